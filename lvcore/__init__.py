@@ -1,0 +1,32 @@
+"""LV Calibration Lab core package.
+
+Importing :mod:`lvcore` switches JAX to float64 (the simulator needs it) before
+any array is created.
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("JAX_ENABLE_X64", "1")
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+__version__ = "0.1.0"
+
+
+def simulate(case):
+    """Run one forward simulation; see :func:`lvcore.mechanics.simulate.simulate`."""
+    from lvcore.mechanics.simulate import simulate as _simulate
+
+    return _simulate(case)
+
+
+def load_case(path):
+    """Read and validate a case file; see :func:`lvcore.mechanics.case.load_case`."""
+    from lvcore.mechanics.case import load_case as _load_case
+
+    return _load_case(path)
+
+
+__all__ = ["simulate", "load_case", "__version__"]

@@ -1,0 +1,47 @@
+"""Units and physiological defaults.
+
+Conventions used throughout :mod:`lvcore`:
+
+* lengths in millimetres (mm), volumes in mm³ internally and millilitres (mL)
+  at the interface (1 mL = 1000 mm³);
+* stresses and stiffness parameters in kilopascals (kPa); exponents
+  (b, b_f, ...) are dimensionless;
+* pressures in kPa internally; mmHg accepted at the interface
+  (1 mmHg = 0.133322 kPa);
+* angles in degrees at the interface, radians internally.
+"""
+from __future__ import annotations
+
+KPA_PER_MMHG = 0.1333223684
+MM3_PER_ML = 1000.0
+
+#: Default end-diastolic pressure (mmHg).
+DEFAULT_EDP_MMHG = 8.0
+#: Default rule-based fibre helix angles (degrees), endocardium and epicardium.
+DEFAULT_ALPHA_ENDO_DEG = -60.0
+DEFAULT_ALPHA_EPI_DEG = 90.0
+
+#: Fixed Holzapfel–Ogden population values (Gao et al. 2017): a_s, a_fs in kPa.
+HO_FIXED = {"as": 0.69, "bs": 1.11, "afs": 0.31, "bfs": 2.58}
+#: Reference material point used in the issues' plausibility checks (kPa, -).
+HO_REFERENCE_THETA = {"a": 0.60, "b": 1.30, "af": 1.00, "bf": 3.60}
+
+
+def mmhg_to_kpa(p_mmhg: float) -> float:
+    """Convert a pressure from mmHg to kPa."""
+    return float(p_mmhg) * KPA_PER_MMHG
+
+
+def kpa_to_mmhg(p_kpa: float) -> float:
+    """Convert a pressure from kPa to mmHg."""
+    return float(p_kpa) / KPA_PER_MMHG
+
+
+def mm3_to_ml(v_mm3: float) -> float:
+    """Convert a volume from mm³ to mL."""
+    return float(v_mm3) / MM3_PER_ML
+
+
+def ml_to_mm3(v_ml: float) -> float:
+    """Convert a volume from mL to mm³."""
+    return float(v_ml) * MM3_PER_ML
