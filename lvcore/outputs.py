@@ -1,0 +1,29 @@
+"""The 25 simulator outputs, their order and names (shared by every layer).
+
+``y[0]`` is the end-diastolic LV cavity volume (LVV, mL). ``y[1 + r]`` is the
+circumferential Green strain (end diastole as reference, negative in filling)
+of region ``r = 6 * level + sector`` (see :mod:`lvcore.geometry.template`):
+level 0 is the most basal of four short-axis levels, sector 0 spans 0°–60°
+counter-clockwise from +x seen from the base.
+"""
+from __future__ import annotations
+
+from lvcore.geometry.template import N_LEVELS, N_REGIONS, N_SECTORS
+
+N_OUTPUTS = 1 + N_REGIONS
+LEVEL_NAMES = ("basal", "mid-basal", "mid-apical", "apical")
+STRAIN_NAMES = tuple(f"E_cc L{level + 1} S{sector + 1}" for level in range(N_LEVELS) for sector in range(N_SECTORS))
+OUTPUT_NAMES = ("LVV",) + STRAIN_NAMES
+#: Column names used in CSV files (measured data, campaign stores, designs).
+OUTPUT_COLUMNS = ("lvv_ml",) + tuple(f"strain_{r + 1:02d}" for r in range(N_REGIONS))
+
+#: Names of material parameters (kPa for a, af; dimensionless b, bf).
+THETA_NAMES = ("a", "b", "af", "bf")
+#: Names of physiological inputs: fibre angles (deg) and EDP (mmHg).
+ANGLE_NAMES = ("alpha_endo", "alpha_epi")
+EDP_NAME = "edp"
+
+
+def pc_names(k: int) -> tuple[str, ...]:
+    """Names of the first ``k`` PCA shape scores: h1..hk."""
+    return tuple(f"h{i + 1}" for i in range(k))
