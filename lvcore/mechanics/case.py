@@ -1,0 +1,573 @@
+"""A simulation case: the validated, typed form of a case JSON file.
+
+A case says *what* to simulate (geometry, material law and parameters, fibres,
+load, boundary conditions, probe points, output options); the mechanics layer
+decides *how* (mesh, solver). :func:`load_case` and :meth:`Case.from_dict`
+check every field and raise one :class:`~lvcore.exceptions.CaseError` naming
+the field path (e.g. ``material.a``) and what to fix.
+
+The JSON schema is documented in ``docs/case_schema.md``. Units: mm, kPa
+(pressure may be given in mmHg), degrees for fibre angles.
+"""
+from __future__ import annotations
+
+import difflib
+import functools
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from lvcore import units
+from lvcore.exceptions import CaseError, LVCoreError
+from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
+from lvcore.geometry.template import DEFAULT_TEMPLATE
+
+GEOMETRY_KINDS = ("ellipsoid", "default", "mesh", "pca", "box")
+LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
+RESOLUTION_PRESET_NAMES = ("fast", "default", "accurate")
+MATERIAL_LAWS = ("holzapfel-ogden", "guccione", "neo-hookean")
+#: Required and optional parameters of each law (all must be > 0; a, af, as, afs, C, mu in kPa).
+LAW_REQUIRED = {
+    "holzapfel-ogden": ("a", "b", "af", "bf"),
+    "guccione": ("C", "bf", "bt", "bfs"),
+    "neo-hookean": ("mu",),
+}
+LAW_DEFAULTS = {
+    "holzapfel-ogden": dict(units.HO_FIXED),
+    "guccione": {},
+    "neo-hookean": {},
+}
+BOX_FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
+BASE_CONDITIONS = ("clamped", "sliding")
+STRAIN_LAYERS = ("endocardial", "wall")
+PRESSURE_UNITS = {"kpa": 1.0, "mmhg": units.KPA_PER_MMHG}
+
+
+# ----------------------------------------------------------------------------
+# dataclasses
+# ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Resolution:
+    """Element counts of the simulation mesh.
+
+    For LV geometries: quadratic elements around, base to apex and through the
+    wall. For a box: elements along x, y and z are stored as
+    (circumferential, longitudinal, transmural) = (nx, ny, nz); use :attr:`xyz`.
+    """
+
+    circumferential: int
+    longitudinal: int
+    transmural: int
+
+    @property
+    def xyz(self) -> tuple[int, int, int]:
+        """(nx, ny, nz) element counts of a box mesh."""
+        return (self.circumferential, self.longitudinal, self.transmural)
+
+
+@dataclass(frozen=True, eq=False)
+class GeometrySpec:
+    """The reference (stress-free, early-diastolic) geometry.
+
+    Attributes
+    ----------
+    kind : {"ellipsoid", "default", "mesh", "pca", "box"}
+    resolution : Resolution or None
+        Explicit element counts; ``None`` means the mechanics uses
+        ``RESOLUTION_PRESETS[preset or "default"]``.
+    preset : {"fast", "default", "accurate"} or None
+    ellipsoid : TruncatedEllipsoidLV or None
+        Kinds "ellipsoid" and "default" (the latter is ``DEFAULT_LV``).
+    template_nodes : (DEFAULT_TEMPLATE.n_nodes, 3) array or None
+        Kinds "mesh" and "pca": node positions on ``DEFAULT_TEMPLATE`` (mm).
+    box_size : (Lx, Ly, Lz) or None
+        Kind "box": the block [0, Lx] x [0, Ly] x [0, Lz] (mm).
+    source : str
+        Human-readable origin of the geometry.
+    """
+
+    kind: str
+    resolution: Resolution | None = None
+    preset: str | None = None
+    ellipsoid: TruncatedEllipsoidLV | None = None
+    template_nodes: np.ndarray | None = None
+    box_size: tuple[float, float, float] | None = None
+    source: str = ""
+    #: Extra data needed to write the spec back to JSON (mesh path, PCA scores/model).
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def __eq__(self, other):
+        if not isinstance(other, GeometrySpec):
+            return NotImplemented
+        a, b = self.template_nodes, other.template_nodes
+        same_nodes = (a is None and b is None) or (
+            a is not None and b is not None and np.array_equal(a, b)
+        )
+        return (
+            same_nodes
+            and (self.kind, self.resolution, self.preset, self.ellipsoid, self.box_size, self.source)
+            == (other.kind, other.resolution, other.preset, other.ellipsoid, other.box_size, other.source)
+        )
+
+    __hash__ = None  # holds an array
+
+    @property
+    def is_lv(self) -> bool:
+        """True for the LV kinds (everything but "box")."""
+        return self.kind in LV_KINDS
+
+    def position_map(self) -> Callable | None:
+        """Parametric map ``(phi, s, t) -> xyz`` (mm) of an LV geometry; ``None`` for a box."""
+        if self.kind in ("ellipsoid", "default"):
+            return self.ellipsoid.position
+        if self.kind in ("mesh", "pca"):
+            return functools.partial(DEFAULT_TEMPLATE.evaluate, self.template_nodes)
+        return None
+
+    def base_z(self) -> float:
+        """Height of the base plane (mm) of an LV geometry."""
+        if self.kind in ("ellipsoid", "default"):
+            return float(self.ellipsoid.base_z)
+        if self.kind in ("mesh", "pca"):
+            return float(np.mean(self.template_nodes[DEFAULT_TEMPLATE.base_nodes, 2]))
+        raise CaseError("geometry.kind", "a box has no base plane")
+
+
+@dataclass(frozen=True)
+class MaterialSpec:
+    """Constitutive law and its complete parameter set (kPa for stiffnesses, exponents -)."""
+
+    law: str
+    params: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class FibreSpec:
+    """Rule-based fibre helix angles (deg, endo to epi) or one constant direction."""
+
+    alpha_endo_deg: float = units.DEFAULT_ALPHA_ENDO_DEG
+    alpha_epi_deg: float = units.DEFAULT_ALPHA_EPI_DEG
+    direction: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class LoadSpec:
+    """Pressure (kPa) on a surface: "endocardium" (LV) or a box face "x0".."z1"."""
+
+    pressure_kpa: float
+    surface: str = "endocardium"
+
+
+@dataclass(frozen=True)
+class BoundarySpec:
+    """Dirichlet conditions: LV base "clamped" or "sliding"; box: clamped faces."""
+
+    base: str | None = "clamped"
+    clamped_faces: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    """Output options: strains averaged over the "endocardial" element layer or the "wall"."""
+
+    strain_layer: str = "endocardial"
+
+
+@dataclass(frozen=True)
+class Case:
+    """One forward simulation, validated. Build with :meth:`from_dict` or :func:`load_case`."""
+
+    geometry: GeometrySpec
+    material: MaterialSpec
+    fibres: FibreSpec = field(default_factory=FibreSpec)
+    load: LoadSpec = field(default_factory=lambda: LoadSpec(units.mmhg_to_kpa(units.DEFAULT_EDP_MMHG)))
+    boundary: BoundarySpec = field(default_factory=BoundarySpec)
+    probes: tuple[tuple[float, float, float], ...] = ()
+    outputs: OutputSpec = field(default_factory=OutputSpec)
+
+    __hash__ = None  # holds arrays and dicts
+
+    @classmethod
+    def from_dict(cls, d: Mapping, base_dir: str | Path | None = None) -> "Case":
+        """Validate a case dictionary (the JSON schema) and build a :class:`Case`.
+
+        Parameters
+        ----------
+        d : mapping
+            The parsed case JSON.
+        base_dir : path, optional
+            Directory that relative file paths (``geometry.path``,
+            ``geometry.model``) are resolved against; default the working
+            directory. :func:`load_case` passes the case file's directory.
+
+        Raises
+        ------
+        CaseError
+            Naming the first bad field.
+        """
+        return _parse_case(d, Path(base_dir) if base_dir is not None else None)
+
+    def to_dict(self) -> dict:
+        """The case as a JSON-ready dictionary (pressure in kPa, parameters complete).
+
+        ``Case.from_dict(case.to_dict())`` rebuilds an equal case.
+        """
+        return _case_to_dict(self)
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """The case as JSON text."""
+        return json.dumps(self.to_dict(), indent=indent)
+
+    # convenience constructors -------------------------------------------------
+    @classmethod
+    def default_lv(
+        cls,
+        theta: Mapping[str, float] | None = None,
+        alpha_endo_deg: float = units.DEFAULT_ALPHA_ENDO_DEG,
+        alpha_epi_deg: float = units.DEFAULT_ALPHA_EPI_DEG,
+        edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+        resolution: str | Mapping[str, int] = "default",
+    ) -> "Case":
+        """The default LV with the HO law at ``theta`` (default ``HO_REFERENCE_THETA``)."""
+        theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
+        return cls.from_dict(
+            {
+                "geometry": {"kind": "default", "resolution": resolution},
+                "material": {"law": "holzapfel-ogden", **theta},
+                "fibres": {"alpha_endo": alpha_endo_deg, "alpha_epi": alpha_epi_deg},
+                "load": {"pressure": edp_mmhg, "units": "mmHg"},
+            }
+        )
+
+
+def load_case(path: str | Path) -> Case:
+    """Read and validate a case JSON file; relative paths inside resolve against its folder."""
+    path = Path(path)
+    if not path.is_file():
+        raise CaseError("<file>", f"case file '{path}' does not exist")
+    try:
+        d = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise CaseError("<file>", f"'{path}' is not valid JSON: {err}") from None
+    return Case.from_dict(d, base_dir=path.parent)
+
+
+# ----------------------------------------------------------------------------
+# validation helpers
+# ----------------------------------------------------------------------------
+def _check_keys(d: Any, where: str, allowed, required=()) -> None:
+    if not isinstance(d, Mapping):
+        raise CaseError(where or "<case>", f"must be a JSON object, got {type(d).__name__}")
+    for key in d:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), list(allowed), n=1, cutoff=0.5)
+            hint = f"; did you mean '{close[0]}'?" if close else f"; valid keys: {', '.join(allowed)}"
+            raise CaseError(_join(where, key), f"unknown key{hint}")
+    for key in required:
+        if key not in d:
+            raise CaseError(_join(where, key), "missing (required)")
+
+
+def _join(where: str, key) -> str:
+    return f"{where}.{key}" if where else str(key)
+
+
+def _number(value, where: str, positive=False, nonnegative=False, lo=None, hi=None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise CaseError(where, f"must be a number, got {type(value).__name__} {value!r}")
+    x = float(value)
+    if not math.isfinite(x):
+        raise CaseError(where, f"must be finite, got {x}")
+    if positive and x <= 0:
+        raise CaseError(where, f"must be > 0, got {x}")
+    if nonnegative and x < 0:
+        raise CaseError(where, f"must be >= 0, got {x}")
+    if lo is not None and x < lo or hi is not None and x > hi:
+        raise CaseError(where, f"must lie in [{lo}, {hi}], got {x}")
+    return x
+
+
+def _count(value, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise CaseError(where, f"must be a positive integer, got {value!r}")
+    if value < 1:
+        raise CaseError(where, f"must be a positive integer, got {value}")
+    return int(value)
+
+
+def _string(value, where: str, choices) -> str:
+    if not isinstance(value, str):
+        raise CaseError(where, f"must be a string, one of {', '.join(choices)}; got {value!r}")
+    if value not in choices:
+        close = difflib.get_close_matches(value, list(choices), n=1, cutoff=0.5)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise CaseError(where, f"must be one of {', '.join(choices)}; got '{value}'{hint}")
+    return value
+
+
+def _vector(value, where: str, n=3, positive=False) -> tuple[float, ...]:
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise CaseError(where, f"must be a list of {n} numbers, got {value!r}")
+    return tuple(_number(v, f"{where}[{i}]", positive=positive) for i, v in enumerate(value))
+
+
+def _resolve(path_value, where: str, base_dir: Path | None) -> Path:
+    if not isinstance(path_value, str) or not path_value:
+        raise CaseError(where, f"must be a file path string, got {path_value!r}")
+    p = Path(path_value).expanduser()
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    if not p.is_file():
+        raise CaseError(where, f"file '{p}' does not exist")
+    return p
+
+
+# ----------------------------------------------------------------------------
+# parsing
+# ----------------------------------------------------------------------------
+_TOP = ("geometry", "material", "fibres", "load", "boundary", "probes", "outputs")
+
+
+def _parse_case(d: Mapping, base_dir: Path | None) -> Case:
+    _check_keys(d, "", _TOP, required=("geometry", "material", "load"))
+    geometry = _parse_geometry(d["geometry"], base_dir)
+    material = _parse_material(d["material"])
+    fibres = _parse_fibres(d.get("fibres", {}))
+    load = _parse_load(d["load"], geometry)
+    boundary = _parse_boundary(d.get("boundary", {}), geometry)
+    probes = _parse_probes(d.get("probes", []))
+    outputs = _parse_outputs(d.get("outputs", {}))
+    return Case(geometry, material, fibres, load, boundary, probes, outputs)
+
+
+def _parse_resolution(value, where: str, kind: str) -> tuple[Resolution | None, str | None]:
+    if kind == "box":
+        if isinstance(value, (list, tuple)):
+            if len(value) != 3:
+                raise CaseError(where, f"a box resolution is [nx, ny, nz], got {value!r}")
+            return Resolution(*(_count(v, f"{where}[{i}]") for i, v in enumerate(value))), None
+        _check_keys(value, where, ("x", "y", "z"), required=("x", "y", "z"))
+        return Resolution(*(_count(value[k], f"{where}.{k}") for k in ("x", "y", "z"))), None
+    if value is None:
+        return None, None
+    if isinstance(value, str):
+        return None, _string(value, where, RESOLUTION_PRESET_NAMES)
+    keys = ("circumferential", "longitudinal", "transmural")
+    _check_keys(value, where, keys, required=keys)
+    res = Resolution(*(_count(value[k], f"{where}.{k}") for k in keys))
+    if res.circumferential < 3:
+        raise CaseError(f"{where}.circumferential", f"must be >= 3, got {res.circumferential}")
+    return res, None
+
+
+def _parse_surface(d, where: str) -> EllipsoidSurface:
+    _check_keys(d, where, ("rs", "rl", "ry"), required=("rs", "rl"))
+    ry = _number(d["ry"], f"{where}.ry", positive=True) if "ry" in d else None
+    return EllipsoidSurface(
+        rs=_number(d["rs"], f"{where}.rs", positive=True), rl=_number(d["rl"], f"{where}.rl", positive=True), ry=ry
+    )
+
+
+def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
+    _check_keys(g, "geometry", ("kind", "endo", "epi", "base_z", "resolution", "path", "scores", "model", "size"),
+                required=("kind",))
+    kind = _string(g["kind"], "geometry.kind", GEOMETRY_KINDS)
+    allowed = {
+        "ellipsoid": ("kind", "endo", "epi", "base_z", "resolution"),
+        "default": ("kind", "resolution"),
+        "mesh": ("kind", "path", "resolution"),
+        "pca": ("kind", "scores", "model", "resolution"),
+        "box": ("kind", "size", "resolution"),
+    }[kind]
+    for key in g:
+        if key not in allowed:
+            raise CaseError(f"geometry.{key}", f"not used by geometry kind '{kind}' (allowed: {', '.join(allowed)})")
+    if kind == "box" and "resolution" not in g:
+        raise CaseError("geometry.resolution", "missing (required for a box: [nx, ny, nz])")
+    resolution, preset = _parse_resolution(g.get("resolution"), "geometry.resolution", kind)
+
+    if kind == "default":
+        return GeometrySpec(kind, resolution, preset, ellipsoid=DEFAULT_LV, source="default LV")
+    if kind == "ellipsoid":
+        for key in ("endo", "epi", "base_z"):
+            if key not in g:
+                raise CaseError(f"geometry.{key}", "missing (required for an ellipsoid)")
+        endo = _parse_surface(g["endo"], "geometry.endo")
+        epi = _parse_surface(g["epi"], "geometry.epi")
+        base_z = _number(g["base_z"], "geometry.base_z")
+        for name, a_in, a_out in (("rs", endo.rs, epi.rs), ("rl", endo.rl, epi.rl),
+                                  ("ry", endo.ry or endo.rs, epi.ry or epi.rs)):
+            if a_out <= a_in:
+                raise CaseError(f"geometry.epi.{name}", f"must exceed the endocardial {name} ({a_in}), got {a_out}")
+        for name, surf in (("endo", endo), ("epi", epi)):
+            if not -surf.rl < base_z < surf.rl:
+                raise CaseError("geometry.base_z", f"the plane z={base_z} must cut the {name} ellipsoid "
+                                                   f"(|base_z| < rl = {surf.rl})")
+        ell = TruncatedEllipsoidLV(endo, epi, base_z)
+        return GeometrySpec(kind, resolution, preset, ellipsoid=ell, source="truncated ellipsoid")
+    if kind == "mesh":
+        if "path" not in g:
+            raise CaseError("geometry.path", "missing (required for geometry kind 'mesh')")
+        path = _resolve(g["path"], "geometry.path", base_dir)
+        from lvcore.geometry.io import read_template_mesh  # lazy: geometry I/O pulls meshio
+
+        try:
+            nodes = read_template_mesh(path)
+        except LVCoreError as err:
+            raise CaseError("geometry.path", f"cannot use '{path}': {err}") from None
+        nodes = _template_nodes(nodes, "geometry.path")
+        return GeometrySpec(kind, resolution, preset, template_nodes=nodes, source=str(path),
+                            extra={"path": str(path)})
+    if kind == "pca":
+        if "scores" not in g:
+            raise CaseError("geometry.scores", "missing (required for geometry kind 'pca')")
+        scores = g["scores"]
+        if not isinstance(scores, (list, tuple)) or len(scores) == 0:
+            raise CaseError("geometry.scores", f"must be a non-empty list of numbers, got {scores!r}")
+        scores = [_number(v, f"geometry.scores[{i}]") for i, v in enumerate(scores)]
+        model = _resolve(g["model"], "geometry.model", base_dir) if "model" in g else None
+        from lvcore.geometry.shape_model import load_shape_model  # lazy
+
+        try:
+            nodes = load_shape_model(model).reconstruct(np.asarray(scores))
+        except LVCoreError as err:
+            raise CaseError("geometry.scores" if model is None else "geometry.model", str(err)) from None
+        nodes = _template_nodes(nodes, "geometry.scores")
+        src = f"PCA scores {scores}" + (f" of model {model}" if model else "")
+        extra = {"scores": scores, **({"model": str(model)} if model else {})}
+        return GeometrySpec(kind, resolution, preset, template_nodes=nodes, source=src, extra=extra)
+    # box
+    if "size" not in g:
+        raise CaseError("geometry.size", "missing (required for a box: [Lx, Ly, Lz] in mm)")
+    size = _vector(g["size"], "geometry.size", positive=True)
+    return GeometrySpec(kind, resolution, None, box_size=size, source=f"box {size[0]:g} x {size[1]:g} x {size[2]:g} mm")
+
+
+def _template_nodes(nodes, where: str) -> np.ndarray:
+    nodes = np.array(nodes, dtype=float)
+    if nodes.shape != (DEFAULT_TEMPLATE.n_nodes, 3):
+        raise CaseError(where, f"geometry has node array of shape {nodes.shape}, expected "
+                               f"{(DEFAULT_TEMPLATE.n_nodes, 3)} (DEFAULT_TEMPLATE)")
+    if not np.all(np.isfinite(nodes)):
+        raise CaseError(where, "geometry has non-finite node coordinates")
+    nodes.setflags(write=False)
+    return nodes
+
+
+def _parse_material(m) -> MaterialSpec:
+    _check_keys(m, "material", ("law",) + tuple(sorted({k for v in LAW_REQUIRED.values() for k in v}
+                                                        | set(units.HO_FIXED))), required=("law",))
+    law = _string(m["law"], "material.law", MATERIAL_LAWS)
+    allowed = ("law",) + LAW_REQUIRED[law] + tuple(LAW_DEFAULTS[law])
+    _check_keys(m, "material", allowed, required=LAW_REQUIRED[law])
+    params = dict(LAW_DEFAULTS[law])
+    for key in LAW_REQUIRED[law] + tuple(LAW_DEFAULTS[law]):
+        if key in m:
+            params[key] = _number(m[key], f"material.{key}", positive=True)
+    ordered = {k: params[k] for k in LAW_REQUIRED[law] + tuple(LAW_DEFAULTS[law])}
+    return MaterialSpec(law, ordered)
+
+
+def _parse_fibres(f) -> FibreSpec:
+    _check_keys(f, "fibres", ("alpha_endo", "alpha_epi", "direction"))
+    if "direction" in f:
+        if "alpha_endo" in f or "alpha_epi" in f:
+            raise CaseError("fibres.direction", "give either a direction or the angles alpha_endo/alpha_epi, not both")
+        v = np.asarray(_vector(f["direction"], "fibres.direction"))
+        norm = float(np.linalg.norm(v))
+        if norm == 0.0:
+            raise CaseError("fibres.direction", "must be a non-zero vector")
+        return FibreSpec(direction=tuple(float(x) for x in v / norm))
+    endo = _number(f.get("alpha_endo", units.DEFAULT_ALPHA_ENDO_DEG), "fibres.alpha_endo", lo=-180, hi=180)
+    epi = _number(f.get("alpha_epi", units.DEFAULT_ALPHA_EPI_DEG), "fibres.alpha_epi", lo=-180, hi=180)
+    return FibreSpec(endo, epi)
+
+
+def _parse_load(ld, geometry: GeometrySpec) -> LoadSpec:
+    _check_keys(ld, "load", ("pressure", "units", "surface"), required=("pressure", "units"))
+    p = _number(ld["pressure"], "load.pressure", nonnegative=True)
+    u = ld["units"]
+    if not isinstance(u, str) or u.lower() not in PRESSURE_UNITS:
+        raise CaseError("load.units", f"must be 'kPa' or 'mmHg', got {u!r}")
+    p_kpa = p * PRESSURE_UNITS[u.lower()]
+    if geometry.is_lv:
+        surface = _string(ld.get("surface", "endocardium"), "load.surface", ("endocardium",))
+    else:
+        if "surface" not in ld:
+            raise CaseError("load.surface", f"missing (required for a box: one of {', '.join(BOX_FACES)})")
+        surface = _string(ld["surface"], "load.surface", BOX_FACES)
+    return LoadSpec(p_kpa, surface)
+
+
+def _parse_boundary(b, geometry: GeometrySpec) -> BoundarySpec:
+    if geometry.is_lv:
+        _check_keys(b, "boundary", ("base",))
+        return BoundarySpec(_string(b.get("base", "clamped"), "boundary.base", BASE_CONDITIONS), ())
+    _check_keys(b, "boundary", ("clamped",), required=("clamped",))
+    faces = b["clamped"]
+    if not isinstance(faces, (list, tuple)) or not faces:
+        raise CaseError("boundary.clamped", f"must be a non-empty list of faces ({', '.join(BOX_FACES)}), got {faces!r}")
+    faces = tuple(_string(v, f"boundary.clamped[{i}]", BOX_FACES) for i, v in enumerate(faces))
+    return BoundarySpec(None, faces)
+
+
+def _parse_probes(p) -> tuple[tuple[float, float, float], ...]:
+    if not isinstance(p, (list, tuple)):
+        raise CaseError("probes", f"must be a list of [x, y, z] points (mm), got {p!r}")
+    return tuple(_vector(v, f"probes[{i}]") for i, v in enumerate(p))
+
+
+def _parse_outputs(o) -> OutputSpec:
+    _check_keys(o, "outputs", ("strain_layer",))
+    return OutputSpec(_string(o.get("strain_layer", "endocardial"), "outputs.strain_layer", STRAIN_LAYERS))
+
+
+# ----------------------------------------------------------------------------
+# writing
+# ----------------------------------------------------------------------------
+def _case_to_dict(case: Case) -> dict:
+    g = case.geometry
+    gd: dict[str, Any] = {"kind": g.kind}
+    if g.kind == "ellipsoid":
+        for name, surf in (("endo", g.ellipsoid.endo), ("epi", g.ellipsoid.epi)):
+            gd[name] = {"rs": surf.rs, "rl": surf.rl, **({"ry": surf.ry} if surf.ry is not None else {})}
+        gd["base_z"] = g.ellipsoid.base_z
+    elif g.kind == "mesh":
+        gd["path"] = g.extra["path"]
+    elif g.kind == "pca":
+        gd["scores"] = list(g.extra["scores"])
+        if "model" in g.extra:
+            gd["model"] = g.extra["model"]
+    elif g.kind == "box":
+        gd["size"] = list(g.box_size)
+    if g.kind == "box":
+        gd["resolution"] = list(g.resolution.xyz)
+    elif g.resolution is not None:
+        gd["resolution"] = {
+            "circumferential": g.resolution.circumferential,
+            "longitudinal": g.resolution.longitudinal,
+            "transmural": g.resolution.transmural,
+        }
+    elif g.preset is not None:
+        gd["resolution"] = g.preset
+
+    f = case.fibres
+    fd = {"direction": list(f.direction)} if f.direction is not None else {
+        "alpha_endo": f.alpha_endo_deg, "alpha_epi": f.alpha_epi_deg}
+    bd = {"base": case.boundary.base} if g.is_lv else {"clamped": list(case.boundary.clamped_faces)}
+    return {
+        "geometry": gd,
+        "material": {"law": case.material.law, **dict(case.material.params)},
+        "fibres": fd,
+        "load": {"pressure": case.load.pressure_kpa, "units": "kPa", "surface": case.load.surface},
+        "boundary": bd,
+        "probes": [list(p) for p in case.probes],
+        "outputs": {"strain_layer": case.outputs.strain_layer},
+    }

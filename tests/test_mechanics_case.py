@@ -1,0 +1,177 @@
+"""Case schema: round trips and one clear CaseError per bad case."""
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from lvcore import units
+from lvcore.exceptions import CaseError
+from lvcore.geometry.analytic import DEFAULT_LV, LAND_LV
+from lvcore.geometry.template import DEFAULT_TEMPLATE
+from lvcore.mechanics.case import Case, GeometrySpec, Resolution, load_case
+
+LAND2 = {
+    "geometry": {"kind": "ellipsoid", "endo": {"rs": 7, "rl": 17}, "epi": {"rs": 10, "rl": 20}, "base_z": 5,
+                 "resolution": {"circumferential": 24, "longitudinal": 12, "transmural": 3}},
+    "material": {"law": "guccione", "C": 10, "bf": 1, "bt": 1, "bfs": 1},
+    "fibres": {"alpha_endo": -60, "alpha_epi": 90},
+    "load": {"pressure": 10, "units": "kPa"},
+    "boundary": {"base": "clamped"},
+    "probes": [[0, 0, -17]],
+}
+BOX = {
+    "geometry": {"kind": "box", "size": [10, 1, 1], "resolution": [10, 1, 1]},
+    "material": {"law": "guccione", "C": 2, "bf": 8, "bt": 2, "bfs": 4},
+    "fibres": {"direction": [1, 0, 0]},
+    "load": {"pressure": 0.004, "units": "kPa", "surface": "z0"},
+    "boundary": {"clamped": ["x0"]},
+    "probes": [[10, 0.5, 1]],
+}
+HO = {
+    "geometry": {"kind": "default", "resolution": "fast"},
+    "material": {"law": "holzapfel-ogden", "a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6},
+    "load": {"pressure": 8, "units": "mmHg"},
+}
+
+
+def test_land_problem2_fields():
+    case = Case.from_dict(LAND2)
+    g = case.geometry
+    assert g.kind == "ellipsoid" and g.ellipsoid == LAND_LV
+    assert g.resolution == Resolution(24, 12, 3) and g.preset is None
+    assert g.base_z() == 5.0
+    np.testing.assert_allclose(g.position_map()(0.0, 1.0, 0.0), [0, 0, -17], atol=1e-12)
+    np.testing.assert_allclose(g.position_map()(0.0, 1.0, 1.0), [0, 0, -20], atol=1e-12)
+    assert case.material.params == {"C": 10.0, "bf": 1.0, "bt": 1.0, "bfs": 1.0}
+    assert case.load.pressure_kpa == 10.0 and case.load.surface == "endocardium"
+    assert case.boundary.base == "clamped" and case.probes == ((0.0, 0.0, -17.0),)
+    assert case.outputs.strain_layer == "endocardial"
+
+
+@pytest.mark.parametrize("d", [LAND2, BOX, HO], ids=["land2", "box", "ho"])
+def test_round_trip(d):
+    case = Case.from_dict(d)
+    again = Case.from_dict(json.loads(json.dumps(case.to_dict())))
+    assert again == case
+    assert again.to_dict() == case.to_dict()
+
+
+def test_defaults_and_units():
+    case = Case.from_dict(HO)
+    assert case.load.pressure_kpa == pytest.approx(8 * 0.1333223684)
+    assert case.material.params["as"] == units.HO_FIXED["as"] and case.material.params["bfs"] == units.HO_FIXED["bfs"]
+    assert case.fibres.alpha_endo_deg == -60 and case.fibres.alpha_epi_deg == 90 and case.fibres.direction is None
+    assert case.geometry.ellipsoid is DEFAULT_LV and case.geometry.preset == "fast" and case.geometry.resolution is None
+    assert case.boundary.base == "clamped"
+    box = Case.from_dict(BOX)
+    assert box.geometry.resolution.xyz == (10, 1, 1) and box.geometry.box_size == (10.0, 1.0, 1.0)
+    assert box.geometry.position_map() is None and box.fibres.direction == (1.0, 0.0, 0.0)
+    assert box.boundary.clamped_faces == ("x0",) and box.load.surface == "z0"
+
+
+def test_default_lv_constructor_matches_dict():
+    assert Case.default_lv(resolution="fast") == Case.from_dict(HO)
+
+
+def test_template_geometry_map_and_base(tmp_path, monkeypatch):
+    nodes = DEFAULT_LV.nodes(DEFAULT_TEMPLATE)
+    g = GeometrySpec("mesh", template_nodes=nodes, source="x")
+    p = DEFAULT_TEMPLATE.parametric_coords[:50]
+    np.testing.assert_allclose(g.position_map()(p[:, 0], p[:, 1], p[:, 2]), nodes[:50], atol=1e-9)
+    assert g.base_z() == pytest.approx(DEFAULT_LV.base_z)
+
+
+def test_load_case_file(tmp_path):
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(LAND2))
+    assert load_case(path) == Case.from_dict(LAND2)
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(CaseError, match="not valid JSON"):
+        load_case(tmp_path / "bad.json")
+    with pytest.raises(CaseError, match="does not exist"):
+        load_case(tmp_path / "missing.json")
+
+
+def _edit(base, path, value=None, delete=False):
+    d = copy.deepcopy(base)
+    *head, last = path
+    node = d
+    for k in head:
+        node = node[k]
+    if delete:
+        del node[last]
+    else:
+        node[last] = value
+    return d
+
+
+BAD = [
+    # (base, path, value, delete, field, message fragment)
+    (LAND2, ("material", "bff"), 1, False, "material.bff", "did you mean 'bf'"),
+    (LAND2, ("fibers",), {}, False, "fibers", "did you mean 'fibres'"),
+    (LAND2, ("geometry", "endo", "rz"), 3, False, "geometry.endo.rz", "did you mean"),
+    (LAND2, ("material",), None, True, "material", "missing"),
+    (LAND2, ("load", "pressure"), None, True, "load.pressure", "missing"),
+    (LAND2, ("geometry", "base_z"), None, True, "geometry.base_z", "missing"),
+    (HO, ("material", "a"), None, True, "material.a", "missing"),
+    (HO, ("material", "a"), -0.5, False, "material.a", "> 0"),
+    (HO, ("material", "bf"), 0, False, "material.bf", "> 0"),
+    (HO, ("material", "as"), 0.0, False, "material.as", "> 0"),
+    (LAND2, ("material", "C"), -10, False, "material.C", "> 0"),
+    (HO, ("material", "b"), "1.3", False, "material.b", "number"),
+    (HO, ("material", "b"), True, False, "material.b", "number"),
+    (HO, ("material", "af"), float("nan"), False, "material.af", "finite"),
+    (HO, ("material", "af"), float("inf"), False, "material.af", "finite"),
+    (HO, ("material", "law"), "holzapfel", False, "material.law", "holzapfel-ogden"),
+    (HO, ("material", "C"), 1.0, False, "material.C", "unknown key"),
+    (HO, ("load", "units"), "psi", False, "load.units", "kPa"),
+    (HO, ("load", "units"), None, True, "load.units", "missing"),
+    (HO, ("load", "pressure"), -1, False, "load.pressure", ">= 0"),
+    (HO, ("load", "surface"), "epicardium", False, "load.surface", "endocardium"),
+    (HO, ("fibres",), {"alpha_endo": -200}, False, "fibres.alpha_endo", "[-180"),
+    (HO, ("fibres",), {"alpha_epi": 181}, False, "fibres.alpha_epi", "180"),
+    (HO, ("fibres",), {"direction": [0, 0, 0]}, False, "fibres.direction", "non-zero"),
+    (HO, ("fibres",), {"direction": [1, 0]}, False, "fibres.direction", "3 numbers"),
+    (HO, ("geometry", "kind"), "sphere", False, "geometry.kind", "ellipsoid"),
+    (HO, ("geometry", "resolution"), "medium", False, "geometry.resolution", "fast"),
+    (HO, ("geometry", "resolution"), {"circumferential": 8, "longitudinal": 0, "transmural": 1}, False,
+     "geometry.resolution.longitudinal", "positive integer"),
+    (HO, ("geometry", "resolution"), {"circumferential": 8, "longitudinal": 4}, False,
+     "geometry.resolution.transmural", "missing"),
+    (HO, ("geometry", "size"), [1, 1, 1], False, "geometry.size", "not used"),
+    (HO, ("boundary",), {"base": "free"}, False, "boundary.base", "clamped"),
+    (HO, ("outputs",), {"strain_layer": "epi"}, False, "outputs.strain_layer", "endocardial"),
+    (HO, ("probes",), [[0, 0]], False, "probes[0]", "3 numbers"),
+    (HO, ("probes",), "apex", False, "probes", "list"),
+    (LAND2, ("geometry", "epi", "rs"), 6, False, "geometry.epi.rs", "exceed"),
+    (LAND2, ("geometry", "base_z"), 18, False, "geometry.base_z", "cut"),
+    (LAND2, ("geometry", "endo", "rl"), -17, False, "geometry.endo.rl", "> 0"),
+    (BOX, ("load", "surface"), "z2", False, "load.surface", "z0"),
+    (BOX, ("load", "surface"), None, True, "load.surface", "missing"),
+    (BOX, ("boundary",), {"clamped": ["x3"]}, False, "boundary.clamped[0]", "x0"),
+    (BOX, ("boundary",), {"base": "clamped"}, False, "boundary.base", "unknown key"),
+    (BOX, ("geometry", "size"), [10, 0, 1], False, "geometry.size[1]", "> 0"),
+    (BOX, ("geometry", "resolution"), [10, 1], False, "geometry.resolution", "[nx, ny, nz]"),
+    (BOX, ("geometry", "resolution"), None, True, "geometry.resolution", "missing"),
+    (HO, ("geometry",), {"kind": "mesh", "path": "/nonexistent/lv.vtu"}, False, "geometry.path", "does not exist"),
+    (HO, ("geometry",), {"kind": "pca", "scores": []}, False, "geometry.scores", "non-empty"),
+    (HO, ("geometry",), {"kind": "pca", "scores": [1.0], "model": "/nonexistent/m.h5"}, False,
+     "geometry.model", "does not exist"),
+]
+
+
+@pytest.mark.parametrize("base,path,value,delete,field,fragment", BAD, ids=[f"{b[4]}-{i}" for i, b in enumerate(BAD)])
+def test_bad_case(base, path, value, delete, field, fragment):
+    with pytest.raises(CaseError) as info:
+        Case.from_dict(_edit(base, path, value, delete))
+    assert info.value.field == field
+    assert fragment in str(info.value)
+
+
+def test_not_a_mapping():
+    with pytest.raises(CaseError, match="JSON object"):
+        Case.from_dict([1, 2])
+    with pytest.raises(CaseError) as info:
+        Case.from_dict(_edit(HO, ("material",), 3))
+    assert info.value.field == "material"
