@@ -1,0 +1,81 @@
+"""``lvcore design ...`` and ``lvcore campaign run|status|resume``."""
+from __future__ import annotations
+
+from lvcore.campaigns.designs import METHODS, make_design, save_design
+from lvcore.campaigns.space import SPACE_NAMES, get_space
+
+
+def register(subparsers) -> None:
+    # lvcore design METHOD --space NAME --n N --seed S --out design.csv
+    p = subparsers.add_parser("design", help="write a space-filling design (CSV) over a named parameter space")
+    p.add_argument("method", choices=METHODS, help="sobol (scrambled), lhs, random, or exp (the chapter's exp-warped LHS)")
+    p.add_argument("--space", required=True, choices=SPACE_NAMES, help="named parameter space (see lvcore.campaigns.space)")
+    p.add_argument("--n", type=int, required=True, help="number of design points")
+    p.add_argument("--seed", type=int, required=True, help="random seed")
+    p.add_argument("--pcs", type=int, default=None, help="number of PC scores (overrides the space's default)")
+    p.add_argument("--out", required=True, help="output CSV path")
+    p.set_defaults(func=_design)
+
+    c = subparsers.add_parser("campaign", help="run, resume or inspect a simulation campaign")
+    sub = c.add_subparsers(dest="campaign_command", required=True)
+
+    run = sub.add_parser("run", help="run every row of a design; results go to an HDF5 store as they arrive")
+    run.add_argument("design", help="design CSV written by `lvcore design`")
+    run.add_argument("--out", required=True, help="HDF5 store to create")
+    _add_executor_args(run)
+    run.add_argument("--resolution", choices=("fast", "default"), default="default", help="simulator mesh resolution")
+    run.add_argument("--forward", default=None, metavar="MODULE:FUNCTION",
+                     help="forward model (default lvcore:simulate, the FE simulator); the tests pass a cheap double")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.set_defaults(func=_run)
+
+    res = sub.add_parser("resume", help="run the rows of a store that are not recorded yet")
+    res.add_argument("store", help="HDF5 store written by `lvcore campaign run`")
+    _add_executor_args(res)
+    res.add_argument("--retry-failed", action="store_true", help="also run the failed rows again")
+    res.add_argument("--no-progress", action="store_true", help="no progress bar")
+    res.set_defaults(func=_resume)
+
+    st = sub.add_parser("status", help="counts of converged/failed/pending rows and failure reasons")
+    st.add_argument("store", help="HDF5 store")
+    st.set_defaults(func=_status)
+
+
+def _add_executor_args(p) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
+    g.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT")
+
+
+def _design(args) -> int:
+    space = get_space(args.space, n_pcs=args.pcs)
+    design = make_design(space, args.method, args.n, args.seed)
+    path = save_design(design, args.out)
+    print(f"wrote {design.n} {args.method} points over space '{space.name}' ({', '.join(space.names)}) to {path}")
+    return 0
+
+
+def _run(args) -> int:
+    from lvcore.campaigns.runner import DEFAULT_FORWARD, run_campaign
+
+    summary = run_campaign(args.design, args.out, workers=args.workers, scheduler=args.scheduler,
+                           resolution=args.resolution, forward=args.forward or DEFAULT_FORWARD,
+                           progress=not args.no_progress)
+    print(summary.format())
+    return 0
+
+
+def _resume(args) -> int:
+    from lvcore.campaigns.runner import resume_campaign
+
+    summary = resume_campaign(args.store, workers=args.workers, scheduler=args.scheduler,
+                              retry_failed=args.retry_failed, progress=not args.no_progress)
+    print(summary.format())
+    return 0
+
+
+def _status(args) -> int:
+    from lvcore.campaigns.runner import campaign_status
+
+    print(campaign_status(args.store).format())
+    return 0

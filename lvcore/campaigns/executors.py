@@ -1,0 +1,163 @@
+"""Where campaign rows run: a local process pool or a Dask cluster.
+
+Both executors expose the same small interface used by
+:mod:`lvcore.campaigns.runner`:
+
+* ``submit(fn, *args) -> future``;
+* ``as_completed(futures)`` yielding futures as they finish;
+* ``workers`` (int) and ``describe()`` (str);
+* ``close()`` (also a context manager).
+
+:class:`LocalExecutor` (the default) is a
+:class:`concurrent.futures.ProcessPoolExecutor` with one worker process per
+core, started with ``spawn`` (forking a process that has imported JAX is
+unsafe). Workers inherit ``OMP_NUM_THREADS=1`` etc. so that numpy's BLAS does
+not fight XLA, and share JAX's persistent compilation cache so only the first
+worker compiles.
+
+:class:`DaskExecutor` submits to a ``distributed`` scheduler given as
+``tcp://HOST:PORT``, or to a :class:`distributed.LocalCluster` it starts
+itself (used in the tests). Remote workers need ``lvcore`` installed.
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing as mp
+import os
+from pathlib import Path
+
+from lvcore.exceptions import CampaignError
+
+#: Environment set in worker processes (before they import numpy).
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "JAX_ENABLE_X64": "1"}
+#: Default location of JAX's persistent compilation cache for workers.
+DEFAULT_JAX_CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "lvcore" / "jax"
+
+
+def default_workers() -> int:
+    """One worker per core available to this process."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - non-Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _worker_init() -> None:
+    """Runs once in every local worker process."""
+    for k, v in WORKER_ENV.items():
+        os.environ.setdefault(k, v)
+    try:
+        import jax
+
+        if not jax.config.jax_compilation_cache_dir:
+            DEFAULT_JAX_CACHE.mkdir(parents=True, exist_ok=True)
+            jax.config.update("jax_compilation_cache_dir", str(DEFAULT_JAX_CACHE))
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    except Exception:  # pragma: no cover - the cache is an optimisation only
+        pass
+
+
+class LocalExecutor:
+    """A process pool on this machine.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Number of worker processes (default: one per core).
+    """
+
+    def __init__(self, workers: int | None = None):
+        self.workers = int(workers or default_workers())
+        if self.workers < 1:
+            raise CampaignError(f"--workers must be >= 1, got {workers}")
+        for k, v in WORKER_ENV.items():  # inherited by the spawned children
+            os.environ.setdefault(k, v)
+        self._pool = cf.ProcessPoolExecutor(
+            max_workers=self.workers, mp_context=mp.get_context("spawn"), initializer=_worker_init
+        )
+
+    def describe(self) -> str:
+        return f"local process pool, {self.workers} worker(s)"
+
+    def submit(self, fn, *args):
+        return self._pool.submit(fn, *args)
+
+    def as_completed(self, futures):
+        return cf.as_completed(futures)
+
+    def close(self, cancel: bool = False) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=cancel)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, *exc):
+        self.close(cancel=exc_type is not None)
+
+
+class DaskExecutor:
+    """Rows run on a Dask ``distributed`` cluster.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a running scheduler. If omitted, a
+        :class:`distributed.LocalCluster` is started with ``workers`` workers.
+    workers : int, optional
+        Workers of the local cluster (ignored with ``scheduler``).
+    processes : bool
+        Local cluster only: worker processes (True) or threads in this
+        process (False, cheapest for tests).
+    """
+
+    def __init__(self, scheduler: str | None = None, workers: int | None = None, processes: bool = True):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError as err:  # pragma: no cover - dask is a dependency
+            raise CampaignError("the Dask executor needs `distributed` (pip install 'dask[distributed]')") from err
+        self._cluster = None
+        if scheduler:
+            if not str(scheduler).startswith(("tcp://", "tls://", "inproc://", "ucx://")):
+                raise CampaignError(f"--scheduler must look like tcp://HOST:PORT, got {scheduler!r}")
+            try:
+                self._client = Client(scheduler, timeout="10s")
+            except (OSError, TimeoutError) as err:
+                raise CampaignError(f"cannot reach the Dask scheduler at {scheduler}: {err}") from err
+        else:
+            n = int(workers or default_workers())
+            self._cluster = LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=processes, dashboard_address=None, silence_logs=40
+            )
+            self._client = Client(self._cluster)
+        info = self._client.scheduler_info()
+        self.workers = max(1, sum(w.get("nthreads", 1) for w in info.get("workers", {}).values()))
+        self.scheduler = scheduler or self._cluster.scheduler_address
+
+    def describe(self) -> str:
+        return f"Dask cluster at {self.scheduler}, {self.workers} thread(s)"
+
+    def submit(self, fn, *args):
+        return self._client.submit(fn, *args, pure=False)
+
+    def as_completed(self, futures):
+        from distributed import as_completed
+
+        return as_completed(futures)
+
+    def close(self, cancel: bool = False) -> None:
+        self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, *exc):
+        self.close(cancel=exc_type is not None)
+
+
+def make_executor(workers: int | None = None, scheduler: str | None = None):
+    """The executor the CLI asks for: Dask if ``scheduler`` is given, else local processes."""
+    if scheduler:
+        return DaskExecutor(scheduler=scheduler)
+    return LocalExecutor(workers)

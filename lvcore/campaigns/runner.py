@@ -1,0 +1,182 @@
+"""Run, resume and inspect simulation campaigns.
+
+A campaign runs every row of a design through a *forward model* and records
+each outcome in a :class:`~lvcore.campaigns.store.CampaignStore` as soon as
+it arrives. The forward model is given as ``"module:function"``; the default
+is the FE simulator :func:`lvcore.simulate`. It takes a case dictionary (see
+:meth:`~lvcore.campaigns.space.ParameterSpace.case`) and returns an object
+with ``.converged`` (bool), ``.message`` (str), ``.seconds`` (float) and
+``.outputs()`` (``(25,)`` array, [LVV mL, 24 strains]).
+
+Failures are data: a :class:`~lvcore.exceptions.SolverError` (or any other
+exception raised by the forward model) or ``converged=False`` is recorded as
+a failed row with its reason; rows are never dropped or filled in.
+
+Killing a campaign (even with SIGKILL) loses only the rows in flight;
+:func:`resume_campaign` runs exactly the rows not yet committed.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+import lvcore
+from lvcore.campaigns.designs import Design, load_design
+from lvcore.campaigns.executors import make_executor
+from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
+from lvcore.exceptions import CampaignError, SolverError
+
+#: The real simulator.
+DEFAULT_FORWARD = "lvcore:simulate"
+RESOLUTIONS = ("fast", "default")
+
+_FORWARD_CACHE: dict[str, object] = {}
+
+
+def resolve_forward(spec: str):
+    """Import ``"module:function"`` and return the function.
+
+    Raises
+    ------
+    CampaignError
+        If the spec is malformed or the function cannot be imported.
+    """
+    if spec in _FORWARD_CACHE:
+        return _FORWARD_CACHE[spec]
+    module_name, sep, attr = str(spec).partition(":")
+    if not sep or not module_name or not attr:
+        raise CampaignError(f"forward model must be given as 'module:function', got {spec!r}")
+    try:
+        fn = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as err:
+        raise CampaignError(f"cannot import forward model {spec!r}: {err}") from err
+    if not callable(fn):
+        raise CampaignError(f"forward model {spec!r} is not callable")
+    _FORWARD_CACHE[spec] = fn
+    return fn
+
+
+def execute_row(forward: str, index: int, case: dict) -> RowResult:
+    """Run one row in a worker and turn every outcome into a :class:`RowResult`.
+
+    Never raises for a failing simulation: solver errors, non-convergence and
+    any other exception of the forward model become failed rows with a reason.
+    """
+    t0 = time.perf_counter()
+    tag = worker_tag()
+    try:
+        fn = resolve_forward(forward)
+        result = fn(case)
+        seconds = float(getattr(result, "seconds", time.perf_counter() - t0))
+        if not bool(result.converged):
+            reason = str(getattr(result, "message", "") or "did not converge")
+            return RowResult(index, np.full(25, np.nan), False, reason, seconds, lvcore.__version__, tag)
+        outputs = np.asarray(result.outputs(), dtype=float)
+        return RowResult(index, outputs, True, "", seconds, lvcore.__version__, tag)
+    except SolverError as err:
+        reason = f"SolverError: {err}"
+    except Exception as err:  # noqa: BLE001 - recorded, never swallowed silently
+        last = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
+        where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
+        reason = f"{type(err).__name__}: {err}{where}"
+    return RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, lvcore.__version__, tag)
+
+
+def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward: str, resolution: str,
+           progress: bool, allow_rerecord: bool = False) -> None:
+    """Submit ``rows`` and record their results as they complete."""
+    if rows.size == 0:
+        return
+    from tqdm import tqdm
+
+    design = store.design()
+    futures = [executor.submit(execute_row, forward, int(i), design.space.case(design.points[i], resolution)) for i in rows]
+    bar = tqdm(total=rows.size, disable=not progress, file=sys.stderr, unit="run", desc="campaign")
+    failed = 0
+    try:
+        for fut in executor.as_completed(futures):
+            try:
+                result = fut.result()
+            except Exception as err:  # infrastructure failure: the row stays pending
+                raise CampaignError(
+                    f"a worker died or could not run a row ({type(err).__name__}: {err}); "
+                    f"finished rows are safe, run `lvcore campaign resume {store.path}`"
+                ) from err
+            store.record(result, allow_rerecord=allow_rerecord)
+            failed += not result.converged
+            bar.update(1)
+            bar.set_postfix(failed=failed)
+    finally:
+        bar.close()
+
+
+def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int | None = None,
+                 scheduler: str | None = None, resolution: str = "default", forward: str = DEFAULT_FORWARD,
+                 progress: bool = True, executor=None, overwrite: bool = False) -> StoreSummary:
+    """Run every row of ``design`` and record the results in a new store ``out``.
+
+    Parameters
+    ----------
+    design : Design or path
+        The design, or a design CSV (:func:`~lvcore.campaigns.designs.load_design`).
+    out : path
+        The HDF5 store to create (refuses to overwrite unless ``overwrite``).
+    workers : int, optional
+        Local worker processes (default one per core).
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a Dask scheduler; overrides ``workers``.
+    resolution : {"fast", "default"}
+        Simulator mesh resolution.
+    forward : str
+        Forward model ``"module:function"`` (default the FE simulator).
+    executor : optional
+        An executor object (see :mod:`lvcore.campaigns.executors`) to use
+        instead of creating one; it is not closed.
+    """
+    if resolution not in RESOLUTIONS:
+        raise CampaignError(f"--resolution must be one of {RESOLUTIONS}, got {resolution!r}")
+    if not isinstance(design, Design):
+        design = load_design(design)
+    resolve_forward(forward)  # fail early on a bad entry point
+    with CampaignStore.create(out, design, forward=forward, resolution=resolution, overwrite=overwrite) as store:
+        _run_with(store, store.pending_rows(), executor, workers, scheduler, forward, resolution, progress)
+        return store.summary()
+
+
+def resume_campaign(store_path: str | Path, *, workers: int | None = None, scheduler: str | None = None,
+                    retry_failed: bool = False, progress: bool = True, executor=None) -> StoreSummary:
+    """Run the rows of an existing store that are not committed yet.
+
+    With ``retry_failed`` the failed rows are run again too (their previous
+    reason is overwritten).
+    """
+    with CampaignStore.open(store_path, "r+") as store:
+        attrs = store.attrs
+        forward, resolution = str(attrs["forward"]), str(attrs["resolution"])
+        resolve_forward(forward)
+        rows = store.pending_rows(retry_failed=retry_failed)
+        _run_with(store, rows, executor, workers, scheduler, forward, resolution, progress, allow_rerecord=retry_failed)
+        return store.summary()
+
+
+def _run_with(store, rows, executor, workers, scheduler, forward, resolution, progress, allow_rerecord=False):
+    if rows.size == 0:
+        return
+    if executor is not None:
+        _drive(store, rows, executor, forward=forward, resolution=resolution, progress=progress, allow_rerecord=allow_rerecord)
+        return
+    with make_executor(workers=workers, scheduler=scheduler) as ex:
+        if progress:
+            print(f"lvcore campaign: {rows.size} row(s) on {ex.describe()}", file=sys.stderr)
+        _drive(store, rows, ex, forward=forward, resolution=resolution, progress=progress, allow_rerecord=allow_rerecord)
+
+
+def campaign_status(store_path: str | Path) -> StoreSummary:
+    """Counts of converged / failed / pending rows and the failure reasons."""
+    with CampaignStore.open(store_path, "r") as store:
+        return store.summary()

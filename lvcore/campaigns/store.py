@@ -1,0 +1,387 @@
+"""The campaign store: one HDF5 file (h5py) per campaign.
+
+Layout (all datasets have one entry per design row, fixed size, allocated and
+filled when the store is created, so recording a row never changes the file's
+structure, only raw data at fixed offsets):
+
+========================  =============  =======================================
+dataset                   dtype          meaning
+========================  =============  =======================================
+``inputs``                (n, d) f8      design points, physical units
+``outputs``               (n, 25) f8     [LVV mL, 24 strains]; NaN unless converged
+``state``                 (n,) i1        0 pending, 1 converged, 2 failed
+``seconds``               (n,) f8        wall time of the solve (s)
+``reason``                (n,) S256      failure reason (empty if converged)
+``version``               (n,) S32       ``lvcore.__version__`` of the worker
+``worker``                (n,) S64       ``host:pid`` of the worker
+``finished_at``           (n,) f8        UNIX time the row was recorded
+``record_count``          (n,) i4        times the row was recorded (must be 1)
+========================  =============  =======================================
+
+File attributes: ``format`` (``"lvcore-campaign"``), ``format_version``,
+``space`` (JSON), ``input_names``, ``output_names``, ``design_method``,
+``design_seed``, ``resolution``, ``forward``, ``lvcore_version``,
+``created_at``.
+
+Crash safety
+------------
+A row is committed by its ``state`` entry, which is written and flushed
+*after* every other field of the row has been written and flushed. A process
+killed with SIGKILL at any moment therefore leaves each row either committed
+with all its fields or still pending (its partial fields are overwritten
+when it is run again). Because no write after creation touches HDF5
+metadata, the file stays readable. Only one process may write a store at a
+time: a ``<store>.lock`` file is held with ``fcntl.flock`` (the kernel
+releases it when the process dies).
+"""
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import socket
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+import lvcore
+from lvcore.campaigns.designs import Design
+from lvcore.campaigns.space import ParameterSpace
+from lvcore.exceptions import CampaignError
+from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
+
+FORMAT = "lvcore-campaign"
+FORMAT_VERSION = 1
+PENDING, CONVERGED, FAILED = 0, 1, 2
+STATE_NAMES = {PENDING: "pending", CONVERGED: "converged", FAILED: "failed"}
+REASON_LEN, VERSION_LEN, WORKER_LEN = 256, 32, 64
+
+
+def worker_tag() -> str:
+    """``host:pid`` of the calling process."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+@dataclass(frozen=True)
+class RowResult:
+    """The outcome of one design row, as produced by a worker.
+
+    Parameters
+    ----------
+    index : int
+        Row number in the design.
+    outputs : np.ndarray
+        ``(25,)`` [LVV mL, 24 strains]; ignored (stored as NaN) unless converged.
+    converged : bool
+        Whether the simulator converged.
+    reason : str
+        Why it failed (empty when converged).
+    seconds : float
+        Wall time of the solve (s).
+    version : str
+        ``lvcore.__version__`` in the worker.
+    worker : str
+        ``host:pid`` of the worker.
+    """
+
+    index: int
+    outputs: np.ndarray
+    converged: bool
+    reason: str = ""
+    seconds: float = float("nan")
+    version: str = lvcore.__version__
+    worker: str = ""
+
+
+@dataclass(frozen=True)
+class StoreContents:
+    """Everything in a store, read into memory (see the module table)."""
+
+    space: ParameterSpace
+    inputs: np.ndarray
+    outputs: np.ndarray
+    state: np.ndarray
+    seconds: np.ndarray
+    reasons: tuple[str, ...]
+    versions: tuple[str, ...]
+    workers: tuple[str, ...]
+    finished_at: np.ndarray
+    record_count: np.ndarray
+    attrs: dict
+
+    @property
+    def converged(self) -> np.ndarray:
+        return self.state == CONVERGED
+
+    @property
+    def failed(self) -> np.ndarray:
+        return self.state == FAILED
+
+    @property
+    def pending(self) -> np.ndarray:
+        return self.state == PENDING
+
+
+@dataclass(frozen=True)
+class StoreSummary:
+    """Counts per state and the failure reasons with their counts."""
+
+    path: str
+    n: int
+    converged: int
+    failed: int
+    pending: int
+    reasons: tuple[tuple[str, int], ...]
+    mean_seconds: float
+    versions: tuple[str, ...]
+    space: str
+    resolution: str
+    forward: str
+
+    def format(self) -> str:
+        lines = [
+            f"campaign store {self.path}",
+            f"  space {self.space}, resolution {self.resolution}, forward {self.forward}",
+            f"  rows {self.n}: converged {self.converged}, failed {self.failed}, pending {self.pending}",
+        ]
+        if np.isfinite(self.mean_seconds):
+            lines.append(f"  mean solve time {self.mean_seconds:.3f} s")
+        if self.versions:
+            lines.append(f"  simulator versions: {', '.join(self.versions)}")
+        if self.reasons:
+            lines.append("  failure reasons:")
+            lines += [f"    {count:6d}  {reason}" for reason, count in self.reasons]
+        return "\n".join(lines)
+
+
+def _fixed_bytes(text: str, length: int) -> bytes:
+    raw = str(text).encode("utf-8", "replace")[:length]
+    return raw.decode("utf-8", "ignore").encode("utf-8")
+
+
+def _decode(arr) -> tuple[str, ...]:
+    return tuple(b.decode("utf-8", "replace") for b in np.asarray(arr))
+
+
+class CampaignStore:
+    """A campaign's HDF5 store. Use :meth:`create` or :meth:`open`.
+
+    In write mode, the store holds the ``<path>.lock`` file lock until
+    :meth:`close`. Use as a context manager.
+    """
+
+    def __init__(self, path: Path, h5: h5py.File, lock_fd: int | None):
+        self.path = Path(path)
+        self._h5 = h5
+        self._lock_fd = lock_fd
+
+    # ----- life cycle -------------------------------------------------------
+    @classmethod
+    def create(cls, path: str | Path, design: Design, *, forward: str, resolution: str, overwrite: bool = False) -> "CampaignStore":
+        """Create a store for ``design`` and open it for writing.
+
+        Raises
+        ------
+        CampaignError
+            If ``path`` exists and ``overwrite`` is false (use ``resume``).
+        """
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise CampaignError(f"store '{path}' already exists; use `lvcore campaign resume {path}` or choose another --out")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        lock_fd = cls._lock(path)
+        tmp = path.with_name(path.name + ".creating")
+        n, d = design.points.shape
+        try:
+            with h5py.File(tmp, "w") as f:
+                f.attrs.update({
+                    "format": FORMAT,
+                    "format_version": FORMAT_VERSION,
+                    "space": design.space.to_json(),
+                    "input_names": json.dumps(list(design.space.names)),
+                    "output_names": json.dumps(list(OUTPUT_COLUMNS)),
+                    "design_method": design.method,
+                    "design_seed": -1 if design.seed is None else int(design.seed),
+                    "resolution": resolution,
+                    "forward": forward,
+                    "lvcore_version": lvcore.__version__,
+                    "created_at": time.time(),
+                })
+                # Writing full arrays now allocates contiguous storage at creation,
+                # so later row writes only touch raw data.
+                f.create_dataset("inputs", data=np.asarray(design.points, dtype="f8"))
+                f.create_dataset("outputs", data=np.full((n, N_OUTPUTS), np.nan))
+                f.create_dataset("state", data=np.zeros(n, dtype="i1"))
+                f.create_dataset("seconds", data=np.full(n, np.nan))
+                f.create_dataset("reason", data=np.zeros(n, dtype=f"S{REASON_LEN}"))
+                f.create_dataset("version", data=np.zeros(n, dtype=f"S{VERSION_LEN}"))
+                f.create_dataset("worker", data=np.zeros(n, dtype=f"S{WORKER_LEN}"))
+                f.create_dataset("finished_at", data=np.full(n, np.nan))
+                f.create_dataset("record_count", data=np.zeros(n, dtype="i4"))
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            cls._unlock(lock_fd)
+            raise
+        return cls(path, h5py.File(path, "r+"), lock_fd)
+
+    @classmethod
+    def open(cls, path: str | Path, mode: str = "r") -> "CampaignStore":
+        """Open an existing store, ``mode`` ``"r"`` (read) or ``"r+"`` (write, locked)."""
+        path = Path(path)
+        if not path.is_file():
+            raise CampaignError(f"store '{path}' does not exist")
+        lock_fd = cls._lock(path) if mode == "r+" else None
+        try:
+            h5 = h5py.File(path, mode, locking=False) if mode == "r" else h5py.File(path, mode)
+        except OSError as err:
+            cls._unlock(lock_fd)
+            raise CampaignError(f"store '{path}' is not a readable HDF5 file: {err}") from err
+        if h5.attrs.get("format") != FORMAT:
+            h5.close()
+            cls._unlock(lock_fd)
+            raise CampaignError(f"'{path}' is not an lvcore campaign store (format attribute {h5.attrs.get('format')!r})")
+        return cls(path, h5, lock_fd)
+
+    @staticmethod
+    def _lock(path: Path) -> int:
+        fd = os.open(str(path) + ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError as err:
+            os.close(fd)
+            raise CampaignError(f"store '{path}' is being written by another process (lock {path}.lock held)") from err
+        return fd
+
+    @staticmethod
+    def _unlock(fd: int | None) -> None:
+        if fd is not None:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+
+    def close(self) -> None:
+        if self._h5 is not None:
+            self._h5.close()
+            self._h5 = None
+        self._unlock(self._lock_fd)
+        self._lock_fd = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ----- metadata ---------------------------------------------------------
+    @property
+    def attrs(self) -> dict:
+        return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in self._h5.attrs.items()}
+
+    @property
+    def space(self) -> ParameterSpace:
+        return ParameterSpace.from_json(self._h5.attrs["space"])
+
+    @property
+    def n(self) -> int:
+        return int(self._h5["state"].shape[0])
+
+    def design(self) -> Design:
+        seed = int(self._h5.attrs["design_seed"])
+        return Design(self.space, self._h5["inputs"][...], str(self._h5.attrs["design_method"]), None if seed < 0 else seed)
+
+    # ----- rows -------------------------------------------------------------
+    def state(self) -> np.ndarray:
+        return self._h5["state"][...]
+
+    def pending_rows(self, retry_failed: bool = False) -> np.ndarray:
+        """Indices of rows still to run (and failed ones if ``retry_failed``)."""
+        s = self.state()
+        todo = s == PENDING
+        if retry_failed:
+            todo |= s == FAILED
+        return np.flatnonzero(todo)
+
+    def record(self, result: RowResult, *, allow_rerecord: bool = False) -> None:
+        """Write one row and commit it (see *Crash safety*).
+
+        Raises
+        ------
+        CampaignError
+            If the row is already committed (a duplicate run) and
+            ``allow_rerecord`` is false.
+        """
+        if self._lock_fd is None:
+            raise CampaignError(f"store '{self.path}' is open read-only")
+        i = int(result.index)
+        if not 0 <= i < self.n:
+            raise CampaignError(f"row {i} is outside the store's {self.n} rows")
+        f = self._h5
+        current = int(f["state"][i])
+        if current == CONVERGED or (current == FAILED and not allow_rerecord):
+            raise CampaignError(f"row {i} of '{self.path}' is already recorded as {STATE_NAMES[current]}; refusing to record it twice")
+        out = np.asarray(result.outputs, dtype=float).reshape(-1) if result.converged else np.full(N_OUTPUTS, np.nan)
+        if out.shape != (N_OUTPUTS,):
+            raise CampaignError(f"row {i}: the forward model returned {out.shape[0]} outputs, expected {N_OUTPUTS}")
+        converged = bool(result.converged) and bool(np.all(np.isfinite(out)))
+        reason = result.reason if not result.converged else ("" if converged else "non-finite outputs")
+        if not converged:
+            out = np.full(N_OUTPUTS, np.nan)
+            reason = reason or "did not converge (no reason given)"
+        f["outputs"][i] = out
+        f["seconds"][i] = float(result.seconds)
+        f["reason"][i] = _fixed_bytes(reason, REASON_LEN)
+        f["version"][i] = _fixed_bytes(result.version, VERSION_LEN)
+        f["worker"][i] = _fixed_bytes(result.worker, WORKER_LEN)
+        f["finished_at"][i] = time.time()
+        f["record_count"][i] = int(f["record_count"][i]) + 1
+        f.flush()
+        f["state"][i] = CONVERGED if converged else FAILED  # the commit
+        f.flush()
+
+    # ----- reading ----------------------------------------------------------
+    def read(self) -> StoreContents:
+        f = self._h5
+        return StoreContents(
+            space=self.space,
+            inputs=f["inputs"][...],
+            outputs=f["outputs"][...],
+            state=f["state"][...],
+            seconds=f["seconds"][...],
+            reasons=_decode(f["reason"][...]),
+            versions=_decode(f["version"][...]),
+            workers=_decode(f["worker"][...]),
+            finished_at=f["finished_at"][...],
+            record_count=f["record_count"][...],
+            attrs=self.attrs,
+        )
+
+    def summary(self) -> StoreSummary:
+        c = self.read()
+        reasons: dict[str, int] = {}
+        for r, failed in zip(c.reasons, c.failed):
+            if failed:
+                reasons[r] = reasons.get(r, 0) + 1
+        done = ~c.pending
+        secs = c.seconds[done & np.isfinite(c.seconds)]
+        return StoreSummary(
+            path=str(self.path),
+            n=int(c.state.size),
+            converged=int(c.converged.sum()),
+            failed=int(c.failed.sum()),
+            pending=int(c.pending.sum()),
+            reasons=tuple(sorted(reasons.items(), key=lambda kv: -kv[1])),
+            mean_seconds=float(secs.mean()) if secs.size else float("nan"),
+            versions=tuple(sorted({v for v, d in zip(c.versions, done) if d and v})),
+            space=c.space.name,
+            resolution=str(c.attrs.get("resolution", "")),
+            forward=str(c.attrs.get("forward", "")),
+        )
+
+
+def read_store(path: str | Path) -> StoreContents:
+    """Read a whole store into memory (read-only, no lock)."""
+    with CampaignStore.open(path, "r") as store:
+        return store.read()
