@@ -1,0 +1,228 @@
+"""Plotly figure builders shared by the app pages and reports.
+
+Every builder is a pure function of plain arrays and returns a
+``plotly.graph_objects.Figure``; nothing here runs a simulation or reads
+files. Strain figures follow :mod:`lvcore.outputs`: region
+``r = 6 * level + sector`` (level 0 basal ... 3 apical; sector 0 spans
+0°–60° counter-clockwise from +x seen from the base).
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+import plotly.graph_objects as go
+
+from lvcore.geometry.template import N_LEVELS, N_REGIONS, N_SECTORS
+from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES
+
+#: Sector labels: "S1 (0–60°)" ... "S6 (300–360°)".
+SECTOR_NAMES = tuple(f"S{k + 1} ({60 * k}–{60 * (k + 1)}°)" for k in range(N_SECTORS))
+#: Colour sequence for series (plotly's default qualitative palette).
+SERIES_COLOURS = ("#636EFA", "#EF553B", "#00CC96", "#AB63FA", "#FFA15A", "#19D3F3", "#FF6692", "#B6E880")
+
+
+def _strains(values, where="strains") -> np.ndarray:
+    y = np.asarray(values, dtype=float).ravel()
+    if y.size == N_REGIONS + 1:  # a full 25-output vector: drop LVV
+        y = y[1:]
+    if y.size != N_REGIONS:
+        raise ValueError(f"{where}: expected {N_REGIONS} regional strains (or 25 outputs), got {y.size} values")
+    return y
+
+
+def strain_grid(strains) -> np.ndarray:
+    """The 24 regional strains as a (4 levels, 6 sectors) array (row = level)."""
+    return _strains(strains).reshape(N_LEVELS, N_SECTORS)
+
+
+def strain_heatmap(strains, *, title: str = "Circumferential strain E_cc", zmin: float | None = None,
+                   zmax: float | None = None, colorscale: str = "RdBu", text_format: str = ".3f",
+                   height: int = 360) -> go.Figure:
+    """Heat map of the 24 strains: 4 levels (rows, basal on top) × 6 sectors (columns).
+
+    Parameters
+    ----------
+    strains : (24,) or (25,) array
+        Regional strains (-), or a full output vector whose first entry (LVV) is dropped.
+    zmin, zmax : float, optional
+        Colour range; default symmetric about zero over the data.
+    """
+    grid = strain_grid(strains)
+    if zmin is None or zmax is None:
+        m = float(np.nanmax(np.abs(grid))) or 1.0
+        zmin = -m if zmin is None else zmin
+        zmax = m if zmax is None else zmax
+    names = np.asarray(STRAIN_NAMES).reshape(N_LEVELS, N_SECTORS)
+    fig = go.Figure(
+        go.Heatmap(
+            z=grid, x=list(SECTOR_NAMES), y=list(LEVEL_NAMES), zmin=zmin, zmax=zmax, colorscale=colorscale,
+            customdata=names, texttemplate="%{z:" + text_format + "}",
+            hovertemplate="%{customdata}<br>%{y}, %{x}<br>E_cc = %{z:.4f}<extra></extra>",
+            colorbar={"title": "E_cc (-)"},
+        )
+    )
+    fig.update_yaxes(autorange="reversed", title="level (base → apex)")
+    fig.update_xaxes(title="sector (counter-clockwise from +x, seen from the base)")
+    fig.update_layout(title=title, height=height, margin=dict(l=10, r=10, t=50, b=10))
+    return fig
+
+
+def strain_bars(series: Mapping[str, Sequence[float]] | Sequence[float], *, errors: Mapping[str, Sequence[float]] | None = None,
+                title: str = "Circumferential strain by region", height: int = 420) -> go.Figure:
+    """Grouped bars of the 24 strains, one subplot-like block per level.
+
+    Parameters
+    ----------
+    series : dict label -> (24,) or (25,) array, or one array
+        Several series (e.g. "measured", "simulated") are drawn side by side.
+    errors : dict label -> (24,) array, optional
+        Symmetric error bars (e.g. posterior predictive sd) per series.
+    """
+    if not isinstance(series, Mapping):
+        series = {"strain": series}
+    x = [[LEVEL_NAMES[r // N_SECTORS] for r in range(N_REGIONS)], [f"S{r % N_SECTORS + 1}" for r in range(N_REGIONS)]]
+    fig = go.Figure()
+    for n, (label, values) in enumerate(series.items()):
+        y = _strains(values, f"series '{label}'")
+        err = None
+        if errors and label in errors:
+            err = {"type": "data", "array": _strains(errors[label], f"errors '{label}'"), "visible": True}
+        fig.add_bar(x=x, y=y, name=label, error_y=err, marker_color=SERIES_COLOURS[n % len(SERIES_COLOURS)],
+                    customdata=np.asarray(STRAIN_NAMES), hovertemplate="%{customdata}: %{y:.4f}<extra>" + label + "</extra>")
+    fig.update_layout(barmode="group", title=title, height=height, yaxis_title="E_cc (-)",
+                      legend=dict(orientation="h", y=1.02, x=1, xanchor="right", yanchor="bottom"),
+                      margin=dict(l=10, r=10, t=60, b=10))
+    return fig
+
+
+def strain_bullseye(strains, *, title: str = "Circumferential strain (bull's eye)", colorscale: str = "RdBu",
+                    zmin: float | None = None, zmax: float | None = None, height: int = 420) -> go.Figure:
+    """Bull's-eye plot: 4 rings (basal outside, apical inside) × 6 sectors.
+
+    Sector k spans the polar angles [60k°, 60(k+1)°) counter-clockwise, as seen from the base.
+    """
+    grid = strain_grid(strains)
+    if zmin is None or zmax is None:
+        m = float(np.nanmax(np.abs(grid))) or 1.0
+        zmin = -m if zmin is None else zmin
+        zmax = m if zmax is None else zmax
+    level = np.repeat(np.arange(N_LEVELS), N_SECTORS)
+    sector = np.tile(np.arange(N_SECTORS), N_LEVELS)
+    fig = go.Figure(
+        go.Barpolar(
+            r=np.ones(N_REGIONS), base=(N_LEVELS - 1 - level).astype(float), theta=60.0 * sector + 30.0,
+            width=np.full(N_REGIONS, 60.0), marker=dict(color=grid.ravel(), colorscale=colorscale, cmin=zmin,
+                                                        cmax=zmax, colorbar={"title": "E_cc (-)"},
+                                                        line=dict(color="white", width=1)),
+            customdata=np.stack([np.asarray(STRAIN_NAMES), grid.ravel()], axis=1),
+            hovertemplate="%{customdata[0]}: %{customdata[1]:.4f}<extra></extra>",
+        )
+    )
+    fig.update_layout(
+        title=title, height=height, margin=dict(l=20, r=20, t=50, b=20),
+        polar=dict(radialaxis=dict(visible=False, range=[0, N_LEVELS]),
+                   angularaxis=dict(direction="counterclockwise", rotation=0, tickvals=[0, 60, 120, 180, 240, 300])),
+    )
+    return fig
+
+
+def violin(samples: Mapping[str, Sequence[float]], *, reference: Mapping[str, float] | None = None,
+           title: str = "", yaxis_title: str = "", log_y: bool = False, height: int = 420) -> go.Figure:
+    """Violins of several sample sets side by side, with optional reference markers.
+
+    Parameters
+    ----------
+    samples : dict label -> 1-D array
+        E.g. posterior draws per parameter or per likelihood model.
+    reference : dict label -> value, optional
+        Shown as a red dashed horizontal segment over the matching violin (e.g. the truth).
+    """
+    fig = go.Figure()
+    labels = list(samples)
+    for n, label in enumerate(labels):
+        fig.add_violin(y=np.asarray(samples[label], dtype=float).ravel(), name=label, box_visible=True,
+                       meanline_visible=True, points=False, line_color=SERIES_COLOURS[n % len(SERIES_COLOURS)])
+    for label, value in (reference or {}).items():
+        if label in samples:
+            k = labels.index(label)
+            fig.add_shape(type="line", x0=k - 0.4, x1=k + 0.4, y0=value, y1=value, xref="x", yref="y",
+                          line=dict(color="red", dash="dash", width=2))
+    if reference:
+        fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="reference")
+    fig.update_layout(title=title, yaxis_title=yaxis_title, height=height, showlegend=bool(reference),
+                      margin=dict(l=10, r=10, t=50, b=10))
+    if log_y:
+        fig.update_yaxes(type="log")
+    return fig
+
+
+def density_overlay(samples: Mapping[str, Sequence[float]], *, reference: float | Mapping[str, float] | None = None,
+                    title: str = "", xaxis_title: str = "", n_grid: int = 200, x_range: tuple[float, float] | None = None,
+                    height: int = 360) -> go.Figure:
+    """Kernel density estimates of several sample sets on one axis, with dashed reference lines.
+
+    Parameters
+    ----------
+    samples : dict label -> 1-D array
+    reference : float or dict label -> float, optional
+        Vertical dashed line(s), e.g. the true value.
+    x_range : (lo, hi), optional
+        Grid of the densities; default the pooled sample range padded by 10 %.
+    """
+    from scipy.stats import gaussian_kde
+
+    arrays = {k: np.asarray(v, dtype=float).ravel() for k, v in samples.items()}
+    pooled = np.concatenate([a[np.isfinite(a)] for a in arrays.values()]) if arrays else np.zeros(1)
+    if x_range is None:
+        lo, hi = float(pooled.min()), float(pooled.max())
+        pad = 0.1 * (hi - lo) if hi > lo else 1.0
+        x_range = (lo - pad, hi + pad)
+    xs = np.linspace(x_range[0], x_range[1], n_grid)
+    fig = go.Figure()
+    for n, (label, a) in enumerate(arrays.items()):
+        a = a[np.isfinite(a)]
+        colour = SERIES_COLOURS[n % len(SERIES_COLOURS)]
+        if a.size >= 2 and np.ptp(a) > 0:
+            fig.add_scatter(x=xs, y=gaussian_kde(a)(xs), mode="lines", name=label, line=dict(color=colour))
+        elif a.size:  # a point mass: show as a vertical line
+            fig.add_vline(x=float(a[0]), line=dict(color=colour))
+    refs = reference if isinstance(reference, Mapping) else ({} if reference is None else {"reference": reference})
+    for label, value in refs.items():
+        fig.add_vline(x=float(value), line=dict(color="black", dash="dash"), annotation_text=str(label),
+                      annotation_position="top")
+    fig.update_layout(title=title, xaxis_title=xaxis_title, yaxis_title="density", height=height,
+                      margin=dict(l=10, r=10, t=50, b=10))
+    return fig
+
+
+def contour(x, y, z, *, title: str = "", xaxis_title: str = "", yaxis_title: str = "", colorbar_title: str = "",
+            points: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None, log_x: bool = False,
+            log_y: bool = False, colorscale: str = "Viridis", height: int = 420) -> go.Figure:
+    """Filled contour plot of ``z[j, i]`` over the grid ``x[i]``, ``y[j]``, with optional point overlays.
+
+    Parameters
+    ----------
+    x : (nx,) array; y : (ny,) array; z : (ny, nx) array
+    points : dict label -> (xs, ys), optional
+        Scatter overlays (e.g. design points, the optimum, the truth).
+    """
+    z = np.asarray(z, dtype=float)
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if z.shape != (y.size, x.size):
+        raise ValueError(f"z must have shape (len(y), len(x)) = {(y.size, x.size)}, got {z.shape}")
+    fig = go.Figure(go.Contour(x=x, y=y, z=z, colorscale=colorscale, colorbar={"title": colorbar_title},
+                               contours=dict(showlabels=True)))
+    symbols = ("x", "star", "circle", "diamond", "cross", "triangle-up")
+    for n, (label, (px, py)) in enumerate((points or {}).items()):
+        fig.add_scatter(x=np.asarray(px, float), y=np.asarray(py, float), mode="markers", name=label,
+                        marker=dict(symbol=symbols[n % len(symbols)], size=10, color="white",
+                                    line=dict(color="black", width=1)))
+    fig.update_layout(title=title, xaxis_title=xaxis_title, yaxis_title=yaxis_title, height=height,
+                      margin=dict(l=10, r=10, t=50, b=10), legend=dict(orientation="h", y=-0.2))
+    if log_x:
+        fig.update_xaxes(type="log")
+    if log_y:
+        fig.update_yaxes(type="log")
+    return fig

@@ -1,0 +1,259 @@
+"""Off-screen 3-D pictures of LV meshes with PyVista (no display needed).
+
+Meshes are 27-node (triquadratic) hexahedra in the template's local node
+order ``a + 3 b + 9 c`` (see :mod:`lvcore.geometry.template`); they are
+converted to ``VTK_TRIQUADRATIC_HEXAHEDRON`` cells with the permutation of
+:mod:`lvcore.geometry.io`. Pictures are rendered with
+``pv.Plotter(off_screen=True)`` and returned as PNG bytes, so the app, the CLI
+and reports share them. ``VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow`` is set
+before PyVista is imported so that a head-less machine renders without an X
+server.
+
+Typical use::
+
+    ref = lv_surface(nodes, elements)
+    cur = lv_surface(nodes + u, elements, point_data={"|u| (mm)": np.linalg.norm(u, axis=1)})
+    png = render_meshes([MeshLayer(ref, color="grey", style="wireframe", label="reference"),
+                         MeshLayer(cur, scalars="|u| (mm)", label="end diastole")])
+"""
+from __future__ import annotations
+
+import io
+import os
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+import numpy as np  # noqa: E402
+import pyvista as pv  # noqa: E402
+
+from lvcore.geometry.io import VTK_FROM_TEMPLATE, VTK_TRIQUADRATIC_HEXAHEDRON  # noqa: E402
+
+#: Named camera directions (from the focal point towards the camera) with +z up.
+VIEWS = {
+    "iso": (1.0, -1.6, 0.8),
+    "side": (0.0, -1.0, 0.0),
+    "front": (1.0, 0.0, 0.0),
+    "base": (0.0, 0.0, 1.0),
+    "apex": (0.0, 0.0, -1.0),
+}
+
+
+def lv_grid(nodes, elements, point_data: Mapping[str, Any] | None = None,
+            cell_data: Mapping[str, Any] | None = None) -> pv.UnstructuredGrid:
+    """A volume grid of 27-node hexahedra.
+
+    Parameters
+    ----------
+    nodes : (n_nodes, 3) array
+        Node positions (mm).
+    elements : (n_elements, 27) int array
+        Connectivity in the template's local order ``a + 3 b + 9 c``.
+    point_data, cell_data : dict of name -> array, optional
+        Fields attached to the grid (first dimension n_nodes / n_elements).
+
+    Returns
+    -------
+    pyvista.UnstructuredGrid with ``VTK_TRIQUADRATIC_HEXAHEDRON`` cells.
+    """
+    nodes = np.asarray(nodes, dtype=float)
+    elements = np.asarray(elements, dtype=np.int64)
+    if nodes.ndim != 2 or nodes.shape[1] != 3:
+        raise ValueError(f"nodes must have shape (n, 3), got {nodes.shape}")
+    if elements.ndim != 2 or elements.shape[1] != 27:
+        raise ValueError(f"elements must have shape (n_elements, 27), got {elements.shape}")
+    grid = pv.UnstructuredGrid({VTK_TRIQUADRATIC_HEXAHEDRON: elements[:, VTK_FROM_TEMPLATE]}, nodes)
+    for name, val in (point_data or {}).items():
+        grid.point_data[name] = np.asarray(val)
+    for name, val in (cell_data or {}).items():
+        grid.cell_data[name] = np.asarray(val)
+    return grid
+
+
+def lv_surface(nodes, elements, point_data: Mapping[str, Any] | None = None,
+               cell_data: Mapping[str, Any] | None = None, subdivision: int = 2) -> pv.PolyData:
+    """The boundary surface of a 27-node hexahedral mesh, as triangles for rendering.
+
+    Parameters
+    ----------
+    nodes, elements, point_data, cell_data
+        As for :func:`lv_grid`.
+    subdivision : int
+        Levels of nonlinear subdivision of the quadratic faces (0 = flat facets
+        through the nodes; 2 follows the curved faces closely).
+
+    Returns
+    -------
+    pyvista.PolyData carrying the interpolated point data.
+    """
+    grid = lv_grid(nodes, elements, point_data, cell_data)
+    return grid.extract_surface(nonlinear_subdivision=int(subdivision), algorithm="dataset_surface")
+
+
+@dataclass
+class MeshLayer:
+    """One mesh in a picture.
+
+    Attributes
+    ----------
+    mesh : pyvista dataset (PolyData or UnstructuredGrid)
+    color : str, optional
+        A single colour (ignored when ``scalars`` is given).
+    scalars : str or array, optional
+        Name of a point/cell array of ``mesh``, or the values themselves,
+        shown with ``cmap`` and a scalar bar titled ``label``.
+    opacity : float
+    label : str, optional
+        Legend entry (single colour) or scalar-bar title (scalars).
+    style : {"surface", "wireframe", "points"}
+    cmap : str
+    clim : (lo, hi), optional
+    line_width : float
+    show_edges : bool
+    """
+
+    mesh: Any
+    color: str | None = None
+    scalars: Any = None
+    opacity: float = 1.0
+    label: str | None = None
+    style: str = "surface"
+    cmap: str = "viridis"
+    clim: tuple[float, float] | None = None
+    line_width: float = 1.0
+    show_edges: bool = False
+
+
+def _as_layer(item) -> MeshLayer:
+    if isinstance(item, MeshLayer):
+        return item
+    if isinstance(item, Mapping):
+        return MeshLayer(**item)
+    if isinstance(item, (tuple, list)):
+        mesh, how, *rest = item
+        opacity = rest[0] if len(rest) > 0 else 1.0
+        label = rest[1] if len(rest) > 1 else None
+        is_field = isinstance(how, str) and how in mesh.array_names
+        is_values = how is not None and not isinstance(how, str) and np.size(how) in (mesh.n_points, mesh.n_cells)
+        if is_field or is_values:
+            return MeshLayer(mesh, scalars=how, opacity=opacity, label=label)
+        return MeshLayer(mesh, color=how, opacity=opacity, label=label)
+    return MeshLayer(item)
+
+
+def render_meshes(layers: Sequence, *, window_size: tuple[int, int] = (800, 600), view: str | Sequence[float] = "iso",
+                  background: str = "white", title: str | None = None, legend: bool = True,
+                  zoom: float = 1.0, parallel_projection: bool = False) -> bytes:
+    """Render meshes off-screen and return a PNG image.
+
+    Parameters
+    ----------
+    layers : sequence
+        Each a :class:`MeshLayer`, a dict of its fields, or a tuple
+        ``(mesh, color_or_scalars, opacity, label)`` (trailing items optional;
+        the second item is taken as scalars when it names an array of the mesh
+        or is an array).
+    window_size : (width, height) in pixels.
+    view : str or (x, y, z)
+        One of :data:`VIEWS` or a direction from the scene centre towards the camera.
+    background : str
+    title : str, optional
+        Text in the upper left corner.
+    legend : bool
+        Show a legend of the labelled single-colour layers.
+    zoom : float
+        Camera zoom factor after fitting the scene.
+    parallel_projection : bool
+
+    Returns
+    -------
+    bytes of a PNG image of ``window_size``.
+    """
+    layers = [_as_layer(item) for item in layers]
+    if isinstance(view, str) and view not in VIEWS:
+        raise ValueError(f"view must be one of {sorted(VIEWS)} or a non-zero 3-vector, got {view!r}")
+    if not layers:
+        raise ValueError("render_meshes needs at least one mesh")
+    plotter = pv.Plotter(off_screen=True, window_size=list(window_size))
+    try:
+        plotter.set_background(background)
+        legend_entries = []
+        for n, layer in enumerate(layers):
+            kwargs: dict[str, Any] = dict(opacity=layer.opacity, style=layer.style, line_width=layer.line_width,
+                                          show_edges=layer.show_edges, smooth_shading=layer.style == "surface")
+            if layer.scalars is not None:
+                kwargs.update(scalars=layer.scalars, cmap=layer.cmap, clim=layer.clim,
+                              scalar_bar_args={"title": layer.label or (layer.scalars if isinstance(layer.scalars, str)
+                                                                        else f"layer {n}"),
+                                               "color": "black", "vertical": True, "position_x": 0.85,
+                                               "position_y": 0.1, "height": 0.7, "width": 0.06})
+            else:
+                kwargs.update(color=layer.color or "lightgrey")
+                if layer.label:
+                    legend_entries.append((layer.label, layer.color or "lightgrey"))
+            plotter.add_mesh(layer.mesh, **kwargs)
+        if legend and legend_entries:
+            plotter.add_legend(legend_entries, bcolor="white", face="rectangle", size=(0.28, 0.06 * len(legend_entries)),
+                               loc="lower left")
+        if title:
+            plotter.add_text(title, position="upper_left", font_size=11, color="black")
+        direction = np.asarray(VIEWS[view] if isinstance(view, str) else view, dtype=float)
+        if direction.shape != (3,) or not np.any(direction):
+            raise ValueError(f"view must be one of {sorted(VIEWS)} or a non-zero 3-vector, got {view!r}")
+        bounds = np.array(plotter.bounds).reshape(3, 2)
+        centre = bounds.mean(axis=1)
+        up = (0.0, 1.0, 0.0) if abs(direction[2]) > 0.99 * np.linalg.norm(direction) else (0.0, 0.0, 1.0)
+        plotter.camera_position = [tuple(centre + direction), tuple(centre), up]
+        plotter.reset_camera()
+        if parallel_projection:
+            plotter.enable_parallel_projection()
+        if zoom != 1.0:
+            plotter.camera.zoom(zoom)
+        image = plotter.screenshot(return_img=True)
+    finally:
+        plotter.close()
+    return png_bytes(image)
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    """Encode an (h, w, 3 or 4) uint8 image as PNG."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.asarray(image, dtype=np.uint8)).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def render_reference_and_deformed(reference_nodes, deformed_nodes, elements, *, scalars=None,
+                                  scalars_label: str = "displacement (mm)", window_size=(800, 600), view="iso",
+                                  title: str | None = None, cmap: str = "viridis") -> bytes:
+    """Reference mesh as a grey wireframe and the deformed mesh as a coloured surface.
+
+    Parameters
+    ----------
+    reference_nodes, deformed_nodes : (n_nodes, 3) arrays (mm)
+    elements : (n_elements, 27) template-order connectivity
+    scalars : (n_nodes,) array, optional
+        Values on the deformed surface; default the displacement magnitude (mm).
+        The reference is drawn as the element edges of its boundary (straight
+        chords between element corners).
+    scalars_label : str
+        Scalar bar title.
+
+    Returns
+    -------
+    PNG bytes.
+    """
+    ref = np.asarray(reference_nodes, dtype=float)
+    cur = np.asarray(deformed_nodes, dtype=float)
+    values = np.linalg.norm(cur - ref, axis=1) if scalars is None else np.asarray(scalars, dtype=float)
+    ref_edges = lv_surface(ref, elements, subdivision=0).extract_all_edges()  # element edges (corner chords)
+    cur_surface = lv_surface(cur, elements, point_data={scalars_label: values})
+    return render_meshes(
+        [
+            MeshLayer(ref_edges, color="black", style="wireframe", opacity=0.8, line_width=1.5, label="reference (early diastole)"),
+            MeshLayer(cur_surface, scalars=scalars_label, opacity=0.7, label=scalars_label, cmap=cmap),
+        ],
+        window_size=window_size, view=view, title=title,
+    )

@@ -1,0 +1,122 @@
+"""Plotly figure builders and off-screen PyVista rendering (no display needed)."""
+import io
+import os
+
+import numpy as np
+import pytest
+
+from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
+from lvcore.geometry.template import DEFAULT_TEMPLATE, LVTemplate
+from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES
+from lvcore.viz import figures
+
+
+def _ramp():
+    return -0.01 * (np.arange(24) + 1)  # region r has strain -(r+1)/100
+
+
+def test_strain_heatmap_places_regions():
+    fig = figures.strain_heatmap(_ramp())
+    hm = fig.data[0]
+    z = np.asarray(hm.z)
+    assert z.shape == (4, 6)
+    # row = level, column = sector: region 6*level + sector
+    assert z[2, 4] == pytest.approx(-0.01 * (6 * 2 + 4 + 1))
+    assert list(hm.y) == list(LEVEL_NAMES)
+    assert np.asarray(hm.customdata)[3, 5] == STRAIN_NAMES[23]
+    assert hm.zmin == pytest.approx(-0.24) and hm.zmax == pytest.approx(0.24)
+    # a 25-output vector drops LVV
+    fig25 = figures.strain_heatmap(np.concatenate([[120.0], _ramp()]))
+    np.testing.assert_array_equal(np.asarray(fig25.data[0].z), z)
+    with pytest.raises(ValueError, match="24 regional strains"):
+        figures.strain_heatmap(np.zeros(23))
+
+
+def test_strain_bars_and_bullseye():
+    fig = figures.strain_bars({"measured": _ramp(), "simulated": _ramp() * 0.5}, errors={"measured": np.full(24, 0.01)})
+    assert len(fig.data) == 2 and fig.layout.barmode == "group"
+    assert np.asarray(fig.data[1].y)[7] == pytest.approx(-0.04)
+    assert np.asarray(fig.data[0].error_y.array)[0] == 0.01
+    assert list(fig.data[0].x[0])[6] == LEVEL_NAMES[1] and list(fig.data[0].x[1])[6] == "S1"
+    bull = figures.strain_bullseye(_ramp())
+    bar = bull.data[0]
+    # region 7 = level 1, sector 1: ring base 2 (basal ring outermost), centred at 90 degrees
+    assert np.asarray(bar.base)[7] == 2 and np.asarray(bar.theta)[7] == 90
+    assert np.asarray(bar.marker.color)[7] == pytest.approx(-0.08)
+
+
+def test_violin_density_contour():
+    rng = np.random.default_rng(0)
+    samples = {"a": rng.normal(1.0, 0.1, 500), "b": rng.normal(2.0, 0.2, 500)}
+    v = figures.violin(samples, reference={"a": 1.0})
+    assert [t.type for t in v.data[:2]] == ["violin", "violin"] and len(v.layout.shapes) == 1
+    d = figures.density_overlay(samples, reference={"truth": 1.0}, n_grid=401)
+    x, y = np.asarray(d.data[0].x), np.asarray(d.data[0].y)
+    assert abs(x[np.argmax(y)] - 1.0) < 0.05  # KDE peaks at the sample mean
+    assert np.trapezoid(y, x) == pytest.approx(1.0, abs=0.02)
+    assert d.layout.shapes[0].line.dash == "dash"
+    xs, ys = np.linspace(0, 1, 5), np.linspace(0, 2, 4)
+    c = figures.contour(xs, ys, np.add.outer(ys, xs), points={"opt": ([0.5], [1.0])})
+    assert c.data[0].type == "contour" and c.data[1].mode == "markers"
+    with pytest.raises(ValueError, match="shape"):
+        figures.contour(xs, ys, np.zeros((5, 4)))
+
+
+# ----------------------------------------------------------------------------
+# PyVista (off-screen)
+# ----------------------------------------------------------------------------
+mesh3d = pytest.importorskip("lvcore.viz.mesh3d")
+
+
+def _wall_volume(lv: TruncatedEllipsoidLV) -> float:
+    outer = TruncatedEllipsoidLV(lv.epi, lv.epi, lv.base_z).cavity_volume_mm3()
+    return outer - lv.cavity_volume_mm3()
+
+
+def test_lv_grid_geometry_matches_ellipsoid():
+    nodes = DEFAULT_LV.nodes(DEFAULT_TEMPLATE)
+    grid = mesh3d.lv_grid(nodes, DEFAULT_TEMPLATE.elements, cell_data={"region": DEFAULT_TEMPLATE.element_regions})
+    assert grid.n_cells == DEFAULT_TEMPLATE.n_elements and set(np.unique(grid.celltypes)) == {29}
+    vols = grid.compute_cell_sizes(length=False, area=False).cell_data["Volume"]
+    assert np.all(vols > 0)  # the permutation keeps every cell right-handed
+    # VTK sizes nonlinear cells from a linear subdivision, so only roughly the exact wall volume
+    assert vols.sum() == pytest.approx(_wall_volume(DEFAULT_LV), rel=3e-2)
+    # VTK's own interpolation inside a cell equals the template's isoparametric map
+    r, s, t = 0.25, 0.6, 0.8  # VTK parametric (circumferential, transmural, longitudinal)
+    for e in (0, 37, DEFAULT_TEMPLATE.n_elements - 1):
+        cell = grid.GetCell(e)
+        x, w = [0.0, 0.0, 0.0], [0.0] * 27
+        from vtkmodules.vtkCommonCore import reference
+
+        cell.EvaluateLocation(reference(0), [r, s, t], x, w)
+        ec, el, et = DEFAULT_TEMPLATE.element_grid[e]
+        expected = DEFAULT_TEMPLATE.evaluate(nodes, 2 * np.pi * (ec + r) / DEFAULT_TEMPLATE.n_circ,
+                                             (el + t) / DEFAULT_TEMPLATE.n_long, (et + s) / DEFAULT_TEMPLATE.n_trans)
+        np.testing.assert_allclose(x, expected, atol=1e-9)
+    surf = mesh3d.lv_surface(nodes, DEFAULT_TEMPLATE.elements, point_data={"z": nodes[:, 2]})
+    assert surf.n_points > nodes.shape[0]  # subdivided curved faces
+    np.testing.assert_allclose(surf.bounds[4:], [-75.0, 10.0], atol=1e-6)
+    np.testing.assert_allclose(surf.point_data["z"], surf.points[:, 2], atol=1e-6)  # interpolated field
+
+
+def test_render_offscreen_png(monkeypatch):
+    from PIL import Image
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    tmpl = LVTemplate(6, 4, 1)
+    lv = TruncatedEllipsoidLV(EllipsoidSurface(7, 17), EllipsoidSurface(10, 20), 5.0)
+    ref = lv.nodes(tmpl)
+    cur = ref * np.array([1.2, 1.2, 1.3])
+    png = mesh3d.render_reference_and_deformed(ref, cur, tmpl.elements, window_size=(320, 240), title="t")
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and img.shape == (240, 320, 3)
+    coloured = np.abs(img.astype(int) - 255).sum(axis=2) > 30  # not the white background
+    assert 0.05 < coloured.mean() < 0.9
+    # an overlay of two single-colour meshes, tuple form; red must appear
+    png2 = mesh3d.render_meshes([(mesh3d.lv_surface(ref, tmpl.elements), "red", 1.0, "a"),
+                                 (mesh3d.lv_surface(cur, tmpl.elements), "blue", 0.3, "b")],
+                                window_size=(200, 200), view="side")
+    img2 = np.asarray(Image.open(io.BytesIO(png2)).convert("RGB")).astype(int)
+    assert np.any((img2[..., 0] > 150) & (img2[..., 1] < 80))
+    with pytest.raises(ValueError, match="view"):
+        mesh3d.render_meshes([mesh3d.lv_surface(ref, tmpl.elements)], view="sideways")
