@@ -1,0 +1,197 @@
+"""Convergence diagnostics (ArviZ R-hat and ESS), InferenceData export.
+
+Policy (chapter: "convergence by PSRF, 1000 draws kept after convergence"):
+run warm-up plus ``num_samples`` draws per chain; if the split R-hat of any
+monitored parameter exceeds ``rhat_max`` or its bulk ESS is below
+``ess_min``, those draws are discarded as burn-in and ``num_samples`` new
+draws are taken from where the chains stopped, up to ``max_rounds`` times.
+A run that still fails is returned with ``converged=False`` and the failing
+parameters listed: non-convergence is reported, never hidden.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import arviz as az
+import numpy as np
+import pandas as pd
+
+from lvcore.inference import models, samplers
+from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
+
+#: Default convergence thresholds.
+DEFAULT_RHAT_MAX = 1.05
+DEFAULT_ESS_MIN = 100.0
+
+
+def monitored_names(samples: dict) -> list[str]:
+    """Scalar parameters whose convergence is checked (theta, angles, sigma_S^2, v, GP hyperparameters)."""
+    order = THETA_NAMES + ANGLE_NAMES + ("sigma_s2", "v") + models.HYPER_NAMES
+    return [n for n in order if n in samples]
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """Convergence summary of one run.
+
+    Attributes
+    ----------
+    converged : bool
+        All monitored parameters have R-hat <= rhat_max and bulk ESS >= ess_min.
+    max_rhat, min_ess_bulk, min_ess_tail : float
+        Worst values over the monitored parameters.
+    n_divergent : int
+        Divergent transitions among the kept draws.
+    failing : tuple of str
+        Parameters that missed a threshold.
+    rounds : int
+        Sampling rounds used (1 = no extension needed).
+    rhat_max, ess_min : float
+        Thresholds used.
+    """
+
+    converged: bool
+    max_rhat: float
+    min_ess_bulk: float
+    min_ess_tail: float
+    n_divergent: int
+    failing: tuple
+    rounds: int = 1
+    rhat_max: float = DEFAULT_RHAT_MAX
+    ess_min: float = DEFAULT_ESS_MIN
+
+    def message(self) -> str:
+        """One line for logs and the app."""
+        state = "converged" if self.converged else "NOT CONVERGED"
+        msg = (f"{state}: max R-hat {self.max_rhat:.3f} (<= {self.rhat_max}), min bulk ESS "
+               f"{self.min_ess_bulk:.0f} (>= {self.ess_min:.0f}), {self.n_divergent} divergent, "
+               f"{self.rounds} round(s)")
+        if self.failing:
+            msg += "; failing: " + ", ".join(self.failing)
+        return msg
+
+
+def summary_table(samples: dict, var_names=None) -> pd.DataFrame:
+    """ArviZ summary (mean, sd, HDI 90%, MCSE, ESS bulk/tail, R-hat) of scalar parameters."""
+    var_names = monitored_names(samples) if var_names is None else list(var_names)
+    data = az.from_dict(posterior={n: np.asarray(samples[n]) for n in var_names})
+    return az.summary(data, hdi_prob=0.9)
+
+
+def check_convergence(run: samplers.SamplerRun, rhat_max: float = DEFAULT_RHAT_MAX,
+                      ess_min: float = DEFAULT_ESS_MIN, rounds: int = 1) -> Convergence:
+    """R-hat and ESS of the monitored parameters of ``run`` (ArviZ rank-normalised split R-hat)."""
+    table = summary_table(run.samples)
+    failing = tuple(table.index[(table["r_hat"] > rhat_max) | (table["ess_bulk"] < ess_min)
+                                | ~np.isfinite(table["r_hat"])])
+    n_div = int(np.sum(run.sample_stats.get("diverging", 0)))
+    return Convergence(
+        converged=not failing,
+        max_rhat=float(np.nanmax(table["r_hat"])),
+        min_ess_bulk=float(np.nanmin(table["ess_bulk"])),
+        min_ess_tail=float(np.nanmin(table["ess_tail"])),
+        n_divergent=n_div,
+        failing=failing,
+        rounds=rounds,
+        rhat_max=rhat_max,
+        ess_min=ess_min,
+    )
+
+
+def sample_until_converged(model_name: str, y, forward, config: samplers.SamplerConfig = samplers.SamplerConfig(),
+                           *, sampler: str = "auto", rhat_max: float = DEFAULT_RHAT_MAX,
+                           ess_min: float = DEFAULT_ESS_MIN, max_rounds: int = 3, progress=None,
+                           **model_kwargs) -> tuple[samplers.SamplerRun, Convergence]:
+    """Run a model and extend it until convergence (see module docstring).
+
+    Parameters
+    ----------
+    progress : callable, optional
+        ``progress(message: str, fraction: float)`` called between rounds.
+    """
+    if progress:
+        progress(f"{model_name}: warm-up and sampling (round 1)", 0.0)
+    run = samplers.run_model(model_name, y, forward, config, sampler=sampler, **model_kwargs)
+    conv = check_convergence(run, rhat_max, ess_min, 1)
+    rounds = 1
+    while not conv.converged and rounds < max_rounds:
+        rounds += 1
+        if progress:
+            progress(f"{model_name}: {conv.message()}; drawing round {rounds}", (rounds - 1) / max_rounds)
+        run = samplers.continue_run(run, forward)
+        conv = check_convergence(run, rhat_max, ess_min, rounds)
+    if progress:
+        progress(f"{model_name}: {conv.message()}", 1.0)
+    return run, conv
+
+
+def ess_per_second(run: samplers.SamplerRun, var_names=THETA_NAMES) -> dict:
+    """Bulk ESS per second of wall time (compilation included) for each of ``var_names``, plus the minimum."""
+    ess = az.ess(az.from_dict(posterior={n: run.samples[n] for n in var_names if n in run.samples}))
+    out = {n: float(ess[n]) / run.wall_s for n in ess.data_vars}
+    out["min"] = min(out.values())
+    return out
+
+
+def _posterior_predictive(run: samplers.SamplerRun, sigma_v: float, seed: int = 1) -> np.ndarray:
+    """Replicated data (chain, draw, 25) under the model's likelihood."""
+    rng = np.random.default_rng(seed)
+    eta = np.asarray(run.samples["eta"])
+    y_rep = eta.copy()
+    y_rep[..., 0] += sigma_v * rng.standard_normal(eta.shape[:-1])
+    if "sigma_s2" in run.samples:
+        mean = eta[..., 1:]
+        if "disc" in run.samples:
+            mean = mean + run.samples["disc"] + run.samples["v"][..., None]
+        y_rep[..., 1:] = mean + np.sqrt(run.samples["sigma_s2"])[..., None] * rng.standard_normal(mean.shape)
+    return y_rep
+
+
+def to_inference_data(run: samplers.SamplerRun, y, *, convergence: Convergence | None = None,
+                      sigma_v: float = models.DEFAULT_SIGMA_V_ML, forward_label: str = "",
+                      extra_attrs: dict | None = None) -> az.InferenceData:
+    """ArviZ InferenceData with posterior, posterior_predictive, observed_data and sample_stats.
+
+    ``eta`` (forward-model outputs at every draw) has dimension ``output``
+    (LVV, 24 strain names); ``disc`` (the discrepancy b) and ``disc_tilde`` have
+    dimension ``region``. For the volume-only model the strain part of
+    ``y_rep`` is the forward model without noise (strains are not modelled).
+    """
+    posterior = {k: np.asarray(v) for k, v in run.samples.items()}
+    coords = {"output": list(OUTPUT_NAMES), "region": list(STRAIN_NAMES)}
+    dims = {"eta": ["output"], "disc": ["region"], "disc_tilde": ["region"], "y_rep": ["output"], "y": ["output"]}
+    attrs = {
+        "model": run.model,
+        "sampler": run.method,
+        "wall_s": float(run.wall_s),
+        "forward_model": forward_label,
+        "sigma_v_ml": float(sigma_v),
+    }
+    if convergence is not None:
+        attrs.update({f"convergence_{k}": (json.dumps(v) if isinstance(v, tuple) else v)
+                      for k, v in asdict(convergence).items()})
+        attrs["convergence_converged"] = int(convergence.converged)
+    attrs.update(extra_attrs or {})
+    return az.from_dict(
+        posterior=posterior,
+        posterior_predictive={"y_rep": _posterior_predictive(run, sigma_v)},
+        observed_data={"y": np.asarray(y, dtype=float)},
+        sample_stats={k: np.asarray(v) for k, v in run.sample_stats.items()},
+        coords=coords,
+        dims=dims,
+        attrs=attrs,
+    )
+
+
+def save_netcdf(idata: az.InferenceData, path) -> Path:
+    """Write InferenceData to netCDF (``.nc``); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    idata.to_netcdf(str(path))
+    return path
+
+
+__all__ = ["Convergence", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table",
+           "check_convergence", "sample_until_converged", "ess_per_second", "to_inference_data", "save_netcdf"]

@@ -1,0 +1,399 @@
+r"""MCMC samplers: NUTS for models (i)-(iii) and the chapter's HMC-within-Gibbs (Algorithm 4).
+
+:func:`run_nuts` runs numpyro NUTS on any model of :mod:`lvcore.inference.models`
+(for model (iii) this is plain *joint* NUTS over theta, sigma_S^2, the GP
+hyperparameters, b_tilde and v).
+
+:class:`PolarGPGibbs` is a blocked sampler for model (iii), one sweep being
+exactly Algorithm 4 of the chapter:
+
+1. ``sigma_S^2 | rest ~ IG(alpha0 + 12, beta0 + RSS / 2)`` (conjugate, closed form),
+   with ``RSS = sum_i (y_i - eta_i - b_i - v)^2`` over the 24 strains;
+2. one NUTS transition for the GP hyperparameters ``(lam, sigma1^2, sigma2^2, c, tau)``
+   targeting ``MVN(b | 0, K) * prior`` with ``b`` held fixed;
+3. Cholesky ``K = L L^T`` of the new Gram matrix, and ``b_tilde = L^{-1} b`` so that
+   ``b`` is unchanged by step 2;
+4. one NUTS transition for ``(theta, b_tilde, v)`` with ``b = L b_tilde`` (whitened).
+
+Each NUTS block keeps its own step size and diagonal mass-matrix adaptation
+(numpyro's functional :func:`numpyro.infer.hmc.hmc` with ``potential_fn_gen``),
+and the cached potential energy and gradient are refreshed whenever the
+conditioning values change. The kernel plugs into :class:`numpyro.infer.MCMC`,
+so chains run sequentially, vectorised or in parallel like any numpyro kernel.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import numpyro.distributions as dist
+from jax.scipy.linalg import solve_triangular
+from numpyro.distributions.transforms import biject_to
+from numpyro.infer import MCMC, NUTS
+from numpyro.infer.hmc import hmc
+from numpyro.infer.mcmc import MCMCKernel
+
+from lvcore.inference import kernels, models
+from lvcore.outputs import N_OUTPUTS
+
+
+@dataclass(frozen=True)
+class SamplerConfig:
+    """MCMC settings.
+
+    Attributes
+    ----------
+    num_warmup, num_samples, num_chains : int
+        Warm-up (adaptation) iterations, kept draws and chains.
+    chain_method : str
+        ``"auto"`` (parallel when there are enough JAX devices, else
+        vectorized), or numpyro's ``"parallel"``, ``"vectorized"``, ``"sequential"``.
+    seed : int
+        PRNG seed.
+    target_accept_prob : float
+        NUTS dual-averaging target.
+    max_tree_depth : int
+        NUTS maximum tree depth.
+    dense_mass : bool
+        Dense mass matrix for plain NUTS (the theta block is strongly correlated).
+    progress_bar : bool
+        numpyro's text progress bar.
+    """
+
+    num_warmup: int = 1000
+    num_samples: int = 1000
+    num_chains: int = 4
+    chain_method: str = "auto"
+    seed: int = 0
+    target_accept_prob: float = 0.8
+    max_tree_depth: int = 10
+    dense_mass: bool = False
+    progress_bar: bool = False
+
+
+@dataclass
+class SamplerRun:
+    """Output of one sampler call.
+
+    Attributes
+    ----------
+    method : str
+        ``"nuts"`` or ``"hmc_gibbs"``.
+    model : str
+        ``"volume"``, ``"iid"`` or ``"discrepancy"``.
+    samples : dict of ndarray
+        Posterior draws, leading axes (chain, draw).
+    sample_stats : dict of ndarray
+        Per-draw statistics (``diverging``, ``n_steps``), axes (chain, draw).
+    wall_s : float
+        Wall time of the call, compilation included (s).
+    mcmc : numpyro.infer.MCMC
+        The MCMC object (for continuing a chain after non-convergence).
+    """
+
+    method: str
+    model: str
+    samples: dict
+    sample_stats: dict
+    wall_s: float
+    mcmc: Any = field(repr=False, default=None)
+    run_kwargs: dict = field(repr=False, default_factory=dict)
+
+
+def resolve_chain_method(config: SamplerConfig) -> str:
+    """Turn ``"auto"`` into ``"parallel"`` when enough devices exist, else ``"vectorized"``."""
+    if config.chain_method != "auto":
+        return config.chain_method
+    if config.num_chains > 1 and jax.local_device_count() >= config.num_chains:
+        return "parallel"
+    return "vectorized"
+
+
+def _mcmc(kernel, config: SamplerConfig) -> MCMC:
+    return MCMC(
+        kernel,
+        num_warmup=config.num_warmup,
+        num_samples=config.num_samples,
+        num_chains=config.num_chains,
+        chain_method=resolve_chain_method(config),
+        progress_bar=config.progress_bar,
+    )
+
+
+def _collect(mcmc: MCMC, stats_fields: dict) -> tuple[dict, dict]:
+    samples = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
+    extra = mcmc.get_extra_fields(group_by_chain=True)
+    stats = {out: np.asarray(extra[src]) for out, src in stats_fields.items() if src in extra}
+    return samples, stats
+
+
+def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(), **model_kwargs) -> SamplerRun:
+    """Run NUTS on model ``model_name`` (``volume``, ``iid`` or ``discrepancy`` = joint NUTS).
+
+    Parameters
+    ----------
+    model_name : str
+        Name in :data:`lvcore.inference.models.MODELS`.
+    y : array_like, shape (25,)
+        Measured LVV (mL) and 24 strains.
+    forward : ForwardModel
+        Forward model (emulator adapter or stand-in).
+    config : SamplerConfig
+    **model_kwargs
+        ``sigma_v``, ``infer_angles`` (and ``nugget`` for the discrepancy model).
+    """
+    model = models.get_model(model_name)
+    kernel = NUTS(model, target_accept_prob=config.target_accept_prob,
+                  max_tree_depth=config.max_tree_depth, dense_mass=config.dense_mass)
+    mcmc = _mcmc(kernel, config)
+    t0 = time.perf_counter()
+    run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64), forward=forward, **model_kwargs)
+    mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
+    samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
+    return SamplerRun("nuts", model_name, samples, stats, time.perf_counter() - t0, mcmc, run_kwargs)
+
+
+# --------------------------------------------------------------------------- blocked sampler
+def _constrain(priors: dict, u: dict):
+    """Constrained values and ``log prior + log|Jacobian|`` for unconstrained ``u``."""
+    out, logp = {}, 0.0
+    for name, d in priors.items():
+        t = biject_to(d.support)
+        x = t(u[name])
+        out[name] = x
+        logp = logp + jnp.sum(d.log_prob(x)) + jnp.sum(t.log_abs_det_jacobian(u[name], x))
+    return out, logp
+
+
+def _unconstrain(priors: dict, x: dict) -> dict:
+    return {n: biject_to(d.support).inv(jnp.asarray(x[n], dtype=jnp.float64)) for n, d in priors.items()}
+
+
+class GibbsState(NamedTuple):
+    """State of :class:`PolarGPGibbs`; ``z`` holds constrained values of every site."""
+
+    z: dict
+    hyper_state: Any
+    main_state: Any
+    diverging: Any
+    num_steps: Any
+    rng_key: Any
+
+
+class PolarGPGibbs(MCMCKernel):
+    """HMC-within-Gibbs for the discrepancy model (iii), Algorithm 4 of the chapter.
+
+    Parameters
+    ----------
+    forward : ForwardModel
+        Forward model returning the 25 outputs.
+    y : array_like, shape (25,)
+        Measured data [LVV (mL), 24 strains].
+    sigma_v : float
+        Fixed LVV noise sd (mL).
+    infer_angles : bool
+        Also sample the fibre angles (uniform priors) in block 4.
+    nugget : float
+        Diagonal jitter of the Gram matrix (strain²).
+    target_accept_prob, max_tree_depth : float, int
+        NUTS settings of both blocks.
+
+    Sites in ``state.z``: theta (and angles), ``sigma_s2``, ``lam``, ``sigma1_sq``,
+    ``sigma2_sq``, ``c``, ``tau``, ``disc_tilde`` (24, whitened), ``disc`` (24, the discrepancy b), ``v``.
+    """
+
+    sample_field = "z"
+
+    def __init__(self, forward, y, *, sigma_v: float = models.DEFAULT_SIGMA_V_ML, infer_angles: bool = False,
+                 nugget: float = kernels.DEFAULT_NUGGET, target_accept_prob: float = 0.8, max_tree_depth: int = 10):
+        self.forward = forward
+        self.y = jnp.asarray(y, dtype=jnp.float64)
+        if self.y.shape != (N_OUTPUTS,):
+            raise ValueError(f"y must have shape ({N_OUTPUTS},), got {self.y.shape}")
+        self.sigma_v = float(sigma_v)
+        self.nugget = float(nugget)
+        self.target_accept_prob = target_accept_prob
+        self.max_tree_depth = max_tree_depth
+        self.theta_priors = models.theta_priors(infer_angles)
+        self.hyper_priors = models.hyper_priors()
+        self.v_prior = models.v_prior()
+        self._hyper_init, self._hyper_sample = hmc(potential_fn_gen=self._hyper_potential_gen, algo="NUTS")
+        self._main_init, self._main_sample = hmc(potential_fn_gen=self._main_potential_gen, algo="NUTS")
+
+    # --- conditionals -------------------------------------------------------
+    def _hyper_potential_gen(self, b):
+        """Potential of block 2: ``-log MVN(b | 0, K(hyper)) - log prior`` (unconstrained)."""
+        def potential(u):
+            hyper, logp = _constrain(self.hyper_priors, u)
+            chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
+            alpha = solve_triangular(chol, b, lower=True)
+            loglik = -0.5 * alpha @ alpha - jnp.sum(jnp.log(jnp.diag(chol)))
+            return -(loglik + logp)
+        return potential
+
+    def _main_potential_gen(self, sigma_s2, chol):
+        """Potential of block 4 over (theta, b_tilde, v) given sigma_S^2 and L."""
+        def potential(u):
+            params, logp = _constrain(self.theta_priors, u)
+            eta = self.forward(params)
+            b = chol @ u["disc_tilde"]
+            logl = dist.Normal(eta[0], self.sigma_v).log_prob(self.y[0])
+            logl += jnp.sum(dist.Normal(eta[1:] + b + u["v"], jnp.sqrt(sigma_s2)).log_prob(self.y[1:]))
+            logp += -0.5 * u["disc_tilde"] @ u["disc_tilde"] + self.v_prior.log_prob(u["v"])
+            return -(logl + logp)
+        return potential
+
+    def _sigma_s2_draw(self, key, params, b, v):
+        """Step 1: conjugate inverse-gamma draw of sigma_S^2."""
+        return sigma_s2_conditional(self.y[1:], self.forward(params)[1:] + b + v).sample(key)
+
+    @staticmethod
+    def _refresh(state, potential):
+        pe, grad = jax.value_and_grad(potential)(state.z)
+        return state._replace(potential_energy=pe, z_grad=grad)
+
+    # --- MCMCKernel API -------------------------------------------------------
+    def init(self, rng_key, num_warmup, init_params, model_args, model_kwargs):
+        if jnp.ndim(rng_key) > 1 or (jnp.ndim(rng_key) == 1 and rng_key.shape[0] != 2):
+            # vectorized chains: one key per chain
+            if init_params is None:
+                return jax.vmap(lambda k: self._init_one(k, num_warmup, None))(rng_key)
+            return jax.vmap(lambda k, p: self._init_one(k, num_warmup, p))(rng_key, init_params)
+        return self._init_one(rng_key, num_warmup, init_params)
+
+    def _init_one(self, rng_key, num_warmup, init_params):
+        k_theta, k_hyp, k_bt, k_v, k_s, k_h, k_m, rng_key = jax.random.split(rng_key, 8)
+        if init_params is None:
+            u_theta = {n: jax.random.uniform(k, (), minval=-2.0, maxval=2.0)
+                       for n, k in zip(self.theta_priors, jax.random.split(k_theta, len(self.theta_priors)))}
+            kh = jax.random.split(k_hyp, 5)
+            u_hyper = {
+                "lam": jax.random.uniform(kh[0], (), minval=-1.0, maxval=1.0),
+                "sigma1_sq": jax.random.uniform(kh[1], (), minval=jnp.log(1e-4), maxval=jnp.log(1e-2)),
+                "sigma2_sq": jax.random.uniform(kh[2], (), minval=jnp.log(1e-4), maxval=jnp.log(1e-2)),
+                "c": jax.random.uniform(kh[3], (), minval=-2.0, maxval=2.0),
+                "tau": jax.random.uniform(kh[4], (), minval=-2.0, maxval=2.0),
+            }
+            b_tilde = 0.5 * jax.random.normal(k_bt, (24,))
+            v = 0.01 * jax.random.normal(k_v, ())
+        else:
+            u_theta = _unconstrain(self.theta_priors, init_params)
+            u_hyper = _unconstrain(self.hyper_priors, init_params)
+            b_tilde = jnp.asarray(init_params.get("disc_tilde", jnp.zeros(24)), dtype=jnp.float64)
+            v = jnp.asarray(init_params.get("v", 0.0), dtype=jnp.float64)
+        hyper, _ = _constrain(self.hyper_priors, u_hyper)
+        chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
+        b = chol @ b_tilde
+        params, _ = _constrain(self.theta_priors, u_theta)
+        sigma_s2 = self._sigma_s2_draw(k_s, params, b, v)
+        common = dict(num_warmup=num_warmup, target_accept_prob=self.target_accept_prob,
+                      max_tree_depth=self.max_tree_depth)
+        hyper_state = self._hyper_init(u_hyper, model_args=(b,), rng_key=k_h, **common)
+        main_state = self._main_init({**u_theta, "disc_tilde": b_tilde, "v": v},
+                                     model_args=(sigma_s2, chol), rng_key=k_m, **common)
+        z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": b, "v": v}
+        return GibbsState(z, hyper_state, main_state, jnp.array(False), jnp.array(0), rng_key)
+
+    def sample(self, state, model_args, model_kwargs):
+        if jnp.ndim(state.rng_key) > 1:  # vectorized chains
+            return jax.vmap(self._sample_one)(state)
+        return self._sample_one(state)
+
+    def _sample_one(self, state):
+        rng_key, k_s = jax.random.split(state.rng_key)
+        z = state.z
+        params = {n: z[n] for n in self.theta_priors}
+        b = z["disc"]
+        # 1. sigma_S^2 from its conjugate inverse gamma.
+        sigma_s2 = self._sigma_s2_draw(k_s, params, b, z["v"])
+        # 2. NUTS on the GP hyperparameters given b.
+        hyper_state = self._refresh(state.hyper_state, self._hyper_potential_gen(b))
+        hyper_state = self._hyper_sample(hyper_state, model_args=(b,))
+        hyper, _ = _constrain(self.hyper_priors, hyper_state.z)
+        # 3. Cholesky of the new K; re-whiten so that b is unchanged.
+        chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
+        b_tilde = solve_triangular(chol, b, lower=True)
+        main_state = state.main_state._replace(z={**state.main_state.z, "disc_tilde": b_tilde})
+        main_state = self._refresh(main_state, self._main_potential_gen(sigma_s2, chol))
+        # 4. NUTS on (theta, b_tilde, v) given sigma_S^2 and L.
+        main_state = self._main_sample(main_state, model_args=(sigma_s2, chol))
+        params, _ = _constrain(self.theta_priors, main_state.z)
+        b_tilde = main_state.z["disc_tilde"]
+        z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": chol @ b_tilde,
+             "v": main_state.z["v"]}
+        diverging = jnp.logical_or(hyper_state.diverging, main_state.diverging)
+        num_steps = hyper_state.num_steps + main_state.num_steps
+        return GibbsState(z, hyper_state, main_state, diverging, num_steps, rng_key)
+
+    def get_diagnostics_str(self, state):
+        return ""
+
+
+def sigma_s2_conditional(y_strain, mean_strain):
+    """Conjugate full conditional of ``sigma_S^2`` under the IG(0.001, 0.001) prior.
+
+    ``IG(alpha0 + n/2, beta0 + sum((y - mean)^2)/2)`` with n = number of strains.
+    """
+    resid = jnp.asarray(y_strain) - jnp.asarray(mean_strain)
+    n = resid.shape[-1]
+    return dist.InverseGamma(models.IG_SHAPE + 0.5 * n, models.IG_SCALE + 0.5 * jnp.sum(resid**2, axis=-1))
+
+
+def run_hmc_gibbs(y, forward, config: SamplerConfig = SamplerConfig(), **model_kwargs) -> SamplerRun:
+    """Run :class:`PolarGPGibbs` (model (iii), Algorithm 4); ``model_kwargs`` as for the kernel."""
+    kernel = PolarGPGibbs(forward, y, target_accept_prob=config.target_accept_prob,
+                          max_tree_depth=config.max_tree_depth, **model_kwargs)
+    mcmc = _mcmc(kernel, config)
+    t0 = time.perf_counter()
+    mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"))
+    samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
+    # eta at every draw (the blocked kernel does not record it as it goes).
+    samples["eta"] = np.asarray(posterior_eta(forward, samples))
+    return SamplerRun("hmc_gibbs", "discrepancy", samples, stats, time.perf_counter() - t0, mcmc)
+
+
+def continue_run(run: SamplerRun, forward) -> SamplerRun:
+    """Draw ``num_samples`` more per chain from where ``run`` stopped (no new warm-up).
+
+    Used by :func:`lvcore.inference.diagnostics.sample_until_converged` to
+    discard non-converged draws as burn-in.
+    """
+    mcmc = run.mcmc
+    mcmc.post_warmup_state = mcmc.last_state
+    t0 = time.perf_counter()
+    mcmc.run(mcmc.post_warmup_state.rng_key, extra_fields=("diverging", "num_steps"), **run.run_kwargs)
+    samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
+    if "eta" not in samples:
+        samples["eta"] = np.asarray(posterior_eta(forward, samples))
+    return SamplerRun(run.method, run.model, samples, stats, run.wall_s + time.perf_counter() - t0, mcmc,
+                      run.run_kwargs)
+
+
+def posterior_eta(forward, samples: dict):
+    """Forward-model outputs at every draw, shape (chain, draw, 25)."""
+    names = forward.param_names
+    flat = {n: jnp.reshape(jnp.asarray(samples[n]), (-1,)) for n in names}
+    lead = np.shape(samples[names[0]])
+    eta = jax.jit(jax.vmap(lambda p: forward(p)))(flat)
+    return jnp.reshape(eta, lead + (N_OUTPUTS,))
+
+
+def run_model(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(), *,
+              sampler: str = "auto", **model_kwargs) -> SamplerRun:
+    """Run the default sampler of a model: NUTS for (i), (ii); HMC-within-Gibbs for (iii).
+
+    ``sampler="nuts"`` forces joint NUTS for the discrepancy model.
+    """
+    if model_name == "discrepancy" and sampler in ("auto", "hmc_gibbs"):
+        return run_hmc_gibbs(y, forward, config, **model_kwargs)
+    if model_name != "discrepancy":
+        model_kwargs.pop("nugget", None)
+    return run_nuts(model_name, y, forward, config, **model_kwargs)
+
+
+__all__ = ["SamplerConfig", "SamplerRun", "PolarGPGibbs", "GibbsState", "run_nuts", "run_hmc_gibbs",
+           "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method"]
