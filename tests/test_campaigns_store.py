@@ -1,0 +1,170 @@
+"""The campaign store: nothing lost or duplicated across SIGKILL + resume; failed rows kept.
+
+The forward model here is ``tests/campaign_double.py``, a TEST DOUBLE (a cheap
+closed-form function with the simulator's return contract), so that the store
+and runner are tested in seconds.
+"""
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from campaign_double import closed_form
+from lvcore.campaigns.designs import make_design, save_design
+from lvcore.campaigns.runner import campaign_status, resume_campaign, run_campaign
+from lvcore.campaigns.space import get_space
+from lvcore.campaigns.store import CONVERGED, FAILED, PENDING, CampaignStore, RowResult, read_store
+from lvcore.exceptions import CampaignError
+
+TESTS = Path(__file__).parent
+DOUBLE = "campaign_double:forward"
+
+
+def _env(**extra):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(TESTS), env.get("PYTHONPATH", "")])
+    env.update({k: str(v) for k, v in extra.items()})
+    return env
+
+
+def _cli(*args):
+    return [sys.executable, "-m", "lvcore.cli", *args]
+
+
+def _log_events(path):
+    if not path.exists():
+        return []
+    return [tuple(line.split()[:2]) for line in path.read_text().splitlines() if line.strip()]
+
+
+def test_sigkill_then_resume_loses_nothing_and_runs_nothing_twice(tmp_path):
+    design = make_design(get_space("material"), "sobol", 32, seed=2)
+    dpath = save_design(design, tmp_path / "d.csv")
+    store_path, log = tmp_path / "s.h5", tmp_path / "exec.log"
+    env = _env(LVCORE_TEST_EXEC_LOG=log, LVCORE_TEST_SLEEP=0.15)
+    proc = subprocess.Popen(
+        _cli("campaign", "run", str(dpath), "--out", str(store_path), "--workers", "2",
+             "--forward", DOUBLE, "--no-progress"),
+        env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    )
+    # wait until a few rows are committed, then kill -9 the campaign and its workers
+    deadline = time.time() + 90
+    done = 0
+    while time.time() < deadline and proc.poll() is None:
+        if store_path.exists():
+            try:
+                done = int(np.sum(read_store(store_path).state != PENDING))
+            except CampaignError:
+                done = 0
+            if done >= 6:
+                break
+        time.sleep(0.05)
+    assert proc.poll() is None, f"campaign ended before it could be killed: {proc.stderr.read().decode()[-2000:]}"
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+
+    before = read_store(store_path)
+    done_before = np.flatnonzero(before.state != PENDING)
+    pending_before = np.flatnonzero(before.state == PENDING)
+    assert 6 <= done_before.size < design.n, "the kill must land mid-campaign"
+    n_log_before = len(_log_events(log))
+
+    res = subprocess.run(_cli("campaign", "resume", str(store_path), "--workers", "2", "--no-progress"),
+                         env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "pending 0" in res.stdout
+
+    after = read_store(store_path)
+    # every row recorded exactly once, with the right numbers
+    assert np.all(after.state == CONVERGED)
+    np.testing.assert_array_equal(after.record_count[done_before], 1)
+    expected = np.array([closed_form(*row) for row in design.points])
+    np.testing.assert_allclose(after.outputs, expected, rtol=1e-12)
+    # rows finished before the kill are untouched ...
+    np.testing.assert_array_equal(after.outputs[done_before], before.outputs[done_before])
+    np.testing.assert_array_equal(after.finished_at[done_before], before.finished_at[done_before])
+    # ... and were not run again; each row pending at the kill ran exactly once on resume
+    keys = [repr(float(a)) for a in design.points[:, 0]]
+    started_after = Counter(k for ev, k in _log_events(log)[n_log_before:] if ev == "start")
+    assert not set(started_after) & {keys[i] for i in done_before}
+    assert started_after == Counter(keys[i] for i in pending_before)
+
+
+def test_failed_rows_are_kept_and_reported(tmp_path, monkeypatch):
+    import campaign_double
+
+    monkeypatch.setattr(campaign_double, "FAIL_ABOVE_A", 3.0)
+    monkeypatch.setattr(campaign_double, "RAISE_ABOVE_B", 20.0)
+    design = make_design(get_space("material"), "sobol", 32, seed=1)
+    n_nonconv = int(np.sum((design.points[:, 0] > 3.0) & (design.points[:, 1] <= 20.0)))
+    n_raise = int(np.sum(design.points[:, 1] > 20.0))
+    assert n_nonconv > 0 and n_raise > 0
+    summary = run_campaign(design, tmp_path / "s.h5", executor=_InlineExecutor(), forward=DOUBLE, progress=False)
+    assert summary.n == 32 and summary.pending == 0
+    assert summary.failed == n_nonconv + n_raise and summary.converged == 32 - summary.failed
+    reasons = dict(summary.reasons)
+    assert reasons["test double: line search failed"] == n_nonconv
+    assert sum(c for r, c in reasons.items() if r.startswith("SolverError: test double")) == n_raise
+    c = read_store(tmp_path / "s.h5")
+    assert np.all(np.isnan(c.outputs[c.failed])) and np.all(np.isfinite(c.outputs[c.converged]))
+    np.testing.assert_array_equal(c.inputs, design.points)  # no row dropped
+    text = campaign_status(tmp_path / "s.h5").format()
+    assert "failed %d" % summary.failed in text and "line search failed" in text
+
+    # the CLI status shows the same
+    from lvcore.cli import main
+    assert main(["campaign", "status", str(tmp_path / "s.h5")]) == 0
+
+    # --retry-failed reruns only the failed rows
+    monkeypatch.setattr(campaign_double, "FAIL_ABOVE_A", float("inf"))
+    monkeypatch.setattr(campaign_double, "RAISE_ABOVE_B", float("inf"))
+    s2 = resume_campaign(tmp_path / "s.h5", retry_failed=True, executor=_InlineExecutor(), progress=False)
+    assert s2.converged == 32
+
+
+def test_store_refuses_duplicates_and_concurrent_writers(tmp_path):
+    design = make_design(get_space("material"), "lhs", 4, seed=0)
+    path = tmp_path / "s.h5"
+    with CampaignStore.create(path, design, forward=DOUBLE, resolution="fast") as store:
+        store.record(RowResult(1, np.arange(25.0), True, seconds=0.1, worker="w"))
+        with pytest.raises(CampaignError, match="twice"):
+            store.record(RowResult(1, np.arange(25.0), True))
+        with pytest.raises(CampaignError, match="expected 25"):
+            store.record(RowResult(2, np.arange(3.0), True))
+        with pytest.raises(CampaignError, match="another process"):
+            CampaignStore.open(path, "r+")
+        store.record(RowResult(3, np.full(25, np.nan), True))  # NaN outputs -> failed, not filled
+        np.testing.assert_array_equal(store.pending_rows(), [0, 2])
+    c = read_store(path)
+    assert list(c.state) == [PENDING, CONVERGED, PENDING, FAILED]
+    assert c.reasons[3] == "non-finite outputs"
+    with pytest.raises(CampaignError, match="already exists"):
+        CampaignStore.create(path, design, forward=DOUBLE, resolution="fast")
+    (tmp_path / "junk.h5").write_bytes(b"not hdf5")
+    with pytest.raises(CampaignError, match="not a readable HDF5"):
+        read_store(tmp_path / "junk.h5")
+
+
+class _InlineExecutor:
+    """Runs submitted rows immediately in this process (keeps monkeypatches visible)."""
+
+    workers = 1
+
+    def describe(self):
+        return "inline"
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+
+        fut = Future()
+        fut.set_result(fn(*args))
+        return fut
+
+    def as_completed(self, futures):
+        return iter(futures)
