@@ -1,0 +1,222 @@
+"""Template meshes on disk: VTU files of 27-node hexahedra.
+
+A geometry in lvcore is the node array of :data:`DEFAULT_TEMPLATE` (mm). It is
+written as an unstructured-grid VTU file whose cells are
+``VTK_TRIQUADRATIC_HEXAHEDRON`` (VTK cell type 29, meshio ``hexahedron27``),
+so ParaView and PyVista show it directly.
+
+Node order
+----------
+The template's local element order is ``a + 3 b + 9 c`` (circumferential,
+transmural, longitudinal index, each 0..2; see :mod:`lvcore.geometry.template`).
+VTK orders the 27 nodes of a triquadratic hexahedron as 8 corners, 12 edge
+mid-points, 6 face centres and the centre. With VTK's parametric axes
+``(r, s, t)`` identified with ``(a, b, c) / 2`` (the same handedness, so the
+Jacobian keeps its sign) the VTK node ``m`` is the template's local node
+``VTK_FROM_TEMPLATE[m]``::
+
+    vtk_cells = template.elements[:, VTK_FROM_TEMPLATE]
+    template_elements = vtk_cells[:, TEMPLATE_FROM_VTK]
+
+The point array of the file is the template's global node array itself
+(``points[n]`` is node ``n``); :func:`read_template_mesh` checks that the
+connectivity is exactly the template's, so files from other tools that
+renumber points are rejected with a clear message rather than misread.
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from lvcore.exceptions import GeometryError
+from lvcore.geometry.template import DEFAULT_TEMPLATE, LVTemplate, lagrange_q2_shape
+
+#: VTK parametric coordinates (r, s, t) of the 27 nodes of VTK_TRIQUADRATIC_HEXAHEDRON,
+#: as returned by ``vtkTriQuadraticHexahedron().GetParametricCoords()``.
+VTK_TRIQUADRATIC_HEX_PCOORDS = np.array(
+    [
+        [0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+        [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1],
+        [0.5, 0, 0], [1, 0.5, 0], [0.5, 1, 0], [0, 0.5, 0],
+        [0.5, 0, 1], [1, 0.5, 1], [0.5, 1, 1], [0, 0.5, 1],
+        [0, 0, 0.5], [1, 0, 0.5], [1, 1, 0.5], [0, 1, 0.5],
+        [0, 0.5, 0.5], [1, 0.5, 0.5], [0.5, 0, 0.5], [0.5, 1, 0.5],
+        [0.5, 0.5, 0], [0.5, 0.5, 1], [0.5, 0.5, 0.5],
+    ]
+)
+#: VTK cell type number of the triquadratic hexahedron.
+VTK_TRIQUADRATIC_HEXAHEDRON = 29
+#: ``VTK_FROM_TEMPLATE[m]`` = template local node (a + 3 b + 9 c) of VTK node m.
+VTK_FROM_TEMPLATE = np.array(
+    [int(round(2 * r)) + 3 * int(round(2 * s)) + 9 * int(round(2 * t)) for r, s, t in VTK_TRIQUADRATIC_HEX_PCOORDS],
+    dtype=np.int64,
+)
+#: Inverse permutation: ``TEMPLATE_FROM_VTK[q]`` = VTK node of template local node q.
+TEMPLATE_FROM_VTK = np.argsort(VTK_FROM_TEMPLATE)
+
+_MESHIO_TYPE = "hexahedron27"
+_FIELD_TEMPLATE = "lvcore_template"
+
+
+def template_to_vtk_cells(template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
+    """(n_elements, 27) connectivity of ``template`` in VTK node order."""
+    return template.elements[:, VTK_FROM_TEMPLATE]
+
+
+def write_template_mesh(path, nodes, template: LVTemplate = DEFAULT_TEMPLATE, point_data=None,
+                        metadata: dict | None = None) -> Path:
+    """Write node positions on ``template`` as a VTU of triquadratic hexahedra.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file; must end in ``.vtu``.
+    nodes : (n_nodes, 3) array
+        Node positions (mm).
+    template : LVTemplate
+        Topology of ``nodes`` (default :data:`DEFAULT_TEMPLATE`).
+    point_data : dict of name -> (n_nodes, ...) arrays, optional
+        Extra per-node fields (e.g. a distance map, mm).
+    metadata : dict of str -> str, optional
+        Stored as string field data ``lvcore_<key>`` (e.g. ``{"label": "SYNTHETIC"}``).
+
+    Returns
+    -------
+    Path of the written file.
+    """
+    import meshio
+
+    path = Path(path)
+    if path.suffix.lower() != ".vtu":
+        raise GeometryError(f"template meshes are written as VTU; give a path ending in .vtu, got '{path}'")
+    nodes = _check_nodes(nodes, template, "nodes")
+    pdata = {"parametric_coords": template.parametric_coords.astype(float)}
+    for key, val in (point_data or {}).items():
+        val = np.asarray(val)
+        if val.shape[0] != template.n_nodes:
+            raise GeometryError(f"point_data '{key}' has {val.shape[0]} rows, expected {template.n_nodes}")
+        pdata[key] = val
+    field = {_FIELD_TEMPLATE: np.array([template.n_circ, template.n_long, template.n_trans], dtype=np.int64)}
+    mesh = meshio.Mesh(
+        points=nodes,
+        cells=[(_MESHIO_TYPE, template_to_vtk_cells(template))],
+        point_data=pdata,
+        field_data=field,
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meshio.write(path, mesh, file_format="vtu")
+    if metadata:
+        _append_metadata(path, metadata)
+    return path
+
+
+def _append_metadata(path: Path, metadata: dict) -> None:
+    """Record string metadata as an XML comment after the VTU header (readers ignore it)."""
+    import json
+
+    text = path.read_text()
+    comment = "<!-- lvcore metadata: " + json.dumps({str(k): str(v) for k, v in metadata.items()}).replace("--", "- -") + " -->\n"
+    head, sep, rest = text.partition("?>\n")
+    if sep:
+        path.write_text(head + sep + comment + rest)
+    else:
+        path.write_text(comment + text)
+
+
+def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
+    """Read a template mesh written by :func:`write_template_mesh` (or an equivalent VTU).
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.vtu`` file with one block of 27-node hexahedra.
+    template : LVTemplate
+        Expected topology (default :data:`DEFAULT_TEMPLATE`).
+
+    Returns
+    -------
+    nodes : (n_nodes, 3) float array (mm).
+
+    Raises
+    ------
+    GeometryError
+        If the file is missing, empty or unreadable, holds other cell types or a
+        different number of nodes or elements, numbers nodes differently from
+        the template, has non-finite coordinates, looks like it is in metres or
+        centimetres, or has inverted elements.
+    """
+    import meshio
+
+    path = Path(path)
+    if not path.exists():
+        raise GeometryError(f"template mesh '{path}' does not exist")
+    if path.stat().st_size == 0:
+        raise GeometryError(f"template mesh '{path}' is an empty file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            mesh = meshio.read(path)
+    except (Exception, SystemExit) as err:  # meshio raises many types, and sys.exit()s on some files
+        raise GeometryError(f"cannot read template mesh '{path}' ({type(err).__name__}: {err}); "
+                            "write it with `lvcore geometry fit ... --out MESH.vtu` or write_template_mesh()") from None
+    if _FIELD_TEMPLATE in mesh.field_data:
+        dims = tuple(int(v) for v in np.ravel(mesh.field_data[_FIELD_TEMPLATE])[:3])
+        if dims != (template.n_circ, template.n_long, template.n_trans):
+            raise GeometryError(f"'{path}' was written on template {dims}, expected "
+                                f"({template.n_circ}, {template.n_long}, {template.n_trans})")
+    blocks = [c for c in mesh.cells if c.type == _MESHIO_TYPE]
+    other = sorted({c.type for c in mesh.cells if c.type != _MESHIO_TYPE})
+    if not blocks:
+        raise GeometryError(f"'{path}' has no 27-node hexahedra (found cell types {other or 'none'}); "
+                            "a template mesh holds VTK_TRIQUADRATIC_HEXAHEDRON cells only")
+    if other:
+        raise GeometryError(f"'{path}' mixes other cell types {other} with the 27-node hexahedra")
+    cells = np.concatenate([b.data for b in blocks], axis=0)
+    if mesh.points.shape[0] != template.n_nodes:
+        raise GeometryError(f"'{path}' has {mesh.points.shape[0]} points, the template has {template.n_nodes}; "
+                            "it was not written on this template")
+    if cells.shape[0] != template.n_elements:
+        raise GeometryError(f"'{path}' has {cells.shape[0]} hexahedra, the template has {template.n_elements}")
+    if not np.array_equal(cells[:, TEMPLATE_FROM_VTK], template.elements):
+        raise GeometryError(f"'{path}' numbers its nodes differently from the template "
+                            "(connectivity mismatch); renumbered meshes cannot be compared node by node")
+    nodes = _check_nodes(mesh.points[:, :3], template, f"'{path}'")
+    return nodes
+
+
+def _check_nodes(nodes, template: LVTemplate, where: str) -> np.ndarray:
+    nodes = np.asarray(nodes, dtype=float)
+    if nodes.shape != (template.n_nodes, 3):
+        raise GeometryError(f"{where}: node array has shape {nodes.shape}, expected {(template.n_nodes, 3)}")
+    if not np.all(np.isfinite(nodes)):
+        raise GeometryError(f"{where}: node coordinates contain NaN or inf")
+    extent = float(np.ptp(nodes, axis=0).max())
+    if extent < 1.0:
+        raise GeometryError(f"{where}: the LV is {extent:.3g} units across; coordinates look like metres. "
+                            "Template meshes are in mm: multiply by 1000")
+    if extent < 20.0:
+        raise GeometryError(f"{where}: the LV is {extent:.3g} units across; coordinates look like centimetres. "
+                            "Template meshes are in mm: multiply by 10")
+    if extent > 1000.0:
+        raise GeometryError(f"{where}: the LV is {extent:.3g} mm across (more than 1 m); check the units (mm expected)")
+    detj = element_jacobian_determinants(nodes, template)
+    if np.any(detj <= 0):
+        bad = np.unique(np.nonzero(detj <= 0)[0])
+        raise GeometryError(f"{where}: {bad.size} elements are inverted or collapsed (non-positive Jacobian), "
+                            f"e.g. element {int(bad[0])}; check the endo/epi order and the apex direction (-z)")
+    return nodes
+
+
+def element_jacobian_determinants(nodes, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
+    """Jacobian determinants (mm³ per unit reference volume) at 2×2×2 interior points of every element.
+
+    Points at ±0.5 avoid the collapsed apex edge where the determinant vanishes.
+    Returns an array of shape (n_elements, 8).
+    """
+    g = np.array([-0.5, 0.5])
+    xi = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    _, dN = lagrange_q2_shape(xi, derivatives=True)
+    jac = np.einsum("qak,eai->eqik", dN, np.asarray(nodes)[template.elements])
+    return np.linalg.det(jac)
