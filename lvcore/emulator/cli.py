@@ -1,0 +1,117 @@
+"""``lvcore emulator train STORE ... --out DIR`` and ``lvcore emulator info NAME``."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lvcore.exceptions import EmulatorError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("emulator", help="train or inspect neural-network emulators")
+    sub = p.add_subparsers(dest="emulator_command", required=True)
+
+    t = sub.add_parser("train", help="train an emulator on campaign store(s)")
+    t.add_argument("stores", nargs="+", help="training campaign store(s) (HDF5, same space)")
+    t.add_argument("--out", required=True, help="output directory (network.npz + metadata.json)")
+    t.add_argument("--inputs", nargs="+", default=None,
+                   help="emulator inputs, e.g. a b af bf h1 h2 h3 h4 h5 (default: every varied input of the space)")
+    t.add_argument("--valid", nargs="+", default=None, help="validation store(s); default: a random split of the training rows")
+    t.add_argument("--valid-fraction", type=float, default=0.1, help="fraction held out for validation without --valid")
+    t.add_argument("--test", nargs="+", default=None, help="held-out test store(s), never used for training or selection")
+    t.add_argument("--name", default=None, help="emulator name (default: the output directory's name)")
+    t.add_argument("--architectures", default="all",
+                   help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200'")
+    t.add_argument("--max-epochs", type=int, default=2000)
+    t.add_argument("--patience", type=int, default=150)
+    t.add_argument("--batch-size", type=int, default=256)
+    t.add_argument("--seed", type=int, default=0)
+    t.set_defaults(func=_train)
+
+    i = sub.add_parser("info", help="show an emulator's inputs, box, architecture and accuracy")
+    i.add_argument("name", help="bundled name (e.g. chapter, angles) or directory")
+    i.add_argument("--json", action="store_true", help="print the full metadata as JSON")
+    i.set_defaults(func=_info)
+
+
+def parse_architectures(text: str) -> tuple[tuple[int, int], ...]:
+    from lvcore.emulator.training import ARCHITECTURES
+
+    if text == "all":
+        return ARCHITECTURES
+    try:
+        archs = tuple(tuple(int(v) for v in item.lower().split("x")) for item in text.split(","))
+    except ValueError as err:
+        raise EmulatorError(f"--architectures must be 'all' or like '50x50,100x200', got {text!r}") from err
+    if not archs or any(len(a) != 2 or min(a) < 1 for a in archs):
+        raise EmulatorError(f"--architectures must list pairs of positive widths, got {text!r}")
+    return archs
+
+
+def _train(args) -> int:
+    from lvcore.emulator.io import save_emulator
+    from lvcore.emulator.training import TrainingConfig, load_store_data, train_emulator
+
+    data = load_store_data(args.stores, args.inputs)
+    x, y = data.inputs, data.outputs
+    if args.valid:
+        v = load_store_data(args.valid, data.input_names)
+        xv, yv = v.inputs, v.outputs
+    else:
+        if not 0 < args.valid_fraction < 1:
+            raise EmulatorError("--valid-fraction must be in (0, 1)")
+        perm = np.random.default_rng(args.seed).permutation(x.shape[0])
+        n_valid = max(1, int(round(args.valid_fraction * x.shape[0])))
+        vi, ti = perm[:n_valid], perm[n_valid:]
+        x, y, xv, yv = x[ti], y[ti], x[vi], y[vi]
+    xt = yt = None
+    if args.test:
+        t = load_store_data(args.test, data.input_names)
+        xt, yt = t.inputs, t.outputs
+    config = TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
+                            patience=args.patience, batch_size=args.batch_size, seed=args.seed)
+    name = args.name or Path(args.out).name
+    print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed and {data.n_pending} pending rows excluded), "
+          f"validating on {xv.shape[0]}; inputs {list(data.input_names)}")
+    emu = train_emulator(x, y, xv, yv, input_names=data.input_names, name=name, lower=data.lower, upper=data.upper,
+                         fixed=data.fixed, config=config, x_test=xt, y_test=yt,
+                         source={**data.info, "n_failed_excluded": data.n_failed}, log=print)
+    pred_x, pred_y = (xt, yt) if xt is not None else (xv, yv)
+    save_emulator(emu, args.out, validation={"inputs": pred_x, "outputs": pred_y, "predictions": np.asarray(emu.apply(pred_x))})
+    print(format_info(emu.metadata))
+    return 0
+
+
+def format_info(meta: dict) -> str:
+    lines = [f"emulator '{meta.get('name')}'  (lvcore {meta.get('lvcore_version')}, {meta.get('created_at', '')})"]
+    lo, hi = meta.get("bounds", {}).get("lower", []), meta.get("bounds", {}).get("upper", [])
+    log = set(meta.get("log_inputs", []))
+    lines.append("  inputs:")
+    for n, a, b in zip(meta.get("input_names", []), lo, hi):
+        lines.append(f"    {n:<11s} [{a:.4g}, {b:.4g}]{'  (log scale)' if n in log else ''}")
+    if meta.get("fixed_inputs"):
+        lines.append(f"  fixed in training: {meta['fixed_inputs']}")
+    arch = meta.get("architecture", {})
+    lines.append(f"  network: {meta.get('input_names') and len(meta['input_names'])} -> {arch.get('hidden')} (tanh) -> 25")
+    tr = meta.get("training", {})
+    if tr:
+        lines.append(f"  trained on {tr.get('n_train')} rows, validated on {tr.get('n_valid')}; best epoch {tr.get('best_epoch')}; "
+                     f"set hash {str(tr.get('set_hash'))[:12]}")
+    for key in ("validation", "test"):
+        m = meta.get(key)
+        if m:
+            lines.append(f"  {key} (n={m['n']}): LVV RMSE {m['lvv_rmse_ml']:.3f} mL (p99 |err| {m['lvv_p99_abs_ml']:.3f}), "
+                         f"strain RMSE {m['strain_rmse']:.4f} (p99 |err| {m['strain_p99_abs']:.4f})")
+    if meta.get("spec_note"):
+        lines.append(f"  NOTE: {meta['spec_note']}")
+    return "\n".join(lines)
+
+
+def _info(args) -> int:
+    from lvcore.emulator.io import load_emulator
+
+    emu = load_emulator(args.name)
+    print(json.dumps(emu.metadata, indent=2) if args.json else format_info(emu.metadata))
+    return 0

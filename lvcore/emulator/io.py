@@ -1,0 +1,174 @@
+"""Saving and loading emulators: plain arrays (.npz) plus JSON metadata, never pickle.
+
+An emulator directory holds
+
+``network.npz``
+    ``layer{i}_weight`` ``(n_out, n_in)`` and ``layer{i}_bias`` ``(n_out,)``
+    for i = 0, 1, 2 (read with ``allow_pickle=False``).
+``metadata.json``
+    ``format`` (``"lvcore-emulator"``), ``format_version``, ``name``,
+    ``input_names``, ``output_names``, ``bounds`` (``lower``, ``upper``),
+    ``log_inputs`` (names log-transformed), ``fixed_inputs`` (name -> value),
+    ``input_scaler`` / ``output_scaler`` (``mean``, ``sd``), ``architecture``
+    (``hidden``, ``activation``, ``init_sd``), ``training`` (``set_hash``,
+    sizes, seed, optimiser settings, the architecture search), ``validation``
+    (metrics, see :func:`lvcore.emulator.training.metrics`), ``test``
+    (metrics on a held-out set, if any), ``source`` (store, space,
+    resolution, simulator versions), ``created_at``, ``lvcore_version``,
+    ``spec_note`` (honest statement of how far the training set is from the
+    chapter's size).
+``validation.npz`` (optional)
+    ``inputs``, ``outputs``, ``predictions`` of the validation (or test)
+    set, for parity plots.
+
+:func:`load_emulator` takes a directory or a bare name: ``"chapter"`` is
+looked up in ``$LVCORE_EMULATORS`` (if set) and then in the repository's
+``assets/emulators/<name>/``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+import lvcore
+from lvcore.emulator.model import Emulator
+from lvcore.emulator.network import from_arrays, to_arrays
+from lvcore.exceptions import EmulatorError
+
+FORMAT = "lvcore-emulator"
+FORMAT_VERSION = 1
+#: Bundled emulators live here (relative to the repository root).
+ASSETS_DIR = Path(__file__).resolve().parents[2] / "assets" / "emulators"
+REQUIRED_KEYS = ("format", "format_version", "name", "input_names", "bounds", "log_inputs",
+                 "input_scaler", "output_scaler", "architecture")
+
+
+def emulator_search_path() -> list[Path]:
+    """Directories searched for named emulators, in order."""
+    dirs = []
+    if os.environ.get("LVCORE_EMULATORS"):
+        dirs += [Path(p) for p in os.environ["LVCORE_EMULATORS"].split(os.pathsep) if p]
+    dirs.append(ASSETS_DIR)
+    return dirs
+
+
+def available_emulators() -> list[str]:
+    """Names of emulators found on :func:`emulator_search_path`."""
+    names = []
+    for d in emulator_search_path():
+        if d.is_dir():
+            names += sorted(p.name for p in d.iterdir() if (p / "metadata.json").is_file() and p.name not in names)
+    return names
+
+
+def resolve_emulator_dir(name_or_path: str | Path) -> Path:
+    p = Path(name_or_path)
+    if p.is_dir():
+        return p
+    if p.name == str(name_or_path):  # a bare name
+        for d in emulator_search_path():
+            if (d / p.name).is_dir():
+                return d / p.name
+    found = ", ".join(available_emulators()) or "none"
+    raise EmulatorError(
+        f"emulator '{name_or_path}' not found (searched {[str(d) for d in emulator_search_path()]}; available: {found}); "
+        "build one with `python scripts/build_emulators.py` or `lvcore emulator train`"
+    )
+
+
+def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict | None = None) -> Path:
+    """Write ``emulator`` to ``directory`` (created) as network.npz + metadata.json.
+
+    Parameters
+    ----------
+    validation : dict, optional
+        Arrays ``inputs``, ``outputs``, ``predictions`` to store in
+        ``validation.npz`` for parity plots.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    meta = dict(emulator.metadata)
+    meta.update({
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "name": emulator.name,
+        "input_names": list(emulator.input_names),
+        "output_names": list(emulator.output_names),
+        "bounds": {"lower": _floats(emulator.lower), "upper": _floats(emulator.upper)},
+        "log_inputs": [n for n, flag in zip(emulator.input_names, emulator.log_inputs) if flag],
+        "fixed_inputs": {k: float(v) for k, v in emulator.fixed.items()},
+        "input_scaler": {"mean": _floats(emulator.x_mean), "sd": _floats(emulator.x_sd)},
+        "output_scaler": {"mean": _floats(emulator.y_mean), "sd": _floats(emulator.y_sd)},
+        "architecture": {**meta.get("architecture", {}), "hidden": list(emulator.network.hidden), "activation": "tanh"},
+        "lvcore_version": meta.get("lvcore_version", lvcore.__version__),
+        "created_at": meta.get("created_at", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())),
+    })
+    np.savez(directory / "network.npz", **to_arrays(emulator.network))
+    (directory / "metadata.json").write_text(json.dumps(meta, indent=2, sort_keys=True))
+    if validation is not None:
+        np.savez(directory / "validation.npz", **{k: np.asarray(v, dtype=float) for k, v in validation.items()})
+    return directory
+
+
+def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator:
+    """Load an emulator by directory or bare name (see the module docstring).
+
+    Raises
+    ------
+    EmulatorError
+        If it cannot be found or its files are malformed.
+    """
+    directory = resolve_emulator_dir(name_or_path)
+    meta_path, net_path = directory / "metadata.json", directory / "network.npz"
+    if not meta_path.is_file() or not net_path.is_file():
+        raise EmulatorError(f"emulator directory '{directory}' needs metadata.json and network.npz")
+    try:
+        meta = json.loads(meta_path.read_text())
+    except json.JSONDecodeError as err:
+        raise EmulatorError(f"'{meta_path}' is not valid JSON: {err}") from err
+    missing = [k for k in REQUIRED_KEYS if k not in meta]
+    if missing:
+        raise EmulatorError(f"'{meta_path}' lacks key(s) {missing}")
+    if meta["format"] != FORMAT or int(meta["format_version"]) > FORMAT_VERSION:
+        raise EmulatorError(f"'{meta_path}': unsupported format {meta['format']!r} v{meta['format_version']}")
+    try:
+        with np.load(net_path, allow_pickle=False) as npz:
+            network = from_arrays({k: npz[k] for k in npz.files})
+    except (ValueError, OSError) as err:
+        raise EmulatorError(f"'{net_path}' is not a valid array archive: {err}") from err
+    names = tuple(meta["input_names"])
+    try:
+        return Emulator(
+            name=str(meta["name"]),
+            input_names=names,
+            lower=np.asarray(meta["bounds"]["lower"], dtype=float),
+            upper=np.asarray(meta["bounds"]["upper"], dtype=float),
+            log_inputs=tuple(n in set(meta["log_inputs"]) for n in names),
+            x_mean=np.asarray(meta["input_scaler"]["mean"], dtype=float),
+            x_sd=np.asarray(meta["input_scaler"]["sd"], dtype=float),
+            y_mean=np.asarray(meta["output_scaler"]["mean"], dtype=float),
+            y_sd=np.asarray(meta["output_scaler"]["sd"], dtype=float),
+            network=network,
+            fixed={k: float(v) for k, v in meta.get("fixed_inputs", {}).items()},
+            metadata=meta,
+            strict=strict,
+        )
+    except (KeyError, TypeError, ValueError) as err:
+        raise EmulatorError(f"'{meta_path}' is malformed: {err!r}") from err
+
+
+def load_validation(name_or_path: str | Path) -> dict | None:
+    """The stored validation arrays (``inputs``, ``outputs``, ``predictions``), or None."""
+    path = resolve_emulator_dir(name_or_path) / "validation.npz"
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as npz:
+        return {k: npz[k] for k in npz.files}
+
+
+def _floats(a) -> list[float]:
+    return [float(v) for v in np.asarray(a, dtype=float).reshape(-1)]

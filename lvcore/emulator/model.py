@@ -1,0 +1,235 @@
+"""The trained emulator η(inputs) -> 25 outputs, as used by the app and calibration.
+
+An :class:`Emulator` bundles the network with its input transform
+(log of the material parameters, then standardisation), its output scaling
+and its training box. Two ways to call it:
+
+``Emulator.apply(x)``
+    pure, jit-compiled JAX function: ``x`` of shape ``(..., d)`` in the order
+    of :attr:`Emulator.input_names` (physical units) to ``(..., 25)``
+    [LVV mL, 24 strains]. Differentiable; safe inside ``jax.grad``,
+    ``vmap`` and numpyro models. It does **not** check the training box
+    (it cannot raise on traced values): use :meth:`Emulator.in_box`.
+``Emulator.predict(x=None, *, strict=None, **named)``
+    convenience front end: accepts an array ``(..., d)``, a mapping of input
+    name to values, or keyword arguments (``predict(a=..., b=..., ...)``),
+    broadcasts them, checks the training box and calls :meth:`apply`.
+    Outside the box it warns (:class:`ExtrapolationWarning`) or, in strict
+    mode, raises :class:`~lvcore.exceptions.EmulatorError`; it never
+    extrapolates silently. Inputs the emulator was trained at a fixed value
+    for (e.g. the fibre angles of ``chapter``) may be passed and must equal
+    that value.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from lvcore.emulator.network import MLP
+from lvcore.exceptions import EmulatorError
+from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS, THETA_NAMES
+
+#: Inputs that are log-transformed before standardisation (positive, scale-like).
+LOG_INPUTS = THETA_NAMES
+
+
+class ExtrapolationWarning(UserWarning):
+    """An emulator was asked for a prediction outside its training box."""
+
+
+@dataclass(frozen=True, eq=False)
+class Emulator:
+    """A trained emulator; build with :func:`lvcore.emulator.training.train_emulator`
+    or :func:`lvcore.emulator.io.load_emulator`.
+
+    Parameters
+    ----------
+    name : str
+        Short name (e.g. ``"chapter"``).
+    input_names : tuple of str
+        Varied inputs, in the column order of ``x``.
+    lower, upper : np.ndarray
+        Training box (physical units), ``(d,)``.
+    log_inputs : tuple of bool
+        Per input: transformed by ``log`` before standardisation.
+    x_mean, x_sd : np.ndarray
+        Standardisation of the (log-)transformed inputs.
+    y_mean, y_sd : np.ndarray
+        Standardisation of the 25 outputs.
+    network : MLP
+        Acts on standardised inputs, returns standardised outputs.
+    fixed : dict
+        Inputs held fixed in the training set (name -> value).
+    metadata : dict
+        Everything else recorded at training (see :mod:`lvcore.emulator.io`).
+    strict : bool
+        Default for :meth:`predict`: raise instead of warn outside the box.
+    """
+
+    name: str
+    input_names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    log_inputs: tuple[bool, ...]
+    x_mean: np.ndarray
+    x_sd: np.ndarray
+    y_mean: np.ndarray
+    y_sd: np.ndarray
+    network: MLP
+    fixed: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+    strict: bool = False
+
+    def __post_init__(self):
+        d = len(self.input_names)
+        for attr in ("lower", "upper", "x_mean", "x_sd"):
+            if np.shape(getattr(self, attr)) != (d,):
+                raise EmulatorError(f"emulator '{self.name}': {attr} must have {d} entries, got shape {np.shape(getattr(self, attr))}")
+        for attr in ("y_mean", "y_sd"):
+            if np.shape(getattr(self, attr)) != (N_OUTPUTS,):
+                raise EmulatorError(f"emulator '{self.name}': {attr} must have {N_OUTPUTS} entries")
+        if len(self.log_inputs) != d:
+            raise EmulatorError(f"emulator '{self.name}': log_inputs must have {d} entries")
+        if np.any(np.asarray(self.x_sd) <= 0) or np.any(np.asarray(self.y_sd) <= 0):
+            raise EmulatorError(f"emulator '{self.name}': scaler standard deviations must be positive")
+        if np.any(np.asarray(self.lower)[np.asarray(self.log_inputs, dtype=bool)] <= 0):
+            raise EmulatorError(f"emulator '{self.name}': log-scaled inputs need a positive lower bound")
+        n_in, n_out = self.network.in_size, self.network.out_size
+        if (n_in, n_out) != (d, N_OUTPUTS):
+            raise EmulatorError(f"emulator '{self.name}': network maps {n_in} -> {n_out}, expected {d} -> {N_OUTPUTS}")
+        object.__setattr__(self, "_apply", jax.jit(_make_apply(self)))
+
+    # ----- the pure function ------------------------------------------------
+    def apply(self, x):
+        """Pure JAX prediction: ``(..., d)`` physical inputs -> ``(..., 25)`` outputs.
+
+        Jit-compiled, batched over leading axes, differentiable. No box check.
+        """
+        return self._apply(jnp.asarray(x, dtype=jnp.float64))
+
+    def __call__(self, x):
+        return self.apply(x)
+
+    @property
+    def dim(self) -> int:
+        return len(self.input_names)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return OUTPUT_COLUMNS
+
+    # ----- inputs -----------------------------------------------------------
+    def as_array(self, x=None, **named) -> np.ndarray:
+        """Assemble ``(..., d)`` inputs from an array, a mapping or keywords.
+
+        Fixed inputs may be passed; they are checked by :meth:`predict`, not used.
+        """
+        if x is not None and named:
+            raise EmulatorError("pass inputs either as one array/mapping or as keywords, not both")
+        if x is None:
+            x = named
+        if isinstance(x, Mapping):
+            unknown = [k for k in x if k not in self.input_names and k not in self.fixed]
+            if unknown:
+                raise EmulatorError(
+                    f"emulator '{self.name}' has no input(s) {unknown}; inputs: {list(self.input_names)}"
+                    + (f", fixed at training: {self.fixed}" if self.fixed else "")
+                )
+            missing = [k for k in self.input_names if k not in x]
+            if missing:
+                raise EmulatorError(f"emulator '{self.name}' needs input(s) {missing}")
+            cols = [x[k] for k in self.input_names]
+            if any(isinstance(c, jax.core.Tracer) for c in cols):
+                cols = jnp.broadcast_arrays(*[jnp.asarray(c, dtype=jnp.float64) for c in cols])
+                return jnp.stack(cols, axis=-1)
+            cols = np.broadcast_arrays(*[np.asarray(c, dtype=float) for c in cols])
+            return np.stack(cols, axis=-1)
+        if isinstance(x, jax.core.Tracer):
+            arr = x
+        else:
+            arr = np.asarray(x, dtype=float)
+        if arr.ndim == 0 or arr.shape[-1] != self.dim:
+            raise EmulatorError(
+                f"emulator '{self.name}' takes arrays of shape (..., {self.dim}) with columns {list(self.input_names)}; got {arr.shape}"
+            )
+        return arr
+
+    def in_box(self, x) -> np.ndarray:
+        """Boolean ``(...)``: inside the training box (relative tolerance 1e-9)."""
+        x = np.asarray(x, dtype=float)
+        span = self.upper - self.lower
+        return np.all((x >= self.lower - 1e-9 * span) & (x <= self.upper + 1e-9 * span), axis=-1)
+
+    def check_inputs(self, x, strict: bool | None = None, given_fixed: Mapping | None = None) -> None:
+        """Warn (or raise in strict mode) for rows outside the training box."""
+        strict = self.strict if strict is None else strict
+        problems = []
+        for k, v in (given_fixed or {}).items():
+            v = np.asarray(v, dtype=float)
+            if not np.allclose(v, self.fixed[k], rtol=0, atol=1e-9 * max(1.0, abs(self.fixed[k]))):
+                problems.append(f"{k} was fixed at {self.fixed[k]:g} in training, got {np.unique(v)[:5]}")
+        x = np.asarray(x, dtype=float)
+        if not np.all(np.isfinite(x)):
+            problems.append("inputs contain NaN or inf")
+        inside = self.in_box(x)
+        if not np.all(inside):
+            flat = x.reshape(-1, self.dim)
+            bad = np.flatnonzero(~inside.reshape(-1))
+            row = flat[bad[0]]
+            cols = [f"{n}={v:.4g} not in [{lo:.4g}, {hi:.4g}]" for n, v, lo, hi in zip(self.input_names, row, self.lower, self.upper)
+                    if not (lo - 1e-9 * (hi - lo) <= v <= hi + 1e-9 * (hi - lo))]
+            problems.append(f"{bad.size} of {flat.shape[0]} row(s) outside the training box, e.g. {'; '.join(cols)}")
+        if problems:
+            msg = f"emulator '{self.name}': " + "; ".join(problems)
+            if strict:
+                raise EmulatorError(msg + " (strict mode: no extrapolation)")
+            warnings.warn(msg + "; predictions there are extrapolations", ExtrapolationWarning, stacklevel=3)
+
+    # ----- the front end ----------------------------------------------------
+    def predict(self, x=None, /, *, strict: bool | None = None, **named):
+        """Predict the 25 outputs ``[LVV mL, 24 strains]``.
+
+        Parameters
+        ----------
+        x : array_like or mapping, optional
+            ``(..., d)`` inputs in :attr:`input_names` order (physical units:
+            kPa, -, deg, mmHg, scores), or a mapping name -> values.
+        strict : bool, optional
+            Raise :class:`EmulatorError` instead of warning outside the
+            training box (default: the emulator's ``strict``).
+        **named
+            Inputs by name, e.g. ``predict(a=0.6, b=1.3, af=1.0, bf=3.6, h1=0, ...)``;
+            arrays broadcast against each other.
+
+        Returns
+        -------
+        jax.Array
+            ``(..., 25)``; a single point gives shape ``(25,)``.
+        """
+        mapping = named if x is None else x
+        given_fixed = {k: v for k, v in mapping.items() if k in self.fixed} if isinstance(mapping, Mapping) else {}
+        arr = self.as_array(x, **named)
+        traced = isinstance(arr, jax.core.Tracer) or any(isinstance(v, jax.core.Tracer) for v in given_fixed.values())
+        if not traced:
+            self.check_inputs(arr, strict, given_fixed)
+        return self.apply(arr)
+
+
+def _make_apply(emu: Emulator):
+    log_mask = jnp.asarray(np.asarray(emu.log_inputs, dtype=bool))
+    x_mean, x_sd = jnp.asarray(emu.x_mean), jnp.asarray(emu.x_sd)
+    y_mean, y_sd = jnp.asarray(emu.y_mean), jnp.asarray(emu.y_sd)
+    net = emu.network
+    # log only where asked; the where-guard keeps gradients finite for linear inputs
+    def apply(x):
+        safe = jnp.where(log_mask, jnp.where(x > 0, x, 1.0), 1.0)
+        z = jnp.where(log_mask, jnp.log(safe), x)
+        z = jnp.where(log_mask & (x <= 0), jnp.nan, z)
+        return net((z - x_mean) / x_sd) * y_sd + y_mean
+
+    return apply

@@ -1,0 +1,353 @@
+"""Training emulators: the chapter's recipe.
+
+* Inputs: the material parameters (a, b, af, bf) on a log scale, the others
+  as they are; then standardised with the training set's mean and sd.
+* Outputs: the 25 simulator outputs, standardised per output.
+* Network: MLP with two hidden tanh layers; the widths are chosen from
+  ``{50, 100, 120, 200}²`` by the validation MSE (on standardised outputs).
+* Weights initialised from N(0, 0.1²).
+* Adam (optax) on the mean squared error with an exponentially decaying
+  learning rate starting at 0.01; minibatches reshuffled every epoch.
+* Early stopping on the validation MSE: the best epoch's weights are kept
+  and training stops after ``patience`` epochs without improvement.
+
+Only converged rows of a campaign are used; failed rows are counted in the
+metadata, never filled in.
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+import lvcore
+from lvcore.emulator.model import LOG_INPUTS, Emulator
+from lvcore.emulator.network import INIT_SD, MLP, WIDTHS
+from lvcore.exceptions import EmulatorError
+from lvcore.outputs import N_OUTPUTS
+
+#: The chapter's architecture grid: every pair of widths.
+ARCHITECTURES = tuple(itertools.product(WIDTHS, WIDTHS))
+
+
+@dataclass(frozen=True)
+class TrainingConfig:
+    """Optimiser and search settings.
+
+    Parameters
+    ----------
+    architectures : tuple of (int, int)
+        Hidden widths to try; the best by validation MSE is kept.
+    learning_rate : float
+        Initial Adam learning rate (0.01 in the chapter).
+    decay_rate, decay_epochs : float, int
+        The learning rate is multiplied by ``decay_rate`` every
+        ``decay_epochs`` epochs (smoothly), down to ``learning_rate * 1e-3``.
+    max_epochs, patience : int
+        Epoch budget and early-stopping patience (epochs).
+    batch_size : int
+        Minibatch size (capped at the training-set size).
+    init_sd : float
+        Standard deviation of the N(0, init_sd²) weight initialisation.
+    seed : int
+        Seed of initialisation and shuffling.
+    """
+
+    architectures: tuple[tuple[int, int], ...] = ARCHITECTURES
+    learning_rate: float = 0.01
+    decay_rate: float = 0.5
+    decay_epochs: int = 150
+    max_epochs: int = 2000
+    patience: int = 150
+    batch_size: int = 256
+    init_sd: float = INIT_SD
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """One architecture's training run."""
+
+    hidden: tuple[int, int]
+    network: MLP = field(repr=False)
+    valid_mse: float
+    best_epoch: int
+    epochs: int
+    seconds: float
+    history: tuple[tuple[int, float, float], ...] = field(repr=False, default=())  # (epoch, train, valid)
+
+
+def training_set_hash(x: np.ndarray, y: np.ndarray, names: Sequence[str]) -> str:
+    """SHA-256 of the training inputs, outputs and input names (float64, C order)."""
+    h = hashlib.sha256()
+    h.update(",".join(names).encode())
+    h.update(np.ascontiguousarray(x, dtype="<f8").tobytes())
+    h.update(np.ascontiguousarray(y, dtype="<f8").tobytes())
+    return h.hexdigest()
+
+
+def metrics(y_true: np.ndarray, y_pred: np.ndarray, y_sd: np.ndarray | None = None) -> dict:
+    """Accuracy in physical units, per output and pooled.
+
+    Returns a dict with ``n``; per output (lists of 25): ``rmse``, ``mae``,
+    ``p99_abs`` (99th percentile of the absolute error: the worst 1 %),
+    ``max_abs``; pooled: ``lvv_rmse_ml``, ``lvv_p99_abs_ml``,
+    ``strain_rmse``, ``strain_p99_abs``; and ``mse_standardised`` (mean over
+    outputs of the MSE divided by ``y_sd²``) when ``y_sd`` is given.
+    """
+    y_true, y_pred = np.asarray(y_true, float), np.asarray(y_pred, float)
+    err = y_pred - y_true
+    abs_err = np.abs(err)
+    out = {
+        "n": int(y_true.shape[0]),
+        "rmse": np.sqrt(np.mean(err**2, axis=0)).tolist(),
+        "mae": np.mean(abs_err, axis=0).tolist(),
+        "p99_abs": np.percentile(abs_err, 99, axis=0).tolist(),
+        "max_abs": np.max(abs_err, axis=0).tolist(),
+        "lvv_rmse_ml": float(np.sqrt(np.mean(err[:, 0] ** 2))),
+        "lvv_p99_abs_ml": float(np.percentile(abs_err[:, 0], 99)),
+        "strain_rmse": float(np.sqrt(np.mean(err[:, 1:] ** 2))),
+        "strain_p99_abs": float(np.percentile(abs_err[:, 1:], 99)),
+    }
+    if y_sd is not None:
+        out["mse_standardised"] = float(np.mean((err / np.asarray(y_sd)) ** 2))
+    return out
+
+
+def transform_inputs(x: np.ndarray, log_inputs: Sequence[bool]) -> np.ndarray:
+    x = np.asarray(x, dtype=float).copy()
+    mask = np.asarray(log_inputs, dtype=bool)
+    if np.any(x[:, mask] <= 0):
+        raise EmulatorError("log-scaled inputs (a, b, af, bf) must be positive")
+    x[:, mask] = np.log(x[:, mask])
+    return x
+
+
+def fit_network(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: np.ndarray,
+                hidden: tuple[int, int], config: TrainingConfig, key: int) -> FitResult:
+    """Train one architecture on standardised data with early stopping."""
+    t0 = time.perf_counter()
+    n, d = zx.shape
+    bs = int(min(config.batch_size, n))
+    n_batches = max(1, n // bs)
+    init_seed, shuffle_seed = np.random.default_rng(key).integers(0, 2**31, size=2)
+    model = MLP(d, zy.shape[1], tuple(hidden), seed=int(init_seed), init_sd=config.init_sd)
+    rng = np.random.default_rng(shuffle_seed)
+    schedule = optax.exponential_decay(
+        init_value=config.learning_rate,
+        transition_steps=config.decay_epochs * n_batches,
+        decay_rate=config.decay_rate,
+        end_value=config.learning_rate * 1e-3,
+    )
+    opt = optax.adam(schedule)
+    opt_state = opt.init(model)
+    zx_j, zy_j = jnp.asarray(zx), jnp.asarray(zy)
+    zxv, zyv = jnp.asarray(zx_valid), jnp.asarray(zy_valid)
+
+    def loss_fn(m, xb, yb):
+        return jnp.mean((m(xb) - yb) ** 2)
+
+    @eqx.filter_jit
+    def epoch(m, state, perm):
+        def step(carry, idx):
+            m, state = carry
+            loss, grads = eqx.filter_value_and_grad(loss_fn)(m, zx_j[idx], zy_j[idx])
+            updates, state = opt.update(grads, state, m)
+            return (eqx.apply_updates(m, updates), state), loss
+
+        (m, state), losses = jax.lax.scan(step, (m, state), perm)
+        return m, state, jnp.mean(losses), loss_fn(m, zxv, zyv)
+
+    best, best_mse, best_epoch, history = model, np.inf, 0, []
+    for ep in range(1, config.max_epochs + 1):
+        perm = rng.permutation(n)[: n_batches * bs].reshape(n_batches, bs)
+        model, opt_state, train_loss, valid_mse = epoch(model, opt_state, perm)
+        valid_mse = float(valid_mse)
+        if ep % 10 == 0 or ep == 1:
+            history.append((ep, float(train_loss), valid_mse))
+        if not np.isfinite(valid_mse):
+            break
+        if valid_mse < best_mse:
+            best, best_mse, best_epoch = model, valid_mse, ep
+        elif ep - best_epoch >= config.patience:
+            break
+    return FitResult(tuple(hidden), best, float(best_mse), best_epoch, ep, time.perf_counter() - t0, tuple(history))
+
+
+def train_emulator(
+    x_train: np.ndarray,
+    y_train: np.ndarray,
+    x_valid: np.ndarray,
+    y_valid: np.ndarray,
+    *,
+    input_names: Sequence[str],
+    name: str,
+    lower: Sequence[float] | None = None,
+    upper: Sequence[float] | None = None,
+    fixed: dict | None = None,
+    config: TrainingConfig = TrainingConfig(),
+    x_test: np.ndarray | None = None,
+    y_test: np.ndarray | None = None,
+    source: dict | None = None,
+    log: callable = None,
+) -> Emulator:
+    """Train an emulator and pick its architecture by validation MSE.
+
+    Parameters
+    ----------
+    x_train, y_train : np.ndarray
+        ``(n, d)`` inputs (physical units, columns ``input_names``) and
+        ``(n, 25)`` outputs [LVV mL, 24 strains].
+    x_valid, y_valid : np.ndarray
+        Validation set: early stopping and architecture selection.
+    input_names : sequence of str
+        Column names; ``a, b, af, bf`` are log-transformed.
+    name : str
+        Emulator name.
+    lower, upper : sequence of float, optional
+        Training box; default the design space's bounds should be passed,
+        otherwise the training data's min/max are used.
+    fixed : dict, optional
+        Inputs held fixed in the training set (recorded, checked by predict).
+    config : TrainingConfig
+    x_test, y_test : np.ndarray, optional
+        A held-out test set never used in training or selection; its
+        metrics are stored under ``metadata["test"]``.
+    source : dict, optional
+        Provenance recorded under ``metadata["source"]``.
+    log : callable, optional
+        Called with progress lines (e.g. ``print``).
+
+    Returns
+    -------
+    Emulator
+        With ``metadata`` holding ``training``, ``validation`` (and ``test``).
+    """
+    names = tuple(input_names)
+    x_train, y_train = np.asarray(x_train, float), np.asarray(y_train, float)
+    x_valid, y_valid = np.asarray(x_valid, float), np.asarray(y_valid, float)
+    d = len(names)
+    for label, x, y in (("training", x_train, y_train), ("validation", x_valid, y_valid)):
+        if x.ndim != 2 or x.shape[1] != d or y.shape != (x.shape[0], N_OUTPUTS):
+            raise EmulatorError(f"{label} set must be inputs (n, {d}) and outputs (n, {N_OUTPUTS}); got {x.shape}, {y.shape}")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+            raise EmulatorError(f"{label} set contains NaN/inf (use only converged rows)")
+        if x.shape[0] < 2:
+            raise EmulatorError(f"{label} set needs at least 2 rows, got {x.shape[0]}")
+    log_inputs = tuple(n in LOG_INPUTS for n in names)
+    tx = transform_inputs(x_train, log_inputs)
+    x_mean, x_sd = tx.mean(axis=0), tx.std(axis=0)
+    if np.any(x_sd == 0):
+        raise EmulatorError(f"input(s) {[n for n, s in zip(names, x_sd) if s == 0]} are constant in the training set; pass them as fixed")
+    y_mean, y_sd = y_train.mean(axis=0), y_train.std(axis=0)
+    y_sd = np.where(y_sd > 0, y_sd, 1.0)
+    zx, zy = (tx - x_mean) / x_sd, (y_train - y_mean) / y_sd
+    zxv, zyv = (transform_inputs(x_valid, log_inputs) - x_mean) / x_sd, (y_valid - y_mean) / y_sd
+
+    seeds = np.random.default_rng(config.seed).integers(0, 2**31, size=len(config.architectures))
+    fits = []
+    for hidden, sub in zip(config.architectures, seeds):
+        fit = fit_network(zx, zy, zxv, zyv, tuple(hidden), config, int(sub))
+        fits.append(fit)
+        if log:
+            log(f"  hidden {fit.hidden}: validation MSE {fit.valid_mse:.3e} (standardised) at epoch {fit.best_epoch}/{fit.epochs}, {fit.seconds:.1f} s")
+    best = min(fits, key=lambda f: f.valid_mse)
+
+    lower = np.asarray(lower if lower is not None else np.minimum(x_train.min(0), x_valid.min(0)), float)
+    upper = np.asarray(upper if upper is not None else np.maximum(x_train.max(0), x_valid.max(0)), float)
+    meta = {
+        "architecture": {"hidden": list(best.hidden), "activation": "tanh", "init_sd": config.init_sd},
+        "training": {
+            "set_hash": training_set_hash(x_train, y_train, names),
+            "n_train": int(x_train.shape[0]),
+            "n_valid": int(x_valid.shape[0]),
+            "config": {**asdict(config), "architectures": [list(a) for a in config.architectures]},
+            "best_epoch": best.best_epoch,
+            "epochs_run": best.epochs,
+            "search": [{"hidden": list(f.hidden), "valid_mse": f.valid_mse, "best_epoch": f.best_epoch,
+                        "epochs": f.epochs, "seconds": round(f.seconds, 2)} for f in fits],
+            "history": [list(h) for h in best.history],
+        },
+        "source": dict(source or {}),
+        "lvcore_version": lvcore.__version__,
+    }
+    emu = Emulator(name=name, input_names=names, lower=lower, upper=upper, log_inputs=log_inputs,
+                   x_mean=x_mean, x_sd=x_sd, y_mean=y_mean, y_sd=y_sd, network=best.network,
+                   fixed=dict(fixed or {}), metadata=meta)
+    meta["validation"] = metrics(y_valid, np.asarray(emu.apply(x_valid)), y_sd)
+    if x_test is not None and y_test is not None and len(x_test):
+        meta["test"] = metrics(y_test, np.asarray(emu.apply(np.asarray(x_test, float))), y_sd)
+    return emu
+
+
+# ----- from campaign stores ---------------------------------------------------
+
+@dataclass(frozen=True)
+class StoreData:
+    """Converged rows of one or more campaign stores, restricted to chosen inputs."""
+
+    inputs: np.ndarray
+    outputs: np.ndarray
+    input_names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    fixed: dict
+    n_failed: int
+    n_pending: int
+    info: dict
+
+
+def load_store_data(stores: Sequence[str | Path], inputs: Sequence[str] | None = None) -> StoreData:
+    """Read the converged rows of campaign stores (same space) for training.
+
+    Parameters
+    ----------
+    stores : sequence of path
+        HDF5 stores from ``lvcore campaign run``.
+    inputs : sequence of str, optional
+        Which varied inputs the emulator takes (default: all of the space's).
+        A varied input left out must then be constant in the data.
+    """
+    from lvcore.campaigns.store import read_store
+
+    contents = [read_store(p) for p in stores]
+    if not contents:
+        raise EmulatorError("no campaign stores given")
+    space = contents[0].space
+    for p, c in zip(stores, contents):
+        if c.space != space:
+            raise EmulatorError(f"store '{p}' uses space '{c.space.name}' with different inputs/bounds than '{stores[0]}'")
+    names = tuple(inputs) if inputs else space.names
+    unknown = [n for n in names if n not in space.names]
+    if unknown:
+        raise EmulatorError(f"input(s) {unknown} are not varied in space '{space.name}' (varied: {list(space.names)})")
+    cols = [space.names.index(n) for n in names]
+    x = np.concatenate([c.inputs[c.converged][:, cols] for c in contents])
+    y = np.concatenate([c.outputs[c.converged] for c in contents])
+    fixed = space.fixed_dict()
+    dropped = [n for n in space.names if n not in names]
+    for n in dropped:
+        vals = np.concatenate([c.inputs[c.converged][:, space.names.index(n)] for c in contents])
+        if not np.allclose(vals, vals[0]):
+            raise EmulatorError(f"input '{n}' varies in the data but is not an emulator input; add it to --inputs")
+        fixed[n] = float(vals[0])
+    versions = sorted({v for c in contents for v, ok in zip(c.versions, c.converged) if ok})
+    return StoreData(
+        inputs=x, outputs=y, input_names=names,
+        lower=space.lower[cols], upper=space.upper[cols], fixed=fixed,
+        n_failed=int(sum(c.failed.sum() for c in contents)),
+        n_pending=int(sum(c.pending.sum() for c in contents)),
+        info={"stores": [str(p) for p in stores], "space": space.to_dict(),
+              "resolution": sorted({str(c.attrs.get("resolution")) for c in contents}),
+              "forward": sorted({str(c.attrs.get("forward")) for c in contents}),
+              "simulator_versions": versions},
+    )

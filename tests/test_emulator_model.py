@@ -1,0 +1,157 @@
+"""Emulator training, save/load, box checks, gradients and batching, on a known smooth function."""
+import json
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from lvcore.emulator.io import load_emulator, load_validation, save_emulator
+from lvcore.emulator.model import ExtrapolationWarning
+from lvcore.emulator.network import MLP, from_arrays, to_arrays
+from lvcore.emulator.training import TrainingConfig, metrics, train_emulator
+from lvcore.exceptions import EmulatorError
+
+NAMES = ("a", "b", "h1")
+LOWER, UPPER = np.array([0.1, 0.5, -2.0]), np.array([10.0, 20.0, 2.0])
+
+
+def truth(x):
+    """A known smooth volume-and-strain-like function of (a, b, h1)."""
+    x = np.atleast_2d(x)
+    a, b, h = x[:, 0], x[:, 1], x[:, 2]
+    lvv = 100 + 30 / (1 + a) + 5 * np.sin(h) + 2 * np.log(b)
+    r = np.arange(24)
+    s = -0.05 - 0.1 / (1 + a[:, None] * (1 + 0.02 * r)) + 0.01 * np.cos(h)[:, None]
+    return np.column_stack([lvv, s])
+
+
+def draw(rng, n):
+    u = rng.random((n, 3))
+    return np.column_stack([np.exp(np.log(0.1) + u[:, 0] * np.log(100)), np.exp(np.log(0.5) + u[:, 1] * np.log(40)),
+                            -2 + 4 * u[:, 2]])
+
+
+@pytest.fixture(scope="module")
+def trained():
+    rng = np.random.default_rng(0)
+    xt, xv, xs = draw(rng, 600), draw(rng, 200), draw(rng, 300)
+    cfg = TrainingConfig(architectures=((50, 50), (20, 20)), max_epochs=500, patience=80, batch_size=64, decay_epochs=150)
+    emu = train_emulator(xt, truth(xt), xv, truth(xv), input_names=NAMES, name="smooth", lower=LOWER, upper=UPPER,
+                         fixed={"edp": 8.0}, config=cfg, x_test=xs, y_test=truth(xs))
+    return emu, xs
+
+
+def test_training_recovers_a_known_smooth_function(trained):
+    emu, xs = trained
+    m = emu.metadata
+    assert m["validation"]["mse_standardised"] < 1e-3
+    assert m["test"]["lvv_rmse_ml"] < 0.5          # range of LVV here is ~30 mL
+    assert m["test"]["strain_rmse"] < 0.002        # range of strains ~0.09
+    # architecture chosen by validation MSE among the candidates
+    search = m["training"]["search"]
+    assert m["architecture"]["hidden"] == min(search, key=lambda s: s["valid_mse"])["hidden"]
+    # metrics are what they say: recompute on the test set
+    pred = np.asarray(emu.predict(xs))
+    np.testing.assert_allclose(np.sqrt(np.mean((pred - truth(xs)) ** 2, axis=0)), m["test"]["rmse"], rtol=1e-10)
+
+
+def test_save_load_round_trip_identical(tmp_path, trained):
+    emu, xs = trained
+    save_emulator(emu, tmp_path / "smooth", validation={"inputs": xs, "outputs": truth(xs), "predictions": emu.apply(xs)})
+    back = load_emulator(tmp_path / "smooth")
+    np.testing.assert_array_equal(np.asarray(back.predict(xs)), np.asarray(emu.predict(xs)))
+    assert back.input_names == NAMES and back.fixed == {"edp": 8.0}
+    meta = json.loads((tmp_path / "smooth" / "metadata.json").read_text())
+    for key in ("input_names", "bounds", "input_scaler", "output_scaler", "architecture", "training", "validation", "test"):
+        assert key in meta
+    assert len(meta["training"]["set_hash"]) == 64
+    with np.load(tmp_path / "smooth" / "network.npz", allow_pickle=False) as npz:  # plain arrays, no pickle
+        assert sorted(npz.files) == [f"layer{i}_{k}" for i in range(3) for k in ("bias", "weight")]
+    assert load_validation(tmp_path / "smooth")["inputs"].shape == xs.shape
+    # a bare name resolves through the search path
+    import os
+    os.environ["LVCORE_EMULATORS"] = str(tmp_path)
+    try:
+        assert load_emulator("smooth").name == "smooth"
+        with pytest.raises(EmulatorError, match="not found"):
+            load_emulator("no-such-emulator")
+    finally:
+        del os.environ["LVCORE_EMULATORS"]
+    (tmp_path / "smooth" / "metadata.json").write_text("{}")
+    with pytest.raises(EmulatorError, match="lacks key"):
+        load_emulator(tmp_path / "smooth")
+
+
+def test_out_of_box_warns_and_strict_raises(trained):
+    emu, _ = trained
+    inside = dict(a=1.0, b=2.0, h1=0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        emu.predict(**inside)                       # no warning inside
+        emu.predict(**inside, edp=8.0)              # fixed input at its training value: fine
+    with pytest.warns(ExtrapolationWarning, match=r"a=20 not in \[0.1, 10\]"):
+        y = emu.predict(a=20.0, b=2.0, h1=0.5)
+    assert y.shape == (25,)                          # still predicts, but not silently
+    with pytest.raises(EmulatorError, match="strict"):
+        emu.predict(a=20.0, b=2.0, h1=0.5, strict=True)
+    with pytest.warns(ExtrapolationWarning, match="edp was fixed at 8"):
+        emu.predict(**inside, edp=12.0)
+    with pytest.raises(EmulatorError, match="no input"):
+        emu.predict(**inside, alpha_endo=-60.0)
+    with pytest.raises(EmulatorError, match="needs input"):
+        emu.predict(a=1.0, b=2.0)
+    with pytest.raises(EmulatorError, match="shape"):
+        emu.predict(np.ones((4, 2)))
+
+
+def test_gradient_through_predict_matches_finite_differences(trained):
+    emu, _ = trained
+    x0 = np.array([0.8, 3.0, 0.3])
+
+    def f(x):
+        return emu.predict(a=x[0], b=x[1], h1=x[2])
+
+    jac = np.asarray(jax.jacfwd(f)(jnp.asarray(x0)))
+    assert jac.shape == (25, 3)
+    eps = 1e-6 * np.maximum(1.0, np.abs(x0))
+    fd = np.column_stack([(np.asarray(f(x0 + e)) - np.asarray(f(x0 - e))) / (2 * e[i])
+                          for i, e in enumerate(np.diag(eps))])
+    np.testing.assert_allclose(jac, fd, rtol=1e-6, atol=1e-9)
+    # apply is pure and usable under grad / vmap (as inside numpyro)
+    g = jax.grad(lambda x: emu.apply(x)[0])(jnp.asarray(x0))
+    np.testing.assert_allclose(g, jac[0], rtol=1e-10)
+
+
+def test_prediction_is_batched(trained):
+    emu, xs = trained
+    batch = np.asarray(emu.predict(xs))
+    assert batch.shape == (xs.shape[0], 25)
+    rows = np.stack([np.asarray(emu.predict(x)) for x in xs[:5]])
+    np.testing.assert_allclose(rows, batch[:5], rtol=1e-12, atol=1e-12)
+    grid = np.asarray(emu.predict(a=np.linspace(0.2, 5, 7)[:, None], b=np.full((1, 4), 2.0), h1=0.0))
+    assert grid.shape == (7, 4, 25)
+    assert np.asarray(emu.predict(xs.reshape(3, 100, 3))).shape == (3, 100, 25)
+
+
+def test_network_arrays_round_trip_and_init_scale():
+    net = MLP(9, 25, (100, 200), seed=3)
+    assert net.hidden == (100, 200)
+    w = np.concatenate([np.ravel(a) for a in to_arrays(net).values()])
+    assert abs(w.std() - 0.1) < 0.005 and abs(w.mean()) < 0.005      # N(0, 0.1^2) init
+    back = from_arrays(to_arrays(net))
+    x = np.random.default_rng(0).standard_normal((4, 9))
+    np.testing.assert_array_equal(np.asarray(back(x)), np.asarray(net(x)))
+    with pytest.raises(EmulatorError):
+        from_arrays({"layer0_weight": np.ones((3, 2)), "layer0_bias": np.ones(3)})
+
+
+def test_metrics_known_values():
+    y = np.zeros((100, 25))
+    p = y.copy()
+    p[:, 0] = 2.0
+    p[:, 1:] = -0.01
+    m = metrics(y, p)
+    assert m["lvv_rmse_ml"] == pytest.approx(2.0) and m["strain_rmse"] == pytest.approx(0.01)
+    assert m["p99_abs"][0] == pytest.approx(2.0)
