@@ -68,6 +68,14 @@ def test_defaults_and_units():
     assert box.geometry.resolution.xyz == (10, 1, 1) and box.geometry.box_size == (10.0, 1.0, 1.0)
     assert box.geometry.position_map() is None and box.fibres.direction == (1.0, 0.0, 0.0)
     assert box.boundary.clamped_faces == ("x0",) and box.load.surface == "z0"
+    for res in ("fast", None):
+        d = copy.deepcopy(BOX)
+        d["geometry"]["resolution"] = res
+        if res is None:
+            del d["geometry"]["resolution"]
+        g = Case.from_dict(d).geometry
+        assert g.resolution is None and g.preset == res
+        assert Case.from_dict(Case.from_dict(d).to_dict()) == Case.from_dict(d)
 
 
 def test_default_lv_constructor_matches_dict():
@@ -153,7 +161,7 @@ BAD = [
     (BOX, ("boundary",), {"base": "clamped"}, False, "boundary.base", "unknown key"),
     (BOX, ("geometry", "size"), [10, 0, 1], False, "geometry.size[1]", "> 0"),
     (BOX, ("geometry", "resolution"), [10, 1], False, "geometry.resolution", "[nx, ny, nz]"),
-    (BOX, ("geometry", "resolution"), None, True, "geometry.resolution", "missing"),
+    (BOX, ("geometry", "resolution"), "coarse", False, "geometry.resolution", "fast"),
     (HO, ("geometry",), {"kind": "mesh", "path": "/nonexistent/lv.vtu"}, False, "geometry.path", "does not exist"),
     (HO, ("geometry",), {"kind": "pca", "scores": []}, False, "geometry.scores", "non-empty"),
     (HO, ("geometry",), {"kind": "pca", "scores": [1.0], "model": "/nonexistent/m.h5"}, False,

@@ -349,6 +349,10 @@ def _parse_case(d: Mapping, base_dir: Path | None) -> Case:
 
 def _parse_resolution(value, where: str, kind: str) -> tuple[Resolution | None, str | None]:
     if kind == "box":
+        if value is None:
+            return None, None
+        if isinstance(value, str):
+            return None, _string(value, where, RESOLUTION_PRESET_NAMES)
         if isinstance(value, (list, tuple)):
             if len(value) != 3:
                 raise CaseError(where, f"a box resolution is [nx, ny, nz], got {value!r}")
@@ -389,8 +393,6 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
     for key in g:
         if key not in allowed:
             raise CaseError(f"geometry.{key}", f"not used by geometry kind '{kind}' (allowed: {', '.join(allowed)})")
-    if kind == "box" and "resolution" not in g:
-        raise CaseError("geometry.resolution", "missing (required for a box: [nx, ny, nz])")
     resolution, preset = _parse_resolution(g.get("resolution"), "geometry.resolution", kind)
 
     if kind == "default":
@@ -447,7 +449,7 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
     if "size" not in g:
         raise CaseError("geometry.size", "missing (required for a box: [Lx, Ly, Lz] in mm)")
     size = _vector(g["size"], "geometry.size", positive=True)
-    return GeometrySpec(kind, resolution, None, box_size=size, source=f"box {size[0]:g} x {size[1]:g} x {size[2]:g} mm")
+    return GeometrySpec(kind, resolution, preset, box_size=size, source=f"box {size[0]:g} x {size[1]:g} x {size[2]:g} mm")
 
 
 def _template_nodes(nodes, where: str) -> np.ndarray:
@@ -547,7 +549,7 @@ def _case_to_dict(case: Case) -> dict:
             gd["model"] = g.extra["model"]
     elif g.kind == "box":
         gd["size"] = list(g.box_size)
-    if g.kind == "box":
+    if g.kind == "box" and g.resolution is not None:
         gd["resolution"] = list(g.resolution.xyz)
     elif g.resolution is not None:
         gd["resolution"] = {
