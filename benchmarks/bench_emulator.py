@@ -1,0 +1,118 @@
+"""Emulator benchmarks: prediction speed and held-out accuracy.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_emulator.py [--emulator NAME_OR_DIR ...]
+
+Speed: 100,000-row batch prediction (target <= 1 s) and single-row latency
+after warm-up (target <= 1 ms), for ``Emulator.predict`` (with box checks) and
+the pure ``Emulator.apply``. Without a trained emulator the timing uses an
+untrained network of the largest architecture (9 -> 200 -> 200 -> 25): the
+cost does not depend on the weights; such rows say "untrained (timing only)".
+
+Accuracy: for each emulator given, the metrics stored at training on its
+held-out set (``test`` if present, else ``validation``): RMSE per output and
+the 99th percentile of |error| (the worst 1 %), against the targets LVV RMSE
+<= 1 mL, strain RMSE <= 0.003.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+import warnings
+
+for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_k, "1")
+
+import numpy as np  # noqa: E402
+
+import lvcore  # noqa: E402,F401
+from lvcore.emulator.model import Emulator  # noqa: E402
+from lvcore.emulator.network import MLP  # noqa: E402
+from lvcore.outputs import OUTPUT_NAMES  # noqa: E402
+
+
+def timing_emulator() -> Emulator:
+    names = ("a", "b", "af", "bf", "h1", "h2", "h3", "h4", "h5")
+    lower = np.array([0.05, 0.1, 0.05, 0.1, -3, -3, -3, -3, -3.0])
+    upper = np.array([10, 30, 10, 30, 3, 3, 3, 3, 3.0])
+    return Emulator(name="untrained (timing only)", input_names=names, lower=lower, upper=upper,
+                    log_inputs=(True,) * 4 + (False,) * 5, x_mean=np.zeros(9), x_sd=np.ones(9),
+                    y_mean=np.zeros(25), y_sd=np.ones(25), network=MLP(9, 25, (200, 200), seed=0))
+
+
+def draw(emu: Emulator, n: int, seed: int = 0) -> np.ndarray:
+    u = np.random.default_rng(seed).random((n, emu.dim))
+    return emu.lower + u * (emu.upper - emu.lower)
+
+
+def best_of(fn, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def speed(emu: Emulator) -> list[tuple[str, float, str]]:
+    big = draw(emu, 100_000)
+    one = draw(emu, 1)[0]
+    named = dict(zip(emu.input_names, one))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        np.asarray(emu.predict(big)); np.asarray(emu.predict(one)); np.asarray(emu.predict(**named))  # warm-up / compile
+        t_big = best_of(lambda: np.asarray(emu.predict(big)), 3)
+        t_big_apply = best_of(lambda: emu.apply(big).block_until_ready(), 3)
+        n = 2000
+        t_one = best_of(lambda: [np.asarray(emu.predict(one)) for _ in range(n)], 3) / n
+        t_named = best_of(lambda: [np.asarray(emu.predict(**named)) for _ in range(n)], 3) / n
+        t_apply = best_of(lambda: [emu.apply(one).block_until_ready() for _ in range(n)], 3) / n
+    return [
+        ("predict, 100,000 rows", t_big, "<= 1 s"),
+        ("apply, 100,000 rows", t_big_apply, "<= 1 s"),
+        ("predict, 1 row (array)", t_one, "<= 1 ms"),
+        ("predict, 1 row (keywords)", t_named, "<= 1 ms"),
+        ("apply, 1 row", t_apply, "<= 1 ms"),
+    ]
+
+
+def accuracy_table(meta: dict) -> str:
+    key = "test" if "test" in meta else "validation"
+    m = meta[key]
+    lines = [f"held-out set: '{key}' (n = {m['n']}); trained on {meta['training']['n_train']} runs",
+             f"LVV RMSE {m['lvv_rmse_ml']:.3f} mL (target <= 1, aim 0.5), p99 |err| {m['lvv_p99_abs_ml']:.3f} mL; "
+             f"strain RMSE {m['strain_rmse']:.4f} (target <= 0.003), p99 |err| {m['strain_p99_abs']:.4f}",
+             "| output | RMSE | p99 abs err (worst 1 %) | max abs err |", "|---|---|---|---|"]
+    for i, name in enumerate(OUTPUT_NAMES):
+        unit = " mL" if i == 0 else ""
+        lines.append(f"| {name} | {m['rmse'][i]:.4g}{unit} | {m['p99_abs'][i]:.4g}{unit} | {m['max_abs'][i]:.4g}{unit} |")
+    if meta.get("spec_note"):
+        lines.append(f"NOTE: {meta['spec_note']}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--emulator", nargs="*", default=[], help="emulator names or directories (default: bundled ones)")
+    args = p.parse_args(argv)
+    from lvcore.emulator.io import available_emulators, load_emulator
+
+    names = args.emulator or available_emulators()
+    emus = [load_emulator(n) for n in names] or [timing_emulator()]
+    import jax
+    print(f"jax {jax.__version__} on {jax.devices()[0].platform}; OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}; "
+          "2-core machine shared with other jobs: timings are noisy (best of 3)")
+    for emu in emus:
+        print(f"\n## emulator '{emu.name}': {emu.dim} -> {list(emu.network.hidden)} -> 25")
+        print("| operation | time | target |\n|---|---|---|")
+        for label, t, target in speed(emu):
+            shown = f"{t * 1e3:.3f} ms" if t < 0.1 else f"{t:.3f} s"
+            print(f"| {label} | {shown} | {target} |")
+        if emu.metadata.get("training"):
+            print()
+            print(accuracy_table(emu.metadata))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
