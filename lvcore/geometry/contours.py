@@ -1,0 +1,410 @@
+"""Segmentation contour stacks: the JSON schema, reading and validation.
+
+A contour stack is what an operator produces from a cardiac-MRI scan at one
+phase (early diastole here): closed endocardial and epicardial contours on
+parallel short-axis (SA) slices, optionally open long-axis (LA) contours, all as
+3-D points in scanner coordinates. Schema (``"schema": "lvcore.contours/1"``)::
+
+    {
+      "schema": "lvcore.contours/1",
+      "units": "mm",                      # "mm" (default), "cm" or "m"
+      "patient": "P01", "operator": "op1",
+      "synthetic": true,                  # optional; true for generated data
+      "slices": [                         # short-axis slices, any order
+        {"position": 0.0,                 # optional slice location (units)
+         "endo": [[x, y, z], ...],        # closed contour, >= 8 points; may be
+                                          #   null/omitted on apical slices
+         "epi":  [[x, y, z], ...]},       # closed contour, >= 8 points
+        ...],
+      "long_axis": [                      # optional open contours
+        {"name": "4CH", "endo": [[x, y, z], ...], "epi": [[x, y, z], ...]}],
+      "landmarks": {"septum": [x, y, z]}  # optional: sets the phi = 0 direction
+    }
+
+A closed contour may repeat its first point at the end. See ``docs/geometry.md``.
+
+Validation (:func:`validate_contours`) raises :class:`GeometryError` naming
+what to fix for: empty or non-JSON files, missing fields, fewer than
+:data:`MIN_SLICES` slices, contours with too few points, open or
+self-intersecting SA contours, swapped endo/epi, an endocardium that leaves the
+epicardium, and coordinates whose size betrays metres or centimetres. It
+warns (:class:`GeometryWarning`) about non-parallel slices or slice positions
+that disagree with the points.
+"""
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lvcore.exceptions import GeometryError
+
+SCHEMA = "lvcore.contours/1"
+#: Fewest short-axis slices a stack needs.
+MIN_SLICES = 4
+#: Fewest points per contour.
+MIN_POINTS = 8
+_UNIT_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+
+
+class GeometryWarning(UserWarning):
+    """A segmentation is usable but something about it looks wrong."""
+
+
+@dataclass(frozen=True)
+class ContourSlice:
+    """One short-axis slice: closed contours (mm, scanner coordinates)."""
+
+    epi: np.ndarray
+    endo: np.ndarray | None = None
+    position: float | None = None
+
+
+@dataclass(frozen=True)
+class LongAxisContour:
+    """One long-axis view: open contours from base over the apex to base (mm)."""
+
+    name: str
+    endo: np.ndarray | None = None
+    epi: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ContourStack:
+    """A validated segmentation of one LV by one operator (mm).
+
+    ``slices`` are sorted from base to apex by :func:`validate_contours`.
+    """
+
+    slices: tuple[ContourSlice, ...]
+    long_axis: tuple[LongAxisContour, ...] = ()
+    patient: str = ""
+    operator: str = ""
+    synthetic: bool = False
+    septum: np.ndarray | None = None
+    source: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """Short human-readable label, flagged SYNTHETIC when generated."""
+        name = " / ".join(v for v in (self.patient, self.operator) if v) or (self.source or "contours")
+        return ("SYNTHETIC " if self.synthetic else "") + name
+
+    def endo_points(self, long_axis: bool = True) -> np.ndarray:
+        """All endocardial points (n, 3) in mm."""
+        pts = [s.endo for s in self.slices if s.endo is not None]
+        if long_axis:
+            pts += [c.endo for c in self.long_axis if c.endo is not None]
+        return np.concatenate(pts, axis=0)
+
+    def epi_points(self, long_axis: bool = True) -> np.ndarray:
+        """All epicardial points (n, 3) in mm."""
+        pts = [s.epi for s in self.slices]
+        if long_axis:
+            pts += [c.epi for c in self.long_axis if c.epi is not None]
+        return np.concatenate(pts, axis=0)
+
+    def to_dict(self, decimals: int = 3) -> dict:
+        """The JSON form of this stack (mm)."""
+        r = lambda a: None if a is None else np.round(np.asarray(a, float), decimals).tolist()  # noqa: E731
+        d = {
+            "schema": SCHEMA,
+            "units": "mm",
+            "patient": self.patient,
+            "operator": self.operator,
+            "synthetic": bool(self.synthetic),
+            "slices": [
+                {**({"position": float(s.position)} if s.position is not None else {}), "endo": r(s.endo), "epi": r(s.epi)}
+                for s in self.slices
+            ],
+        }
+        if self.long_axis:
+            d["long_axis"] = [{"name": c.name, "endo": r(c.endo), "epi": r(c.epi)} for c in self.long_axis]
+        if self.septum is not None:
+            d["landmarks"] = {"septum": r(self.septum)}
+        if self.extra:
+            d["extra"] = self.extra
+        return d
+
+    def save(self, path) -> Path:
+        """Write this stack as JSON (mm)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), separators=(",", ":")))
+        return path
+
+
+# ----------------------------------------------------------------------------- reading
+def read_contours(path) -> ContourStack:
+    """Read and validate a contour-stack JSON file (see the module docstring).
+
+    Raises
+    ------
+    GeometryError
+        With a message naming the problem and what to fix.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise GeometryError(f"contour file '{path}' does not exist")
+    text = path.read_text(errors="replace")
+    if not text.strip():
+        raise GeometryError(f"contour file '{path}' is empty; export the segmentation as JSON (schema {SCHEMA})")
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise GeometryError(f"contour file '{path}' is not valid JSON ({err}); expected schema {SCHEMA}") from None
+    return contours_from_dict(data, source=str(path))
+
+
+def contours_from_dict(data, source: str = "<dict>") -> ContourStack:
+    """Build and validate a :class:`ContourStack` from its JSON form."""
+    where = f"contours {source}"
+    if not isinstance(data, dict):
+        raise GeometryError(f"{where}: top level must be a JSON object with 'slices', got {type(data).__name__}")
+    schema = data.get("schema", SCHEMA)
+    if schema != SCHEMA:
+        raise GeometryError(f"{where}: unknown schema '{schema}', expected '{SCHEMA}'")
+    units = data.get("units", "mm")
+    if units not in _UNIT_TO_MM:
+        raise GeometryError(f"{where}: units '{units}' not understood; use one of {sorted(_UNIT_TO_MM)}")
+    scale = _UNIT_TO_MM[units]
+    slices_in = data.get("slices")
+    if not isinstance(slices_in, list) or not slices_in:
+        raise GeometryError(f"{where}: 'slices' must be a non-empty list of short-axis slices "
+                            "({'endo': [[x,y,z],...], 'epi': [[x,y,z],...]})")
+    slices = []
+    for i, s in enumerate(slices_in):
+        if not isinstance(s, dict):
+            raise GeometryError(f"{where}: slice {i} must be an object with 'endo' and 'epi'")
+        if s.get("epi") is None:
+            raise GeometryError(f"{where}: slice {i} has no 'epi' contour (every short-axis slice needs one)")
+        epi = _points(s["epi"], f"{where}: slice {i} epi", scale)
+        endo = None if s.get("endo") is None else _points(s["endo"], f"{where}: slice {i} endo", scale)
+        pos = s.get("position")
+        if pos is not None and not isinstance(pos, (int, float)):
+            raise GeometryError(f"{where}: slice {i} 'position' must be a number, got {pos!r}")
+        slices.append(ContourSlice(epi=epi, endo=endo, position=None if pos is None else float(pos) * scale))
+    la = []
+    for i, c in enumerate(data.get("long_axis") or []):
+        if not isinstance(c, dict):
+            raise GeometryError(f"{where}: long_axis[{i}] must be an object with 'endo' and/or 'epi'")
+        endo = None if c.get("endo") is None else _points(c["endo"], f"{where}: long_axis[{i}] endo", scale)
+        epi = None if c.get("epi") is None else _points(c["epi"], f"{where}: long_axis[{i}] epi", scale)
+        if endo is None and epi is None:
+            raise GeometryError(f"{where}: long_axis[{i}] has neither 'endo' nor 'epi' points")
+        la.append(LongAxisContour(name=str(c.get("name", f"LA{i + 1}")), endo=endo, epi=epi))
+    septum = None
+    lm = data.get("landmarks") or {}
+    if "septum" in lm and lm["septum"] is not None:
+        septum = np.asarray(lm["septum"], dtype=float) * scale
+        if septum.shape != (3,) or not np.all(np.isfinite(septum)):
+            raise GeometryError(f"{where}: landmarks.septum must be one point [x, y, z]")
+    stack = ContourStack(
+        slices=tuple(slices),
+        long_axis=tuple(la),
+        patient=str(data.get("patient", "")),
+        operator=str(data.get("operator", "")),
+        synthetic=bool(data.get("synthetic", False)),
+        septum=septum,
+        source=source,
+        extra=dict(data.get("extra", {}) or {}),
+    )
+    return validate_contours(stack, declared_units=units)
+
+
+def _points(value, where: str, scale: float) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise GeometryError(f"{where}: points must be a list of [x, y, z] numbers") from None
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise GeometryError(f"{where}: points must be a list of [x, y, z] triples, got array of shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise GeometryError(f"{where}: points contain NaN or inf")
+    if len(a) > 1 and np.allclose(a[0], a[-1]):
+        a = a[:-1]  # a repeated closing point
+    if len(a) < MIN_POINTS:
+        raise GeometryError(f"{where}: {len(a)} points; a contour needs at least {MIN_POINTS}")
+    return a * scale
+
+
+# ----------------------------------------------------------------------------- geometry helpers
+def plane_fit(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Least-squares plane of points: (centroid, unit normal, rms out-of-plane distance)."""
+    c = points.mean(axis=0)
+    _, sv, vt = np.linalg.svd(points - c, full_matrices=False)
+    return c, vt[2], float(sv[2] / np.sqrt(len(points)))
+
+
+def in_plane_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning the plane orthogonal to ``normal``."""
+    ref = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = ref - normal * (ref @ normal)
+    u /= np.linalg.norm(u)
+    return u, np.cross(normal, u)
+
+
+def polygon_area(xy: np.ndarray) -> float:
+    """Signed area of a closed 2-D polygon (shoelace)."""
+    x, y = xy[:, 0], xy[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def self_intersections(xy: np.ndarray) -> int:
+    """Number of crossing pairs of non-adjacent edges of a closed 2-D polygon."""
+    p = xy
+    q = np.roll(xy, -1, axis=0)
+    n = len(p)
+    d = q - p
+    # orientation tests for all edge pairs
+    def cross(a, b):
+        return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+    pi, di = p[:, None, :], d[:, None, :]
+    pj, dj = p[None, :, :], d[None, :, :]
+    o1 = cross(di, pj - pi)
+    o2 = cross(di, pj + dj - pi)
+    o3 = cross(dj, pi - pj)
+    o4 = cross(dj, pi + di - pj)
+    hit = (o1 * o2 < 0) & (o3 * o4 < 0)
+    i, j = np.triu_indices(n, k=2)
+    keep = ~((i == 0) & (j == n - 1))
+    return int(np.count_nonzero(hit[i[keep], j[keep]]))
+
+
+def _inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Even-odd point-in-polygon test (2-D)."""
+    x, y = pts[:, 0][:, None], pts[:, 1][:, None]
+    x1, y1 = poly[:, 0][None, :], poly[:, 1][None, :]
+    x2, y2 = np.roll(poly[:, 0], -1)[None, :], np.roll(poly[:, 1], -1)[None, :]
+    cond = (y1 > y) != (y2 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xint = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+    return np.count_nonzero(cond & (x < xint), axis=1) % 2 == 1
+
+
+# ----------------------------------------------------------------------------- validation
+def validate_contours(stack: ContourStack, declared_units: str = "mm") -> ContourStack:
+    """Check a stack and return it with slices sorted from base to apex.
+
+    Raises :class:`GeometryError` for unusable stacks, warns
+    (:class:`GeometryWarning`) for suspicious ones. See the module docstring.
+    """
+    where = f"contours {stack.source or stack.label}"
+    n = len(stack.slices)
+    if n < MIN_SLICES:
+        raise GeometryError(f"{where}: {n} short-axis slices; at least {MIN_SLICES} from base to apex are needed "
+                            "to fit an LV (add the missing slices)")
+    # slice planes
+    normals, centroids = [], []
+    for i, s in enumerate(stack.slices):
+        c, nrm, rms = plane_fit(s.epi)
+        normals.append(nrm)
+        centroids.append(c)
+    normals = np.array(normals)
+    ref = normals[0]
+    normals *= np.sign(normals @ ref)[:, None]
+    normal = normals.mean(axis=0)
+    normal /= np.linalg.norm(normal)
+    tilt = np.degrees(np.arccos(np.clip(normals @ normal, -1, 1)))
+    if tilt.max() > 10.0:
+        warnings.warn(f"{where}: short-axis slices are not parallel (up to {tilt.max():.0f}° from the mean plane); "
+                      "check that only short-axis contours are listed under 'slices'", GeometryWarning, stacklevel=3)
+    u, v = in_plane_basis(normal)
+
+    def xy(pts):
+        return np.stack([pts @ u, pts @ v], axis=1)
+
+    # units by size: an adult LV epicardium has a radius of about 15-45 mm
+    radii = []
+    for s in stack.slices:
+        e = xy(s.epi)
+        radii.append(np.sqrt(abs(polygon_area(e)) / np.pi))
+    rmax = float(np.max(radii))
+    scale = _UNIT_TO_MM[declared_units]
+    if rmax < 0.1:
+        raise GeometryError(f"{where}: the largest epicardial contour has an equivalent radius of {rmax / scale:.3g} "
+                            f"{declared_units}; the coordinates look like metres. Set \"units\": \"m\" "
+                            "or convert the points to mm")
+    if rmax < 8.0:
+        raise GeometryError(f"{where}: the largest epicardial contour has an equivalent radius of {rmax / scale:.3g} "
+                            f"{declared_units}; the coordinates look like centimetres. Set \"units\": \"cm\" "
+                            "or convert the points to mm")
+    if rmax > 150.0:
+        raise GeometryError(f"{where}: the largest epicardial contour has an equivalent radius of {rmax:.0f} mm, "
+                            "far larger than an LV; check the units (mm expected) and that the points are contours")
+    # per-slice checks
+    swapped = []
+    for i, s in enumerate(stack.slices):
+        for name, pts in (("epi", s.epi), ("endo", s.endo)):
+            if pts is None:
+                continue
+            p2 = xy(pts)
+            seg = np.linalg.norm(np.diff(np.vstack([p2, p2[:1]]), axis=0), axis=1)
+            med = float(np.median(seg))
+            c2 = p2.mean(axis=0)
+            ang = np.sort(np.arctan2(p2[:, 1] - c2[1], p2[:, 0] - c2[0]))
+            ang_gap = float(np.max(np.diff(np.append(ang, ang[0] + 2 * np.pi))))
+            closing = seg[-1]
+            if closing > max(5.0 * med, 3.0) or ang_gap > np.pi / 2:
+                raise GeometryError(f"{where}: slice {i} {name} contour is open (gap of {closing:.1f} mm between its last "
+                                    f"and first point, median spacing {med:.1f} mm); short-axis contours must go "
+                                    "all the way round")
+            k = self_intersections(p2)
+            if k:
+                raise GeometryError(f"{where}: slice {i} {name} contour crosses itself ({k} crossing(s)); "
+                                    "redraw it as a simple closed curve")
+        if s.endo is not None:
+            a_endo = abs(polygon_area(xy(s.endo)))
+            a_epi = abs(polygon_area(xy(s.epi)))
+            if a_endo >= a_epi:
+                swapped.append(i)
+                continue
+            out = ~_inside(xy(s.epi), xy(s.endo))
+            if out.mean() > 0.05:
+                raise GeometryError(f"{where}: slice {i}: {100 * out.mean():.0f}% of the endocardial contour lies outside "
+                                    "the epicardial contour; fix the contours of that slice")
+    if swapped:
+        if len(swapped) >= n // 2:
+            raise GeometryError(f"{where}: endocardial and epicardial contours look swapped (endo encloses the larger "
+                                f"area in slices {swapped}); swap the 'endo' and 'epi' fields")
+        raise GeometryError(f"{where}: in slices {swapped} the endocardial contour encloses more area than the "
+                            "epicardial one; they look swapped there")
+    if all(s.endo is None for s in stack.slices):
+        raise GeometryError(f"{where}: no slice has an endocardial contour")
+    # order base -> apex: base is the end with the larger epicardial area
+    pos = np.array(centroids) @ normal
+    order = np.argsort(pos)
+    areas = np.array(radii)[order]
+    k = max(1, n // 3)
+    if areas[:k].mean() < areas[-k:].mean():
+        order = order[::-1]
+    given = np.array([np.nan if s.position is None else s.position for s in stack.slices])
+    if np.all(np.isfinite(given)):
+        gap = np.abs(np.abs(np.diff(np.sort(given))).sum() - np.abs(np.diff(np.sort(pos))).sum())
+        if gap > 0.2 * max(np.ptp(pos), 1.0):
+            warnings.warn(f"{where}: slice 'position' values span {np.ptp(given):.1f} mm but the contours' planes span "
+                          f"{np.ptp(pos):.1f} mm; the positions are ignored (the points are used)", GeometryWarning,
+                          stacklevel=3)
+    slices = tuple(stack.slices[i] for i in order)
+    if slices[0].endo is None:
+        raise GeometryError(f"{where}: the basal slice has no endocardial contour; the base must show the cavity")
+    return ContourStack(slices=slices, long_axis=stack.long_axis, patient=stack.patient, operator=stack.operator,
+                        synthetic=stack.synthetic, septum=stack.septum, source=stack.source, extra=stack.extra)
+
+
+def slice_normal(stack: ContourStack) -> np.ndarray:
+    """Mean unit normal of the short-axis slices, pointing from the apex towards the base."""
+    normals = np.array([plane_fit(s.epi)[1] for s in stack.slices])
+    normals *= np.sign(normals @ normals[0])[:, None]
+    n = normals.mean(axis=0)
+    n /= np.linalg.norm(n)
+    c0 = stack.slices[0].epi.mean(axis=0)
+    c1 = stack.slices[-1].epi.mean(axis=0)
+    if (c0 - c1) @ n < 0:
+        n = -n
+    return n

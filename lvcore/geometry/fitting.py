@@ -1,0 +1,412 @@
+"""Fit the fixed-topology template to a segmentation (contour stack or surfaces).
+
+Method
+------
+1. **Frame.** The long axis runs from the base centroid (centroid of the
+   basal endocardial contour, or of the endocardial surface's open boundary)
+   to the apex (the epicardial point furthest from the base, from long-axis
+   contours or the surface; without long-axis contours the mean short-axis
+   slice normal is used). It becomes −z; the base plane, orthogonal to it
+   through the base centroid, becomes ``z = base_z``. The +x axis (phi = 0)
+   points from the axis towards the ``septum`` landmark if one is given,
+   otherwise along the scanner x axis projected onto the base plane.
+2. **Radial functions.** About a centre ``O = (0, 0, base_z − κ L)`` on the
+   axis (``L`` the base-to-epicardial-apex length, ``κ`` = :data:`CENTRE_FRACTION`),
+   each surface is star-shaped: ``x = O + R(θ, φ) d(θ, φ)`` with
+   ``d = (sin θ cos φ, sin θ sin φ, −cos θ)`` (θ = 0 at the apex). ``R`` is
+   fitted to the points by Tikhonov-regularised least squares on real
+   spherical harmonics up to :data:`DEFAULT_DEGREE` (penalty ``λ (l(l+1))²``),
+   which smooths the contours, bridges the gaps between slices and closes the
+   apical cap. ``L`` (hence ``O``) is re-estimated from the fitted epicardium
+   and the fit repeated, so the parametrisation is intrinsic to the shape.
+3. **Nodes.** Template node ``(φ, s, t)``: on each surface the point at polar
+   angle ``θ = (1 − s) θ_b(φ)``, where ``θ_b(φ)`` puts the base row exactly on
+   the base plane; interior layers interpolate linearly between endocardium
+   (t = 0) and epicardium (t = 1), as in :mod:`lvcore.geometry.analytic`.
+4. **Residual.** Distance from every input point at or below the base plane
+   to the fitted (isoparametric) template surface of its kind, computed
+   against a fine triangulation of the template surface (mm).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lvcore.exceptions import GeometryError
+from lvcore.geometry.contours import ContourStack, GeometryWarning, plane_fit, read_contours, slice_normal
+from lvcore.geometry.template import DEFAULT_TEMPLATE, LVTemplate
+
+#: Default spherical-harmonic degree of the radial functions.
+DEFAULT_DEGREE = 10
+#: Default regularisation weight (relative; see :func:`fit_radial`).
+DEFAULT_SMOOTHING = 1e-6
+#: Centre of the radial parametrisation, as a fraction of the base-apex length below the base.
+CENTRE_FRACTION = 0.4
+#: Base plane height of fitted geometries (mm).
+DEFAULT_BASE_Z = 0.0
+
+
+@dataclass(frozen=True)
+class LVFrame:
+    """Rigid map from scanner coordinates to the template frame (mm).
+
+    ``x_template = rotation @ (x - origin) + (0, 0, base_z)``; the rows of
+    ``rotation`` are the template's x, y, z axes in scanner coordinates.
+    """
+
+    origin: np.ndarray
+    rotation: np.ndarray
+    base_z: float = DEFAULT_BASE_Z
+
+    def to_template(self, x) -> np.ndarray:
+        return (np.asarray(x, float) - self.origin) @ self.rotation.T + np.array([0.0, 0.0, self.base_z])
+
+    def to_scanner(self, x) -> np.ndarray:
+        return (np.asarray(x, float) - np.array([0.0, 0.0, self.base_z])) @ self.rotation + self.origin
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A template fitted to a segmentation.
+
+    Attributes
+    ----------
+    nodes : (n_nodes, 3) array
+        Node positions on the template, in the template frame (mm).
+    residual_mean_mm, residual_max_mm : float
+        Mean and maximum distance of the input points (at or below the base
+        plane) to the fitted surfaces (mm).
+    residual_endo_mean_mm, residual_epi_mean_mm : float
+        The mean split by surface (mm).
+    n_points : int
+        Input points used in the residual.
+    n_above_base : int
+        Input points above the base plane (not part of the truncated LV).
+    cavity_volume_ml : float
+        Cavity volume of the fitted geometry (mL).
+    length_mm : float
+        Base-plane-to-epicardial-apex length (mm).
+    frame : LVFrame
+        Scanner -> template transform.
+    label : str
+        What was fitted (patient / operator; SYNTHETIC if generated).
+    warnings : tuple of str
+    """
+
+    nodes: np.ndarray
+    residual_mean_mm: float
+    residual_max_mm: float
+    residual_endo_mean_mm: float
+    residual_epi_mean_mm: float
+    n_points: int
+    n_above_base: int
+    cavity_volume_ml: float
+    length_mm: float
+    frame: LVFrame
+    label: str = ""
+    warnings: tuple = field(default=())
+
+    def summary(self) -> dict:
+        """Plain-data summary (JSON-ready)."""
+        return {
+            "label": self.label,
+            "residual_mean_mm": self.residual_mean_mm,
+            "residual_max_mm": self.residual_max_mm,
+            "residual_endo_mean_mm": self.residual_endo_mean_mm,
+            "residual_epi_mean_mm": self.residual_epi_mean_mm,
+            "n_points": self.n_points,
+            "n_above_base": self.n_above_base,
+            "cavity_volume_ml": self.cavity_volume_ml,
+            "length_mm": self.length_mm,
+            "warnings": list(self.warnings),
+        }
+
+
+# ----------------------------------------------------------------------------- spherical harmonics
+def _sh_basis(theta, phi, degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Real spherical harmonics (n, P) and their degrees l (P,)."""
+    from scipy.special import sph_harm_y
+
+    cols, ls = [], []
+    for l in range(degree + 1):
+        for m in range(0, l + 1):
+            y = sph_harm_y(l, m, theta, phi)
+            if m == 0:
+                cols.append(y.real)
+                ls.append(l)
+            else:
+                cols.append(np.sqrt(2.0) * y.real)
+                cols.append(np.sqrt(2.0) * y.imag)
+                ls += [l, l]
+    return np.stack(cols, axis=-1), np.asarray(ls)
+
+
+@dataclass(frozen=True)
+class RadialSurface:
+    """A star-shaped surface ``O + R(θ, φ) d(θ, φ)`` about ``O = (0, 0, z0)`` (mm)."""
+
+    z0: float
+    coef: np.ndarray
+    degree: int
+
+    def radius(self, theta, phi) -> np.ndarray:
+        theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
+        B, _ = _sh_basis(theta.ravel(), phi.ravel(), self.degree)
+        return (B @ self.coef).reshape(theta.shape)
+
+    def point(self, theta, phi) -> np.ndarray:
+        theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
+        r = self.radius(theta, phi)
+        d = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), -np.cos(theta)], axis=-1)
+        return np.array([0.0, 0.0, self.z0]) + r[..., None] * d
+
+    def base_angle(self, phi, base_z: float, n_grid: int = 240) -> np.ndarray:
+        """Polar angle θ_b(φ) where the surface meets the plane z = base_z (rad)."""
+        phi = np.asarray(phi, float)
+        th = np.linspace(0.02, np.pi - 0.02, n_grid)
+        TH, PH = np.meshgrid(th, phi, indexing="ij")
+        z = self.z0 - self.radius(TH, PH) * np.cos(TH) - base_z  # (n_grid, n_phi)
+        out = np.empty(phi.shape)
+        for i in range(phi.size):
+            idx = np.nonzero((z[:-1, i] < 0) & (z[1:, i] >= 0))[0]
+            if idx.size == 0:
+                raise GeometryError("the fitted surface does not reach the base plane; the segmentation is "
+                                    "too short or the base slice is missing")
+            a = idx[0]
+            t0, t1, z0_, z1_ = th[a], th[a + 1], z[a, i], z[a + 1, i]
+            out.flat[i] = t0 + (t1 - t0) * (-z0_) / (z1_ - z0_)
+        # two secant refinements
+        for _ in range(2):
+            f = self.z0 - self.radius(out, phi) * np.cos(out) - base_z
+            h = 1e-4
+            f2 = self.z0 - self.radius(out + h, phi) * np.cos(out + h) - base_z
+            step = f * h / np.where(np.abs(f2 - f) > 1e-14, f2 - f, 1e-14)
+            out = out - np.clip(step, -0.05, 0.05)
+        return out
+
+
+def fit_radial(points, z0: float, degree: int = DEFAULT_DEGREE, smoothing: float = DEFAULT_SMOOTHING) -> RadialSurface:
+    """Least-squares radial function of points (template frame, mm) about ``(0, 0, z0)``.
+
+    Minimises ``Σ (|x_i - O| - R(θ_i, φ_i))² / n + smoothing · R0² Σ_lm (l(l+1))² c_lm²``
+    where ``R0`` is the mean radius, so ``smoothing`` is scale-free.
+    """
+    p = np.asarray(points, float) - np.array([0.0, 0.0, z0])
+    r = np.linalg.norm(p, axis=1)
+    theta = np.arccos(np.clip(-p[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
+    phi = np.arctan2(p[:, 1], p[:, 0])
+    B, ls = _sh_basis(theta, phi, degree)
+    n = len(r)
+    pen = smoothing * (ls * (ls + 1.0)) ** 2
+    A = B.T @ B / n + np.diag(pen)
+    coef = np.linalg.solve(A, B.T @ r / n)
+    return RadialSurface(z0=float(z0), coef=coef, degree=degree)
+
+
+# ----------------------------------------------------------------------------- core fit
+def nodes_from_radial(endo: RadialSurface, epi: RadialSurface, base_z: float,
+                      template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
+    """Template nodes from two radial surfaces (see the module docstring)."""
+    pc = template.parametric_coords
+    phi_u = 2 * np.pi * np.arange(template.nc) / template.nc
+    tb_endo = endo.base_angle(phi_u, base_z)
+    tb_epi = epi.base_angle(phi_u, base_z)
+    i = template.grid_ijk[:, 0]
+    phi, s, t = pc[:, 0], pc[:, 1], pc[:, 2]
+    x_endo = endo.point((1.0 - s) * tb_endo[i], phi)
+    x_epi = epi.point((1.0 - s) * tb_epi[i], phi)
+    x = (1.0 - t)[:, None] * x_endo + t[:, None] * x_epi
+    x[:, 2] = np.where(s == 0.0, base_z, x[:, 2])  # exactly planar base
+    return x
+
+
+def fit_point_clouds(endo_points, epi_points, base_z: float = DEFAULT_BASE_Z, template: LVTemplate = DEFAULT_TEMPLATE,
+                     degree: int = DEFAULT_DEGREE, smoothing: float = DEFAULT_SMOOTHING, n_iter: int = 2):
+    """Fit template nodes to endo/epi point clouds already in the template frame (mm).
+
+    Returns
+    -------
+    nodes : (n_nodes, 3) array (mm)
+    endo, epi : RadialSurface
+    length : float
+        Base-to-epicardial-apex length (mm).
+    """
+    endo_points = np.asarray(endo_points, float)
+    epi_points = np.asarray(epi_points, float)
+    length = float(base_z - epi_points[:, 2].min())
+    if length <= 5.0:
+        raise GeometryError(f"the epicardial points reach only {length:.1f} mm below the base plane; an LV needs its "
+                            "slices from base towards the apex")
+    for _ in range(max(1, n_iter)):
+        z0 = base_z - CENTRE_FRACTION * length
+        endo = fit_radial(endo_points, z0, degree, smoothing)
+        epi = fit_radial(epi_points, z0, degree, smoothing)
+        length = float(base_z - (z0 - epi.radius(0.0, 0.0)))
+    nodes = nodes_from_radial(endo, epi, base_z, template)
+    return nodes, endo, epi, length
+
+
+def _surface_polydata(nodes, template: LVTemplate, t: float, n_phi: int = 96, n_s: int = 64):
+    import pyvista as pv
+
+    phi = np.linspace(0.0, 2 * np.pi, n_phi, endpoint=False)
+    s = np.linspace(0.0, 1.0, n_s + 1)[:-1]
+    P, S = np.meshgrid(phi, s, indexing="ij")
+    pts = template.evaluate(nodes, P, S, np.full_like(P, t)).reshape(-1, 3)
+    apex = template.evaluate(nodes, 0.0, 1.0, t).reshape(1, 3)
+    pts = np.vstack([pts, apex])
+    idx = np.arange(n_phi * n_s).reshape(n_phi, n_s)
+    i1 = np.roll(idx, -1, axis=0)
+    tris = [np.stack([idx[:, :-1], i1[:, :-1], i1[:, 1:]], -1).reshape(-1, 3),
+            np.stack([idx[:, :-1], i1[:, 1:], idx[:, 1:]], -1).reshape(-1, 3),
+            np.stack([idx[:, -1], i1[:, -1], np.full(n_phi, n_phi * n_s)], -1)]
+    tris = np.vstack(tris)
+    faces = np.hstack([np.full((len(tris), 1), 3), tris]).ravel()
+    return pv.PolyData(pts, faces)
+
+
+def surface_distances(nodes, points, which: str, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
+    """Distance (mm) of points (template frame) to the template's endo or epi surface."""
+    poly = _surface_polydata(nodes, template, 0.0 if which == "endo" else 1.0)
+    points = np.asarray(points, float)
+    if len(points) == 0:
+        return np.zeros(0)
+    _, closest = poly.find_closest_cell(points, return_closest_point=True)
+    return np.linalg.norm(points - closest, axis=1)
+
+
+def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label: str, warn: list) -> FitResult:
+    from lvcore.geometry.measures import cavity_volume
+
+    tol = 0.5
+    e_in = endo_t[endo_t[:, 2] <= frame.base_z + tol]
+    p_in = epi_t[epi_t[:, 2] <= frame.base_z + tol]
+    n_above = len(endo_t) + len(epi_t) - len(e_in) - len(p_in)
+    de = surface_distances(nodes, e_in, "endo", template)
+    dp = surface_distances(nodes, p_in, "epi", template)
+    d = np.concatenate([de, dp])
+    vol = float(cavity_volume(nodes, template, frame.base_z)) / 1000.0
+    from lvcore.geometry.io import element_jacobian_determinants
+
+    if np.any(element_jacobian_determinants(nodes, template) <= 0):
+        raise GeometryError(f"{label}: the fitted mesh has inverted elements; the segmentation is too irregular "
+                            "(check for swapped or crossing contours)")
+    return FitResult(
+        nodes=nodes,
+        residual_mean_mm=float(d.mean()),
+        residual_max_mm=float(d.max()),
+        residual_endo_mean_mm=float(de.mean()) if de.size else float("nan"),
+        residual_epi_mean_mm=float(dp.mean()) if dp.size else float("nan"),
+        n_points=int(d.size),
+        n_above_base=int(n_above),
+        cavity_volume_ml=vol,
+        length_mm=float(length),
+        frame=frame,
+        label=label,
+        warnings=tuple(warn),
+    )
+
+
+def _x_axis(ez: np.ndarray, origin: np.ndarray, septum) -> np.ndarray:
+    if septum is not None:
+        v = np.asarray(septum, float) - origin
+        v = v - ez * (v @ ez)
+        if np.linalg.norm(v) > 1e-6:
+            return v / np.linalg.norm(v)
+    for ref in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
+        v = ref - ez * (ref @ ez)
+        if np.linalg.norm(v) > 0.3:
+            return v / np.linalg.norm(v)
+    raise AssertionError("unreachable")
+
+
+def _frame(origin, ez, septum, base_z) -> LVFrame:
+    ez = ez / np.linalg.norm(ez)
+    ex = _x_axis(ez, origin, septum)
+    ey = np.cross(ez, ex)
+    return LVFrame(origin=np.asarray(origin, float), rotation=np.stack([ex, ey, ez]), base_z=float(base_z))
+
+
+def frame_from_contours(stack: ContourStack, base_z: float = DEFAULT_BASE_Z) -> tuple[LVFrame, list]:
+    """The template frame of a contour stack (see the module docstring) and warnings."""
+    warn = []
+    n = slice_normal(stack)  # apex -> base
+    origin = stack.slices[0].endo.mean(axis=0)
+    ez = n
+    la_pts = [c.epi if c.epi is not None else c.endo for c in stack.long_axis]
+    if la_pts:
+        pts = np.concatenate(la_pts)
+        apex = pts[np.argmin(pts @ n)]
+        axis = origin - apex
+        if np.linalg.norm(axis) > 10.0:
+            cand = axis / np.linalg.norm(axis)
+            ang = np.degrees(np.arccos(np.clip(cand @ n, -1, 1)))
+            if ang < 30.0:
+                ez = cand
+            else:
+                warn.append(f"the long-axis apex is {ang:.0f}° off the short-axis slice normal; using the slice "
+                            "normal as the long axis (check the long-axis contours)")
+    return _frame(origin, ez, stack.septum, base_z), warn
+
+
+def fit_contours(stack, template: LVTemplate = DEFAULT_TEMPLATE, base_z: float = DEFAULT_BASE_Z,
+                 degree: int = DEFAULT_DEGREE, smoothing: float = DEFAULT_SMOOTHING) -> FitResult:
+    """Fit the template to a contour stack (a :class:`ContourStack` or a JSON path).
+
+    Returns
+    -------
+    FitResult
+        Nodes in the template frame (base plane ``z = base_z``, apex on −z, mm)
+        and the fit residual.
+    """
+    if not isinstance(stack, ContourStack):
+        stack = read_contours(stack)
+    frame, warn = frame_from_contours(stack, base_z)
+    endo_t = frame.to_template(stack.endo_points())
+    epi_t = frame.to_template(stack.epi_points())
+    nodes, _, _, length = fit_point_clouds(endo_t, epi_t, base_z, template, degree, smoothing)
+    res = _finish(nodes, endo_t, epi_t, frame, length, template, stack.label, warn)
+    for w in warn:
+        warnings.warn(f"{stack.label}: {w}", GeometryWarning, stacklevel=2)
+    return res
+
+
+def fit_surfaces(endo, epi, template: LVTemplate = DEFAULT_TEMPLATE, base_z: float = DEFAULT_BASE_Z,
+                 units: str = "mm", septum=None, degree: int = DEFAULT_DEGREE,
+                 smoothing: float = DEFAULT_SMOOTHING) -> FitResult:
+    """Fit the template to endocardial and epicardial surface meshes.
+
+    Parameters
+    ----------
+    endo, epi : path, pyvista mesh or :class:`~lvcore.geometry.surfaces.LVSurface`
+        Surfaces open at the base (the endocardial boundary loop defines the base).
+    units : {"mm", "cm", "m"}
+    septum : (3,) array, optional
+        A point on the septum (scanner coordinates) fixing phi = 0.
+    """
+    from lvcore.geometry.surfaces import LVSurface, check_surface_pair, read_surface
+
+    endo_s = endo if isinstance(endo, LVSurface) else read_surface(endo, "endo", units)
+    epi_s = epi if isinstance(epi, LVSurface) else read_surface(epi, "epi", units)
+    check_surface_pair(endo_s, epi_s)
+    origin, n, _ = plane_fit(endo_s.boundary)
+    if np.linalg.norm(np.ptp(endo_s.boundary, axis=0)) < 5.0:
+        raise GeometryError(f"the endocardial surface '{endo_s.source}' has only a tiny opening; it must be open at the base")
+    origin = endo_s.boundary.mean(axis=0)
+    epi_pts = epi_s.sample()
+    proj = (epi_pts - origin) @ n
+    if abs(proj.min()) > abs(proj.max()):
+        apex = epi_pts[np.argmin(proj)]
+    else:
+        apex = epi_pts[np.argmax(proj)]
+    ez = origin - apex
+    if np.linalg.norm(ez) < 10.0:
+        raise GeometryError("cannot find the apex: the surfaces extend less than 10 mm from the base opening")
+    frame = _frame(origin, ez, septum, base_z)
+    endo_t = frame.to_template(endo_s.sample())
+    epi_t = frame.to_template(epi_pts)
+    nodes, _, _, length = fit_point_clouds(endo_t, epi_t, base_z, template, degree, smoothing)
+    label = f"surfaces {endo_s.source} + {epi_s.source}"
+    return _finish(nodes, endo_t, epi_t, frame, length, template, label, [])
