@@ -208,11 +208,11 @@ class PolarGPGibbs(MCMCKernel):
 
     sample_field = "z"
 
-    def __init__(self, forward, y, *, sigma_v: float = models.DEFAULT_SIGMA_V_ML, infer_angles: bool = False,
+    def __init__(self, forward, y=None, *, sigma_v: float = models.DEFAULT_SIGMA_V_ML, infer_angles: bool = False,
                  nugget: float = kernels.DEFAULT_NUGGET, target_accept_prob: float = 0.8, max_tree_depth: int = 10):
         self.forward = forward
-        self.y = jnp.asarray(y, dtype=jnp.float64)
-        if self.y.shape != (N_OUTPUTS,):
+        self.y = None if y is None else jnp.asarray(y, dtype=jnp.float64)
+        if self.y is not None and self.y.shape != (N_OUTPUTS,):
             raise ValueError(f"y must have shape ({N_OUTPUTS},), got {self.y.shape}")
         self.sigma_v = float(sigma_v)
         self.nugget = float(nugget)
@@ -225,7 +225,7 @@ class PolarGPGibbs(MCMCKernel):
         self._main_init, self._main_sample = hmc(potential_fn_gen=self._main_potential_gen, algo="NUTS")
 
     # --- conditionals -------------------------------------------------------
-    def _hyper_potential_gen(self, b):
+    def _hyper_potential_gen(self, b, y=None):
         """Potential of block 2: ``-log MVN(b | 0, K(hyper)) - log prior`` (unconstrained)."""
         def potential(u):
             hyper, logp = _constrain(self.hyper_priors, u)
@@ -235,21 +235,21 @@ class PolarGPGibbs(MCMCKernel):
             return -(loglik + logp)
         return potential
 
-    def _main_potential_gen(self, sigma_s2, chol):
+    def _main_potential_gen(self, sigma_s2, chol, y):
         """Potential of block 4 over (theta, b_tilde, v) given sigma_S^2 and L."""
         def potential(u):
             params, logp = _constrain(self.theta_priors, u)
             eta = self.forward(params)
             b = chol @ u["disc_tilde"]
-            logl = dist.Normal(eta[0], self.sigma_v).log_prob(self.y[0])
-            logl += jnp.sum(dist.Normal(eta[1:] + b + u["v"], jnp.sqrt(sigma_s2)).log_prob(self.y[1:]))
+            logl = dist.Normal(eta[0], self.sigma_v).log_prob(y[0])
+            logl += jnp.sum(dist.Normal(eta[1:] + b + u["v"], jnp.sqrt(sigma_s2)).log_prob(y[1:]))
             logp += -0.5 * u["disc_tilde"] @ u["disc_tilde"] + self.v_prior.log_prob(u["v"])
             return -(logl + logp)
         return potential
 
-    def _sigma_s2_draw(self, key, params, b, v):
+    def _sigma_s2_draw(self, key, params, b, v, y):
         """Step 1: conjugate inverse-gamma draw of sigma_S^2."""
-        return sigma_s2_conditional(self.y[1:], self.forward(params)[1:] + b + v).sample(key)
+        return sigma_s2_conditional(y[1:], self.forward(params)[1:] + b + v).sample(key)
 
     @staticmethod
     def _refresh(state, potential):
@@ -258,14 +258,15 @@ class PolarGPGibbs(MCMCKernel):
 
     # --- MCMCKernel API -------------------------------------------------------
     def init(self, rng_key, num_warmup, init_params, model_args, model_kwargs):
+        y = self._data(model_args)
         if jnp.ndim(rng_key) > 1 or (jnp.ndim(rng_key) == 1 and rng_key.shape[0] != 2):
             # vectorized chains: one key per chain
             if init_params is None:
-                return jax.vmap(lambda k: self._init_one(k, num_warmup, None))(rng_key)
-            return jax.vmap(lambda k, p: self._init_one(k, num_warmup, p))(rng_key, init_params)
-        return self._init_one(rng_key, num_warmup, init_params)
+                return jax.vmap(lambda k: self._init_one(k, num_warmup, None, y))(rng_key)
+            return jax.vmap(lambda k, p: self._init_one(k, num_warmup, p, y))(rng_key, init_params)
+        return self._init_one(rng_key, num_warmup, init_params, y)
 
-    def _init_one(self, rng_key, num_warmup, init_params):
+    def _init_one(self, rng_key, num_warmup, init_params, y=None):
         k_theta, k_hyp, k_bt, k_v, k_s, k_h, k_m, rng_key = jax.random.split(rng_key, 8)
         if init_params is None:
             u_theta = {n: jax.random.uniform(k, (), minval=-2.0, maxval=2.0)
@@ -289,27 +290,34 @@ class PolarGPGibbs(MCMCKernel):
         chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
         b = chol @ b_tilde
         params, _ = _constrain(self.theta_priors, u_theta)
-        sigma_s2 = self._sigma_s2_draw(k_s, params, b, v)
+        sigma_s2 = self._sigma_s2_draw(k_s, params, b, v, y)
         common = dict(num_warmup=num_warmup, target_accept_prob=self.target_accept_prob,
                       max_tree_depth=self.max_tree_depth)
         hyper_state = self._hyper_init(u_hyper, model_args=(b,), rng_key=k_h, **common)
         main_state = self._main_init({**u_theta, "disc_tilde": b_tilde, "v": v},
-                                     model_args=(sigma_s2, chol), rng_key=k_m, **common)
+                                     model_args=(sigma_s2, chol, y), rng_key=k_m, **common)
         z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": b, "v": v}
         return GibbsState(z, hyper_state, main_state, jnp.array(False), jnp.array(0), rng_key)
 
-    def sample(self, state, model_args, model_kwargs):
-        if jnp.ndim(state.rng_key) > 1:  # vectorized chains
-            return jax.vmap(self._sample_one)(state)
-        return self._sample_one(state)
+    def _data(self, model_args):
+        """Data from ``MCMC.run(key, y)`` if given (one compilation serves many data sets), else ``self.y``."""
+        if model_args:
+            return jnp.asarray(model_args[0], dtype=jnp.float64)
+        return self.y
 
-    def _sample_one(self, state):
+    def sample(self, state, model_args, model_kwargs):
+        y = self._data(model_args)
+        if jnp.ndim(state.rng_key) > 1:  # vectorized chains
+            return jax.vmap(lambda s: self._sample_one(s, y))(state)
+        return self._sample_one(state, y)
+
+    def _sample_one(self, state, y):
         rng_key, k_s = jax.random.split(state.rng_key)
         z = state.z
         params = {n: z[n] for n in self.theta_priors}
         b = z["disc"]
         # 1. sigma_S^2 from its conjugate inverse gamma.
-        sigma_s2 = self._sigma_s2_draw(k_s, params, b, z["v"])
+        sigma_s2 = self._sigma_s2_draw(k_s, params, b, z["v"], y)
         # 2. NUTS on the GP hyperparameters given b.
         hyper_state = self._refresh(state.hyper_state, self._hyper_potential_gen(b))
         hyper_state = self._hyper_sample(hyper_state, model_args=(b,))
@@ -318,9 +326,9 @@ class PolarGPGibbs(MCMCKernel):
         chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
         b_tilde = solve_triangular(chol, b, lower=True)
         main_state = state.main_state._replace(z={**state.main_state.z, "disc_tilde": b_tilde})
-        main_state = self._refresh(main_state, self._main_potential_gen(sigma_s2, chol))
+        main_state = self._refresh(main_state, self._main_potential_gen(sigma_s2, chol, y))
         # 4. NUTS on (theta, b_tilde, v) given sigma_S^2 and L.
-        main_state = self._main_sample(main_state, model_args=(sigma_s2, chol))
+        main_state = self._main_sample(main_state, model_args=(sigma_s2, chol, y))
         params, _ = _constrain(self.theta_priors, main_state.z)
         b_tilde = main_state.z["disc_tilde"]
         z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": chol @ b_tilde,

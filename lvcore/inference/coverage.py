@@ -1,0 +1,164 @@
+"""Frequentist check of Bayesian credible intervals (simulation-based calibration).
+
+Draw theta from its prior, simulate data ``y = forward(theta) + noise``
+(sigma_V = 5 mL, sigma_S = 0.03, no discrepancy), calibrate, and count how
+often the central ``level`` credible interval of each parameter contains the
+truth. With truths drawn from the prior a correct sampler covers the truth
+``level`` of the time up to binomial noise, so this catches biased
+likelihoods, wrong Jacobians and broken Gibbs steps.
+
+All data sets and chains run in one jitted, vmapped computation, so the
+cost per data set is just the sampling.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from numpyro.infer.hmc import hmc
+from numpyro.infer.util import initialize_model
+
+from lvcore.inference import models, samplers
+from lvcore.outputs import THETA_NAMES
+
+
+@dataclass(frozen=True)
+class CoverageResult:
+    """Outcome of :func:`coverage_study`.
+
+    Attributes
+    ----------
+    model : str
+    n_datasets : int
+    level : float
+        Nominal credible level (e.g. 0.9).
+    per_param : dict
+        Fraction of data sets whose interval covers the truth, per parameter.
+    overall : float
+        Fraction over all parameters and data sets.
+    wall_s : float
+        Total wall time (s), compilation included.
+    hits : ndarray, shape (n_datasets, n_params)
+    """
+
+    model: str
+    n_datasets: int
+    level: float
+    per_param: dict
+    overall: float
+    wall_s: float
+    hits: np.ndarray = field(repr=False)
+
+    def binomial_sd(self) -> float:
+        """Standard error of ``overall`` if intervals were independent."""
+        n = self.hits.size
+        return float(np.sqrt(self.level * (1 - self.level) / n))
+
+
+def simulate_data(forward, theta: dict, rng: np.random.Generator, sigma_v: float = 5.0,
+                  sigma_s: float = 0.03, discrepancy=None) -> np.ndarray:
+    """SYNTHETIC data: ``forward(theta)`` plus Gaussian noise (and an optional strain discrepancy)."""
+    y = np.asarray(forward(theta), dtype=float).copy()
+    if discrepancy is not None:
+        y[1:] += np.asarray(discrepancy)
+    y[0] += sigma_v * rng.standard_normal()
+    y[1:] += sigma_s * rng.standard_normal(24)
+    return y
+
+
+def prior_draw(rng: np.random.Generator) -> dict:
+    """theta from the uniform priors of Table 9.1."""
+    return {n: float(rng.uniform(*models.THETA_BOUNDS[n])) for n in THETA_NAMES}
+
+
+def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.SamplerConfig, y0):
+    """Pure (jittable, vmappable) init/sample/constrain functions of NUTS on a named model."""
+    model = partial(models.get_model(model_name), forward=forward, sigma_v=sigma_v)
+    info = initialize_model(jax.random.PRNGKey(0), model, model_args=(jnp.asarray(y0),), dynamic_args=True)
+    init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
+    z_proto = info.param_info.z
+
+    def init(key, y):
+        k_z, k_h = jax.random.split(key)
+        keys = jax.random.split(k_z, len(z_proto))
+        z = {n: jax.random.uniform(k, jnp.shape(v), minval=-2.0, maxval=2.0)
+             for k, (n, v) in zip(keys, z_proto.items())}
+        return init_kernel(z, config.num_warmup, model_args=(y,), rng_key=k_h,
+                           target_accept_prob=config.target_accept_prob, max_tree_depth=config.max_tree_depth)
+
+    def sample(state, y):
+        return sample_kernel(state, model_args=(y,))
+
+    def constrain(z, y):
+        return info.postprocess_fn(y)(z)
+
+    return init, sample, constrain
+
+
+def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
+    kernel = samplers.PolarGPGibbs(forward, None, sigma_v=sigma_v, target_accept_prob=config.target_accept_prob,
+                                   max_tree_depth=config.max_tree_depth)
+    return (lambda key, y: kernel.init(key, config.num_warmup, None, (y,), None),
+            lambda state, y: kernel.sample(state, (y,), None),
+            lambda z, y: z)
+
+
+def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.SamplerConfig,
+                       sigma_v: float = 5.0) -> dict:
+    """theta draws for many data sets at once: one jit, vmapped over (data set x chain).
+
+    Returns a dict of arrays of shape (n_datasets, num_chains * num_samples).
+    """
+    ys = jnp.asarray(ys, dtype=jnp.float64)
+    n = ys.shape[0]
+    if model_name == "discrepancy":
+        init, sample, constrain = _gibbs_fns(forward, sigma_v, config)
+    else:
+        init, sample, constrain = _nuts_fns(model_name, forward, sigma_v, config, ys[0])
+    total = config.num_warmup + config.num_samples
+
+    def one_chain(key, y):
+        state = init(key, y)
+
+        def body(st, _):
+            st = sample(st, y)
+            zc = constrain(st.z, y)
+            return st, {k: zc[k] for k in THETA_NAMES}
+
+        _, draws = jax.lax.scan(body, state, None, length=total)
+        return {k: v[config.num_warmup:] for k, v in draws.items()}
+
+    chain_keys = jax.vmap(lambda k: jax.random.split(k, config.num_chains))(keys)
+    flat_keys = chain_keys.reshape((n * config.num_chains,) + chain_keys.shape[2:])
+    flat_y = jnp.repeat(ys, config.num_chains, axis=0)
+    draws = jax.jit(jax.vmap(one_chain))(flat_keys, flat_y)
+    return {k: np.asarray(v).reshape(n, -1) for k, v in draws.items()}
+
+
+def coverage_study(forward, model_name: str = "iid", n_datasets: int = 50, *, level: float = 0.9,
+                   config: samplers.SamplerConfig = samplers.SamplerConfig(num_warmup=500, num_samples=500,
+                                                                           num_chains=2),
+                   seed: int = 0, sigma_v: float = 5.0, sigma_s: float = 0.03) -> CoverageResult:
+    """Coverage of central ``level`` credible intervals over ``n_datasets`` prior-drawn truths."""
+    rng = np.random.default_rng(seed)
+    truths = [prior_draw(rng) for _ in range(n_datasets)]
+    ys = np.stack([simulate_data(forward, th, rng, sigma_v, sigma_s) for th in truths])
+    keys = jax.random.split(jax.random.PRNGKey(seed), n_datasets)
+    t0 = time.perf_counter()
+    draws = batched_posteriors(forward, model_name, ys, keys, config, sigma_v)
+    wall = time.perf_counter() - t0
+    lo, hi = (1 - level) / 2, 1 - (1 - level) / 2
+    hits = np.zeros((n_datasets, len(THETA_NAMES)), dtype=bool)
+    for j, n in enumerate(THETA_NAMES):
+        q = np.quantile(draws[n], [lo, hi], axis=1)
+        tv = np.array([th[n] for th in truths])
+        hits[:, j] = (q[0] <= tv) & (tv <= q[1])
+    per = {n: float(hits[:, j].mean()) for j, n in enumerate(THETA_NAMES)}
+    return CoverageResult(model_name, n_datasets, level, per, float(hits.mean()), wall, hits)
+
+
+__all__ = ["CoverageResult", "coverage_study", "batched_posteriors", "simulate_data", "prior_draw"]
