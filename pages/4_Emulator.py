@@ -1,0 +1,157 @@
+"""Emulator: accuracy on held-out simulations, and a live check against the simulator."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import numpy as np
+import pandas as pd
+import plotly.graph_objects as go
+import streamlit as st
+
+from lvcore.emulator.io import available_emulators, load_emulator, load_validation
+from lvcore.exceptions import LVCoreError
+from lvcore.outputs import OUTPUT_NAMES
+
+REPO = Path(__file__).resolve().parents[1]
+BELOW_SPEC_DIR = REPO / "build" / "emulators" / "below-spec"
+
+st.set_page_config(page_title="Emulator", layout="wide")
+st.title("Emulator")
+st.caption(
+    "A neural-network emulator η(θ, h) replaces the finite-element simulator where thousands of runs are "
+    "needed (calibration, live sweeps). Here: how accurate it is on simulations it never saw, and a live "
+    "comparison with one simulator run at any point you choose."
+)
+
+
+@st.cache_resource(show_spinner=False)
+def _load(path: str):
+    return load_emulator(path)
+
+
+@st.cache_data(show_spinner=False)
+def _validation(path: str):
+    return load_validation(path)
+
+
+choices = {name: name for name in available_emulators()}
+if BELOW_SPEC_DIR.is_dir():
+    for d in sorted(BELOW_SPEC_DIR.iterdir()):
+        if (d / "metadata.json").is_file():
+            choices[f"{d.name} (below spec, demonstration)"] = str(d)
+if not choices:
+    st.info(
+        "No trained emulator found. Build the bundled ones with `python scripts/build_emulators.py` "
+        "(see docs/campaigns_and_emulators.md), or train one on a campaign store with "
+        "`lvcore emulator train STORE --out DIR` and set `LVCORE_EMULATORS` to its parent directory."
+    )
+    st.stop()
+
+label = st.selectbox("Emulator", list(choices))
+try:
+    emu = _load(choices[label])
+except LVCoreError as err:
+    st.error(str(err))
+    st.stop()
+meta = emu.metadata
+if meta.get("spec_note"):
+    st.warning(meta["spec_note"])
+source = meta.get("source", {})
+if any("campaign_double" in f for f in source.get("forward", [])):
+    st.warning("Trained on a TEST DOUBLE forward model (not the simulator): synthetic, for testing only.")
+
+# ----- summary ---------------------------------------------------------------
+tr = meta.get("training", {})
+held_key = "test" if "test" in meta else "validation"
+held = meta.get(held_key, {})
+c1, c2, c3, c4 = st.columns(4)
+c1.metric("Training runs", tr.get("n_train", "?"))
+c2.metric("Architecture", " × ".join(str(h) for h in meta.get("architecture", {}).get("hidden", [])))
+if held:
+    c3.metric(f"LVV RMSE ({held_key})", f"{held['lvv_rmse_ml']:.2f} mL")
+    c4.metric(f"Strain RMSE ({held_key})", f"{held['strain_rmse']:.4f}")
+
+with st.expander("Inputs and training box"):
+    st.dataframe(pd.DataFrame({
+        "input": emu.input_names, "lower": emu.lower, "upper": emu.upper,
+        "scale": ["log" if f else "linear" for f in emu.log_inputs],
+    }), hide_index=True)
+    if emu.fixed:
+        st.write("Fixed during training:", emu.fixed)
+    st.caption(f"Resolution: {source.get('resolution', '?')}; simulator versions: {source.get('simulator_versions', '?')}; "
+               f"training-set hash {str(tr.get('set_hash', ''))[:16]}")
+
+# ----- accuracy ----------------------------------------------------------------
+st.subheader("Accuracy on held-out simulations")
+if held:
+    table = pd.DataFrame({"output": OUTPUT_NAMES, "RMSE": held["rmse"], "99th pct |error| (worst 1%)": held["p99_abs"],
+                          "max |error|": held["max_abs"]})
+    st.dataframe(table, hide_index=True, height=260)
+
+val = _validation(choices[label])
+if val is None:
+    st.info("This emulator has no stored validation predictions (validation.npz).")
+else:
+    k = st.selectbox("Output", list(range(len(OUTPUT_NAMES))), format_func=lambda i: OUTPUT_NAMES[i])
+    y, p = val["outputs"][:, k], val["predictions"][:, k]
+    unit = " (mL)" if k == 0 else ""
+    left, right = st.columns(2)
+    lo, hi = float(min(y.min(), p.min())), float(max(y.max(), p.max()))
+    fig = go.Figure([
+        go.Scatter(x=y, y=p, mode="markers", marker=dict(size=4, opacity=0.6), name="held-out runs"),
+        go.Scatter(x=[lo, hi], y=[lo, hi], mode="lines", line=dict(dash="dash", color="black"), name="y = x"),
+    ])
+    fig.update_layout(title=f"Parity: {OUTPUT_NAMES[k]}", xaxis_title=f"simulator{unit}", yaxis_title=f"emulator{unit}",
+                      height=420, margin=dict(l=10, r=10, t=40, b=10))
+    left.plotly_chart(fig, use_container_width=True)
+    hist = go.Figure(go.Histogram(x=p - y, nbinsx=40))
+    hist.update_layout(title=f"Residuals: {OUTPUT_NAMES[k]}", xaxis_title=f"emulator − simulator{unit}",
+                       yaxis_title="count", height=420, margin=dict(l=10, r=10, t=40, b=10))
+    right.plotly_chart(hist, use_container_width=True)
+
+# ----- live check ----------------------------------------------------------------
+st.subheader("Live check: emulator vs one simulator run")
+values = {}
+cols = st.columns(3)
+for i, (name, lo, hi, log) in enumerate(zip(emu.input_names, emu.lower, emu.upper, emu.log_inputs)):
+    mid = float(np.sqrt(lo * hi)) if log else float(0.5 * (lo + hi))
+    values[name] = cols[i % 3].slider(name, float(lo), float(hi), mid, key=f"in_{name}")
+x = np.array([values[n] for n in emu.input_names])
+y_emu = np.asarray(emu.predict(x, strict=True))
+st.write(f"Emulator: LVV **{y_emu[0]:.1f} mL**, mean strain **{y_emu[1:].mean():.4f}** (instant).")
+
+space_dict = source.get("space")
+run = st.button("Run the simulator at this point", disabled=space_dict is None,
+                help="one finite-element solve at the resolution the emulator was trained on")
+if run:
+    from lvcore.campaigns.space import ParameterSpace
+    import lvcore
+
+    space = ParameterSpace.from_dict(space_dict)
+    row = [values.get(n, emu.fixed.get(n)) for n in space.names]
+    resolution = (source.get("resolution") or ["default"])[0]
+    with st.spinner("Simulating..."):
+        try:
+            res = lvcore.simulate(space.case(row, resolution))
+        except LVCoreError as err:
+            res = None
+            st.error(f"Simulator failed: {err}")
+    if res is not None and not res.converged:
+        st.error(f"Simulator did not converge: {res.message}")
+    elif res is not None:
+        y_sim = np.asarray(res.outputs())
+        st.session_state["live"] = (x.tolist(), y_sim.tolist(), float(res.seconds))
+live = st.session_state.get("live")
+if live and np.allclose(live[0], x):
+    y_sim = np.asarray(live[1])
+    st.write(f"Simulator ({live[2]:.2f} s): LVV **{y_sim[0]:.1f} mL**; emulator error "
+             f"{y_emu[0] - y_sim[0]:+.2f} mL, strain RMSE {np.sqrt(np.mean((y_emu[1:] - y_sim[1:]) ** 2)):.4f}.")
+    fig = go.Figure([go.Bar(x=list(OUTPUT_NAMES[1:]), y=y_sim[1:], name="simulator"),
+                     go.Bar(x=list(OUTPUT_NAMES[1:]), y=y_emu[1:], name="emulator")])
+    fig.update_layout(barmode="group", yaxis_title="circumferential strain", height=380, margin=dict(l=10, r=10, t=20, b=10))
+    st.plotly_chart(fig, use_container_width=True)
