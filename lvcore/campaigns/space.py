@@ -16,7 +16,8 @@ Named spaces (see :func:`get_space`):
     default geometry, fibre angles (-60°, 60°), EDP 8 mmHg.
 ``chapter``
     the chapter's emulator: ``material`` plus ``h1..h5`` uniform over
-    +/- 3 score standard deviations of the bundled PCA shape model.
+    +/- 3 score standard deviations of the bundled PCA shape model (its
+    scores are standardised, so [-3, 3]).
 ``angles``
     ``chapter`` plus ``alpha_endo`` in [-90, 0]°, ``alpha_epi`` in [0, 90]°
     and ``edp`` in [6, 14] mmHg, all uniform.
@@ -242,27 +243,23 @@ def pc_parameters(k: int, score_sd: Sequence[float] | None = None, span_sd: floa
 
 
 def pc_score_sd(k: int) -> np.ndarray:
-    """Standard deviations of the first ``k`` PC scores of the bundled shape model."""
+    """Standard deviations of the first ``k`` PC scores of the bundled shape model.
+
+    :mod:`lvcore.geometry.shape_model` standardises its scores (unit variance
+    over the training population), so these are ones; the call checks that
+    the bundled model exists and has at least ``k`` modes.
+    """
     try:
         from lvcore.geometry.shape_model import load_shape_model
     except ImportError as err:  # pragma: no cover - depends on another module landing
         raise CampaignError("spaces with PC scores need lvcore.geometry.shape_model (not available)") from err
-    model = load_shape_model()
-    sd = _shape_model_sd(model)
-    if sd.shape[0] < k:
-        raise CampaignError(f"the shape model has {sd.shape[0]} components, a space asks for {k}")
-    return sd[:k]
-
-
-def _shape_model_sd(model) -> np.ndarray:
-    for attr in ("score_sd", "scores_sd", "sd", "singular_sd"):
-        if hasattr(model, attr):
-            return np.asarray(getattr(model, attr), dtype=float)
-    if hasattr(model, "explained_variance"):
-        return np.sqrt(np.asarray(model.explained_variance, dtype=float))
-    if hasattr(model, "variances"):
-        return np.sqrt(np.asarray(model.variances, dtype=float))
-    raise CampaignError("cannot find the PC score standard deviations on the shape model")
+    try:
+        model = load_shape_model()
+    except Exception as err:  # GeometryError with a hint how to build it
+        raise CampaignError(f"spaces with PC scores need the bundled shape model: {err}") from err
+    if model.n_modes < k:
+        raise CampaignError(f"the shape model has {model.n_modes} modes, a space asks for {k}")
+    return np.ones(k)
 
 
 def _fixed(angles=CHAPTER_ANGLES, edp=CHAPTER_EDP) -> tuple[tuple[str, float], ...]:
