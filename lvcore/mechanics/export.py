@@ -77,3 +77,65 @@ def write_vtu(path, nodes, elements, *, displacement=None, point_data: Mapping[s
     path.parent.mkdir(parents=True, exist_ok=True)
     meshio.write(path, mesh, file_format="vtu")
     return path
+
+
+def result_fields(result, case=None) -> dict:
+    """Cell fields of a simulation mesh for export and pictures.
+
+    Parameters
+    ----------
+    result : lvcore.mechanics.simulate.SimulationResult
+    case : lvcore.mechanics.case.Case, optional
+        The simulated case; needed for the strain ``region`` of each element
+        (LV meshes) and the ``fibre`` direction at each element centre.
+
+    Returns
+    -------
+    dict name -> (n_elements, ...) array (empty without ``case``).
+    """
+    if case is None:
+        return {}
+    from lvcore.mechanics.simulate import build_frames, build_mesh
+
+    mesh = build_mesh(case)
+    if mesh.elements.shape != np.shape(result.elements) or not np.array_equal(mesh.elements, result.elements):
+        raise LVCoreError("the case does not match the result's mesh (different geometry or resolution)")
+    fields = {}
+    if mesh.template is not None:
+        fields["region"] = mesh.template.element_regions.astype(np.int32)
+    frames = build_frames(mesh, case.fibres)  # (n_el, 27 Gauss points, 3 rows f0 s0 n0, 3)
+    fields["fibre"] = frames[:, 13, 0, :]  # Gauss point 13 of the 3x3x3 rule is the element centre
+    return fields
+
+
+def export_result(result, path, case=None) -> Path:
+    """Write a simulation result to VTU: reference mesh, ``displacement`` (mm), cell fields.
+
+    Parameters
+    ----------
+    result : lvcore.mechanics.simulate.SimulationResult
+        A failed solve (``converged`` False) writes the reference mesh only.
+    path : str or Path
+        Output ``.vtu`` file.
+    case : Case, optional
+        Adds ``region`` (0..23, LV meshes) and ``fibre`` cell fields, and the
+        load as field data.
+
+    Returns
+    -------
+    Path of the written file.
+    """
+    field_data = {"converged": np.array([int(bool(result.converged))])}
+    if case is not None:
+        field_data["pressure_kpa"] = np.array([float(case.load.pressure_kpa)])
+    return write_vtu(path, result.reference_nodes, result.elements, displacement=result.displacement,
+                     cell_data=result_fields(result, case), field_data=field_data)
+
+
+def result_vtu_bytes(result, case=None) -> bytes:
+    """The VTU file of :func:`export_result` as bytes (for downloads)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = export_result(result, Path(tmp) / "result.vtu", case)
+        return path.read_bytes()

@@ -1,0 +1,97 @@
+"""``lvcore simulate CASE.json``: run one forward simulation from a case file.
+
+Exit codes: 0 converged, 1 the solver did not converge, 2 bad input (any
+:class:`~lvcore.exceptions.LVCoreError`, reported by :func:`lvcore.cli.main`).
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+
+def register(subparsers) -> None:
+    """Add the ``simulate`` sub-command."""
+    p = subparsers.add_parser(
+        "simulate",
+        help="run one forward simulation of a case file",
+        description="Inflate the geometry of CASE.json (see docs/case_schema.md) and report the end-diastolic "
+                    "volume, the 24 regional circumferential strains, probe positions and solver diagnostics.",
+    )
+    p.add_argument("case", help="case JSON file (docs/case_schema.md)")
+    p.add_argument("--json", action="store_true", help="print the full result as JSON instead of a summary")
+    p.add_argument("--vtu", metavar="OUT.vtu", help="also write the reference mesh and displacement to a VTU file")
+    p.add_argument("--sensitivities", action="store_true",
+                   help="also compute the derivatives of the outputs with respect to the material parameters")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run the ``simulate`` sub-command; returns the exit code."""
+    from lvcore.mechanics.case import load_case
+    from lvcore.mechanics.simulate import simulate
+
+    case = load_case(args.case)
+    result = simulate(case, with_sensitivities=bool(args.sensitivities))
+    if args.vtu:
+        from lvcore.mechanics.export import export_result
+
+        export_result(result, args.vtu, case)
+    if args.json:
+        out = result.to_dict()
+        if args.sensitivities and getattr(result, "sensitivities", None) is not None:
+            out["sensitivities"] = _clean(json.loads(json.dumps(result.sensitivities, default=_json_default)))
+        print(json.dumps(out, indent=2, default=_json_default, allow_nan=False))
+    else:
+        print(format_summary(result))
+        if args.vtu:
+            print(f"wrote {args.vtu}")
+    return 0 if bool(result.converged) else 1
+
+
+def _json_default(obj):
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        return _clean(obj.item())
+    raise TypeError(f"cannot write {type(obj).__name__} as JSON")
+
+
+def _clean(x):
+    if isinstance(x, list):
+        return [_clean(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def format_summary(result) -> str:
+    """A readable multi-line summary of a simulation result."""
+    from lvcore.outputs import LEVEL_NAMES
+    from lvcore.viz.figures import strain_grid
+
+    d = result.to_dict()
+    state = "converged" if d["converged"] else "NOT CONVERGED"
+    lines = [f"solver: {state}" + (f" ({d['message']})" if d["message"] and d["message"] != state else ""),
+             f"  {d['newton_iterations']} Newton iterations, {d['load_steps']} load steps, {d['dofs']} dofs, "
+             f"{d['seconds']:.2f} s"]
+    vol = d.get("cavity_volume_ml")
+    if vol:
+        lines.append(f"cavity volume: reference {vol['reference']:.3f} mL"
+                     + (f", loaded (LVV) {vol['loaded']:.3f} mL" if vol.get("loaded") is not None else ""))
+    if d.get("lvv_standardised") is not None:
+        lines.append(f"standardised LVV (EDV / V_early): {d['lvv_standardised']:.4f}")
+    if d.get("apex"):
+        for name, pos in d["apex"].items():
+            lines.append(f"{name} apex (deformed): ({pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}) mm")
+    for k, pos in enumerate(d.get("probes") or []):
+        lines.append(f"probe {k} (deformed): ({pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}) mm")
+    if d.get("strains") is not None:
+        lines.append("circumferential strain E_cc (rows: levels base -> apex; columns: sectors S1..S6):")
+        for name, row in zip(LEVEL_NAMES, strain_grid(d["strains"])):
+            lines.append(f"  {name:>10s} " + " ".join(f"{v:+.4f}" for v in row))
+    sens = getattr(result, "sensitivities", None)
+    if sens:
+        lines.append("sensitivities: " + ", ".join(str(k) for k in sens) + " (use --json for values)")
+    return "\n".join(lines)
