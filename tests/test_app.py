@@ -1,0 +1,56 @@
+"""The entry page (Simulator) under Streamlit's AppTest, at the fast resolution."""
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("lvcore.mechanics.simulate")
+from streamlit.testing.v1 import AppTest  # noqa: E402
+
+APP = str(Path(__file__).resolve().parents[1] / "app.py")
+
+
+def _lvv(at) -> float:
+    (metric,) = [m for m in at.metric if m.label.startswith("LVV")]
+    return float(metric.value.split()[0])
+
+
+def test_simulator_page_runs_and_responds_to_sliders():
+    at = AppTest.from_file(APP, default_timeout=180).run()
+    assert not at.exception
+    assert at.title[0].value == "LV Calibration Lab"
+    assert at.radio(key="resolution").value == "fast"
+    lvv0 = _lvv(at)
+    v_early = float([m for m in at.metric if m.label.startswith("V_early")][0].value.split()[0])
+    assert 60 < v_early < 110 and lvv0 > v_early
+    assert len(at.get("plotly_chart")) >= 1 and len(at.get("image")) == 1
+    assert {b.label for b in at.get("download_button")} >= {"Download mesh + displacement (VTU)",
+                                                             "Download result (JSON)"}
+    assert not at.error and not at.warning
+    # a stiffer isotropic matrix fills less
+    slider = at.select_slider(key="a")
+    slider.set_value(slider.options[-10])  # about 3 kPa (log-spaced stops)
+    at.form_submit_button[0].click().run()
+    assert not at.exception
+    assert _lvv(at) < lvv0 - 10
+
+
+def test_failed_solve_shows_message(monkeypatch):
+    import streamlit as st
+
+    from lvcore.mechanics import newton
+    from lvcore.mechanics import simulate as sim
+
+    real = sim.simulate
+
+    def starved(case, with_sensitivities=False):  # a real solve allowed too few iterations
+        return real(case, with_sensitivities, options=newton.NewtonOptions(max_iterations=1, max_cuts=0))
+
+    monkeypatch.setattr(sim, "simulate", starved)
+    st.cache_data.clear()
+    try:
+        at = AppTest.from_file(APP, default_timeout=180).run()
+    finally:
+        st.cache_data.clear()
+    assert not at.exception
+    assert at.error and "did not converge" in at.error[0].value
+    assert not [m for m in at.metric if m.label.startswith("LVV")]
