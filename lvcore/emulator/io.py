@@ -8,7 +8,8 @@ An emulator directory holds
 ``metadata.json``
     ``format`` (``"lvcore-emulator"``), ``format_version``, ``name``,
     ``input_names``, ``output_names``, ``bounds`` (``lower``, ``upper``),
-    ``log_inputs`` (names log-transformed), ``fixed_inputs`` (name -> value),
+    ``log_inputs`` (names log-transformed), ``log_outputs`` (outputs the
+    network predicts on a log scale), ``fixed_inputs`` (name -> value),
     ``input_scaler`` / ``output_scaler`` (``mean``, ``sd``), ``architecture``
     (``hidden``, ``activation``, ``init_sd``), ``training`` (``set_hash``,
     sizes, seed, optimiser settings, the architecture search), ``validation``
@@ -38,6 +39,7 @@ import lvcore
 from lvcore.emulator.model import Emulator
 from lvcore.emulator.network import from_arrays, to_arrays
 from lvcore.exceptions import EmulatorError
+from lvcore.outputs import OUTPUT_COLUMNS
 
 FORMAT = "lvcore-emulator"
 FORMAT_VERSION = 1
@@ -101,6 +103,7 @@ def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict
         "bounds": {"lower": _floats(emulator.lower), "upper": _floats(emulator.upper)},
         "log_inputs": [n for n, flag in zip(emulator.input_names, emulator.log_inputs) if flag],
         "fixed_inputs": {k: float(v) for k, v in emulator.fixed.items()},
+        "log_outputs": [n for n, flag in zip(emulator.output_names, emulator.log_outputs) if flag],
         "input_scaler": {"mean": _floats(emulator.x_mean), "sd": _floats(emulator.x_sd)},
         "output_scaler": {"mean": _floats(emulator.y_mean), "sd": _floats(emulator.y_sd)},
         "architecture": {**meta.get("architecture", {}), "hidden": list(emulator.network.hidden), "activation": "tanh"},
@@ -109,6 +112,7 @@ def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict
     })
     np.savez(directory / "network.npz", **to_arrays(emulator.network))
     (directory / "metadata.json").write_text(json.dumps(meta, indent=2, sort_keys=True))
+    emulator.metadata.update(meta)  # the in-memory emulator now shows what was saved
     if validation is not None:
         np.savez(directory / "validation.npz", **{k: np.asarray(v, dtype=float) for k, v in validation.items()})
     return directory
@@ -156,6 +160,7 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
             fixed={k: float(v) for k, v in meta.get("fixed_inputs", {}).items()},
             metadata=meta,
             strict=strict,
+            log_outputs=tuple(n in set(meta.get("log_outputs", [])) for n in OUTPUT_COLUMNS),
         )
     except (KeyError, TypeError, ValueError) as err:
         raise EmulatorError(f"'{meta_path}' is malformed: {err!r}") from err

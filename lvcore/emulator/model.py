@@ -69,6 +69,9 @@ class Emulator:
         Everything else recorded at training (see :mod:`lvcore.emulator.io`).
     strict : bool
         Default for :meth:`predict`: raise instead of warn outside the box.
+    log_outputs : tuple of bool
+        Per output: the network predicts the standardised ``log`` of it
+        (used for the LVV, which spans an order of magnitude).
     """
 
     name: str
@@ -84,6 +87,7 @@ class Emulator:
     fixed: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
     strict: bool = False
+    log_outputs: tuple[bool, ...] = (False,) * N_OUTPUTS
 
     def __post_init__(self):
         d = len(self.input_names)
@@ -93,6 +97,8 @@ class Emulator:
         for attr in ("y_mean", "y_sd"):
             if np.shape(getattr(self, attr)) != (N_OUTPUTS,):
                 raise EmulatorError(f"emulator '{self.name}': {attr} must have {N_OUTPUTS} entries")
+        if len(self.log_outputs) != N_OUTPUTS:
+            raise EmulatorError(f"emulator '{self.name}': log_outputs must have {N_OUTPUTS} entries")
         if len(self.log_inputs) != d:
             raise EmulatorError(f"emulator '{self.name}': log_inputs must have {d} entries")
         if np.any(np.asarray(self.x_sd) <= 0) or np.any(np.asarray(self.y_sd) <= 0):
@@ -224,12 +230,14 @@ def _make_apply(emu: Emulator):
     log_mask = jnp.asarray(np.asarray(emu.log_inputs, dtype=bool))
     x_mean, x_sd = jnp.asarray(emu.x_mean), jnp.asarray(emu.x_sd)
     y_mean, y_sd = jnp.asarray(emu.y_mean), jnp.asarray(emu.y_sd)
+    log_out = jnp.asarray(np.asarray(emu.log_outputs, dtype=bool))
     net = emu.network
     # log only where asked; the where-guard keeps gradients finite for linear inputs
     def apply(x):
         safe = jnp.where(log_mask, jnp.where(x > 0, x, 1.0), 1.0)
         z = jnp.where(log_mask, jnp.log(safe), x)
         z = jnp.where(log_mask & (x <= 0), jnp.nan, z)
-        return net((z - x_mean) / x_sd) * y_sd + y_mean
+        y = net((z - x_mean) / x_sd) * y_sd + y_mean
+        return jnp.where(log_out, jnp.exp(jnp.where(log_out, y, 0.0)), y)
 
     return apply
