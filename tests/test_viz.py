@@ -120,3 +120,23 @@ def test_render_offscreen_png(monkeypatch):
     assert np.any((img2[..., 0] > 150) & (img2[..., 1] < 80))
     with pytest.raises(ValueError, match="view"):
         mesh3d.render_meshes([mesh3d.lv_surface(ref, tmpl.elements)], view="sideways")
+
+
+def test_element_edges_follow_the_curved_surfaces():
+    tmpl = LVTemplate(6, 4, 1)
+    lv = TruncatedEllipsoidLV(EllipsoidSurface(7, 17), EllipsoidSurface(10, 20), 5.0)
+    edges = mesh3d.element_edges(lv.nodes(tmpl), tmpl.elements, samples=8)
+    p = np.asarray(edges.points)
+
+    def level(surf):
+        return np.abs((p[:, 0] ** 2 + p[:, 1] ** 2) / surf.rs**2 + p[:, 2] ** 2 / surf.rl**2 - 1.0)
+
+    off = np.minimum.reduce([level(lv.endo), level(lv.epi), np.abs(p[:, 2] - 5.0)])
+    assert off.max() < 0.01  # every sample lies on the endocardium, epicardium or base (boundary only)
+    # curved: 60-degree straight chords would sit up to 1 - cos(30 deg) = 13 % inside a circle
+    r = np.hypot(p[:, 0], p[:, 1])
+    base = np.abs(p[:, 2] - 5.0) < 1e-9
+    r_ring = 7.0 * np.sqrt(1 - 25 / 289)  # endocardial base ring, 6.69 mm; chords would dip to 5.79 mm
+    assert r[base].min() == pytest.approx(r_ring, rel=5e-3)
+    all_edges = mesh3d.element_edges(lv.nodes(tmpl), tmpl.elements, boundary_only=False)
+    assert all_edges.n_cells > edges.n_cells

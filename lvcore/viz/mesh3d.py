@@ -91,6 +91,67 @@ def lv_surface(nodes, elements, point_data: Mapping[str, Any] | None = None,
     return grid.extract_surface(nonlinear_subdivision=int(subdivision), algorithm="dataset_surface")
 
 
+def _local(a, b, c) -> int:
+    return a + 3 * b + 9 * c
+
+
+#: The 12 edges of a 27-node hexahedron as local node triples (end, middle, end).
+_HEX_EDGES = np.array(
+    [[_local(0, b, c), _local(1, b, c), _local(2, b, c)] for b in (0, 2) for c in (0, 2)]
+    + [[_local(a, 0, c), _local(a, 1, c), _local(a, 2, c)] for a in (0, 2) for c in (0, 2)]
+    + [[_local(a, b, 0), _local(a, b, 1), _local(a, b, 2)] for a in (0, 2) for b in (0, 2)]
+)
+#: The 6 faces of a 27-node hexahedron as local node lists (9 nodes each).
+_HEX_FACES = [
+    [_local(a, b, c) for b in range(3) for c in range(3) for a in (fa,)] for fa in (0, 2)
+] + [
+    [_local(a, b, c) for a in range(3) for c in range(3) for b in (fb,)] for fb in (0, 2)
+] + [
+    [_local(a, b, c) for a in range(3) for b in range(3) for c in (fc,)] for fc in (0, 2)
+]
+
+
+def element_edges(nodes, elements, *, boundary_only: bool = True, samples: int = 8) -> pv.PolyData:
+    """Curved element edges of a 27-node hexahedral mesh, as polylines.
+
+    Each edge is the quadratic curve through its three nodes, sampled at
+    ``samples + 1`` points, so coarse meshes still look round.
+
+    Parameters
+    ----------
+    nodes : (n_nodes, 3) array (mm)
+    elements : (n_elements, 27) template-order connectivity
+    boundary_only : bool
+        Keep only edges lying on the boundary surface (all three nodes on
+        faces that belong to a single element).
+    samples : int
+        Segments per edge.
+
+    Returns
+    -------
+    pyvista.PolyData of lines.
+    """
+    nodes = np.asarray(nodes, dtype=float)
+    elements = np.asarray(elements, dtype=np.int64)
+    edges = elements[:, _HEX_EDGES].reshape(-1, 3)
+    key = np.sort(edges[:, [0, 2]], axis=1)
+    _, first = np.unique(np.column_stack([key, edges[:, 1]]), axis=0, return_index=True)
+    edges = edges[np.sort(first)]
+    edges = edges[~((edges[:, 0] == edges[:, 1]) & (edges[:, 1] == edges[:, 2]))]  # collapsed (apex)
+    if boundary_only:
+        faces = np.concatenate([elements[:, f] for f in _HEX_FACES], axis=0)
+        _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+        on_boundary = np.zeros(nodes.shape[0], dtype=bool)
+        on_boundary[np.unique(faces[counts[inverse.ravel()] == 1])] = True
+        edges = edges[on_boundary[edges].all(axis=1)]
+    xi = np.linspace(-1.0, 1.0, samples + 1)
+    shape = np.stack([0.5 * xi * (xi - 1.0), 1.0 - xi * xi, 0.5 * xi * (xi + 1.0)], axis=1)  # (m, 3)
+    points = np.einsum("mk,ekd->emd", shape, nodes[edges]).reshape(-1, 3)
+    m = samples + 1
+    lines = np.hstack([np.full((edges.shape[0], 1), m), np.arange(edges.shape[0] * m).reshape(-1, m)]).ravel()
+    return pv.PolyData(points, lines=lines)
+
+
 @dataclass
 class MeshLayer:
     """One mesh in a picture.
@@ -236,8 +297,7 @@ def render_reference_and_deformed(reference_nodes, deformed_nodes, elements, *, 
     elements : (n_elements, 27) template-order connectivity
     scalars : (n_nodes,) array, optional
         Values on the deformed surface; default the displacement magnitude (mm).
-        The reference is drawn as the element edges of its boundary (straight
-        chords between element corners).
+        The reference is drawn as the curved element edges of its boundary.
     scalars_label : str
         Scalar bar title.
 
@@ -248,7 +308,7 @@ def render_reference_and_deformed(reference_nodes, deformed_nodes, elements, *, 
     ref = np.asarray(reference_nodes, dtype=float)
     cur = np.asarray(deformed_nodes, dtype=float)
     values = np.linalg.norm(cur - ref, axis=1) if scalars is None else np.asarray(scalars, dtype=float)
-    ref_edges = lv_surface(ref, elements, subdivision=0).extract_all_edges()  # element edges (corner chords)
+    ref_edges = element_edges(ref, elements)
     cur_surface = lv_surface(cur, elements, point_data={scalars_label: values})
     return render_meshes(
         [
