@@ -1,0 +1,161 @@
+"""``lvcore geometry ...``: fit segmentations, inspect meshes, use the shape model.
+
+* ``lvcore geometry fit CONTOURS.json --out MESH.vtu [--json]``
+* ``lvcore geometry fit --endo ENDO.stl --epi EPI.stl [--units mm] --out MESH.vtu [--json]``
+* ``lvcore geometry info MESH.vtu [--json]``: cavity volume, wall volume, length
+* ``lvcore geometry compare A.vtu B.vtu [--json]``: node MSE (cm²), max node distance
+* ``lvcore geometry pca SCORES... --out MESH.vtu [--model M.json]``: reconstruct from PC scores
+* ``lvcore geometry project MESH.vtu [--modes K] [--json]``: PC scores of a mesh
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from lvcore.exceptions import GeometryError
+
+
+def _fit(args) -> int:
+    from lvcore.geometry.fitting import fit_contours, fit_surfaces
+    from lvcore.geometry.io import write_template_mesh
+
+    if args.contours and (args.endo or args.epi):
+        raise GeometryError("give either a contour file or --endo/--epi surfaces, not both")
+    if args.contours:
+        res = fit_contours(args.contours, base_z=args.base_z)
+    elif args.endo and args.epi:
+        res = fit_surfaces(args.endo, args.epi, units=args.units, base_z=args.base_z)
+    else:
+        raise GeometryError("nothing to fit: give CONTOURS.json or both --endo and --epi surface files")
+    out = None
+    if args.out:
+        meta = {"label": res.label, "residual_mean_mm": f"{res.residual_mean_mm:.4f}"}
+        out = write_template_mesh(args.out, res.nodes, metadata=meta)
+    summary = {**res.summary(), "out": str(out) if out else None}
+    if args.json:
+        print(json.dumps(summary, indent=1))
+    else:
+        print(f"fitted {res.label}")
+        print(f"  residual: mean {res.residual_mean_mm:.3f} mm, max {res.residual_max_mm:.3f} mm "
+              f"(endo {res.residual_endo_mean_mm:.3f}, epi {res.residual_epi_mean_mm:.3f}; {res.n_points} points, "
+              f"{res.n_above_base} above the base plane ignored)")
+        print(f"  cavity volume {res.cavity_volume_ml:.1f} mL, base-apex length {res.length_mm:.1f} mm")
+        for w in res.warnings:
+            print(f"  warning: {w}")
+        if out:
+            print(f"  wrote {out}  (use it as {{\"geometry\": {{\"kind\": \"mesh\", \"path\": \"{out}\"}}}})")
+    return 0
+
+
+def geometry_info(nodes) -> dict:
+    """Plain-data measures of a template geometry (mm, mL)."""
+    from lvcore.geometry.measures import cavity_volume
+    from lvcore.geometry.template import DEFAULT_TEMPLATE as T
+
+    base_z = float(np.mean(nodes[T.base_nodes, 2]))
+    cav = float(cavity_volume(nodes, T)) / 1000.0
+    # wall volume = epicardial "cavity" minus endocardial cavity, using the epi surface as if it were endo
+    epi_as_endo = nodes.copy()
+    k0 = T.node_index(T.grid_ijk[:, 0], T.grid_ijk[:, 1], 0)
+    kN = T.node_index(T.grid_ijk[:, 0], T.grid_ijk[:, 1], T.nt - 1)
+    epi_as_endo[k0] = nodes[kN]
+    outer = float(cavity_volume(epi_as_endo, T, base_z)) / 1000.0
+    return {
+        "cavity_volume_ml": cav,
+        "wall_volume_ml": outer - cav,
+        "base_z_mm": base_z,
+        "length_mm": base_z - float(nodes[T.apex_epi_node, 2]),
+        "n_nodes": int(nodes.shape[0]),
+    }
+
+
+def _info(args) -> int:
+    from lvcore.geometry.io import read_template_mesh
+
+    info = geometry_info(read_template_mesh(args.mesh))
+    if args.json:
+        print(json.dumps(info, indent=1))
+    else:
+        for k, v in info.items():
+            print(f"{k:18s} {v:.2f}" if isinstance(v, float) else f"{k:18s} {v}")
+    return 0
+
+
+def _compare(args) -> int:
+    from lvcore.geometry.io import read_template_mesh
+    from lvcore.geometry.measures import node_mse_cm2
+
+    a, b = read_template_mesh(args.a), read_template_mesh(args.b)
+    d = np.linalg.norm(a - b, axis=1)
+    out = {"node_mse_cm2": node_mse_cm2(a, b), "max_node_distance_mm": float(d.max()),
+           "mean_node_distance_mm": float(d.mean())}
+    print(json.dumps(out, indent=1) if args.json else
+          f"node MSE {out['node_mse_cm2']:.4f} cm², mean {out['mean_node_distance_mm']:.2f} mm, "
+          f"max {out['max_node_distance_mm']:.2f} mm")
+    return 0
+
+
+def _pca(args) -> int:
+    from lvcore.geometry.io import write_template_mesh
+    from lvcore.geometry.shape_model import load_shape_model
+
+    sm = load_shape_model(args.model)
+    nodes = sm.reconstruct(np.asarray(args.scores, float))
+    out = write_template_mesh(args.out, nodes, metadata={"label": f"PCA scores {args.scores} of {sm.label}"})
+    print(f"wrote {out} ({len(args.scores)} of {sm.n_modes} standardised scores; model {sm.label})")
+    return 0
+
+
+def _project(args) -> int:
+    from lvcore.geometry.io import read_template_mesh
+    from lvcore.geometry.shape_model import load_shape_model
+
+    sm = load_shape_model(args.model)
+    nodes = read_template_mesh(args.mesh)
+    h = sm.project(nodes, args.modes)
+    out = {"scores": [float(v) for v in h], "reconstruction_mse_cm2": sm.reconstruction_mse_cm2(nodes, args.modes),
+           "model": sm.label}
+    print(json.dumps(out, indent=1) if args.json else
+          "scores " + " ".join(f"{v:.3f}" for v in h) + f"\nreconstruction MSE {out['reconstruction_mse_cm2']:.4f} cm²")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``lvcore geometry`` and its sub-commands."""
+    p = subparsers.add_parser("geometry", help="fit segmentations to the LV template, inspect meshes, PCA")
+    sub = p.add_subparsers(dest="geometry_command", required=True)
+
+    f = sub.add_parser("fit", help="fit the template to a contour stack (JSON) or endo/epi surfaces")
+    f.add_argument("contours", nargs="?", help="contour stack JSON (schema lvcore.contours/1)")
+    f.add_argument("--endo", help="endocardial surface (VTK/VTP/STL/PLY/OBJ), open at the base")
+    f.add_argument("--epi", help="epicardial surface, open at the base")
+    f.add_argument("--units", default="mm", choices=("mm", "cm", "m"), help="units of surface files (default mm)")
+    f.add_argument("--base-z", type=float, default=0.0, help="height of the base plane in the output (mm, default 0)")
+    f.add_argument("--out", help="write the fitted mesh here (.vtu)")
+    f.add_argument("--json", action="store_true", help="print the fit summary as JSON")
+    f.set_defaults(func=_fit)
+
+    i = sub.add_parser("info", help="cavity and wall volume of a template mesh")
+    i.add_argument("mesh")
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=_info)
+
+    c = sub.add_parser("compare", help="node MSE (cm²) between two template meshes")
+    c.add_argument("a")
+    c.add_argument("b")
+    c.add_argument("--json", action="store_true")
+    c.set_defaults(func=_compare)
+
+    r = sub.add_parser("pca", help="reconstruct a mesh from standardised PCA scores")
+    r.add_argument("scores", nargs="+", type=float)
+    r.add_argument("--out", required=True)
+    r.add_argument("--model", default=None, help="shape model .json (default: bundled SYNTHETIC model)")
+    r.set_defaults(func=_pca)
+
+    q = sub.add_parser("project", help="standardised PCA scores of a template mesh")
+    q.add_argument("mesh")
+    q.add_argument("--modes", type=int, default=5)
+    q.add_argument("--model", default=None)
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=_project)
