@@ -12,7 +12,7 @@ For each emulator it
    training = scrambled Sobol (seed ``S``), validation = scrambled Sobol
    (seed ``S + 1``), test = uniform random (seed ``S + 2``); the material
    parameters are log-uniform (a, af in [0.05, 10] kPa; b, bf in [0.1, 30]),
-   the PC scores uniform over +/- 3 sd of the bundled shape model;
+   the PC scores uniform over +/- 2 sd of the bundled shape model;
 2. runs the three campaigns with the FE simulator (``lvcore campaign run``;
    if a store exists it is *resumed*, so an interrupted build just continues);
 3. trains on the converged training rows, selects the architecture among

@@ -27,7 +27,7 @@ def test_space_dimensions_and_cases():
     assert chapter.names == ("a", "b", "af", "bf", "h1", "h2", "h3", "h4", "h5")
     angles = get_space("angles", score_sd=SD)
     assert angles.names[:7] == ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "edp") and angles.dim == 12
-    np.testing.assert_allclose(chapter.upper[4:], 3 * np.array(SD))
+    np.testing.assert_allclose(chapter.upper[4:], 2 * np.array(SD))
     row = [0.6, 1.3, 1.0, 3.6, 1, 2, 3, 4, 5]
     case = chapter.case(row, "fast")
     assert case["geometry"] == {"kind": "pca", "scores": [1.0, 2.0, 3.0, 4.0, 5.0], "resolution": "fast"}

@@ -16,8 +16,9 @@ Named spaces (see :func:`get_space`):
     default geometry, fibre angles (-60°, 60°), EDP 8 mmHg.
 ``chapter``
     the chapter's emulator: ``material`` plus ``h1..h5`` uniform over
-    +/- 3 score standard deviations of the bundled PCA shape model (its
-    scores are standardised, so [-3, 3]).
+    +/- 2 score standard deviations of the bundled PCA shape model (its
+    scores are standardised, so [-2, 2]; at +/- 3 corners the geometry
+    inverts).
 ``angles``
     ``chapter`` plus ``alpha_endo`` in [-90, 0]°, ``alpha_epi`` in [0, 90]°
     and ``edp`` in [6, 14] mmHg, all uniform.
@@ -44,7 +45,7 @@ CHAPTER_EDP = 8.0
 #: Material bounds of the calibration prior (Table 9.1): kPa for a, af.
 THETA_BOUNDS = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
 #: How many score standard deviations the PC bounds span on each side.
-PC_SPAN_SD = 3.0
+PC_SPAN_SD = 2.0
 
 SCALES = ("linear", "log")
 
