@@ -26,9 +26,12 @@ def test_simulate_json_and_vtu(case_file, tmp_path, capsys):
     import meshio
 
     vtu = tmp_path / "out.vtu"
-    assert main(["simulate", str(case_file), "--json", "--vtu", str(vtu)]) == 0
+    assert main(["simulate", str(case_file), "--json", "--vtu", str(vtu), "--sensitivities"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["converged"] is True
+    sens = out["sensitivities"]
+    assert set(sens) == {"a", "b", "af", "bf"} and all(len(v) == 25 for v in sens.values())
+    assert sens["a"][0] < 0 and sens["af"][0] < 0  # stiffer myocardium, smaller end-diastolic volume
     vol = out["cavity_volume_ml"]
     assert 60 < vol["reference"] < 110 and vol["loaded"] > vol["reference"]  # filling increases the volume
     assert out["lvv_standardised"] == pytest.approx(vol["loaded"] / vol["reference"])
