@@ -1,0 +1,56 @@
+"""Kinematics: deformation gradient, invariants and strains (jax.numpy, pure).
+
+Conventions: ``F[i, J] = d x_i / d X_J``; ``C = F^T F``; Green strain
+``E = (C - I) / 2``. Fibre frames are stored as rows ``(f0, s0, n0)`` of an
+orthonormal 3x3 matrix in the reference configuration.
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def deformation_gradient(x_e, dNdX):
+    """F at quadrature points: ``x_e`` (27, 3) current nodes, ``dNdX`` (q, 27, 3) -> (q, 3, 3)."""
+    return jnp.einsum("ai,qaJ->qiJ", x_e, dNdX)
+
+
+def det3(F):
+    """Determinant of (..., 3, 3)."""
+    return (
+        F[..., 0, 0] * (F[..., 1, 1] * F[..., 2, 2] - F[..., 1, 2] * F[..., 2, 1])
+        - F[..., 0, 1] * (F[..., 1, 0] * F[..., 2, 2] - F[..., 1, 2] * F[..., 2, 0])
+        + F[..., 0, 2] * (F[..., 1, 0] * F[..., 2, 1] - F[..., 1, 1] * F[..., 2, 0])
+    )
+
+
+def cofactor(F):
+    """Cofactor ``dJ/dF = J F^{-T}`` of (..., 3, 3), computed without inversion."""
+    c0, c1, c2 = F[..., :, 0], F[..., :, 1], F[..., :, 2]
+    return jnp.stack([jnp.cross(c1, c2), jnp.cross(c2, c0), jnp.cross(c0, c1)], axis=-1)
+
+
+def right_cauchy_green(F):
+    """C = F^T F."""
+    return jnp.einsum("...kI,...kJ->...IJ", F, F)
+
+
+def green_strain(F):
+    """E = (F^T F - I) / 2."""
+    return 0.5 * (right_cauchy_green(F) - jnp.eye(3))
+
+
+def isochoric_i1(F):
+    """First invariant of the isochoric part: J^{-2/3} tr(C)."""
+    J = det3(F)
+    return jnp.sum(F * F, axis=(-2, -1)) * J ** (-2.0 / 3.0)
+
+
+def stretch_along(F, v):
+    """Stretch ``|F v|`` of the reference unit vector ``v`` (..., 3)."""
+    return jnp.linalg.norm(jnp.einsum("...iJ,...J->...i", F, v), axis=-1)
+
+
+def circumferential_green_strain(F, c):
+    """Glasgow convention, end diastole as reference: ``(1/λ² − 1)/2`` with ``λ = |F c|``."""
+    lam2 = jnp.sum(jnp.einsum("...iJ,...J->...i", F, c) ** 2, axis=-1)
+    return 0.5 * (1.0 / lam2 - 1.0)

@@ -1,0 +1,129 @@
+"""What the simulator reports: cavity volume, regional strains, point positions.
+
+Volume and strains are jax functions of the displacement so that the adjoint
+(:mod:`lvcore.mechanics.sensitivities`) can differentiate them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+
+from lvcore.geometry.template import N_REGIONS, lagrange_q2_shape
+from lvcore.mechanics import loads
+from lvcore.mechanics.fibres import lv_wall_frame
+from lvcore.mechanics.kinematics import circumferential_green_strain, deformation_gradient
+from lvcore.mechanics.mesh import FEMesh
+from lvcore.mechanics.quadrature import gauss_hex, reference_gradients
+
+STRAIN_LAYERS = ("endocardial", "wall")
+
+
+@dataclass(frozen=True, eq=False)
+class StrainOperator:
+    """Averaging of circumferential Green strain over the 24 regions.
+
+    Attributes
+    ----------
+    e_c : (n_el, n_q, 3) reference circumferential unit vectors.
+    weights : (24, n_el * n_q) volume weights, each row summing to 1, of the
+        quadrature points of the region's elements in the chosen layer.
+    """
+
+    e_c: np.ndarray
+    weights: np.ndarray
+
+
+def strain_operator(mesh: FEMesh, layer: str = "endocardial") -> StrainOperator:
+    """Build the regional strain average for an LV mesh.
+
+    ``layer="endocardial"``: the elements next to the endocardium (first
+    transmural element layer); ``"wall"``: all elements.
+    """
+    if layer not in STRAIN_LAYERS:
+        raise ValueError(f"strain layer must be one of {STRAIN_LAYERS}, got {layer!r}")
+    tpl = mesh.template
+    xi, _ = gauss_hex(3)
+    e_c, _, _ = lv_wall_frame(mesh.nodes, mesh.elements, xi)
+    _, wdet, _ = reference_gradients(mesh.nodes, mesh.elements)
+    regions = tpl.element_regions
+    use = np.ones(mesh.n_elements, bool) if layer == "wall" else tpl.element_grid[:, 2] == 0
+    W = np.zeros((N_REGIONS, mesh.n_elements, xi.shape[0]))
+    for r in range(N_REGIONS):
+        sel = use & (regions == r)
+        W[r, sel] = wdet[sel]
+    tot = W.reshape(N_REGIONS, -1).sum(axis=1)
+    if np.any(tot <= 0):
+        raise ValueError(
+            f"resolution {mesh.resolution} leaves strain regions {np.flatnonzero(tot <= 0).tolist()} empty; "
+            "use at least 6 elements around and 4 base to apex"
+        )
+    return StrainOperator(e_c=e_c, weights=(W.reshape(N_REGIONS, -1) / tot[:, None]))
+
+
+def regional_strains(x, elements, dNdX, op: StrainOperator):
+    """(24,) circumferential Green strains (end diastole as reference) for current nodes x."""
+    F = jnp.vectorize(deformation_gradient, signature="(a,i),(q,a,j)->(q,i,j)")(x[elements], dNdX)
+    e = circumferential_green_strain(F, jnp.asarray(op.e_c))
+    return jnp.asarray(op.weights) @ e.reshape(-1)
+
+
+def cavity_volume(x, mesh: FEMesh):
+    """Cavity volume (mm³) enclosed by the endocardium of ``x`` and the base plane."""
+    return loads.cavity_volume(x, jnp.asarray(mesh.surfaces["endocardium"]), mesh.base_z)
+
+
+def locate_points(mesh: FEMesh, points, tol: float = 1e-6, n_candidates: int = 12):
+    """Find the element and reference coordinates of material points.
+
+    Parameters
+    ----------
+    points : (n, 3) positions in the reference configuration (mm).
+
+    Returns
+    -------
+    elem : (n,) element numbers; xi : (n, 3) reference coordinates.
+
+    Raises
+    ------
+    ValueError naming the first point outside the mesh.
+    """
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
+    X = mesh.nodes[mesh.elements]  # (e, 27, 3)
+    centres = X.mean(axis=1)
+    elem = np.zeros(len(pts), int)
+    xis = np.zeros((len(pts), 3))
+    for n, x in enumerate(pts):
+        order = np.argsort(np.linalg.norm(centres - x, axis=1))[:n_candidates]
+        best = None
+        for e in order:
+            xi = np.zeros(3)
+            for _ in range(30):
+                N, dN = lagrange_q2_shape(xi[None], derivatives=True)
+                r = N[0] @ X[e] - x
+                Jm = X[e].T @ dN[0]
+                try:
+                    step = np.linalg.solve(Jm, r)
+                except np.linalg.LinAlgError:
+                    break
+                xi = np.clip(xi - step, -1.5, 1.5)
+                if np.linalg.norm(step) < 1e-12:
+                    break
+            err = np.linalg.norm(lagrange_q2_shape(xi[None])[0] @ X[e] - x)
+            out = np.max(np.abs(xi)) - 1.0
+            if err < 1e-6 * (1 + np.linalg.norm(x)) and out <= tol:
+                best = (e, np.clip(xi, -1, 1))
+                break
+        if best is None:
+            raise ValueError(f"probe point {n} at {x.tolist()} mm is not inside the reference mesh")
+        elem[n], xis[n] = best
+    return elem, xis
+
+
+def point_positions(x: np.ndarray, mesh: FEMesh, elem: np.ndarray, xi: np.ndarray) -> np.ndarray:
+    """Current positions (n, 3) of located material points for current nodes ``x``."""
+    if len(elem) == 0:
+        return np.zeros((0, 3))
+    N = lagrange_q2_shape(xi)
+    return np.einsum("na,nad->nd", N, x[mesh.elements[elem]])

@@ -1,0 +1,85 @@
+"""Gauss quadrature and Q2 (27-node) reference-element data.
+
+Local node ``a + 3 b + 9 c`` of a hexahedron sits at reference coordinates
+``(a - 1, b - 1, c - 1)`` (see :func:`lvcore.geometry.template.lagrange_q2_shape`).
+The volumetric constraint uses the element-wise linear space
+``{1, xi, eta, zeta}`` (the discontinuous P1 pressure space of the Q2/P1
+mixed element); :func:`p1_basis` evaluates it.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from lvcore.geometry.template import lagrange_q2_shape
+
+
+@lru_cache(maxsize=8)
+def gauss_hex(order: int = 3):
+    """Tensor Gauss–Legendre rule on [-1, 1]³.
+
+    Returns
+    -------
+    xi : (order³, 3) points; w : (order³,) weights (sum 8).
+    """
+    g, w = np.polynomial.legendre.leggauss(order)
+    a, b, c = np.meshgrid(g, g, g, indexing="ij")
+    wa, wb, wc = np.meshgrid(w, w, w, indexing="ij")
+    xi = np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1)
+    return xi, (wa * wb * wc).ravel()
+
+
+@lru_cache(maxsize=8)
+def gauss_quad(order: int = 4):
+    """Tensor Gauss–Legendre rule on [-1, 1]²: points (order², 2), weights (order²,)."""
+    g, w = np.polynomial.legendre.leggauss(order)
+    a, b = np.meshgrid(g, g, indexing="ij")
+    return np.stack([a.ravel(), b.ravel()], axis=1), np.outer(w, w).ravel()
+
+
+def quad9_shape(xi: np.ndarray):
+    """9-node quadratic quad basis (local node ``a + 3 b`` at ``(a-1, b-1)``).
+
+    Returns N (n, 9), dN/da (n, 9), dN/db (n, 9) at points ``xi`` (n, 2).
+    """
+    def basis(x):
+        return (np.stack([0.5 * x * (x - 1), 1 - x * x, 0.5 * x * (x + 1)], -1),
+                np.stack([x - 0.5, -2 * x, x + 0.5], -1))
+
+    na, da = basis(xi[:, 0])
+    nb, db = basis(xi[:, 1])
+    q = np.arange(9)
+    a, b = q % 3, q // 3
+    return na[:, a] * nb[:, b], da[:, a] * nb[:, b], na[:, a] * db[:, b]
+
+
+def p1_basis(xi: np.ndarray) -> np.ndarray:
+    """Element-wise linear basis {1, xi, eta, zeta} at points ``xi`` (n, 3) -> (n, 4)."""
+    xi = np.atleast_2d(xi)
+    return np.concatenate([np.ones((xi.shape[0], 1)), xi], axis=1)
+
+
+def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3):
+    """Shape-function gradients and integration weights in the reference configuration.
+
+    Parameters
+    ----------
+    nodes : (n_nodes, 3) reference positions (mm).
+    elements : (n_el, 27) connectivity.
+    order : Gauss points per direction.
+
+    Returns
+    -------
+    dNdX : (n_el, n_q, 27, 3) gradients (1/mm).
+    wdet : (n_el, n_q) quadrature weight times det(dX/dxi) (mm³).
+    detJ : (n_el, n_q) det(dX/dxi), for checking element validity.
+    """
+    xi, w = gauss_hex(order)
+    _, dN = lagrange_q2_shape(xi, derivatives=True)  # (q, 27, 3)
+    X = nodes[elements]  # (e, 27, 3)
+    Jm = np.einsum("eai,qaj->eqij", X, dN)  # dX_i/dxi_j
+    det = np.linalg.det(Jm)
+    inv = np.linalg.inv(Jm)  # dxi_j/dX_i as inv[j, i]
+    dNdX = np.einsum("qaj,eqji->eqai", dN, inv)
+    return dNdX, w[None, :] * det, det

@@ -1,0 +1,245 @@
+"""Forward simulation of one case: ``simulate(case) -> SimulationResult``.
+
+Quasi-static inflation of a (nearly) incompressible hyperelastic body from
+its reference geometry by a follower pressure: the LV endocardium (pressure
+as the potential ``−p V_cavity``) or one face of a box. Mixed Q2/P1
+hexahedra (see :mod:`lvcore.mechanics.element`), load-stepping Newton
+(:mod:`lvcore.mechanics.newton`), SciPy/CHOLMOD sparse solves.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+import jax
+import jax.numpy as jnp
+
+from lvcore import units
+from lvcore.exceptions import CaseError, SolverError
+from lvcore.outputs import N_OUTPUTS, THETA_NAMES
+from lvcore.mechanics import boundary, fibres, materials, newton, observables
+from lvcore.mechanics.mesh import RESOLUTION_PRESETS, FEMesh, box_mesh, box_resolution, lv_mesh
+from lvcore.mechanics.quadrature import gauss_hex, reference_gradients
+from lvcore.mechanics.system import DiscreteSystem
+
+#: Bulk penalty relative to the law's largest stiffness parameter.
+KAPPA_FACTOR = 1.0e4
+
+
+def enable_compilation_cache(path: str | None = None) -> str | None:
+    """Turn on JAX's persistent compilation cache (``LVCORE_JAX_CACHE`` or ~/.cache/lvcore/jax).
+
+    Set ``LVCORE_JAX_CACHE=off`` to disable. Returns the directory used.
+    """
+    path = path or os.environ.get("LVCORE_JAX_CACHE") or str(Path.home() / ".cache" / "lvcore" / "jax")
+    if path.lower() == "off":
+        return None
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", path)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    except Exception:  # pragma: no cover - read-only home etc.
+        return None
+    return path
+
+
+enable_compilation_cache()
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """Outputs of one forward simulation (mm, mm³, kPa; see :meth:`to_dict`).
+
+    Fields are ``None`` where they do not apply (box cases) or when the solve
+    failed (``converged`` False, ``message`` says why); never NaN.
+    """
+
+    converged: bool
+    message: str
+    cavity_volume_mm3: tuple[float, float] | None  # (reference, loaded)
+    lvv_standardised: float | None
+    apex_endocardium: np.ndarray | None
+    apex_epicardium: np.ndarray | None
+    probes: np.ndarray
+    strains: np.ndarray | None
+    newton_iterations: int
+    load_steps: int
+    dofs: int
+    seconds: float
+    reference_nodes: np.ndarray
+    displacement: np.ndarray | None
+    elements: np.ndarray
+    sensitivities: dict | None = None
+    timings: dict = field(default_factory=dict)
+
+    def outputs(self) -> np.ndarray:
+        """The 25 outputs [LVV (mL), 24 circumferential strains]; raises if unavailable."""
+        if not self.converged:
+            raise SolverError(f"simulation did not converge: {self.message}")
+        if self.cavity_volume_mm3 is None or self.strains is None:
+            raise SolverError("this case has no LV outputs (box geometry)")
+        return np.concatenate([[units.mm3_to_ml(self.cavity_volume_mm3[1])], self.strains])
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (see docs/simulator.md)."""
+        def vec(v):
+            return None if v is None else [float(c) for c in np.asarray(v)]
+
+        vol = self.cavity_volume_mm3
+        return {
+            "converged": bool(self.converged),
+            "message": self.message,
+            "cavity_volume_ml": None if vol is None else {"reference": vol[0] / units.MM3_PER_ML,
+                                                         "loaded": None if vol[1] is None else vol[1] / units.MM3_PER_ML},
+            "cavity_volume_mm3": None if vol is None else {"reference": float(vol[0]),
+                                                          "loaded": None if vol[1] is None else float(vol[1])},
+            "lvv_standardised": None if self.lvv_standardised is None else float(self.lvv_standardised),
+            "apex": None if self.apex_endocardium is None else {"endocardium": vec(self.apex_endocardium),
+                                                               "epicardium": vec(self.apex_epicardium)},
+            "probes": [vec(p) for p in self.probes],
+            "strains": vec(self.strains),
+            "newton_iterations": int(self.newton_iterations),
+            "load_steps": int(self.load_steps),
+            "dofs": int(self.dofs),
+            "seconds": float(self.seconds),
+        }
+
+
+def build_mesh(case) -> FEMesh:
+    """The simulation mesh of ``case.geometry`` at its resolution (or preset)."""
+    g = case.geometry
+    preset = g.preset or "default"
+    if g.kind == "box":
+        res = g.resolution.xyz if g.resolution is not None else box_resolution(g.box_size, preset)
+        return box_mesh(g.box_size, res)
+    if g.resolution is not None:
+        res = (g.resolution.circumferential, g.resolution.longitudinal, g.resolution.transmural)
+    else:
+        res = RESOLUTION_PRESETS[preset]
+    return lv_mesh(g.position_map(), res, g.base_z())
+
+
+def build_frames(mesh: FEMesh, fib) -> np.ndarray:
+    """Fibre frames (n_el, 27, 3, 3) at the Gauss points."""
+    xi, _ = gauss_hex(3)
+    if fib.direction is not None or mesh.kind == "box":
+        d = fib.direction if fib.direction is not None else (1.0, 0.0, 0.0)
+        return np.broadcast_to(fibres.constant_frame(d), (mesh.n_elements, xi.shape[0], 3, 3)).copy()
+    et = mesh.template.element_grid[:, 2]
+    t = (et[:, None] + 0.5 * (xi[None, :, 1] + 1.0)) / mesh.resolution[2]
+    frames, _ = fibres.rule_based_frames(mesh.nodes, mesh.elements, xi, t, fib.alpha_endo_deg, fib.alpha_epi_deg)
+    return frames
+
+
+def build_system(case, mesh: FEMesh | None = None) -> DiscreteSystem:
+    """The discrete system of ``case`` (mesh, fibres, material, load, boundary conditions)."""
+    mesh = mesh or build_mesh(case)
+    law = case.material.law
+    params = materials.param_vector(law, case.material.params)
+    modulus = materials.modulus_scale(law, case.material.params)
+    fixed = boundary.fixed_dofs(mesh, case.boundary.base, case.boundary.clamped_faces)
+    surface = case.load.surface if mesh.kind == "box" else "endocardium"
+    return DiscreteSystem(mesh, law, params, build_frames(mesh, case.fibres), KAPPA_FACTOR * modulus,
+                          surface, case.load.pressure_kpa, fixed, modulus=modulus)
+
+
+def _as_case(case):
+    if isinstance(case, Mapping):
+        from lvcore.mechanics.case import Case
+
+        return Case.from_dict(case)
+    return case
+
+
+def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptions | None = None,
+             raise_on_failure: bool = False) -> SimulationResult:
+    """Run one forward simulation.
+
+    Parameters
+    ----------
+    case : lvcore.mechanics.case.Case or dict (the case JSON schema).
+    with_sensitivities : also return d(25 outputs)/d(a, b, af, bf) by the
+        adjoint method (Holzapfel–Ogden LV cases; other laws: all parameters).
+    options : Newton settings.
+    raise_on_failure : raise :class:`SolverError` instead of returning
+        ``converged=False``.
+
+    Returns
+    -------
+    SimulationResult
+    """
+    t0 = time.perf_counter()
+    case = _as_case(case)
+    mesh = build_mesh(case)
+    system = build_system(case, mesh)
+    is_lv = mesh.kind == "lv"
+    elem_p, xi_p = (np.zeros(0, int), np.zeros((0, 3)))
+    if case.probes:
+        try:
+            elem_p, xi_p = observables.locate_points(mesh, case.probes)
+        except ValueError as exc:
+            raise CaseError("probes", str(exc)) from None
+    v_ref = float(observables.cavity_volume(jnp.asarray(mesh.nodes), mesh)) if is_lv else None
+    if case.load.pressure_kpa == 0:
+        res = newton.NewtonResult(True, "converged (zero load)", np.zeros(system.n_free), system.zero_pressure(),
+                                  1.0, 0, 0, 0, {})
+    else:
+        res = newton.solve(system, options)
+    dofs = system.n_free
+    if not res.converged:
+        if raise_on_failure:
+            raise SolverError(res.message)
+        return SimulationResult(False, res.message, None if v_ref is None else (v_ref, None), None, None, None,
+                                np.zeros((0, 3)), None, res.iterations, res.load_steps, dofs,
+                                time.perf_counter() - t0, mesh.nodes, None, mesh.elements, None, res.timings)
+    u = system.full(res.u)
+    x = mesh.nodes + u.reshape(-1, 3)
+    probes = observables.point_positions(x, mesh, elem_p, xi_p)
+    vol = strains = apex_endo = apex_epi = standardised = None
+    sens = None
+    if is_lv:
+        op = observables.strain_operator(mesh, case.outputs.strain_layer)
+        dNdX = jnp.asarray(system.dNdX)
+        X = jnp.asarray(mesh.nodes)
+        elements = jnp.asarray(mesh.elements)
+
+        def output_fn(u_full):
+            xx = X + u_full.reshape(-1, 3)
+            v = observables.cavity_volume(xx, mesh) / units.MM3_PER_ML
+            s = observables.regional_strains(xx, elements, dNdX, op)
+            return jnp.concatenate([v[None], s])
+
+        y = np.asarray(jax.jit(output_fn)(jnp.asarray(u)))
+        vol = (v_ref, float(y[0]) * units.MM3_PER_ML)
+        strains = y[1:]
+        standardised = vol[1] / v_ref
+        apex_endo = x[mesh.template.apex_endo_node].copy()
+        apex_epi = x[mesh.template.apex_epi_node].copy()
+        if with_sensitivities:
+            from lvcore.mechanics.sensitivities import output_sensitivities
+
+            names = materials.PARAM_ORDER[case.material.law]
+            which = THETA_NAMES if case.material.law == "holzapfel-ogden" else names
+            sens = output_sensitivities(system, res.u, res.p, output_fn, names, which)
+    if not (np.all(np.isfinite(x)) and (strains is None or np.all(np.isfinite(strains)))):
+        msg = "solver produced non-finite outputs"
+        if raise_on_failure:
+            raise SolverError(msg)
+        return SimulationResult(False, msg, None, None, None, None, np.zeros((0, 3)), None, res.iterations,
+                                res.load_steps, dofs, time.perf_counter() - t0, mesh.nodes, None, mesh.elements)
+    return SimulationResult(
+        converged=True, message=res.message, cavity_volume_mm3=vol, lvv_standardised=standardised,
+        apex_endocardium=apex_endo, apex_epicardium=apex_epi, probes=probes, strains=strains,
+        newton_iterations=res.iterations, load_steps=res.load_steps, dofs=dofs,
+        seconds=time.perf_counter() - t0, reference_nodes=mesh.nodes, displacement=u.reshape(-1, 3),
+        elements=mesh.elements, sensitivities=sens, timings=res.timings,
+    )
+
+
+__all__ = ["SimulationResult", "simulate", "build_mesh", "build_system", "RESOLUTION_PRESETS", "N_OUTPUTS"]
