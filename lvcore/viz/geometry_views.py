@@ -1,0 +1,98 @@
+"""Pictures and figures of LV geometries, operators and the shape model.
+
+3-D pictures reuse :mod:`lvcore.viz.mesh3d` (off-screen PyVista, PNG bytes);
+charts are plotly figures. No science here: inputs are node arrays on
+:data:`~lvcore.geometry.template.DEFAULT_TEMPLATE` and the plain data of
+:func:`lvcore.studies.geometry_operators.operator_table`.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+import plotly.graph_objects as go
+
+from lvcore.geometry.template import DEFAULT_TEMPLATE
+
+#: Colours of up to three operators (and a fourth for reconstructions).
+OPERATOR_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd")
+
+
+def node_distances(nodes_a, nodes_b) -> np.ndarray:
+    """Per-node distance between two geometries on one template (mm)."""
+    return np.linalg.norm(np.asarray(nodes_a, float) - np.asarray(nodes_b, float), axis=1)
+
+
+def render_overlay(geometries: Mapping[str, np.ndarray], *, view="iso", window_size=(700, 560), title=None,
+                   colors: Sequence[str] = OPERATOR_COLORS) -> bytes:
+    """Overlay of several geometries: curved element edges of each in its own colour (PNG bytes)."""
+    from lvcore.viz.mesh3d import MeshLayer, element_edges, lv_surface, render_meshes
+
+    layers = []
+    for (label, nodes), color in zip(geometries.items(), colors):
+        layers.append(MeshLayer(element_edges(nodes, DEFAULT_TEMPLATE.elements), color=color, style="wireframe",
+                                label=label, line_width=2.0))
+    first = next(iter(geometries.values()))
+    layers.append(MeshLayer(lv_surface(first, DEFAULT_TEMPLATE.elements, subdivision=1), color="lightgrey",
+                            opacity=0.25))
+    return render_meshes(layers, view=view, window_size=window_size, title=title)
+
+
+def render_distance_map(nodes_a, nodes_b, *, label="distance (mm)", view="iso", window_size=(700, 560),
+                        title=None, clim=None) -> bytes:
+    """Geometry A coloured by the per-node distance to geometry B (PNG bytes)."""
+    from lvcore.viz.mesh3d import MeshLayer, lv_surface, render_meshes
+
+    d = node_distances(nodes_a, nodes_b)
+    surf = lv_surface(nodes_a, DEFAULT_TEMPLATE.elements, point_data={label: d}, subdivision=1)
+    return render_meshes([MeshLayer(surf, scalars=label, label=label, cmap="magma",
+                                    clim=clim or (0.0, max(float(d.max()), 1e-6)))],
+                         view=view, window_size=window_size, title=title)
+
+
+def render_shape(nodes, *, color="#c9a27e", view="side", window_size=(420, 420), title=None) -> bytes:
+    """One geometry as a shaded surface with its element edges (PNG bytes)."""
+    from lvcore.viz.mesh3d import MeshLayer, element_edges, lv_surface, render_meshes
+
+    return render_meshes([MeshLayer(lv_surface(nodes, DEFAULT_TEMPLATE.elements, subdivision=1), color=color),
+                          MeshLayer(element_edges(nodes, DEFAULT_TEMPLATE.elements), color="black",
+                                    style="wireframe", line_width=1.0)],
+                         view=view, window_size=window_size, title=title, legend=False)
+
+
+def explained_variance_figure(explained_variance_ratio, k_max: int = 15, title="Explained variance (SYNTHETIC)"):
+    """Bars of the per-mode explained variance and a line of the cumulative share."""
+    evr = np.asarray(explained_variance_ratio)[:k_max]
+    k = np.arange(1, evr.size + 1)
+    fig = go.Figure()
+    fig.add_bar(x=k, y=evr, name="per mode")
+    fig.add_scatter(x=k, y=np.cumsum(evr), mode="lines+markers", name="cumulative")
+    fig.update_layout(title=title, xaxis_title="mode k", yaxis_title="share of variance", yaxis_range=[0, 1.02],
+                      height=360, margin=dict(l=40, r=20, t=50, b=40))
+    return fig
+
+
+def operator_mse_figure(table: Mapping, main: str, log_y: bool = True):
+    """MSE of k-mode reconstructions against k for each patient, with the operators' MSE as dashed lines.
+
+    ``table`` is :func:`lvcore.studies.geometry_operators.operator_table`'s output.
+    """
+    block = next(b for b in table["blocks"] if b["main"] == main)
+    ks = list(table["ks"])
+    fig = go.Figure()
+    palette = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+    for i, row in enumerate(block["rows"]):
+        c = palette[i % len(palette)]
+        name = row["patient"].replace("SYNTHETIC-", "")
+        fig.add_scatter(x=ks, y=[row["pca_mse"][str(k)] for k in ks], mode="lines+markers", line=dict(color=c),
+                        name=f"{name}: k-mode PCA", legendgroup=name)
+        for j, (other, v) in enumerate(row["operator_mse"].items()):
+            fig.add_scatter(x=[ks[0], ks[-1]], y=[v, v], mode="lines",
+                            line=dict(color=c, dash="dash" if j == 0 else "dot"),
+                            name=f"{name}: vs {other}", legendgroup=name)
+    fig.update_layout(title=f"Reconstruction error vs k; main operator {main} (SYNTHETIC)",
+                      xaxis_title="number of PCA modes k", yaxis_title="mean squared node distance (cm²)",
+                      height=460, margin=dict(l=50, r=20, t=50, b=40))
+    if log_y:
+        fig.update_yaxes(type="log")
+    return fig

@@ -1,0 +1,40 @@
+"""The Geometry & operators and Shape model pages under Streamlit's AppTest."""
+import json
+from pathlib import Path
+
+import pytest
+from streamlit.testing.v1 import AppTest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE1 = str(ROOT / "pages" / "1_Geometry_and_operators.py")
+PAGE2 = str(ROOT / "pages" / "2_Shape_model.py")
+
+
+def test_geometry_page_bundled_patient():
+    at = AppTest.from_file(PAGE1, default_timeout=120).run()
+    assert not at.exception, at.exception
+    assert any("SYNTHETIC" in c.value for c in at.caption)
+    assert len(at.get("image")) >= 2  # overlay + distance map
+    assert len(at.dataframe) == 2  # volumes/residuals and the MSE matrix
+    at.selectbox[0].set_value("SYNTHETIC-P02").run()
+    assert not at.exception, at.exception
+    assert any("node MSE" in m.label for m in at.metric)
+
+
+def test_geometry_page_upload_messages():
+    at = AppTest.from_file(PAGE1, default_timeout=120).run()
+    at.radio[0].set_value("Upload my own").run()
+    assert not at.exception, at.exception
+    assert any("Upload at least one" in i.value for i in at.info)
+
+
+def test_shape_model_page():
+    at = AppTest.from_file(PAGE2, default_timeout=120).run()
+    assert not at.exception, at.exception
+    assert any("SYNTHETIC" in c.value for c in at.caption)
+    assert len(at.get("plotly_chart")) == 2
+    assert len(at.get("image")) >= 5  # mean, ±2 SD, original, reconstruction
+    at.slider[0].set_value(10).run()
+    assert not at.exception, at.exception
+    at.radio[0].set_value("op2").run()
+    assert not at.exception, at.exception
