@@ -64,6 +64,7 @@ def render_picture(case_json: str, view: str) -> bytes:
     sim = run_simulation(case_json)
     ref = sim["reference_nodes"]
     return render_reference_and_deformed(ref, ref + sim["displacement"], sim["elements"], view=view,
+                                         reference_label="reference (unloaded)",
                                          window_size=(720, 560))
 
 
@@ -122,58 +123,111 @@ with st.form("simulator"):
                                    "solve at a new resolution also compiles the FE kernels).")
     st.form_submit_button("Simulate", type="primary")
 
-case = Case.default_lv(theta, alpha_endo, alpha_epi, edp, resolution)
-case_json = case.to_json(indent=None)
-with st.spinner("Solving…"):
-    sim = run_simulation(case_json)
 
-if not sim["converged"]:
+
+def show_failure(sim: dict) -> None:
+    """A clear message for a failed solve (no traceback)."""
     reason = sim.get("error") or sim["summary"]["message"]
-    st.error(f"The solver did not converge for these inputs: {reason}. Try a lower EDP, stiffer parameters "
+    st.error(f"The solver did not converge for these inputs: {reason}. Try a lower pressure, stiffer parameters "
              "or another resolution.")
     if "summary" in sim:
         with st.expander("Solver diagnostics"):
             st.json(sim["summary"])
-    st.stop()
 
-summary = sim["summary"]
-vol = summary["cavity_volume_ml"]
-m1, m2, m3, m4 = st.columns(4)
-m1.metric("LVV (end diastole)", f"{vol['loaded']:.1f} mL")
-m2.metric("V_early (reference)", f"{vol['reference']:.1f} mL")
-m3.metric("EDV / V_early", f"{summary['lvv_standardised']:.3f}")
-m4.metric("Mean E_cc", f"{np.mean(summary['strains']):.3f}")
 
-from lvcore.viz import figures  # noqa: E402
-
-left, right = st.columns([1.1, 1])
-with left:
-    tab_map, tab_bull, tab_bars = st.tabs(["Strain map", "Bull's eye", "Bars"])
-    strains = np.asarray(summary["strains"])
-    with tab_map:
-        st.plotly_chart(figures.strain_heatmap(strains), width="stretch")
-    with tab_bull:
-        st.plotly_chart(figures.strain_bullseye(strains), width="stretch")
-    with tab_bars:
-        st.plotly_chart(figures.strain_bars({"simulated": strains}), width="stretch")
-with right:
-    view = st.radio("View", ("iso", "side", "base", "apex"), horizontal=True, key="view")
+def show_picture(case_json: str, key: str, caption: str) -> None:
+    view = st.radio("View", ("iso", "side", "front", "base", "apex"), horizontal=True, key=key)
     try:
-        st.image(render_picture(case_json, view),
-                 caption="Reference (black element edges) and end-diastolic LV coloured by displacement (mm)")
+        st.image(render_picture(case_json, view), caption=caption)
     except Exception as err:  # rendering is optional: never hide the numbers
         st.warning(f"3-D picture unavailable ({type(err).__name__}: {err})")
 
-with st.expander("Solver diagnostics"):
-    st.write(f"{summary['newton_iterations']} Newton iterations over {summary['load_steps']} load steps, "
-             f"{summary['dofs']} degrees of freedom, {summary['seconds']:.2f} s "
-             "(cached results are not re-timed).")
-    st.json({k: summary[k] for k in ("message", "apex", "newton_iterations", "load_steps", "dofs", "seconds")})
 
-d1, d2, d3 = st.columns(3)
-d1.download_button("Download mesh + displacement (VTU)", sim["vtu"], file_name="lv_simulation.vtu",
-                   mime="application/octet-stream", key="dl_vtu")
-d2.download_button("Download result (JSON)", json.dumps(summary, indent=2), file_name="lv_simulation_result.json",
-                   mime="application/json", key="dl_json")
-d3.download_button("Download case (JSON)", case.to_json(), file_name="lv_case.json", mime="application/json",
-                   key="dl_case", help="Run it again with `lvcore simulate lv_case.json`.")
+def show_simulator_result(case: Case, case_json: str, sim: dict) -> None:
+    from lvcore.viz import figures
+
+    summary = sim["summary"]
+    vol = summary["cavity_volume_ml"]
+    m1, m2, m3, m4 = st.columns(4)
+    m1.metric("LVV (end diastole)", f"{vol['loaded']:.1f} mL")
+    m2.metric("V_early (reference)", f"{vol['reference']:.1f} mL")
+    m3.metric("EDV / V_early", f"{summary['lvv_standardised']:.3f}")
+    m4.metric("Mean E_cc", f"{np.mean(summary['strains']):.3f}")
+
+    left, right = st.columns([1.1, 1])
+    with left:
+        tab_map, tab_bull, tab_bars = st.tabs(["Strain map", "Bull's eye", "Bars"])
+        strains = np.asarray(summary["strains"])
+        with tab_map:
+            st.plotly_chart(figures.strain_heatmap(strains), width="stretch")
+        with tab_bull:
+            st.plotly_chart(figures.strain_bullseye(strains), width="stretch")
+        with tab_bars:
+            st.plotly_chart(figures.strain_bars({"simulated": strains}), width="stretch")
+    with right:
+        show_picture(case_json, "view", "Reference (black element edges) and end-diastolic LV coloured by "
+                                        "displacement (mm)")
+
+    with st.expander("Solver diagnostics"):
+        st.write(f"{summary['newton_iterations']} Newton iterations over {summary['load_steps']} load steps, "
+                 f"{summary['dofs']} degrees of freedom, {summary['seconds']:.2f} s "
+                 "(cached results are not re-timed).")
+        st.json({k: summary[k] for k in ("message", "apex", "newton_iterations", "load_steps", "dofs", "seconds")})
+
+    d1, d2, d3 = st.columns(3)
+    d1.download_button("Download mesh + displacement (VTU)", sim["vtu"], file_name="lv_simulation.vtu",
+                       mime="application/octet-stream", key="dl_vtu")
+    d2.download_button("Download result (JSON)", json.dumps(summary, indent=2), file_name="lv_simulation_result.json",
+                       mime="application/json", key="dl_json")
+    d3.download_button("Download case (JSON)", case.to_json(), file_name="lv_case.json", mime="application/json",
+                       key="dl_case", help="Run it again with `lvcore simulate lv_case.json`.")
+
+
+case = Case.default_lv(theta, alpha_endo, alpha_epi, edp, resolution)
+case_json = case.to_json(indent=None)
+with st.spinner("Solving…"):
+    sim = run_simulation(case_json)
+if sim["converged"]:
+    show_simulator_result(case, case_json, sim)
+else:
+    show_failure(sim)
+
+# ----------------------------------------------------------------------------
+st.header("Run a case file")
+st.caption("Any geometry, law and load of the case schema (docs/case_schema.md), e.g. the Land et al. (2015) "
+           "benchmarks. The same as `lvcore simulate CASE.json` on the command line.")
+EXAMPLES = {p.name: p for p in sorted((HERE / "examples" / "cases").glob("*.json"))}
+example = st.selectbox("Start from an example", list(EXAMPLES), key="example") if EXAMPLES else None
+with st.form("case_runner"):
+    text = st.text_area("Case JSON", EXAMPLES[example].read_text() if example else "", height=220,
+                        key=f"case_text_{example}")
+    run_case = st.form_submit_button("Run case")
+if run_case:
+    st.session_state["case_runner_input"] = (text, example)
+
+if "case_runner_input" in st.session_state:
+    from lvcore.mechanics.cli import format_summary
+
+    text, example = st.session_state["case_runner_input"]
+    base_dir = EXAMPLES[example].parent if example else None
+    try:
+        user_case = Case.from_dict(json.loads(text), base_dir=base_dir)
+    except json.JSONDecodeError as err:
+        st.error(f"This is not valid JSON: {err}")
+    except LVCoreError as err:
+        field = getattr(err, "field", None)
+        st.error(f"Bad case: field `{field}`: {err.problem}" if field else f"Bad case: {err}")
+    else:
+        user_json = user_case.to_json(indent=None)
+        with st.spinner("Solving the case…"):
+            user_sim = run_simulation(user_json)
+        if user_sim["converged"]:
+            c1, c2 = st.columns([1, 1])
+            c1.code(format_summary(user_sim["summary"]), language=None)
+            with c2:
+                show_picture(user_json, "case_view", f"Reference edges and deformed {user_case.geometry.source}, "
+                                                     "coloured by displacement (mm)")
+            st.download_button("Download mesh + displacement (VTU)", user_sim["vtu"], file_name="case_result.vtu",
+                               mime="application/octet-stream", key="dl_case_vtu")
+        else:
+            show_failure(user_sim)

@@ -54,3 +54,17 @@ def test_failed_solve_shows_message(monkeypatch):
     assert not at.exception
     assert at.error and "did not converge" in at.error[0].value
     assert not [m for m in at.metric if m.label.startswith("LVV")]
+
+
+def test_case_runner_reports_bad_cases():
+    at = AppTest.from_file(APP, default_timeout=180).run()
+    assert "land2015_problem2.json" in at.selectbox(key="example").options
+    runner = at.form_submit_button(key="FormSubmitter:case_runner-Run case")
+    at.text_area[0].set_value('{"geometry": {"kind": "default"}, "material": {"law": "guccione", "C": 1},'
+                              ' "load": {"pressure": 1, "units": "kPa"}}')
+    runner.click().run()
+    assert not at.exception
+    assert "material.bf" in at.error[0].value
+    at.text_area[0].set_value("{not json")
+    at.form_submit_button(key="FormSubmitter:case_runner-Run case").click().run()
+    assert not at.exception and "not valid JSON" in at.error[0].value

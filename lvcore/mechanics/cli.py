@@ -67,11 +67,11 @@ def _clean(x):
 
 
 def format_summary(result) -> str:
-    """A readable multi-line summary of a simulation result."""
+    """A readable multi-line summary of a simulation result (or of its ``to_dict()``)."""
     from lvcore.outputs import LEVEL_NAMES
     from lvcore.viz.figures import strain_grid
 
-    d = result.to_dict()
+    d = result if isinstance(result, dict) else result.to_dict()
     state = "converged" if d["converged"] else "NOT CONVERGED"
     lines = [f"solver: {state}" + (f" ({d['message']})" if d["message"] and d["message"] != state else ""),
              f"  {d['newton_iterations']} Newton iterations, {d['load_steps']} load steps, {d['dofs']} dofs, "
@@ -91,7 +91,7 @@ def format_summary(result) -> str:
         lines.append("circumferential strain E_cc (rows: levels base -> apex; columns: sectors S1..S6):")
         for name, row in zip(LEVEL_NAMES, strain_grid(d["strains"])):
             lines.append(f"  {name:>10s} " + " ".join(f"{v:+.4f}" for v in row))
-    sens = getattr(result, "sensitivities", None)
+    sens = d.get("sensitivities") if isinstance(result, dict) else getattr(result, "sensitivities", None)
     if sens:
         lines.append("sensitivities: " + ", ".join(str(k) for k in sens) + " (use --json for values)")
     return "\n".join(lines)

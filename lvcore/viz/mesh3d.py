@@ -247,7 +247,8 @@ def render_meshes(layers: Sequence, *, window_size: tuple[int, int] = (800, 600)
                 kwargs.update(scalars=layer.scalars, cmap=layer.cmap, clim=layer.clim,
                               scalar_bar_args={"title": layer.label or (layer.scalars if isinstance(layer.scalars, str)
                                                                         else f"layer {n}"),
-                                               "color": "black", "vertical": True, "position_x": 0.85,
+                                               "color": "black", "vertical": True, "position_x": 0.8,
+                                               "title_font_size": 12, "label_font_size": 12,
                                                "position_y": 0.1, "height": 0.7, "width": 0.06})
             else:
                 kwargs.update(color=layer.color or "lightgrey")
@@ -288,7 +289,8 @@ def png_bytes(image: np.ndarray) -> bytes:
 
 def render_reference_and_deformed(reference_nodes, deformed_nodes, elements, *, scalars=None,
                                   scalars_label: str = "displacement (mm)", window_size=(800, 600), view="iso",
-                                  title: str | None = None, cmap: str = "viridis") -> bytes:
+                                  title: str | None = None, cmap: str = "viridis",
+                                  reference_label: str = "reference") -> bytes:
     """Reference mesh as a grey wireframe and the deformed mesh as a coloured surface.
 
     Parameters
@@ -300,6 +302,8 @@ def render_reference_and_deformed(reference_nodes, deformed_nodes, elements, *, 
         The reference is drawn as the curved element edges of its boundary.
     scalars_label : str
         Scalar bar title.
+    reference_label : str
+        Legend entry of the reference wireframe.
 
     Returns
     -------
@@ -312,7 +316,7 @@ def render_reference_and_deformed(reference_nodes, deformed_nodes, elements, *, 
     cur_surface = lv_surface(cur, elements, point_data={scalars_label: values})
     return render_meshes(
         [
-            MeshLayer(ref_edges, color="black", style="wireframe", opacity=0.8, line_width=1.5, label="reference (early diastole)"),
+            MeshLayer(ref_edges, color="black", style="wireframe", opacity=0.8, line_width=1.5, label=reference_label),
             MeshLayer(cur_surface, scalars=scalars_label, opacity=0.7, label=scalars_label, cmap=cmap),
         ],
         window_size=window_size, view=view, title=title,
