@@ -91,6 +91,23 @@ def accuracy_table(meta: dict) -> str:
     return "\n".join(lines)
 
 
+def physiological_table(emu: Emulator) -> str | None:
+    """Held-out accuracy restricted to runs with a physiological LVV (50-250 mL)."""
+    from lvcore.emulator.io import load_validation
+    from lvcore.emulator.training import metrics
+
+    src = emu.metadata.get("_dir")
+    val = load_validation(src) if src else None
+    if val is None:
+        return None
+    keep = (val["outputs"][:, 0] >= 50) & (val["outputs"][:, 0] <= 250)
+    if keep.sum() < 5:
+        return None
+    m = metrics(val["outputs"][keep], val["predictions"][keep])
+    return (f"held-out runs with 50 <= LVV <= 250 mL ({int(keep.sum())} of {keep.size}): LVV RMSE {m['lvv_rmse_ml']:.3f} mL "
+            f"(p99 {m['lvv_p99_abs_ml']:.3f}), strain RMSE {m['strain_rmse']:.4f} (p99 {m['strain_p99_abs']:.4f})")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--emulator", nargs="*", default=[], help="emulator names or directories (default: bundled ones)")
@@ -98,7 +115,14 @@ def main(argv=None) -> int:
     from lvcore.emulator.io import available_emulators, load_emulator
 
     names = args.emulator or available_emulators()
-    emus = [load_emulator(n) for n in names] or [timing_emulator()]
+    from lvcore.emulator.io import resolve_emulator_dir
+
+    emus = []
+    for n in names:
+        emu = load_emulator(n)
+        emu.metadata["_dir"] = str(resolve_emulator_dir(n))
+        emus.append(emu)
+    emus = emus or [timing_emulator()]
     import jax
     print(f"jax {jax.__version__} on {jax.devices()[0].platform}; OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}; "
           "2-core machine shared with other jobs: timings are noisy (best of 3)")
@@ -111,6 +135,9 @@ def main(argv=None) -> int:
         if emu.metadata.get("training"):
             print()
             print(accuracy_table(emu.metadata))
+            phys = physiological_table(emu)
+            if phys:
+                print(phys)
     return 0
 
 
