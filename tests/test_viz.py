@@ -140,3 +140,19 @@ def test_element_edges_follow_the_curved_surfaces():
     assert r[base].min() == pytest.approx(r_ring, rel=5e-3)
     all_edges = mesh3d.element_edges(lv.nodes(tmpl), tmpl.elements, boundary_only=False)
     assert all_edges.n_cells > edges.n_cells
+
+
+def test_overlay_and_scalar_map():
+    from PIL import Image
+
+    tmpl = LVTemplate(6, 4, 1)
+    a = TruncatedEllipsoidLV(EllipsoidSurface(7, 17), EllipsoidSurface(10, 20), 5.0).nodes(tmpl)
+    b = a * np.array([1.3, 1.3, 1.0])
+    png = mesh3d.render_overlay({"A": a, "B": b}, tmpl.elements, window_size=(240, 200), opacity=1.0)
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+    blue = (img[..., 2] > 150) & (img[..., 0] < 120)  # royalblue: B (wider) shows around A
+    assert blue.mean() > 0.01
+    png = mesh3d.render_scalar_map(a, tmpl.elements, tmpl.element_regions, label="region", window_size=(200, 200))
+    assert png[:4] == b"\x89PNG"
+    with pytest.raises(ValueError, match="one entry per node"):
+        mesh3d.render_scalar_map(a, tmpl.elements, np.zeros(5))

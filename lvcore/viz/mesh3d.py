@@ -321,3 +321,67 @@ def render_reference_and_deformed(reference_nodes, deformed_nodes, elements, *, 
         ],
         window_size=window_size, view=view, title=title,
     )
+
+
+#: Distinct colours for overlays of several geometries.
+OVERLAY_COLOURS = ("tomato", "royalblue", "seagreen", "darkorange", "mediumpurple", "goldenrod", "teal", "hotpink")
+
+
+def render_overlay(geometries: Mapping[str, Any], elements, *, opacity: float = 0.35, edges: bool = True,
+                   window_size=(800, 600), view="iso", title: str | None = None) -> bytes:
+    """Several geometries on one mesh topology, overlaid in distinct colours (e.g. three operators, a PCA
+    reconstruction and its original).
+
+    Parameters
+    ----------
+    geometries : dict label -> (n_nodes, 3) node array (mm)
+        All on the same topology ``elements``.
+    elements : (n_elements, 27) template-order connectivity
+    opacity : float
+        Surface opacity of each geometry.
+    edges : bool
+        Also draw each geometry's curved boundary element edges in its colour.
+
+    Returns
+    -------
+    PNG bytes.
+    """
+    layers = []
+    for n, (label, nodes) in enumerate(geometries.items()):
+        colour = OVERLAY_COLOURS[n % len(OVERLAY_COLOURS)]
+        layers.append(MeshLayer(lv_surface(nodes, elements), color=colour, opacity=opacity, label=str(label)))
+        if edges:
+            layers.append(MeshLayer(element_edges(nodes, elements), color=colour, style="wireframe", line_width=1.5))
+    return render_meshes(layers, window_size=window_size, view=view, title=title)
+
+
+def render_scalar_map(nodes, elements, values, *, label: str = "value", cmap: str = "viridis",
+                      clim: tuple[float, float] | None = None, window_size=(800, 600), view="iso",
+                      title: str | None = None) -> bytes:
+    """One geometry coloured by a nodal or element field (e.g. node distance to another geometry, region ids).
+
+    Parameters
+    ----------
+    nodes : (n_nodes, 3) array (mm)
+    elements : (n_elements, 27) template-order connectivity
+    values : (n_nodes,) or (n_elements,) array
+        Point values (interpolated over the curved faces) or cell values.
+    label : str
+        Scalar bar title (with units).
+
+    Returns
+    -------
+    PNG bytes.
+    """
+    values = np.asarray(values, dtype=float)
+    nodes = np.asarray(nodes, dtype=float)
+    if values.shape[0] == nodes.shape[0]:
+        surface = lv_surface(nodes, elements, point_data={label: values})
+    elif values.shape[0] == np.shape(elements)[0]:
+        surface = lv_surface(nodes, elements, cell_data={label: values})
+    else:
+        raise ValueError(f"values must have one entry per node ({nodes.shape[0]}) or per element "
+                         f"({np.shape(elements)[0]}), got {values.shape[0]}")
+    return render_meshes([MeshLayer(surface, scalars=label, label=label, cmap=cmap, clim=clim),
+                          MeshLayer(element_edges(nodes, elements), color="black", style="wireframe", opacity=0.5)],
+                         window_size=window_size, view=view, title=title)
