@@ -183,3 +183,38 @@ def test_not_a_mapping():
     with pytest.raises(CaseError) as info:
         Case.from_dict(_edit(HO, ("material",), 3))
     assert info.value.field == "material"
+
+
+def test_mesh_geometry_from_file(tmp_path):
+    gio = pytest.importorskip("lvcore.geometry.io")
+    nodes = DEFAULT_LV.nodes(DEFAULT_TEMPLATE) * 1.1
+    gio.write_template_mesh(tmp_path / "lv.vtu", nodes)
+    d = copy.deepcopy(HO)
+    d["geometry"] = {"kind": "mesh", "path": "lv.vtu", "resolution": "fast"}
+    (tmp_path / "case.json").write_text(json.dumps(d))
+    case = load_case(tmp_path / "case.json")  # relative path resolves against the case file's folder
+    np.testing.assert_allclose(case.geometry.template_nodes, nodes)
+    assert case.geometry.base_z() == pytest.approx(11.0)
+    assert Case.from_dict(case.to_dict()) == case
+    (tmp_path / "broken.vtu").write_text("<VTKFile>")
+    d["geometry"]["path"] = str(tmp_path / "broken.vtu")
+    with pytest.raises(CaseError) as info:
+        Case.from_dict(d)
+    assert info.value.field == "geometry.path" and "broken.vtu" in str(info.value)
+
+
+def test_pca_geometry_from_bundled_model():
+    sm = pytest.importorskip("lvcore.geometry.shape_model")
+    try:
+        model = sm.load_shape_model()
+    except Exception as err:  # the bundled model is built by scripts/build_cohort.py
+        pytest.skip(f"no bundled shape model: {err}")
+    d = copy.deepcopy(HO)
+    d["geometry"] = {"kind": "pca", "scores": [1.0, -0.5]}
+    case = Case.from_dict(d)
+    np.testing.assert_allclose(case.geometry.template_nodes, model.reconstruct(np.array([1.0, -0.5])))
+    assert "SYNTHETIC" in case.geometry.source
+    d["geometry"]["scores"] = [0.0] * (model.n_modes + 1)
+    with pytest.raises(CaseError) as info:
+        Case.from_dict(d)
+    assert info.value.field == "geometry.scores" and "modes" in str(info.value)

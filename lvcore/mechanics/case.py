@@ -318,13 +318,13 @@ def _vector(value, where: str, n=3, positive=False) -> tuple[float, ...]:
     return tuple(_number(v, f"{where}[{i}]", positive=positive) for i, v in enumerate(value))
 
 
-def _resolve(path_value, where: str, base_dir: Path | None) -> Path:
+def _resolve(path_value, where: str, base_dir: Path | None, suffixes=()) -> Path:
     if not isinstance(path_value, str) or not path_value:
         raise CaseError(where, f"must be a file path string, got {path_value!r}")
     p = Path(path_value).expanduser()
     if not p.is_absolute() and base_dir is not None:
         p = base_dir / p
-    if not p.is_file():
+    if not p.is_file() and not any(p.with_suffix(sfx).is_file() for sfx in suffixes):
         raise CaseError(where, f"file '{p}' does not exist")
     return p
 
@@ -434,7 +434,7 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
         if not isinstance(scores, (list, tuple)) or len(scores) == 0:
             raise CaseError("geometry.scores", f"must be a non-empty list of numbers, got {scores!r}")
         scores = [_number(v, f"geometry.scores[{i}]") for i, v in enumerate(scores)]
-        model = _resolve(g["model"], "geometry.model", base_dir) if "model" in g else None
+        model = _resolve(g["model"], "geometry.model", base_dir, suffixes=(".json",)) if "model" in g else None
         from lvcore.geometry.shape_model import load_shape_model  # lazy
 
         try:
@@ -442,7 +442,7 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
         except LVCoreError as err:
             raise CaseError("geometry.scores" if model is None else "geometry.model", str(err)) from None
         nodes = _template_nodes(nodes, "geometry.scores")
-        src = f"PCA scores {scores}" + (f" of model {model}" if model else "")
+        src = f"PCA scores {scores} of " + (f"shape model {model}" if model else "the bundled SYNTHETIC shape model")
         extra = {"scores": scores, **({"model": str(model)} if model else {})}
         return GeometrySpec(kind, resolution, preset, template_nodes=nodes, source=src, extra=extra)
     # box
