@@ -97,3 +97,21 @@ def test_ellipsoid_round_trip_surfaces(tmp_path):
     assert abs(r.cavity_volume_ml / (g.cavity_volume_mm3() / 1000.0) - 1) < 0.01
     out = write_template_mesh(tmp_path / "fit.vtu", r.nodes)
     assert np.allclose(read_template_mesh(out), r.nodes)
+
+
+def test_spherical_harmonics_match_scipy():
+    from scipy.special import sph_harm_y
+
+    from lvcore.geometry.fitting import _sh_basis
+
+    rng = np.random.default_rng(0)
+    th, ph = rng.uniform(0, np.pi, 50), rng.uniform(-np.pi, np.pi, 50)
+    B, ls = _sh_basis(th, ph, 6)
+    col = 0
+    for l in range(7):
+        for m in range(l + 1):
+            y = sph_harm_y(l, m, th, ph)
+            refs = [y.real] if m == 0 else [np.sqrt(2) * y.real, np.sqrt(2) * y.imag]
+            for ref in refs:
+                assert np.allclose(np.abs(B[:, col]), np.abs(ref), atol=1e-12) and ls[col] == l
+                col += 1
