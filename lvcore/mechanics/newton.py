@@ -13,12 +13,15 @@ states whose smallest pointwise J is below ``min_jacobian`` are rejected.
 """
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lvcore.mechanics.linear import factorize
+
+_DEBUG = bool(os.environ.get("LVCORE_NEWTON_DEBUG"))
 
 
 @dataclass
@@ -28,12 +31,13 @@ class NewtonOptions:
     rtol: float = 1e-9
     rtol_intermediate: float = 1e-4
     max_iterations: int = 25
-    first_step: float = 1.0
+    first_step: float = 0.5
     min_step: float = 1.0 / 1024
     grow: float = 2.0
     max_cuts: int = 12
     min_jacobian: float = 0.02
     max_line_search: int = 10
+    predictor: bool = True
 
 
 @dataclass
@@ -49,6 +53,38 @@ class NewtonResult:
     timings: dict = field(default_factory=dict)
 
 
+def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
+    """Step length along (du, dp).
+
+    Trial states with min J below ``opts.min_jacobian`` are halved away. Among
+    admissible states the step is chosen by the root of the projected residual
+    ``g(α) = du · (r_u + κ Dᵀ M⁻¹ r_p)(u + α du, p + α dp)`` (D frozen; the
+    directional derivative of the energy for a potential load): the full step is taken unless it overshoots the
+    root by much (``g(1) > 0.5 |g(0)|``), in which case secant steps
+    towards the root are taken.
+    """
+    g0 = float(du @ rhs)
+    alpha, lo, g_lo = 1.0, 0.0, g0
+    best = None
+    for _ in range(opts.max_line_search):
+        ut, pt = u + alpha * du, p + alpha * dp
+        rut, rpt, mjt, _ = system.residual(ut, pt, lam)
+        stats["residuals"] += 1
+        if not (mjt > opts.min_jacobian and np.all(np.isfinite(rut)) and np.all(np.isfinite(rpt))):
+            alpha = lo + 0.5 * (alpha - lo)
+            continue
+        best = (alpha, ut, pt, rut, rpt, mjt)
+        g = float(du @ system.condensed(rut, rpt, D))
+        if g0 >= 0 or g <= 0.5 * abs(g0):
+            break
+        # overshoot: secant root between lo (g_lo < 0) and alpha (g > 0)
+        a_new = lo + (alpha - lo) * g_lo / (g_lo - g)
+        alpha = float(np.clip(a_new, lo + 0.1 * (alpha - lo), lo + 0.9 * (alpha - lo)))
+    if best is None:
+        return False, 0.0, u, p, None, None, 0.0
+    return (True,) + best
+
+
 def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats):
     """Newton iterations at fixed load factor. Returns (ok, u, p, reason)."""
     r_u, r_p, mj, _ = system.residual(u, p, lam)
@@ -58,7 +94,6 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats):
             return False, u, p, "non-finite residual"
         if it > 0 and np.linalg.norm(r_u) <= tol_u and np.max(np.abs(r_p)) <= tol_p:
             return True, u, p, ""
-        m0 = system.merit(r_u, r_p)
         t0 = time.perf_counter()
         rhs, K, D, r_p = system.tangent(u, p, lam)
         stats["t_tangent"] += time.perf_counter() - t0
@@ -72,23 +107,14 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats):
         if not np.all(np.isfinite(du)):
             return False, u, p, "non-finite Newton step"
         dp = system.pressure_increment(du, D, r_p)
-        alpha = 1.0
         t0 = time.perf_counter()
-        for _ in range(opts.max_line_search):
-            ut, pt = u + alpha * du, p + alpha * dp
-            rut, rpt, mjt, _ = system.residual(ut, pt, lam)
-            stats["residuals"] += 1
-            ok = mjt > opts.min_jacobian and np.all(np.isfinite(rut)) and np.all(np.isfinite(rpt))
-            if ok:
-                mt = system.merit(rut, rpt)
-                ok = mt < (1.0 - 1e-4 * alpha) * m0 or (np.linalg.norm(rut) <= tol_u and np.max(np.abs(rpt)) <= tol_p)
-            if ok:
-                break
-            alpha *= 0.5
-        else:
-            stats["t_line"] += time.perf_counter() - t0
-            return False, u, p, "line search found no admissible step (inverted elements or no decrease)"
+        found, alpha, ut, pt, rut, rpt, mjt = _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats)
         stats["t_line"] += time.perf_counter() - t0
+        if not found:
+            return False, u, p, "line search found no admissible step (inverted elements)"
+        if _DEBUG:
+            print(f"  it {it} lam {lam:.4f} |r_u| {np.linalg.norm(r_u):.3e} -> {np.linalg.norm(rut):.3e} alpha {alpha:g} "
+                  f"|r_p| {np.abs(rpt).max():.2e} minJ {mjt:.3f}")
         u, p, r_u, r_p = ut, pt, rut, rpt
         if np.linalg.norm(r_u) <= tol_u and np.max(np.abs(r_p)) <= tol_p:
             return True, u, p, ""
@@ -110,14 +136,24 @@ def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
     scale = max(np.linalg.norm(r1), 1e-30)
     vol = float(np.max(np.sum(system.wdet, axis=1)))
     lam, step, steps, cuts = 0.0, opts.first_step, 0, 0
+    prev = None  # (load factor, u, p) of the previous converged step, for the secant predictor
     last_reason = ""
     while lam < 1.0:
         target = min(1.0, lam + step)
         final = target >= 1.0
         rtol = opts.rtol if final else opts.rtol_intermediate
         it0 = stats["iterations"]
-        ok, u_new, p_new, reason = _newton_at(system, u, p, target, rtol * scale, rtol * 1e-2 * vol, opts, stats)
+        u_start, p_start = u, p
+        if prev is not None and opts.predictor:
+            c = (target - lam) / (lam - prev[0])
+            u_try, p_try = u + c * (u - prev[1]), p + c * (p - prev[2])
+            if system.residual(u_try, p_try, target)[2] > opts.min_jacobian:
+                u_start, p_start = u_try, p_try
+            stats["residuals"] += 1
+        ok, u_new, p_new, reason = _newton_at(system, u_start, p_start, target, rtol * scale, rtol * 1e-2 * vol,
+                                              opts, stats)
         if ok:
+            prev = (lam, u, p)
             u, p, lam = u_new, p_new, target
             steps += 1
             if stats["iterations"] - it0 <= 6:

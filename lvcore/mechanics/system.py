@@ -182,6 +182,13 @@ class DiscreteSystem:
         du = self.full(du_free)[self.edofs]
         return float(self.kappa) * np.einsum("emn,en->em", self.Minv, r_p + np.einsum("emk,ek->em", D, du))
 
+    def condensed(self, r_u, r_p, D) -> np.ndarray:
+        """Condensed residual ``r_u + κ Dᵀ M⁻¹ r_p`` on the free dofs (D from a tangent call)."""
+        q = float(self.kappa) * np.einsum("emn,en->em", self.Minv, r_p)
+        g = np.zeros(self.mesh.n_dofs)
+        np.add.at(g, self.edofs, np.einsum("emk,em->ek", D, q))
+        return r_u + g[self.free]
+
     def merit(self, r_u, r_p) -> float:
         """Line-search merit: the norm of the force residual ||r_u|| (mN).
 

@@ -1,0 +1,96 @@
+"""simulate(): outputs, JSON, invariance to rigid motions, base conditions, failures, adjoint vs FD."""
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from lvcore.geometry.analytic import DEFAULT_LV
+from lvcore.geometry.template import DEFAULT_TEMPLATE
+from lvcore.mechanics.case import Case, GeometrySpec
+from lvcore.mechanics.newton import NewtonOptions
+from lvcore.mechanics.simulate import simulate
+
+THETA = {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}
+
+
+@pytest.fixture(scope="module")
+def fast_case():
+    return Case.default_lv(THETA, resolution="fast")
+
+
+@pytest.fixture(scope="module")
+def fast_result(fast_case):
+    return simulate(fast_case, with_sensitivities=True)
+
+
+def test_outputs_and_json(fast_result):
+    r = fast_result
+    assert r.converged, r.message
+    y = r.outputs()
+    assert y.shape == (25,) and np.all(np.isfinite(y))
+    assert y[0] > r.cavity_volume_mm3[0] / 1000.0  # the cavity fills
+    assert np.all(y[1:] < 0)  # circumferential strain w.r.t. end diastole is negative in filling
+    d = json.loads(json.dumps(r.to_dict()))
+    assert set(d) == {"converged", "message", "cavity_volume_ml", "cavity_volume_mm3", "lvv_standardised", "apex",
+                      "probes", "strains", "newton_iterations", "load_steps", "dofs", "seconds"}
+    assert d["cavity_volume_ml"]["loaded"] == pytest.approx(y[0])
+    assert d["lvv_standardised"] == pytest.approx(r.cavity_volume_mm3[1] / r.cavity_volume_mm3[0])
+    assert len(d["strains"]) == 24
+    # the apex moves down the axis
+    assert d["apex"]["endocardium"][2] < DEFAULT_LV.position(0.0, 1.0, 0.0)[2]
+
+
+def test_accepts_dict_and_probes_follow_nodes(fast_case):
+    d = fast_case.to_dict()
+    apex_endo = DEFAULT_LV.position(0.0, 1.0, 0.0).tolist()
+    d["probes"] = [apex_endo]
+    r = simulate(d)
+    assert r.converged
+    np.testing.assert_allclose(r.probes[0], r.apex_endocardium, atol=1e-9)
+
+
+def test_rigid_motion_leaves_outputs_unchanged(fast_case):
+    nodes = DEFAULT_TEMPLATE.nodes_from_map(DEFAULT_LV.position)
+    th = 0.7
+    R = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1.0]])
+    moved = nodes @ R.T + np.array([3.0, -5.0, 12.0])
+    outs = []
+    for n in (nodes, moved):
+        g = GeometrySpec("mesh", preset="fast", template_nodes=n, source="test")
+        outs.append(simulate(dataclasses.replace(fast_case, geometry=g)).outputs())
+    np.testing.assert_allclose(outs[0], outs[1], rtol=1e-7, atol=1e-9)
+
+
+def test_sliding_base_stays_planar_and_is_softer(fast_case, fast_result):
+    d = fast_case.to_dict()
+    d["boundary"] = {"base": "sliding"}
+    r = simulate(d)
+    assert r.converged, r.message
+    base = np.abs(r.reference_nodes[:, 2] - DEFAULT_LV.base_z) < 1e-9
+    assert np.abs(r.displacement[base, 2]).max() < 1e-12
+    assert np.abs(r.displacement[base, :2]).max() > 1e-3  # it slides
+    assert r.cavity_volume_mm3[1] > fast_result.cavity_volume_mm3[1]
+
+
+def test_failure_reports_reason_without_nans(fast_case):
+    d = fast_case.to_dict()
+    d["load"] = {"pressure": 400.0, "units": "kPa"}
+    r = simulate(d, options=NewtonOptions(max_iterations=4, max_cuts=2))
+    assert not r.converged and "load factor" in r.message
+    txt = json.dumps(r.to_dict())
+    assert "NaN" not in txt and "Infinity" not in txt
+
+
+def test_adjoint_sensitivities_match_finite_differences(fast_case, fast_result):
+    sens = fast_result.sensitivities
+    assert set(sens) == {"a", "b", "af", "bf"}
+    for name in ("a", "bf"):
+        h = 1e-4 * THETA[name]
+        ys = []
+        for sgn in (1, -1):
+            th = dict(THETA, **{name: THETA[name] + sgn * h})
+            ys.append(simulate(Case.default_lv(th, resolution="fast")).outputs())
+        fd = (ys[0] - ys[1]) / (2 * h)
+        np.testing.assert_allclose(sens[name], fd, rtol=2e-4, atol=1e-6 * np.abs(fd).max())
+    assert sens["a"][0] < 0  # stiffer myocardium, smaller cavity
