@@ -35,3 +35,15 @@ def test_fit_bad_input_is_a_clean_error(tmp_path, capsys):
     assert main(["geometry", "fit", str(bad), "--out", str(tmp_path / "x.vtu")]) == 2
     assert "empty" in capsys.readouterr().err
     assert main(["geometry", "fit"]) == 2
+
+
+def test_fitted_mesh_runs_in_the_simulator(tmp_path):
+    import lvcore
+
+    out = tmp_path / "fit.vtu"
+    assert main(["geometry", "fit", str(EXAMPLE), "--out", str(out)]) == 0
+    case = {"geometry": {"kind": "mesh", "path": str(out), "resolution": "fast"},
+            "material": {"law": "holzapfel-ogden", "a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6},
+            "load": {"pressure": 8, "units": "mmHg"}}
+    y = lvcore.simulate(case).outputs()
+    assert len(y) == 25 and y[0] > 60.0 and np.all(np.asarray(y[1:]) < 0)
