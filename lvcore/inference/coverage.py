@@ -108,10 +108,16 @@ def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
 
 
 def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.SamplerConfig,
-                       sigma_v: float = 5.0) -> dict:
-    """theta draws for many data sets at once: one jit, vmapped over (data set x chain).
+                       sigma_v: float = 5.0, sites=THETA_NAMES, group_by_chain: bool = False) -> dict:
+    """Posterior draws for many data sets at once: one jit, vmapped over (data set x chain).
 
-    Returns a dict of arrays of shape (n_datasets, num_chains * num_samples).
+    Parameters
+    ----------
+    sites : sequence of str
+        Sites to keep (constrained values; ``eta`` is available for NUTS models).
+    group_by_chain : bool
+        Return arrays of shape (n_datasets, num_chains, num_samples, ...) instead
+        of (n_datasets, num_chains * num_samples, ...).
     """
     ys = jnp.asarray(ys, dtype=jnp.float64)
     n = ys.shape[0]
@@ -127,7 +133,7 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
         def body(st, _):
             st = sample(st, y)
             zc = constrain(st.z, y)
-            return st, {k: zc[k] for k in THETA_NAMES}
+            return st, {k: zc[k] for k in sites}
 
         _, draws = jax.lax.scan(body, state, None, length=total)
         return {k: v[config.num_warmup:] for k, v in draws.items()}
@@ -136,7 +142,8 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
     flat_keys = chain_keys.reshape((n * config.num_chains,) + chain_keys.shape[2:])
     flat_y = jnp.repeat(ys, config.num_chains, axis=0)
     draws = jax.jit(jax.vmap(one_chain))(flat_keys, flat_y)
-    return {k: np.asarray(v).reshape(n, -1) for k, v in draws.items()}
+    shape = (n, config.num_chains, config.num_samples) if group_by_chain else (n, -1)
+    return {k: np.asarray(v).reshape(shape + np.shape(v)[2:]) for k, v in draws.items()}
 
 
 def coverage_study(forward, model_name: str = "iid", n_datasets: int = 50, *, level: float = 0.9,

@@ -1,0 +1,191 @@
+"""Plotly figures for calibration results (ArviZ InferenceData in, ``go.Figure`` out).
+
+Trace and rank plots, the R-hat/ESS table, a pair plot of theta, posterior
+predictive densities of all 25 outputs with the measured values as dashed
+lines (chapter Fig. 9.1 style), the discrepancy b on the 6 x 4 strain grid,
+and the fibre-discrepancy study figures (Figs. 9.6, 9.7, 9.9).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import pandas as pd
+import plotly.graph_objects as go
+from plotly.subplots import make_subplots
+
+from lvcore.outputs import OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
+from lvcore.viz.figures import SERIES_COLOURS, strain_heatmap, violin
+
+UNITS = {"a": "kPa", "b": "-", "af": "kPa", "bf": "-", "alpha_endo": "deg", "alpha_epi": "deg",
+         "sigma_s2": "strain²", "v": "strain", "c": "rad", "tau": "-", "lam": "levels",
+         "sigma1_sq": "strain²", "sigma2_sq": "strain²"}
+
+
+def _draws(idata, name) -> np.ndarray:
+    """(chain, draw[, ...]) array of a posterior variable."""
+    return np.asarray(idata.posterior[name].values)
+
+
+def _scalar_vars(idata, var_names=None) -> list[str]:
+    if var_names is not None:
+        return [v for v in var_names if v in idata.posterior]
+    return [v for v in idata.posterior.data_vars if idata.posterior[v].ndim == 2]
+
+
+def trace_figure(idata, var_names=None, *, height_per_var: int = 160) -> go.Figure:
+    """Trace plots: one row per parameter, one line per chain."""
+    names = _scalar_vars(idata, var_names)
+    fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True, vertical_spacing=0.02,
+                        subplot_titles=[f"{n} ({UNITS.get(n, '')})" for n in names])
+    for i, n in enumerate(names):
+        d = _draws(idata, n)
+        for c in range(d.shape[0]):
+            fig.add_scatter(y=d[c], mode="lines", line=dict(width=0.8, color=SERIES_COLOURS[c % 8]),
+                            name=f"chain {c}", legendgroup=f"chain {c}", showlegend=i == 0, row=i + 1, col=1)
+    fig.update_layout(height=max(300, height_per_var * len(names)), title="Trace plots",
+                      margin=dict(l=10, r=10, t=60, b=10))
+    fig.update_xaxes(title_text="draw", row=len(names), col=1)
+    return fig
+
+
+def rank_figure(idata, var_names=None, *, bins: int = 20, height_per_var: int = 150) -> go.Figure:
+    """Rank plots: histograms of each chain's ranks in the pooled draws (flat = well mixed)."""
+    from scipy.stats import rankdata
+
+    names = _scalar_vars(idata, var_names)
+    fig = make_subplots(rows=len(names), cols=1, vertical_spacing=0.03, subplot_titles=list(names))
+    for i, n in enumerate(names):
+        d = _draws(idata, n)
+        ranks = rankdata(d.reshape(-1)).reshape(d.shape)
+        edges = np.linspace(0, ranks.size, bins + 1)
+        for c in range(d.shape[0]):
+            counts, _ = np.histogram(ranks[c], bins=edges)
+            fig.add_scatter(x=0.5 * (edges[1:] + edges[:-1]), y=counts, mode="lines", line_shape="hvh",
+                            line=dict(color=SERIES_COLOURS[c % 8]), name=f"chain {c}",
+                            legendgroup=f"chain {c}", showlegend=i == 0, row=i + 1, col=1)
+        fig.add_hline(y=d.shape[1] / bins, line=dict(color="grey", dash="dot"), row=i + 1, col=1)
+    fig.update_layout(height=max(300, height_per_var * len(names)), title="Rank plots (uniform if chains agree)",
+                      margin=dict(l=10, r=10, t=60, b=10))
+    return fig
+
+
+def diagnostics_table(idata, var_names=None) -> pd.DataFrame:
+    """ArviZ summary (mean, sd, 90% HDI, ESS bulk/tail, R-hat) of scalar parameters."""
+    import arviz as az
+
+    return az.summary(idata, var_names=_scalar_vars(idata, var_names), hdi_prob=0.9)
+
+
+def pair_figure(idata, var_names=THETA_NAMES, *, max_points: int = 1500, truth: Mapping | None = None) -> go.Figure:
+    """Pair plot (scatter matrix) of posterior draws, thinned to ``max_points``."""
+    names = [n for n in var_names if n in idata.posterior]
+    flat = {n: _draws(idata, n).reshape(-1) for n in names}
+    m = len(next(iter(flat.values())))
+    idx = np.linspace(0, m - 1, min(m, max_points)).astype(int)
+    fig = go.Figure(go.Splom(
+        dimensions=[dict(label=f"{n} ({UNITS.get(n, '')})", values=flat[n][idx]) for n in names],
+        marker=dict(size=3, opacity=0.4, color=SERIES_COLOURS[0]), diagonal_visible=False, showupperhalf=False,
+        name="posterior"))
+    if truth:
+        fig.add_trace(go.Splom(dimensions=[dict(label=f"{n} ({UNITS.get(n, '')})", values=[truth[n]]) for n in names],
+                               marker=dict(size=10, color="red", symbol="x"), diagonal_visible=False,
+                               showupperhalf=False, name="truth"))
+    fig.update_layout(title="Posterior pair plot", height=650, margin=dict(l=10, r=10, t=50, b=10))
+    return fig
+
+
+def predictive_density_figure(results: Mapping[str, object], y_measured, *, kind: str = "y_rep",
+                              n_grid: int = 120) -> go.Figure:
+    """Posterior predictive densities of all 25 outputs, measured values as dashed lines (Fig. 9.1 style).
+
+    Parameters
+    ----------
+    results : dict label -> InferenceData
+        One entry per model (overlaid).
+    y_measured : (25,) array
+    kind : str
+        ``"y_rep"`` (posterior predictive, with noise) or ``"eta"`` (forward model at the draws).
+    """
+    from scipy.stats import gaussian_kde
+
+    y_measured = np.asarray(y_measured, dtype=float)
+    fig = make_subplots(rows=5, cols=5, subplot_titles=[f"{OUTPUT_NAMES[0]} (mL)"] + list(STRAIN_NAMES),
+                        horizontal_spacing=0.03, vertical_spacing=0.07)
+    for k, (label, idata) in enumerate(results.items()):
+        arr = (np.asarray(idata.posterior_predictive["y_rep"].values) if kind == "y_rep"
+               else np.asarray(idata.posterior["eta"].values)).reshape(-1, 25)
+        for j in range(25):
+            a = arr[:, j]
+            lo, hi = np.quantile(a, [0.001, 0.999])
+            lo, hi = min(lo, y_measured[j]), max(hi, y_measured[j])
+            xs = np.linspace(lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo), n_grid)
+            dens = gaussian_kde(a)(xs) if np.ptp(a) > 0 else np.zeros_like(xs)
+            fig.add_scatter(x=xs, y=dens, mode="lines", line=dict(color=SERIES_COLOURS[k % 8], width=1.2), name=label,
+                            legendgroup=label, showlegend=j == 0, row=j // 5 + 1, col=j % 5 + 1)
+    for j in range(25):
+        fig.add_vline(x=float(y_measured[j]), line=dict(color="black", dash="dash", width=1), row=j // 5 + 1,
+                      col=j % 5 + 1)
+    fig.update_yaxes(showticklabels=False)
+    fig.update_layout(height=900, title=("Posterior predictive" if kind == "y_rep" else "Emulator at posterior draws")
+                      + " of the 25 outputs; dashed: measured", margin=dict(l=10, r=10, t=70, b=10),
+                      font=dict(size=10))
+    return fig
+
+
+def discrepancy_figure(idata, *, include_v: bool = True) -> go.Figure:
+    """Posterior median of the discrepancy b (+ v) on the 4 x 6 strain grid (levels x sectors)."""
+    d = _draws(idata, "disc").reshape(-1, 24)
+    if include_v and "v" in idata.posterior:
+        d = d + _draws(idata, "v").reshape(-1, 1)
+    med = np.median(d, axis=0)
+    title = "Discrepancy b(x) + v, posterior median" if include_v else "Discrepancy b(x), posterior median"
+    return strain_heatmap(med, title=title)
+
+
+def sigma_s_figure(samples: Mapping[str, np.ndarray], truth: float | None = 0.03) -> go.Figure:
+    """Posterior densities of sigma_S per model with the true value dashed (Fig. 9.7)."""
+    from lvcore.viz.figures import density_overlay
+
+    return density_overlay({k: np.asarray(v) for k, v in samples.items()},
+                           reference=None if truth is None else {"truth": truth},
+                           title="Posterior of the strain noise sd σ_S", xaxis_title="σ_S (strain)")
+
+
+def strain_predictive_figure(bands: Mapping[str, Mapping[str, np.ndarray]], y_measured) -> go.Figure:
+    """Posterior predictive 5-95% bands and medians of the 24 strains per model vs the data (Fig. 9.6).
+
+    ``bands[label]`` has arrays ``q05``, ``q50``, ``q95`` of length 24.
+    """
+    y = np.asarray(y_measured, dtype=float)[-24:]
+    x = np.arange(1, 25)
+    fig = go.Figure()
+    for k, (label, b) in enumerate(bands.items()):
+        off = (k - (len(bands) - 1) / 2) * 0.25
+        fig.add_scatter(x=x + off, y=b["q50"], mode="markers", name=label, marker=dict(color=SERIES_COLOURS[k % 8]),
+                        error_y=dict(type="data", symmetric=False, array=np.asarray(b["q95"]) - b["q50"],
+                                     arrayminus=np.asarray(b["q50"]) - b["q05"]))
+    fig.add_scatter(x=x, y=y, mode="markers", name="data", marker=dict(color="black", symbol="line-ew-open", size=14))
+    fig.update_layout(title="Posterior predictive of the 24 strains (median, 5–95%) vs data",
+                      xaxis=dict(title="region r + 1 (6·level + sector)", tickvals=x), yaxis_title="E_cc (-)",
+                      height=420, margin=dict(l=10, r=10, t=50, b=10))
+    return fig
+
+
+def error_violin_figure(errors: Mapping[str, np.ndarray]) -> go.Figure:
+    """Violins of |eta(theta_post, h) - eta(theta_true, h)| per model over all test sets (Fig. 9.9)."""
+    return violin(errors, title="|η(θ_post, h) − η(θ̃, h)| over the 24 strains and all test sets",
+                  yaxis_title="absolute strain error (-)")
+
+
+def write_html(fig: go.Figure, path) -> Path:
+    """Write a self-contained HTML file of ``fig``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.write_html(str(path), include_plotlyjs=True)
+    return path
+
+
+__all__ = ["trace_figure", "rank_figure", "diagnostics_table", "pair_figure", "predictive_density_figure",
+           "discrepancy_figure", "sigma_s_figure", "strain_predictive_figure", "error_violin_figure", "write_html"]
