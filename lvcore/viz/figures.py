@@ -18,6 +18,8 @@ from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES
 
 #: Sector labels: "S1 (0–60°)" ... "S6 (300–360°)".
 SECTOR_NAMES = tuple(f"S{k + 1} ({60 * k}–{60 * (k + 1)}°)" for k in range(N_SECTORS))
+#: Two-line sector tick labels for plots.
+_SECTOR_TICKS = tuple(f"S{k + 1}<br>{60 * k}–{60 * (k + 1)}°" for k in range(N_SECTORS))
 #: Colour sequence for series (plotly's default qualitative palette).
 SERIES_COLOURS = ("#636EFA", "#EF553B", "#00CC96", "#AB63FA", "#FFA15A", "#19D3F3", "#FF6692", "#B6E880")
 
@@ -56,14 +58,15 @@ def strain_heatmap(strains, *, title: str = "Circumferential strain E_cc", zmin:
     names = np.asarray(STRAIN_NAMES).reshape(N_LEVELS, N_SECTORS)
     fig = go.Figure(
         go.Heatmap(
-            z=grid, x=list(SECTOR_NAMES), y=list(LEVEL_NAMES), zmin=zmin, zmax=zmax, colorscale=colorscale,
+            z=grid, x=list(_SECTOR_TICKS), y=list(LEVEL_NAMES), zmin=zmin, zmax=zmax, colorscale=colorscale,
+            xgap=2, ygap=2,
             customdata=names, texttemplate="%{z:" + text_format + "}",
             hovertemplate="%{customdata}<br>%{y}, %{x}<br>E_cc = %{z:.4f}<extra></extra>",
             colorbar={"title": "E_cc (-)"},
         )
     )
     fig.update_yaxes(autorange="reversed", title="level (base → apex)")
-    fig.update_xaxes(title="sector (counter-clockwise from +x, seen from the base)")
+    fig.update_xaxes(title="sector (counter-clockwise from +x, seen from the base)", tickangle=0)
     fig.update_layout(title=title, height=height, margin=dict(l=10, r=10, t=50, b=10))
     return fig
 

@@ -248,7 +248,7 @@ def render_meshes(layers: Sequence, *, window_size: tuple[int, int] = (800, 600)
                               scalar_bar_args={"title": layer.label or (layer.scalars if isinstance(layer.scalars, str)
                                                                         else f"layer {n}"),
                                                "color": "black", "vertical": True, "position_x": 0.8,
-                                               "title_font_size": 12, "label_font_size": 12,
+                                               "title_font_size": 16, "label_font_size": 14,
                                                "position_y": 0.1, "height": 0.7, "width": 0.06})
             else:
                 kwargs.update(color=layer.color or "lightgrey")
