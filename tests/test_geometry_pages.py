@@ -2,7 +2,6 @@
 import json
 from pathlib import Path
 
-import pytest
 from streamlit.testing.v1 import AppTest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,3 +37,18 @@ def test_shape_model_page():
     assert not at.exception, at.exception
     at.radio[0].set_value("op2").run()
     assert not at.exception, at.exception
+
+
+def test_geometry_page_upload_good_and_bad_contours():
+    example = (ROOT / "examples" / "contours" / "SYNTHETIC_example_contours.json").read_bytes()
+    d = json.loads(example)
+    d["slices"] = d["slices"][:2]
+    at = AppTest.from_file(PAGE1, default_timeout=120).run()
+    at.radio[0].set_value("Upload my own").run()
+    at.file_uploader(key="c0").upload("good.json", example, "application/json")
+    at.file_uploader(key="c1").upload("bad.json", json.dumps(d).encode(), "application/json")
+    at.run()
+    assert not at.exception, at.exception
+    assert any("at least 4" in e.value for e in at.error)
+    assert any("fitted: residual" in s.value for s in at.success)
+    assert len(at.get("image")) >= 1
