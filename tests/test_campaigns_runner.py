@@ -57,7 +57,7 @@ def test_real_simulator_rows_at_fast_resolution(tmp_path):
     assert np.all((c.outputs[:, 1:] < 0) & (c.outputs[:, 1:] > -0.5))    # filling: negative strains
     assert c.outputs[1, 0] < c.outputs[0, 0]                              # stiffer -> smaller end-diastolic volume
     assert np.all(np.abs(c.outputs[1, 1:]) < np.abs(c.outputs[0, 1:]))    # ... and smaller strains
-    assert np.all(c.seconds > 0) and set(c.versions) == {lvcore.__version__}
+    assert np.all(c.seconds > 0) and len(set(c.versions)) == 1 and c.versions[0].startswith(lvcore.__version__ + "+src.")
 
 
 class _Inline:

@@ -36,6 +36,27 @@ DEFAULT_FORWARD = "lvcore:simulate"
 RESOLUTIONS = ("fast", "default")
 
 _FORWARD_CACHE: dict[str, object] = {}
+_VERSION: list[str] = []
+
+
+def simulator_version() -> str:
+    """``lvcore.__version__`` plus a hash of the simulator's source files.
+
+    ``"0.1.0+src.1a2b3c4d5e"``: the hash covers ``lvcore/mechanics`` and
+    ``lvcore/geometry`` (``*.py``), so rows computed by different code are
+    told apart even when the package version did not change.
+    """
+    if not _VERSION:
+        import hashlib
+
+        root = Path(lvcore.__file__).resolve().parent
+        h = hashlib.sha256()
+        for sub in ("mechanics", "geometry"):
+            for f in sorted((root / sub).glob("*.py")):
+                h.update(f.name.encode())
+                h.update(f.read_bytes())
+        _VERSION.append(f"{lvcore.__version__}+src.{h.hexdigest()[:10]}")
+    return _VERSION[0]
 
 
 def resolve_forward(spec: str):
@@ -75,16 +96,16 @@ def execute_row(forward: str, index: int, case: dict) -> RowResult:
         seconds = float(getattr(result, "seconds", time.perf_counter() - t0))
         if not bool(result.converged):
             reason = str(getattr(result, "message", "") or "did not converge")
-            return RowResult(index, np.full(25, np.nan), False, reason, seconds, lvcore.__version__, tag)
+            return RowResult(index, np.full(25, np.nan), False, reason, seconds, simulator_version(), tag)
         outputs = np.asarray(result.outputs(), dtype=float)
-        return RowResult(index, outputs, True, "", seconds, lvcore.__version__, tag)
+        return RowResult(index, outputs, True, "", seconds, simulator_version(), tag)
     except SolverError as err:
         reason = f"SolverError: {err}"
     except Exception as err:  # noqa: BLE001 - recorded, never swallowed silently
         last = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
         where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
         reason = f"{type(err).__name__}: {err}{where}"
-    return RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, lvcore.__version__, tag)
+    return RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, simulator_version(), tag)
 
 
 def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward: str, resolution: str,

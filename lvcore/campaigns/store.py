@@ -12,7 +12,8 @@ dataset                   dtype          meaning
 ``state``                 (n,) i1        0 pending, 1 converged, 2 failed
 ``seconds``               (n,) f8        wall time of the solve (s)
 ``reason``                (n,) S256      failure reason (empty if converged)
-``version``               (n,) S32       ``lvcore.__version__`` of the worker
+``version``               (n,) S32       simulator version of the worker: ``lvcore.__version__``
+                                         plus a hash of the simulator sources
 ``worker``                (n,) S64       ``host:pid`` of the worker
 ``finished_at``           (n,) f8        UNIX time the row was recorded
 ``record_count``          (n,) i4        times the row was recorded (must be 1)
