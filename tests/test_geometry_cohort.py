@@ -37,3 +37,21 @@ def test_bundled_cohort_and_operator_assets():
     r = fit_contours(st)
     assert node_mse_cm2(r.nodes, og.nodes[1, 1]) < 1e-6
     assert og.fits["SYNTHETIC-P01/op1"]["motion_error_mm"] > 0
+
+
+def test_operator_errors_move_the_geometry_as_intended():
+    from dataclasses import replace
+
+    from lvcore.geometry.cohort import OperatorStyle, random_pose
+
+    rng = np.random.default_rng(11)
+    lv, pose = sample_lv(rng), random_pose(rng)
+    clean = OperatorStyle("clean", noise_mm=0.0, shift_mm=0.0)
+    ref = fit_contours(contour_stack(lv, clean, 0, pose=pose, jitter=0.0))
+    dropped = fit_contours(contour_stack(lv, replace(clean, basal_slices=-1), 0, pose=pose, jitter=0.0))
+    assert abs(ref.length_mm - dropped.length_mm - 10.0) < 1.5  # one 10 mm slice fewer
+    assert node_mse_cm2(ref.nodes, dropped.nodes) > 0.1
+    wide = fit_contours(contour_stack(lv, replace(clean, endo_bias_mm=1.0), 0, pose=pose, jitter=0.0))
+    assert wide.cavity_volume_ml > ref.cavity_volume_ml * 1.03  # border through the trabeculae: larger cavity
+    moved = fit_contours(contour_stack(lv, replace(clean, motion_error_mm=3.5), 0, pose=pose, jitter=0.0))
+    assert 0.01 < node_mse_cm2(ref.nodes, moved.nodes) < 0.08

@@ -178,6 +178,10 @@ class OperatorStyle:
     shift_mm : SD of the per-slice in-plane shift (breath-hold variation).
     motion_error_mm : in-plane shift of the apical half of the stack (a
         motion-correction error); 0 for none.
+    basal_slices : whole-slice choice of the base: +1 includes one more slice
+        above the true base, -1 drops the basal slice (not used by
+        :data:`OPERATORS`: a whole 10 mm slice moves nodes by up to 10 mm, an
+        order of magnitude beyond the chapter's operator differences).
     """
 
     name: str
@@ -187,6 +191,7 @@ class OperatorStyle:
     noise_mm: float = 0.3
     shift_mm: float = 0.2
     motion_error_mm: float = 0.0
+    basal_slices: int = 0
 
 
 #: The three imitation operators of the operator study (see docs/geometry.md).
@@ -242,6 +247,10 @@ def contour_stack(lv: SyntheticLV, operator: OperatorStyle = REFERENCE_OPERATOR,
         return np.sum(amp[:, None] * np.cos(m[:, None] * phi[None, :] + ph[:, None]), axis=0)
 
     zs = [base] + list(-spacing * np.arange(1, 40))
+    if operator.basal_slices > 0:
+        zs = [base + spacing * k for k in range(operator.basal_slices, 0, -1)] + zs
+    elif operator.basal_slices < 0:
+        zs = zs[-operator.basal_slices:]
     z_epi_apex, z_endo_apex = lv.apex_z("epi"), lv.apex_z("endo")
     zs = [z for z in zs if z > z_epi_apex + 4.0]
     n_slices = len(zs)
