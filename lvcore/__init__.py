@@ -15,11 +15,12 @@ jax.config.update("jax_enable_x64", True)
 __version__ = "0.1.0"
 
 
-def simulate(case):
-    """Run one forward simulation; see :func:`lvcore.mechanics.simulate.simulate`."""
+def simulate(case, **options):
+    """Run one forward simulation; see :func:`lvcore.mechanics.simulate.simulate`
+    (``options`` such as ``with_sensitivities=True`` are passed through)."""
     from lvcore.mechanics.simulate import simulate as _simulate
 
-    return _simulate(case)
+    return _simulate(case, **options)
 
 
 def load_case(path):
