@@ -26,6 +26,17 @@ def test_dask_localcluster_campaign_of_20_rows(tmp_path):
     np.testing.assert_array_equal(c.record_count, 1)
 
 
+def test_dask_executor_connects_to_a_scheduler_address(tmp_path):
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        with DaskExecutor(scheduler=cluster.scheduler_address) as ex:
+            assert cluster.scheduler_address in ex.describe()
+            s = run_campaign(make_design(get_space("material"), "lhs", 5, seed=1), tmp_path / "s.h5", executor=ex,
+                             forward="campaign_double:forward", progress=False)
+    assert s.converged == 5
+
+
 def test_bad_forward_and_scheduler_are_clear_errors(tmp_path):
     with pytest.raises(CampaignError, match="module:function"):
         resolve_forward("nocolon")
