@@ -23,40 +23,85 @@ def node_distances(nodes_a, nodes_b) -> np.ndarray:
     return np.linalg.norm(np.asarray(nodes_a, float) - np.asarray(nodes_b, float), axis=1)
 
 
+def template_surface(nodes, field=None, *, n_phi: int = 96, n_s: int = 48, name: str = "field"):
+    """Triangulated boundary (endocardium, epicardium, base ring) of a template geometry.
+
+    The surface samples the isoparametric map itself (``DEFAULT_TEMPLATE.evaluate``)
+    on an ``n_phi`` × ``n_s`` grid, so it follows the curved quadratic faces.
+    ``field`` (n_nodes,) is interpolated with the same shape functions and
+    attached as point data ``name``.
+    """
+    import pyvista as pv
+
+    T = DEFAULT_TEMPLATE
+    nodes = np.asarray(nodes, float)
+    phi = np.linspace(0.0, 2 * np.pi, n_phi, endpoint=False)
+    s = np.linspace(0.0, 1.0, n_s + 1)[:-1]
+    pts, vals, tris = [], [], []
+    f3 = None if field is None else np.repeat(np.asarray(field, float)[:, None], 3, axis=1)
+
+    def add(P, S, Tt, closed_apex):
+        off = sum(len(p) for p in pts)
+        x = T.evaluate(nodes, P, S, Tt).reshape(-1, 3)
+        v = None if f3 is None else T.evaluate(f3, P, S, Tt)[..., 0].ravel()
+        if closed_apex:
+            x = np.vstack([x, T.evaluate(nodes, 0.0, 1.0, Tt.flat[0]).reshape(1, 3)])
+            if v is not None:
+                v = np.r_[v, T.evaluate(f3, 0.0, 1.0, Tt.flat[0])[..., 0].ravel()]
+        pts.append(x)
+        if v is not None:
+            vals.append(v)
+        n_a, n_b = P.shape
+        idx = off + np.arange(n_a * n_b).reshape(n_a, n_b)
+        i1 = np.roll(idx, -1, axis=0)
+        tris.append(np.stack([idx[:, :-1], i1[:, :-1], i1[:, 1:]], -1).reshape(-1, 3))
+        tris.append(np.stack([idx[:, :-1], i1[:, 1:], idx[:, 1:]], -1).reshape(-1, 3))
+        if closed_apex:
+            tris.append(np.stack([idx[:, -1], i1[:, -1], np.full(n_a, off + n_a * n_b)], -1))
+
+    P, S = np.meshgrid(phi, s, indexing="ij")
+    add(P, S, np.zeros_like(P), True)  # endocardium
+    add(P, S, np.ones_like(P), True)  # epicardium
+    Pb, Tb = np.meshgrid(phi, np.linspace(0.0, 1.0, 5), indexing="ij")
+    add(Pb, np.zeros_like(Pb), Tb, False)  # base ring
+    tri = np.vstack(tris)
+    poly = pv.PolyData(np.vstack(pts), np.hstack([np.full((len(tri), 1), 3), tri]).ravel())
+    if vals:
+        poly.point_data[name] = np.concatenate(vals)
+    return poly.compute_normals(auto_orient_normals=False, split_vertices=False)
+
+
 def render_overlay(geometries: Mapping[str, np.ndarray], *, view="iso", window_size=(700, 560), title=None,
                    colors: Sequence[str] = OPERATOR_COLORS) -> bytes:
     """Overlay of several geometries: curved element edges of each in its own colour (PNG bytes)."""
-    from lvcore.viz.mesh3d import MeshLayer, element_edges, lv_surface, render_meshes
+    from lvcore.viz.mesh3d import MeshLayer, element_edges, render_meshes
 
     layers = []
     for (label, nodes), color in zip(geometries.items(), colors):
         layers.append(MeshLayer(element_edges(nodes, DEFAULT_TEMPLATE.elements), color=color, style="wireframe",
                                 label=label, line_width=2.0))
     first = next(iter(geometries.values()))
-    layers.append(MeshLayer(lv_surface(first, DEFAULT_TEMPLATE.elements, subdivision=1), color="lightgrey",
-                            opacity=0.25))
+    layers.append(MeshLayer(template_surface(first), color="lightgrey", opacity=0.25))
     return render_meshes(layers, view=view, window_size=window_size, title=title)
 
 
 def render_distance_map(nodes_a, nodes_b, *, label="distance (mm)", view="iso", window_size=(700, 560),
                         title=None, clim=None) -> bytes:
     """Geometry A coloured by the per-node distance to geometry B (PNG bytes)."""
-    from lvcore.viz.mesh3d import MeshLayer, lv_surface, render_meshes
+    from lvcore.viz.mesh3d import MeshLayer, render_meshes
 
     d = node_distances(nodes_a, nodes_b)
-    surf = lv_surface(nodes_a, DEFAULT_TEMPLATE.elements, point_data={label: d}, subdivision=1)
+    surf = template_surface(nodes_a, d, name=label)
     return render_meshes([MeshLayer(surf, scalars=label, label=label, cmap="magma",
                                     clim=clim or (0.0, max(float(d.max()), 1e-6)))],
                          view=view, window_size=window_size, title=title)
 
 
 def render_shape(nodes, *, color="#c9a27e", view="side", window_size=(420, 420), title=None) -> bytes:
-    """One geometry as a shaded surface with its element edges (PNG bytes)."""
-    from lvcore.viz.mesh3d import MeshLayer, element_edges, lv_surface, render_meshes
+    """One geometry as a shaded surface (PNG bytes)."""
+    from lvcore.viz.mesh3d import MeshLayer, render_meshes
 
-    return render_meshes([MeshLayer(lv_surface(nodes, DEFAULT_TEMPLATE.elements, subdivision=1), color=color),
-                          MeshLayer(element_edges(nodes, DEFAULT_TEMPLATE.elements), color="black",
-                                    style="wireframe", line_width=1.0)],
+    return render_meshes([MeshLayer(template_surface(nodes), color=color)],
                          view=view, window_size=window_size, title=title, legend=False)
 
 
