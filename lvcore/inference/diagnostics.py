@@ -80,6 +80,11 @@ def summary_table(samples: dict, var_names=None) -> pd.DataFrame:
     return az.summary(data, hdi_prob=0.9)
 
 
+def n_chains(run: samplers.SamplerRun) -> int:
+    """Number of chains in a run."""
+    return int(np.shape(next(iter(run.samples.values())))[0])
+
+
 def check_convergence(run: samplers.SamplerRun, rhat_max: float = DEFAULT_RHAT_MAX,
                       ess_min: float = DEFAULT_ESS_MIN, rounds: int = 1) -> Convergence:
     """R-hat and ESS of the monitored parameters of ``run`` (ArviZ rank-normalised split R-hat)."""
@@ -87,9 +92,12 @@ def check_convergence(run: samplers.SamplerRun, rhat_max: float = DEFAULT_RHAT_M
     failing = tuple(table.index[(table["r_hat"] > rhat_max) | (table["ess_bulk"] < ess_min)
                                 | ~np.isfinite(table["r_hat"])])
     n_div = int(np.sum(run.sample_stats.get("diverging", 0)))
+    rhat = table["r_hat"].to_numpy(dtype=float)
+    if n_chains(run) < 2:
+        failing = tuple(failing) + ("R-hat needs >= 2 chains",)
     return Convergence(
         converged=not failing,
-        max_rhat=float(np.nanmax(table["r_hat"])),
+        max_rhat=float(np.max(rhat)) if np.all(np.isfinite(rhat)) else float("nan"),
         min_ess_bulk=float(np.nanmin(table["ess_bulk"])),
         min_ess_tail=float(np.nanmin(table["ess_tail"])),
         n_divergent=n_div,

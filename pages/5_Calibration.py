@@ -1,0 +1,211 @@
+"""Calibration: posterior of theta = (a, b, af, bf) from LVV + 24 strains, with honest uncertainty."""
+from __future__ import annotations
+
+import os
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import numpy as np
+import streamlit as st
+
+import lvcore  # noqa: F401  (float64)
+from lvcore.emulator.io import available_emulators, load_emulator
+from lvcore.exceptions import LVCoreError
+from lvcore.inference import calibrate as cal
+from lvcore.inference.data import MeasuredData, read_measured_csv
+from lvcore.inference.forward import emulator_forward
+from lvcore.inference.samplers import SamplerConfig
+
+REPO = Path(__file__).resolve().parents[1]
+VOLUNTEERS = REPO / "assets" / "volunteers"
+BELOW_SPEC_DIR = REPO / "build" / "emulators" / "below-spec"
+MODEL_LABELS = {"volume": "(i) volume only", "iid": "(ii) iid strains", "discrepancy": "(iii) polar-GP discrepancy"}
+
+st.set_page_config(page_title="Calibration", layout="wide")
+st.title("Bayesian calibration")
+st.caption(
+    "Infer θ = (a, b, a_f, b_f) from one subject's end-diastolic volume and 24 circumferential strains with an "
+    "emulator of the simulator. Three likelihoods: (i) volume only, (ii) iid Gaussian strains, (iii) strains "
+    "with a polar Gaussian-process discrepancy b(x) sampled by HMC-within-Gibbs (chapter Algorithm 4)."
+)
+
+# ----------------------------------------------------------------------------- emulator
+choices = {name: name for name in available_emulators()}
+if BELOW_SPEC_DIR.is_dir():
+    for d in sorted(BELOW_SPEC_DIR.iterdir()):
+        if (d / "metadata.json").is_file():
+            choices[f"{d.name} (below spec, demonstration)"] = str(d)
+if not choices:
+    st.info(
+        "No trained emulator found, so calibration cannot run. Build the bundled ones with "
+        "`python scripts/build_emulators.py`, or train one with `lvcore emulator train STORE --out DIR` and set "
+        "`LVCORE_EMULATORS` to its parent directory."
+    )
+    st.stop()
+
+
+@st.cache_resource(show_spinner=False)
+def _emulator(path: str):
+    return load_emulator(path)
+
+
+# ----------------------------------------------------------------------------- data
+left, right = st.columns(2)
+with left:
+    st.subheader("Data")
+    source = st.radio("Source", ["bundled volunteer", "upload"], horizontal=True)
+    data: MeasuredData | None = None
+    geom_path: Path | None = None
+    try:
+        if source == "bundled volunteer":
+            files = sorted(VOLUNTEERS.glob("*_measured.csv"))
+            if not files:
+                st.warning("No bundled volunteers in assets/volunteers; upload data instead.")
+            else:
+                name = st.selectbox("Volunteer", [f.name.replace("_measured.csv", "") for f in files])
+                data = read_measured_csv(VOLUNTEERS / f"{name}_measured.csv")[0]
+                geom_path = VOLUNTEERS / f"{name}_geometry.vtu"
+                if name.startswith("SYNTHETIC"):
+                    st.caption("⚠ SYNTHETIC volunteer: generated data, not a real subject.")
+        else:
+            up_data = st.file_uploader("Measured CSV (lvv_ml, strain_01..strain_24)", type=["csv"])
+            up_geom = st.file_uploader("Geometry: PC scores (.json/.csv) or template mesh (.vtu)",
+                                       type=["json", "csv", "vtu"])
+            tmp = Path(tempfile.gettempdir()) / "lvcore_calibration_upload"
+            tmp.mkdir(exist_ok=True)
+            if up_data is not None:
+                p = tmp / "measured.csv"
+                p.write_bytes(up_data.getvalue())
+                rows = read_measured_csv(p)
+                subj = st.selectbox("Subject", [r.subject for r in rows])
+                data = next(r for r in rows if r.subject == subj)
+            if up_geom is not None:
+                geom_path = tmp / f"geometry{Path(up_geom.name).suffix}"
+                geom_path.write_bytes(up_geom.getvalue())
+        h = cal.read_pc_scores(geom_path) if geom_path is not None else None
+    except LVCoreError as err:
+        st.error(str(err))
+        st.stop()
+    if data is not None:
+        st.write(f"LVV = {data.lvv_ml:.1f} mL; strains from {data.strains.min():.3f} to {data.strains.max():.3f}")
+    if h is not None:
+        st.write("PC scores h = " + ", ".join(f"{v:.2f}" for v in h))
+
+with right:
+    st.subheader("Model")
+    emu_label = st.selectbox("Emulator", list(choices))
+    models = st.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid", "discrepancy"],
+                            format_func=MODEL_LABELS.get)
+    angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
+                      help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
+    c1, c2, c3 = st.columns(3)
+    chains = c1.number_input("chains", 1, 8, 4)
+    warmup = c2.number_input("warm-up", 50, 5000, 1000, step=100)
+    samples = c3.number_input("draws kept", 50, 5000, 1000, step=100)
+
+# ----------------------------------------------------------------------------- background run
+job = st.session_state.get("calibration_job")
+
+
+def _worker(job: dict, y, forward, models, config, infer):
+    try:
+        for k, m in enumerate(models):
+            def progress(msg, frac, k=k):
+                job["message"] = msg
+                job["fraction"] = (k + frac) / len(models)
+            job["results"][m] = cal.calibrate(y, forward, m, config=config, infer_angles=infer, progress=progress)
+        job["message"] = "done"
+        job["fraction"] = 1.0
+    except Exception as err:  # noqa: BLE001 - shown to the user
+        job["error"] = f"{type(err).__name__}: {err}"
+    finally:
+        job["done"] = True
+        job["elapsed"] = time.perf_counter() - job["t0"]
+
+
+run_clicked = st.button("Run calibration", type="primary",
+                        disabled=data is None or h is None or not models or (job is not None and not job["done"]))
+if run_clicked:
+    try:
+        forward = emulator_forward(_emulator(choices[emu_label]), h, infer_angles=angles == "infer", name=emu_label)
+    except LVCoreError as err:
+        st.error(str(err))
+        st.stop()
+    config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains))
+    job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
+           "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
+           "synthetic": data.subject.startswith("SYNTHETIC")}
+    st.session_state["calibration_job"] = job
+    threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
+                     daemon=True).start()
+
+
+@st.fragment(run_every=1.0)
+def _progress():
+    j = st.session_state.get("calibration_job")
+    if j is None or j.get("shown"):
+        return
+    if not j["done"]:
+        with st.status(f"Sampling… {j['message']}", expanded=False):
+            st.progress(min(1.0, j["fraction"]), text=f"{time.perf_counter() - j['t0']:.0f} s elapsed")
+    else:
+        j["shown"] = True
+        st.rerun()
+
+
+_progress()
+
+# ----------------------------------------------------------------------------- results
+job = st.session_state.get("calibration_job")
+if job is not None and job["done"]:
+    from lvcore.viz import inference_figures as figs
+
+    if job["error"]:
+        st.error(job["error"])
+    results = job["results"]
+    if results:
+        st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
+        if job["synthetic"]:
+            st.caption("⚠ SYNTHETIC data.")
+        for m, res in results.items():
+            (st.success if res.convergence.converged else st.error)(f"{MODEL_LABELS[m]}: {res.convergence.message()}")
+        idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
+        fig_pred = figs.predictive_density_figure(idatas, job["y"])
+        st.plotly_chart(fig_pred, width="stretch")
+        downloads = {"posterior_predictive.html": fig_pred}
+        tabs = st.tabs([MODEL_LABELS[m] for m in results])
+        for tab, (m, res) in zip(tabs, results.items()):
+            with tab:
+                st.dataframe(res.summary)
+                st.caption(f"sampler {res.sampler}; {res.wall_s:.1f} s incl. compilation; "
+                           f"min bulk ESS/s over θ {res.ess_per_s['min']:.1f}")
+                fig_pair = figs.pair_figure(res.idata)
+                st.plotly_chart(fig_pair, width="stretch")
+                names = [n for n in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "sigma_s2")
+                         if n in res.idata.posterior]
+                fig_trace = figs.trace_figure(res.idata, names)
+                fig_rank = figs.rank_figure(res.idata, names)
+                t1, t2 = st.columns(2)
+                t1.plotly_chart(fig_trace, width="stretch")
+                t2.plotly_chart(fig_rank, width="stretch")
+                downloads.update({f"{m}_pair.html": fig_pair, f"{m}_trace.html": fig_trace,
+                                  f"{m}_rank.html": fig_rank})
+                if m == "discrepancy":
+                    fig_disc = figs.discrepancy_figure(res.idata)
+                    st.plotly_chart(fig_disc, width="stretch")
+                    downloads[f"{m}_discrepancy.html"] = fig_disc
+                with tempfile.TemporaryDirectory() as d:
+                    nc = Path(d) / f"{job['subject']}_{m}.nc"
+                    res.idata.to_netcdf(str(nc))
+                    st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
+                                       key=f"nc_{m}")
+        st.subheader("Export figures")
+        for name, fig in downloads.items():
+            st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{job['subject']}_{name}",
+                               mime="text/html", key=f"html_{name}")

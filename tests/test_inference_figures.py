@@ -1,0 +1,66 @@
+"""Calibration figures and the Calibration page (AppTest)."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lvcore.inference import diagnostics, samplers
+from lvcore.viz import inference_figures as figs
+
+PAGE = Path(__file__).resolve().parents[1] / "pages" / "5_Calibration.py"
+
+
+@pytest.fixture(scope="module")
+def idata():
+    """InferenceData built from random draws (no sampling) to exercise the figure builders."""
+    rng = np.random.default_rng(0)
+    c, d = 2, 50
+    s = {n: np.exp(rng.normal(0, 0.2, (c, d))) for n in ("a", "b", "af", "bf")}
+    s.update(sigma_s2=np.full((c, d), 9e-4) * np.exp(rng.normal(0, 0.1, (c, d))), v=rng.normal(0, 0.01, (c, d)),
+             disc=rng.normal(0, 0.02, (c, d, 24)), eta=np.r_[130.0, np.full(24, -0.15)] + rng.normal(0, 0.01, (c, d, 25)))
+    run = samplers.SamplerRun("hmc_gibbs", "discrepancy", s, {"diverging": np.zeros((c, d), bool)}, 1.0)
+    y = np.r_[128.0, np.full(24, -0.14)]
+    return diagnostics.to_inference_data(run, y, convergence=diagnostics.check_convergence(run)), y
+
+
+def test_figures_build(idata, tmp_path):
+    idata, y = idata
+    assert len(figs.trace_figure(idata, ["a", "b"]).data) == 4
+    assert len(figs.rank_figure(idata, ["a"]).data) == 2
+    assert figs.diagnostics_table(idata, ["a", "b"]).shape[0] == 2
+    assert len(figs.pair_figure(idata).data[0].dimensions) == 4
+    fig = figs.predictive_density_figure({"iii": idata}, y)
+    assert len(fig.data) == 25  # one density per output
+    heat = figs.discrepancy_figure(idata)
+    assert np.asarray(heat.data[0].z).shape == (4, 6)
+    p = figs.write_html(fig, tmp_path / "f.html")
+    assert p.stat().st_size > 1000
+    pp = np.asarray(idata.posterior_predictive["y_rep"])
+    assert pp.shape == (2, 50, 25) and np.std(pp[..., 1:]) > 0.02  # noise sigma_S added
+
+
+def test_page_without_emulator_says_how_to_build(tmp_path, monkeypatch):
+    from streamlit.testing.v1 import AppTest
+
+    import lvcore.emulator.io as eio
+    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+    monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "none")
+    at = AppTest.from_file(str(PAGE), default_timeout=60).run()
+    assert not at.exception, at.exception
+    if at.info:  # no below-spec emulator in this checkout either
+        assert "build_emulators.py" in at.info[0].value
+
+
+def test_page_renders_controls_with_an_emulator(tmp_path, monkeypatch):
+    from streamlit.testing.v1 import AppTest
+
+    from lvcore.emulator.io import save_emulator
+    from test_inference_calibrate import _random_emulator
+
+    save_emulator(_random_emulator(), tmp_path / "chapter")
+    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+    at = AppTest.from_file(str(PAGE), default_timeout=60).run()
+    assert not at.exception, at.exception
+    assert any("chapter" in str(o) for o in at.selectbox[-1].options)
+    assert at.button[0].label == "Run calibration"
+    assert len(at.multiselect) == 1
