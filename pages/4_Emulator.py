@@ -18,7 +18,8 @@ from lvcore.exceptions import LVCoreError
 from lvcore.outputs import OUTPUT_NAMES
 
 REPO = Path(__file__).resolve().parents[1]
-BELOW_SPEC_DIR = REPO / "build" / "emulators" / "below-spec"
+#: Emulators built below the spec (demonstrations), never loaded by name.
+BELOW_SPEC_DIRS = (REPO / "assets" / "emulators-below-spec", REPO / "build" / "emulators" / "below-spec")
 
 st.set_page_config(page_title="Emulator", layout="wide")
 st.title("Emulator")
@@ -40,10 +41,12 @@ def _validation(path: str):
 
 
 choices = {name: name for name in available_emulators()}
-if BELOW_SPEC_DIR.is_dir():
-    for d in sorted(BELOW_SPEC_DIR.iterdir()):
-        if (d / "metadata.json").is_file():
-            choices[f"{d.name} (below spec, demonstration)"] = str(d)
+for below in BELOW_SPEC_DIRS:
+    if below.is_dir():
+        for d in sorted(below.iterdir()):
+            label_ = f"{d.name} (below spec, demonstration)"
+            if (d / "metadata.json").is_file() and label_ not in choices:
+                choices[label_] = str(d)
 if not choices:
     st.info(
         "No trained emulator found. Build the bundled ones with `python scripts/build_emulators.py` "

@@ -28,8 +28,8 @@ Emulators (the chapter's, Section 9.2.4):
 Defaults meet the spec: 10,000 training, 1,000 validation and 1,000 test
 simulations per emulator at the ``default`` resolution. An emulator built
 below that spec (fewer runs or the ``fast`` mesh) is never written to
-``assets/emulators/``: it goes to ``<workdir>/below-spec/<name>/`` and its
-metadata carries a ``spec_note`` saying so.
+``assets/emulators/``: it goes to ``<workdir>/below-spec/<name>/`` (or
+``--below-spec-out``) and its metadata carries a ``spec_note`` saying so.
 """
 from __future__ import annotations
 
@@ -65,6 +65,8 @@ def parse_args(argv=None):
     g.add_argument("--scheduler", default=None, help="Dask scheduler tcp://HOST:PORT")
     p.add_argument("--workdir", type=Path, default=REPO / "build" / "emulators", help="designs and campaign stores")
     p.add_argument("--out", type=Path, default=REPO / "assets" / "emulators", help="where spec-compliant emulators go")
+    p.add_argument("--below-spec-out", type=Path, default=None,
+                   help="where below-spec emulators go (default <workdir>/below-spec); never assets/emulators")
     p.add_argument("--architectures", default="all", help="'all' ({50,100,120,200}^2) or e.g. '50x50,100x200'")
     p.add_argument("--max-epochs", type=int, default=2000)
     p.add_argument("--patience", type=int, default=150)
@@ -148,7 +150,10 @@ def build_one(name: str, args) -> Path | None:
     )
     if note:
         emu.metadata["spec_note"] = f"BELOW SPEC, for demonstration only: {note}"
-    out = (args.workdir / "below-spec" / name) if note else (args.out / name)
+    below = args.below_spec_out or (args.workdir / "below-spec")
+    if note and below.resolve() == args.out.resolve():
+        raise SystemExit("--below-spec-out must differ from --out: below-spec emulators never go where bundled ones live")
+    out = (below / name) if note else (args.out / name)
     held = test if test is not None else valid
     save_emulator(emu, out, validation={"inputs": held.inputs, "outputs": held.outputs,
                                         "predictions": np.asarray(emu.apply(held.inputs))})
