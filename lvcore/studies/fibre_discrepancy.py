@@ -114,13 +114,13 @@ def _rhat(draws: dict, i: int, names) -> float:
 
 def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | None = None, seed: int = 0,
               simulate_fn: Callable | None = None, resolution: str = "default", out: str | Path | None = None,
-              progress=None, set_indices=None) -> dict:
+              progress=None, set_indices=None, emulator: str = "chapter") -> dict:
     """Run the study; returns plain data (and writes it under ``out`` if given).
 
     Parameters
     ----------
     forward : ForwardModel, optional
-        Default: the ``chapter`` emulator with ``h`` bound in
+        Default: emulator ``emulator`` (name or directory; ``chapter``) with ``h`` bound in
         (:func:`lvcore.inference.forward.load_forward`); raises EmulatorError if absent.
     simulate_fn : callable, optional
         ``(theta, alpha_endo, alpha_epi) -> 25 outputs``; default the FE simulator.
@@ -130,7 +130,7 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
     if forward is None:
         from lvcore.inference.forward import load_forward
 
-        forward = load_forward("chapter", h)
+        forward = load_forward(emulator, h)
     sets = make_test_sets(forward, h, seed=seed, simulate_fn=simulate_fn, resolution=resolution, progress=progress,
                           set_indices=set_indices)
     t_sim = time.perf_counter() - t_start
@@ -248,13 +248,15 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--chains", type=int, default=4)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resolution", default="default", help="simulator mesh preset for the test data")
+    p.add_argument("--emulator", default="chapter",
+                   help="emulator name or directory trained at angles (-60, 60) (default: chapter)")
     p.set_defaults(func=_cli)
 
 
 def _cli(args) -> int:
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
                                  seed=args.seed)
-    res = run_study(config=cfg, seed=args.seed, resolution=args.resolution, out=args.out,
+    res = run_study(config=cfg, seed=args.seed, resolution=args.resolution, out=args.out, emulator=args.emulator,
                     progress=None if args.json else (lambda msg, frac: print(msg, flush=True)))
     if args.json:
         print(json.dumps({k: res[k] for k in ("findings", "timings_s", "forward_model")}, indent=2))
