@@ -94,3 +94,17 @@ def test_adjoint_sensitivities_match_finite_differences(fast_case, fast_result):
         fd = (ys[0] - ys[1]) / (2 * h)
         np.testing.assert_allclose(sens[name], fd, rtol=2e-4, atol=1e-6 * np.abs(fd).max())
     assert sens["a"][0] < 0  # stiffer myocardium, smaller cavity
+
+
+@pytest.mark.slow
+def test_default_resolution_is_converged_and_plausible():
+    """Default preset vs the accurate one; plausibility at the reference parameters (8 mmHg)."""
+    r_def = simulate(Case.default_lv(THETA, resolution="default"))
+    r_acc = simulate(Case.default_lv(THETA, resolution="accurate"))
+    y, ref = r_def.outputs(), r_acc.outputs()
+    assert abs(y[0] - ref[0]) / ref[0] < 0.01
+    assert abs(np.mean(y[1:]) - np.mean(ref[1:])) / abs(np.mean(ref[1:])) < 0.01
+    assert np.abs(y[1:] - ref[1:]).max() < 0.005
+    # plausibility (documented in docs/simulator.md): the cavity roughly doubles, strains in the measured range
+    assert 1.3 < r_def.lvv_standardised < 2.5
+    assert np.all((y[1:] > -0.30) & (y[1:] < -0.05))

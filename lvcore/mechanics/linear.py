@@ -1,8 +1,14 @@
-"""Sparse direct solves of the (symmetric, possibly indefinite) tangent.
+"""Sparse direct solves of the tangent.
 
-Uses CHOLMOD (scikit-sparse) when it is installed and the matrix is positive
-definite, falling back to SciPy's SuperLU with a symmetric ordering, which
-also handles indefinite tangents away from equilibrium.
+* Symmetric tangents (pressure potential on the LV): CHOLMOD (scikit-sparse,
+  optional) with the symbolic analysis done once per sparsity pattern and
+  reused; an indefinite tangent (possible away from equilibrium) or a missing
+  CHOLMOD falls back to SciPy's SuperLU with a symmetric ordering.
+* Non-symmetric tangents (follower pressure on an open face): SuperLU with
+  partial pivoting.
+
+Install CHOLMOD with ``apt-get install -y libsuitesparse-dev`` and
+``pip install scikit-sparse==0.4.16``; without it everything still works, slower.
 """
 from __future__ import annotations
 
@@ -11,36 +17,65 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 try:  # optional, faster
-    from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky as _cholmod
+    from sksparse.cholmod import CholmodNotPositiveDefiniteError, analyze as _cholmod_analyze
 except Exception:  # pragma: no cover - depends on the environment
-    _cholmod = None
+    _cholmod_analyze = None
     CholmodNotPositiveDefiniteError = Exception
+
+_SYMBOLIC: dict = {}
 
 
 def available_backends() -> tuple[str, ...]:
     """Names of the usable backends, fastest first."""
-    return (("cholmod",) if _cholmod is not None else ()) + ("superlu",)
+    return (("cholmod",) if _cholmod_analyze is not None else ()) + ("superlu",)
+
+
+def _as_csc(K, symmetric):
+    if symmetric and sp.isspmatrix_csr(K):
+        # a symmetric CSR matrix read as CSC is the same matrix: no conversion
+        return sp.csc_matrix((K.data, K.indices, K.indptr), shape=K.shape)
+    return sp.csc_matrix(K)
 
 
 class Factorization:
-    """A factorised matrix; call :meth:`solve` (1-D or 2-D right-hand sides)."""
+    """A factorised matrix; call :meth:`solve` (1-D or 2-D right-hand sides).
 
-    def __init__(self, K: sp.csr_matrix, backend: str | None = None, symmetric: bool = True):
+    Parameters
+    ----------
+    K : sparse matrix.
+    backend : "cholmod" or "superlu" (default: the fastest available).
+    symmetric : whether K is symmetric.
+    key : hashable id of K's sparsity pattern; with CHOLMOD the symbolic
+        analysis is cached under it.
+    """
+
+    def __init__(self, K, backend: str | None = None, symmetric: bool = True, key=None):
         self.backend = backend or available_backends()[0]
         self._lu = None
         self._chol = None
-        if self.backend == "cholmod" and _cholmod is not None and symmetric:
+        A = _as_csc(K, symmetric)
+        if self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
             try:
-                self._chol = _cholmod(sp.csc_matrix(K))
+                if key is not None and key in _SYMBOLIC:
+                    f = _SYMBOLIC[key]
+                    f.cholesky_inplace(A)
+                else:
+                    f = _cholmod_analyze(A)
+                    f.cholesky_inplace(A)
+                    if key is not None:
+                        if len(_SYMBOLIC) > 16:
+                            _SYMBOLIC.clear()
+                        _SYMBOLIC[key] = f
+                self._chol = f
                 return
             except CholmodNotPositiveDefiniteError:
-                self.backend = "superlu"
+                pass
         self.backend = "superlu"
         if symmetric:
-            self._lu = spla.splu(sp.csc_matrix(K), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
+            self._lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
                                  options={"SymmetricMode": True})
         else:
-            self._lu = spla.splu(sp.csc_matrix(K))
+            self._lu = spla.splu(A)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         if self._chol is not None:
@@ -48,6 +83,6 @@ class Factorization:
         return self._lu.solve(b)
 
 
-def factorize(K: sp.csr_matrix, backend: str | None = None, symmetric: bool = True) -> Factorization:
+def factorize(K, backend: str | None = None, symmetric: bool = True, key=None) -> Factorization:
     """Factorise ``K`` with the fastest available backend (``symmetric=False``: SuperLU, partial pivoting)."""
-    return Factorization(K, backend, symmetric)
+    return Factorization(K, backend, symmetric, key)

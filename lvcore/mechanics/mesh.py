@@ -28,7 +28,7 @@ from lvcore.mechanics.quadrature import quad9_shape, reference_gradients
 RESOLUTION_PRESETS = {
     "fast": (6, 4, 1),
     "default": (12, 4, 1),
-    "accurate": (18, 8, 2),
+    "accurate": (12, 8, 2),
 }
 #: Box resolutions as elements across the smallest box dimension; other
 #: directions get the same element size (rounded up).

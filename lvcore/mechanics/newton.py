@@ -29,15 +29,16 @@ class NewtonOptions:
     """Solver settings (tolerances relative to the norm of the full external load)."""
 
     rtol: float = 1e-9
-    rtol_intermediate: float = 1e-4
+    rtol_intermediate: float = 1e-2
     max_iterations: int = 25
-    first_step: float = 0.5
+    first_step: float = 0.25
     min_step: float = 1.0 / 1024
     grow: float = 2.0
     max_cuts: int = 12
     min_jacobian: float = 0.02
     max_line_search: int = 10
-    predictor: bool = True
+    predictor: bool = False
+    min_first_alpha: float = 0.3
 
 
 @dataclass
@@ -85,7 +86,7 @@ def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
     return (True,) + best
 
 
-def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats):
+def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False):
     """Newton iterations at fixed load factor. Returns (ok, u, p, reason)."""
     r_u, r_p, mj, _ = system.residual(u, p, lam)
     stats["residuals"] += 1
@@ -99,7 +100,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats):
         stats["t_tangent"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         try:
-            du = -factorize(K, symmetric=system.potential).solve(rhs)
+            du = -factorize(K, symmetric=system.potential, key=id(system.pattern)).solve(rhs)
         except RuntimeError as exc:  # singular factor
             return False, u, p, f"linear solve failed: {exc}"
         stats["t_solve"] += time.perf_counter() - t0
@@ -112,6 +113,9 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats):
         stats["t_line"] += time.perf_counter() - t0
         if not found:
             return False, u, p, "line search found no admissible step (inverted elements)"
+        if it == 0 and can_cut and alpha < opts.min_first_alpha:
+            # the linearisation at the start of the step is poor: a smaller load step is cheaper
+            return False, u, p, f"load step too large (first Newton step damped to {alpha:.2g})"
         if _DEBUG:
             print(f"  it {it} lam {lam:.4f} |r_u| {np.linalg.norm(r_u):.3e} -> {np.linalg.norm(rut):.3e} alpha {alpha:g} "
                   f"|r_p| {np.abs(rpt).max():.2e} minJ {mjt:.3f}")
@@ -151,12 +155,12 @@ def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
                 u_start, p_start = u_try, p_try
             stats["residuals"] += 1
         ok, u_new, p_new, reason = _newton_at(system, u_start, p_start, target, rtol * scale, rtol * 1e-2 * vol,
-                                              opts, stats)
+                                              opts, stats, can_cut=step > 4 * opts.min_step)
         if ok:
             prev = (lam, u, p)
             u, p, lam = u_new, p_new, target
             steps += 1
-            if stats["iterations"] - it0 <= 6:
+            if stats["iterations"] - it0 <= 5:
                 step = min(1.0, step * opts.grow)
         else:
             last_reason = reason

@@ -13,7 +13,7 @@ import numpy as np
 from lvcore.geometry.template import N_REGIONS, lagrange_q2_shape
 from lvcore.mechanics import loads
 from lvcore.mechanics.fibres import lv_wall_frame
-from lvcore.mechanics.kinematics import circumferential_green_strain, deformation_gradient
+from lvcore.mechanics.kinematics import circumferential_green_strain
 from lvcore.mechanics.mesh import FEMesh
 from lvcore.mechanics.quadrature import gauss_hex, reference_gradients
 
@@ -26,45 +26,72 @@ class StrainOperator:
 
     Attributes
     ----------
-    e_c : (n_el, n_q, 3) reference circumferential unit vectors.
-    weights : (24, n_el * n_q) volume weights, each row summing to 1, of the
-        quadrature points of the region's elements in the chosen layer.
+    elements : (m,) elements that contribute; connectivity : (m, 27) their nodes.
+    dNdX : (m, q, 27, 3) shape gradients at the strain sampling points.
+    e_c : (m, q, 3) reference circumferential unit vectors there.
+    weights : (24, m * q) volume weights, each row summing to 1.
     """
 
+    elements: np.ndarray
+    connectivity: np.ndarray
+    dNdX: np.ndarray
     e_c: np.ndarray
     weights: np.ndarray
+
+
+#: Transmural extent (fraction of the wall from the endocardium) of each strain layer.
+LAYER_DEPTH = {"endocardial": 0.5, "wall": 1.0}
 
 
 def strain_operator(mesh: FEMesh, layer: str = "endocardial") -> StrainOperator:
     """Build the regional strain average for an LV mesh.
 
-    ``layer="endocardial"``: the elements next to the endocardium (first
-    transmural element layer); ``"wall"``: all elements.
+    ``layer="endocardial"``: the inner half of the wall (transmural coordinate
+    t <= 1/2: the elements next to the endocardium of a two-layer mesh),
+    integrated with 3x3x3 Gauss points mapped into the part of each element
+    that lies in it, so the definition does not depend on the resolution;
+    ``"wall"``: the whole wall.
     """
     if layer not in STRAIN_LAYERS:
         raise ValueError(f"strain layer must be one of {STRAIN_LAYERS}, got {layer!r}")
     tpl = mesh.template
-    xi, _ = gauss_hex(3)
-    e_c, _, _ = lv_wall_frame(mesh.nodes, mesh.elements, xi)
-    _, wdet, _ = reference_gradients(mesh.nodes, mesh.elements)
-    regions = tpl.element_regions
-    use = np.ones(mesh.n_elements, bool) if layer == "wall" else tpl.element_grid[:, 2] == 0
-    W = np.zeros((N_REGIONS, mesh.n_elements, xi.shape[0]))
+    nt = mesh.resolution[2]
+    depth = LAYER_DEPTH[layer]
+    xi0, w0 = gauss_hex(3)
+    parts = []
+    for et in range(nt):
+        lo, hi = et / nt, min((et + 1) / nt, depth)
+        if hi <= lo + 1e-12:
+            continue
+        b_lo, b_hi = 2 * (lo * nt - et) - 1, 2 * (hi * nt - et) - 1
+        xi = xi0.copy()
+        xi[:, 1] = b_lo + (xi0[:, 1] + 1) * 0.5 * (b_hi - b_lo)
+        w = w0 * 0.5 * (b_hi - b_lo)
+        sel = np.flatnonzero(tpl.element_grid[:, 2] == et)
+        dNdX, wdet, _ = reference_gradients(mesh.nodes, mesh.elements[sel], points=(xi, w))
+        e_c, _, _ = lv_wall_frame(mesh.nodes, mesh.elements[sel], xi)
+        parts.append((sel, dNdX, wdet, e_c))
+    sel = np.concatenate([p[0] for p in parts])
+    dNdX = np.concatenate([p[1] for p in parts])
+    wdet = np.concatenate([p[2] for p in parts])
+    e_c = np.concatenate([p[3] for p in parts])
+    regions = tpl.element_regions[sel]
+    W = np.zeros((N_REGIONS,) + wdet.shape)
     for r in range(N_REGIONS):
-        sel = use & (regions == r)
-        W[r, sel] = wdet[sel]
+        W[r, regions == r] = wdet[regions == r]
     tot = W.reshape(N_REGIONS, -1).sum(axis=1)
     if np.any(tot <= 0):
         raise ValueError(
             f"resolution {mesh.resolution} leaves strain regions {np.flatnonzero(tot <= 0).tolist()} empty; "
             "use at least 6 elements around and 4 base to apex"
         )
-    return StrainOperator(e_c=e_c, weights=(W.reshape(N_REGIONS, -1) / tot[:, None]))
+    return StrainOperator(elements=sel, connectivity=mesh.elements[sel], dNdX=dNdX, e_c=e_c, weights=W.reshape(N_REGIONS, -1) / tot[:, None])
 
 
-def regional_strains(x, elements, dNdX, op: StrainOperator):
-    """(24,) circumferential Green strains (end diastole as reference) for current nodes x."""
-    F = jnp.vectorize(deformation_gradient, signature="(a,i),(q,a,j)->(q,i,j)")(x[elements], dNdX)
+def regional_strains(x, op: StrainOperator):
+    """(24,) circumferential Green strains (end diastole as reference) for current nodes x (n, 3)."""
+    xe = x[jnp.asarray(op.connectivity)]
+    F = jnp.einsum("eai,eqaJ->eqiJ", xe, jnp.asarray(op.dNdX))
     e = circumferential_green_strain(F, jnp.asarray(op.e_c))
     return jnp.asarray(op.weights) @ e.reshape(-1)
 

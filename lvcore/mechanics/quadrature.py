@@ -60,7 +60,7 @@ def p1_basis(xi: np.ndarray) -> np.ndarray:
     return np.concatenate([np.ones((xi.shape[0], 1)), xi], axis=1)
 
 
-def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3):
+def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3, points=None):
     """Shape-function gradients and integration weights in the reference configuration.
 
     Parameters
@@ -68,6 +68,7 @@ def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3)
     nodes : (n_nodes, 3) reference positions (mm).
     elements : (n_el, 27) connectivity.
     order : Gauss points per direction.
+    points : optional (xi (q, 3), w (q,)) rule used instead of the Gauss rule.
 
     Returns
     -------
@@ -75,7 +76,7 @@ def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3)
     wdet : (n_el, n_q) quadrature weight times det(dX/dxi) (mm³).
     detJ : (n_el, n_q) det(dX/dxi), for checking element validity.
     """
-    xi, w = gauss_hex(order)
+    xi, w = gauss_hex(order) if points is None else points
     _, dN = lagrange_q2_shape(xi, derivatives=True)  # (q, 27, 3)
     X = nodes[elements]  # (e, 27, 3)
     Jm = np.einsum("eai,qaj->eqij", X, dN)  # dX_i/dxi_j

@@ -205,14 +205,12 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     sens = None
     if is_lv:
         op = observables.strain_operator(mesh, case.outputs.strain_layer)
-        dNdX = jnp.asarray(system.dNdX)
         X = jnp.asarray(mesh.nodes)
-        elements = jnp.asarray(mesh.elements)
 
         def output_fn(u_full):
             xx = X + u_full.reshape(-1, 3)
             v = observables.cavity_volume(xx, mesh) / units.MM3_PER_ML
-            s = observables.regional_strains(xx, elements, dNdX, op)
+            s = observables.regional_strains(xx, op)
             return jnp.concatenate([v[None], s])
 
         y = np.asarray(jax.jit(output_fn)(jnp.asarray(u)))

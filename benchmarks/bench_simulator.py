@@ -1,0 +1,118 @@
+"""Simulator benchmarks: mesh convergence and timing on the default LV at 8 mmHg.
+
+Usage::
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
+        python benchmarks/bench_simulator.py [--resolutions 6,4,1 12,4,1 ...] [--repeats 5] [--processes]
+
+Prints markdown tables: per resolution the dofs, LVV, EDV/V_early, mean
+strain, the largest relative output change against the finest resolution,
+Newton iterations, compile+first-solve time and median warm solve time; with
+``--processes`` also the throughput of one vs two worker processes.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+
+def _case(res):
+    from lvcore.mechanics.case import Case
+
+    return Case.default_lv(resolution={"circumferential": res[0], "longitudinal": res[1], "transmural": res[2]})
+
+
+def run_resolution(res, repeats):
+    from lvcore.mechanics.simulate import simulate
+
+    t0 = time.perf_counter()
+    r = simulate(_case(res))
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        r = simulate(_case(res))
+        times.append(time.perf_counter() - t0)
+    return r, first, statistics.median(times) if times else float("nan")
+
+
+def cold_start(res) -> float:
+    code = (
+        "import time; t=time.perf_counter(); import lvcore; from lvcore.mechanics.case import Case; "
+        "from lvcore.mechanics.simulate import simulate; "
+        f"r=simulate(Case.default_lv(resolution={{'circumferential':{res[0]},'longitudinal':{res[1]},'transmural':{res[2]}}})); "
+        "print(time.perf_counter()-t)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def _worker(args):
+    res, n = args
+    from lvcore.mechanics.simulate import simulate
+
+    for _ in range(n):
+        simulate(_case(res))
+    return n
+
+
+def throughput(res, n_jobs, n_proc):
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(n_proc) as pool:
+        pool.map(_worker, [(res, 1)] * n_proc)  # warm up (compile) each worker
+        t0 = time.perf_counter()
+        pool.map(_worker, [(res, n_jobs // n_proc)] * n_proc)
+        return n_jobs / (time.perf_counter() - t0)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--resolutions", nargs="*", default=["6,4,1", "12,4,1", "12,8,1", "12,8,2"])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--processes", action="store_true", help="measure 1 vs 2 worker processes")
+    ap.add_argument("--cold", default=None, help="resolution for the cold-start measurement (e.g. 12,4,1)")
+    a = ap.parse_args(argv)
+    import numpy as np
+
+    from lvcore.mechanics.linear import available_backends
+
+    rows = []
+    for s in a.resolutions:
+        res = tuple(int(v) for v in s.split(","))
+        r, first, med = run_resolution(res, a.repeats)
+        rows.append((res, r, first, med))
+        print(f"done {res}: converged={r.converged} {med:.3f} s", file=sys.stderr, flush=True)
+    ref = rows[-1][1].outputs()
+    print(f"Default LV, HO theta=(0.60,1.30,1.00,3.60), 8 mmHg, angles (-60,+90); linear solver {available_backends()[0]}")
+    print("CPU shared with other jobs: compare ratios within this table.\n")
+    print("| resolution | dofs | LVV (mL) | EDV/V_early | mean strain | max rel. change vs finest (LVV; strains) "
+          "| Newton its | steps | first solve incl. compile (s) | median solve (s) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for res, r, first, med in rows:
+        y = r.outputs()
+        dv = abs(y[0] - ref[0]) / ref[0]
+        ds = np.max(np.abs(y[1:] - ref[1:]) / np.abs(ref[1:]))
+        print(f"| {res} | {r.dofs} | {y[0]:.2f} | {r.lvv_standardised:.3f} | {np.mean(y[1:]):.4f} | "
+              f"{dv:.2%}; {ds:.2%} | {r.newton_iterations} | {r.load_steps} | {first:.2f} | {med:.3f} |")
+    if a.cold:
+        res = tuple(int(v) for v in a.cold.split(","))
+        print(f"\ncold start (new process: import + compile or cache load + first solve) at {res}: "
+              f"{cold_start(res):.2f} s")
+    if a.processes:
+        res = rows[0][0] if len(rows) == 1 else tuple(int(v) for v in a.resolutions[1].split(","))
+        t1 = throughput(res, 8, 1)
+        t2 = throughput(res, 8, 2)
+        print(f"\nthroughput at {res}: 1 process {t1:.2f} solves/s, 2 processes {t2:.2f} solves/s, ratio {t2 / t1:.2f}")
+
+
+if __name__ == "__main__":
+    main()

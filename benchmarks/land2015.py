@@ -1,0 +1,98 @@
+"""Land et al. (2015) benchmark problems 1 and 2: mesh-convergence tables.
+
+Usage::
+
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
+        python benchmarks/land2015.py [--problem 1|2|both] [--p1 10,1,1 20,2,2] [--p2 6,8,2 12,8,2]
+
+Prints markdown tables (dofs, results, Newton iterations, wall time) to be
+pasted into docs/simulator.md. Reference values: problem 1 tip z in
+[4.151, 4.185] mm (consensus ~4.17); problem 2 (Simula/FEniCS converged)
+endocardial apex z = -26.612 mm, epicardial apex z = -28.279 mm, cavity
+volume 10734 mm³.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+P2_REF = {"endo": -26.612, "epi": -28.279, "volume": 10734.0}
+
+
+def problem1_case(res):
+    return {
+        "geometry": {"kind": "box", "size": [10, 1, 1], "resolution": {"x": res[0], "y": res[1], "z": res[2]}},
+        "material": {"law": "guccione", "C": 2.0, "bf": 8.0, "bt": 2.0, "bfs": 4.0},
+        "fibres": {"direction": [1, 0, 0]},
+        "load": {"pressure": 0.004, "units": "kPa", "surface": "z0"},
+        "boundary": {"clamped": ["x0"]},
+        "probes": [[10.0, 0.5, 1.0]],
+    }
+
+
+def problem2_case(res):
+    return {
+        "geometry": {"kind": "ellipsoid", "endo": {"rs": 7.0, "rl": 17.0}, "epi": {"rs": 10.0, "rl": 20.0},
+                     "base_z": 5.0,
+                     "resolution": {"circumferential": res[0], "longitudinal": res[1], "transmural": res[2]}},
+        "material": {"law": "guccione", "C": 10.0, "bf": 1.0, "bt": 1.0, "bfs": 1.0},
+        "load": {"pressure": 10.0, "units": "kPa"},
+        "boundary": {"base": "clamped"},
+    }
+
+
+def _timed(case):
+    from lvcore.mechanics.simulate import simulate
+
+    t0 = time.perf_counter()
+    r = simulate(case)
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    r = simulate(case)
+    return r, first, time.perf_counter() - t0
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--problem", default="both", choices=["1", "2", "both"])
+    ap.add_argument("--p1", nargs="*", default=["10,1,1", "20,2,2", "30,3,3"])
+    ap.add_argument("--p2", nargs="*", default=["6,8,2", "6,12,2", "6,16,3", "12,8,2"])
+    a = ap.parse_args(argv)
+    from lvcore.mechanics.linear import available_backends
+
+    print(f"linear solver: {available_backends()[0]}; CPU shared with other jobs (times are indicative)\n")
+    if a.problem in ("1", "both"):
+        print("Problem 1 (beam), tip (10, 0.5, 1): reference z in [4.151, 4.185] mm\n")
+        print("| elements (x,y,z) | dofs | tip x | tip y | tip z | Newton its | 1st run incl. compile (s) | warm (s) |")
+        print("|---|---|---|---|---|---|---|---|")
+        for s in a.p1:
+            res = tuple(int(v) for v in s.split(","))
+            r, first, warm = _timed(problem1_case(res))
+            tip = r.probes[0] if r.converged else [float("nan")] * 3
+            print(f"| {res} | {r.dofs} | {tip[0]:.4f} | {tip[1]:.4f} | {tip[2]:.4f} | {r.newton_iterations} "
+                  f"| {first:.1f} | {warm:.1f} |", flush=True)
+        print()
+    if a.problem in ("2", "both"):
+        print("Problem 2 (LV inflation): reference endo apex z -26.612, epi apex z -28.279 mm, volume 10734 mm³\n")
+        print("| elements (circ,long,trans) | dofs | endo apex z | epi apex z | volume (mm³) | vol. error "
+              "| Newton its | steps | 1st run incl. compile (s) | warm (s) |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for s in a.p2:
+            res = tuple(int(v) for v in s.split(","))
+            r, first, warm = _timed(problem2_case(res))
+            if r.converged:
+                v = r.cavity_volume_mm3[1]
+                print(f"| {res} | {r.dofs} | {r.apex_endocardium[2]:.3f} | {r.apex_epicardium[2]:.3f} | {v:.0f} "
+                      f"| {(v - P2_REF['volume']) / P2_REF['volume']:+.2%} | {r.newton_iterations} | {r.load_steps} "
+                      f"| {first:.1f} | {warm:.1f} |", flush=True)
+            else:
+                print(f"| {res} | {r.dofs} | failed: {r.message} |", flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
