@@ -6,7 +6,7 @@ boundary condition (NumPy); each assembly is then one ``segment_sum``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -28,6 +28,7 @@ class SparsityPattern:
     keep : indices into the concatenated, raveled local matrices of the entries
         that land on free rows and columns.
     dest : CSR slot of each kept entry.
+    cache : scratch space for solvers (e.g. a reusable symbolic factorisation).
     """
 
     n_dofs: int
@@ -36,6 +37,7 @@ class SparsityPattern:
     indices: np.ndarray
     keep: np.ndarray
     dest: np.ndarray
+    cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def n_free(self) -> int:

@@ -22,9 +22,6 @@ except Exception:  # pragma: no cover - depends on the environment
     _cholmod_analyze = None
     CholmodNotPositiveDefiniteError = Exception
 
-_SYMBOLIC: dict = {}
-
-
 def available_backends() -> tuple[str, ...]:
     """Names of the usable backends, fastest first."""
     return (("cholmod",) if _cholmod_analyze is not None else ()) + ("superlu",)
@@ -45,27 +42,23 @@ class Factorization:
     K : sparse matrix.
     backend : "cholmod" or "superlu" (default: the fastest available).
     symmetric : whether K is symmetric.
-    key : hashable id of K's sparsity pattern; with CHOLMOD the symbolic
-        analysis is cached under it.
+    cache : optional dict owned by K's sparsity pattern; with CHOLMOD the
+        symbolic analysis is stored there and reused for matrices of that pattern.
     """
 
-    def __init__(self, K, backend: str | None = None, symmetric: bool = True, key=None):
+    def __init__(self, K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None):
         self.backend = backend or available_backends()[0]
         self._lu = None
         self._chol = None
         A = _as_csc(K, symmetric)
         if self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
             try:
-                if key is not None and key in _SYMBOLIC:
-                    f = _SYMBOLIC[key]
-                    f.cholesky_inplace(A)
-                else:
+                f = cache.get("cholmod") if cache is not None else None
+                if f is None:
                     f = _cholmod_analyze(A)
-                    f.cholesky_inplace(A)
-                    if key is not None:
-                        if len(_SYMBOLIC) > 16:
-                            _SYMBOLIC.clear()
-                        _SYMBOLIC[key] = f
+                    if cache is not None:
+                        cache["cholmod"] = f
+                f.cholesky_inplace(A)
                 self._chol = f
                 return
             except CholmodNotPositiveDefiniteError:
@@ -83,6 +76,6 @@ class Factorization:
         return self._lu.solve(b)
 
 
-def factorize(K, backend: str | None = None, symmetric: bool = True, key=None) -> Factorization:
+def factorize(K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None) -> Factorization:
     """Factorise ``K`` with the fastest available backend (``symmetric=False``: SuperLU, partial pivoting)."""
-    return Factorization(K, backend, symmetric, key)
+    return Factorization(K, backend, symmetric, cache)

@@ -34,7 +34,7 @@ class NewtonOptions:
     first_step: float = 0.25
     min_step: float = 1.0 / 1024
     grow: float = 2.0
-    max_cuts: int = 12
+    max_cuts: int = 40
     min_jacobian: float = 0.02
     max_line_search: int = 10
     predictor: bool = False
@@ -100,7 +100,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False):
         stats["t_tangent"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         try:
-            du = -factorize(K, symmetric=system.potential, key=id(system.pattern)).solve(rhs)
+            du = -factorize(K, symmetric=system.potential, cache=system.pattern.cache).solve(rhs)
         except RuntimeError as exc:  # singular factor
             return False, u, p, f"linear solve failed: {exc}"
         stats["t_solve"] += time.perf_counter() - t0

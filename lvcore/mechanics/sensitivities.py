@@ -32,7 +32,7 @@ def output_sensitivities(system, u_free, p, output_fn, param_names, which) -> di
     _, K, _, _ = system.tangent(u_free, p, 1.0)
     dR = system.residual_param_jacobian(u_free, p, 1.0)
     idx = [list(param_names).index(n) for n in which]
-    du = -factorize(K, symmetric=system.potential, key=id(system.pattern)).solve(np.ascontiguousarray(dR[:, idx]))
+    du = -factorize(K, symmetric=system.potential, cache=system.pattern.cache).solve(np.ascontiguousarray(dR[:, idx]))
     if du.ndim == 1:
         du = du[:, None]
     u_full = jnp.asarray(system.full(u_free))

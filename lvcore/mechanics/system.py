@@ -102,7 +102,7 @@ class DiscreteSystem:
     load_surface : "endocardium" (pressure potential with the base plane) or a box face.
     pressure : full load (kPa).
     fixed_dofs : global dof numbers held at zero displacement.
-    modulus : stiffness scale (kPa) used to weigh the constraint residual in the merit.
+    modulus : stiffness scale of the law (kPa), for reference.
     """
 
     def __init__(self, mesh: FEMesh, law, params, frames, kappa, load_surface, pressure, fixed_dofs,
@@ -144,8 +144,7 @@ class DiscreteSystem:
         self.free = self.pattern.free
         self.Minv = np.linalg.inv(M)
         self.edofs = block_dofs(elements)
-        h = float(np.mean(np.sum(wdet, axis=1)) ** (1.0 / 3.0))
-        self.p_scale = float(modulus) / h
+        self.modulus = float(modulus)
 
     # ----- vectors ----------------------------------------------------------
     @property
@@ -188,15 +187,6 @@ class DiscreteSystem:
         g = np.zeros(self.mesh.n_dofs)
         np.add.at(g, self.edofs, np.einsum("emk,em->ek", D, q))
         return r_u + g[self.free]
-
-    def merit(self, r_u, r_p) -> float:
-        """Line-search merit: the norm of the force residual ||r_u|| (mN).
-
-        The constraint residual is left out on purpose: after a Newton step it is
-        second order in the step and weighing it in stalls the line search on
-        large rotations; convergence still requires it to vanish.
-        """
-        return float(np.linalg.norm(r_u))
 
     def residual_param_jacobian(self, u_free, p, load_factor: float = 1.0) -> np.ndarray:
         """d r_u / d params on the free dofs at fixed (u, p), (n_free, n_params)."""
