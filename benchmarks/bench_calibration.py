@@ -33,6 +33,9 @@ def main(argv=None) -> int:
     p.add_argument("--runs", default="volume,iid,discrepancy,discrepancy-nuts")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
+    import numpyro
+
+    numpyro.set_host_device_count(min(args.chains, os.cpu_count() or 1))
 
     import numpy as np
 
@@ -73,7 +76,7 @@ def main(argv=None) -> int:
                   f"ESS/s {r['ess_per_s_min_theta']:7.1f}  R-hat {r['max_rhat']:.3f}  div {r['divergent']}  "
                   f"steps/iter {r['mean_steps']:.0f}", flush=True)
     meta = {"forward": getattr(forward, "label", ""), "chains": args.chains, "warmup": args.warmup,
-            "samples": args.samples, "chain_method": samplers.resolve_chain_method(cfg),
+            "samples": args.samples, "chain_method": getattr(samplers.resolve_chain_method(cfg), "__name__", samplers.resolve_chain_method(cfg)),
             "load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
     if args.json:
         print(json.dumps({"meta": meta, "rows": rows}, indent=2))

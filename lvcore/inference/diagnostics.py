@@ -124,7 +124,8 @@ def sample_until_converged(model_name: str, y, forward, config: samplers.Sampler
     run = samplers.run_model(model_name, y, forward, config, sampler=sampler, **model_kwargs)
     conv = check_convergence(run, rhat_max, ess_min, 1)
     rounds = 1
-    while not conv.converged and rounds < max_rounds:
+    # (R-hat needs two chains: a single chain is reported as not assessable, not extended)
+    while not conv.converged and rounds < max_rounds and n_chains(run) > 1:
         rounds += 1
         if progress:
             progress(f"{model_name}: {conv.message()}; drawing round {rounds}", (rounds - 1) / max_rounds)
