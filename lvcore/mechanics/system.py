@@ -26,8 +26,16 @@ from lvcore.mechanics.element import element_residual, element_tangent
 from lvcore.mechanics.mesh import FEMesh
 from lvcore.mechanics.quadrature import gauss_hex, p1_basis, reference_gradients
 
-#: Elements per batch in the element loops (lax.map); bounds peak memory.
-ELEMENT_BATCH = 32
+#: Largest number of elements per batch in the element loops (lax.map); bounds peak memory.
+ELEMENT_BATCH = 64
+
+
+def _batch_size(n: int) -> int:
+    """Largest divisor of ``n`` not above ELEMENT_BATCH (no remainder loop to compile)."""
+    for b in range(min(n, ELEMENT_BATCH), 0, -1):
+        if n % b == 0:
+            return b if b >= 8 or n <= 8 else min(n, ELEMENT_BATCH)
+    return 1
 
 
 def _elem_args(data, x, p):
@@ -40,7 +48,7 @@ def _map_elements(fn, data, x, p, params, kappa, law):
     def one(args):
         return fn(*args, P, params, kappa, law)
 
-    return jax.lax.map(one, _elem_args(data, x, p), batch_size=ELEMENT_BATCH)
+    return jax.lax.map(one, _elem_args(data, x, p), batch_size=_batch_size(data["elements"].shape[0]))
 
 
 def _external_forces(data, x, pressure, potential):
