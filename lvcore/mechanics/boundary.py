@@ -2,8 +2,12 @@
 
 * LV ``"clamped"``: every dof of the base-plane nodes.
 * LV ``"sliding"``: the z dof of every base node (the base stays in its
-  plane) plus the three in-plane rigid-body modes: x and y of the
-  endocardial base node at phi = 0 and y of the one at phi = 180°.
+  plane) plus the three in-plane rigid-body modes, removed by holding the
+  *circumferential* displacement of three endocardial base nodes: y at
+  phi = 0° and phi = 180° (y translation and rotation about z) and x at
+  phi ≈ 90° (x translation). Radial motion stays free, so an axisymmetric
+  inflation is not disturbed (an earlier version held x at phi = 0, which
+  blocked the radial expansion of that node).
 * Box: every dof of the nodes of each clamped face.
 """
 from __future__ import annotations
@@ -26,9 +30,10 @@ def fixed_dofs(mesh: FEMesh, base: str | None = None, clamped_faces=()) -> np.nd
             return node_dofs(nodes)
         if base == "sliding":
             tpl = mesh.template
-            a = int(tpl.node_index(0, 0, 0))
-            b = int(tpl.node_index(tpl.nc // 2, 0, 0))
-            return np.unique(np.concatenate([3 * nodes + 2, [3 * a, 3 * a + 1, 3 * b + 1]]))
+            at_0 = int(tpl.node_index(0, 0, 0))
+            at_180 = int(tpl.node_index(tpl.nc // 2, 0, 0))
+            at_90 = int(tpl.node_index(round(tpl.nc / 4), 0, 0))
+            return np.unique(np.concatenate([3 * nodes + 2, [3 * at_0 + 1, 3 * at_180 + 1, 3 * at_90]]))
         raise ValueError(f"LV base condition must be 'clamped' or 'sliding', got {base!r}")
     if not clamped_faces:
         raise ValueError("a box needs at least one clamped face (boundary.clamped_faces)")
