@@ -70,27 +70,30 @@ def test_ellipsoid_round_trip_contours(long_axis):
     assert abs(x_epi_base[0] - g.epi.rs * np.sin(psi)) < 0.3
 
 
-def test_ellipsoid_round_trip_surfaces(tmp_path):
+def ellipsoid_surface_mesh(surf, base_z, scale=1.0):
+    """A triangulated truncated-ellipsoid surface, open at the base plane (PyVista PolyData)."""
     import pyvista as pv
 
+    psib = surf.polar_angle_at(base_z)
+    ph = np.linspace(0, 2 * np.pi, 73)[:-1]
+    ps = np.linspace(0, psib, 40)[1:]
+    P, S = np.meshgrid(ph, ps, indexing="ij")
+    pts = np.vstack([[[0, 0, -surf.rl]], surf.point(P, S).reshape(-1, 3)]) * scale
+    n_p, n_s = P.shape
+    idx = 1 + np.arange(n_p * n_s).reshape(n_p, n_s)
+    i1 = np.roll(idx, -1, 0)
+    tris = np.vstack([np.stack([idx[:, :-1], idx[:, 1:], i1[:, 1:]], -1).reshape(-1, 3),
+                      np.stack([idx[:, :-1], i1[:, 1:], i1[:, :-1]], -1).reshape(-1, 3),
+                      np.stack([np.zeros(n_p, int), idx[:, 0], i1[:, 0]], -1)])
+    return pv.PolyData(pts, np.hstack([np.full((len(tris), 1), 3), tris]).ravel())
+
+
+def test_ellipsoid_round_trip_surfaces(tmp_path):
     g = TruncatedEllipsoidLV(EllipsoidSurface(22.0, 60.0), EllipsoidSurface(31.0, 70.0), 8.0)
     paths = []
     for name, surf, fmt in (("endo", g.endo, "stl"), ("epi", g.epi, "ply")):
-        psib = surf.polar_angle_at(g.base_z)
-        ph = np.linspace(0, 2 * np.pi, 73)[:-1]
-        ps = np.linspace(0, psib, 40)[1:]
-        P, S = np.meshgrid(ph, ps, indexing="ij")
-        pts = np.vstack([[[0, 0, -surf.rl]], surf.point(P, S).reshape(-1, 3)])
-        grid = pv.PolyData(pts).delaunay_2d() if False else None  # noqa: F841 (surface built below)
-        n_p, n_s = P.shape
-        idx = 1 + np.arange(n_p * n_s).reshape(n_p, n_s)
-        i1 = np.roll(idx, -1, 0)
-        tris = np.vstack([np.stack([idx[:, :-1], idx[:, 1:], i1[:, 1:]], -1).reshape(-1, 3),
-                          np.stack([idx[:, :-1], i1[:, 1:], i1[:, :-1]], -1).reshape(-1, 3),
-                          np.stack([np.zeros(n_p, int), idx[:, 0], i1[:, 0]], -1)])
-        mesh = pv.PolyData(pts, np.hstack([np.full((len(tris), 1), 3), tris]).ravel())
         p = tmp_path / f"{name}.{fmt}"
-        mesh.save(p)
+        ellipsoid_surface_mesh(surf, g.base_z).save(p)
         paths.append(p)
     r = fit_surfaces(*paths)
     assert r.residual_mean_mm < 0.15

@@ -186,21 +186,48 @@ def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndar
     return nodes
 
 
+def check_extent_is_mm(extent: float, what: str, fix_metres: str, fix_centimetres: str, max_mm: float) -> None:
+    """Raise GeometryError when an LV's size betrays metres, centimetres or nonsense.
+
+    Parameters
+    ----------
+    extent : float
+        Largest bounding-box side of the geometry, in the file's units.
+    what : str
+        What is measured, starting the message (e.g. "endo surface 'x.stl'").
+    fix_metres, fix_centimetres : str
+        What the user should do when the units look like m or cm.
+    max_mm : float
+        Largest plausible size (mm).
+    """
+    if extent < 1.0:
+        raise GeometryError(f"{what} is {extent:.3g} units across: the coordinates look like metres; {fix_metres}")
+    if extent < 20.0:
+        raise GeometryError(f"{what} is {extent:.3g} units across: the coordinates look like centimetres; "
+                            f"{fix_centimetres}")
+    if extent > max_mm:
+        raise GeometryError(f"{what} is {extent:.0f} mm across, far larger than an LV; check the units (mm expected)")
+
+
+def as_q2_mesh(nodes, elements) -> tuple[np.ndarray, np.ndarray]:
+    """Validate and convert a 27-node hexahedral mesh: (n, 3) float nodes, (n_el, 27) int elements."""
+    nodes = np.asarray(nodes, dtype=float)
+    elements = np.asarray(elements, dtype=np.int64)
+    if nodes.ndim != 2 or nodes.shape[1] != 3:
+        raise ValueError(f"nodes must have shape (n, 3), got {nodes.shape}")
+    if elements.ndim != 2 or elements.shape[1] != 27:
+        raise ValueError(f"elements must have shape (n_elements, 27), got {elements.shape}")
+    return nodes, elements
+
+
 def _check_nodes(nodes, template: LVTemplate, where: str) -> np.ndarray:
     nodes = np.asarray(nodes, dtype=float)
     if nodes.shape != (template.n_nodes, 3):
         raise GeometryError(f"{where}: node array has shape {nodes.shape}, expected {(template.n_nodes, 3)}")
     if not np.all(np.isfinite(nodes)):
         raise GeometryError(f"{where}: node coordinates contain NaN or inf")
-    extent = float(np.ptp(nodes, axis=0).max())
-    if extent < 1.0:
-        raise GeometryError(f"{where}: the LV is {extent:.3g} units across; coordinates look like metres. "
-                            "Template meshes are in mm: multiply by 1000")
-    if extent < 20.0:
-        raise GeometryError(f"{where}: the LV is {extent:.3g} units across; coordinates look like centimetres. "
-                            "Template meshes are in mm: multiply by 10")
-    if extent > 1000.0:
-        raise GeometryError(f"{where}: the LV is {extent:.3g} mm across (more than 1 m); check the units (mm expected)")
+    check_extent_is_mm(float(np.ptp(nodes, axis=0).max()), f"{where}: the LV", "multiply by 1000",
+                       "multiply by 10", max_mm=1000.0)
     detj = element_jacobian_determinants(nodes, template)
     if np.any(detj <= 0):
         bad = np.unique(np.nonzero(detj <= 0)[0])

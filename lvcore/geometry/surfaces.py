@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from lvcore.exceptions import GeometryError
+from lvcore.geometry.io import check_extent_is_mm
 
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
@@ -96,7 +97,8 @@ def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSu
                 mesh = pv.from_meshio(m)
             except (Exception, SystemExit) as err:
                 errors.append(f"meshio: {err}")
-        if mesh is None:
+        if mesh is None or mesh.n_points == 0:
+            errors = errors or ["no points found"]
             raise GeometryError(f"cannot read {name} surface '{path}' ({'; '.join(errors)}); "
                                 f"use a surface mesh format such as {', '.join(SURFACE_EXTENSIONS)}")
     else:
@@ -115,15 +117,9 @@ def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSu
     pts = np.asarray(surf.points, dtype=float) * scale
     if not np.all(np.isfinite(pts)):
         raise GeometryError(f"{name} surface '{source}' has NaN or inf coordinates")
-    extent = float(np.ptp(pts, axis=0).max())
-    if extent < 1.0:
-        raise GeometryError(f"{name} surface '{source}' is {extent:.3g} units across: the coordinates look like metres; "
-                            "pass units='m' (CLI: --units m) or convert to mm")
-    if extent < 20.0:
-        raise GeometryError(f"{name} surface '{source}' is {extent:.3g} units across: the coordinates look like "
-                            "centimetres; pass units='cm' (CLI: --units cm) or convert to mm")
-    if extent > 500.0:
-        raise GeometryError(f"{name} surface '{source}' is {extent:.0f} mm across, far larger than an LV; check units")
+    check_extent_is_mm(float(np.ptp(pts, axis=0).max()), f"{name} surface '{source}'",
+                       "pass units='m' (CLI: --units m) or convert to mm",
+                       "pass units='cm' (CLI: --units cm) or convert to mm", max_mm=500.0)
     edges = surf.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False,
                                        non_manifold_edges=False)
     boundary = np.asarray(edges.points, dtype=float) * scale if edges.n_points else np.zeros((0, 3))

@@ -43,17 +43,12 @@ def write_vtu(path, nodes, elements, *, displacement=None, point_data: Mapping[s
     """
     import meshio
 
-    from lvcore.geometry.io import VTK_FROM_TEMPLATE
+    from lvcore.geometry.io import VTK_FROM_TEMPLATE, as_q2_mesh
 
     path = Path(path)
     if path.suffix.lower() != ".vtu":
         raise LVCoreError(f"VTU export needs a path ending in .vtu, got '{path}'")
-    nodes = np.asarray(nodes, dtype=float)
-    elements = np.asarray(elements, dtype=np.int64)
-    if nodes.ndim != 2 or nodes.shape[1] != 3:
-        raise ValueError(f"nodes must have shape (n, 3), got {nodes.shape}")
-    if elements.ndim != 2 or elements.shape[1] != 27:
-        raise ValueError(f"elements must have shape (n_elements, 27), got {elements.shape}")
+    nodes, elements = as_q2_mesh(nodes, elements)
     pdata = {}
     if displacement is not None:
         u = np.asarray(displacement, dtype=float)

@@ -28,7 +28,7 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 import numpy as np  # noqa: E402
 import pyvista as pv  # noqa: E402
 
-from lvcore.geometry.io import VTK_FROM_TEMPLATE, VTK_TRIQUADRATIC_HEXAHEDRON  # noqa: E402
+from lvcore.geometry.io import VTK_FROM_TEMPLATE, VTK_TRIQUADRATIC_HEXAHEDRON, as_q2_mesh  # noqa: E402
 
 #: Named camera directions (from the focal point towards the camera) with +z up.
 VIEWS = {
@@ -57,12 +57,7 @@ def lv_grid(nodes, elements, point_data: Mapping[str, Any] | None = None,
     -------
     pyvista.UnstructuredGrid with ``VTK_TRIQUADRATIC_HEXAHEDRON`` cells.
     """
-    nodes = np.asarray(nodes, dtype=float)
-    elements = np.asarray(elements, dtype=np.int64)
-    if nodes.ndim != 2 or nodes.shape[1] != 3:
-        raise ValueError(f"nodes must have shape (n, 3), got {nodes.shape}")
-    if elements.ndim != 2 or elements.shape[1] != 27:
-        raise ValueError(f"elements must have shape (n_elements, 27), got {elements.shape}")
+    nodes, elements = as_q2_mesh(nodes, elements)
     grid = pv.UnstructuredGrid({VTK_TRIQUADRATIC_HEXAHEDRON: elements[:, VTK_FROM_TEMPLATE]}, nodes)
     for name, val in (point_data or {}).items():
         grid.point_data[name] = np.asarray(val)
