@@ -7,7 +7,8 @@ Usage::
 
 Prints markdown tables: per resolution the dofs, LVV, EDV/V_early, mean
 strain, the largest relative output change against the finest resolution,
-Newton iterations, compile+first-solve time and median warm solve time; with
+Newton iterations (chord iterations included), tangents (= factorisations),
+load steps, compile+first-solve time and median warm solve time; with
 ``--processes`` also the throughput of one vs two worker processes.
 """
 from __future__ import annotations
@@ -95,14 +96,14 @@ def main(argv=None):
     print(f"Default LV, HO theta=(0.60,1.30,1.00,3.60), 8 mmHg, angles (-60,+90); linear solver {available_backends()[0]}")
     print("CPU shared with other jobs: compare ratios within this table.\n")
     print("| resolution | dofs | LVV (mL) | EDV/V_early | mean strain | max rel. change vs finest (LVV; strains) "
-          "| Newton its | steps | first solve incl. compile (s) | median solve (s) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| Newton its | tangents | steps | first solve incl. compile (s) | median solve (s) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for res, r, first, med in rows:
         y = r.outputs()
         dv = abs(y[0] - ref[0]) / ref[0]
         ds = np.max(np.abs(y[1:] - ref[1:]) / np.abs(ref[1:]))
         print(f"| {res} | {r.dofs} | {y[0]:.2f} | {r.lvv_standardised:.3f} | {np.mean(y[1:]):.4f} | "
-              f"{dv:.2%}; {ds:.2%} | {r.newton_iterations} | {r.load_steps} | {first:.2f} | {med:.3f} |")
+              f"{dv:.2%}; {ds:.2%} | {r.newton_iterations} | {r.timings.get('tangents', '-')} | {r.load_steps} | {first:.2f} | {med:.3f} |")
     if a.cold:
         res = tuple(int(v) for v in a.cold.split(","))
         print(f"\ncold start (new process: import + compile or cache load + first solve) at {res}: "

@@ -1,9 +1,13 @@
 """Sparse direct solves of the tangent.
 
 * Symmetric tangents (pressure potential on the LV): CHOLMOD (scikit-sparse,
-  optional) with the symbolic analysis done once per sparsity pattern and
-  reused; an indefinite tangent (possible away from equilibrium) or a missing
-  CHOLMOD falls back to SciPy's SuperLU with a symmetric ordering.
+  optional) simplicial LDLᵀ with the symbolic analysis done once per sparsity
+  pattern and reused. LDLᵀ also factors the indefinite tangents met away from
+  equilibrium (negative entries in D), which an LLᵀ Cholesky rejects. It does
+  not pivot, so every solve checks its normwise backward error
+  ``‖Kx − b‖∞ / (‖K‖∞‖x‖∞ + ‖b‖∞)``; above :data:`BACKWARD_ERROR_TOL` (or
+  without CHOLMOD) SciPy's SuperLU with a symmetric ordering and threshold
+  pivoting is used instead.
 * Non-symmetric tangents (follower pressure on an open face): SuperLU with
   partial pivoting.
 
@@ -21,6 +25,10 @@ try:  # optional, faster
 except Exception:  # pragma: no cover - depends on the environment
     _cholmod_analyze = None
     CholmodNotPositiveDefiniteError = Exception
+
+#: Largest accepted normwise backward error of an LDLᵀ solve (a stable solve gives ~1e-16).
+BACKWARD_ERROR_TOL = 1e-10
+
 
 def available_backends() -> tuple[str, ...]:
     """Names of the usable backends, fastest first."""
@@ -50,29 +58,39 @@ class Factorization:
         self.backend = backend or available_backends()[0]
         self._lu = None
         self._chol = None
-        A = _as_csc(K, symmetric)
+        self._symmetric = symmetric
+        self._A = A = _as_csc(K, symmetric)
         if self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
             try:
-                f = cache.get("cholmod") if cache is not None else None
+                f = cache.get("cholmod_ldl") if cache is not None else None
                 if f is None:
-                    f = _cholmod_analyze(A)
+                    f = _cholmod_analyze(A, mode="simplicial")
                     if cache is not None:
-                        cache["cholmod"] = f
-                f.cholesky_inplace(A)
-                self._chol = f
+                        cache["cholmod_ldl"] = f
+                self._chol = f.cholesky(A)  # a copy: this factorisation stays valid after later ones
+                self._norm_A = float(abs(A).sum(axis=0).max())  # = ‖A‖∞ for symmetric A
                 return
-            except CholmodNotPositiveDefiniteError:
+            except CholmodNotPositiveDefiniteError:  # a zero pivot (singular leading block)
                 pass
+        self._superlu()
+
+    def _superlu(self):
         self.backend = "superlu"
-        if symmetric:
-            self._lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
+        self._chol = None
+        if self._symmetric:
+            self._lu = spla.splu(self._A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
                                  options={"SymmetricMode": True})
         else:
-            self._lu = spla.splu(A)
+            self._lu = spla.splu(self._A)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         if self._chol is not None:
-            return self._chol(b)
+            x = self._chol(b)
+            r = self._A @ x - b
+            denom = self._norm_A * np.max(np.abs(x)) + np.max(np.abs(b))
+            if np.all(np.isfinite(x)) and np.max(np.abs(r)) <= BACKWARD_ERROR_TOL * denom:
+                return x
+            self._superlu()  # unstable LDLᵀ (tiny pivot): factor again with pivoting
         return self._lu.solve(b)
 
 

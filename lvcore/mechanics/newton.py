@@ -8,6 +8,10 @@ loose tolerance, the final step the tight one.
 
 Newton acts on the mixed (displacement, element pressure) equations with
 the pressure condensed per element (see :mod:`lvcore.mechanics.element`).
+A tangent (assembly ~20 ms, factorisation ~10 ms at the default LV
+resolution) costs about ten residual evaluations, so factorised tangents are
+reused while they contract well (chord iterations), and the last tangent of
+a converged load step gives the first iteration of the next one.
 Line search: backtracking on a scaled norm of the mixed residual; trial
 states whose smallest pointwise J is below ``min_jacobian`` are rejected.
 """
@@ -26,7 +30,25 @@ _DEBUG = bool(os.environ.get("LVCORE_NEWTON_DEBUG"))
 
 @dataclass
 class NewtonOptions:
-    """Solver settings (tolerances relative to the norm of the full external load)."""
+    """Solver settings (tolerances relative to the norm of the full external load).
+
+    Attributes
+    ----------
+    rtol, rtol_intermediate : force tolerance of the final / intermediate load steps.
+    max_iterations : iterations per load step (chord iterations included).
+    first_step, min_step, grow, max_cuts : load stepping (steps that needed at most
+        5 tangents grow by ``grow``; failed steps are halved).
+    min_jacobian : trial states with a smaller pointwise J are rejected.
+    max_line_search : trial states per line search.
+    predictor : secant extrapolation of (u, p) from the last two load steps.
+    min_first_alpha : a load step whose first Newton step is damped below this is cut.
+    reuse_ratio : a factorised tangent is reused (chord iteration) after an
+        undamped step that reduced ``‖r_u‖`` by at least this factor, and for as
+        long as the chord iterations do; 0 gives a fresh tangent every iteration.
+    chord_predictor : start each load step with the last tangent of the previous
+        one (a poor chord predictor, damped below ``min_first_alpha``, is dropped
+        for a fresh tangent instead of cutting the step unless ``cut_on_predictor``).
+    """
 
     rtol: float = 1e-9
     rtol_intermediate: float = 1e-2
@@ -39,6 +61,9 @@ class NewtonOptions:
     max_line_search: int = 10
     predictor: bool = False
     min_first_alpha: float = 0.3
+    reuse_ratio: float = 0.3
+    chord_predictor: bool = True
+    cut_on_predictor: bool = False
 
 
 @dataclass
@@ -86,43 +111,78 @@ def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
     return (True,) + best
 
 
-def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False):
-    """Newton iterations at fixed load factor. Returns (ok, u, p, reason)."""
+def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reuse=None):
+    """Newton iterations at fixed load factor. Returns (ok, u, p, reason, last).
+
+    ``reuse``: optional ``(factorisation, D)`` of an earlier tangent (the last
+    one of the previous load step) for the first iteration, a chord
+    predictor; ``last`` is the ``(factorisation, D)`` of the last tangent used.
+
+    Once a full Newton step has reduced ``‖r_u‖`` by ``opts.reuse_ratio`` or
+    more, the factorised tangent (and its condensation matrices D) is reused
+    for the next iterations (chord / modified Newton: one residual and one
+    back-substitution each) for as long as every such iteration keeps
+    reducing ``‖r_u‖`` by that ratio; otherwise the next iteration takes a
+    fresh tangent. The convergence test is on the true residuals either way.
+    """
     r_u, r_p, mj, _ = system.residual(u, p, lam)
     stats["residuals"] += 1
+    last = reuse
+    first = True  # the first accepted iteration of this load step decides a cut
     for it in range(opts.max_iterations):
         if not (np.all(np.isfinite(r_u)) and np.all(np.isfinite(r_p))):
-            return False, u, p, "non-finite residual"
+            return False, u, p, "non-finite residual", last
         if it > 0 and np.linalg.norm(r_u) <= tol_u and np.max(np.abs(r_p)) <= tol_p:
-            return True, u, p, ""
+            return True, u, p, "", last
+        chord = reuse is not None
         t0 = time.perf_counter()
-        rhs, K, D, r_p = system.tangent(u, p, lam)
+        if chord:
+            fac, D = reuse
+            rhs = system.condensed(r_u, r_p, D)
+        else:
+            rhs, K, D, r_p = system.tangent(u, p, lam)
+            stats["tangents"] += 1
         stats["t_tangent"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         try:
-            du = -factorize(K, symmetric=system.potential, cache=system.pattern.cache).solve(rhs)
+            if not chord:
+                fac = factorize(K, symmetric=system.potential, cache=system.pattern.cache)
+                last = (fac, D)
+            du = -fac.solve(rhs)
         except RuntimeError as exc:  # singular factor
-            return False, u, p, f"linear solve failed: {exc}"
+            return False, u, p, f"linear solve failed: {exc}", last
         stats["t_solve"] += time.perf_counter() - t0
         stats["iterations"] += 1
         if not np.all(np.isfinite(du)):
-            return False, u, p, "non-finite Newton step"
+            return False, u, p, "non-finite Newton step", last
         dp = system.pressure_increment(du, D, r_p)
         t0 = time.perf_counter()
         found, alpha, ut, pt, rut, rpt, mjt = _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats)
         stats["t_line"] += time.perf_counter() - t0
         if not found:
-            return False, u, p, "line search found no admissible step (inverted elements)"
-        if it == 0 and can_cut and alpha < opts.min_first_alpha:
+            if chord:  # retry from the same state with a fresh tangent
+                reuse = None
+                continue
+            return False, u, p, "line search found no admissible step (inverted elements)", last
+        if chord and not np.linalg.norm(rut) < np.linalg.norm(r_u):
+            reuse = None  # a chord step must reduce the residual; else a fresh tangent from the same state
+            continue
+        if first and chord and alpha < opts.min_first_alpha and not opts.cut_on_predictor:
+            reuse = None  # poor chord predictor: judge the step on a fresh tangent
+            continue
+        if first and can_cut and alpha < opts.min_first_alpha:
             # the linearisation at the start of the step is poor: a smaller load step is cheaper
-            return False, u, p, f"load step too large (first Newton step damped to {alpha:.2g})"
+            return False, u, p, f"load step too large (first Newton step damped to {alpha:.2g})", last
         if _DEBUG:
             print(f"  it {it} lam {lam:.4f} |r_u| {np.linalg.norm(r_u):.3e} -> {np.linalg.norm(rut):.3e} alpha {alpha:g} "
-                  f"|r_p| {np.abs(rpt).max():.2e} minJ {mjt:.3f}")
+                  f"|r_p| {np.abs(rpt).max():.2e} minJ {mjt:.3f}{' chord' if chord else ''}")
+        first = False
+        contracted = alpha == 1.0 and np.linalg.norm(rut) <= opts.reuse_ratio * np.linalg.norm(r_u)
+        reuse = (fac, D) if contracted and opts.reuse_ratio > 0 else None
         u, p, r_u, r_p = ut, pt, rut, rpt
         if np.linalg.norm(r_u) <= tol_u and np.max(np.abs(r_p)) <= tol_p:
-            return True, u, p, ""
-    return False, u, p, f"no convergence in {opts.max_iterations} iterations"
+            return True, u, p, "", last
+    return False, u, p, f"no convergence in {opts.max_iterations} iterations", last
 
 
 def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
@@ -133,20 +193,21 @@ def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
     """
     opts = opts or NewtonOptions()
     t_start = time.perf_counter()
-    stats = {"iterations": 0, "residuals": 0, "t_tangent": 0.0, "t_solve": 0.0, "t_line": 0.0}
+    stats = {"iterations": 0, "tangents": 0, "residuals": 0, "t_tangent": 0.0, "t_solve": 0.0, "t_line": 0.0}
     u = np.zeros(system.n_free)
     p = system.zero_pressure()
     r1, _, _, _ = system.residual(u, p, 1.0)
     scale = max(np.linalg.norm(r1), 1e-30)
     vol = float(np.max(np.sum(system.wdet, axis=1)))
     lam, step, steps, cuts = 0.0, opts.first_step, 0, 0
+    carry = None  # (factorisation, D) of the last tangent of the last converged step
     prev = None  # (load factor, u, p) of the previous converged step, for the secant predictor
     last_reason = ""
     while lam < 1.0:
         target = min(1.0, lam + step)
         final = target >= 1.0
         rtol = opts.rtol if final else opts.rtol_intermediate
-        it0 = stats["iterations"]
+        it0 = stats["tangents"]
         u_start, p_start = u, p
         if prev is not None and opts.predictor:
             c = (target - lam) / (lam - prev[0])
@@ -154,13 +215,15 @@ def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
             if system.residual(u_try, p_try, target)[2] > opts.min_jacobian:
                 u_start, p_start = u_try, p_try
             stats["residuals"] += 1
-        ok, u_new, p_new, reason = _newton_at(system, u_start, p_start, target, rtol * scale, rtol * 1e-2 * vol,
-                                              opts, stats, can_cut=step > 4 * opts.min_step)
+        ok, u_new, p_new, reason, last = _newton_at(system, u_start, p_start, target, rtol * scale,
+                                                    rtol * 1e-2 * vol, opts, stats, can_cut=step > 4 * opts.min_step,
+                                                    reuse=carry if opts.chord_predictor else None)
         if ok:
             prev = (lam, u, p)
             u, p, lam = u_new, p_new, target
+            carry = last
             steps += 1
-            if stats["iterations"] - it0 <= 5:
+            if stats["tangents"] - it0 <= 5:
                 step = min(1.0, step * opts.grow)
         else:
             last_reason = reason

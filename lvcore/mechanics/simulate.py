@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from lvcore import units
 from lvcore.exceptions import CaseError, SolverError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
-from lvcore.mechanics import boundary, fibres, materials, newton, observables
+from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables
 from lvcore.mechanics.mesh import RESOLUTION_PRESETS, FEMesh, box_mesh, box_resolution, lv_mesh
 from lvcore.mechanics.quadrature import gauss_hex, reference_gradients
 from lvcore.mechanics.system import DiscreteSystem
@@ -149,6 +149,30 @@ def build_system(case, mesh: FEMesh | None = None) -> DiscreteSystem:
                           surface, case.load.pressure_kpa, fixed, modulus=modulus)
 
 
+def _volume_args(mesh: FEMesh):
+    return jnp.asarray(mesh.surfaces["endocardium"]), jnp.asarray(float(mesh.base_z))
+
+
+@jax.jit
+def _cavity_volume(x, faces, base_z):
+    """Cavity volume (mm³), compiled once per topology (see :func:`observables.cavity_volume`)."""
+    return loads.cavity_volume(x, faces, base_z)
+
+
+@jax.jit
+def _outputs(u_full, X, faces, base_z, connectivity, dNdX, e_c, weights):
+    """The 25 outputs ``[LVV (mL), 24 strains]`` of a full displacement vector.
+
+    Jitted at module level with the mesh data as traced arguments, so it is
+    compiled once per topology rather than once per call.
+    """
+    x = X + u_full.reshape(-1, 3)
+    v = loads.cavity_volume(x, faces, base_z) / units.MM3_PER_ML
+    op = observables.StrainOperator(elements=None, connectivity=connectivity, dNdX=dNdX, e_c=e_c, weights=weights)
+    s = observables.regional_strains(x, op)
+    return jnp.concatenate([v[None], s])
+
+
 def _as_case(case):
     if isinstance(case, Mapping):
         from lvcore.mechanics.case import Case
@@ -185,7 +209,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
             elem_p, xi_p = observables.locate_points(mesh, case.probes)
         except ValueError as exc:
             raise CaseError("probes", str(exc)) from None
-    v_ref = float(observables.cavity_volume(jnp.asarray(mesh.nodes), mesh)) if is_lv else None
+    v_ref = float(_cavity_volume(jnp.asarray(mesh.nodes), *_volume_args(mesh))) if is_lv else None
     if case.load.pressure_kpa == 0:
         res = newton.NewtonResult(True, "converged (zero load)", np.zeros(system.n_free), system.zero_pressure(),
                                   1.0, 0, 0, 0, {})
@@ -205,15 +229,13 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     sens = None
     if is_lv:
         op = observables.strain_operator(mesh, case.outputs.strain_layer)
-        X = jnp.asarray(mesh.nodes)
+        out_args = (jnp.asarray(mesh.nodes),) + _volume_args(mesh) + (
+            jnp.asarray(op.connectivity), jnp.asarray(op.dNdX), jnp.asarray(op.e_c), jnp.asarray(op.weights))
 
         def output_fn(u_full):
-            xx = X + u_full.reshape(-1, 3)
-            v = observables.cavity_volume(xx, mesh) / units.MM3_PER_ML
-            s = observables.regional_strains(xx, op)
-            return jnp.concatenate([v[None], s])
+            return _outputs(u_full, *out_args)
 
-        y = np.asarray(jax.jit(output_fn)(jnp.asarray(u)))
+        y = np.asarray(output_fn(jnp.asarray(u)))
         vol = (v_ref, float(y[0]) * units.MM3_PER_ML)
         strains = y[1:]
         standardised = vol[1] / v_ref
