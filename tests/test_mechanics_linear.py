@@ -1,0 +1,48 @@
+"""Sparse solves of the tangent (lvcore.mechanics.linear)."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from lvcore.mechanics import linear
+
+
+def _spd_plus_shift(n=60, shift=0.0, seed=0):
+    """A sparse symmetric banded matrix; ``shift`` > its smallest eigenvalue makes it indefinite."""
+    rng = np.random.default_rng(seed)
+    B = sp.random(n, n, density=0.1, random_state=rng) + sp.eye(n)
+    A = (B @ B.T).tocsr() + sp.eye(n)
+    return (A - shift * sp.eye(n)).tocsr()
+
+
+@pytest.mark.parametrize("shift", [0.0, 2.5])
+def test_symmetric_solve_definite_and_indefinite(shift):
+    A = _spd_plus_shift(shift=shift)
+    eig = np.linalg.eigvalsh(A.toarray())
+    assert (eig.min() < 0) == (shift > 0)  # the shifted matrix really is indefinite
+    b = np.arange(A.shape[0], dtype=float)
+    cache = {}
+    f = linear.factorize(A, symmetric=True, cache=cache)
+    x = f.solve(b)
+    np.testing.assert_allclose(A @ x, b, rtol=0, atol=1e-9 * np.abs(b).max())
+    if "cholmod" in linear.available_backends():
+        assert f.backend == "cholmod"  # LDLT, no SuperLU fallback on the indefinite matrix
+        assert "cholmod_ldl" in cache
+        # a later factorisation of the same pattern does not change this one
+        linear.factorize(A + sp.eye(A.shape[0]), symmetric=True, cache=cache)
+        np.testing.assert_allclose(f.solve(b), x, rtol=1e-12)
+
+
+def test_unstable_ldl_falls_back_to_pivoting():
+    # [[0, 1], [1, 0]] has a zero leading pivot: LDLT without pivoting cannot factor it
+    A = sp.csr_matrix(np.array([[1e-30, 1.0, 0.0], [1.0, 1e-30, 0.0], [0.0, 0.0, 2.0]]))
+    b = np.array([1.0, 2.0, 4.0])
+    f = linear.factorize(A, symmetric=True)
+    np.testing.assert_allclose(f.solve(b), [2.0, 1.0, 2.0], rtol=1e-12)
+    assert f.backend == "superlu"
+
+
+def test_nonsymmetric_uses_superlu():
+    A = sp.csr_matrix(np.array([[2.0, 1.0], [0.0, 3.0]]))
+    f = linear.factorize(A, symmetric=False)
+    assert f.backend == "superlu"
+    np.testing.assert_allclose(f.solve(np.array([3.0, 3.0])), [1.0, 1.0])
