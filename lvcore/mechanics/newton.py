@@ -48,6 +48,8 @@ class NewtonOptions:
     chord_predictor : start each load step with the last tangent of the previous
         one (a poor chord predictor, damped below ``min_first_alpha``, is dropped
         for a fresh tangent instead of cutting the step unless ``cut_on_predictor``).
+        Switched off for the rest of the solve after the first failed load step
+        (on hard paths it could lead Newton astray: 2 of 256 sweep points failed).
     """
 
     rtol: float = 1e-9
@@ -201,6 +203,7 @@ def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
     vol = float(np.max(np.sum(system.wdet, axis=1)))
     lam, step, steps, cuts = 0.0, opts.first_step, 0, 0
     carry = None  # (factorisation, D) of the last tangent of the last converged step
+    predict = opts.chord_predictor
     prev = None  # (load factor, u, p) of the previous converged step, for the secant predictor
     last_reason = ""
     while lam < 1.0:
@@ -217,7 +220,7 @@ def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
             stats["residuals"] += 1
         ok, u_new, p_new, reason, last = _newton_at(system, u_start, p_start, target, rtol * scale,
                                                     rtol * 1e-2 * vol, opts, stats, can_cut=step > 4 * opts.min_step,
-                                                    reuse=carry if opts.chord_predictor else None)
+                                                    reuse=carry if predict else None)
         if ok:
             prev = (lam, u, p)
             u, p, lam = u_new, p_new, target
@@ -227,6 +230,7 @@ def solve(system, opts: NewtonOptions | None = None) -> NewtonResult:
                 step = min(1.0, step * opts.grow)
         else:
             last_reason = reason
+            predict = False  # a hard path: no chord predictor from here on (it can lead Newton astray)
             cuts += 1
             step *= 0.5
             if step < opts.min_step or cuts > opts.max_cuts:
