@@ -61,7 +61,8 @@ def parse_args(argv=None):
     p.add_argument("--seed", type=int, default=2026, help="design seed S (training S, validation S+1, test S+2)")
     p.add_argument("--resolution", choices=("fast", "default"), default=SPEC["resolution"])
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None, help="local worker processes (default one per core)")
+    g.add_argument("--workers", type=int, default=None,
+                   help="local worker processes for the campaigns and the architecture search (default one per core)")
     g.add_argument("--scheduler", default=None, help="Dask scheduler tcp://HOST:PORT")
     p.add_argument("--workdir", type=Path, default=REPO / "build" / "emulators", help="designs and campaign stores")
     p.add_argument("--out", type=Path, default=REPO / "assets" / "emulators", help="where spec-compliant emulators go")
@@ -90,6 +91,7 @@ def below_spec(args) -> str:
 
 def build_one(name: str, args) -> Path | None:
     from lvcore.campaigns.designs import load_design, make_design, save_design
+    from lvcore.campaigns.executors import default_workers
     from lvcore.campaigns.runner import resume_campaign, run_campaign
     from lvcore.campaigns.space import get_space
     from lvcore.emulator.cli import format_info, parse_architectures
@@ -147,6 +149,7 @@ def build_one(name: str, args) -> Path | None:
                 "build_command": " ".join([Path(sys.argv[0]).name] + sys.argv[1:]),
                 "design_seeds": {k: v[2] for k, v in sets.items()}},
         log=print,
+        workers=args.workers or default_workers(),
     )
     if note:
         emu.metadata["spec_note"] = f"BELOW SPEC, for demonstration only: {note}"

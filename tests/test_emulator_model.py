@@ -155,3 +155,22 @@ def test_metrics_known_values():
     m = metrics(y, p)
     assert m["lvv_rmse_ml"] == pytest.approx(2.0) and m["strain_rmse"] == pytest.approx(0.01)
     assert m["p99_abs"][0] == pytest.approx(2.0)
+
+
+def test_parallel_architecture_search_equals_serial():
+    """Two worker processes train the same networks (same seeds) as one process."""
+    from lvcore.emulator.training import search_architectures
+
+    rng = np.random.default_rng(3)
+    x, xv = rng.standard_normal((120, 3)), rng.standard_normal((40, 3))
+    y, yv = truth(np.abs(x) + 0.2)[:, :4], truth(np.abs(xv) + 0.2)[:, :4]
+    y, yv = (y - y.mean(0)) / y.std(0), (yv - y.mean(0)) / y.std(0)
+    cfg = TrainingConfig(architectures=((8, 8), (12, 6)), max_epochs=30, patience=30, batch_size=32)
+    serial = search_architectures(x, y, xv, yv, cfg, workers=1)
+    parallel = search_architectures(x, y, xv, yv, cfg, workers=2)
+    assert [f.hidden for f in parallel] == [(8, 8), (12, 6)]
+    for s, p in zip(serial, parallel):
+        assert p.best_epoch == s.best_epoch
+        np.testing.assert_allclose(p.valid_mse, s.valid_mse, rtol=1e-10)
+        for a, b in zip(to_arrays(s.network).values(), to_arrays(p.network).values()):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)

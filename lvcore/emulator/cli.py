@@ -28,6 +28,8 @@ def register(subparsers) -> None:
     t.add_argument("--patience", type=int, default=150)
     t.add_argument("--batch-size", type=int, default=256)
     t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--workers", type=int, default=1,
+                   help="processes for the architecture search (one architecture each; same result as 1)")
     t.set_defaults(func=_train)
 
     i = sub.add_parser("info", help="show an emulator's inputs, box, architecture and accuracy")
@@ -77,7 +79,8 @@ def _train(args) -> int:
           f"validating on {xv.shape[0]}; inputs {list(data.input_names)}")
     emu = train_emulator(x, y, xv, yv, input_names=data.input_names, name=name, lower=data.lower, upper=data.upper,
                          fixed=data.fixed, config=config, x_test=xt, y_test=yt,
-                         source={**data.info, "n_failed_excluded": data.n_failed}, log=print)
+                         source={**data.info, "n_failed_excluded": data.n_failed}, log=print,
+                         workers=args.workers)
     pred_x, pred_y = (xt, yt) if xt is not None else (xv, yv)
     save_emulator(emu, args.out, validation={"inputs": pred_x, "outputs": pred_y, "predictions": np.asarray(emu.apply(pred_x))})
     print(format_info(emu.metadata))

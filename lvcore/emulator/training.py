@@ -33,7 +33,7 @@ import optax
 
 import lvcore
 from lvcore.emulator.model import LOG_INPUTS, Emulator
-from lvcore.emulator.network import INIT_SD, MLP, WIDTHS
+from lvcore.emulator.network import INIT_SD, MLP, WIDTHS, from_arrays, to_arrays
 from lvcore.exceptions import EmulatorError
 from lvcore.outputs import N_OUTPUTS
 
@@ -197,6 +197,57 @@ def fit_network(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: 
     return FitResult(tuple(hidden), best, float(best_mse), best_epoch, ep, time.perf_counter() - t0, tuple(history))
 
 
+def _fit_in_worker(zx, zy, zxv, zyv, hidden, config, key) -> dict:
+    """:func:`fit_network` in a worker process; the network comes back as plain arrays."""
+    fit = fit_network(zx, zy, zxv, zyv, hidden, config, key)
+    return {"hidden": fit.hidden, "arrays": to_arrays(fit.network), "valid_mse": fit.valid_mse,
+            "best_epoch": fit.best_epoch, "epochs": fit.epochs, "seconds": fit.seconds, "history": fit.history}
+
+
+def search_architectures(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: np.ndarray,
+                         config: TrainingConfig, workers: int = 1, log: callable = None) -> list[FitResult]:
+    """Train every architecture of ``config.architectures`` (the chapter's grid).
+
+    Each architecture gets its own seed drawn from ``config.seed``, so the
+    fits, and therefore the selected network, are the same whether they run
+    in this process (``workers=1``) or in ``workers`` spawned processes
+    (:class:`lvcore.campaigns.executors.LocalExecutor`, one thread each).
+
+    Returns
+    -------
+    list of FitResult
+        In the order of ``config.architectures``.
+    """
+    seeds = np.random.default_rng(config.seed).integers(0, 2**31, size=len(config.architectures))
+    jobs = [(tuple(int(w) for w in hidden), int(sub)) for hidden, sub in zip(config.architectures, seeds)]
+
+    def report(fit: FitResult) -> None:
+        if log:
+            log(f"  hidden {fit.hidden}: validation MSE {fit.valid_mse:.3e} (standardised) at epoch "
+                f"{fit.best_epoch}/{fit.epochs}, {fit.seconds:.1f} s")
+
+    if int(workers) <= 1 or len(jobs) == 1:
+        fits = []
+        for hidden, key in jobs:
+            fits.append(fit_network(zx, zy, zx_valid, zy_valid, hidden, config, key))
+            report(fits[-1])
+        return fits
+
+    from lvcore.campaigns.executors import LocalExecutor
+
+    fits: dict[int, FitResult] = {}
+    with LocalExecutor(min(int(workers), len(jobs))) as pool:
+        futures = {pool.submit(_fit_in_worker, zx, zy, zx_valid, zy_valid, hidden, config, key): i
+                   for i, (hidden, key) in enumerate(jobs)}
+        for fut in pool.as_completed(futures):
+            r = fut.result()
+            fit = FitResult(tuple(r["hidden"]), from_arrays(r["arrays"]), float(r["valid_mse"]), int(r["best_epoch"]),
+                            int(r["epochs"]), float(r["seconds"]), tuple(r["history"]))
+            fits[futures[fut]] = fit
+            report(fit)
+    return [fits[i] for i in range(len(jobs))]
+
+
 def train_emulator(
     x_train: np.ndarray,
     y_train: np.ndarray,
@@ -213,6 +264,7 @@ def train_emulator(
     y_test: np.ndarray | None = None,
     source: dict | None = None,
     log: callable = None,
+    workers: int = 1,
 ) -> Emulator:
     """Train an emulator and pick its architecture by validation MSE.
 
@@ -240,6 +292,9 @@ def train_emulator(
         Provenance recorded under ``metadata["source"]``.
     log : callable, optional
         Called with progress lines (e.g. ``print``).
+    workers : int
+        Processes for the architecture search (see
+        :func:`search_architectures`); the result does not depend on it.
 
     Returns
     -------
@@ -271,13 +326,7 @@ def train_emulator(
     zx, zy = (tx - x_mean) / x_sd, (ty - y_mean) / y_sd
     zxv, zyv = (transform_inputs(x_valid, log_inputs) - x_mean) / x_sd, (tyv - y_mean) / y_sd
 
-    seeds = np.random.default_rng(config.seed).integers(0, 2**31, size=len(config.architectures))
-    fits = []
-    for hidden, sub in zip(config.architectures, seeds):
-        fit = fit_network(zx, zy, zxv, zyv, tuple(hidden), config, int(sub))
-        fits.append(fit)
-        if log:
-            log(f"  hidden {fit.hidden}: validation MSE {fit.valid_mse:.3e} (standardised) at epoch {fit.best_epoch}/{fit.epochs}, {fit.seconds:.1f} s")
+    fits = search_architectures(zx, zy, zxv, zyv, config, workers=workers, log=log)
     best = min(fits, key=lambda f: f.valid_mse)
 
     lower = np.asarray(lower if lower is not None else np.minimum(x_train.min(0), x_valid.min(0)), float)
