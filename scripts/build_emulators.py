@@ -73,6 +73,9 @@ def parse_args(argv=None):
     p.add_argument("--patience", type=int, default=150)
     p.add_argument("--batch-size", type=int, default=256)
     p.add_argument("--train-seed", type=int, default=0)
+    p.add_argument("--lbfgs-iterations", type=int, default=1000,
+                   help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
+    p.add_argument("--lvv-weight", type=float, default=1.0, help="loss weight of the LVV (each strain has 1)")
     p.add_argument("--steps", nargs="+", default=["design", "run", "train"], choices=["design", "run", "train"])
     p.add_argument("--no-progress", action="store_true")
     return p.parse_args(argv)
@@ -138,7 +141,8 @@ def build_one(name: str, args) -> Path | None:
     test = load_store_data([paths["test"][1]], train.input_names) if "test" in paths else None
     note = below_spec(args)
     config = TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
-                            patience=args.patience, batch_size=args.batch_size, seed=args.train_seed)
+                            patience=args.patience, batch_size=args.batch_size, seed=args.train_seed,
+                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight)
     print(f"[{name}] training on {train.inputs.shape[0]} converged rows ({train.n_failed} failed excluded), "
           f"validating on {valid.inputs.shape[0]}")
     emu = train_emulator(

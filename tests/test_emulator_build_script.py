@@ -22,7 +22,7 @@ def test_below_spec_build_goes_to_workdir_and_says_so(tmp_path):
     out = tmp_path / "assets"
     args = ["--emulators", "material", "--n-train", "8", "--n-valid", "8", "--n-test", "0", "--resolution", "fast",
             "--workers", "2", "--workdir", str(tmp_path / "work"), "--out", str(out), "--architectures", "20x20",
-            "--max-epochs", "20", "--batch-size", "4", "--no-progress"]
+            "--max-epochs", "20", "--batch-size", "4", "--lbfgs-iterations", "50", "--no-progress"]
     assert mod.main(args) == 0
     store = read_store(tmp_path / "work" / "material" / "train_fast.h5")
     assert store.pending.sum() == 0 and store.converged.sum() >= 4
@@ -30,6 +30,7 @@ def test_below_spec_build_goes_to_workdir_and_says_so(tmp_path):
     meta = json.loads((tmp_path / "work" / "below-spec" / "material" / "metadata.json").read_text())
     assert meta["spec_note"].startswith("BELOW SPEC")
     assert meta["training"]["n_train"] == int(store.converged.sum())
+    assert meta["training"]["lbfgs"]["iterations"] == 50
     assert meta["source"]["design_seeds"] == {"train": 2026, "valid": 2027}
     # rerunning resumes: nothing is simulated again, designs are reused
     assert mod.main(args[:-1] + ["--steps", "design", "run", "--no-progress"]) == 0

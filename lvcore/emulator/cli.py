@@ -28,6 +28,9 @@ def register(subparsers) -> None:
     t.add_argument("--patience", type=int, default=150)
     t.add_argument("--batch-size", type=int, default=256)
     t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--lbfgs-iterations", type=int, default=0,
+                   help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
+    t.add_argument("--lvv-weight", type=float, default=1.0, help="loss weight of the LVV (each strain has 1)")
     t.add_argument("--workers", type=int, default=1,
                    help="processes for the architecture search (one architecture each; same result as 1)")
     t.set_defaults(func=_train)
@@ -73,7 +76,8 @@ def _train(args) -> int:
         t = load_store_data(args.test, data.input_names)
         xt, yt = t.inputs, t.outputs
     config = TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
-                            patience=args.patience, batch_size=args.batch_size, seed=args.seed)
+                            patience=args.patience, batch_size=args.batch_size, seed=args.seed,
+                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight)
     name = args.name or Path(args.out).name
     print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed and {data.n_pending} pending rows excluded), "
           f"validating on {xv.shape[0]}; inputs {list(data.input_names)}")

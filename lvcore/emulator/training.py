@@ -12,6 +12,9 @@
   learning rate starting at 0.01; minibatches reshuffled every epoch.
 * Early stopping on the validation MSE: the best epoch's weights are kept
   and training stops after ``patience`` epochs without improvement.
+* Optional, not in the chapter: the selected network is then refined by
+  full-batch L-BFGS (``TrainingConfig.lbfgs_iterations``), again keeping the
+  iterate with the best validation loss. The bundled emulators use it.
 
 Only converged rows of a campaign are used; failed rows are counted in the
 metadata, never filled in.
@@ -66,6 +69,23 @@ class TrainingConfig:
         Fit the LVV on a log scale (then standardised). Not in the chapter:
         over the prior box the LVV spans ~100 to ~1000 mL, and the log makes
         it far easier to fit; strains are always fitted as they are.
+    lbfgs_iterations : int
+        After the Adam search, the selected network is refined by full-batch
+        L-BFGS (optax, zoom line search) for up to this many iterations,
+        keeping the iterate with the lowest validation loss (checked every
+        ``lbfgs_check_every`` iterations). 0 (the default) is the chapter's
+        recipe alone. Not in the chapter: on the first 1,237 rows of the
+        ``chapter`` campaign it cut the validation strain RMSE from 0.0030
+        to 0.0017 and the LVV RMSE from 8.0 to 5.5 mL (100 x 100 network).
+    lbfgs_check_every : int
+        Validation check interval of the L-BFGS stage (iterations).
+    lvv_weight : float
+        Weight of the (standardised) LVV in the mean squared error, the 24
+        strains having weight 1 each; used for training, early stopping and
+        the architecture choice. 1 is the chapter's plain MSE, in which the
+        volume is 1/25 of the loss although calibration leans on it as much
+        as on all the strains together; ``N_OUTPUTS - 1`` gives the volume
+        the weight of the 24 strains.
     """
 
     architectures: tuple[tuple[int, int], ...] = ARCHITECTURES
@@ -78,6 +98,9 @@ class TrainingConfig:
     init_sd: float = INIT_SD
     seed: int = 0
     log_lvv: bool = True
+    lvv_weight: float = 1.0
+    lbfgs_iterations: int = 0
+    lbfgs_check_every: int = 50
 
 
 @dataclass(frozen=True)
@@ -146,6 +169,15 @@ def _transform_outputs(y: np.ndarray, log_outputs) -> np.ndarray:
     return y
 
 
+def output_weights(config: TrainingConfig, n_outputs: int = N_OUTPUTS) -> np.ndarray:
+    """Per-output loss weights, normalised to mean 1 (LVV first, see ``TrainingConfig.lvv_weight``)."""
+    w = np.ones(n_outputs)
+    w[0] = float(config.lvv_weight)
+    if not np.all(np.isfinite(w)) or np.any(w <= 0):
+        raise EmulatorError(f"lvv_weight must be a positive number, got {config.lvv_weight}")
+    return w / w.mean()
+
+
 def fit_network(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: np.ndarray,
                 hidden: tuple[int, int], config: TrainingConfig, key: int) -> FitResult:
     """Train one architecture on standardised data with early stopping."""
@@ -167,8 +199,10 @@ def fit_network(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: 
     zx_j, zy_j = jnp.asarray(zx), jnp.asarray(zy)
     zxv, zyv = jnp.asarray(zx_valid), jnp.asarray(zy_valid)
 
+    weights = jnp.asarray(output_weights(config, zy.shape[1]))
+
     def loss_fn(m, xb, yb):
-        return jnp.mean((m(xb) - yb) ** 2)
+        return jnp.mean(weights * (m(xb) - yb) ** 2)
 
     @eqx.filter_jit
     def epoch(m, state, perm):
@@ -195,6 +229,62 @@ def fit_network(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: 
         elif ep - best_epoch >= config.patience:
             break
     return FitResult(tuple(hidden), best, float(best_mse), best_epoch, ep, time.perf_counter() - t0, tuple(history))
+
+
+def refine_lbfgs(network: MLP, zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: np.ndarray,
+                 config: TrainingConfig) -> tuple[MLP, dict]:
+    """Full-batch L-BFGS refinement of a trained network (see ``TrainingConfig.lbfgs_iterations``).
+
+    Returns
+    -------
+    network : MLP
+        The iterate with the lowest validation loss (the input network if
+        none improves on it).
+    report : dict
+        ``iterations`` run, ``valid_before`` / ``valid_after`` (weighted MSE
+        on standardised outputs), ``seconds`` and ``history`` ((iteration,
+        train, valid) triples).
+    """
+    t0 = time.perf_counter()
+    weights = jnp.asarray(output_weights(config, zy.shape[1]))
+    params, static = eqx.partition(network, eqx.is_array)
+    x, y, xv, yv = (jnp.asarray(a) for a in (zx, zy, zx_valid, zy_valid))
+
+    def loss(p, xb, yb):
+        return jnp.mean(weights * (eqx.combine(p, static)(xb) - yb) ** 2)
+
+    def train_loss(p):
+        return loss(p, x, y)
+
+    opt = optax.lbfgs()
+    value_and_grad = optax.value_and_grad_from_state(train_loss)
+
+    @jax.jit
+    def block(p, state):
+        def one(carry, _):
+            p, state = carry
+            value, grad = value_and_grad(p, state=state)
+            updates, state = opt.update(grad, state, p, value=value, grad=grad, value_fn=train_loss)
+            return (optax.apply_updates(p, updates), state), value
+
+        (p, state), values = jax.lax.scan(one, (p, state), None, length=int(config.lbfgs_check_every))
+        return p, state, values[-1], loss(p, xv, yv)
+
+    state = opt.init(params)
+    best_params, best_valid = params, float(loss(params, xv, yv))
+    before, history, it = best_valid, [], 0
+    while it < int(config.lbfgs_iterations):
+        params, state, train_value, valid_value = block(params, state)
+        it += int(config.lbfgs_check_every)
+        train_value, valid_value = float(train_value), float(valid_value)
+        history.append((it, train_value, valid_value))
+        if not (np.isfinite(train_value) and np.isfinite(valid_value)):
+            break
+        if valid_value < best_valid:
+            best_params, best_valid = params, valid_value
+    report = {"iterations": it, "valid_before": before, "valid_after": best_valid,
+              "seconds": round(time.perf_counter() - t0, 2), "history": history}
+    return eqx.combine(best_params, static), report
 
 
 def _fit_in_worker(zx, zy, zxv, zyv, hidden, config, key) -> dict:
@@ -328,6 +418,12 @@ def train_emulator(
 
     fits = search_architectures(zx, zy, zxv, zyv, config, workers=workers, log=log)
     best = min(fits, key=lambda f: f.valid_mse)
+    network, refinement = best.network, None
+    if config.lbfgs_iterations > 0:
+        network, refinement = refine_lbfgs(best.network, zx, zy, zxv, zyv, config)
+        if log:
+            log(f"  L-BFGS refinement of {best.hidden}: validation MSE {refinement['valid_before']:.3e} -> "
+                f"{refinement['valid_after']:.3e} in {refinement['iterations']} iterations, {refinement['seconds']:.1f} s")
 
     lower = np.asarray(lower if lower is not None else np.minimum(x_train.min(0), x_valid.min(0)), float)
     upper = np.asarray(upper if upper is not None else np.maximum(x_train.max(0), x_valid.max(0)), float)
@@ -343,12 +439,13 @@ def train_emulator(
             "search": [{"hidden": list(f.hidden), "valid_mse": f.valid_mse, "best_epoch": f.best_epoch,
                         "epochs": f.epochs, "seconds": round(f.seconds, 2)} for f in fits],
             "history": [list(h) for h in best.history],
+            "lbfgs": None if refinement is None else {**refinement, "history": [list(h) for h in refinement["history"]]},
         },
         "source": dict(source or {}),
         "lvcore_version": lvcore.__version__,
     }
     emu = Emulator(name=name, input_names=names, lower=lower, upper=upper, log_inputs=log_inputs,
-                   x_mean=x_mean, x_sd=x_sd, y_mean=y_mean, y_sd=y_sd, network=best.network,
+                   x_mean=x_mean, x_sd=x_sd, y_mean=y_mean, y_sd=y_sd, network=network,
                    fixed=dict(fixed or {}), metadata=meta, log_outputs=log_outputs)
     y_sd_phys = y_valid.std(axis=0)  # physical-unit scale for the standardised MSE in the report
     meta["validation"] = metrics(y_valid, np.asarray(emu.apply(x_valid)), y_sd_phys)
