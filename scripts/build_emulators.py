@@ -71,6 +71,8 @@ def parse_args(argv=None):
     p.add_argument("--architectures", default="all", help="'all' ({50,100,120,200}^2) or e.g. '50x50,100x200'")
     p.add_argument("--max-epochs", type=int, default=2000)
     p.add_argument("--patience", type=int, default=150)
+    p.add_argument("--decay-epochs", type=int, default=150,
+                   help="the Adam learning rate (from 0.01) halves every this many epochs")
     p.add_argument("--batch-size", type=int, default=256)
     p.add_argument("--train-seed", type=int, default=0)
     p.add_argument("--lbfgs-iterations", type=int, default=1000,
@@ -142,7 +144,8 @@ def build_one(name: str, args) -> Path | None:
     note = below_spec(args)
     config = TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
                             patience=args.patience, batch_size=args.batch_size, seed=args.train_seed,
-                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight)
+                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight,
+                            decay_epochs=args.decay_epochs)
     print(f"[{name}] training on {train.inputs.shape[0]} converged rows ({train.n_failed} failed excluded), "
           f"validating on {valid.inputs.shape[0]}")
     emu = train_emulator(

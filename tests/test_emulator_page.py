@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from campaign_double import closed_form
+import lvcore.emulator.io as eio
 from lvcore.emulator.io import save_emulator
 from lvcore.emulator.training import TrainingConfig, train_emulator
 
@@ -23,6 +24,7 @@ def emulator_dir(tmp_path, monkeypatch):
     save_emulator(emu, tmp_path / "demo", validation={"inputs": x[100:], "outputs": y[100:],
                                                         "predictions": np.asarray(emu.apply(x[100:]))})
     monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+    monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "no-bundled-emulators")  # only the test double is listed
     return tmp_path / "demo"
 
 
@@ -43,7 +45,8 @@ def test_page_renders_with_an_emulator(emulator_dir):
 def test_page_labels_the_shipped_below_spec_demo(tmp_path, monkeypatch):
     from streamlit.testing.v1 import AppTest
 
-    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))  # no spec emulators on the search path
+    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+    monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "no-bundled-emulators")  # no spec emulators on the search path
     demo = PAGE.parents[1] / "assets" / "emulators-below-spec" / "chapter"
     if not demo.is_dir():
         pytest.skip("no below-spec demonstration emulator in this checkout")

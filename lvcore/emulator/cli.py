@@ -26,6 +26,8 @@ def register(subparsers) -> None:
                    help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200'")
     t.add_argument("--max-epochs", type=int, default=2000)
     t.add_argument("--patience", type=int, default=150)
+    t.add_argument("--decay-epochs", type=int, default=150,
+                   help="the Adam learning rate (from 0.01) halves every this many epochs")
     t.add_argument("--batch-size", type=int, default=256)
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--lbfgs-iterations", type=int, default=0,
@@ -77,7 +79,8 @@ def _train(args) -> int:
         xt, yt = t.inputs, t.outputs
     config = TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
                             patience=args.patience, batch_size=args.batch_size, seed=args.seed,
-                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight)
+                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight,
+                            decay_epochs=args.decay_epochs)
     name = args.name or Path(args.out).name
     print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed and {data.n_pending} pending rows excluded), "
           f"validating on {xv.shape[0]}; inputs {list(data.input_names)}")
