@@ -80,6 +80,8 @@ def parse_args(argv=None):
     p.add_argument("--lvv-weight", type=float, default=1.0, help="loss weight of the LVV (each strain has 1)")
     p.add_argument("--steps", nargs="+", default=["design", "run", "train"], choices=["design", "run", "train"])
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-training-data", action="store_true",
+                   help="do not write training_data.npz (the converged rows) beside the emulator")
     return p.parse_args(argv)
 
 
@@ -100,7 +102,7 @@ def build_one(name: str, args) -> Path | None:
     from lvcore.campaigns.runner import resume_campaign, run_campaign
     from lvcore.campaigns.space import get_space
     from lvcore.emulator.cli import format_info, parse_architectures
-    from lvcore.emulator.io import save_emulator
+    from lvcore.emulator.io import save_emulator, save_training_data
     from lvcore.emulator.training import TrainingConfig, load_store_data, train_emulator
 
     space_name, inputs = EMULATORS[name]
@@ -167,6 +169,9 @@ def build_one(name: str, args) -> Path | None:
     held = test if test is not None else valid
     save_emulator(emu, out, validation={"inputs": held.inputs, "outputs": held.outputs,
                                         "predictions": np.asarray(emu.apply(held.inputs))})
+    if not args.no_training_data:
+        shipped = {"train": train, "valid": valid, **({"test": test} if test is not None else {})}
+        save_training_data(out, {k: (v.inputs, v.outputs) for k, v in shipped.items()})
     print(format_info(emu.metadata))
     print(f"[{name}] saved to {out}")
     return out

@@ -31,6 +31,10 @@ def test_below_spec_build_goes_to_workdir_and_says_so(tmp_path):
     assert meta["spec_note"].startswith("BELOW SPEC")
     assert meta["training"]["n_train"] == int(store.converged.sum())
     assert meta["training"]["lbfgs"]["iterations"] == 50
+    import numpy as np
+    with np.load(tmp_path / "work" / "below-spec" / "material" / "training_data.npz", allow_pickle=False) as z:
+        assert z["train_inputs"].shape == (meta["training"]["n_train"], 4)
+        assert z["train_outputs"].shape == (meta["training"]["n_train"], 25) and "test_inputs" not in z
     assert meta["source"]["design_seeds"] == {"train": 2026, "valid": 2027}
     # rerunning resumes: nothing is simulated again, designs are reused
     assert mod.main(args[:-1] + ["--steps", "design", "run", "--no-progress"]) == 0

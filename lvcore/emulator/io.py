@@ -21,6 +21,9 @@ An emulator directory holds
 ``validation.npz`` (optional)
     ``inputs``, ``outputs``, ``predictions`` of the validation (or test)
     set, for parity plots.
+``training_data.npz`` (optional, :func:`save_training_data`)
+    the converged campaign rows behind the emulator: ``train_inputs``,
+    ``train_outputs``, ``valid_*`` and ``test_*``.
 
 :func:`load_emulator` takes a directory or a bare name: ``"chapter"`` is
 looked up in ``$LVCORE_EMULATORS`` (if set) and then in the repository's
@@ -164,6 +167,36 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
         )
     except (KeyError, TypeError, ValueError) as err:
         raise EmulatorError(f"'{meta_path}' is malformed: {err!r}") from err
+
+
+def save_training_data(out_dir: str | Path, sets: dict) -> Path:
+    """Ship the converged campaign rows an emulator was trained on: ``training_data.npz``.
+
+    Parameters
+    ----------
+    out_dir : path
+        The emulator's directory.
+    sets : dict
+        ``{"train": (inputs, outputs), "valid": ..., "test": ...}``; inputs
+        ``(n, d)`` in the emulator's input order (stored as float64, exact),
+        outputs ``(n, 25)`` (stored as float32, ~7 significant digits, far
+        below the simulator's discretisation error).
+
+    Returns
+    -------
+    Path
+        The file, with arrays ``<set>_inputs`` and ``<set>_outputs``.
+    """
+    arrays = {}
+    for key, (x, y) in sets.items():
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float32)
+        if x.ndim != 2 or y.shape != (x.shape[0], len(OUTPUT_COLUMNS)):
+            raise EmulatorError(f"training data '{key}': inputs (n, d) and outputs (n, 25) expected, got {x.shape}, {y.shape}")
+        arrays[f"{key}_inputs"], arrays[f"{key}_outputs"] = x, y
+    path = Path(out_dir) / "training_data.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(path, **arrays)
+    return path
 
 
 def load_validation(name_or_path: str | Path) -> dict | None:

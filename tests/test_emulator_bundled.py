@@ -1,0 +1,64 @@
+"""The emulators bundled in assets/emulators: provenance, size of the training set, and agreement with a live
+simulator run (skipped for an emulator that is not bundled in this checkout)."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lvcore.emulator.io import ASSETS_DIR, load_emulator, load_validation
+
+BUNDLED = ("chapter", "angles")
+
+
+def _bundled_or_skip(name):
+    if not (ASSETS_DIR / name / "metadata.json").is_file():
+        pytest.skip(f"emulator '{name}' is not bundled in this checkout (build it with scripts/build_emulators.py)")
+    return load_emulator(name)
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+def test_bundled_emulator_meets_the_data_spec_and_records_provenance(name):
+    emu = _bundled_or_skip(name)
+    meta = emu.metadata
+    assert "spec_note" not in meta, "a below-spec emulator must never be bundled in assets/emulators"
+    assert meta["training"]["n_train"] >= 10_000 and meta["training"]["n_valid"] >= 1_000
+    assert meta["test"]["n"] >= 1_000
+    assert meta["source"]["resolution"] == ["default"]
+    assert meta["source"]["forward"] == ["lvcore:simulate"]
+    assert len(meta["training"]["search"]) == 16  # the chapter's {50, 100, 120, 200}^2 grid
+    assert list(meta["architecture"]["hidden"]) in [s["hidden"] for s in meta["training"]["search"]]
+    val = load_validation(ASSETS_DIR / name)
+    # the stored held-out predictions are what the saved network predicts now
+    np.testing.assert_allclose(np.asarray(emu.apply(val["inputs"][:50])), val["predictions"][:50], rtol=1e-9, atol=1e-9)
+    err = val["predictions"] - val["outputs"]
+    np.testing.assert_allclose(np.sqrt(np.mean(err[:, 0] ** 2)), meta["test"]["lvv_rmse_ml"], rtol=1e-9)
+
+
+def test_chapter_emulator_agrees_with_a_live_simulator_run():
+    """At a physiological point inside the training box, the emulator reproduces a fresh FE solve."""
+    emu = _bundled_or_skip("chapter")
+    from lvcore.campaigns.space import get_space
+    from lvcore.mechanics.simulate import simulate
+
+    x = {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1}
+    space = get_space("chapter")
+    row = [x[n] for n in space.names]
+    sim = simulate(space.case(row, resolution="default"))
+    assert sim.converged, sim.message
+    y_sim = sim.outputs()
+    y_emu = np.asarray(emu.predict(**x))
+    assert abs(y_emu[0] - y_sim[0]) < 0.03 * y_sim[0], (y_emu[0], y_sim[0])   # LVV within 3 %
+    assert np.max(np.abs(y_emu[1:] - y_sim[1:])) < 0.015                     # strains (noise sd 0.03)
+
+
+def test_bundled_training_data_if_shipped_matches_the_metadata():
+    for name in BUNDLED:
+        path = ASSETS_DIR / name / "training_data.npz"
+        if not path.is_file():
+            continue
+        meta = json.loads((ASSETS_DIR / name / "metadata.json").read_text())
+        with np.load(path, allow_pickle=False) as z:
+            assert z["train_inputs"].shape == (meta["training"]["n_train"], len(meta["input_names"]))
+            assert z["train_outputs"].shape == (meta["training"]["n_train"], 25)
+            assert z["valid_inputs"].shape[0] == meta["training"]["n_valid"]
