@@ -15,9 +15,14 @@ For each emulator it
    the PC scores uniform over +/- 2 sd of the bundled shape model;
 2. runs the three campaigns with the FE simulator (``lvcore campaign run``;
    if a store exists it is *resumed*, so an interrupted build just continues);
-3. trains on the converged training rows, selects the architecture among
-   ``{50,100,120,200}²`` by validation MSE, reports accuracy on the held-out
-   test set, and saves ``network.npz`` + ``metadata.json`` + ``validation.npz``.
+3. trains on the converged training rows with Adam (400 epochs at most,
+   learning rate 0.01 halved every 60 epochs, early stopping with patience
+   100), selects the architecture among ``{50,100,120,200}²`` by validation
+   MSE (in parallel worker processes), refines the selected network by 800
+   full-batch L-BFGS iterations (best validation iterate kept), reports
+   accuracy on the held-out test set, and saves ``network.npz`` +
+   ``metadata.json`` + ``validation.npz`` + ``training_data.npz`` (the
+   converged rows).
 
 Emulators (the chapter's, Section 9.2.4):
 
@@ -69,13 +74,13 @@ def parse_args(argv=None):
     p.add_argument("--below-spec-out", type=Path, default=None,
                    help="where below-spec emulators go (default <workdir>/below-spec); never assets/emulators")
     p.add_argument("--architectures", default="all", help="'all' ({50,100,120,200}^2) or e.g. '50x50,100x200'")
-    p.add_argument("--max-epochs", type=int, default=2000)
-    p.add_argument("--patience", type=int, default=150)
-    p.add_argument("--decay-epochs", type=int, default=150,
+    p.add_argument("--max-epochs", type=int, default=400)
+    p.add_argument("--patience", type=int, default=100)
+    p.add_argument("--decay-epochs", type=int, default=60,
                    help="the Adam learning rate (from 0.01) halves every this many epochs")
     p.add_argument("--batch-size", type=int, default=256)
     p.add_argument("--train-seed", type=int, default=0)
-    p.add_argument("--lbfgs-iterations", type=int, default=1000,
+    p.add_argument("--lbfgs-iterations", type=int, default=800,
                    help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
     p.add_argument("--lvv-weight", type=float, default=1.0, help="loss weight of the LVV (each strain has 1)")
     p.add_argument("--steps", nargs="+", default=["design", "run", "train"], choices=["design", "run", "train"])
