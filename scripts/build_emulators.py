@@ -57,7 +57,16 @@ EMULATORS = {
 DEFAULT_EMULATORS = ("chapter", "angles")
 
 
+def _bundled_training():
+    from lvcore.emulator.training import TrainingConfig
+
+    # Adam 400 epochs, lr halved every 60, patience 100, then 800 L-BFGS iterations (see the module docstring)
+    return TrainingConfig(max_epochs=400, patience=100, decay_epochs=60, lbfgs_iterations=800)
+
+
 def parse_args(argv=None):
+    from lvcore.emulator.cli import add_training_arguments
+
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--emulators", nargs="+", default=list(DEFAULT_EMULATORS), choices=list(EMULATORS))
     p.add_argument("--n-train", type=int, default=SPEC["n_train"], help="training simulations (default %(default)s)")
@@ -73,16 +82,8 @@ def parse_args(argv=None):
     p.add_argument("--out", type=Path, default=REPO / "assets" / "emulators", help="where spec-compliant emulators go")
     p.add_argument("--below-spec-out", type=Path, default=None,
                    help="where below-spec emulators go (default <workdir>/below-spec); never assets/emulators")
-    p.add_argument("--architectures", default="all", help="'all' ({50,100,120,200}^2) or e.g. '50x50,100x200'")
-    p.add_argument("--max-epochs", type=int, default=400)
-    p.add_argument("--patience", type=int, default=100)
-    p.add_argument("--decay-epochs", type=int, default=60,
-                   help="the Adam learning rate (from 0.01) halves every this many epochs")
-    p.add_argument("--batch-size", type=int, default=256)
+    add_training_arguments(p, _bundled_training())
     p.add_argument("--train-seed", type=int, default=0)
-    p.add_argument("--lbfgs-iterations", type=int, default=800,
-                   help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
-    p.add_argument("--lvv-weight", type=float, default=1.0, help="loss weight of the LVV (each strain has 1)")
     p.add_argument("--steps", nargs="+", default=["design", "run", "train"], choices=["design", "run", "train"])
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--no-training-data", action="store_true",
@@ -106,9 +107,9 @@ def build_one(name: str, args) -> Path | None:
     from lvcore.campaigns.executors import default_workers
     from lvcore.campaigns.runner import resume_campaign, run_campaign
     from lvcore.campaigns.space import get_space
-    from lvcore.emulator.cli import format_info, parse_architectures
+    from lvcore.emulator.cli import format_info, training_config
     from lvcore.emulator.io import save_emulator, save_training_data
-    from lvcore.emulator.training import TrainingConfig, load_store_data, train_emulator
+    from lvcore.emulator.training import load_store_data, train_emulator
 
     space_name, inputs = EMULATORS[name]
     work = args.workdir / name
@@ -149,10 +150,7 @@ def build_one(name: str, args) -> Path | None:
     valid = load_store_data([paths["valid"][1]], train.input_names)
     test = load_store_data([paths["test"][1]], train.input_names) if "test" in paths else None
     note = below_spec(args)
-    config = TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
-                            patience=args.patience, batch_size=args.batch_size, seed=args.train_seed,
-                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight,
-                            decay_epochs=args.decay_epochs)
+    config = training_config(args, seed=args.train_seed)
     print(f"[{name}] training on {train.inputs.shape[0]} converged rows ({train.n_failed} failed excluded), "
           f"validating on {valid.inputs.shape[0]}")
     emu = train_emulator(

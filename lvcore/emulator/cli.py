@@ -22,17 +22,8 @@ def register(subparsers) -> None:
     t.add_argument("--valid-fraction", type=float, default=0.1, help="fraction held out for validation without --valid")
     t.add_argument("--test", nargs="+", default=None, help="held-out test store(s), never used for training or selection")
     t.add_argument("--name", default=None, help="emulator name (default: the output directory's name)")
-    t.add_argument("--architectures", default="all",
-                   help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200'")
-    t.add_argument("--max-epochs", type=int, default=2000)
-    t.add_argument("--patience", type=int, default=150)
-    t.add_argument("--decay-epochs", type=int, default=150,
-                   help="the Adam learning rate (from 0.01) halves every this many epochs")
-    t.add_argument("--batch-size", type=int, default=256)
+    add_training_arguments(t)
     t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--lbfgs-iterations", type=int, default=0,
-                   help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
-    t.add_argument("--lvv-weight", type=float, default=1.0, help="loss weight of the LVV (each strain has 1)")
     t.add_argument("--workers", type=int, default=1,
                    help="processes for the architecture search (one architecture each; same result as 1)")
     t.set_defaults(func=_train)
@@ -41,6 +32,35 @@ def register(subparsers) -> None:
     i.add_argument("name", help="bundled name (e.g. chapter, angles) or directory")
     i.add_argument("--json", action="store_true", help="print the full metadata as JSON")
     i.set_defaults(func=_info)
+
+
+def add_training_arguments(parser, defaults=None) -> None:
+    """The training options shared by ``lvcore emulator train`` and ``scripts/build_emulators.py``.
+
+    ``defaults`` is a :class:`lvcore.emulator.training.TrainingConfig` (default: its own defaults).
+    """
+    from lvcore.emulator.training import TrainingConfig
+
+    d = defaults or TrainingConfig()
+    parser.add_argument("--architectures", default="all",
+                        help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200'")
+    parser.add_argument("--max-epochs", type=int, default=d.max_epochs)
+    parser.add_argument("--patience", type=int, default=d.patience)
+    parser.add_argument("--decay-epochs", type=int, default=d.decay_epochs,
+                        help="the Adam learning rate (from 0.01) halves every this many epochs")
+    parser.add_argument("--batch-size", type=int, default=d.batch_size)
+    parser.add_argument("--lbfgs-iterations", type=int, default=d.lbfgs_iterations,
+                        help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
+    parser.add_argument("--lvv-weight", type=float, default=d.lvv_weight, help="loss weight of the LVV (each strain has 1)")
+
+
+def training_config(args, seed: int):
+    """A :class:`lvcore.emulator.training.TrainingConfig` from :func:`add_training_arguments` options."""
+    from lvcore.emulator.training import TrainingConfig
+
+    return TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
+                          patience=args.patience, decay_epochs=args.decay_epochs, batch_size=args.batch_size,
+                          lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight, seed=seed)
 
 
 def parse_architectures(text: str) -> tuple[tuple[int, int], ...]:
@@ -59,7 +79,7 @@ def parse_architectures(text: str) -> tuple[tuple[int, int], ...]:
 
 def _train(args) -> int:
     from lvcore.emulator.io import save_emulator
-    from lvcore.emulator.training import TrainingConfig, load_store_data, train_emulator
+    from lvcore.emulator.training import load_store_data, train_emulator
 
     data = load_store_data(args.stores, args.inputs)
     x, y = data.inputs, data.outputs
@@ -77,10 +97,7 @@ def _train(args) -> int:
     if args.test:
         t = load_store_data(args.test, data.input_names)
         xt, yt = t.inputs, t.outputs
-    config = TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
-                            patience=args.patience, batch_size=args.batch_size, seed=args.seed,
-                            lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight,
-                            decay_epochs=args.decay_epochs)
+    config = training_config(args, seed=args.seed)
     name = args.name or Path(args.out).name
     print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed and {data.n_pending} pending rows excluded), "
           f"validating on {xv.shape[0]}; inputs {list(data.input_names)}")
