@@ -21,6 +21,7 @@ is a finding, not a bug.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -109,7 +110,7 @@ def main(argv=None) -> int:
               + (f"{np.median(sig):.4f}" if sig else "-") + f" | {all(r['converged'] for r in rs)} |")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps({"emulator": emulator, "angles": args.angles, "config": vars(config) if hasattr(config, "__dict__") else str(config),
+        args.out.write_text(json.dumps({"emulator": emulator, "angles": args.angles, "config": dataclasses.asdict(config),
                                         "records": records}, indent=2, default=str))
         print(f"wrote {args.out}")
     return 0

@@ -178,6 +178,11 @@ def output_weights(config: TrainingConfig, n_outputs: int = N_OUTPUTS) -> np.nda
     return w / w.mean()
 
 
+def weighted_mse(network, x, y, weights) -> jnp.ndarray:
+    """Mean over rows and outputs of ``weights * (network(x) - y)²`` (standardised units)."""
+    return jnp.mean(weights * (network(x) - y) ** 2)
+
+
 def fit_network(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: np.ndarray,
                 hidden: tuple[int, int], config: TrainingConfig, key: int) -> FitResult:
     """Train one architecture on standardised data with early stopping."""
@@ -202,7 +207,7 @@ def fit_network(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, zy_valid: 
     weights = jnp.asarray(output_weights(config, zy.shape[1]))
 
     def loss_fn(m, xb, yb):
-        return jnp.mean(weights * (m(xb) - yb) ** 2)
+        return weighted_mse(m, xb, yb, weights)
 
     @eqx.filter_jit
     def epoch(m, state, perm):
@@ -251,7 +256,7 @@ def refine_lbfgs(network: MLP, zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndar
     x, y, xv, yv = (jnp.asarray(a) for a in (zx, zy, zx_valid, zy_valid))
 
     def loss(p, xb, yb):
-        return jnp.mean(weights * (eqx.combine(p, static)(xb) - yb) ** 2)
+        return weighted_mse(eqx.combine(p, static), xb, yb, weights)
 
     def train_loss(p):
         return loss(p, x, y)
