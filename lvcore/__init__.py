@@ -1,7 +1,8 @@
 """LV Calibration Lab core package.
 
 Importing :mod:`lvcore` switches JAX to float64 (the simulator needs it) before
-any array is created.
+any array is created, and turns on JAX's persistent compilation cache
+(:mod:`lvcore.jax_cache`; ``LVCORE_JAX_CACHE=off`` disables it).
 """
 from __future__ import annotations
 
@@ -11,6 +12,10 @@ os.environ.setdefault("JAX_ENABLE_X64", "1")
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+
+from lvcore.jax_cache import enable_compilation_cache  # noqa: E402
+
+enable_compilation_cache()
 
 __version__ = "0.1.0"
 

@@ -24,14 +24,12 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
-from pathlib import Path
 
 from lvcore.exceptions import CampaignError
 
 #: Environment set in worker processes (before they import numpy).
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "JAX_ENABLE_X64": "1"}
 #: Default location of JAX's persistent compilation cache for workers.
-DEFAULT_JAX_CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "lvcore" / "jax"
 
 
 def default_workers() -> int:
@@ -46,15 +44,7 @@ def _worker_init() -> None:
     """Runs once in every local worker process."""
     for k, v in WORKER_ENV.items():
         os.environ.setdefault(k, v)
-    try:
-        import jax
-
-        if not jax.config.jax_compilation_cache_dir:
-            DEFAULT_JAX_CACHE.mkdir(parents=True, exist_ok=True)
-            jax.config.update("jax_compilation_cache_dir", str(DEFAULT_JAX_CACHE))
-            jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    except Exception:  # pragma: no cover - the cache is an optimisation only
-        pass
+    import lvcore  # noqa: F401 - float64 and the persistent compilation cache (lvcore.jax_cache)
 
 
 class LocalExecutor:

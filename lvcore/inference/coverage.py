@@ -88,7 +88,8 @@ def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.Sampler
         z = {n: jax.random.uniform(k, jnp.shape(v), minval=-2.0, maxval=2.0)
              for k, (n, v) in zip(keys, z_proto.items())}
         return init_kernel(z, config.num_warmup, model_args=(y,), rng_key=k_h,
-                           target_accept_prob=config.target_accept_prob, max_tree_depth=config.max_tree_depth)
+                           target_accept_prob=config.target_accept_prob, max_tree_depth=config.max_tree_depth,
+                           dense_mass=config.dense_mass)
 
     def sample(state, y):
         return sample_kernel(state, model_args=(y,))

@@ -8,10 +8,8 @@ hexahedra (see :mod:`lvcore.mechanics.element`), load-stepping Newton
 """
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Mapping
 
 import numpy as np
@@ -29,27 +27,6 @@ from lvcore.mechanics.system import DiscreteSystem
 
 #: Bulk penalty relative to the law's largest stiffness parameter.
 KAPPA_FACTOR = 1.0e4
-
-
-def enable_compilation_cache(path: str | None = None) -> str | None:
-    """Turn on JAX's persistent compilation cache (``LVCORE_JAX_CACHE`` or ~/.cache/lvcore/jax).
-
-    Set ``LVCORE_JAX_CACHE=off`` to disable. Returns the directory used.
-    """
-    path = path or os.environ.get("LVCORE_JAX_CACHE") or str(Path.home() / ".cache" / "lvcore" / "jax")
-    if path.lower() == "off":
-        return None
-    try:
-        Path(path).mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    except Exception:  # pragma: no cover - read-only home etc.
-        return None
-    return path
-
-
-enable_compilation_cache()
 
 
 @dataclass(frozen=True, eq=False)
