@@ -210,7 +210,9 @@ class AnalyticForward:
     ``LVV = 140 - 25 tanh(0.5 u_a + 0.3 u_b + 0.3 u_af + 0.2 u_bf)`` (mL) and
     ``strain_r = -0.15 + 0.04 sum_j M_rj u_j + 0.004 |u|^2`` with ``M`` a fixed
     smooth map over (sector, level). If ``alpha_endo``/``alpha_epi`` are in
-    ``param_names`` they shift the strains linearly (per 30 degrees).
+    ``param_names`` they shift the strains linearly, by 0.02 per 30 degrees times
+fixed sector (alpha_endo) and level (alpha_epi) patterns that no change of
+theta can mimic.
     """
 
     theta_ref: tuple[float, float, float, float] = (0.6, 5.0, 1.5, 5.0)
@@ -226,8 +228,11 @@ class AnalyticForward:
             r = jnp.arange(24)
             zz = (r // 6) / 3.0
             gg = (r % 6) * jnp.pi / 3
-            strains = strains + 0.02 * (params["alpha_endo"] + 60.0) / 30.0 * jnp.cos(gg) \
-                + 0.02 * (params["alpha_epi"] - 60.0) / 30.0 * zz
+            # patterns orthogonal to every column of M and to a constant, so the angles are identifiable
+            endo_pattern = jnp.sin(2.0 * gg)                 # sectors
+            epi_pattern = 9.0 * (zz - 0.5) ** 2 - 1.25       # levels: +1, -1, -1, +1
+            strains = strains + 0.02 * (params["alpha_endo"] + 60.0) / 30.0 * endo_pattern \
+                + 0.02 * (params["alpha_epi"] - 60.0) / 30.0 * epi_pattern
         return jnp.concatenate([lvv[None], strains])
 
 
