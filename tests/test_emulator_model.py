@@ -197,5 +197,10 @@ def test_lvv_weight_enters_the_loss_and_is_validated():
     w = output_weights(TrainingConfig(lvv_weight=24.0))
     assert w.shape == (25,) and np.isclose(w.mean(), 1.0) and np.isclose(w[0] / w[1], 24.0)
     np.testing.assert_array_equal(output_weights(TrainingConfig()), np.ones(25))
-    with pytest.raises(EmulatorError, match="lvv_weight"):
+    with pytest.raises(EmulatorError, match="LVV loss weight"):
         output_weights(TrainingConfig(lvv_weight=0.0))
+    # the L-BFGS stage has its own weight, falling back to lvv_weight
+    cfg = TrainingConfig(lvv_weight=2.0, lbfgs_lvv_weight=10.0)
+    assert np.isclose(output_weights(cfg)[0] / output_weights(cfg)[1], 2.0)
+    assert np.isclose(output_weights(cfg, stage="lbfgs")[0] / output_weights(cfg, stage="lbfgs")[1], 10.0)
+    assert np.isclose(output_weights(TrainingConfig(lvv_weight=3.0), stage="lbfgs")[0], 3.0 * 25 / 27)

@@ -52,6 +52,8 @@ def add_training_arguments(parser, defaults=None) -> None:
     parser.add_argument("--lbfgs-iterations", type=int, default=d.lbfgs_iterations,
                         help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
     parser.add_argument("--lvv-weight", type=float, default=d.lvv_weight, help="loss weight of the LVV (each strain has 1)")
+    parser.add_argument("--lbfgs-lvv-weight", type=float, default=d.lbfgs_lvv_weight,
+                        help="LVV loss weight of the L-BFGS stage (default: --lvv-weight)")
 
 
 def training_config(args, seed: int):
@@ -60,7 +62,8 @@ def training_config(args, seed: int):
 
     return TrainingConfig(architectures=parse_architectures(args.architectures), max_epochs=args.max_epochs,
                           patience=args.patience, decay_epochs=args.decay_epochs, batch_size=args.batch_size,
-                          lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight, seed=seed)
+                          lbfgs_iterations=args.lbfgs_iterations, lvv_weight=args.lvv_weight,
+                          lbfgs_lvv_weight=args.lbfgs_lvv_weight, seed=seed)
 
 
 def parse_architectures(text: str) -> tuple[tuple[int, int], ...]:
