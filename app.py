@@ -20,7 +20,10 @@ import streamlit as st  # noqa: E402
 
 from lvcore import units  # noqa: E402
 from lvcore.exceptions import LVCoreError  # noqa: E402
+from lvcore.inference.samplers import use_host_devices  # noqa: E402
 from lvcore.mechanics.case import Case  # noqa: E402
+
+use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (pages/5_Calibration.py)
 
 HERE = Path(__file__).resolve().parent
 #: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-), log-spaced.

@@ -31,12 +31,12 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, default=1000)
     p.add_argument("--chain-method", default="auto")
     p.add_argument("--runs", default="volume,iid,discrepancy,discrepancy-nuts")
-    p.add_argument("--diag-mass", action="store_true", help="diagonal NUTS mass matrix (default: dense)")
+    p.add_argument("--dense-mass", action="store_true", help="dense NUTS mass matrix (default: diagonal)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
-    import numpyro
+    from lvcore.inference.samplers import use_host_devices
 
-    numpyro.set_host_device_count(min(args.chains, os.cpu_count() or 1))
+    use_host_devices(args.chains)
 
     import numpy as np
 
@@ -60,7 +60,7 @@ def main(argv=None) -> int:
     disc = 0.03 * np.cos(x[:, 0] - 1.0) + 0.02 * (x[:, 1] - 1.5) / 1.5
     y = simulate_data(forward, theta, np.random.default_rng(0), discrepancy=disc)
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
-                                 chain_method=args.chain_method, dense_mass=not args.diag_mass)
+                                 chain_method=args.chain_method, dense_mass=args.dense_mass)
     rows = []
     for name in args.runs.split(","):
         model, sampler = (name, "auto") if name != "discrepancy-nuts" else ("discrepancy", "nuts")
@@ -77,7 +77,7 @@ def main(argv=None) -> int:
                   f"ESS/s {r['ess_per_s_min_theta']:7.1f}  R-hat {r['max_rhat']:.3f}  div {r['divergent']}  "
                   f"steps/iter {r['mean_steps']:.0f}", flush=True)
     meta = {"forward": getattr(forward, "label", ""), "chains": args.chains, "warmup": args.warmup,
-            "samples": args.samples, "dense_mass": not args.diag_mass, "chain_method": getattr(samplers.resolve_chain_method(cfg), "__name__", samplers.resolve_chain_method(cfg)),
+            "samples": args.samples, "dense_mass": args.dense_mass, "chain_method": getattr(samplers.resolve_chain_method(cfg), "__name__", samplers.resolve_chain_method(cfg)),
             "load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())}
     if args.json:
         print(json.dumps({"meta": meta, "rows": rows}, indent=2))

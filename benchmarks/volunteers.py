@@ -50,9 +50,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=None, help="write the per-subject records as JSON here")
     args = p.parse_args(argv)
 
-    import numpyro
+    from lvcore.inference.samplers import use_host_devices
 
-    numpyro.set_host_device_count(min(args.chains, os.cpu_count() or 1))
+    use_host_devices(args.chains)
     import numpy as np
 
     from lvcore.inference import calibrate as cal

@@ -20,7 +20,9 @@ from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.inference.forward import emulator_forward
-from lvcore.inference.samplers import SamplerConfig
+from lvcore.inference.samplers import SamplerConfig, use_host_devices
+
+use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
 
 REPO = Path(__file__).resolve().parents[1]
 VOLUNTEERS = REPO / "assets" / "volunteers"

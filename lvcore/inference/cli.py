@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 
@@ -42,11 +41,9 @@ def register(subparsers) -> None:
 
 
 def run_calibrate(args) -> int:
-    import numpyro
+    from lvcore.inference.samplers import use_host_devices
 
-    n_dev = min(args.chains, os.cpu_count() or 1)
-    if n_dev > 1:
-        numpyro.set_host_device_count(n_dev)
+    use_host_devices(args.chains)
 
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal

@@ -59,11 +59,12 @@ class SamplerConfig:
     max_tree_depth : int
         NUTS maximum tree depth.
     dense_mass : bool
-        Dense mass matrix for plain NUTS (default). The log-theta block is
-        strongly correlated (a trades off against b, af against bf); with the
-        ``chapter`` emulator and the iid model a dense matrix gave 2.8x the
-        minimum ESS of a diagonal one at 0.8x the wall time
-        (``benchmarks/bench_calibration.py --runs iid [--diag-mass]``).
+        Dense mass matrix for plain NUTS (default: diagonal). Neither wins
+        everywhere: over 7 SYNTHETIC iid data sets on the ``chapter``
+        emulator (4 x (1000 + 1000)) a dense matrix gave the larger minimum
+        ESS on 4 but the two poorest runs (ESS 61 with R-hat 1.05, and 571),
+        where the diagonal one's poorest was 1441
+        (``benchmarks/bench_calibration.py --runs iid [--dense-mass]``).
     progress_bar : bool
         numpyro's text progress bar.
     """
@@ -75,7 +76,7 @@ class SamplerConfig:
     seed: int = 0
     target_accept_prob: float = 0.8
     max_tree_depth: int = 10
-    dense_mass: bool = True
+    dense_mass: bool = False
     progress_bar: bool = False
 
 
@@ -124,10 +125,27 @@ def pmap_vmap(n_devices: int):
     return wrap
 
 
+def use_host_devices(num_chains: int = 4) -> None:
+    """Give every chain its own XLA host device, so ``auto`` runs the chains with numpyro's ``parallel``.
+
+    Call it at an entry point before JAX's first computation (``lvcore
+    calibrate``, ``lvcore study``, the app, the benchmark scripts); importing
+    lvcore never does, and once JAX's backend is up the call has no effect.
+    Host devices are threads, so this pays off with more chains than cores:
+    on the 2-core machine, 4 chains of the iid model on 4 host devices took
+    12.8-15.8 s against 22.5-23.0 s on 2 devices (vmapped pairs), compilation
+    included, with the same ESS (``benchmarks/bench_calibration.py``).
+    """
+    import numpyro
+
+    if int(num_chains) > 1:
+        numpyro.set_host_device_count(int(num_chains))
+
+
 def resolve_chain_method(config: SamplerConfig):
     """Resolve ``"auto"``: ``parallel`` if there are as many JAX devices as chains; :func:`pmap_vmap`
     if several devices divide the chains; else ``vectorized``. Entry points create host devices with
-    ``numpyro.set_host_device_count``; importing lvcore never does."""
+    :func:`use_host_devices`; importing lvcore never does."""
     if config.chain_method != "auto":
         return config.chain_method
     n_dev = jax.local_device_count()
@@ -429,4 +447,5 @@ def run_model(model_name: str, y, forward, config: SamplerConfig = SamplerConfig
 
 
 __all__ = ["SamplerConfig", "SamplerRun", "PolarGPGibbs", "GibbsState", "run_nuts", "run_hmc_gibbs",
-           "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap"]
+           "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap",
+           "use_host_devices"]

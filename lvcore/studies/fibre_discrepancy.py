@@ -254,6 +254,7 @@ def add_study_parser(study_subparsers) -> None:
 
 
 def _cli(args) -> int:
+    samplers.use_host_devices(args.chains)
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
                                  seed=args.seed)
     res = run_study(config=cfg, seed=args.seed, resolution=args.resolution, out=args.out, emulator=args.emulator,
