@@ -53,7 +53,7 @@ def lv_wall_frame(nodes: np.ndarray, elements: np.ndarray, xi: np.ndarray):
     """
     _, dN = lagrange_q2_shape(xi, derivatives=True)
     X = nodes[elements]
-    d = np.einsum("eai,qaj->eqji", X, dN)  # d[..., j, :] = dX/dxi_j
+    d = np.einsum("eai,qaj->eqji", X, dN, optimize=True)  # d[..., j, :] = dX/dxi_j
     e_c = _unit(d[..., 0, :])
     e_t = _unit(np.cross(e_c, d[..., 2, :]))
     flip = np.sum(e_t * d[..., 1, :], axis=-1, keepdims=True) < 0
