@@ -210,9 +210,9 @@ class AnalyticForward:
     ``LVV = 140 - 25 tanh(0.5 u_a + 0.3 u_b + 0.3 u_af + 0.2 u_bf)`` (mL) and
     ``strain_r = -0.15 + 0.04 sum_j M_rj u_j + 0.004 |u|^2`` with ``M`` a fixed
     smooth map over (sector, level). If ``alpha_endo``/``alpha_epi`` are in
-    ``param_names`` they shift the strains linearly, by 0.02 per 30 degrees times
-fixed sector (alpha_endo) and level (alpha_epi) patterns that no change of
-theta can mimic.
+    ``param_names`` they shift the strains linearly, by 0.02 per 30 degrees
+    times fixed sector (alpha_endo) and level (alpha_epi) patterns that no
+    change of theta can mimic.
     """
 
     theta_ref: tuple[float, float, float, float] = (0.6, 5.0, 1.5, 5.0)
