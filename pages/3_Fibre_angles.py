@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -11,8 +12,10 @@ import numpy as np
 import pandas as pd
 import streamlit as st
 
+from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
-from lvcore.studies.fibre_angles import CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, strain_table
+from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
+                                         strain_table)
 from lvcore.viz import figures
 
 st.set_page_config(page_title="Fibre angles", layout="wide")
@@ -83,25 +86,54 @@ with tab_sweep:
                                     "converged": r.converged, "message": r.message} for r in runs]),
                      hide_index=True, use_container_width=True)
 
+EMULATOR_ENGINE = "`angles` emulator (live)"
+
+
+@st.cache_resource(show_spinner=False)
+def _angles_emulator():
+    return load_emulator("angles")
+
+
+def _draw_map(amap):
+    left, right = st.columns(2)
+    left.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.lvv_ml, title="LVV (mL)",
+                                      xaxis_title="α_endo (°)", yaxis_title="α_epi (°)", colorbar_title="mL"),
+                      use_container_width=True)
+    right.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.mean_strain, title="Mean E_cc",
+                                       xaxis_title="α_endo (°)", yaxis_title="α_epi (°)"),
+                       use_container_width=True)
+
+
 with tab_map:
+    engines = ["FE simulator"] + ([EMULATOR_ENGINE] if "angles" in available_emulators() else [])
+    engine = st.radio("Computed by", engines, horizontal=True,
+                      help="The emulator answers in milliseconds, so its map follows the sliders live; build it with "
+                           "`python scripts/build_emulators.py --emulators angles` if it is missing.")
     c1, c2, c3 = st.columns(3)
-    n = c1.slider("Grid points per angle", 2, 6, 3)
+    live = engine == EMULATOR_ENGINE
+    n = c1.slider("Grid points per angle", 5 if live else 2, 41 if live else 6, 21 if live else 3)
     endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
     epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
     endo = tuple(np.linspace(*endo_range, n))
     epi = tuple(np.linspace(*epi_range, n))
-    st.caption(f"{n * n} simulations.")
-    if st.button("Run map"):
-        with st.spinner(f"Simulating {n * n} angle pairs..."):
-            st.session_state["angle_map"] = _map(endo, epi, _frozen(options))
-    amap = st.session_state.get("angle_map")
-    if amap is not None:
-        left, right = st.columns(2)
-        left.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.lvv_ml, title="LVV (mL)",
-                                          xaxis_title="α_endo (°)", yaxis_title="α_epi (°)", colorbar_title="mL"),
-                          use_container_width=True)
-        right.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.mean_strain, title="Mean E_cc",
-                                           xaxis_title="α_endo (°)", yaxis_title="α_epi (°)"),
-                           use_container_width=True)
-        for r in amap.failures:
-            st.warning(f"({r.alpha_endo:g}°, {r.alpha_epi:g}°) did not converge: {r.message}")
+    if live:
+        st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0), not the analytic "
+                   "default LV; the mesh choice does not apply.")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                _draw_map(emulator_angle_map(_angles_emulator(), endo, epi, theta=options["theta"], edp_mmhg=edp))
+            except LVCoreError as err:
+                st.error(str(err))
+        for w in caught:
+            st.warning(str(w.message))
+    else:
+        st.caption(f"{n * n} simulations.")
+        if st.button("Run map"):
+            with st.spinner(f"Simulating {n * n} angle pairs..."):
+                st.session_state["angle_map"] = _map(endo, epi, _frozen(options))
+        amap = st.session_state.get("angle_map")
+        if amap is not None:
+            _draw_map(amap)
+            for r in amap.failures:
+                st.warning(f"({r.alpha_endo:g}°, {r.alpha_epi:g}°) did not converge: {r.message}")

@@ -51,3 +51,56 @@ def test_page_runs_a_sweep():
     at.button[0].click().run()
     assert not at.exception
     assert len(at.dataframe) == 1
+
+
+def test_emulator_angle_map_is_one_batched_prediction():
+    """The emulator map equals point-by-point predictions and is laid out like angle_map."""
+    from test_inference_calibrate import _random_emulator
+
+    from lvcore.emulator.model import ExtrapolationWarning
+    from lvcore.exceptions import EmulatorError
+    from lvcore.studies.fibre_angles import emulator_angle_map
+
+    emu = _random_emulator("angles", angles=True)  # UNTRAINED: the plumbing only
+    theta = {"a": 0.7, "b": 2.0, "af": 1.2, "bf": 4.0}
+    h = [0.3, -0.2, 0.1, 0.0, 0.5]
+    endo, epi = [-90.0, -45.0, 0.0], [0.0, 90.0]
+    amap = emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=10.0, h=h)
+    assert amap.lvv_ml.shape == (2, 3) and amap.mean_strain.shape == (2, 3) and len(amap.runs) == 6
+    assert not amap.failures
+    one = np.asarray(emu.predict(**theta, alpha_endo=-45.0, alpha_epi=90.0, edp=10.0,
+                                 **{f"h{i + 1}": v for i, v in enumerate(h)}))
+    assert amap.lvv_ml[1, 1] == pytest.approx(one[0], rel=1e-12)
+    assert amap.mean_strain[1, 1] == pytest.approx(np.mean(one[1:]), rel=1e-12)
+    run = amap.runs[4]  # row-major over alpha_epi, then alpha_endo
+    assert (run.alpha_endo, run.alpha_epi) == (-45.0, 90.0) and "emulator 'angles'" in run.message
+    np.testing.assert_allclose(run.strains, one[1:], rtol=1e-12)
+    with pytest.warns(ExtrapolationWarning, match="edp"):
+        emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=30.0, h=h)
+    with pytest.raises(EmulatorError, match="5 PC scores"):
+        emulator_angle_map(emu, endo, epi, h=[0.1])
+    with pytest.raises(EmulatorError, match="fibre angles"):
+        emulator_angle_map(_random_emulator(), endo, epi)
+
+
+def test_page_draws_the_live_emulator_map(tmp_path, monkeypatch):
+    """With an emulator named 'angles' on the search path the map tab offers it and draws without a button."""
+    from streamlit.testing.v1 import AppTest
+    from test_inference_calibrate import _random_emulator
+
+    from lvcore.emulator import io as eio
+
+    eio.save_emulator(_random_emulator("angles", angles=True), tmp_path / "angles")  # UNTRAINED test double
+    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+    monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "no-bundled-emulators")
+    at = AppTest.from_file(str(Path(__file__).parents[1] / "pages" / "3_Fibre_angles.py"), default_timeout=300)
+    at.run()
+    assert not at.exception
+    radio = at.radio[0]
+    assert "`angles` emulator (live)" in radio.options
+    radio.set_value("`angles` emulator (live)").run()
+    assert not at.exception and not at.warning
+    assert len(at.get("plotly_chart")) >= 2
+    edp = next(s for s in at.sidebar.slider if "EDP" in s.label)
+    edp.set_value(30.0).run()  # outside the emulator's training box: said, not hidden
+    assert any("outside the training box" in w.value for w in at.warning)
