@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, NamedTuple
 
 import jax
@@ -109,6 +110,37 @@ class SamplerRun:
     run_kwargs: dict = field(repr=False, default_factory=dict)
 
 
+def _with_dynamic_model_args(fn):
+    """Split numpyro's per-chain function into ``(call(map_args, model_args), model_args)``.
+
+    numpyro hands a callable chain method ``partial(_single_chain_mcmc,
+    args=..., kwargs=...)``; mapping the model arguments (the data) as an
+    explicit, unmapped argument instead of a closure keeps them out of the
+    compiled program as constants. With ``jit_model_args=True`` the compiled
+    sampler then depends only on the shapes, so a new data set reuses it
+    (in memory, and across processes through the persistent cache).
+    """
+    if not (isinstance(fn, partial) and {"args", "kwargs"} <= set(fn.keywords)):
+        return (lambda map_args, _: fn(map_args)), None  # another numpyro layout: closure as before
+    kw = dict(fn.keywords)
+    model_args = (kw.pop("args"), kw.pop("kwargs"))
+
+    def call(map_args, model_args):
+        args, kwargs = model_args
+        return fn.func(map_args, args=args, kwargs=kwargs, **kw)
+
+    return call, model_args
+
+
+def pmap_chains(fn):
+    """numpyro chain method: one chain per JAX device (pmap), the data passed as an argument."""
+    call, model_args = _with_dynamic_model_args(fn)
+    return lambda map_args: jax.pmap(call, in_axes=(0, None))(map_args, model_args)
+
+
+pmap_chains.__name__ = "parallel"
+
+
 def pmap_vmap(n_devices: int):
     """numpyro chain method: chains split over ``n_devices`` JAX devices (pmap), vectorised within each (vmap).
 
@@ -116,9 +148,11 @@ def pmap_vmap(n_devices: int):
     runs two vectorised pairs of chains side by side.
     """
     def wrap(fn):
+        call, model_args = _with_dynamic_model_args(fn)
+
         def run(args):
             split = jax.tree.map(lambda x: x.reshape((n_devices, x.shape[0] // n_devices) + x.shape[1:]), args)
-            out = jax.pmap(jax.vmap(fn))(split)
+            out = jax.pmap(jax.vmap(call, in_axes=(0, None)), in_axes=(0, None))(split, model_args)
             return jax.tree.map(lambda x: x.reshape((x.shape[0] * x.shape[1],) + x.shape[2:]), out)
         return run
     wrap.__name__ = f"pmap{n_devices}_vmap"
@@ -150,13 +184,15 @@ def resolve_chain_method(config: SamplerConfig):
         return config.chain_method
     n_dev = jax.local_device_count()
     if config.num_chains > 1 and n_dev >= config.num_chains:
-        return "parallel"
+        return pmap_chains
     if config.num_chains > 1 and n_dev > 1 and config.num_chains % n_dev == 0:
         return pmap_vmap(n_dev)
     return "vectorized"
 
 
-def _mcmc(kernel, config: SamplerConfig) -> MCMC:
+def _mcmc(kernel, config: SamplerConfig, dynamic_args: bool = False) -> MCMC:
+    """numpyro MCMC; ``dynamic_args``: the model's arguments (arrays only) are inputs of the
+    compiled sampler (``jit_model_args``), not constants, so new data of the same shape reuse it."""
     return MCMC(
         kernel,
         num_warmup=config.num_warmup,
@@ -164,6 +200,7 @@ def _mcmc(kernel, config: SamplerConfig) -> MCMC:
         num_chains=config.num_chains,
         chain_method=resolve_chain_method(config),
         progress_bar=config.progress_bar,
+        jit_model_args=dynamic_args,
     )
 
 
@@ -189,12 +226,13 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
     **model_kwargs
         ``sigma_v``, ``infer_angles`` (and ``nugget`` for the discrepancy model).
     """
-    model = models.get_model(model_name)
+    # the forward model and settings are bound into the model; only the data y is a (dynamic) argument
+    model = partial(models.get_model(model_name), forward=forward, **model_kwargs)
     kernel = NUTS(model, target_accept_prob=config.target_accept_prob,
                   max_tree_depth=config.max_tree_depth, dense_mass=config.dense_mass)
-    mcmc = _mcmc(kernel, config)
+    mcmc = _mcmc(kernel, config, dynamic_args=True)
     t0 = time.perf_counter()
-    run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64), forward=forward, **model_kwargs)
+    run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64))
     mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
     samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
     return SamplerRun("nuts", model_name, samples, stats, time.perf_counter() - t0, mcmc, run_kwargs)
@@ -447,5 +485,5 @@ def run_model(model_name: str, y, forward, config: SamplerConfig = SamplerConfig
 
 
 __all__ = ["SamplerConfig", "SamplerRun", "PolarGPGibbs", "GibbsState", "run_nuts", "run_hmc_gibbs",
-           "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap",
+           "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap", "pmap_chains",
            "use_host_devices"]
