@@ -339,7 +339,7 @@ class PolarGPGibbs(MCMCKernel):
 
     # --- MCMCKernel API -------------------------------------------------------
     def init(self, rng_key, num_warmup, init_params, model_args, model_kwargs):
-        y = self._data(model_args)
+        y = self._data(model_args, model_kwargs)
         if jnp.ndim(rng_key) > 1 or (jnp.ndim(rng_key) == 1 and rng_key.shape[0] != 2):
             # vectorized chains: one key per chain
             if init_params is None:
@@ -380,14 +380,17 @@ class PolarGPGibbs(MCMCKernel):
         z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": b, "v": v}
         return GibbsState(z, hyper_state, main_state, jnp.array(False), jnp.array(0), rng_key)
 
-    def _data(self, model_args):
-        """Data from ``MCMC.run(key, y)`` if given (one compilation serves many data sets), else ``self.y``."""
+    def _data(self, model_args, model_kwargs=None):
+        """Data from ``MCMC.run(key, y)`` or ``MCMC.run(key, y=y)`` if given (one compilation serves
+        many data sets), else ``self.y``."""
         if model_args:
             return jnp.asarray(model_args[0], dtype=jnp.float64)
+        if model_kwargs and model_kwargs.get("y") is not None:
+            return jnp.asarray(model_kwargs["y"], dtype=jnp.float64)
         return self.y
 
     def sample(self, state, model_args, model_kwargs):
-        y = self._data(model_args)
+        y = self._data(model_args, model_kwargs)
         if jnp.ndim(state.rng_key) > 1:  # vectorized chains
             return jax.vmap(lambda s: self._sample_one(s, y))(state)
         return self._sample_one(state, y)
@@ -436,13 +439,14 @@ def run_hmc_gibbs(y, forward, config: SamplerConfig = SamplerConfig(), **model_k
     """Run :class:`PolarGPGibbs` (model (iii), Algorithm 4); ``model_kwargs`` as for the kernel."""
     kernel = PolarGPGibbs(forward, y, target_accept_prob=config.target_accept_prob,
                           max_tree_depth=config.max_tree_depth, **model_kwargs)
-    mcmc = _mcmc(kernel, config)
+    mcmc = _mcmc(kernel, config, dynamic_args=True)  # y an argument of the compiled sampler, as for NUTS
     t0 = time.perf_counter()
-    mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"))
+    run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64))
+    mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
     samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
     # eta at every draw (the blocked kernel does not record it as it goes).
     samples["eta"] = np.asarray(posterior_eta(forward, samples))
-    return SamplerRun("hmc_gibbs", "discrepancy", samples, stats, time.perf_counter() - t0, mcmc)
+    return SamplerRun("hmc_gibbs", "discrepancy", samples, stats, time.perf_counter() - t0, mcmc, run_kwargs)
 
 
 def continue_run(run: SamplerRun, forward) -> SamplerRun:
