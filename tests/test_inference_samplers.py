@@ -92,7 +92,7 @@ def test_discrepancy_model_recovers_smooth_discrepancy():
     x = kernels.strain_grid()
     true_disc = 0.05 * np.cos(x[:, 0] - 0.7) + 0.03 * (x[:, 1] - 1.5) / 1.5
     y = _data(seed=5, disc=true_disc)
-    cfg = samplers.SamplerConfig(num_warmup=300, num_samples=300, num_chains=2)
+    cfg = samplers.SamplerConfig(num_warmup=500, num_samples=500, num_chains=2)
     run = samplers.run_hmc_gibbs(y, FWD, cfg)
     total = run.samples["disc"] + run.samples["v"][..., None]
     eta_dev = run.samples["eta"][..., 1:] - np.asarray(FWD(TRUTH))[1:]
@@ -108,7 +108,7 @@ def test_discrepancy_model_recovers_smooth_discrepancy():
     assert 0.012 < np.median(s) < 0.045
     # an iid fit of the same data inflates sigma_S
     iid = samplers.run_nuts("iid", y, FWD, cfg)
-    assert iid.samples["eta"].shape == (2, 300, 25) and iid.sample_stats["diverging"].shape == (2, 300)
+    assert iid.samples["eta"].shape == (2, 500, 25) and iid.sample_stats["diverging"].shape == (2, 500)
     assert np.median(np.sqrt(iid.samples["sigma_s2"])) > np.median(s)
 
 
