@@ -27,3 +27,9 @@ EDP_NAME = "edp"
 def pc_names(k: int) -> tuple[str, ...]:
     """Names of the first ``k`` PCA shape scores: h1..hk."""
     return tuple(f"h{i + 1}" for i in range(k))
+
+
+def is_pc_name(name) -> bool:
+    """True for a PCA shape-score name ``h<k>`` (h1, h2, ...)."""
+    name = str(name)
+    return name.startswith("h") and name[1:].isdigit()

@@ -111,7 +111,7 @@ with tab_map:
                            "`python scripts/build_emulators.py --emulators angles` if it is missing.")
     c1, c2, c3 = st.columns(3)
     live = engine == EMULATOR_ENGINE
-    n = c1.slider("Grid points per angle", 5 if live else 2, 41 if live else 6, 21 if live else 3)
+    n = c1.slider("Grid points per angle", *((5, 41, 21) if live else (2, 6, 3)))  # (min, max, default)
     endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
     epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
     endo = tuple(np.linspace(*endo_range, n))

@@ -36,7 +36,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from lvcore.exceptions import CampaignError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, pc_names
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
 
 #: Fibre angles (deg) at which the chapter's emulator was trained.
 CHAPTER_ANGLES = (-60.0, 60.0)
@@ -140,7 +140,7 @@ class ParameterSpace:
     @property
     def n_pcs(self) -> int:
         """Number of PCA scores among the varied inputs (they must be h1..hk)."""
-        return sum(1 for n in self.names if n.startswith("h") and n[1:].isdigit())
+        return sum(1 for n in self.names if is_pc_name(n))
 
     def fixed_dict(self) -> dict[str, float]:
         return dict(self.fixed)

@@ -18,6 +18,7 @@ import pandas as pd
 from lvcore.exceptions import GeometryError
 from lvcore.inference import diagnostics, models, samplers
 from lvcore.inference.data import validate_measurements
+from lvcore.outputs import is_pc_name
 
 
 @dataclass(frozen=True)
@@ -108,13 +109,13 @@ def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:
             if "h" in obj:
                 h = obj["h"]
             else:
-                keys = sorted((k for k in obj if k.startswith("h") and k[1:].isdigit()), key=lambda k: int(k[1:]))
+                keys = sorted((k for k in obj if is_pc_name(k)), key=lambda k: int(k[1:]))
                 h = [obj[k] for k in keys]
         else:
             h = obj
     elif suffix == ".csv":
         df = pd.read_csv(path)
-        cols = [c for c in df.columns if str(c).startswith("h") and str(c)[1:].isdigit()]
+        cols = [c for c in df.columns if is_pc_name(c)]
         if cols:
             cols = sorted(cols, key=lambda c: int(str(c)[1:]))
             h = df.loc[0, cols].to_numpy(dtype=float)

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore.exceptions import EmulatorError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES, pc_names
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES, is_pc_name, pc_names
 from lvcore.units import DEFAULT_ALPHA_ENDO_DEG, DEFAULT_ALPHA_EPI_DEG, DEFAULT_EDP_MMHG
 
 
@@ -137,7 +137,7 @@ def emulator_forward(
             "use --angles fixed or an emulator with alpha_endo/alpha_epi inputs (e.g. 'angles')"
         )
     h = np.atleast_1d(np.asarray(h, dtype=float))
-    n_pc = sum(1 for n in names if n.startswith("h") and n[1:].isdigit())
+    n_pc = sum(1 for n in names if is_pc_name(n))
     if h.size < n_pc:
         raise EmulatorError(f"emulator '{label}' needs {n_pc} PC scores, got {h.size}")
     cond = {n: float(v) for n, v in zip(pc_names(n_pc), h[:n_pc])}

@@ -20,6 +20,7 @@ import numpy as np
 
 from lvcore import units
 from lvcore.geometry.template import N_REGIONS
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name
 
 #: Angle pairs (α_endo, α_epi) in degrees used by the chapter (§9.3.2, Fig 9.5).
 CHAPTER_ANGLE_PAIRS = ((-60.0, 90.0), (-60.0, 60.0), (-30.0, 60.0), (0.0, 90.0))
@@ -202,18 +203,18 @@ def emulator_angle_map(
     from lvcore.exceptions import EmulatorError
 
     names = tuple(emulator.input_names)
-    if not {"alpha_endo", "alpha_epi"} <= set(names):
+    if not set(ANGLE_NAMES) <= set(names):
         raise EmulatorError(f"emulator '{emulator.name}' does not take the fibre angles (inputs {list(names)}); "
                             "use the 'angles' emulator or the simulator")
     ae = np.asarray(alpha_endo, dtype=float)
     ap = np.asarray(alpha_epi, dtype=float)
     endo, epi = np.meshgrid(ae, ap)  # (n_epi, n_endo), row-major over alpha_epi as in angle_map
     theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
-    pcs = [n for n in names if n[:1] == "h" and n[1:].isdigit()]
+    pcs = [n for n in names if is_pc_name(n)]
     h = np.zeros(len(pcs)) if h is None else np.atleast_1d(np.asarray(h, dtype=float))
     if h.size < len(pcs):
         raise EmulatorError(f"emulator '{emulator.name}' needs {len(pcs)} PC scores, got {h.size}")
-    values = {**theta, "alpha_endo": endo, "alpha_epi": epi, "edp": float(edp_mmhg)}
+    values = {**theta, ANGLE_NAMES[0]: endo, ANGLE_NAMES[1]: epi, EDP_NAME: float(edp_mmhg)}
     values.update({n: float(h[int(n[1:]) - 1]) for n in pcs})
     missing = [n for n in names if n not in values]
     if missing:
