@@ -3,7 +3,7 @@
 Usage::
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
-        python benchmarks/bench_simulator.py [--resolutions 6,4,1 12,4,1 ...] [--repeats 5] [--processes]
+        python benchmarks/bench_simulator.py [--resolutions fast coarse default 12,4+2+2+4,2,5] [--repeats 5] [--processes]
 
 Prints markdown tables: per resolution the dofs, LVV, EDV/V_early, mean
 strain, the largest relative output change against the finest resolution,
@@ -24,10 +24,23 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 
-def _case(res):
+def _resolution(spec: str):
+    """A preset name, or ``"NC,NL,NT[,GP]"`` (NL may be per-level counts ``2+1+1+2``) as a case resolution."""
+    from lvcore.mechanics.mesh import RESOLUTION_PRESETS, LVResolution
+
+    return spec if spec in RESOLUTION_PRESETS else LVResolution.from_spec(spec).case_dict()
+
+
+def _label(spec: str) -> str:
+    from lvcore.mechanics.mesh import RESOLUTION_PRESETS, LVResolution
+
+    return f"{spec}: {RESOLUTION_PRESETS[spec].describe()}" if spec in RESOLUTION_PRESETS else LVResolution.from_spec(spec).describe()
+
+
+def _case(spec):
     from lvcore.mechanics.case import Case
 
-    return Case.default_lv(resolution={"circumferential": res[0], "longitudinal": res[1], "transmural": res[2]})
+    return Case.default_lv(resolution=_resolution(spec))
 
 
 def run_resolution(res, repeats):
@@ -48,7 +61,7 @@ def cold_start(res) -> float:
     code = (
         "import time; t=time.perf_counter(); import lvcore; from lvcore.mechanics.case import Case; "
         "from lvcore.mechanics.simulate import simulate; "
-        f"r=simulate(Case.default_lv(resolution={{'circumferential':{res[0]},'longitudinal':{res[1]},'transmural':{res[2]}}})); "
+        f"r=simulate(Case.default_lv(resolution={_resolution(res)!r})); "
         "print(time.perf_counter()-t)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -77,21 +90,21 @@ def throughput(res, n_jobs, n_proc):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--resolutions", nargs="*", default=["6,4,1", "12,4,1", "12,8,1", "12,8,2"])
+    ap.add_argument("--resolutions", nargs="*", default=["fast", "coarse", "default", "12,4+2+2+4,2,5"],
+                    help="preset names or NC,NL,NT[,GP] (NL may be per-level counts 2+1+1+2); the last is the reference")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--processes", action="store_true", help="measure 1 vs 2 worker processes")
     ap.add_argument("--throughput-solves", type=int, default=24, help="solves per throughput measurement")
     ap.add_argument("--throughput-rounds", type=int, default=2,
                     help="alternating 1- and 2-process rounds; the best of each is reported")
-    ap.add_argument("--cold", default=None, help="resolution for the cold-start measurement (e.g. 12,4,1)")
+    ap.add_argument("--cold", default=None, help="resolution for the cold-start measurement (e.g. default)")
     a = ap.parse_args(argv)
     import numpy as np
 
     from lvcore.mechanics.linear import available_backends
 
     rows = []
-    for s in a.resolutions:
-        res = tuple(int(v) for v in s.split(","))
+    for res in a.resolutions:
         r, first, med = run_resolution(res, a.repeats)
         rows.append((res, r, first, med))
         print(f"done {res}: converged={r.converged} {med:.3f} s", file=sys.stderr, flush=True)
@@ -105,14 +118,14 @@ def main(argv=None):
         y = r.outputs()
         dv = abs(y[0] - ref[0]) / ref[0]
         ds = np.max(np.abs(y[1:] - ref[1:]) / np.abs(ref[1:]))
-        print(f"| {res} | {r.dofs} | {y[0]:.2f} | {r.lvv_standardised:.3f} | {np.mean(y[1:]):.4f} | "
+        print(f"| {_label(res)} | {r.dofs} | {y[0]:.2f} | {r.lvv_standardised:.3f} | {np.mean(y[1:]):.4f} | "
               f"{dv:.2%}; {ds:.2%} | {r.newton_iterations} | {r.timings.get('tangents', '-')} | {r.load_steps} | {first:.2f} | {med:.3f} |")
     if a.cold:
-        res = tuple(int(v) for v in a.cold.split(","))
+        res = a.cold
         print(f"\ncold start (new process: import + compile or cache load + first solve) at {res}: "
               f"{cold_start(res):.2f} s")
     if a.processes:
-        res = rows[0][0] if len(rows) == 1 else tuple(int(v) for v in a.resolutions[1].split(","))
+        res = rows[0][0] if len(rows) == 1 else a.resolutions[1]
         n = 2 * (a.throughput_solves // 2)
         ones, twos = [], []
         for _ in range(a.throughput_rounds):  # alternate, so slow drifts in the machine's load hit both

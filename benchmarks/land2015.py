@@ -36,10 +36,15 @@ def problem1_case(res):
 
 
 def problem2_case(res):
+    """Problem 2 at ``res``: a preset name, an LVResolution or ``"NC,NL,NT[,GP]"`` (NL may be ``2+1+1+2``)."""
+    from lvcore.mechanics.mesh import LVResolution
+
+    if isinstance(res, str) and "," in res:
+        res = LVResolution.from_spec(res)
+    resolution = res.case_dict() if isinstance(res, LVResolution) else res
     return {
         "geometry": {"kind": "ellipsoid", "endo": {"rs": 7.0, "rl": 17.0}, "epi": {"rs": 10.0, "rl": 20.0},
-                     "base_z": 5.0,
-                     "resolution": {"circumferential": res[0], "longitudinal": res[1], "transmural": res[2]}},
+                     "base_z": 5.0, "resolution": resolution},
         "material": {"law": "guccione", "C": 10.0, "bf": 1.0, "bt": 1.0, "bfs": 1.0},
         "load": {"pressure": 10.0, "units": "kPa"},
         "boundary": {"base": "clamped"},
@@ -79,12 +84,15 @@ def main(argv=None):
         print()
     if a.problem in ("2", "both"):
         print("Problem 2 (LV inflation): reference endo apex z -26.612, epi apex z -28.279 mm, volume 10734 mm³\n")
-        print("| elements (circ,long,trans) | dofs | endo apex z | epi apex z | volume (mm³) | vol. error "
+        print("| elements (circ x long x trans, Gauss points through the wall) | dofs | endo apex z | epi apex z | volume (mm³) | vol. error "
               "| Newton its | steps | 1st run incl. compile (s) | warm (s) |")
         print("|---|---|---|---|---|---|---|---|---|---|")
         for s in a.p2:
-            res = tuple(int(v) for v in s.split(","))
+            from lvcore.mechanics.mesh import RESOLUTION_PRESETS, LVResolution
+
+            res = RESOLUTION_PRESETS[s] if s in RESOLUTION_PRESETS else LVResolution.from_spec(s)
             r, first, warm = _timed(problem2_case(res))
+            res = f"{s}: {res.describe()}" if s in RESOLUTION_PRESETS else res.describe()
             if r.converged:
                 v = r.cavity_volume_mm3[1]
                 print(f"| {res} | {r.dofs} | {r.apex_endocardium[2]:.3f} | {r.apex_epicardium[2]:.3f} | {v:.0f} "

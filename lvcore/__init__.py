@@ -17,7 +17,7 @@ from lvcore.jax_cache import enable_compilation_cache  # noqa: E402
 
 enable_compilation_cache()
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 
 def simulate(case, **options):

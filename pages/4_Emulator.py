@@ -132,12 +132,13 @@ space_dict = source.get("space")
 run = st.button("Run the simulator at this point", disabled=space_dict is None,
                 help="one finite-element solve at the resolution the emulator was trained on")
 if run:
+    from lvcore.campaigns.runner import recorded_resolution
     from lvcore.campaigns.space import ParameterSpace
     import lvcore
 
     space = ParameterSpace.from_dict(space_dict)
     row = [values.get(n, emu.fixed.get(n)) for n in space.names]
-    resolution = (source.get("resolution") or ["default"])[0]
+    resolution = recorded_resolution((source.get("resolution") or ["default"])[0], source.get("simulator_versions"))
     with st.spinner("Simulating..."):
         try:
             res = lvcore.simulate(space.case(row, resolution))

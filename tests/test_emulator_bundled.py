@@ -41,13 +41,16 @@ def test_bundled_emulator_meets_the_data_spec_and_records_provenance(name):
 def test_chapter_emulator_agrees_with_a_live_simulator_run():
     """At a physiological point inside the training box, the emulator reproduces a fresh FE solve."""
     emu = _bundled_or_skip("chapter")
+    from lvcore.campaigns.runner import recorded_resolution
     from lvcore.campaigns.space import get_space
     from lvcore.mechanics.simulate import simulate
 
     x = {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1}
     space = get_space("chapter")
     row = [x[n] for n in space.names]
-    sim = simulate(space.case(row, resolution="default"))
+    resolution = recorded_resolution(emu.metadata["source"]["resolution"][0], emu.metadata["source"]["simulator_versions"])
+    assert resolution == "coarse"  # trained on lvcore 0.1's default mesh
+    sim = simulate(space.case(row, resolution=resolution))
     assert sim.converged, sim.message
     y_sim = sim.outputs()
     y_emu = np.asarray(emu.predict(**x))

@@ -61,3 +61,25 @@ def test_region_order_is_level_major():
     assert LVTemplate.region_of(np.deg2rad(70.0), 0.01) == 1
     assert LVTemplate.region_of(np.deg2rad(10.0), 0.3) == 6
     assert LVTemplate.region_of(np.deg2rad(350.0), 0.99) == 23
+
+
+def test_graded_template_refines_base_and_apex_levels():
+    t = LVTemplate.graded(6, (2, 1, 1, 2), 1)
+    assert (t.n_long, t.level_elements) == (6, (2, 1, 1, 2))
+    np.testing.assert_allclose(t.s_breaks, [0, 0.125, 0.25, 0.5, 0.75, 0.875, 1.0])
+    # same topology as the uniform template with the same counts, other parametric rows
+    u = LVTemplate(6, 6, 1)
+    assert np.array_equal(t.elements, u.elements)
+    rows = t.parametric_coords[t.grid_ijk[:, 1] == 1, 1]
+    np.testing.assert_allclose(rows, 0.0625)  # mid-node row of the first (basal) element row
+    # every element lies in one level: 2, 1, 1, 2 element rows of 6 elements
+    levels = t.element_regions // 6
+    assert np.bincount(levels).tolist() == [12, 6, 6, 12]
+    # sampling a map and evaluating the isoparametric geometry round-trips
+    X = t.nodes_from_map(DEFAULT_LV.position)
+    p = t.parametric_coords
+    np.testing.assert_allclose(t.evaluate(X, p[:, 0], p[:, 1], p[:, 2]), X, atol=1e-9)
+    phi, s, tt = 0.0, 0.2, 0.0  # between node rows (s is mapped through the grading), on a node column
+    assert np.linalg.norm(t.evaluate(X, phi, s, tt) - DEFAULT_LV.position(np.array([phi]), np.array([s]), np.array([tt]))[0]) < 0.2
+    with pytest.raises(ValueError, match="level_elements"):
+        LVTemplate(6, 5, 1, (2, 1, 1, 2))

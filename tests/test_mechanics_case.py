@@ -78,6 +78,20 @@ def test_defaults_and_units():
         assert Case.from_dict(Case.from_dict(d).to_dict()) == Case.from_dict(d)
 
 
+def test_graded_resolution_parses_and_round_trips():
+    d = copy.deepcopy(HO)
+    d["geometry"]["resolution"] = {"circumferential": 6, "longitudinal": [2, 1, 1, 2], "transmural": 1,
+                                   "transmural_gauss_points": 5}
+    case = Case.from_dict(d)
+    r = case.geometry.resolution
+    assert (r.longitudinal, r.level_elements, r.transmural_gauss_points) == (6, (2, 1, 1, 2), 5)
+    assert case.to_dict()["geometry"]["resolution"] == d["geometry"]["resolution"]
+    assert Case.from_dict(case.to_dict()) == case
+    from lvcore.mechanics.mesh import RESOLUTION_PRESETS
+
+    assert r.lv() == RESOLUTION_PRESETS["default"]
+
+
 def test_default_lv_constructor_matches_dict():
     assert Case.default_lv(resolution="fast") == Case.from_dict(HO)
 
@@ -147,6 +161,13 @@ BAD = [
      "geometry.resolution.longitudinal", "positive integer"),
     (HO, ("geometry", "resolution"), {"circumferential": 8, "longitudinal": 4}, False,
      "geometry.resolution.transmural", "missing"),
+    (HO, ("geometry", "resolution"), {"circumferential": 6, "longitudinal": [2, 1, 1], "transmural": 1}, False,
+     "geometry.resolution.longitudinal", "four counts"),
+    (HO, ("geometry", "resolution"), {"circumferential": 6, "longitudinal": [2, 0, 1, 2], "transmural": 1}, False,
+     "geometry.resolution.longitudinal[1]", "positive integer"),
+    (HO, ("geometry", "resolution"), {"circumferential": 6, "longitudinal": 4, "transmural": 1,
+                                      "transmural_gauss_points": 12}, False,
+     "geometry.resolution.transmural_gauss_points", "1..10"),
     (HO, ("geometry", "size"), [1, 1, 1], False, "geometry.size", "not used"),
     (HO, ("boundary",), {"base": "free"}, False, "boundary.base", "clamped"),
     (HO, ("outputs",), {"strain_layer": "epi"}, False, "outputs.strain_layer", "endocardial"),

@@ -7,7 +7,6 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from land2015 import problem1_case, problem2_case  # noqa: E402
 
-from lvcore.mechanics.mesh import RESOLUTION_PRESETS  # noqa: E402
 from lvcore.mechanics.simulate import simulate  # noqa: E402
 
 
@@ -23,10 +22,7 @@ def test_problem1_beam_tip():
 
 @pytest.mark.slow
 def test_problem2_lv_inflation_accurate_preset():
-    case = problem2_case(RESOLUTION_PRESETS["accurate"])
-    case["geometry"].pop("resolution")
-    case["geometry"]["resolution"] = "accurate"
-    r = simulate(case)
+    r = simulate(problem2_case("accurate"))
     assert r.converged, r.message
     assert r.cavity_volume_mm3[0] == pytest.approx(2492, rel=2e-3)
     assert r.apex_endocardium[2] == pytest.approx(-26.612, abs=0.1)

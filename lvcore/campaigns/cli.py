@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from lvcore.campaigns.designs import METHODS, make_design, save_design
 from lvcore.campaigns.space import SPACE_NAMES, get_space
+from lvcore.campaigns.runner import RESOLUTIONS
 
 
 def register(subparsers) -> None:
@@ -23,7 +24,7 @@ def register(subparsers) -> None:
     run.add_argument("design", help="design CSV written by `lvcore design`")
     run.add_argument("--out", required=True, help="HDF5 store to create")
     _add_executor_args(run)
-    run.add_argument("--resolution", choices=("fast", "default"), default="default", help="simulator mesh resolution")
+    run.add_argument("--resolution", choices=RESOLUTIONS, default="default", help="simulator mesh resolution")
     run.add_argument("--forward", default=None, metavar="MODULE:FUNCTION",
                      help="forward model (default lvcore:simulate, the FE simulator); the tests pass a cheap double")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -33,7 +33,7 @@ from lvcore.exceptions import CampaignError, SolverError
 
 #: The real simulator.
 DEFAULT_FORWARD = "lvcore:simulate"
-RESOLUTIONS = ("fast", "default")
+RESOLUTIONS = ("fast", "coarse", "default")
 
 _FORWARD_CACHE: dict[str, object] = {}
 _VERSION: list[str] = []
@@ -57,6 +57,22 @@ def simulator_version() -> str:
                 h.update(f.read_bytes())
         _VERSION.append(f"{lvcore.__version__}+src.{h.hexdigest()[:10]}")
     return _VERSION[0]
+
+
+def recorded_resolution(resolution: str, simulator_versions) -> str:
+    """The preset name that reproduces rows recorded as ``resolution`` by ``simulator_versions``.
+
+    lvcore 0.1's ``"default"`` mesh (12 x 4 x 1 elements, 3 Gauss points
+    through the wall) is called ``"coarse"`` since lvcore 0.2, whose
+    ``"default"`` is a graded mesh that meets the 1 % mesh-convergence check.
+    Stores and emulators made by 0.1 keep saying ``"default"``; this maps
+    them to the mesh they used (for resuming a campaign or checking an
+    emulator against a live solve).
+    """
+    versions = [str(v) for v in (simulator_versions or [])]
+    if resolution == "default" and versions and all(v.startswith("0.1.") for v in versions):
+        return "coarse"
+    return resolution
 
 
 def resolve_forward(spec: str):
@@ -151,8 +167,8 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         Local worker processes (default one per core).
     scheduler : str, optional
         ``tcp://HOST:PORT`` of a Dask scheduler; overrides ``workers``.
-    resolution : {"fast", "default"}
-        Simulator mesh resolution.
+    resolution : {"fast", "coarse", "default"}
+        Simulator mesh resolution preset.
     forward : str
         Forward model ``"module:function"`` (default the FE simulator).
     executor : optional
@@ -178,7 +194,8 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
     """
     with CampaignStore.open(store_path, "r+") as store:
         attrs = store.attrs
-        forward, resolution = str(attrs["forward"]), str(attrs["resolution"])
+        forward = str(attrs["forward"])
+        resolution = recorded_resolution(str(attrs["resolution"]), store.summary().versions)
         resolve_forward(forward)
         rows = store.pending_rows(retry_failed=retry_failed)
         _run_with(store, rows, executor, workers, scheduler, forward, resolution, progress, allow_rerecord=retry_failed)

@@ -24,6 +24,17 @@ Each node has parametric (material) coordinates ``(phi, s, t)``:
 +x axis), ``s = j / (2 n_long)`` (0 at the base, 1 at the apex) and
 ``t = k / (NT - 1)`` (0 endocardium, 1 epicardium).
 
+A *graded* template (``level_elements``, e.g. ``(2, 1, 1, 2)``) places
+``level_elements[l]`` equal elements in each of the four short-axis levels
+instead of spacing all ``n_long`` element rows evenly in ``s``: element row
+boundaries are :attr:`LVTemplate.s_breaks`, and ``s`` is linear in ``j``
+within each element row. The topology (numbering, faces) is that of the
+uniform template with the same counts; only the parametric coordinates and the
+element regions change. Simulation meshes use grading to refine the
+boundary layers at the clamped base and the apex (see
+:mod:`lvcore.mechanics.mesh`); geometries stored on
+:data:`DEFAULT_TEMPLATE` are uniform.
+
 Local element node order: ``a + 3 b + 9 c`` with ``a`` the circumferential,
 ``b`` the transmural and ``c`` the longitudinal (towards the apex) local index,
 each in {0, 1, 2}. With this order the isoparametric map has a positive
@@ -69,6 +80,8 @@ class LVTemplate:
     n_circ: int = 12
     n_long: int = 8
     n_trans: int = 2
+    #: Elements per short-axis level, base to apex (graded template), or None (uniform).
+    level_elements: tuple[int, ...] | None = None
 
     def __post_init__(self):
         if self.n_circ < 3 or self.n_long < 1 or self.n_trans < 1:
@@ -76,6 +89,41 @@ class LVTemplate:
                 "LVTemplate needs n_circ >= 3, n_long >= 1 and n_trans >= 1; got "
                 f"({self.n_circ}, {self.n_long}, {self.n_trans})"
             )
+        if self.level_elements is not None:
+            le = tuple(int(v) for v in self.level_elements)
+            if len(le) != N_LEVELS or min(le) < 1 or sum(le) != self.n_long:
+                raise ValueError(
+                    f"level_elements must be {N_LEVELS} counts >= 1 summing to n_long={self.n_long}; "
+                    f"got {self.level_elements!r}"
+                )
+            object.__setattr__(self, "level_elements", le)
+
+    @classmethod
+    def graded(cls, n_circ: int, level_elements, n_trans: int) -> "LVTemplate":
+        """A template with ``level_elements[l]`` element rows in short-axis level ``l``."""
+        le = tuple(int(v) for v in level_elements)
+        return cls(n_circ, sum(le), n_trans, le)
+
+    @cached_property
+    def s_breaks(self) -> np.ndarray:
+        """(n_long + 1,) longitudinal coordinate s of the element-row boundaries (0 base, 1 apex)."""
+        if self.level_elements is None:
+            return np.linspace(0.0, 1.0, self.n_long + 1)
+        parts = [np.zeros(1)] + [
+            (lv + np.arange(1, n + 1) / n) / N_LEVELS for lv, n in enumerate(self.level_elements)
+        ]
+        return np.concatenate(parts)
+
+    def _s_of_row(self, row) -> np.ndarray:
+        """s at fractional element-row coordinates ``row`` in [0, n_long] (linear within a row)."""
+        if self.level_elements is None:
+            return np.asarray(row, dtype=float) / self.n_long
+        return np.interp(row, np.arange(self.n_long + 1), self.s_breaks)
+
+    def _row_of_s(self, s) -> np.ndarray:
+        if self.level_elements is None:
+            return np.asarray(s, dtype=float) * self.n_long
+        return np.interp(s, self.s_breaks, np.arange(self.n_long + 1))
 
     # ----- sizes -----------------------------------------------------------
     @property
@@ -134,7 +182,7 @@ class LVTemplate:
         return np.stack(
             [
                 2.0 * np.pi * ijk[:, 0] / self.nc,
-                ijk[:, 1] / (self.nl - 1),
+                self._s_of_row(ijk[:, 1] / 2.0),
                 ijk[:, 2] / (self.nt - 1),
             ],
             axis=1,
@@ -246,7 +294,7 @@ class LVTemplate:
         shape = phi.shape
         phi, s, t = phi.ravel(), s.ravel(), t.ravel()
         u = np.mod(phi, 2 * np.pi) / (2 * np.pi) * self.n_circ
-        v = np.clip(s, 0.0, 1.0) * self.n_long
+        v = self._row_of_s(np.clip(s, 0.0, 1.0))
         w = np.clip(t, 0.0, 1.0) * self.n_trans
         ec = np.minimum(np.floor(u).astype(int), self.n_circ - 1)
         el = np.minimum(np.floor(v).astype(int), self.n_long - 1)
@@ -272,7 +320,7 @@ class LVTemplate:
         return np.stack(
             [
                 2 * np.pi * (ec + 0.5) / self.n_circ,
-                (el + 0.5) / self.n_long,
+                self._s_of_row(el + 0.5),
                 (et + 0.5) / self.n_trans,
             ],
             axis=1,

@@ -28,7 +28,8 @@ from lvcore.geometry.template import DEFAULT_TEMPLATE
 
 GEOMETRY_KINDS = ("ellipsoid", "default", "mesh", "pca", "box")
 LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
-RESOLUTION_PRESET_NAMES = ("fast", "default", "accurate")
+RESOLUTION_PRESET_NAMES = ("fast", "coarse", "default", "accurate")
+BOX_RESOLUTION_PRESET_NAMES = ("fast", "default", "accurate")
 MATERIAL_LAWS = ("holzapfel-ogden", "guccione", "neo-hookean")
 #: Required and optional parameters of each law (all must be > 0; a, af, as, afs, C, mu in kPa).
 LAW_REQUIRED = {
@@ -62,11 +63,22 @@ class Resolution:
     circumferential: int
     longitudinal: int
     transmural: int
+    #: LV only: element rows per short-axis level (base to apex), or None for even rows.
+    level_elements: tuple[int, ...] | None = None
+    #: LV only: Gauss points through the wall per element.
+    transmural_gauss_points: int = 3
 
     @property
     def xyz(self) -> tuple[int, int, int]:
         """(nx, ny, nz) element counts of a box mesh."""
         return (self.circumferential, self.longitudinal, self.transmural)
+
+    def lv(self):
+        """The :class:`lvcore.mechanics.mesh.LVResolution` of an LV mesh."""
+        from lvcore.mechanics.mesh import LVResolution
+
+        return LVResolution(self.circumferential, self.longitudinal, self.transmural, self.level_elements,
+                            self.transmural_gauss_points)
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,7 +91,7 @@ class GeometrySpec:
     resolution : Resolution or None
         Explicit element counts; ``None`` means the mechanics uses
         ``RESOLUTION_PRESETS[preset or "default"]``.
-    preset : {"fast", "default", "accurate"} or None
+    preset : {"fast", "coarse", "default", "accurate"} or None
     ellipsoid : TruncatedEllipsoidLV or None
         Kinds "ellipsoid" and "default" (the latter is ``DEFAULT_LV``).
     template_nodes : (DEFAULT_TEMPLATE.n_nodes, 3) array or None
@@ -352,7 +364,7 @@ def _parse_resolution(value, where: str, kind: str) -> tuple[Resolution | None, 
         if value is None:
             return None, None
         if isinstance(value, str):
-            return None, _string(value, where, RESOLUTION_PRESET_NAMES)
+            return None, _string(value, where, BOX_RESOLUTION_PRESET_NAMES)
         if isinstance(value, (list, tuple)):
             if len(value) != 3:
                 raise CaseError(where, f"a box resolution is [nx, ny, nz], got {value!r}")
@@ -364,8 +376,22 @@ def _parse_resolution(value, where: str, kind: str) -> tuple[Resolution | None, 
     if isinstance(value, str):
         return None, _string(value, where, RESOLUTION_PRESET_NAMES)
     keys = ("circumferential", "longitudinal", "transmural")
-    _check_keys(value, where, keys, required=keys)
-    res = Resolution(*(_count(value[k], f"{where}.{k}") for k in keys))
+    _check_keys(value, where, keys + ("transmural_gauss_points",), required=keys)
+    long = value["longitudinal"]
+    levels = None
+    if isinstance(long, (list, tuple)):
+        if len(long) != 4:
+            raise CaseError(f"{where}.longitudinal", "give one element count or four counts, one per short-axis "
+                            f"level from base to apex, e.g. [2, 1, 1, 2]; got {long!r}")
+        levels = tuple(_count(v, f"{where}.longitudinal[{i}]") for i, v in enumerate(long))
+        n_long = sum(levels)
+    else:
+        n_long = _count(long, f"{where}.longitudinal")
+    gp = _count(value.get("transmural_gauss_points", 3), f"{where}.transmural_gauss_points")
+    if gp > 10:
+        raise CaseError(f"{where}.transmural_gauss_points", f"must be 1..10, got {gp}")
+    res = Resolution(_count(value["circumferential"], f"{where}.circumferential"), n_long,
+                     _count(value["transmural"], f"{where}.transmural"), levels, gp)
     if res.circumferential < 3:
         raise CaseError(f"{where}.circumferential", f"must be >= 3, got {res.circumferential}")
     return res, None
@@ -552,11 +578,14 @@ def _case_to_dict(case: Case) -> dict:
     if g.kind == "box" and g.resolution is not None:
         gd["resolution"] = list(g.resolution.xyz)
     elif g.resolution is not None:
+        r = g.resolution
         gd["resolution"] = {
-            "circumferential": g.resolution.circumferential,
-            "longitudinal": g.resolution.longitudinal,
-            "transmural": g.resolution.transmural,
+            "circumferential": r.circumferential,
+            "longitudinal": list(r.level_elements) if r.level_elements is not None else r.longitudinal,
+            "transmural": r.transmural,
         }
+        if r.transmural_gauss_points != 3:
+            gd["resolution"]["transmural_gauss_points"] = r.transmural_gauss_points
     elif g.preset is not None:
         gd["resolution"] = g.preset
 

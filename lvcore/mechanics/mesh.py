@@ -1,9 +1,10 @@
 """Finite-element meshes of quadratic (27-node) hexahedra for the simulator.
 
 * LV meshes sample a parametric map ``position(phi, s, t) -> xyz`` (mm) at a
-  resolution ``(n_circ, n_long, n_trans)`` with
-  :meth:`lvcore.geometry.template.LVTemplate.nodes_from_map`, so any LV
-  geometry (analytic, fitted, PCA) is simulated at the simulator's own
+  resolution (:class:`LVResolution`: elements around, per short-axis level or
+  evenly base to apex, through the wall, and the Gauss points through the
+  wall) with :meth:`lvcore.geometry.template.LVTemplate.nodes_from_map`, so
+  any LV geometry (analytic, fitted, PCA) is simulated at the simulator's own
   resolution.
 * Box meshes discretise ``[0, Lx] x [0, Ly] x [0, Lz]`` (mm) with named faces
   ``x0, x1, y0, y1, z0, z1``.
@@ -21,14 +22,95 @@ import numpy as np
 
 from lvcore.exceptions import GeometryError
 from lvcore.geometry.template import LVTemplate
-from lvcore.mechanics.quadrature import quad9_shape, reference_gradients
+from lvcore.mechanics.quadrature import gauss_hex_points, quad9_shape, reference_gradients
 
-#: LV resolutions (n_circ, n_long, n_trans) of quadratic elements. n_circ is a
-#: multiple of 6 and n_long of 4 so that every element lies in one strain region.
+@dataclass(frozen=True)
+class LVResolution:
+    """Discretisation of an LV mesh.
+
+    Attributes
+    ----------
+    n_circ : quadratic elements around (a multiple of 6 puts every element in one sector).
+    n_long : element rows base to apex (a multiple of 4 puts every element in one level).
+    n_trans : elements through the wall.
+    level_elements : optional element rows in each of the 4 short-axis levels,
+        base to apex, summing to ``n_long`` (``(2, 1, 1, 2)`` refines the
+        clamped base and the apex, where the strains vary fastest); None spaces
+        the rows evenly.
+    transmural_gauss_points : Gauss points through the wall per element (3
+        integrates a Q2 element of smooth material; with one element through
+        the wall the helix angle turns by 150° across it, and the fibre terms
+        need 5).
+    """
+
+    n_circ: int
+    n_long: int
+    n_trans: int
+    level_elements: tuple[int, ...] | None = None
+    transmural_gauss_points: int = 3
+
+    def __post_init__(self):
+        if self.level_elements is not None:
+            le = tuple(int(v) for v in self.level_elements)
+            if len(le) != 4 or min(le) < 1 or sum(le) != self.n_long:
+                raise ValueError(f"level_elements must be 4 counts >= 1 summing to n_long={self.n_long}, got {le}")
+            object.__setattr__(self, "level_elements", le)
+        if not 1 <= int(self.transmural_gauss_points) <= 10:
+            raise ValueError(f"transmural_gauss_points must be in 1..10, got {self.transmural_gauss_points}")
+
+    @classmethod
+    def graded(cls, n_circ: int, level_elements, n_trans: int, transmural_gauss_points: int = 3) -> "LVResolution":
+        """``level_elements[l]`` element rows in short-axis level ``l``."""
+        le = tuple(int(v) for v in level_elements)
+        return cls(int(n_circ), sum(le), int(n_trans), le, transmural_gauss_points)
+
+    @classmethod
+    def from_spec(cls, spec: str) -> "LVResolution":
+        """Parse ``"NC,NL,NT[,GP]"``, NL an integer or per-level counts ``"2+1+1+2"`` (benchmark CLIs)."""
+        parts = [p.strip() for p in str(spec).split(",")]
+        if len(parts) not in (3, 4):
+            raise ValueError(f"resolution spec is 'NC,NL,NT[,GP]' (NL may be '2+1+1+2'), got {spec!r}")
+        gp = int(parts[3]) if len(parts) == 4 else 3
+        if "+" in parts[1]:
+            return cls.graded(int(parts[0]), [int(v) for v in parts[1].split("+")], int(parts[2]), gp)
+        return cls(int(parts[0]), int(parts[1]), int(parts[2]), None, gp)
+
+    def case_dict(self) -> dict:
+        """The case-schema ``geometry.resolution`` dict of this resolution."""
+        d = {"circumferential": self.n_circ,
+             "longitudinal": list(self.level_elements) if self.level_elements is not None else self.n_long,
+             "transmural": self.n_trans}
+        if self.transmural_gauss_points != 3:
+            d["transmural_gauss_points"] = self.transmural_gauss_points
+        return d
+
+    @property
+    def counts(self) -> tuple[int, int, int]:
+        """(n_circ, n_long, n_trans) element counts."""
+        return (self.n_circ, self.n_long, self.n_trans)
+
+    def template(self) -> LVTemplate:
+        if self.level_elements is None or len(set(self.level_elements)) == 1:
+            return LVTemplate(self.n_circ, self.n_long, self.n_trans)
+        return LVTemplate.graded(self.n_circ, self.level_elements, self.n_trans)
+
+    def describe(self) -> str:
+        """Short label, e.g. ``"6x(2,1,1,2)x1, 5 GP"``."""
+        le = self.level_elements
+        long = str(self.n_long) if le is None or len(set(le)) == 1 else "(" + ",".join(map(str, le)) + ")"
+        gp = "" if self.transmural_gauss_points == 3 else f", {self.transmural_gauss_points} GP"
+        return f"{self.n_circ}x{long}x{self.n_trans}{gp}"
+
+
+#: LV resolutions. ``default`` is the cheapest mesh found whose 25 default-LV
+#: outputs are within 1 % of a mesh with twice the elements in every direction
+#: (docs/simulator.md); ``coarse`` was the default of lvcore 0.1 (the bundled
+#: emulators were trained on it).
 RESOLUTION_PRESETS = {
-    "fast": (6, 4, 1),
-    "default": (12, 4, 1),
-    "accurate": (12, 8, 2),
+    "fast": LVResolution(6, 4, 1),
+    "coarse": LVResolution(12, 4, 1),
+    "default": LVResolution.graded(6, (2, 1, 1, 2), 1, transmural_gauss_points=5),
+    "accurate": LVResolution(12, 8, 2),
 }
 #: Box resolutions as elements across the smallest box dimension; other
 #: directions get the same element size (rounded up).
@@ -52,6 +134,8 @@ class FEMesh:
     node_sets : name -> node numbers (LV: "base"; box: the six faces).
     template : the LVTemplate (LV meshes) or None.
     base_z : base-plane height (mm) for LV meshes, else None.
+    transmural_gauss_points : Gauss points through the wall (LV) or along y
+        (box) per element; 3 in the other directions.
     """
 
     kind: str
@@ -62,6 +146,12 @@ class FEMesh:
     node_sets: dict = field(default_factory=dict)
     template: LVTemplate | None = None
     base_z: float | None = None
+    transmural_gauss_points: int = 3
+
+    @property
+    def quadrature(self):
+        """(xi (q, 3), w (q,)) element quadrature rule of this mesh."""
+        return gauss_hex_points(3, self.transmural_gauss_points)
 
     @property
     def n_nodes(self) -> int:
@@ -77,7 +167,8 @@ class FEMesh:
 
     def topology_key(self) -> tuple:
         """Hashable description of the topology (for caching compiled kernels)."""
-        return (self.kind, self.resolution)
+        return (self.kind, self.resolution, self.template.level_elements if self.template else None,
+                self.transmural_gauss_points)
 
 
 def _check_elements(nodes, elements, what):
@@ -96,11 +187,15 @@ def lv_mesh(position, resolution, base_z: float) -> FEMesh:
     Parameters
     ----------
     position : callable ``(phi, s, t) -> (n, 3)`` (mm).
-    resolution : (n_circ, n_long, n_trans) quadratic elements.
+    resolution : LVResolution, or (n_circ, n_long, n_trans) quadratic elements
+        (n_long evenly spaced rows, 3 Gauss points through the wall).
     base_z : height of the (planar) base (mm).
     """
-    nc, nl, nt = (int(v) for v in resolution)
-    tpl = LVTemplate(nc, nl, nt)
+    if not isinstance(resolution, LVResolution):
+        resolution = LVResolution(*(int(v) for v in resolution))
+    nc, nl, nt = resolution.counts
+    tpl = resolution.template()
+    gp = resolution.transmural_gauss_points
     nodes = tpl.nodes_from_map(position)
     if not np.all(np.isfinite(nodes)):
         raise GeometryError("the LV position map returned non-finite coordinates")
@@ -115,6 +210,7 @@ def lv_mesh(position, resolution, base_z: float) -> FEMesh:
         node_sets={"base": tpl.base_nodes},
         template=tpl,
         base_z=float(base_z),
+        transmural_gauss_points=gp,
     )
 
 

@@ -30,6 +30,23 @@ def gauss_hex(order: int = 3):
     return xi, (wa * wb * wc).ravel()
 
 
+@lru_cache(maxsize=16)
+def gauss_hex_points(order: int = 3, transmural: int | None = None):
+    """Tensor Gauss rule with ``order`` points along ξ and ζ and ``transmural`` along η.
+
+    η (the second reference coordinate) runs through the wall of an LV
+    element (see :mod:`lvcore.geometry.template`). ``transmural=None`` or
+    equal to ``order`` is :func:`gauss_hex`.
+    """
+    if transmural is None or transmural == order:
+        return gauss_hex(order)
+    g, w = np.polynomial.legendre.leggauss(order)
+    gt, wt = np.polynomial.legendre.leggauss(transmural)
+    a, b, c = np.meshgrid(g, gt, g, indexing="ij")
+    wa, wb, wc = np.meshgrid(w, wt, w, indexing="ij")
+    return np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1), (wa * wb * wc).ravel()
+
+
 @lru_cache(maxsize=8)
 def gauss_quad(order: int = 4):
     """Tensor Gauss–Legendre rule on [-1, 1]²: points (order², 2), weights (order²,)."""

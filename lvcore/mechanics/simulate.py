@@ -22,7 +22,6 @@ from lvcore.exceptions import CaseError, SolverError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
 from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables
 from lvcore.mechanics.mesh import RESOLUTION_PRESETS, FEMesh, box_mesh, box_resolution, lv_mesh
-from lvcore.mechanics.quadrature import gauss_hex, reference_gradients
 from lvcore.mechanics.system import DiscreteSystem
 
 #: Bulk penalty relative to the law's largest stiffness parameter.
@@ -96,15 +95,15 @@ def build_mesh(case) -> FEMesh:
         res = g.resolution.xyz if g.resolution is not None else box_resolution(g.box_size, preset)
         return box_mesh(g.box_size, res)
     if g.resolution is not None:
-        res = (g.resolution.circumferential, g.resolution.longitudinal, g.resolution.transmural)
+        res = g.resolution.lv()
     else:
         res = RESOLUTION_PRESETS[preset]
     return lv_mesh(g.position_map(), res, g.base_z())
 
 
 def build_frames(mesh: FEMesh, fib) -> np.ndarray:
-    """Fibre frames (n_el, 27, 3, 3) at the Gauss points."""
-    xi, _ = gauss_hex(3)
+    """Fibre frames (n_el, n_q, 3, 3) at the Gauss points of ``mesh.quadrature``."""
+    xi, _ = mesh.quadrature
     if fib.direction is not None or mesh.kind == "box":
         d = fib.direction if fib.direction is not None else (1.0, 0.0, 0.0)
         return np.broadcast_to(fibres.constant_frame(d), (mesh.n_elements, xi.shape[0], 3, 3)).copy()

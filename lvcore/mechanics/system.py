@@ -24,7 +24,7 @@ from lvcore.mechanics import loads
 from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern
 from lvcore.mechanics.element import element_residual, element_tangent
 from lvcore.mechanics.mesh import FEMesh
-from lvcore.mechanics.quadrature import gauss_hex, p1_basis, reference_gradients
+from lvcore.mechanics.quadrature import p1_basis, reference_gradients
 
 #: Largest number of elements per batch in the element loops (lax.map); bounds peak memory.
 #: Small batches keep the per-element 81x81 tangents in cache: on the 2-core CPU
@@ -107,7 +107,7 @@ class DiscreteSystem:
     ----------
     mesh : FEMesh
     law : material law name; params : (k,) parameter vector (materials.PARAM_ORDER).
-    frames : (n_el, n_q, 3, 3) fibre frames at the 27 Gauss points.
+    frames : (n_el, n_q, 3, 3) fibre frames at the mesh's Gauss points (``mesh.quadrature``).
     kappa : volumetric penalty (kPa).
     load_surface : "endocardium" (pressure potential with the base plane) or a box face.
     pressure : full load (kPa).
@@ -126,8 +126,8 @@ class DiscreteSystem:
         if load_surface not in mesh.surfaces:
             raise ValueError(f"load surface {load_surface!r} not in mesh surfaces {sorted(mesh.surfaces)}")
         faces = np.ascontiguousarray(mesh.surfaces[load_surface], dtype=np.int64)
-        xi, _ = gauss_hex(3)
-        dNdX, wdet, _ = reference_gradients(mesh.nodes, mesh.elements)
+        xi, w = mesh.quadrature
+        dNdX, wdet, _ = reference_gradients(mesh.nodes, mesh.elements, points=(xi, w))
         P = p1_basis(xi)
         M = np.einsum("eq,qm,qn->emn", wdet, P, P)
         elements = np.ascontiguousarray(mesh.elements, dtype=np.int64)
