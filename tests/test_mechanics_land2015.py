@@ -25,8 +25,9 @@ def test_problem2_lv_inflation_accurate_preset():
     r = simulate(problem2_case("accurate"))
     assert r.converged, r.message
     assert r.cavity_volume_mm3[0] == pytest.approx(2492, rel=2e-3)
-    assert r.apex_endocardium[2] == pytest.approx(-26.612, abs=0.1)
-    assert r.apex_epicardium[2] == pytest.approx(-28.279, abs=0.1)
+    # the issue asks for +-0.1 mm and aims at +-0.05 mm: the graded accurate preset meets the aim
+    assert r.apex_endocardium[2] == pytest.approx(-26.612, abs=0.05)
+    assert r.apex_epicardium[2] == pytest.approx(-28.279, abs=0.05)
     assert r.cavity_volume_mm3[1] == pytest.approx(10734, rel=0.01)
     # the apex stays on the axis
     assert abs(r.apex_endocardium[0]) < 1e-8 and abs(r.apex_endocardium[1]) < 1e-8

@@ -578,14 +578,7 @@ def _case_to_dict(case: Case) -> dict:
     if g.kind == "box" and g.resolution is not None:
         gd["resolution"] = list(g.resolution.xyz)
     elif g.resolution is not None:
-        r = g.resolution
-        gd["resolution"] = {
-            "circumferential": r.circumferential,
-            "longitudinal": list(r.level_elements) if r.level_elements is not None else r.longitudinal,
-            "transmural": r.transmural,
-        }
-        if r.transmural_gauss_points != 3:
-            gd["resolution"]["transmural_gauss_points"] = r.transmural_gauss_points
+        gd["resolution"] = g.resolution.lv().case_dict()
     elif g.preset is not None:
         gd["resolution"] = g.preset
 

@@ -57,7 +57,7 @@ class NewtonOptions:
     max_iterations: int = 25
     first_step: float = 0.25
     min_step: float = 1.0 / 1024
-    grow: float = 2.0
+    grow: float = 1.5
     max_cuts: int = 40
     min_jacobian: float = 0.02
     max_line_search: int = 10
