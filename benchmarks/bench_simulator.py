@@ -3,7 +3,7 @@
 Usage::
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
-        python benchmarks/bench_simulator.py [--resolutions fast coarse default 12,4+2+2+4,2,5] [--repeats 5] [--processes]
+        python benchmarks/bench_simulator.py [--resolutions fast coarse default accurate] [--repeats 5] [--processes]
 
 Prints markdown tables: per resolution the dofs, LVV, EDV/V_early, mean
 strain, the largest relative output change against the finest resolution,
@@ -90,7 +90,7 @@ def throughput(res, n_jobs, n_proc):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--resolutions", nargs="*", default=["fast", "coarse", "default", "12,4+2+2+4,2,5"],
+    ap.add_argument("--resolutions", nargs="*", default=["fast", "coarse", "default", "accurate"],
                     help="preset names or NC,NL,NT[,GP] (NL may be per-level counts 2+1+1+2); the last is the reference")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--processes", action="store_true", help="measure 1 vs 2 worker processes")

@@ -104,8 +104,9 @@ def test_default_resolution_is_converged_and_plausible():
     d = RESOLUTION_PRESETS["default"]
     finer = LVResolution.graded(2 * d.n_circ, [2 * n for n in d.level_elements], 2 * d.n_trans,
                                 d.transmural_gauss_points)
+    assert RESOLUTION_PRESETS["accurate"] == finer
     r_def = simulate(Case.default_lv(THETA, resolution="default"))
-    r_fine = simulate(Case.default_lv(THETA, resolution=finer.case_dict()))
+    r_fine = simulate(Case.default_lv(THETA, resolution="accurate"))
     y, ref = r_def.outputs(), r_fine.outputs()
     rel = np.abs(y - ref) / np.abs(ref)
     assert rel.max() < 0.01, rel.round(4)

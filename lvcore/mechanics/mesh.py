@@ -103,15 +103,15 @@ class LVResolution:
 
 
 #: LV resolutions. ``default`` is the cheapest mesh found whose 25 default-LV
-#: outputs are within 1 % of a mesh with twice the elements in every direction;
-#: ``accurate`` meets the Land et al. (2015) problem 2 apex positions to
-#: ±0.05 mm (docs/simulator.md); ``coarse`` was the default of lvcore 0.1 (the
-#: bundled emulators were trained on it).
+#: outputs are within 1 % of ``accurate``, the same mesh with twice the elements
+#: in every direction, which meets the Land et al. (2015) problem 2 apex
+#: positions to ±0.05 mm (docs/simulator.md); ``coarse`` was the default of
+#: lvcore 0.1 (the bundled emulators were trained on it).
 RESOLUTION_PRESETS = {
     "fast": LVResolution(6, 4, 1),
     "coarse": LVResolution(12, 4, 1),
     "default": LVResolution.graded(6, (2, 1, 1, 2), 1, transmural_gauss_points=5),
-    "accurate": LVResolution.graded(6, (4, 2, 2, 4), 2, transmural_gauss_points=5),
+    "accurate": LVResolution.graded(12, (4, 2, 2, 4), 2, transmural_gauss_points=5),
 }
 #: Box resolutions as elements across the smallest box dimension; other
 #: directions get the same element size (rounded up).
