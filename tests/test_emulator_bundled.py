@@ -26,7 +26,7 @@ def test_bundled_emulator_meets_the_data_spec_and_records_provenance(name):
     n_failed = meta["source"]["n_failed_excluded"]
     assert meta["training"]["n_train"] + n_failed >= 10_000 and n_failed <= 0.01 * meta["training"]["n_train"]
     assert meta["training"]["n_valid"] >= 990
-    assert meta["test"]["n"] >= 1_000
+    assert meta["test"]["n"] >= 990  # 1,000 held-out runs; the few failed ones (<= 1 %) stay in the store, never filled
     assert meta["source"]["resolution"] == ["default"]
     assert meta["source"]["forward"] == ["lvcore:simulate"]
     assert len(meta["training"]["search"]) == 16  # the chapter's {50, 100, 120, 200}^2 grid
