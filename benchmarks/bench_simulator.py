@@ -24,17 +24,11 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 
-def _resolution(spec: str):
+def _resolution(spec: str) -> dict:
     """A preset name, or ``"NC,NL,NT[,GP]"`` (NL may be per-level counts ``2+1+1+2``) as a case resolution."""
-    from lvcore.mechanics.mesh import RESOLUTION_PRESETS, LVResolution
+    from lvcore.mechanics.mesh import LVResolution
 
-    return spec if spec in RESOLUTION_PRESETS else LVResolution.from_spec(spec).case_dict()
-
-
-def _label(spec: str) -> str:
-    from lvcore.mechanics.mesh import RESOLUTION_PRESETS, LVResolution
-
-    return f"{spec}: {RESOLUTION_PRESETS[spec].describe()}" if spec in RESOLUTION_PRESETS else LVResolution.from_spec(spec).describe()
+    return LVResolution.from_spec(spec).case_dict()
 
 
 def _case(spec):
@@ -102,6 +96,7 @@ def main(argv=None):
     import numpy as np
 
     from lvcore.mechanics.linear import available_backends
+    from lvcore.mechanics.mesh import resolution_label
 
     rows = []
     for res in a.resolutions:
@@ -118,7 +113,7 @@ def main(argv=None):
         y = r.outputs()
         dv = abs(y[0] - ref[0]) / ref[0]
         ds = np.max(np.abs(y[1:] - ref[1:]) / np.abs(ref[1:]))
-        print(f"| {_label(res)} | {r.dofs} | {y[0]:.2f} | {r.lvv_standardised:.3f} | {np.mean(y[1:]):.4f} | "
+        print(f"| {resolution_label(res)} | {r.dofs} | {y[0]:.2f} | {r.lvv_standardised:.3f} | {np.mean(y[1:]):.4f} | "
               f"{dv:.2%}; {ds:.2%} | {r.newton_iterations} | {r.timings.get('tangents', '-')} | {r.load_steps} | {first:.2f} | {med:.3f} |")
     if a.cold:
         res = a.cold

@@ -39,9 +39,7 @@ def problem2_case(res):
     """Problem 2 at ``res``: a preset name, an LVResolution or ``"NC,NL,NT[,GP]"`` (NL may be ``2+1+1+2``)."""
     from lvcore.mechanics.mesh import LVResolution
 
-    if isinstance(res, str) and "," in res:
-        res = LVResolution.from_spec(res)
-    resolution = res.case_dict() if isinstance(res, LVResolution) else res
+    resolution = (res if isinstance(res, LVResolution) else LVResolution.from_spec(res)).case_dict()
     return {
         "geometry": {"kind": "ellipsoid", "endo": {"rs": 7.0, "rl": 17.0}, "epi": {"rs": 10.0, "rl": 20.0},
                      "base_z": 5.0, "resolution": resolution},
@@ -87,12 +85,11 @@ def main(argv=None):
         print("| elements (circ x long x trans, Gauss points through the wall) | dofs | endo apex z | epi apex z | volume (mm³) | vol. error "
               "| Newton its | steps | 1st run incl. compile (s) | warm (s) |")
         print("|---|---|---|---|---|---|---|---|---|---|")
-        for s in a.p2:
-            from lvcore.mechanics.mesh import RESOLUTION_PRESETS, LVResolution
+        from lvcore.mechanics.mesh import resolution_label
 
-            res = RESOLUTION_PRESETS[s] if s in RESOLUTION_PRESETS else LVResolution.from_spec(s)
-            r, first, warm = _timed(problem2_case(res))
-            res = f"{s}: {res.describe()}" if s in RESOLUTION_PRESETS else res.describe()
+        for s in a.p2:
+            r, first, warm = _timed(problem2_case(s))
+            res = resolution_label(s)
             if r.converged:
                 v = r.cavity_volume_mm3[1]
                 print(f"| {res} | {r.dofs} | {r.apex_endocardium[2]:.3f} | {r.apex_epicardium[2]:.3f} | {v:.0f} "

@@ -66,6 +66,20 @@ N_LEVELS = 4
 N_REGIONS = N_SECTORS * N_LEVELS
 
 
+def checked_level_elements(level_elements, n_long: int) -> tuple[int, ...]:
+    """``level_elements`` as a tuple of ints, checked: one count >= 1 per level, summing to ``n_long``.
+
+    Raises
+    ------
+    ValueError
+    """
+    le = tuple(int(v) for v in level_elements)
+    if len(le) != N_LEVELS or min(le) < 1 or sum(le) != n_long:
+        raise ValueError(f"level_elements must be {N_LEVELS} counts >= 1 summing to n_long={n_long}; "
+                         f"got {tuple(level_elements)!r}")
+    return le
+
+
 @dataclass(frozen=True)
 class LVTemplate:
     """Fixed-topology structured Q2 hexahedral LV mesh topology.
@@ -90,13 +104,7 @@ class LVTemplate:
                 f"({self.n_circ}, {self.n_long}, {self.n_trans})"
             )
         if self.level_elements is not None:
-            le = tuple(int(v) for v in self.level_elements)
-            if len(le) != N_LEVELS or min(le) < 1 or sum(le) != self.n_long:
-                raise ValueError(
-                    f"level_elements must be {N_LEVELS} counts >= 1 summing to n_long={self.n_long}; "
-                    f"got {self.level_elements!r}"
-                )
-            object.__setattr__(self, "level_elements", le)
+            object.__setattr__(self, "level_elements", checked_level_elements(self.level_elements, self.n_long))
 
     @classmethod
     def graded(cls, n_circ: int, level_elements, n_trans: int) -> "LVTemplate":

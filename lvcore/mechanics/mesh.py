@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lvcore.exceptions import GeometryError
-from lvcore.geometry.template import LVTemplate
+from lvcore.geometry.template import LVTemplate, checked_level_elements
 from lvcore.mechanics.quadrature import gauss_hex_points, quad9_shape, reference_gradients
 
 @dataclass(frozen=True)
@@ -51,10 +51,7 @@ class LVResolution:
 
     def __post_init__(self):
         if self.level_elements is not None:
-            le = tuple(int(v) for v in self.level_elements)
-            if len(le) != 4 or min(le) < 1 or sum(le) != self.n_long:
-                raise ValueError(f"level_elements must be 4 counts >= 1 summing to n_long={self.n_long}, got {le}")
-            object.__setattr__(self, "level_elements", le)
+            object.__setattr__(self, "level_elements", checked_level_elements(self.level_elements, self.n_long))
         if not 1 <= int(self.transmural_gauss_points) <= 10:
             raise ValueError(f"transmural_gauss_points must be in 1..10, got {self.transmural_gauss_points}")
 
@@ -66,7 +63,9 @@ class LVResolution:
 
     @classmethod
     def from_spec(cls, spec: str) -> "LVResolution":
-        """Parse ``"NC,NL,NT[,GP]"``, NL an integer or per-level counts ``"2+1+1+2"`` (benchmark CLIs)."""
+        """A preset name, or ``"NC,NL,NT[,GP]"`` with NL an integer or per-level counts ``"2+1+1+2"`` (benchmark CLIs)."""
+        if spec in RESOLUTION_PRESETS:
+            return RESOLUTION_PRESETS[spec]
         parts = [p.strip() for p in str(spec).split(",")]
         if len(parts) not in (3, 4):
             raise ValueError(f"resolution spec is 'NC,NL,NT[,GP]' (NL may be '2+1+1+2'), got {spec!r}")
@@ -89,17 +88,27 @@ class LVResolution:
         """(n_circ, n_long, n_trans) element counts."""
         return (self.n_circ, self.n_long, self.n_trans)
 
+    @property
+    def is_uniform(self) -> bool:
+        """True when the element rows are evenly spaced base to apex."""
+        return self.level_elements is None or len(set(self.level_elements)) == 1
+
     def template(self) -> LVTemplate:
-        if self.level_elements is None or len(set(self.level_elements)) == 1:
+        if self.is_uniform:
             return LVTemplate(self.n_circ, self.n_long, self.n_trans)
         return LVTemplate.graded(self.n_circ, self.level_elements, self.n_trans)
 
     def describe(self) -> str:
         """Short label, e.g. ``"6x(2,1,1,2)x1, 5 GP"``."""
-        le = self.level_elements
-        long = str(self.n_long) if le is None or len(set(le)) == 1 else "(" + ",".join(map(str, le)) + ")"
+        long = str(self.n_long) if self.is_uniform else "(" + ",".join(map(str, self.level_elements)) + ")"
         gp = "" if self.transmural_gauss_points == 3 else f", {self.transmural_gauss_points} GP"
         return f"{self.n_circ}x{long}x{self.n_trans}{gp}"
+
+
+def resolution_label(spec: str) -> str:
+    """Table label of a benchmark resolution spec: ``"default: 6x(2,1,1,2)x1, 5 GP"`` or ``"12x8x2"``."""
+    described = LVResolution.from_spec(spec).describe()
+    return f"{spec}: {described}" if spec in RESOLUTION_PRESETS else described
 
 
 #: LV resolutions. ``default`` is the cheapest mesh found whose 25 default-LV
