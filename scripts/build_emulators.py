@@ -28,7 +28,8 @@ For each emulator it
 Emulators (the chapter's, Section 9.2.4):
 
 ``chapter``  inputs a, b, af, bf, h1..h5; fibre angles fixed at (-60°, 60°); EDP 8 mmHg.
-``angles``   inputs a, b, af, bf, alpha_endo in [-90, 0]°, alpha_epi in [0, 90]°, edp in [6, 14] mmHg, h1..h5.
+``angles``   inputs a, b, af, bf (b, bf in [0.5, 30]), alpha_endo in [-90, 0]°, alpha_epi in [0, 90]°,
+             edp in [6, 14] mmHg, h1..h5.
 ``material`` (only when asked for) inputs a, b, af, bf on the default LV; angles (-60°, 60°), EDP 8 mmHg.
 
 Defaults meet the spec: 10,000 training, 1,000 validation and 1,000 test

@@ -8,7 +8,7 @@ import pytest
 
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import calibrate as cal
-from lvcore.inference import coverage, samplers
+from lvcore.inference import coverage, models, samplers
 from lvcore.inference.forward import AnalyticForward, emulator_forward
 from lvcore.outputs import THETA_NAMES, pc_names
 
@@ -20,7 +20,8 @@ def _random_emulator(name="chapter", angles=False):
 
     names = THETA_NAMES + (("alpha_endo", "alpha_epi", "edp") if angles else ()) + pc_names(5)
     d = len(names)
-    lower = np.array([0.05, 0.1, 0.05, 0.1] + ([-90.0, 0.0, 6.0] if angles else []) + [-2.0] * 5)
+    b_lo = 0.5 if angles else 0.1  # the 'angles' space trains on b, bf >= 0.5
+    lower = np.array([0.05, b_lo, 0.05, b_lo] + ([-90.0, 0.0, 6.0] if angles else []) + [-2.0] * 5)
     upper = np.array([10.0, 30.0, 10.0, 30.0] + ([0.0, 90.0, 14.0] if angles else []) + [2.0] * 5)
     log = tuple(n in THETA_NAMES for n in names)
     return Emulator(name=name, input_names=names, lower=lower, upper=upper, log_inputs=log,
@@ -48,6 +49,21 @@ def test_emulator_adapter_matches_direct_call_and_is_differentiable():
     y1 = fa({**theta, "alpha_endo": -30.0, "alpha_epi": 60.0})
     y2 = emulator_forward(emu_a, h, alpha_endo=-30.0, alpha_epi=60.0)(theta)
     np.testing.assert_allclose(np.asarray(y1), np.asarray(y2), rtol=1e-12)
+
+
+def test_priors_are_cut_to_the_emulator_training_box():
+    """NUTS must never push an emulator outside its training box: the priors are intersected with it."""
+    emu = _random_emulator("angles", angles=True)
+    fwd = emulator_forward(emu, np.zeros(5), infer_angles=True)
+    assert fwd.param_bounds["b"] == (0.5, 30.0) and fwd.param_bounds["alpha_epi"] == (0.0, 90.0)
+    bounds = models.prior_bounds(True, fwd)
+    assert bounds["b"] == bounds["bf"] == (0.5, 30.0)  # emulator box is narrower than Table 9.1
+    assert bounds["a"] == (0.05, 10.0) and bounds["alpha_endo"] == (-90.0, 0.0)
+    assert models.prior_bounds(False, AnalyticForward())["b"] == (0.1, 30.0)  # no box: Table 9.1
+    assert set(models.theta_priors(False, emulator_forward(_random_emulator(), np.zeros(5)))) == set(THETA_NAMES)
+    emu.upper[1] = 0.09  # a box that misses the prior entirely
+    with pytest.raises(ValueError, match="'b'.*do not overlap"):
+        models.prior_bounds(False, emulator_forward(emu, np.zeros(5)))
 
 
 def test_calibrate_writes_inference_data(tmp_path):
@@ -133,6 +149,8 @@ def test_cli_joint_angle_inference_with_an_angles_emulator(tmp_path, monkeypatch
         assert draws.shape == (2, 100)
         lo, hi = (-90.0, 0.0) if name == "alpha_endo" else (0.0, 90.0)
         assert np.all((draws >= lo) & (draws <= hi))
+    for name in ("b", "bf"):  # the prior is cut to the emulator's box (b, bf >= 0.5), not Table 9.1's 0.1
+        assert np.all(np.asarray(idata.posterior[name]) >= 0.5)
     # an emulator trained at fixed angles cannot infer them: a clear error, exit code 2
     save_emulator(_random_emulator(), tmp_path / "emus" / "chapter")
     rc = main(["calibrate", "--data", str(data), "--geometry", str(tmp_path / "h.json"), "--angles", "infer",

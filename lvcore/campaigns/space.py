@@ -21,7 +21,8 @@ Named spaces (see :func:`get_space`):
     inverts).
 ``angles``
     ``chapter`` plus ``alpha_endo`` in [-90, 0]°, ``alpha_epi`` in [0, 90]°
-    and ``edp`` in [6, 14] mmHg, all uniform.
+    and ``edp`` in [6, 14] mmHg, all uniform, with ``b, bf`` in [0.5, 30]
+    instead of [0.1, 30] (:data:`ANGLES_THETA_BOUNDS`).
 ``bo4`` / ``bo6``
     the chapter's Bayesian-optimisation start: ``a, b, af, bf`` in [0.1, 10]
     (linear scale; use with the ``exp`` design), default geometry; ``bo6``
@@ -44,6 +45,10 @@ CHAPTER_ANGLES = (-60.0, 60.0)
 CHAPTER_EDP = 8.0
 #: Material bounds of the calibration prior (Table 9.1): kPa for a, af.
 THETA_BOUNDS = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
+#: Material bounds of the ``angles`` emulator: Table 9.1's, except b, bf >= 0.5. Below 0.5 the
+#: exponential stiffening that defines myocardium is gone; with a soft matrix those corners give
+#: 700-2,500 mL LVs at 6-14 mmHg, which no patient has and which cost the emulator most of its error.
+ANGLES_THETA_BOUNDS = {**THETA_BOUNDS, "b": (0.5, 30.0), "bf": (0.5, 30.0)}
 #: How many score standard deviations the PC bounds span on each side.
 PC_SPAN_SD = 2.0
 
@@ -295,7 +300,7 @@ def get_space(name: str, n_pcs: int | None = None, score_sd: Sequence[float] | N
         params, fixed = theta, _fixed()
     elif name == "angles":
         k = 5 if n_pcs is None else n_pcs
-        params, fixed = theta + angles + (Parameter(EDP_NAME, 6.0, 14.0),), ()
+        params, fixed = theta_parameters("log", ANGLES_THETA_BOUNDS) + angles + (Parameter(EDP_NAME, 6.0, 14.0),), ()
     elif name in ("bo4", "bo6"):
         k = n_pcs or 0
         bo = theta_parameters("linear", {n: (0.1, 10.0) for n in THETA_NAMES})

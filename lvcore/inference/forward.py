@@ -83,6 +83,21 @@ class EmulatorForward:
     label: str = "emulator"
     _named: bool = field(default=False, repr=False)
 
+    @property
+    def param_bounds(self) -> dict[str, tuple[float, float]]:
+        """The emulator's training box over ``param_names`` (physical units).
+
+        Calibration narrows its uniform priors to this box
+        (:func:`lvcore.inference.models.prior_bounds`), so NUTS never asks
+        the emulator to extrapolate.
+        """
+        names = tuple(self.emulator.input_names)
+        lower, upper = getattr(self.emulator, "lower", None), getattr(self.emulator, "upper", None)
+        if lower is None or upper is None:
+            return {}
+        return {n: (float(lower[names.index(n)]), float(upper[names.index(n)]))
+                for n in self.param_names if n in names}
+
     def __call__(self, params):
         names = tuple(self.emulator.input_names)
         values = [params[n] if n in self.param_names else self.conditions[n] for n in names]

@@ -29,13 +29,12 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
+from lvcore.campaigns.space import THETA_BOUNDS  # Table 9.1: a, af in [0.05, 10] kPa; b, bf in [0.1, 30]
 from lvcore.inference import kernels
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 
 #: Fixed LVV noise standard deviation (mL), chapter Table E.1.
 DEFAULT_SIGMA_V_ML = 5.0
-#: Uniform bounds of the material parameters (kPa for a, af; dimensionless b, bf).
-THETA_BOUNDS = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
 #: Uniform bounds of the fibre angles (degrees) when inferred.
 ANGLE_BOUNDS = {"alpha_endo": (-90.0, 0.0), "alpha_epi": (0.0, 90.0)}
 #: Inverse-gamma (shape, scale) of every variance prior.
@@ -47,12 +46,40 @@ HYPER_NAMES = ("lam", "sigma1_sq", "sigma2_sq", "c", "tau")
 MODEL_NAMES = ("volume", "iid", "discrepancy")
 
 
-def theta_priors(infer_angles: bool = False) -> dict:
-    """Priors of the forward-model parameters (Table 9.1; angles uniform if inferred)."""
-    pri = {n: dist.Uniform(*THETA_BOUNDS[n]) for n in THETA_NAMES}
+def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[float, float]]:
+    """Bounds of the uniform priors: Table 9.1 (and :data:`ANGLE_BOUNDS`), narrowed to the
+    forward model's valid box.
+
+    Parameters
+    ----------
+    infer_angles : bool
+        Include the fibre angles (degrees).
+    forward : ForwardModel, optional
+        If it has ``param_bounds`` (an emulator's training box, see
+        :class:`lvcore.inference.forward.EmulatorForward`), each prior is cut
+        to its intersection with that box: the ``angles`` emulator, for one,
+        is trained on b, bf >= 0.5 only.
+
+    Raises
+    ------
+    ValueError
+        If a parameter's prior and the forward model's box do not overlap.
+    """
+    bounds = {n: THETA_BOUNDS[n] for n in THETA_NAMES}
     if infer_angles:
-        pri.update({n: dist.Uniform(*ANGLE_BOUNDS[n]) for n in ANGLE_NAMES})
-    return pri
+        bounds.update({n: ANGLE_BOUNDS[n] for n in ANGLE_NAMES})
+    for n, (lo, hi) in (getattr(forward, "param_bounds", None) or {}).items():
+        if n in bounds:
+            cut = (max(bounds[n][0], lo), min(bounds[n][1], hi))
+            if not cut[0] < cut[1]:
+                raise ValueError(f"the prior of '{n}' {bounds[n]} and the forward model's box [{lo}, {hi}] do not overlap")
+            bounds[n] = cut
+    return bounds
+
+
+def theta_priors(infer_angles: bool = False, forward=None) -> dict:
+    """Uniform priors of the forward-model parameters over :func:`prior_bounds`."""
+    return {n: dist.Uniform(*b) for n, b in prior_bounds(infer_angles, forward).items()}
 
 
 def sigma_s2_prior():
@@ -81,8 +108,8 @@ def _check_y(y):
         raise ValueError(f"y must have shape ({N_OUTPUTS},) [LVV, 24 strains], got {jnp.shape(y)}")
 
 
-def _sample_params(infer_angles: bool) -> dict:
-    return {n: numpyro.sample(n, d) for n, d in theta_priors(infer_angles).items()}
+def _sample_params(infer_angles: bool, forward) -> dict:
+    return {n: numpyro.sample(n, d) for n, d in theta_priors(infer_angles, forward).items()}
 
 
 def _volume_term(eta0, y, sigma_v):
@@ -92,7 +119,7 @@ def _volume_term(eta0, y, sigma_v):
 def volume_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_angles: bool = False):
     """Model (i): LVV only, ``y0 ~ N(eta0(theta), sigma_v^2)``; strains are ignored."""
     _check_y(y)
-    params = _sample_params(infer_angles)
+    params = _sample_params(infer_angles, forward)
     eta = numpyro.deterministic("eta", forward(params))
     _volume_term(eta[0], y, sigma_v)
 
@@ -100,7 +127,7 @@ def volume_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_
 def iid_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_angles: bool = False):
     """Model (ii): LVV term plus iid Gaussian strains with inferred ``sigma_S^2``."""
     _check_y(y)
-    params = _sample_params(infer_angles)
+    params = _sample_params(infer_angles, forward)
     sigma_s2 = numpyro.sample("sigma_s2", sigma_s2_prior())
     eta = numpyro.deterministic("eta", forward(params))
     _volume_term(eta[0], y, sigma_v)
@@ -117,7 +144,7 @@ def discrepancy_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, i
     matrix (plus ``nugget``) on the 6 x 4 strain grid.
     """
     _check_y(y)
-    params = _sample_params(infer_angles)
+    params = _sample_params(infer_angles, forward)
     sigma_s2 = numpyro.sample("sigma_s2", sigma_s2_prior())
     hyper = {n: numpyro.sample(n, d) for n, d in hyper_priors().items()}
     b_tilde = numpyro.sample("disc_tilde", dist.Normal(0.0, 1.0).expand([24]).to_event(1))
@@ -143,6 +170,6 @@ def get_model(name: str):
 
 __all__ = [
     "DEFAULT_SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
-    "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
+    "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model",
 ]

@@ -299,7 +299,7 @@ class PolarGPGibbs(MCMCKernel):
         self.nugget = float(nugget)
         self.target_accept_prob = target_accept_prob
         self.max_tree_depth = max_tree_depth
-        self.theta_priors = models.theta_priors(infer_angles)
+        self.theta_priors = models.theta_priors(infer_angles, forward)
         self.hyper_priors = models.hyper_priors()
         self.v_prior = models.v_prior()
         self._hyper_init, self._hyper_sample = hmc(potential_fn_gen=self._hyper_potential_gen, algo="NUTS")
