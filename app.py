@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 import streamlit as st  # noqa: E402
 
 from lvcore import units  # noqa: E402
+from lvcore.campaigns.space import THETA_BOUNDS  # noqa: E402
 from lvcore.exceptions import LVCoreError  # noqa: E402
 from lvcore.inference.samplers import use_host_devices  # noqa: E402
 from lvcore.mechanics.case import Case  # noqa: E402
@@ -27,7 +28,7 @@ use_host_devices(4)  # before JAX starts: one XLA host device per calibration ch
 
 HERE = Path(__file__).resolve().parent
 #: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-), log-spaced.
-THETA_RANGES = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
+THETA_RANGES = dict(THETA_BOUNDS)
 THETA_LABELS = {"a": "a (kPa)", "b": "b (–)", "af": "a_f (kPa)", "bf": "b_f (–)"}
 RESOLUTIONS = ("fast", "default", "accurate")
 
