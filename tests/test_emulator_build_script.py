@@ -47,3 +47,17 @@ def test_spec_defaults():
     args = mod.parse_args([])
     assert (args.n_train, args.n_valid, args.resolution) == (10_000, 1_000, "default")
     assert args.emulators == ["chapter", "angles"] and mod.below_spec(args) == ""
+
+
+def test_each_bundled_emulator_gets_its_shipped_schedule_unless_told_otherwise():
+    import json
+
+    mod = _script()
+    args = mod.parse_args([])
+    for name in ("chapter", "angles"):
+        meta = json.loads((mod.REPO / "assets" / "emulators" / name / "metadata.json").read_text())
+        shipped = meta["training"]["config"]
+        filled = mod.schedule_args(name, args)
+        assert {k: getattr(filled, k) for k in mod.SCHEDULE_OPTIONS} == {k: shipped[k] for k in mod.SCHEDULE_OPTIONS}
+    told = mod.schedule_args("angles", mod.parse_args(["--lbfgs-iterations", "5"]))
+    assert told.lbfgs_iterations == 5 and told.max_epochs == 1000
