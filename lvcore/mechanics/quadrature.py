@@ -23,11 +23,7 @@ def gauss_hex(order: int = 3):
     -------
     xi : (order³, 3) points; w : (order³,) weights (sum 8).
     """
-    g, w = np.polynomial.legendre.leggauss(order)
-    a, b, c = np.meshgrid(g, g, g, indexing="ij")
-    wa, wb, wc = np.meshgrid(w, w, w, indexing="ij")
-    xi = np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1)
-    return xi, (wa * wb * wc).ravel()
+    return gauss_hex_points(order, order)
 
 
 @lru_cache(maxsize=16)
@@ -38,10 +34,8 @@ def gauss_hex_points(order: int = 3, transmural: int | None = None):
     element (see :mod:`lvcore.geometry.template`). ``transmural=None`` or
     equal to ``order`` is :func:`gauss_hex`.
     """
-    if transmural is None or transmural == order:
-        return gauss_hex(order)
     g, w = np.polynomial.legendre.leggauss(order)
-    gt, wt = np.polynomial.legendre.leggauss(transmural)
+    gt, wt = np.polynomial.legendre.leggauss(order if transmural is None else transmural)
     a, b, c = np.meshgrid(g, gt, g, indexing="ij")
     wa, wb, wc = np.meshgrid(w, wt, w, indexing="ij")
     return np.stack([a.ravel(), b.ravel(), c.ravel()], axis=1), (wa * wb * wc).ravel()
