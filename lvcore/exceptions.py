@@ -33,3 +33,7 @@ class EmulatorError(LVCoreError, ValueError):
 
 class CampaignError(LVCoreError, RuntimeError):
     """A campaign store or design cannot be used as given."""
+
+
+class ForwardError(LVCoreError, ValueError):
+    """A forward model was called with inputs it does not read, or in a way it does not support."""

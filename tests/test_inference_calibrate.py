@@ -45,7 +45,7 @@ def test_emulator_adapter_matches_direct_call_and_is_differentiable():
         emulator_forward(emu, h, infer_angles=True)
     emu_a = _random_emulator("angles", angles=True)
     fa = emulator_forward(emu_a, h, infer_angles=True)
-    assert fa.param_names[-2:] == ("alpha_endo", "alpha_epi")
+    assert fa.input_names[-2:] == ("alpha_endo", "alpha_epi")
     y1 = fa({**theta, "alpha_endo": -30.0, "alpha_epi": 60.0})
     y2 = emulator_forward(emu_a, h, alpha_endo=-30.0, alpha_epi=60.0)(theta)
     np.testing.assert_allclose(np.asarray(y1), np.asarray(y2), rtol=1e-12)
@@ -55,7 +55,7 @@ def test_priors_are_cut_to_the_emulator_training_box():
     """NUTS must never push an emulator outside its training box: the priors are intersected with it."""
     emu = _random_emulator("angles", angles=True)
     fwd = emulator_forward(emu, np.zeros(5), infer_angles=True)
-    assert fwd.param_bounds["b"] == (0.5, 30.0) and fwd.param_bounds["alpha_epi"] == (0.0, 90.0)
+    assert fwd.input_bounds["b"] == (0.5, 30.0) and fwd.input_bounds["alpha_epi"] == (0.0, 90.0)
     bounds = models.prior_bounds(True, fwd)
     assert bounds["b"] == bounds["bf"] == (0.5, 30.0)  # emulator box is narrower than Table 9.1
     assert bounds["a"] == (0.05, 10.0) and bounds["alpha_endo"] == (-90.0, 0.0)

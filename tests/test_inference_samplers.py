@@ -124,7 +124,7 @@ def test_joint_theta_and_fibre_angle_inference(model_name):
     """
     from lvcore.inference import diagnostics
 
-    fwd = AnalyticForward(param_names=THETA_NAMES + ("alpha_endo", "alpha_epi"))
+    fwd = AnalyticForward(input_names=THETA_NAMES + ("alpha_endo", "alpha_epi"))
     truth = {**TRUTH, "alpha_endo": -20.0, "alpha_epi": 70.0}
     y = coverage.simulate_data(fwd, truth, np.random.default_rng(11), sigma_s=0.01)
     cfg = samplers.SamplerConfig(num_warmup=300, num_samples=300, num_chains=2, seed=1)

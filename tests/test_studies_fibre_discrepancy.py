@@ -26,7 +26,7 @@ def test_design_is_the_chapters():
 
 def test_study_pipeline_on_stand_ins(tmp_path):
     """SYNTHETIC stand-ins passed explicitly: the 'simulator' shifts strains with the fibre angles."""
-    truth = AnalyticForward(param_names=("a", "b", "af", "bf", "alpha_endo", "alpha_epi"))
+    truth = AnalyticForward(input_names=("a", "b", "af", "bf", "alpha_endo", "alpha_epi"))
     sim = lambda th, ae, ap: np.asarray(truth({**th, "alpha_endo": ae, "alpha_epi": ap}))  # noqa: E731
     cfg = samplers.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2)
     res = fd.run_study(AnalyticForward(), config=cfg, simulate_fn=sim, out=tmp_path, set_indices=(0, 11))

@@ -55,7 +55,7 @@ def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[fl
     infer_angles : bool
         Include the fibre angles (degrees).
     forward : ForwardModel, optional
-        If it has ``param_bounds`` (an emulator's training box, see
+        If it has ``input_bounds`` (an emulator's training box, see
         :class:`lvcore.inference.forward.EmulatorForward`), each prior is cut
         to its intersection with that box: the ``angles`` emulator, for one,
         is trained on b, bf >= 0.5 only.
@@ -68,7 +68,7 @@ def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[fl
     bounds = {n: THETA_BOUNDS[n] for n in THETA_NAMES}
     if infer_angles:
         bounds.update({n: ANGLE_BOUNDS[n] for n in ANGLE_NAMES})
-    for n, (lo, hi) in (getattr(forward, "param_bounds", None) or {}).items():
+    for n, (lo, hi) in (getattr(forward, "input_bounds", None) or {}).items():
         if n in bounds:
             cut = (max(bounds[n][0], lo), min(bounds[n][1], hi))
             if not cut[0] < cut[1]:

@@ -468,7 +468,7 @@ def continue_run(run: SamplerRun, forward) -> SamplerRun:
 
 def posterior_eta(forward, samples: dict):
     """Forward-model outputs at every draw, shape (chain, draw, 25)."""
-    names = forward.param_names
+    names = forward.input_names
     flat = {n: jnp.reshape(jnp.asarray(samples[n]), (-1,)) for n in names}
     lead = np.shape(samples[names[0]])
     eta = jax.jit(jax.vmap(lambda p: forward(p)))(flat)

@@ -1,0 +1,283 @@
+"""Parameter spaces, the prior box and the one case builder (the core layer's inputs side).
+
+Every layer that names the model inputs uses this module: campaigns (named
+design spaces), optimisation (boxes), inference (prior bounds) and the app
+(slider ranges). Units: ``a``, ``af`` in kPa; ``b``, ``bf`` dimensionless;
+``alpha_endo``, ``alpha_epi`` in degrees; ``edp`` in mmHg; PC scores
+``h1..hk`` in the shape model's (standardised) score units.
+
+* :class:`Parameter` and :class:`ParameterSpace`: an ordered set of varied
+  inputs (bounds, linear or log scale) plus inputs held fixed; maps the unit
+  cube of a design to physical values.
+* :data:`THETA_BOUNDS` (the chapter's Table 9.1 prior box),
+  :data:`ANGLES_THETA_BOUNDS`, :data:`ANGLE_BOUNDS`, :data:`EDP_BOUNDS`,
+  :data:`CHAPTER_ANGLES`, :data:`CHAPTER_EDP`, :data:`SIGMA_V_ML`.
+* :func:`build_case`: named physical inputs -> the simulator's case
+  dictionary. It is the only place in lvcore that writes such a dictionary
+  from named inputs.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from lvcore.exceptions import CampaignError, CaseError
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
+
+#: Fibre angles (deg) at which the chapter's emulator was trained.
+CHAPTER_ANGLES = (-60.0, 60.0)
+#: EDP (mmHg) used for the chapter's emulator.
+CHAPTER_EDP = 8.0
+#: Material bounds of the calibration prior (Table 9.1): kPa for a, af.
+THETA_BOUNDS = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
+#: Material bounds of the ``angles`` emulator: Table 9.1's, except b, bf >= 0.5. Below 0.5 the
+#: exponential stiffening that defines myocardium is gone; with a soft matrix those corners give
+#: 700-2,500 mL LVs at 6-14 mmHg, which no patient has and which cost the emulator most of its error.
+ANGLES_THETA_BOUNDS = {**THETA_BOUNDS, "b": (0.5, 30.0), "bf": (0.5, 30.0)}
+#: Range of the rule-based fibre helix angles (degrees): the calibration prior when they are
+#: inferred and the ``angles`` emulator's training box.
+ANGLE_BOUNDS = {"alpha_endo": (-90.0, 0.0), "alpha_epi": (0.0, 90.0)}
+#: Range of the end-diastolic pressure (mmHg) of the ``angles`` emulator.
+EDP_BOUNDS = (6.0, 14.0)
+#: Fixed LVV noise standard deviation (mL) of every calibration likelihood (chapter Table E.1).
+SIGMA_V_ML = 5.0
+
+SCALES = ("linear", "log")
+#: Case sections :func:`build_case` writes (material law: Holzapfel-Ogden).
+CASE_LAW = "holzapfel-ogden"
+
+
+def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, resolution: str = "default",
+               base: str = "clamped") -> dict:
+    """The simulator case dictionary for named physical inputs.
+
+    Parameters
+    ----------
+    inputs : mapping
+        ``a, b, af, bf`` (kPa, -, kPa, -; required), and optionally
+        ``alpha_endo, alpha_epi`` (deg; default :data:`CHAPTER_ANGLES`),
+        ``edp`` (mmHg; default :data:`CHAPTER_EDP`) and PC scores
+        ``h1..hk`` (consecutive from h1). Other names are an error.
+    geometry : mapping, optional
+        The case's ``geometry`` section (e.g. ``{"kind": "default"}`` or
+        ``{"kind": "mesh", "path": ...}``). Default: a ``pca`` geometry with
+        the scores ``h1..hk`` when ``inputs`` has them, else the default LV.
+        Giving both a geometry and PC scores is an error.
+    resolution : str
+        Mesh resolution preset, used unless ``geometry`` sets its own.
+    base : {"clamped", "sliding"}
+        Basal boundary condition.
+
+    Returns
+    -------
+    dict
+        ``geometry``, ``material``, ``fibres``, ``load`` (mmHg) and
+        ``boundary`` sections; validated later by
+        :meth:`lvcore.mechanics.case.Case.from_dict`.
+
+    Raises
+    ------
+    CaseError
+        Missing material parameters, unknown or non-consecutive input names,
+        or PC scores together with an explicit geometry.
+    """
+    v = {str(k): val for k, val in inputs.items()}
+    known = set(THETA_NAMES) | set(ANGLE_NAMES) | {EDP_NAME}
+    unknown = sorted(n for n in v if n not in known and not is_pc_name(n))
+    if unknown:
+        raise CaseError("inputs", f"unknown input name(s) {unknown}; known: {sorted(known)} and h1..hk")
+    missing = [n for n in THETA_NAMES if n not in v]
+    if missing:
+        raise CaseError("material", f"missing material parameter(s) {missing} (a, af in kPa; b, bf dimensionless)")
+    pcs = sorted((n for n in v if is_pc_name(n)), key=lambda n: int(n[1:]))
+    if pcs and tuple(pcs) != pc_names(len(pcs)):
+        raise CaseError("geometry.scores", f"PC scores must be h1..hk without gaps, got {pcs}")
+    if pcs and geometry is not None:
+        raise CaseError("geometry", f"give either PC scores {pcs} or a geometry section, not both")
+    if geometry is not None:
+        geom = dict(geometry)
+        geom.setdefault("resolution", resolution)
+    elif pcs:
+        geom = {"kind": "pca", "scores": [float(v[n]) for n in pcs], "resolution": resolution}
+    else:
+        geom = {"kind": "default", "resolution": resolution}
+    return {
+        "geometry": geom,
+        "material": {"law": CASE_LAW, **{n: float(v[n]) for n in THETA_NAMES}},
+        "fibres": {"alpha_endo": float(v.get(ANGLE_NAMES[0], CHAPTER_ANGLES[0])),
+                   "alpha_epi": float(v.get(ANGLE_NAMES[1], CHAPTER_ANGLES[1]))},
+        "load": {"pressure": float(v.get(EDP_NAME, CHAPTER_EDP)), "units": "mmHg"},
+        "boundary": {"base": base},
+    }
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One varied input.
+
+    Parameters
+    ----------
+    name : str
+        Input name (see :mod:`lvcore.outputs`).
+    lower, upper : float
+        Bounds in physical units (kPa, -, deg, mmHg or score units).
+    scale : {"linear", "log"}
+        Uniform on this scale: ``"log"`` means log-uniform (needs lower > 0).
+    """
+
+    name: str
+    lower: float
+    upper: float
+    scale: str = "linear"
+
+    def __post_init__(self):
+        if self.scale not in SCALES:
+            raise CampaignError(f"parameter '{self.name}': scale must be one of {SCALES}, got {self.scale!r}")
+        if not (np.isfinite(self.lower) and np.isfinite(self.upper) and self.lower < self.upper):
+            raise CampaignError(f"parameter '{self.name}': need finite lower < upper, got [{self.lower}, {self.upper}]")
+        if self.scale == "log" and self.lower <= 0:
+            raise CampaignError(f"parameter '{self.name}': a log scale needs lower > 0, got {self.lower}")
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """Map ``u`` in [0, 1] to physical values on this parameter's scale."""
+        u = np.asarray(u, dtype=float)
+        if self.scale == "log":
+            lo, hi = np.log(self.lower), np.log(self.upper)
+            return np.exp(lo + u * (hi - lo))
+        return self.lower + u * (self.upper - self.lower)
+
+    def to_unit(self, x: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`from_unit`."""
+        x = np.asarray(x, dtype=float)
+        if self.scale == "log":
+            lo, hi = np.log(self.lower), np.log(self.upper)
+            return (np.log(x) - lo) / (hi - lo)
+        return (x - self.lower) / (self.upper - self.lower)
+
+
+@dataclass(frozen=True)
+class ParameterSpace:
+    """An ordered set of varied inputs plus fixed ones.
+
+    Parameters
+    ----------
+    name : str
+        Name of the space (recorded in designs and stores).
+    parameters : tuple of Parameter
+        Varied inputs, in design-column order.
+    fixed : tuple of (str, float)
+        Inputs held fixed (e.g. ``("alpha_endo", -60.0)``).
+    """
+
+    name: str
+    parameters: tuple[Parameter, ...]
+    fixed: tuple[tuple[str, float], ...] = field(default_factory=tuple)
+
+    def __post_init__(self):
+        names = [p.name for p in self.parameters] + [k for k, _ in self.fixed]
+        if len(set(names)) != len(names):
+            raise CampaignError(f"space '{self.name}': duplicate input names in {names}")
+        if not self.parameters:
+            raise CampaignError(f"space '{self.name}': needs at least one varied parameter")
+
+    # ----- shape ------------------------------------------------------------
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of the varied inputs (design columns)."""
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def dim(self) -> int:
+        return len(self.parameters)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([p.lower for p in self.parameters])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([p.upper for p in self.parameters])
+
+    @property
+    def n_pcs(self) -> int:
+        """Number of PCA scores among the varied inputs (they must be h1..hk)."""
+        return sum(1 for n in self.names if is_pc_name(n))
+
+    def fixed_dict(self) -> dict[str, float]:
+        return dict(self.fixed)
+
+    # ----- mapping ----------------------------------------------------------
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """Map unit-cube points ``(n, dim)`` to physical values ``(n, dim)``."""
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        if u.shape[1] != self.dim:
+            raise CampaignError(f"space '{self.name}' has {self.dim} dimensions, got points with {u.shape[1]}")
+        return np.column_stack([p.from_unit(u[:, i]) for i, p in enumerate(self.parameters)])
+
+    def to_unit(self, x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        return np.column_stack([p.to_unit(x[:, i]) for i, p in enumerate(self.parameters)])
+
+    def contains(self, x: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+        """Boolean per row: inside the bounds (with a relative tolerance)."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        span = self.upper - self.lower
+        return np.all((x >= self.lower - rtol * span) & (x <= self.upper + rtol * span), axis=1)
+
+    def full_inputs(self, row: Sequence[float]) -> dict[str, float]:
+        """Every input of one row (varied and fixed) by name."""
+        values = {n: float(v) for n, v in zip(self.names, row)}
+        values.update(self.fixed_dict())
+        return values
+
+    def case(self, row: Sequence[float], resolution: str = "default") -> dict:
+        """The simulator case dictionary for one design row (see :func:`build_case`).
+
+        Parameters
+        ----------
+        row : sequence of float
+            Values of :attr:`names`, physical units.
+        resolution : {"fast", "default", ...}
+            Mesh resolution passed to the simulator's geometry section.
+        """
+        v = self.full_inputs(row)
+        missing = [n for n in THETA_NAMES if n not in v]
+        if missing:
+            raise CampaignError(f"space '{self.name}' does not define material parameter(s) {missing}")
+        return build_case(v, resolution=resolution)
+
+    # ----- serialisation ----------------------------------------------------
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "parameters": [{"name": p.name, "lower": p.lower, "upper": p.upper, "scale": p.scale} for p in self.parameters],
+            "fixed": {k: v for k, v in self.fixed},
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict())
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ParameterSpace":
+        try:
+            params = tuple(Parameter(str(p["name"]), float(p["lower"]), float(p["upper"]), str(p.get("scale", "linear"))) for p in d["parameters"])
+            fixed = tuple((str(k), float(v)) for k, v in dict(d.get("fixed", {})).items())
+            return cls(str(d["name"]), params, fixed)
+        except (KeyError, TypeError, ValueError) as err:
+            raise CampaignError(f"malformed parameter-space description: {err!r}") from err
+
+    @classmethod
+    def from_json(cls, text: str) -> "ParameterSpace":
+        try:
+            return cls.from_dict(json.loads(text))
+        except json.JSONDecodeError as err:
+            raise CampaignError(f"parameter-space description is not valid JSON: {err}") from err
+
+
+__all__ = [
+    "Parameter", "ParameterSpace", "build_case", "THETA_BOUNDS", "ANGLES_THETA_BOUNDS", "ANGLE_BOUNDS",
+    "EDP_BOUNDS", "CHAPTER_ANGLES", "CHAPTER_EDP", "SIGMA_V_ML", "SCALES",
+]
