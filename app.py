@@ -23,6 +23,7 @@ from lvcore.campaigns.space import THETA_BOUNDS  # noqa: E402
 from lvcore.exceptions import LVCoreError  # noqa: E402
 from lvcore.inference.samplers import use_host_devices  # noqa: E402
 from lvcore.mechanics.case import Case  # noqa: E402
+from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES  # noqa: E402
 
 use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (pages/5_Calibration.py)
 
@@ -30,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 #: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-), log-spaced.
 THETA_RANGES = dict(THETA_BOUNDS)
 THETA_LABELS = {"a": "a (kPa)", "b": "b (–)", "af": "a_f (kPa)", "bf": "b_f (–)"}
-RESOLUTIONS = ("fast", "default", "accurate")
+RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
 st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
 
@@ -123,7 +124,7 @@ with st.form("simulator"):
         alpha_epi = st.slider("α_epi (deg)", -90, 90, int(units.DEFAULT_ALPHA_EPI_DEG), key="alpha_epi")
         edp = st.slider("EDP (mmHg)", 2.0, 30.0, float(units.DEFAULT_EDP_MMHG), step=0.5, key="edp")
         resolution = st.radio("Resolution", RESOLUTIONS, index=0, horizontal=True, key="resolution",
-                              help="fast: seconds, for exploring; default/accurate: finer meshes (slower; the first "
+                              help="fast: seconds, for exploring; coarse (lvcore 0.1's default)/default/accurate: finer meshes (slower; the first "
                                    "solve at a new resolution also compiles the FE kernels).")
     st.form_submit_button("Simulate", type="primary")
 

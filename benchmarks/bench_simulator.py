@@ -3,7 +3,7 @@
 Usage::
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
-        python benchmarks/bench_simulator.py [--resolutions fast coarse default accurate] [--repeats 5] [--processes]
+        python benchmarks/bench_simulator.py [--resolutions PRESET|NC,NL,NT[,GP] ...] [--repeats 5] [--processes]
 
 Prints markdown tables: per resolution the dofs, LVV, EDV/V_early, mean
 strain, the largest relative output change against the finest resolution,
@@ -26,7 +26,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 def _resolution(spec: str) -> dict:
     """A preset name, or ``"NC,NL,NT[,GP]"`` (NL may be per-level counts ``2+1+1+2``) as a case resolution."""
-    from lvcore.mechanics.mesh import LVResolution
+    from lvcore.mechanics.resolution import LVResolution
 
     return LVResolution.from_spec(spec).case_dict()
 
@@ -84,8 +84,9 @@ def throughput(res, n_jobs, n_proc):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--resolutions", nargs="*", default=["fast", "coarse", "default", "accurate"],
-                    help="preset names or NC,NL,NT[,GP] (NL may be per-level counts 2+1+1+2); the last is the reference")
+    ap.add_argument("--resolutions", nargs="*", default=None,
+                    help="preset names or NC,NL,NT[,GP] (NL may be per-level counts 2+1+1+2); the last is the "
+                         "reference; default: every preset, cheapest first")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--processes", action="store_true", help="measure 1 vs 2 worker processes")
     ap.add_argument("--throughput-solves", type=int, default=24, help="solves per throughput measurement")
@@ -96,7 +97,9 @@ def main(argv=None):
     import numpy as np
 
     from lvcore.mechanics.linear import available_backends
-    from lvcore.mechanics.mesh import resolution_label
+    from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, resolution_label
+
+    a.resolutions = a.resolutions or list(RESOLUTION_PRESET_NAMES)
 
     rows = []
     for res in a.resolutions:

@@ -37,7 +37,7 @@ def problem1_case(res):
 
 def problem2_case(res):
     """Problem 2 at ``res``: a preset name, an LVResolution or ``"NC,NL,NT[,GP]"`` (NL may be ``2+1+1+2``)."""
-    from lvcore.mechanics.mesh import LVResolution
+    from lvcore.mechanics.resolution import LVResolution
 
     resolution = (res if isinstance(res, LVResolution) else LVResolution.from_spec(res)).case_dict()
     return {
@@ -85,7 +85,7 @@ def main(argv=None):
         print("| elements (circ x long x trans, Gauss points through the wall) | dofs | endo apex z | epi apex z | volume (mm³) | vol. error "
               "| Newton its | steps | 1st run incl. compile (s) | warm (s) |")
         print("|---|---|---|---|---|---|---|---|---|---|")
-        from lvcore.mechanics.mesh import resolution_label
+        from lvcore.mechanics.resolution import resolution_label
 
         for s in a.p2:
             r, first, warm = _timed(problem2_case(s))

@@ -9,7 +9,8 @@ from lvcore import units
 from lvcore.exceptions import CaseError
 from lvcore.geometry.analytic import DEFAULT_LV, LAND_LV
 from lvcore.geometry.template import DEFAULT_TEMPLATE
-from lvcore.mechanics.case import Case, GeometrySpec, Resolution, load_case
+from lvcore.mechanics.case import Case, GeometrySpec, load_case
+from lvcore.mechanics.resolution import RESOLUTION_PRESETS, LVResolution
 
 LAND2 = {
     "geometry": {"kind": "ellipsoid", "endo": {"rs": 7, "rl": 17}, "epi": {"rs": 10, "rl": 20}, "base_z": 5,
@@ -39,7 +40,7 @@ def test_land_problem2_fields():
     case = Case.from_dict(LAND2)
     g = case.geometry
     assert g.kind == "ellipsoid" and g.ellipsoid == LAND_LV
-    assert g.resolution == Resolution(24, 12, 3) and g.preset is None
+    assert g.resolution == LVResolution(24, 12, 3) and g.preset is None
     assert g.base_z() == 5.0
     np.testing.assert_allclose(g.position_map()(0.0, 1.0, 0.0), [0, 0, -17], atol=1e-12)
     np.testing.assert_allclose(g.position_map()(0.0, 1.0, 1.0), [0, 0, -20], atol=1e-12)
@@ -84,12 +85,10 @@ def test_graded_resolution_parses_and_round_trips():
                                    "transmural_gauss_points": 5}
     case = Case.from_dict(d)
     r = case.geometry.resolution
-    assert (r.longitudinal, r.level_elements, r.transmural_gauss_points) == (6, (2, 1, 1, 2), 5)
+    assert (r.n_long, r.level_elements, r.transmural_gauss_points) == (6, (2, 1, 1, 2), 5)
     assert case.to_dict()["geometry"]["resolution"] == d["geometry"]["resolution"]
     assert Case.from_dict(case.to_dict()) == case
-    from lvcore.mechanics.mesh import RESOLUTION_PRESETS
-
-    assert r.lv() == RESOLUTION_PRESETS["default"]
+    assert r == RESOLUTION_PRESETS["default"]
 
 
 def test_default_lv_constructor_matches_dict():
@@ -168,6 +167,10 @@ BAD = [
     (HO, ("geometry", "resolution"), {"circumferential": 6, "longitudinal": 4, "transmural": 1,
                                       "transmural_gauss_points": 12}, False,
      "geometry.resolution.transmural_gauss_points", "1..10"),
+    (HO, ("geometry", "resolution"), {"circumferential": 2, "longitudinal": 4, "transmural": 1}, False,
+     "geometry.resolution.circumferential", ">= 3"),
+    (HO, ("geometry", "resolution"), {"circumferential": 6, "longitudinal": 4, "transmural": 1.5}, False,
+     "geometry.resolution.transmural", "positive integer"),
     (HO, ("geometry", "size"), [1, 1, 1], False, "geometry.size", "not used"),
     (HO, ("boundary",), {"base": "free"}, False, "boundary.base", "clamped"),
     (HO, ("outputs",), {"strain_layer": "epi"}, False, "outputs.strain_layer", "endocardial"),
@@ -183,6 +186,8 @@ BAD = [
     (BOX, ("geometry", "size"), [10, 0, 1], False, "geometry.size[1]", "> 0"),
     (BOX, ("geometry", "resolution"), [10, 1], False, "geometry.resolution", "[nx, ny, nz]"),
     (BOX, ("geometry", "resolution"), "coarse", False, "geometry.resolution", "fast"),
+    (BOX, ("geometry", "resolution"), [10, 0, 1], False, "geometry.resolution[1]", "positive integer"),
+    (BOX, ("geometry", "resolution"), {"x": 1, "y": 1, "z": "2"}, False, "geometry.resolution.z", "positive integer"),
     (HO, ("geometry",), {"kind": "mesh", "path": "/nonexistent/lv.vtu"}, False, "geometry.path", "does not exist"),
     (HO, ("geometry",), {"kind": "pca", "scores": []}, False, "geometry.scores", "non-empty"),
     (HO, ("geometry",), {"kind": "pca", "scores": [1.0], "model": "/nonexistent/m.h5"}, False,

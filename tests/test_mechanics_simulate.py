@@ -99,7 +99,7 @@ def test_adjoint_sensitivities_match_finite_differences(fast_case, fast_result):
 @pytest.mark.slow
 def test_default_resolution_is_converged_and_plausible():
     """Every one of the 25 outputs of the default preset within 1 % of the mesh refined 2x in every direction."""
-    from lvcore.mechanics.mesh import RESOLUTION_PRESETS, LVResolution
+    from lvcore.mechanics.resolution import RESOLUTION_PRESETS, LVResolution
 
     d = RESOLUTION_PRESETS["default"]
     finer = LVResolution.graded(2 * d.n_circ, [2 * n for n in d.level_elements], 2 * d.n_trans,

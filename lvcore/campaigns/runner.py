@@ -30,10 +30,11 @@ from lvcore.campaigns.designs import Design, load_design
 from lvcore.campaigns.executors import make_executor
 from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
 from lvcore.exceptions import CampaignError, SolverError
+from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
 
 #: The real simulator.
 DEFAULT_FORWARD = "lvcore:simulate"
-RESOLUTIONS = ("fast", "coarse", "default")
+RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
 _FORWARD_CACHE: dict[str, object] = {}
 _VERSION: list[str] = []
@@ -167,7 +168,7 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         Local worker processes (default one per core).
     scheduler : str, optional
         ``tcp://HOST:PORT`` of a Dask scheduler; overrides ``workers``.
-    resolution : {"fast", "coarse", "default"}
+    resolution : a preset name of :data:`lvcore.mechanics.resolution.RESOLUTION_PRESET_NAMES`
         Simulator mesh resolution preset.
     forward : str
         Forward model ``"module:function"`` (default the FE simulator).

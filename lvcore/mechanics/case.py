@@ -25,11 +25,16 @@ from lvcore import units
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE
+from lvcore.mechanics.resolution import (
+    BOX_RESOLUTION_PRESET_NAMES,
+    RESOLUTION_PRESET_NAMES,
+    BoxResolution,
+    LVResolution,
+    ResolutionError,
+)
 
 GEOMETRY_KINDS = ("ellipsoid", "default", "mesh", "pca", "box")
 LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
-RESOLUTION_PRESET_NAMES = ("fast", "coarse", "default", "accurate")
-BOX_RESOLUTION_PRESET_NAMES = ("fast", "default", "accurate")
 MATERIAL_LAWS = ("holzapfel-ogden", "guccione", "neo-hookean")
 #: Required and optional parameters of each law (all must be > 0; a, af, as, afs, C, mu in kPa).
 LAW_REQUIRED = {
@@ -51,34 +56,8 @@ PRESSURE_UNITS = {"kpa": 1.0, "mmhg": units.KPA_PER_MMHG}
 # ----------------------------------------------------------------------------
 # dataclasses
 # ----------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Resolution:
-    """Element counts of the simulation mesh.
-
-    For LV geometries: quadratic elements around, base to apex and through the
-    wall. For a box: elements along x, y and z are stored as
-    (circumferential, longitudinal, transmural) = (nx, ny, nz); use :attr:`xyz`.
-    """
-
-    circumferential: int
-    longitudinal: int
-    transmural: int
-    #: LV only: element rows per short-axis level (base to apex), or None for even rows.
-    level_elements: tuple[int, ...] | None = None
-    #: LV only: Gauss points through the wall per element.
-    transmural_gauss_points: int = 3
-
-    @property
-    def xyz(self) -> tuple[int, int, int]:
-        """(nx, ny, nz) element counts of a box mesh."""
-        return (self.circumferential, self.longitudinal, self.transmural)
-
-    def lv(self):
-        """The :class:`lvcore.mechanics.mesh.LVResolution` of an LV mesh."""
-        from lvcore.mechanics.mesh import LVResolution
-
-        return LVResolution(self.circumferential, self.longitudinal, self.transmural, self.level_elements,
-                            self.transmural_gauss_points)
+#: The element counts of a geometry: an LV resolution, or a box's counts along x, y, z.
+Resolution = LVResolution | BoxResolution
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,10 +67,10 @@ class GeometrySpec:
     Attributes
     ----------
     kind : {"ellipsoid", "default", "mesh", "pca", "box"}
-    resolution : Resolution or None
-        Explicit element counts; ``None`` means the mechanics uses
-        ``RESOLUTION_PRESETS[preset or "default"]``.
-    preset : {"fast", "coarse", "default", "accurate"} or None
+    resolution : LVResolution (LV kinds), BoxResolution (kind "box") or None
+        Explicit element counts; ``None`` means the mechanics uses the preset
+        ``preset or "default"`` (:mod:`lvcore.mechanics.resolution`).
+    preset : one of ``RESOLUTION_PRESET_NAMES`` (LV) or ``BOX_RESOLUTION_PRESET_NAMES`` (box), or None
     ellipsoid : TruncatedEllipsoidLV or None
         Kinds "ellipsoid" and "default" (the latter is ``DEFAULT_LV``).
     template_nodes : (DEFAULT_TEMPLATE.n_nodes, 3) array or None
@@ -103,7 +82,7 @@ class GeometrySpec:
     """
 
     kind: str
-    resolution: Resolution | None = None
+    resolution: LVResolution | BoxResolution | None = None
     preset: str | None = None
     ellipsoid: TruncatedEllipsoidLV | None = None
     template_nodes: np.ndarray | None = None
@@ -303,17 +282,6 @@ def _number(value, where: str, positive=False, nonnegative=False, lo=None, hi=No
     return x
 
 
-def _count(value, where: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        else:
-            raise CaseError(where, f"must be a positive integer, got {value!r}")
-    if value < 1:
-        raise CaseError(where, f"must be a positive integer, got {value}")
-    return int(value)
-
-
 def _string(value, where: str, choices) -> str:
     if not isinstance(value, str):
         raise CaseError(where, f"must be a string, one of {', '.join(choices)}; got {value!r}")
@@ -359,41 +327,35 @@ def _parse_case(d: Mapping, base_dir: Path | None) -> Case:
     return Case(geometry, material, fibres, load, boundary, probes, outputs)
 
 
-def _parse_resolution(value, where: str, kind: str) -> tuple[Resolution | None, str | None]:
-    if kind == "box":
-        if value is None:
-            return None, None
-        if isinstance(value, str):
-            return None, _string(value, where, BOX_RESOLUTION_PRESET_NAMES)
-        if isinstance(value, (list, tuple)):
-            if len(value) != 3:
-                raise CaseError(where, f"a box resolution is [nx, ny, nz], got {value!r}")
-            return Resolution(*(_count(v, f"{where}[{i}]") for i, v in enumerate(value))), None
-        _check_keys(value, where, ("x", "y", "z"), required=("x", "y", "z"))
-        return Resolution(*(_count(value[k], f"{where}.{k}") for k in ("x", "y", "z"))), None
+def _parse_resolution(value, where: str, kind: str) -> tuple[LVResolution | BoxResolution | None, str | None]:
+    """(explicit resolution, preset name); the bounds are checked by the resolution classes."""
     if value is None:
         return None, None
     if isinstance(value, str):
-        return None, _string(value, where, RESOLUTION_PRESET_NAMES)
+        return None, _string(value, where, BOX_RESOLUTION_PRESET_NAMES if kind == "box" else RESOLUTION_PRESET_NAMES)
+    if kind == "box":
+        if isinstance(value, (list, tuple)):
+            if len(value) != 3:
+                raise CaseError(where, f"a box resolution is [nx, ny, nz], got {value!r}")
+            counts, paths = value, [f"{where}[{i}]" for i in range(3)]
+        else:
+            _check_keys(value, where, ("x", "y", "z"), required=("x", "y", "z"))
+            counts, paths = [value[k] for k in "xyz"], [f"{where}.{k}" for k in "xyz"]
+        try:
+            return BoxResolution(*counts), None
+        except ResolutionError as err:
+            raise CaseError(paths[("nx", "ny", "nz").index(err.field)], err.problem) from None
     keys = ("circumferential", "longitudinal", "transmural")
     _check_keys(value, where, keys + ("transmural_gauss_points",), required=keys)
     long = value["longitudinal"]
-    levels = None
-    if isinstance(long, (list, tuple)):
-        if len(long) != 4:
-            raise CaseError(f"{where}.longitudinal", "give one element count or four counts, one per short-axis "
-                            f"level from base to apex, e.g. [2, 1, 1, 2]; got {long!r}")
-        levels = tuple(_count(v, f"{where}.longitudinal[{i}]") for i, v in enumerate(long))
-        n_long = sum(levels)
-    else:
-        n_long = _count(long, f"{where}.longitudinal")
-    gp = _count(value.get("transmural_gauss_points", 3), f"{where}.transmural_gauss_points")
-    if gp > 10:
-        raise CaseError(f"{where}.transmural_gauss_points", f"must be 1..10, got {gp}")
-    res = Resolution(_count(value["circumferential"], f"{where}.circumferential"), n_long,
-                     _count(value["transmural"], f"{where}.transmural"), levels, gp)
-    if res.circumferential < 3:
-        raise CaseError(f"{where}.circumferential", f"must be >= 3, got {res.circumferential}")
+    gp = value.get("transmural_gauss_points", 3)
+    try:
+        if isinstance(long, (list, tuple)):
+            res = LVResolution.graded(value["circumferential"], long, value["transmural"], gp)
+        else:
+            res = LVResolution(value["circumferential"], long, value["transmural"], None, gp)
+    except ResolutionError as err:
+        raise CaseError(f"{where}.{err.field}", err.problem) from None
     return res, None
 
 
@@ -578,7 +540,7 @@ def _case_to_dict(case: Case) -> dict:
     if g.kind == "box" and g.resolution is not None:
         gd["resolution"] = list(g.resolution.xyz)
     elif g.resolution is not None:
-        gd["resolution"] = g.resolution.lv().case_dict()
+        gd["resolution"] = g.resolution.case_dict()
     elif g.preset is not None:
         gd["resolution"] = g.preset
 

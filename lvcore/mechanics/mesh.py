@@ -15,116 +15,14 @@ cavity).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lvcore.exceptions import GeometryError
-from lvcore.geometry.template import LVTemplate, checked_level_elements
-from lvcore.mechanics.quadrature import gauss_hex_points, quad9_shape, reference_gradients
-
-@dataclass(frozen=True)
-class LVResolution:
-    """Discretisation of an LV mesh.
-
-    Attributes
-    ----------
-    n_circ : quadratic elements around (a multiple of 6 puts every element in one sector).
-    n_long : element rows base to apex (a multiple of 4 puts every element in one level).
-    n_trans : elements through the wall.
-    level_elements : optional element rows in each of the 4 short-axis levels,
-        base to apex, summing to ``n_long`` (``(2, 1, 1, 2)`` refines the
-        clamped base and the apex, where the strains vary fastest); None spaces
-        the rows evenly.
-    transmural_gauss_points : Gauss points through the wall per element (3
-        integrates a Q2 element of smooth material; with one element through
-        the wall the helix angle turns by 150° across it, and the fibre terms
-        need 5).
-    """
-
-    n_circ: int
-    n_long: int
-    n_trans: int
-    level_elements: tuple[int, ...] | None = None
-    transmural_gauss_points: int = 3
-
-    def __post_init__(self):
-        if self.level_elements is not None:
-            object.__setattr__(self, "level_elements", checked_level_elements(self.level_elements, self.n_long))
-        if not 1 <= int(self.transmural_gauss_points) <= 10:
-            raise ValueError(f"transmural_gauss_points must be in 1..10, got {self.transmural_gauss_points}")
-
-    @classmethod
-    def graded(cls, n_circ: int, level_elements, n_trans: int, transmural_gauss_points: int = 3) -> "LVResolution":
-        """``level_elements[l]`` element rows in short-axis level ``l``."""
-        le = tuple(int(v) for v in level_elements)
-        return cls(int(n_circ), sum(le), int(n_trans), le, transmural_gauss_points)
-
-    @classmethod
-    def from_spec(cls, spec: str) -> "LVResolution":
-        """A preset name, or ``"NC,NL,NT[,GP]"`` with NL an integer or per-level counts ``"2+1+1+2"`` (benchmark CLIs)."""
-        if spec in RESOLUTION_PRESETS:
-            return RESOLUTION_PRESETS[spec]
-        parts = [p.strip() for p in str(spec).split(",")]
-        if len(parts) not in (3, 4):
-            raise ValueError(f"resolution spec is 'NC,NL,NT[,GP]' (NL may be '2+1+1+2'), got {spec!r}")
-        gp = int(parts[3]) if len(parts) == 4 else 3
-        if "+" in parts[1]:
-            return cls.graded(int(parts[0]), [int(v) for v in parts[1].split("+")], int(parts[2]), gp)
-        return cls(int(parts[0]), int(parts[1]), int(parts[2]), None, gp)
-
-    def case_dict(self) -> dict:
-        """The case-schema ``geometry.resolution`` dict of this resolution."""
-        d = {"circumferential": self.n_circ,
-             "longitudinal": list(self.level_elements) if self.level_elements is not None else self.n_long,
-             "transmural": self.n_trans}
-        if self.transmural_gauss_points != 3:
-            d["transmural_gauss_points"] = self.transmural_gauss_points
-        return d
-
-    @property
-    def counts(self) -> tuple[int, int, int]:
-        """(n_circ, n_long, n_trans) element counts."""
-        return (self.n_circ, self.n_long, self.n_trans)
-
-    @property
-    def is_uniform(self) -> bool:
-        """True when the element rows are evenly spaced base to apex."""
-        return self.level_elements is None or len(set(self.level_elements)) == 1
-
-    def template(self) -> LVTemplate:
-        if self.is_uniform:
-            return LVTemplate(self.n_circ, self.n_long, self.n_trans)
-        return LVTemplate.graded(self.n_circ, self.level_elements, self.n_trans)
-
-    def describe(self) -> str:
-        """Short label, e.g. ``"6x(2,1,1,2)x1, 5 GP"``."""
-        long = str(self.n_long) if self.is_uniform else "(" + ",".join(map(str, self.level_elements)) + ")"
-        gp = "" if self.transmural_gauss_points == 3 else f", {self.transmural_gauss_points} GP"
-        return f"{self.n_circ}x{long}x{self.n_trans}{gp}"
-
-
-def resolution_label(spec: str) -> str:
-    """Table label of a benchmark resolution spec: ``"default: 6x(2,1,1,2)x1, 5 GP"`` or ``"12x8x2"``."""
-    described = LVResolution.from_spec(spec).describe()
-    return f"{spec}: {described}" if spec in RESOLUTION_PRESETS else described
-
-
-#: LV resolutions. ``default`` is the cheapest mesh found whose 25 default-LV
-#: outputs are within 1 % of ``accurate``, the same mesh with twice the elements
-#: in every direction, which meets the Land et al. (2015) problem 2 apex
-#: positions to ±0.05 mm (docs/simulator.md); ``coarse`` was the default of
-#: lvcore 0.1 (the bundled emulators were trained on it).
-RESOLUTION_PRESETS = {
-    "fast": LVResolution(6, 4, 1),
-    "coarse": LVResolution(12, 4, 1),
-    "default": LVResolution.graded(6, (2, 1, 1, 2), 1, transmural_gauss_points=5),
-    "accurate": LVResolution.graded(12, (4, 2, 2, 4), 2, transmural_gauss_points=5),
-}
-#: Box resolutions as elements across the smallest box dimension; other
-#: directions get the same element size (rounded up).
-BOX_RESOLUTION_PRESETS = {"fast": 1, "default": 2, "accurate": 3}
+from lvcore.geometry.template import LVTemplate
+from lvcore.mechanics.quadrature import gauss_hex_points, reference_gradients
+from lvcore.mechanics.resolution import BoxResolution, LVResolution
 
 BOX_FACE_NAMES = ("x0", "x1", "y0", "y1", "z0", "z1")
 
@@ -230,21 +128,14 @@ def _flip(faces):
     return faces[:, idx]
 
 
-def box_resolution(size, preset_or_counts) -> tuple[int, int, int]:
-    """Element counts for a box: a preset name or explicit (nx, ny, nz)."""
-    if isinstance(preset_or_counts, str):
-        per_min = BOX_RESOLUTION_PRESETS[preset_or_counts]
-        h = min(size) / per_min
-        return tuple(max(1, int(math.ceil(L / h - 1e-9))) for L in size)
-    return tuple(int(v) for v in preset_or_counts)
-
-
 def box_mesh(size, resolution) -> FEMesh:
-    """Q2 mesh of the box ``[0, Lx] x [0, Ly] x [0, Lz]`` (mm) with ``resolution`` = (nx, ny, nz)."""
+    """Q2 mesh of the box ``[0, Lx] x [0, Ly] x [0, Lz]`` (mm) with ``resolution`` a BoxResolution or (nx, ny, nz)."""
     size = tuple(float(v) for v in size)
     if any(not (L > 0) for L in size):
         raise GeometryError(f"box size must be positive, got {size}")
-    nx, ny, nz = (int(v) for v in resolution)
+    if not isinstance(resolution, BoxResolution):
+        resolution = BoxResolution(*resolution)
+    nx, ny, nz = resolution.xyz
     mx, my, mz = 2 * nx + 1, 2 * ny + 1, 2 * nz + 1
     xs = [np.linspace(0.0, L, m) for L, m in zip(size, (mx, my, mz))]
 
@@ -285,13 +176,3 @@ def box_mesh(size, resolution) -> FEMesh:
         node_sets[name] = np.unique(faces)
     return FEMesh(kind="box", nodes=nodes, elements=elements, resolution=(nx, ny, nz),
                   surfaces=surfaces, node_sets=node_sets)
-
-
-def face_normals(nodes: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Unit normals ``dX/da x dX/db`` at the centre of each quad (n_faces, 3)."""
-    _, da, db = quad9_shape(np.zeros((1, 2)))
-    X = nodes[faces]
-    ta = np.einsum("a,fai->fi", da[0], X)
-    tb = np.einsum("a,fai->fi", db[0], X)
-    n = np.cross(ta, tb)
-    return n / np.linalg.norm(n, axis=1, keepdims=True)

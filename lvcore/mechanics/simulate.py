@@ -21,7 +21,8 @@ from lvcore import units
 from lvcore.exceptions import CaseError, SolverError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
 from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables
-from lvcore.mechanics.mesh import RESOLUTION_PRESETS, FEMesh, box_mesh, box_resolution, lv_mesh
+from lvcore.mechanics.mesh import FEMesh, box_mesh, lv_mesh
+from lvcore.mechanics.resolution import RESOLUTION_PRESETS, BoxResolution
 from lvcore.mechanics.system import DiscreteSystem
 
 #: Bulk penalty relative to the law's largest stiffness parameter.
@@ -92,12 +93,9 @@ def build_mesh(case) -> FEMesh:
     g = case.geometry
     preset = g.preset or "default"
     if g.kind == "box":
-        res = g.resolution.xyz if g.resolution is not None else box_resolution(g.box_size, preset)
+        res = g.resolution if g.resolution is not None else BoxResolution.from_preset(g.box_size, preset)
         return box_mesh(g.box_size, res)
-    if g.resolution is not None:
-        res = g.resolution.lv()
-    else:
-        res = RESOLUTION_PRESETS[preset]
+    res = g.resolution if g.resolution is not None else RESOLUTION_PRESETS[preset]
     return lv_mesh(g.position_map(), res, g.base_z())
 
 
