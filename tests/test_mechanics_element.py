@@ -11,6 +11,13 @@ from lvcore.mechanics.case import FibreSpec
 from lvcore.mechanics.system import DiscreteSystem
 
 
+HO = materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6})
+
+
+def _model(law, kappa):
+    return materials.ConstitutiveModel(law, materials.MixedPenalty(kappa))
+
+
 def _check_tangent(S, rng, scale=0.05):
     u = rng.normal(size=S.n_free) * scale
     p = rng.normal(size=(S.mesh.n_elements, 4)) * 0.5
@@ -30,9 +37,7 @@ def _check_tangent(S, rng, scale=0.05):
 def test_lv_tangent_matches_finite_differences():
     m = lv_mesh(LAND_LV.position, (6, 4, 1), 5.0)
     frames = build_frames(m, FibreSpec(-60.0, 90.0, None))
-    params = materials.param_vector("holzapfel-ogden", {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6})
-    S = DiscreteSystem(m, "holzapfel-ogden", params, frames, 1e3, "endocardium", 2.0,
-                       boundary.fixed_dofs(m, "sliding"))
+    S = DiscreteSystem(m, _model(HO, 1e3), frames, "endocardium", 2.0, boundary.fixed_dofs(m, "sliding"))
     _check_tangent(S, np.random.default_rng(0))
     assert abs(K_sym := (S.tangent(np.zeros(S.n_free), S.zero_pressure(), 1.0)[1])).max() > 0
     assert abs(K_sym - K_sym.T).max() < 1e-9 * abs(K_sym).max()
@@ -42,16 +47,15 @@ def test_box_follower_tangent_matches_finite_differences():
     m = box_mesh((4.0, 1.0, 1.0), (3, 1, 1))
     xi, _ = gauss_hex(3)
     frames = build_frames(m, FibreSpec(0.0, 0.0, (1.0, 0.0, 0.0)))
-    params = materials.param_vector("guccione", {"C": 2, "bf": 8, "bt": 2, "bfs": 4})
-    S = DiscreteSystem(m, "guccione", params, frames, 2e3, "z0", 0.5, boundary.fixed_dofs(m, clamped_faces=("x0",)))
+    law = materials.Guccione.from_params({"C": 2, "bf": 8, "bt": 2, "bfs": 4})
+    S = DiscreteSystem(m, _model(law, 2e3), frames, "z0", 0.5, boundary.fixed_dofs(m, clamped_faces=("x0",)))
     _check_tangent(S, np.random.default_rng(1), scale=0.02)
 
 
 def test_zero_load_is_equilibrium_and_rigid_motion_is_stress_free():
     m = lv_mesh(LAND_LV.position, (6, 4, 1), 5.0)
     frames = build_frames(m, FibreSpec(-60.0, 90.0, None))
-    params = materials.param_vector("holzapfel-ogden", {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6})
-    S = DiscreteSystem(m, "holzapfel-ogden", params, frames, 1e3, "endocardium", 2.0, [])
+    S = DiscreteSystem(m, _model(HO, 1e3), frames, "endocardium", 2.0, [])
     r_u, r_p, mj, w = S.residual(np.zeros(S.n_free), S.zero_pressure(), 0.0)
     assert np.abs(r_u).max() < 1e-10 and np.abs(r_p).max() < 1e-12 and mj == pytest.approx(1.0)
     th = 0.3

@@ -25,6 +25,7 @@ from lvcore import units
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE
+from lvcore.mechanics.materials import LAWS, MaterialLaw
 from lvcore.mechanics.resolution import (
     BOX_RESOLUTION_PRESET_NAMES,
     RESOLUTION_PRESET_NAMES,
@@ -35,18 +36,8 @@ from lvcore.mechanics.resolution import (
 
 GEOMETRY_KINDS = ("ellipsoid", "default", "mesh", "pca", "box")
 LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
-MATERIAL_LAWS = ("holzapfel-ogden", "guccione", "neo-hookean")
-#: Required and optional parameters of each law (all must be > 0; a, af, as, afs, C, mu in kPa).
-LAW_REQUIRED = {
-    "holzapfel-ogden": ("a", "b", "af", "bf"),
-    "guccione": ("C", "bf", "bt", "bfs"),
-    "neo-hookean": ("mu",),
-}
-LAW_DEFAULTS = {
-    "holzapfel-ogden": dict(units.HO_FIXED),
-    "guccione": {},
-    "neo-hookean": {},
-}
+#: Law names of ``material.law``; parameters, required ones and defaults come from :data:`materials.LAWS`.
+MATERIAL_LAWS = tuple(LAWS)
 BOX_FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
 BASE_CONDITIONS = ("clamped", "sliding")
 STRAIN_LAYERS = ("endocardial", "wall")
@@ -129,14 +120,6 @@ class GeometrySpec:
 
 
 @dataclass(frozen=True)
-class MaterialSpec:
-    """Constitutive law and its complete parameter set (kPa for stiffnesses, exponents -)."""
-
-    law: str
-    params: Mapping[str, float]
-
-
-@dataclass(frozen=True)
 class FibreSpec:
     """Rule-based fibre helix angles (deg, endo to epi) or one constant direction."""
 
@@ -170,10 +153,15 @@ class OutputSpec:
 
 @dataclass(frozen=True)
 class Case:
-    """One forward simulation, validated. Build with :meth:`from_dict` or :func:`load_case`."""
+    """One forward simulation, validated. Build with :meth:`from_dict` or :func:`load_case`.
+
+    ``material`` is the law with its complete parameter set (a
+    :class:`~lvcore.mechanics.materials.MaterialLaw`: ``.law`` is the
+    case-schema name, ``.params`` the parameters by case-schema name).
+    """
 
     geometry: GeometrySpec
-    material: MaterialSpec
+    material: MaterialLaw
     fibres: FibreSpec = field(default_factory=FibreSpec)
     load: LoadSpec = field(default_factory=lambda: LoadSpec(units.mmhg_to_kpa(units.DEFAULT_EDP_MMHG)))
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
@@ -451,18 +439,13 @@ def _template_nodes(nodes, where: str) -> np.ndarray:
     return nodes
 
 
-def _parse_material(m) -> MaterialSpec:
-    _check_keys(m, "material", ("law",) + tuple(sorted({k for v in LAW_REQUIRED.values() for k in v}
-                                                        | set(units.HO_FIXED))), required=("law",))
-    law = _string(m["law"], "material.law", MATERIAL_LAWS)
-    allowed = ("law",) + LAW_REQUIRED[law] + tuple(LAW_DEFAULTS[law])
-    _check_keys(m, "material", allowed, required=LAW_REQUIRED[law])
-    params = dict(LAW_DEFAULTS[law])
-    for key in LAW_REQUIRED[law] + tuple(LAW_DEFAULTS[law]):
-        if key in m:
-            params[key] = _number(m[key], f"material.{key}", positive=True)
-    ordered = {k: params[k] for k in LAW_REQUIRED[law] + tuple(LAW_DEFAULTS[law])}
-    return MaterialSpec(law, ordered)
+def _parse_material(m) -> MaterialLaw:
+    all_keys = tuple(sorted({k for cls in LAWS.values() for k in cls.keys}))
+    _check_keys(m, "material", ("law",) + all_keys, required=("law",))
+    cls = LAWS[_string(m["law"], "material.law", MATERIAL_LAWS)]
+    _check_keys(m, "material", ("law",) + cls.keys, required=cls.required)
+    params = {k: _number(m[k], f"material.{k}", positive=True) if k in m else cls.optional[k] for k in cls.keys}
+    return cls.from_params(params)
 
 
 def _parse_fibres(f) -> FibreSpec:

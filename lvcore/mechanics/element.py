@@ -31,17 +31,9 @@ import jax
 import jax.numpy as jnp
 
 from lvcore.mechanics.kinematics import cofactor, deformation_gradient, det3
-from lvcore.mechanics.materials import energy_function
 
 
-def _psi(W, params):
-    def psi(Fq, frame, pq):
-        return W(Fq, frame, params) + pq * det3(Fq)
-
-    return psi
-
-
-def element_residual(x_e, p_e, dNdX, wdet, frames, Minv, P, params, kappa, law):
+def element_residual(x_e, p_e, dNdX, wdet, frames, Minv, P, model):
     """Element residuals of the mixed form.
 
     Parameters
@@ -49,25 +41,25 @@ def element_residual(x_e, p_e, dNdX, wdet, frames, Minv, P, params, kappa, law):
     x_e : (27, 3) current node positions (mm); p_e : (4,) pressure coefficients (kPa).
     dNdX : (q, 27, 3); wdet : (q,) (mm³); frames : (q, 3, 3) rows f0, s0, n0.
     Minv : (4, 4) inverse P1 mass matrix; P : (q, 4) P1 basis at the points.
-    params : material parameters; kappa : bulk penalty (kPa); law : str (static).
+    model : :class:`lvcore.mechanics.materials.ConstitutiveModel` (law and bulk penalty κ, kPa).
 
     Returns
     -------
     r_u : (27, 3) internal forces (mN); r_p : (4,) constraint residual (mm³);
     min_J : smallest pointwise J; energy : ∫ W dV (kPa mm³).
     """
-    W = energy_function(law)
+    kappa = model.kappa
     F = deformation_gradient(x_e, dNdX)
     J = det3(F)
     pq = P @ p_e
-    Pst = jax.vmap(jax.grad(_psi(W, params)))(F, frames, pq)
+    Pst = jax.vmap(jax.grad(model.psi))(F, frames, pq)
     r_u = jnp.einsum("q,qiJ,qaJ->ai", wdet, Pst, dNdX)
     r_p = P.T @ (wdet * (J - 1.0)) - jnp.linalg.solve(Minv, p_e) / kappa
-    w = jax.vmap(W, in_axes=(0, 0, None))(F, frames, params)
+    w = jax.vmap(model.material.strain_energy)(F, frames)
     return r_u, r_p, jnp.min(J), jnp.sum(wdet * w)
 
 
-def element_tangent(x_e, p_e, dNdX, wdet, frames, Minv, P, params, kappa, law):
+def element_tangent(x_e, p_e, dNdX, wdet, frames, Minv, P, model):
     """Condensed element system.
 
     Returns
@@ -75,11 +67,11 @@ def element_tangent(x_e, p_e, dNdX, wdet, frames, Minv, P, params, kappa, law):
     rhs : (81,) condensed residual ``r_u + κ Dᵀ M⁻¹ r_p``;
     K : (81, 81) condensed tangent; D : (4, 81); r_p : (4,).
     """
-    W = energy_function(law)
+    kappa = model.kappa
     F = deformation_gradient(x_e, dNdX)
     J = det3(F)
     pq = P @ p_e
-    psi = _psi(W, params)
+    psi = model.psi
     Pst = jax.vmap(jax.grad(psi))(F, frames, pq)  # (q, 3, 3)
     A = jax.vmap(jax.hessian(psi))(F, frames, pq)  # (q, 3, 3, 3, 3)
     r_u = jnp.einsum("q,qiJ,qaJ->ai", wdet, Pst, dNdX).reshape(81)

@@ -1,42 +1,41 @@
-"""Hyperelastic strain-energy densities (kPa), pure jax.numpy functions.
+"""Constitutive models: typed hyperelastic laws, the compressibility term and their composition.
 
-Every law has the signature ``W(F, frame, params) -> scalar`` with ``F`` the
-deformation gradient (3, 3), ``frame`` the rows ``(f0, s0, n0)`` of the local
-fibre/sheet/sheet-normal frame (reference configuration) and ``params`` a 1-D
-array in the order of :data:`PARAM_ORDER`. Incompressibility is imposed
-separately (by the volumetric penalty in :mod:`lvcore.mechanics.element`);
-the isotropic parts use the isochoric invariant ``Ī1 = J^{-2/3} I1`` so that
-the reference configuration is stress free.
+Following fenicsx-pulse (``material_models/holzapfelogden.py``,
+``cardiac_model.py``), each law is a frozen dataclass holding its parameters,
+with a ``default_parameters()`` constructor and a
+``strain_energy(F, frame)`` method; a :class:`ConstitutiveModel` composes a
+law with the compressibility term (:class:`MixedPenalty`). The element
+kernels (:mod:`lvcore.mechanics.element`) take the composed model; no law
+name is threaded through them.
 
-Laws
-----
-* ``holzapfel-ogden`` (Holzapfel & Ogden 2009; 8 parameters):
-  ``W = a/(2b)(e^{b(Ī1−3)} − 1) + Σ_{i=f,s} a_i/(2b_i)(e^{b_i (I4i−1)²} − 1)·[I4i > 1]
-  + a_fs/(2b_fs)(e^{b_fs I8fs²} − 1)``, with ``I4f = f0·C f0``, ``I4s = s0·C s0``,
-  ``I8fs = f0·C s0``. The fibre and sheet terms act only in tension.
-* ``guccione`` (Guccione et al. 1991, as in Land et al. 2015):
-  ``W = C/2 (e^Q − 1)``, ``Q = b_f E11² + b_t (E22² + E33² + 2 E23²) + 2 b_fs (E12² + E13²)``,
-  ``E`` the isochoric Green strain ``(J^{-2/3} C − I)/2`` in fibre coordinates
-  (1 = f0, 2 = s0, 3 = n0); the deviatoric–volumetric split makes the law
-  well behaved under the volumetric penalty and equals Guccione's at J = 1.
-* ``neo-hookean``: ``W = mu/2 (Ī1 − 3)``.
+Every class here is a JAX pytree (:func:`jax.tree_util.register_dataclass`):
+the parameters are the leaves, the class is the static part. A jitted
+kernel therefore compiles once per law (and mesh topology) and takes new
+parameter values without recompiling, and parameter derivatives are plain
+``jax.jacfwd`` over :meth:`MaterialLaw.from_vector`.
+
+Conventions: ``F`` the deformation gradient (3, 3); ``frame`` the rows
+``(f0, s0, n0)`` of the local fibre/sheet/sheet-normal frame (reference
+configuration); energies in kPa. Incompressibility is imposed separately (by
+the compressibility term); the isotropic parts use the isochoric invariant
+``Ī1 = J^{-2/3} I1`` so that the reference configuration is stress free.
+
+:data:`LAWS` (case-schema name -> class) is the one registry of laws; the
+case parser (:mod:`lvcore.mechanics.case`) reads required parameters and
+defaults from it.
 """
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from lvcore import units
 from lvcore.mechanics.kinematics import det3, green_strain, isochoric_i1, right_cauchy_green
-
-#: Parameter order of the ``params`` array for each law.
-PARAM_ORDER = {
-    "holzapfel-ogden": ("a", "b", "af", "bf", "as", "bs", "afs", "bfs"),
-    "guccione": ("C", "bf", "bt", "bfs"),
-    "neo-hookean": ("mu",),
-}
-#: Parameters with units of stress (kPa); used to scale the volumetric penalty.
-MODULUS_KEYS = {"holzapfel-ogden": ("a", "af", "as", "afs"), "guccione": ("C",), "neo-hookean": ("mu",)}
 
 
 def _expm1_over(a, b, x):
@@ -44,66 +43,279 @@ def _expm1_over(a, b, x):
     return a / (2.0 * b) * jnp.expm1(b * x)
 
 
-def holzapfel_ogden(F, frame, params):
-    """Holzapfel–Ogden energy density (kPa); see module docstring."""
-    a, b, af, bf, as_, bs, afs, bfs = (params[i] for i in range(8))
-    C = right_cauchy_green(F)
-    f0, s0 = frame[0], frame[1]
-    i4f = f0 @ C @ f0
-    i4s = s0 @ C @ s0
-    i8 = f0 @ C @ s0
-    ef = jnp.where(i4f > 1.0, i4f - 1.0, 0.0)
-    es = jnp.where(i4s > 1.0, i4s - 1.0, 0.0)
-    return (
-        _expm1_over(a, b, isochoric_i1(F) - 3.0)
-        + _expm1_over(af, bf, ef * ef)
-        + _expm1_over(as_, bs, es * es)
-        + _expm1_over(afs, bfs, i8 * i8)
-    )
+def _pytree(cls):
+    """Register a frozen dataclass as a JAX pytree with every field a leaf."""
+    return jax.tree_util.register_dataclass(
+        cls, data_fields=[f.name for f in dataclasses.fields(cls)], meta_fields=[])
 
 
-def guccione(F, frame, params):
-    """Guccione energy density (kPa) in fibre coordinates; see module docstring."""
-    c, bf, bt, bfs = (params[i] for i in range(4))
-    Fbar = F * det3(F) ** (-1.0 / 3.0)
-    E = frame @ green_strain(Fbar) @ frame.T
-    Q = (
-        bf * E[0, 0] ** 2
-        + bt * (E[1, 1] ** 2 + E[2, 2] ** 2 + 2.0 * E[1, 2] ** 2)
-        + 2.0 * bfs * (E[0, 1] ** 2 + E[0, 2] ** 2)
-    )
-    return 0.5 * c * jnp.expm1(Q)
+class MaterialLaw:
+    """Base class of the hyperelastic laws (frozen dataclasses of their parameters).
+
+    Class attributes
+    ----------------
+    law : str
+        The case-schema name (``material.law``).
+    keys : tuple of str
+        Case-schema names of the parameters, in field (and vector) order.
+    required : tuple of str
+        Parameters a case must give; the others default to :attr:`optional`.
+    optional : mapping
+        Defaults of the parameters a case may leave out.
+    stress_keys : tuple of str
+        Parameters with units of stress (kPa); the largest scales the
+        compressibility penalty (:meth:`modulus`).
+    """
+
+    law: ClassVar[str]
+    keys: ClassVar[tuple[str, ...]]
+    required: ClassVar[tuple[str, ...]]
+    optional: ClassVar[Mapping[str, float]] = {}
+    stress_keys: ClassVar[tuple[str, ...]]
+
+    @classmethod
+    def default_parameters(cls) -> dict[str, float]:
+        """A complete literature parameter set (case-schema names -> values)."""
+        raise NotImplementedError
+
+    @classmethod
+    def from_params(cls, params: Mapping[str, float]) -> "MaterialLaw":
+        """The law from case-schema parameter names; :attr:`optional` fills the ones left out.
+
+        Raises
+        ------
+        ValueError
+            Naming missing or unknown parameters.
+        """
+        p = {**cls.optional, **dict(params)}
+        missing = [k for k in cls.keys if k not in p]
+        if missing:
+            raise ValueError(f"material law {cls.law!r} needs parameters {missing}")
+        unknown = sorted(set(p) - set(cls.keys))
+        if unknown:
+            raise ValueError(f"material law {cls.law!r} has no parameters {unknown}; its parameters are {list(cls.keys)}")
+        return cls(*(float(p[k]) for k in cls.keys))
+
+    @classmethod
+    def from_vector(cls, v) -> "MaterialLaw":
+        """The law from a parameter vector in :attr:`keys` order (entries may be JAX tracers)."""
+        return cls(*(v[i] for i in range(len(cls.keys))))
+
+    @property
+    def params(self) -> dict[str, float]:
+        """Parameters by case-schema name, in :attr:`keys` order."""
+        return {k: getattr(self, f.name) for k, f in zip(self.keys, dataclasses.fields(self))}
+
+    def vector(self) -> np.ndarray:
+        """Parameters as a float64 array in :attr:`keys` order."""
+        return np.array([float(getattr(self, f.name)) for f in dataclasses.fields(self)], dtype=np.float64)
+
+    def modulus(self) -> float:
+        """A stiffness scale (kPa): the largest stress-like parameter."""
+        p = self.params
+        return float(max(float(p[k]) for k in self.stress_keys))
+
+    def strain_energy(self, F, frame):
+        """Strain-energy density (kPa) at deformation gradient ``F`` in the fibre ``frame``."""
+        raise NotImplementedError
 
 
-def neo_hookean(F, frame, params):
-    """Isochoric neo-Hookean energy density (kPa): mu/2 (Ī1 − 3)."""
-    return 0.5 * params[0] * (isochoric_i1(F) - 3.0)
+@_pytree
+@dataclass(frozen=True)
+class HolzapfelOgden(MaterialLaw):
+    """Holzapfel & Ogden (2009) orthotropic law, 8 parameters.
+
+    ``W = a/(2b)(e^{b(Ī1−3)} − 1) + Σ_{i=f,s} a_i/(2b_i)(e^{b_i (I4i−1)²} − 1)·[I4i > 1]
+    + a_fs/(2b_fs)(e^{b_fs I8fs²} − 1)``, with ``I4f = f0·C f0``,
+    ``I4s = s0·C s0``, ``I8fs = f0·C s0``. The fibre and sheet terms act only
+    in tension.
+
+    Attributes
+    ----------
+    a, a_f, a_s, a_fs : float
+        Stiffnesses (kPa): matrix, fibre, sheet, fibre-sheet.
+    b, b_f, b_s, b_fs : float
+        Exponents (-).
+    """
+
+    a: Any
+    b: Any
+    a_f: Any
+    b_f: Any
+    a_s: Any = units.HO_FIXED["as"]
+    b_s: Any = units.HO_FIXED["bs"]
+    a_fs: Any = units.HO_FIXED["afs"]
+    b_fs: Any = units.HO_FIXED["bfs"]
+
+    law: ClassVar[str] = "holzapfel-ogden"
+    keys: ClassVar[tuple[str, ...]] = ("a", "b", "af", "bf", "as", "bs", "afs", "bfs")
+    required: ClassVar[tuple[str, ...]] = ("a", "b", "af", "bf")
+    optional: ClassVar[Mapping[str, float]] = dict(units.HO_FIXED)
+    stress_keys: ClassVar[tuple[str, ...]] = ("a", "af", "as", "afs")
+
+    @classmethod
+    def default_parameters(cls) -> dict[str, float]:
+        """The chapter's reference θ (``units.HO_REFERENCE_THETA``) with the fixed sheet terms (Gao et al. 2017)."""
+        return {**units.HO_REFERENCE_THETA, **units.HO_FIXED}
+
+    def strain_energy(self, F, frame):
+        C = right_cauchy_green(F)
+        f0, s0 = frame[0], frame[1]
+        i4f = f0 @ C @ f0
+        i4s = s0 @ C @ s0
+        i8 = f0 @ C @ s0
+        ef = jnp.where(i4f > 1.0, i4f - 1.0, 0.0)
+        es = jnp.where(i4s > 1.0, i4s - 1.0, 0.0)
+        return (
+            _expm1_over(self.a, self.b, isochoric_i1(F) - 3.0)
+            + _expm1_over(self.a_f, self.b_f, ef * ef)
+            + _expm1_over(self.a_s, self.b_s, es * es)
+            + _expm1_over(self.a_fs, self.b_fs, i8 * i8)
+        )
 
 
-LAWS = {"holzapfel-ogden": holzapfel_ogden, "guccione": guccione, "neo-hookean": neo_hookean}
+@_pytree
+@dataclass(frozen=True)
+class Guccione(MaterialLaw):
+    """Guccione et al. (1991) transversely isotropic law, as in Land et al. (2015).
+
+    ``W = C/2 (e^Q − 1)``, ``Q = b_f E11² + b_t (E22² + E33² + 2 E23²) + 2 b_fs (E12² + E13²)``,
+    ``E`` the isochoric Green strain ``(J^{-2/3} C − I)/2`` in fibre
+    coordinates (1 = f0, 2 = s0, 3 = n0); the deviatoric–volumetric split
+    makes the law well behaved under the volumetric penalty and equals
+    Guccione's at J = 1.
+
+    Attributes
+    ----------
+    C : float
+        Stiffness (kPa).
+    b_f, b_t, b_fs : float
+        Fibre, transverse and fibre-shear exponents (-).
+    """
+
+    C: Any
+    b_f: Any
+    b_t: Any
+    b_fs: Any
+
+    law: ClassVar[str] = "guccione"
+    keys: ClassVar[tuple[str, ...]] = ("C", "bf", "bt", "bfs")
+    required: ClassVar[tuple[str, ...]] = ("C", "bf", "bt", "bfs")
+    stress_keys: ClassVar[tuple[str, ...]] = ("C",)
+
+    @classmethod
+    def default_parameters(cls) -> dict[str, float]:
+        """Land et al. (2015) problem 3: C = 2 kPa, b_f = 8, b_t = 2, b_fs = 4."""
+        return {"C": 2.0, "bf": 8.0, "bt": 2.0, "bfs": 4.0}
+
+    def strain_energy(self, F, frame):
+        Fbar = F * det3(F) ** (-1.0 / 3.0)
+        E = frame @ green_strain(Fbar) @ frame.T
+        Q = (
+            self.b_f * E[0, 0] ** 2
+            + self.b_t * (E[1, 1] ** 2 + E[2, 2] ** 2 + 2.0 * E[1, 2] ** 2)
+            + 2.0 * self.b_fs * (E[0, 1] ** 2 + E[0, 2] ** 2)
+        )
+        return 0.5 * self.C * jnp.expm1(Q)
 
 
-def energy_function(law: str):
-    """The energy density function of ``law`` (raises ValueError naming the choices)."""
+@_pytree
+@dataclass(frozen=True)
+class NeoHookean(MaterialLaw):
+    """Isochoric neo-Hookean law: ``W = mu/2 (Ī1 − 3)``.
+
+    Attributes
+    ----------
+    mu : float
+        Shear modulus (kPa).
+    """
+
+    mu: Any
+
+    law: ClassVar[str] = "neo-hookean"
+    keys: ClassVar[tuple[str, ...]] = ("mu",)
+    required: ClassVar[tuple[str, ...]] = ("mu",)
+    stress_keys: ClassVar[tuple[str, ...]] = ("mu",)
+
+    @classmethod
+    def default_parameters(cls) -> dict[str, float]:
+        """mu = 1 kPa (a soft-tissue scale; there is no literature default)."""
+        return {"mu": 1.0}
+
+    def strain_energy(self, F, frame):
+        return 0.5 * self.mu * (isochoric_i1(F) - 3.0)
+
+
+#: The one registry of material laws: case-schema name -> law class.
+LAWS: dict[str, type[MaterialLaw]] = {cls.law: cls for cls in (HolzapfelOgden, Guccione, NeoHookean)}
+
+
+def law_class(name: str) -> type[MaterialLaw]:
+    """The law class of case-schema name ``name`` (raises ValueError naming the choices)."""
     try:
-        return LAWS[law]
+        return LAWS[name]
     except KeyError:
-        raise ValueError(f"unknown material law {law!r}; choose one of {sorted(LAWS)}") from None
+        raise ValueError(f"unknown material law {name!r}; choose one of {sorted(LAWS)}") from None
 
 
-def param_vector(law: str, params) -> np.ndarray:
-    """Parameters as a float64 array in :data:`PARAM_ORDER` (HO fixed values filled in)."""
-    p = dict(params)
-    if law == "holzapfel-ogden":
-        for k, v in units.HO_FIXED.items():
-            p.setdefault(k, v)
-    missing = [k for k in PARAM_ORDER[law] if k not in p]
-    if missing:
-        raise ValueError(f"material law {law!r} needs parameters {missing}")
-    return np.array([float(p[k]) for k in PARAM_ORDER[law]], dtype=np.float64)
+def material_law(name: str, params: Mapping[str, float]) -> MaterialLaw:
+    """The law ``name`` with case-schema parameters ``params`` (optional ones filled in)."""
+    return law_class(name).from_params(params)
 
 
-def modulus_scale(law: str, params) -> float:
-    """A stiffness scale (kPa) of the law: the largest stress-like parameter."""
-    p = dict(zip(PARAM_ORDER[law], param_vector(law, params)))
-    return float(max(p[k] for k in MODULUS_KEYS[law]))
+@_pytree
+@dataclass(frozen=True)
+class MixedPenalty:
+    """Near incompressibility by a mixed, element-wise P1 pressure ``p`` and a bulk penalty.
+
+    Adds ``∫ p (J − 1) dV − ∫ p² / (2κ) dV`` to the energy (see
+    :mod:`lvcore.mechanics.element`); eliminating ``p`` leaves the penalty
+    ``κ/2 ∫ (Π J − 1)²``.
+
+    Attributes
+    ----------
+    kappa : float
+        Bulk penalty (kPa).
+    """
+
+    kappa: Any
+
+    def pressure_energy(self, F, p):
+        """The pointwise ``p J`` term (kPa) whose F-derivatives enter the element residual and tangent."""
+        return p * det3(F)
+
+
+@_pytree
+@dataclass(frozen=True)
+class ConstitutiveModel:
+    """A hyperelastic law composed with the compressibility term (as fenicsx-pulse's ``CardiacModel``).
+
+    Attributes
+    ----------
+    material : MaterialLaw
+    compressibility : MixedPenalty
+    """
+
+    material: MaterialLaw
+    compressibility: MixedPenalty
+
+    @property
+    def kappa(self):
+        """Bulk penalty (kPa)."""
+        return self.compressibility.kappa
+
+    def psi(self, F, frame, p):
+        """Pointwise energy ``W(F) + p J`` (kPa) of the mixed form at pressure ``p``."""
+        return self.material.strain_energy(F, frame) + self.compressibility.pressure_energy(F, p)
+
+    def with_parameters(self, v) -> "ConstitutiveModel":
+        """The same model with the law's parameters replaced by vector ``v`` (:attr:`MaterialLaw.keys` order)."""
+        return ConstitutiveModel(type(self.material).from_vector(v), self.compressibility)
+
+    def as_arrays(self) -> "ConstitutiveModel":
+        """Every parameter as a float64 JAX scalar (a fixed jit signature, whatever the input types)."""
+        return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.float64), self)
+
+
+__all__ = ["MaterialLaw", "HolzapfelOgden", "Guccione", "NeoHookean", "LAWS", "law_class", "material_law",
+           "MixedPenalty", "ConstitutiveModel"]

@@ -22,7 +22,7 @@ def output_sensitivities(system, u_free, p, output_fn, param_names, which) -> di
     ----------
     system : DiscreteSystem at its converged state ``(u_free, p)`` (full load).
     output_fn : jax function of the full displacement vector -> (n_out,) outputs.
-    param_names : names of all entries of ``system.params``.
+    param_names : names of the law's parameters, in its ``keys`` (vector) order.
     which : names to differentiate with respect to.
 
     Returns

@@ -114,13 +114,11 @@ def build_frames(mesh: FEMesh, fib) -> np.ndarray:
 def build_system(case, mesh: FEMesh | None = None) -> DiscreteSystem:
     """The discrete system of ``case`` (mesh, fibres, material, load, boundary conditions)."""
     mesh = mesh or build_mesh(case)
-    law = case.material.law
-    params = materials.param_vector(law, case.material.params)
-    modulus = materials.modulus_scale(law, case.material.params)
+    law = case.material
+    model = materials.ConstitutiveModel(law, materials.MixedPenalty(KAPPA_FACTOR * law.modulus()))
     fixed = boundary.fixed_dofs(mesh, case.boundary.base, case.boundary.clamped_faces)
     surface = case.load.surface if mesh.kind == "box" else "endocardium"
-    return DiscreteSystem(mesh, law, params, build_frames(mesh, case.fibres), KAPPA_FACTOR * modulus,
-                          surface, case.load.pressure_kpa, fixed, modulus=modulus)
+    return DiscreteSystem(mesh, model, build_frames(mesh, case.fibres), surface, case.load.pressure_kpa, fixed)
 
 
 def _volume_args(mesh: FEMesh):
@@ -218,8 +216,8 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         if with_sensitivities:
             from lvcore.mechanics.sensitivities import output_sensitivities
 
-            names = materials.PARAM_ORDER[case.material.law]
-            which = THETA_NAMES if case.material.law == "holzapfel-ogden" else names
+            names = case.material.keys
+            which = THETA_NAMES if isinstance(case.material, materials.HolzapfelOgden) else names
             sens = output_sensitivities(system, res.u, res.p, output_fn, names, which)
     if not (np.all(np.isfinite(x)) and (strains is None or np.all(np.isfinite(strains)))):
         msg = "solver produced non-finite outputs"

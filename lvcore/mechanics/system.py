@@ -23,34 +23,29 @@ import numpy as np
 from lvcore.mechanics import loads
 from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern
 from lvcore.mechanics.element import element_residual, element_tangent
+from lvcore.mechanics.materials import ConstitutiveModel
 from lvcore.mechanics.mesh import FEMesh
 from lvcore.mechanics.quadrature import p1_basis, reference_gradients
 
-#: Largest number of elements per batch in the element loops (lax.map); bounds peak memory.
-#: Small batches keep the per-element 81x81 tangents in cache: on the 2-core CPU
-#: machine 8 made the default-LV tangent ~2x faster than 48 (and 12,8,2 ~1.4x than 64).
+#: Elements per batch in the element loops (lax.map); bounds peak memory. Small
+#: batches keep the per-element 81x81 tangents in cache: on the 2-core CPU
+#: machine 8 made the default-LV tangent ~2x faster than 48 (and 12,8,2 ~1.4x
+#: than 64). lax.map runs a remainder that does not fill a batch as one extra
+#: vectorised step.
 ELEMENT_BATCH = 8
-
-
-def _batch_size(n: int) -> int:
-    """Largest divisor of ``n`` not above ELEMENT_BATCH (no remainder loop to compile)."""
-    for b in range(min(n, ELEMENT_BATCH), 0, -1):
-        if n % b == 0:
-            return b if b >= 8 or n <= 8 else min(n, ELEMENT_BATCH)
-    return 1
 
 
 def _elem_args(data, x, p):
     return (x[data["elements"]], p, data["dNdX"], data["wdet"], data["frames"], data["Minv"])
 
 
-def _map_elements(fn, data, x, p, params, kappa, law):
+def _map_elements(fn, data, x, p, model):
     P = data["P"]
 
     def one(args):
-        return fn(*args, P, params, kappa, law)
+        return fn(*args, P, model)
 
-    return jax.lax.map(one, _elem_args(data, x, p), batch_size=_batch_size(data["elements"].shape[0]))
+    return jax.lax.map(one, _elem_args(data, x, p), batch_size=min(data["elements"].shape[0], ELEMENT_BATCH))
 
 
 def _external_forces(data, x, pressure, potential):
@@ -71,19 +66,19 @@ def _external_stiffness(data, x, pressure, potential):
     return jax.vmap(jax.jacfwd(loads.follower_force), in_axes=(0, None))(xf, pressure).reshape(-1, 27, 27)
 
 
-@partial(jax.jit, static_argnames=("law", "potential"))
-def _residual(u, p, pressure, params, kappa, data, law, potential):
+@partial(jax.jit, static_argnames=("potential",))
+def _residual(u, p, pressure, model, data, potential):
     x = data["X"] + u.reshape(-1, 3)
-    r_u, r_p, mj, w = _map_elements(element_residual, data, x, p, params, kappa, law)
+    r_u, r_p, mj, w = _map_elements(element_residual, data, x, p, model)
     R = jnp.zeros_like(x).at[data["elements"]].add(r_u)
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
     return R.ravel(), r_p, jnp.min(mj), jnp.sum(w)
 
 
-@partial(jax.jit, static_argnames=("law", "potential", "nnz"))
-def _tangent(u, p, pressure, params, kappa, data, law, potential, nnz):
+@partial(jax.jit, static_argnames=("potential", "nnz"))
+def _tangent(u, p, pressure, model, data, potential, nnz):
     x = data["X"] + u.reshape(-1, 3)
-    rhs, K, D, r_p = _map_elements(element_tangent, data, x, p, params, kappa, law)
+    rhs, K, D, r_p = _map_elements(element_tangent, data, x, p, model)
     R = jnp.zeros_like(x).at[data["elements"]].add(rhs.reshape(-1, 27, 3))
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
     Ks = -_external_stiffness(data, x, pressure, potential)
@@ -106,21 +101,18 @@ class DiscreteSystem:
     Parameters
     ----------
     mesh : FEMesh
-    law : material law name; params : (k,) parameter vector (materials.PARAM_ORDER).
+    model : ConstitutiveModel
+        The material law and the compressibility term (bulk penalty κ, kPa).
     frames : (n_el, n_q, 3, 3) fibre frames at the mesh's Gauss points (``mesh.quadrature``).
-    kappa : volumetric penalty (kPa).
     load_surface : "endocardium" (pressure potential with the base plane) or a box face.
     pressure : full load (kPa).
     fixed_dofs : global dof numbers held at zero displacement.
-    modulus : stiffness scale of the law (kPa), for reference.
     """
 
-    def __init__(self, mesh: FEMesh, law, params, frames, kappa, load_surface, pressure, fixed_dofs,
-                 modulus: float = 1.0):
+    def __init__(self, mesh: FEMesh, model: ConstitutiveModel, frames, load_surface, pressure, fixed_dofs):
         self.mesh = mesh
-        self.law = law
-        self.params = jnp.asarray(np.asarray(params, dtype=np.float64))
-        self.kappa = jnp.asarray(float(kappa))
+        self.model = model.as_arrays()
+        self.kappa = self.model.kappa
         self.pressure = float(pressure)
         self.potential = load_surface == "endocardium"
         if load_surface not in mesh.surfaces:
@@ -154,7 +146,6 @@ class DiscreteSystem:
         self.free = self.pattern.free
         self.Minv = np.linalg.inv(M)
         self.edofs = block_dofs(elements)
-        self.modulus = float(modulus)
 
     # ----- vectors ----------------------------------------------------------
     @property
@@ -171,19 +162,18 @@ class DiscreteSystem:
     def zero_pressure(self) -> np.ndarray:
         return np.zeros((self.mesh.n_elements, 4))
 
-    def residual(self, u_free, p, load_factor: float, params=None):
+    def residual(self, u_free, p, load_factor: float):
         """Mixed residuals at (u, p): (r_u on free dofs, r_p (n_el, 4), min J, strain energy)."""
-        prm = self.params if params is None else params
         R, r_p, mj, w = _residual(jnp.asarray(self.full(u_free)), jnp.asarray(p),
-                                  jnp.asarray(load_factor * self.pressure), prm, self.kappa, self.data,
-                                  law=self.law, potential=self.potential)
+                                  jnp.asarray(load_factor * self.pressure), self.model, self.data,
+                                  potential=self.potential)
         return np.asarray(R)[self.free], np.asarray(r_p), float(mj), float(w)
 
     def tangent(self, u_free, p, load_factor: float):
         """Condensed system: (rhs on free dofs, CSR tangent, D (n_el, 4, 81), r_p (n_el, 4))."""
         R, kd, D, r_p = _tangent(jnp.asarray(self.full(u_free)), jnp.asarray(p),
-                                 jnp.asarray(load_factor * self.pressure), self.params, self.kappa,
-                                 self.data, law=self.law, potential=self.potential, nnz=self.pattern.nnz)
+                                 jnp.asarray(load_factor * self.pressure), self.model,
+                                 self.data, potential=self.potential, nnz=self.pattern.nnz)
         return np.asarray(R)[self.free], self.pattern.matrix(kd), np.asarray(D), np.asarray(r_p)
 
     def pressure_increment(self, du_free, D, r_p) -> np.ndarray:
@@ -199,12 +189,15 @@ class DiscreteSystem:
         return r_u + g[self.free]
 
     def residual_param_jacobian(self, u_free, p, load_factor: float = 1.0) -> np.ndarray:
-        """d r_u / d params on the free dofs at fixed (u, p), (n_free, n_params)."""
+        """d r_u / d (law parameters) on the free dofs at fixed (u, p), (n_free, n_params).
+
+        Columns in the order of the law's ``keys``.
+        """
         u = jnp.asarray(self.full(u_free))
         pr = jnp.asarray(load_factor * self.pressure)
         pj = jnp.asarray(p)
 
-        def r(params):
-            return _residual(u, pj, pr, params, self.kappa, self.data, law=self.law, potential=self.potential)[0]
+        def r(v):
+            return _residual(u, pj, pr, self.model.with_parameters(v), self.data, potential=self.potential)[0]
 
-        return np.asarray(jax.jacfwd(r)(self.params))[self.free]
+        return np.asarray(jax.jacfwd(r)(jnp.asarray(self.model.material.vector())))[self.free]
