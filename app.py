@@ -211,7 +211,7 @@ if run_case:
     st.session_state["case_runner_input"] = (text, example)
 
 if "case_runner_input" in st.session_state:
-    from lvcore.mechanics.cli import format_summary
+    from lvcore.mechanics.summary import format_summary
 
     text, example = st.session_state["case_runner_input"]
     base_dir = EXAMPLES[example].parent if example else None

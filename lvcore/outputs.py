@@ -8,6 +8,8 @@ counter-clockwise from +x seen from the base.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from lvcore.geometry.template import N_LEVELS, N_REGIONS, N_SECTORS
 
 N_OUTPUTS = 1 + N_REGIONS
@@ -22,6 +24,27 @@ THETA_NAMES = ("a", "b", "af", "bf")
 #: Names of physiological inputs: fibre angles (deg) and EDP (mmHg).
 ANGLE_NAMES = ("alpha_endo", "alpha_epi")
 EDP_NAME = "edp"
+
+
+def strain_vector(values, where: str = "strains") -> np.ndarray:
+    """The 24 regional strains (-) of ``values``: 24 strains, or 25 outputs whose first entry (LVV) is dropped.
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` when ``values`` holds neither 24 nor 25 numbers.
+    """
+    y = np.asarray(values, dtype=float).ravel()
+    if y.size == N_REGIONS + 1:  # a full 25-output vector: drop LVV
+        y = y[1:]
+    if y.size != N_REGIONS:
+        raise ValueError(f"{where}: expected {N_REGIONS} regional strains (or 25 outputs), got {y.size} values")
+    return y
+
+
+def strains_by_level(values) -> np.ndarray:
+    """The 24 regional strains as a (4 levels, 6 sectors) array: row = level (basal first), column = sector."""
+    return strain_vector(values).reshape(N_LEVELS, N_SECTORS)
 
 
 def pc_names(k: int) -> tuple[str, ...]:

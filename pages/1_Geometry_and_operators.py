@@ -111,7 +111,7 @@ else:
         st.stop()
 
 names = list(geoms)
-from lvcore.geometry.cli import geometry_info  # noqa: E402
+from lvcore.geometry.measures import geometry_info  # noqa: E402
 from lvcore.geometry.measures import node_mse_cm2  # noqa: E402
 
 rows = []

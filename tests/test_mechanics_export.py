@@ -4,7 +4,7 @@ import pytest
 
 from lvcore.geometry.analytic import LAND_LV, TruncatedEllipsoidLV
 from lvcore.geometry.template import LVTemplate, lagrange_q2_shape
-from lvcore.mechanics.export import write_vtu
+from lvcore.geometry.io import write_vtu
 
 io = pytest.importorskip("lvcore.geometry.io")
 

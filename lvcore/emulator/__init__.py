@@ -1,12 +1,16 @@
-"""Neural-network emulators of the simulator (see :mod:`lvcore.emulator.model`)."""
+"""Neural-network emulators of the simulator (see :mod:`lvcore.emulator.model`).
+
+Names are imported from their submodules on first use.
+"""
 from __future__ import annotations
 
+from lvcore._exports import lazy_exports
 
-def load_emulator(name_or_path, *, strict: bool = False):
-    """Load an emulator by name or directory; see :func:`lvcore.emulator.io.load_emulator`."""
-    from lvcore.emulator.io import load_emulator as _load
+_EXPORTS = {
+    "Emulator": "model", "ExtrapolationWarning": "model",
+    "load_emulator": "io", "save_emulator": "io", "available_emulators": "io",
+    "TrainingConfig": "training", "train_emulator": "training",
+}
 
-    return _load(name_or_path, strict=strict)
-
-
-__all__ = ["load_emulator"]
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

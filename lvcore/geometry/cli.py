@@ -14,6 +14,7 @@ import json
 import numpy as np
 
 from lvcore.exceptions import GeometryError
+from lvcore.geometry.measures import geometry_info
 
 
 def _fit(args) -> int:
@@ -46,28 +47,6 @@ def _fit(args) -> int:
         if out:
             print(f"  wrote {out}  (use it as {{\"geometry\": {{\"kind\": \"mesh\", \"path\": \"{out}\"}}}})")
     return 0
-
-
-def geometry_info(nodes) -> dict:
-    """Plain-data measures of a template geometry (mm, mL)."""
-    from lvcore.geometry.measures import cavity_volume
-    from lvcore.geometry.template import DEFAULT_TEMPLATE as T
-
-    base_z = float(np.mean(nodes[T.base_nodes, 2]))
-    cav = float(cavity_volume(nodes, T)) / 1000.0
-    # wall volume = epicardial "cavity" minus endocardial cavity, using the epi surface as if it were endo
-    epi_as_endo = nodes.copy()
-    k0 = T.node_index(T.grid_ijk[:, 0], T.grid_ijk[:, 1], 0)
-    kN = T.node_index(T.grid_ijk[:, 0], T.grid_ijk[:, 1], T.nt - 1)
-    epi_as_endo[k0] = nodes[kN]
-    outer = float(cavity_volume(epi_as_endo, T, base_z)) / 1000.0
-    return {
-        "cavity_volume_ml": cav,
-        "wall_volume_ml": outer - cav,
-        "base_z_mm": base_z,
-        "length_mm": base_z - float(nodes[T.apex_epi_node, 2]),
-        "n_nodes": int(nodes.shape[0]),
-    }
 
 
 def _info(args) -> int:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -86,11 +87,6 @@ def write_template_mesh(path, nodes, template: LVTemplate = DEFAULT_TEMPLATE, po
     -------
     Path of the written file.
     """
-    import meshio
-
-    path = Path(path)
-    if path.suffix.lower() != ".vtu":
-        raise GeometryError(f"template meshes are written as VTU; give a path ending in .vtu, got '{path}'")
     nodes = _check_nodes(nodes, template, "nodes")
     pdata = {"parametric_coords": template.parametric_coords.astype(float)}
     for key, val in (point_data or {}).items():
@@ -99,16 +95,72 @@ def write_template_mesh(path, nodes, template: LVTemplate = DEFAULT_TEMPLATE, po
             raise GeometryError(f"point_data '{key}' has {val.shape[0]} rows, expected {template.n_nodes}")
         pdata[key] = val
     field = {_FIELD_TEMPLATE: np.array([template.n_circ, template.n_long, template.n_trans], dtype=np.int64)}
-    mesh = meshio.Mesh(
-        points=nodes,
-        cells=[(_MESHIO_TYPE, template_to_vtk_cells(template))],
-        point_data=pdata,
-        field_data=field,
-    )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    meshio.write(path, mesh, file_format="vtu")
+    path = write_vtu(path, nodes, template.elements, point_data=pdata, field_data=field)
     if metadata:
         _append_metadata(path, metadata)
+    return path
+
+
+def write_vtu(path, nodes, elements, *, displacement=None, point_data: Mapping[str, Any] | None = None,
+              cell_data: Mapping[str, Any] | None = None, field_data: Mapping[str, Any] | None = None) -> Path:
+    """Write a 27-node hexahedral mesh with fields as a VTU file (the one VTU writer of lvcore).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (``.vtu``).
+    nodes : (n_nodes, 3) array
+        Node positions (mm).
+    elements : (n_elements, 27) int array
+        Connectivity in the template's local order ``a + 3 b + 9 c``
+        (written in VTK order with :data:`VTK_FROM_TEMPLATE`).
+    displacement : (n_nodes, 3) array, optional
+        Nodal displacement (mm), stored as point field ``displacement``.
+    point_data : dict name -> (n_nodes, ...) array, optional
+    cell_data : dict name -> (n_elements, ...) array, optional
+        E.g. ``region`` (0..23) and ``fibre`` directions per element.
+    field_data : dict name -> array, optional
+        Whole-mesh values (e.g. ``pressure_kpa``).
+
+    Returns
+    -------
+    Path of the written file.
+
+    Raises
+    ------
+    GeometryError
+        If ``path`` does not end in ``.vtu``.
+    ValueError
+        If an array does not match the mesh.
+    """
+    import meshio
+
+    path = Path(path)
+    if path.suffix.lower() != ".vtu":
+        raise GeometryError(f"meshes are written as VTU; give a path ending in .vtu, got '{path}'")
+    nodes, elements = as_q2_mesh(nodes, elements)
+    pdata = {}
+    if displacement is not None:
+        u = np.asarray(displacement, dtype=float)
+        if u.shape != nodes.shape:
+            raise ValueError(f"displacement must have shape {nodes.shape}, got {u.shape}")
+        pdata["displacement"] = u
+    for name, val in (point_data or {}).items():
+        val = np.asarray(val)
+        if val.shape[0] != nodes.shape[0]:
+            raise ValueError(f"point field '{name}' has {val.shape[0]} rows, expected {nodes.shape[0]}")
+        pdata[name] = val
+    cdata = {}
+    for name, val in (cell_data or {}).items():
+        val = np.asarray(val)
+        if val.shape[0] != elements.shape[0]:
+            raise ValueError(f"cell field '{name}' has {val.shape[0]} rows, expected {elements.shape[0]}")
+        cdata[name] = [val]
+    fdata = {name: np.atleast_1d(np.asarray(val)) for name, val in (field_data or {}).items()}
+    mesh = meshio.Mesh(points=nodes, cells=[(_MESHIO_TYPE, elements[:, VTK_FROM_TEMPLATE])],
+                       point_data=pdata, cell_data=cdata, field_data=fdata)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meshio.write(path, mesh, file_format="vtu")
     return path
 
 

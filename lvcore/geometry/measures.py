@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import jax.numpy as jnp
 
-from lvcore.geometry.template import LVTemplate
+from lvcore.geometry.template import DEFAULT_TEMPLATE, LVTemplate
 
 
 def _quad9_shape_derivatives(order: int = 4):
@@ -73,3 +73,31 @@ def node_mse_cm2(nodes_a, nodes_b) -> float:
     """Mean squared node distance between two geometries on one template (cm²)."""
     d2 = np.sum((np.asarray(nodes_a) - np.asarray(nodes_b)) ** 2, axis=1)
     return float(np.mean(d2) / 100.0)
+
+
+def geometry_info(nodes) -> dict:
+    """Plain-data measures of a geometry on ``DEFAULT_TEMPLATE`` (mm, mL).
+
+    Returns
+    -------
+    dict
+        ``cavity_volume_ml``, ``wall_volume_ml`` (epicardial minus endocardial
+        volume), ``base_z_mm``, ``length_mm`` (base plane to epicardial apex),
+        ``n_nodes``.
+    """
+    T = DEFAULT_TEMPLATE
+    base_z = float(np.mean(nodes[T.base_nodes, 2]))
+    cav = float(cavity_volume(nodes, T)) / 1000.0
+    # wall volume = epicardial "cavity" minus endocardial cavity, using the epi surface as if it were endo
+    epi_as_endo = nodes.copy()
+    k0 = T.node_index(T.grid_ijk[:, 0], T.grid_ijk[:, 1], 0)
+    kN = T.node_index(T.grid_ijk[:, 0], T.grid_ijk[:, 1], T.nt - 1)
+    epi_as_endo[k0] = nodes[kN]
+    outer = float(cavity_volume(epi_as_endo, T, base_z)) / 1000.0
+    return {
+        "cavity_volume_ml": cav,
+        "wall_volume_ml": outer - cav,
+        "base_z_mm": base_z,
+        "length_mm": base_z - float(nodes[T.apex_epi_node, 2]),
+        "n_nodes": int(nodes.shape[0]),
+    }

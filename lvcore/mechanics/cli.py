@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from lvcore.mechanics.summary import format_summary
+
 
 def register(subparsers) -> None:
     """Add the ``simulate`` sub-command."""
@@ -64,34 +66,3 @@ def _clean(x):
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
-
-
-def format_summary(result) -> str:
-    """A readable multi-line summary of a simulation result (or of its ``to_dict()``)."""
-    from lvcore.outputs import LEVEL_NAMES
-    from lvcore.viz.figures import strain_grid
-
-    d = result if isinstance(result, dict) else result.to_dict()
-    state = "converged" if d["converged"] else "NOT CONVERGED"
-    lines = [f"solver: {state}" + (f" ({d['message']})" if d["message"] and d["message"] != state else ""),
-             f"  {d['newton_iterations']} Newton iterations, {d['load_steps']} load steps, {d['dofs']} dofs, "
-             f"{d['seconds']:.2f} s"]
-    vol = d.get("cavity_volume_ml")
-    if vol:
-        lines.append(f"cavity volume: reference {vol['reference']:.3f} mL"
-                     + (f", loaded (LVV) {vol['loaded']:.3f} mL" if vol.get("loaded") is not None else ""))
-    if d.get("lvv_standardised") is not None:
-        lines.append(f"standardised LVV (EDV / V_early): {d['lvv_standardised']:.4f}")
-    if d.get("apex"):
-        for name, pos in d["apex"].items():
-            lines.append(f"{name} apex (deformed): ({pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}) mm")
-    for k, pos in enumerate(d.get("probes") or []):
-        lines.append(f"probe {k} (deformed): ({pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}) mm")
-    if d.get("strains") is not None:
-        lines.append("circumferential strain E_cc (rows: levels base -> apex; columns: sectors S1..S6):")
-        for name, row in zip(LEVEL_NAMES, strain_grid(d["strains"])):
-            lines.append(f"  {name:>10s} " + " ".join(f"{v:+.4f}" for v in row))
-    sens = d.get("sensitivities") if isinstance(result, dict) else getattr(result, "sensitivities", None)
-    if sens:
-        lines.append("sensitivities: " + ", ".join(str(k) for k in sens) + " (use --json for values)")
-    return "\n".join(lines)

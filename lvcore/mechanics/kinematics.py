@@ -45,11 +45,6 @@ def isochoric_i1(F):
     return jnp.sum(F * F, axis=(-2, -1)) * J ** (-2.0 / 3.0)
 
 
-def stretch_along(F, v):
-    """Stretch ``|F v|`` of the reference unit vector ``v`` (..., 3)."""
-    return jnp.linalg.norm(jnp.einsum("...iJ,...J->...i", F, v), axis=-1)
-
-
 def circumferential_green_strain(F, c):
     """Glasgow convention, end diastole as reference: ``(1/λ² − 1)/2`` with ``λ = |F c|``."""
     lam2 = jnp.sum(jnp.einsum("...iJ,...J->...i", F, c) ** 2, axis=-1)

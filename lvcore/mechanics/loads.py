@@ -22,7 +22,6 @@ Faces are (9, 3) node arrays with local order ``a + 3 b`` oriented so that
 from __future__ import annotations
 
 import jax.numpy as jnp
-import numpy as np
 
 from lvcore.mechanics.quadrature import gauss_quad, quad9_shape
 
@@ -53,11 +52,3 @@ def follower_force(x_f, pressure):
     _, ta, tb = _tangents(x_f)
     n_da = jnp.cross(ta, tb) * jnp.asarray(_W)[:, None]
     return -pressure * jnp.asarray(_N).T @ n_da
-
-
-def reference_area(nodes: np.ndarray, faces: np.ndarray) -> float:
-    """Total reference area (mm²) of quads, for checks."""
-    x = nodes[faces]
-    ta = np.einsum("qa,fai->fqi", _DA, x)
-    tb = np.einsum("qa,fai->fqi", _DB, x)
-    return float(np.sum(np.linalg.norm(np.cross(ta, tb), axis=-1) * _W))

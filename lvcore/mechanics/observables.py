@@ -11,7 +11,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore.geometry.template import N_REGIONS, lagrange_q2_shape
-from lvcore.mechanics import loads
 from lvcore.mechanics.fibres import lv_wall_frame
 from lvcore.mechanics.kinematics import circumferential_green_strain
 from lvcore.mechanics.mesh import FEMesh
@@ -94,11 +93,6 @@ def regional_strains(x, op: StrainOperator):
     F = jnp.einsum("eai,eqaJ->eqiJ", xe, jnp.asarray(op.dNdX))
     e = circumferential_green_strain(F, jnp.asarray(op.e_c))
     return jnp.asarray(op.weights) @ e.reshape(-1)
-
-
-def cavity_volume(x, mesh: FEMesh):
-    """Cavity volume (mm³) enclosed by the endocardium of ``x`` and the base plane."""
-    return loads.cavity_volume(x, jnp.asarray(mesh.surfaces["endocardium"]), mesh.base_z)
 
 
 def locate_points(mesh: FEMesh, points, tol: float = 1e-6, n_candidates: int = 12):

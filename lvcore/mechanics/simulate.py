@@ -127,7 +127,7 @@ def _volume_args(mesh: FEMesh):
 
 @jax.jit
 def _cavity_volume(x, faces, base_z):
-    """Cavity volume (mm³), compiled once per topology (see :func:`observables.cavity_volume`)."""
+    """Cavity volume (mm³), compiled once per topology (see :func:`loads.cavity_volume`)."""
     return loads.cavity_volume(x, faces, base_z)
 
 

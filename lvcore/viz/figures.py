@@ -14,7 +14,7 @@ import numpy as np
 import plotly.graph_objects as go
 
 from lvcore.geometry.template import N_LEVELS, N_REGIONS, N_SECTORS
-from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES
+from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES, strain_vector, strains_by_level
 
 #: Sector labels: "S1 (0–60°)" ... "S6 (300–360°)".
 SECTOR_NAMES = tuple(f"S{k + 1} ({60 * k}–{60 * (k + 1)}°)" for k in range(N_SECTORS))
@@ -22,20 +22,6 @@ SECTOR_NAMES = tuple(f"S{k + 1} ({60 * k}–{60 * (k + 1)}°)" for k in range(N_
 _SECTOR_TICKS = tuple(f"S{k + 1}<br>{60 * k}–{60 * (k + 1)}°" for k in range(N_SECTORS))
 #: Colour sequence for series (plotly's default qualitative palette).
 SERIES_COLOURS = ("#636EFA", "#EF553B", "#00CC96", "#AB63FA", "#FFA15A", "#19D3F3", "#FF6692", "#B6E880")
-
-
-def _strains(values, where="strains") -> np.ndarray:
-    y = np.asarray(values, dtype=float).ravel()
-    if y.size == N_REGIONS + 1:  # a full 25-output vector: drop LVV
-        y = y[1:]
-    if y.size != N_REGIONS:
-        raise ValueError(f"{where}: expected {N_REGIONS} regional strains (or 25 outputs), got {y.size} values")
-    return y
-
-
-def strain_grid(strains) -> np.ndarray:
-    """The 24 regional strains as a (4 levels, 6 sectors) array (row = level)."""
-    return _strains(strains).reshape(N_LEVELS, N_SECTORS)
 
 
 def strain_heatmap(strains, *, title: str = "Circumferential strain E_cc", zmin: float | None = None,
@@ -50,7 +36,7 @@ def strain_heatmap(strains, *, title: str = "Circumferential strain E_cc", zmin:
     zmin, zmax : float, optional
         Colour range; default symmetric about zero over the data.
     """
-    grid = strain_grid(strains)
+    grid = strains_by_level(strains)
     if zmin is None or zmax is None:
         m = float(np.nanmax(np.abs(grid))) or 1.0
         zmin = -m if zmin is None else zmin
@@ -87,10 +73,10 @@ def strain_bars(series: Mapping[str, Sequence[float]] | Sequence[float], *, erro
     x = [[LEVEL_NAMES[r // N_SECTORS] for r in range(N_REGIONS)], [f"S{r % N_SECTORS + 1}" for r in range(N_REGIONS)]]
     fig = go.Figure()
     for n, (label, values) in enumerate(series.items()):
-        y = _strains(values, f"series '{label}'")
+        y = strain_vector(values, f"series '{label}'")
         err = None
         if errors and label in errors:
-            err = {"type": "data", "array": _strains(errors[label], f"errors '{label}'"), "visible": True}
+            err = {"type": "data", "array": strain_vector(errors[label], f"errors '{label}'"), "visible": True}
         fig.add_bar(x=x, y=y, name=label, error_y=err, marker_color=SERIES_COLOURS[n % len(SERIES_COLOURS)],
                     customdata=np.asarray(STRAIN_NAMES), hovertemplate="%{customdata}: %{y:.4f}<extra>" + label + "</extra>")
     fig.update_layout(barmode="group", title=title, height=height, yaxis_title="E_cc (-)",
@@ -105,7 +91,7 @@ def strain_bullseye(strains, *, title: str = "Circumferential strain (bull's eye
 
     Sector k spans the polar angles [60k°, 60(k+1)°) counter-clockwise, as seen from the base.
     """
-    grid = strain_grid(strains)
+    grid = strains_by_level(strains)
     if zmin is None or zmax is None:
         m = float(np.nanmax(np.abs(grid))) or 1.0
         zmin = -m if zmin is None else zmin
