@@ -21,32 +21,7 @@ import time
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
-P2_REF = {"endo": -26.612, "epi": -28.279, "volume": 10734.0}
-
-
-def problem1_case(res):
-    return {
-        "geometry": {"kind": "box", "size": [10, 1, 1], "resolution": {"x": res[0], "y": res[1], "z": res[2]}},
-        "material": {"law": "guccione", "C": 2.0, "bf": 8.0, "bt": 2.0, "bfs": 4.0},
-        "fibres": {"direction": [1, 0, 0]},
-        "load": {"pressure": 0.004, "units": "kPa", "surface": "z0"},
-        "boundary": {"clamped": ["x0"]},
-        "probes": [[10.0, 0.5, 1.0]],
-    }
-
-
-def problem2_case(res):
-    """Problem 2 at ``res``: a preset name, an LVResolution or ``"NC,NL,NT[,GP]"`` (NL may be ``2+1+1+2``)."""
-    from lvcore.mechanics.resolution import LVResolution
-
-    resolution = (res if isinstance(res, LVResolution) else LVResolution.from_spec(res)).case_dict()
-    return {
-        "geometry": {"kind": "ellipsoid", "endo": {"rs": 7.0, "rl": 17.0}, "epi": {"rs": 10.0, "rl": 20.0},
-                     "base_z": 5.0, "resolution": resolution},
-        "material": {"law": "guccione", "C": 10.0, "bf": 1.0, "bt": 1.0, "bfs": 1.0},
-        "load": {"pressure": 10.0, "units": "kPa"},
-        "boundary": {"base": "clamped"},
-    }
+from lvcore.mechanics.verification import P1_TIP_POINT, P1_TIP_Z_RANGE_MM, P2_REF, problem1_case, problem2_case  # noqa: E402
 
 
 def _timed(case):
@@ -70,7 +45,8 @@ def main(argv=None):
 
     print(f"linear solver: {available_backends()[0]}; CPU shared with other jobs (times are indicative)\n")
     if a.problem in ("1", "both"):
-        print("Problem 1 (beam), tip (10, 0.5, 1): reference z in [4.151, 4.185] mm\n")
+        lo, hi = P1_TIP_Z_RANGE_MM
+        print(f"Problem 1 (beam), tip {P1_TIP_POINT}: reference z in [{lo}, {hi}] mm\n")
         print("| elements (x,y,z) | dofs | tip x | tip y | tip z | Newton its | 1st run incl. compile (s) | warm (s) |")
         print("|---|---|---|---|---|---|---|---|")
         for s in a.p1:
@@ -81,7 +57,8 @@ def main(argv=None):
                   f"| {first:.1f} | {warm:.1f} |", flush=True)
         print()
     if a.problem in ("2", "both"):
-        print("Problem 2 (LV inflation): reference endo apex z -26.612, epi apex z -28.279 mm, volume 10734 mm³\n")
+        print(f"Problem 2 (LV inflation): reference endo apex z {P2_REF['endo']}, epi apex z {P2_REF['epi']} mm, "
+              f"volume {P2_REF['volume']:.0f} mm³\n")
         print("| elements (circ x long x trans, Gauss points through the wall) | dofs | endo apex z | epi apex z | volume (mm³) | vol. error "
               "| Newton its | steps | 1st run incl. compile (s) | warm (s) |")
         print("|---|---|---|---|---|---|---|---|---|---|")

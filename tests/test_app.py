@@ -2,9 +2,7 @@
 from pathlib import Path
 
 import pytest
-
-pytest.importorskip("lvcore.mechanics.simulate")
-from streamlit.testing.v1 import AppTest  # noqa: E402
+from streamlit.testing.v1 import AppTest
 
 APP = str(Path(__file__).resolve().parents[1] / "app.py")
 

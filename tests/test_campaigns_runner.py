@@ -1,6 +1,4 @@
 """Campaign runner on executors: a Dask LocalCluster campaign, and real simulator rows."""
-import importlib.util
-
 import numpy as np
 import pytest
 
@@ -52,8 +50,6 @@ def test_forward_exceptions_become_failed_rows():
     assert not r.converged and "cannot import" in r.reason and r.index == 3
 
 
-@pytest.mark.skipif(importlib.util.find_spec("lvcore.mechanics.simulate") is None,
-                    reason="the FE simulator (lvcore.mechanics.simulate) is not in this checkout yet")
 def test_real_simulator_rows_at_fast_resolution(tmp_path):
     from lvcore.campaigns.designs import Design
 

@@ -212,7 +212,8 @@ def test_not_a_mapping():
 
 
 def test_mesh_geometry_from_file(tmp_path):
-    gio = pytest.importorskip("lvcore.geometry.io")
+    from lvcore.geometry import io as gio
+
     nodes = DEFAULT_LV.nodes(DEFAULT_TEMPLATE) * 1.1
     gio.write_template_mesh(tmp_path / "lv.vtu", nodes)
     d = copy.deepcopy(HO)
@@ -230,11 +231,9 @@ def test_mesh_geometry_from_file(tmp_path):
 
 
 def test_pca_geometry_from_bundled_model():
-    sm = pytest.importorskip("lvcore.geometry.shape_model")
-    try:
-        model = sm.load_shape_model()
-    except Exception as err:  # the bundled model is built by scripts/build_cohort.py
-        pytest.skip(f"no bundled shape model: {err}")
+    from lvcore.geometry.shape_model import load_shape_model
+
+    model = load_shape_model()  # bundled (scripts/build_cohort.py); missing data must fail, not skip
     d = copy.deepcopy(HO)
     d["geometry"] = {"kind": "pca", "scores": [1.0, -0.5]}
     case = Case.from_dict(d)

@@ -6,8 +6,6 @@ import pytest
 
 from lvcore.cli import main
 
-pytest.importorskip("lvcore.mechanics.simulate")
-
 FAST_LV = {
     "geometry": {"kind": "default", "resolution": "fast"},
     "material": {"law": "holzapfel-ogden", "a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6},

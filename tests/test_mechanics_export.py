@@ -2,11 +2,10 @@
 import numpy as np
 import pytest
 
+from lvcore.geometry import io
 from lvcore.geometry.analytic import LAND_LV, TruncatedEllipsoidLV
 from lvcore.geometry.template import LVTemplate, lagrange_q2_shape
 from lvcore.geometry.io import write_vtu
-
-io = pytest.importorskip("lvcore.geometry.io")
 
 
 def _gauss_volume(nodes, elements):

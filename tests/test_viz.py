@@ -8,7 +8,7 @@ import pytest
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE, LVTemplate
 from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES
-from lvcore.viz import figures
+from lvcore.viz import figures, mesh3d
 
 
 def _ramp():
@@ -65,8 +65,6 @@ def test_violin_density_contour():
 # ----------------------------------------------------------------------------
 # PyVista (off-screen)
 # ----------------------------------------------------------------------------
-mesh3d = pytest.importorskip("lvcore.viz.mesh3d")
-
 
 def _wall_volume(lv: TruncatedEllipsoidLV) -> float:
     outer = TruncatedEllipsoidLV(lv.epi, lv.epi, lv.base_z).cavity_volume_mm3()

@@ -14,6 +14,4 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser("study", help="run one of the chapter's studies")
     studies = parser.add_subparsers(dest="study", required=True)
     for name in STUDY_MODULES:
-        if importlib.util.find_spec(name) is None:
-            continue
         importlib.import_module(name).add_study_parser(studies)

@@ -1,13 +1,19 @@
-"""Land et al. (2015) benchmark problems 1 (beam) and 2 (LV inflation), Guccione law, follower pressure."""
-import sys
-from pathlib import Path
-
+"""Land et al. (2015) benchmark problems 1 (beam) and 2 (LV inflation), Guccione law, follower pressure
+(lvcore.mechanics.verification)."""
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from land2015 import problem1_case, problem2_case  # noqa: E402
+from lvcore.mechanics.case import Case
+from lvcore.mechanics.simulate import simulate
+from lvcore.mechanics.verification import P1_TIP_POINT, problem1_case, problem2_case
 
-from lvcore.mechanics.simulate import simulate  # noqa: E402
+
+def test_problem_cases_validate_as_the_stated_problems():
+    beam = Case.from_dict(problem1_case((20, 2, 2)))
+    assert beam.probes == (P1_TIP_POINT,) and beam.load.pressure_kpa == pytest.approx(0.004)
+    assert beam.material.law == "guccione"
+    lv = Case.from_dict(problem2_case("accurate"))
+    assert lv.load.pressure_kpa == pytest.approx(10.0) and lv.geometry.base_z() == pytest.approx(5.0)
+    assert lv.material.law == "guccione"
 
 
 @pytest.mark.slow
