@@ -1,5 +1,5 @@
 """The emulators bundled in assets/emulators: provenance, size of the training set, and agreement with a live
-simulator run (skipped for an emulator that is not bundled in this checkout)."""
+simulator run. Both emulators ship with the package: a missing one is a failure, never a skip."""
 import json
 from pathlib import Path
 
@@ -11,15 +11,15 @@ from lvcore.emulator.io import ASSETS_DIR, load_emulator, load_validation
 BUNDLED = ("chapter", "angles")
 
 
-def _bundled_or_skip(name):
-    if not (ASSETS_DIR / name / "metadata.json").is_file():
-        pytest.skip(f"emulator '{name}' is not bundled in this checkout (build it with scripts/build_emulators.py)")
+def _bundled(name):
+    assert (ASSETS_DIR / name / "metadata.json").is_file(), \
+        f"emulator '{name}' is not bundled in this checkout (build it with scripts/build_emulators.py)"
     return load_emulator(name)
 
 
 @pytest.mark.parametrize("name", BUNDLED)
 def test_bundled_emulator_meets_the_data_spec_and_records_provenance(name):
-    emu = _bundled_or_skip(name)
+    emu = _bundled(name)
     meta = emu.metadata
     assert "spec_note" not in meta, "a below-spec emulator must never be bundled in assets/emulators"
     # >= 10,000 training simulations were run; failed rows are kept in the store and reported, never filled in
@@ -41,7 +41,7 @@ def test_bundled_emulator_meets_the_data_spec_and_records_provenance(name):
 @pytest.mark.parametrize("name", BUNDLED)
 def test_bundled_emulator_meets_the_accuracy_targets(name):
     """The issue's targets on the held-out test set, recomputed from the stored test predictions."""
-    emu = _bundled_or_skip(name)
+    emu = _bundled(name)
     val = load_validation(ASSETS_DIR / name)
     err = val["predictions"] - val["outputs"]
     assert np.sqrt(np.mean(err[:, 0] ** 2)) <= 1.0        # LVV RMSE <= 1 mL
@@ -60,7 +60,7 @@ LIVE_POINTS = {  # physiological points inside each training box, off the design
 @pytest.mark.parametrize("name", BUNDLED)
 def test_bundled_emulator_agrees_with_a_live_simulator_run(name):
     """At a physiological point inside the training box, the emulator reproduces a fresh FE solve."""
-    emu = _bundled_or_skip(name)
+    emu = _bundled(name)
     from lvcore.campaigns.runner import recorded_resolution
     from lvcore.campaigns.space import ParameterSpace
     from lvcore.mechanics.simulate import simulate
