@@ -7,6 +7,7 @@ import pytest
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import samplers
 from lvcore.inference.forward import AnalyticForward
+from lvcore.outputs import THETA_NAMES
 from lvcore.studies import fibre_discrepancy as fd
 
 
@@ -19,17 +20,122 @@ def test_missing_chapter_emulator_is_a_clear_error(tmp_path, monkeypatch):
         fd.run_study(simulate_fn=lambda *a: pytest.fail("must not simulate without an emulator"))
 
 
-def test_design_is_the_chapters():
-    assert len(fd.ANGLE_SETS) * len(fd.THETA_SETS) == 12
-    assert (0.0, 90.0) in fd.ANGLE_SETS and (0.5, 8.0, 1.5, 6.0) in fd.THETA_SETS
+# The chapter's design (DESIGN.md, fibre-discrepancy study): simulator angles x true theta, noise sigma_V, sigma_S.
+CHAPTER_ANGLES = ((-60.0, 90.0), (-30.0, 60.0), (0.0, 90.0))
+CHAPTER_THETAS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), (1.0, 5.0, 1.0, 5.0))
+SIGMA_V_ML, SIGMA_S = 5.0, 0.03
+#: SYNTHETIC stand-ins: the "simulator" shifts the strains with the fibre angles; the "emulator" has none.
+TRUTH = AnalyticForward(input_names=("a", "b", "af", "bf", "alpha_endo", "alpha_epi"))
+EMULATOR = AnalyticForward()
 
 
-def test_study_pipeline_on_stand_ins(tmp_path):
-    """SYNTHETIC stand-ins passed explicitly: the 'simulator' shifts strains with the fibre angles."""
-    truth = AnalyticForward(input_names=("a", "b", "af", "bf", "alpha_endo", "alpha_epi"))
-    sim = lambda th, ae, ap: np.asarray(truth({**th, "alpha_endo": ae, "alpha_epi": ap}))  # noqa: E731
+def _simulate(theta, alpha_endo, alpha_epi):
+    return np.asarray(TRUTH({**theta, "alpha_endo": alpha_endo, "alpha_epi": alpha_epi}))
+
+
+def _simulate_at_emulator_angles(theta, alpha_endo, alpha_epi):
+    """The control: a simulator that ignores the set's angles and uses the emulator's (-60, 60)."""
+    return _simulate(theta, -60.0, 60.0)
+
+
+def test_test_sets_are_simulated_at_the_chapters_angles_and_theta_with_the_stated_noise():
+    calls = []
+
+    def sim(theta, alpha_endo, alpha_epi):
+        calls.append((alpha_endo, alpha_epi, tuple(theta[n] for n in THETA_NAMES)))
+        return _simulate(theta, alpha_endo, alpha_epi)
+
+    sets = fd.make_test_sets(EMULATOR, simulate_fn=sim, seed=3)
+    design = [(ae, ap, th) for ae, ap in CHAPTER_ANGLES for th in CHAPTER_THETAS]
+    assert sorted(calls) == sorted(design) and len(sets) == 12
+    for s, call in zip(sets, calls):
+        assert (s.alpha_endo, s.alpha_epi, tuple(s.theta[n] for n in THETA_NAMES)) == call
+        # the data come from the simulator at the set's own angles ...
+        np.testing.assert_allclose(s.z, _simulate(s.theta, s.alpha_endo, s.alpha_epi), rtol=1e-12)
+        # ... the benchmark is the emulator (fixed angles) at the true theta
+        np.testing.assert_allclose(s.benchmark, np.asarray(EMULATOR(s.theta)), rtol=1e-12)
+    # the same theta at other angles: other strain data, the same benchmark
+    assert np.abs(sets[0].z[1:] - sets[8].z[1:]).max() > 0.01 and sets[0].z[0] == pytest.approx(sets[8].z[0])
+    np.testing.assert_array_equal(sets[0].benchmark, sets[8].benchmark)
+    # noise: sigma_V on the volume, sigma_S on each strain, independent across sets
+    noise = np.stack([s.y - s.z for s in sets])
+    strain, volume = noise[:, 1:].ravel() / SIGMA_S, noise[:, 0] / SIGMA_V_ML
+    assert 0.85 < strain.std() < 1.15 and abs(strain.mean()) < 0.2
+    assert 0.5 < volume.std() < 1.6
+    assert abs(np.corrcoef(noise[:-1, 1:].ravel(), noise[1:, 1:].ravel())[0, 1]) < 0.2
+    # a subset of the sets sees exactly the same data as in the full study
+    subset = fd.make_test_sets(EMULATOR, simulate_fn=sim, seed=3, set_indices=(4, 11))
+    assert [s.index for s in subset] == [4, 11]
+    np.testing.assert_array_equal(subset[1].y, sets[11].y)
+
+
+def test_default_test_data_come_from_the_fe_simulator_at_the_set_angles(monkeypatch):
+    import lvcore
+    from lvcore.geometry.shape_model import load_shape_model
+    from lvcore.mechanics.case import Case
+
+    cases = []
+
+    class _Result:
+        def outputs(self):
+            return np.zeros(25)
+
+    def fake_simulate(case, **kwargs):
+        cases.append(case)
+        return _Result()
+
+    monkeypatch.setattr(lvcore, "simulate", fake_simulate)
+    h = (0.3, -0.2, 0.1, 0.0, 0.4)
+    sets = fd.make_test_sets(EMULATOR, h, set_indices=(2, 9), resolution="fast")
+    assert len(cases) == 2
+    nodes = load_shape_model().reconstruct(np.asarray(h))
+    for raw, s in zip(cases, sets):
+        case = Case.from_dict(raw)
+        assert (case.fibres.alpha_endo_deg, case.fibres.alpha_epi_deg) == (s.alpha_endo, s.alpha_epi)
+        assert case.material.law == "holzapfel-ogden"
+        assert {n: case.material.params[n] for n in THETA_NAMES} == pytest.approx(s.theta)
+        assert case.load.pressure_kpa == pytest.approx(8.0 * 0.133322, rel=1e-5)  # EDP 8 mmHg
+        np.testing.assert_allclose(case.geometry.template_nodes, nodes)         # the geometry at h
+    assert (sets[0].alpha_endo, sets[1].alpha_endo) == (-60.0, 0.0)
+
+
+@pytest.fixture(scope="module")
+def study_mismatched(tmp_path_factory):
+    """The study on sets 0 and 11, SYNTHETIC stand-ins: simulator angles differ from the emulator's."""
     cfg = samplers.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2)
-    res = fd.run_study(AnalyticForward(), config=cfg, simulate_fn=sim, out=tmp_path, set_indices=(0, 11))
+    out = tmp_path_factory.mktemp("fibre_discrepancy")
+    return out, fd.run_study(EMULATOR, config=cfg, simulate_fn=_simulate, out=out, set_indices=(0, 11))
+
+
+@pytest.fixture(scope="module")
+def study_matched():
+    """The control: the same sets with the simulator at the emulator's angles (no discrepancy)."""
+    cfg = samplers.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2)
+    return fd.run_study(EMULATOR, config=cfg, simulate_fn=_simulate_at_emulator_angles, set_indices=(0, 11))
+
+
+@pytest.mark.slow
+def test_the_three_likelihoods_respond_to_the_angle_discrepancy_as_described(study_mismatched, study_matched):
+    _, wrong = study_mismatched
+    for w, m in zip(wrong["sets"], study_matched["sets"]):
+        assert w["set"] == m["set"] and w["y"][0] == m["y"][0] and w["y"][1:] != m["y"][1:]
+        # (i) volume only: the strains are not used, so the wrong strains change nothing
+        assert w["models"]["volume"]["theta_median"] == pytest.approx(m["models"]["volume"]["theta_median"],
+                                                                      rel=1e-9)
+        # (ii) iid: recovers sigma_S without a discrepancy, and absorbs the discrepancy into an inflated sigma_S
+        assert m["models"]["iid"]["sigma_s"]["median"] == pytest.approx(SIGMA_S, abs=0.006)
+        assert w["models"]["iid"]["sigma_s"]["median"] > 1.3 * m["models"]["iid"]["sigma_s"]["median"]
+        # (iii) the polar-GP discrepancy keeps sigma_S near the truth either way
+        for run in (w, m):
+            assert run["models"]["discrepancy"]["sigma_s"]["median"] == pytest.approx(SIGMA_S, abs=0.01)
+    assert wrong["findings"]["iid_inflates_sigma_s_about_2x"]
+    assert not study_matched["findings"]["iid_inflates_sigma_s_about_2x"]
+    assert wrong["findings"]["discrepancy_sigma_s_near_truth"] and study_matched["findings"]["discrepancy_sigma_s_near_truth"]
+
+
+def test_study_pipeline_on_stand_ins(study_mismatched):
+    """SYNTHETIC stand-ins passed explicitly: the 'simulator' shifts strains with the fibre angles."""
+    tmp_path, res = study_mismatched
     assert [s["set"] for s in res["sets"]] == [0, 11]
     assert res["sets"][1]["alpha_endo"] == 0.0 and res["sets"][1]["theta"]["bf"] == 5.0
     for s in res["sets"]:
