@@ -43,6 +43,7 @@ def _log_events(path):
     return [tuple(line.split()[:2]) for line in path.read_text().splitlines() if line.strip()]
 
 
+@pytest.mark.slow
 def test_sigkill_then_resume_loses_nothing_and_runs_nothing_twice(tmp_path):
     design = make_design(get_space("material"), "sobol", 32, seed=2)
     dpath = save_design(design, tmp_path / "d.csv")

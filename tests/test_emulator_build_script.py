@@ -17,6 +17,7 @@ def _script():
     return mod
 
 
+@pytest.mark.slow
 def test_below_spec_build_goes_to_workdir_and_says_so(tmp_path):
     mod = _script()
     out = tmp_path / "assets"

@@ -157,6 +157,7 @@ def test_metrics_known_values():
     assert m["p99_abs"][0] == pytest.approx(2.0)
 
 
+@pytest.mark.slow
 def test_parallel_architecture_search_equals_serial():
     """Two worker processes train the same networks (same seeds) as one process."""
     from lvcore.emulator.training import search_architectures

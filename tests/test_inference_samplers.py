@@ -67,6 +67,7 @@ def iid_batch():
     return truths, draws
 
 
+@pytest.mark.slow
 def test_iid_nuts_recovers_truth(iid_batch):
     truths, draws = iid_batch
     for n in THETA_NAMES:
@@ -75,6 +76,7 @@ def test_iid_nuts_recovers_truth(iid_batch):
         assert hi - lo < 0.8 * (models.THETA_BOUNDS[n][1] - models.THETA_BOUNDS[n][0])  # data are informative
 
 
+@pytest.mark.slow
 def test_quick_coverage_iid(iid_batch):
     """90% intervals over 24 truths (23 prior-drawn) cover about 90% (binomial tolerance)."""
     truths, draws = iid_batch
@@ -87,6 +89,7 @@ def test_quick_coverage_iid(iid_batch):
     assert 0.78 <= overall <= 0.99, overall
 
 
+@pytest.mark.slow
 def test_discrepancy_model_recovers_smooth_discrepancy():
     """Data with a known discrepancy in the kernel's class: (iii) covers it and sigma_S near truth."""
     x = kernels.strain_grid()
@@ -112,7 +115,7 @@ def test_discrepancy_model_recovers_smooth_discrepancy():
     assert np.median(np.sqrt(iid.samples["sigma_s2"])) > np.median(s)
 
 
-@pytest.mark.parametrize("model_name", ["volume", "iid", "discrepancy"])
+@pytest.mark.parametrize("model_name", ["volume", "iid", pytest.param("discrepancy", marks=pytest.mark.slow)])
 def test_joint_theta_and_fibre_angle_inference(model_name):
     """theta and (alpha_endo, alpha_epi) sampled together under each likelihood.
 
@@ -142,6 +145,7 @@ def test_joint_theta_and_fibre_angle_inference(model_name):
             assert 0.8 * prior_sd < sd < 1.2 * prior_sd, (name, sd)
 
 
+@pytest.mark.slow
 def test_data_passed_to_the_compiled_sampler_give_the_same_draws():
     """The chain methods that pass the data as an argument (not a compiled-in constant) draw what
     numpyro's own vectorized method draws, and a second data set changes the draws."""

@@ -45,6 +45,7 @@ def sphere_result():
     return simulate(case)
 
 
+@pytest.mark.slow
 def test_hemisphere_matches_analytic_inflation(sphere_result):
     r = sphere_result
     assert r.converged, r.message
@@ -58,6 +59,7 @@ def test_hemisphere_matches_analytic_inflation(sphere_result):
     assert r.apex_endocardium[2] == pytest.approx(-a, rel=5e-4)  # measured 1.5e-5
 
 
+@pytest.mark.slow
 def test_hemisphere_strains_match_hoop_stretch(sphere_result):
     """Circumferential Green strain (end diastole as reference) of the inner half
     of the wall, against the analytic hoop stretch averaged over that layer."""

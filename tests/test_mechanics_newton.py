@@ -6,8 +6,9 @@ from lvcore.mechanics.newton import NewtonOptions
 from lvcore.mechanics.simulate import simulate
 
 
-def test_chord_iterations_match_full_newton():
-    case = Case.default_lv(resolution="fast")
+def test_chord_iterations_match_full_newton(fast_lv_case):
+    case = fast_lv_case
+    assert case == Case.default_lv(resolution="fast")
     full = simulate(case, options=NewtonOptions(reuse_ratio=0.0, chord_predictor=False))
     fast = simulate(case)
     assert full.converged and fast.converged

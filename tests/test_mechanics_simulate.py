@@ -14,14 +14,15 @@ from lvcore.mechanics.simulate import simulate
 THETA = {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}
 
 
-@pytest.fixture(scope="module")
-def fast_case():
-    return Case.default_lv(THETA, resolution="fast")
+@pytest.fixture()
+def fast_case(fast_lv_case):
+    assert {n: fast_lv_case.material.params[n] for n in THETA} == THETA
+    return fast_lv_case
 
 
-@pytest.fixture(scope="module")
-def fast_result(fast_case):
-    return simulate(fast_case, with_sensitivities=True)
+@pytest.fixture()
+def fast_result(fast_lv_result):
+    return fast_lv_result
 
 
 def test_outputs_and_json(fast_result):

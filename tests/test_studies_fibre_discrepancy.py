@@ -133,6 +133,7 @@ def test_the_three_likelihoods_respond_to_the_angle_discrepancy_as_described(stu
     assert wrong["findings"]["discrepancy_sigma_s_near_truth"] and study_matched["findings"]["discrepancy_sigma_s_near_truth"]
 
 
+@pytest.mark.slow
 def test_study_pipeline_on_stand_ins(study_mismatched):
     """SYNTHETIC stand-ins passed explicitly: the 'simulator' shifts strains with the fibre angles."""
     tmp_path, res = study_mismatched
