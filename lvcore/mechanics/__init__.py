@@ -29,6 +29,8 @@ _EXPORTS = {
     "NewtonOptions": "newton", "FEMesh": "mesh", "lv_mesh": "mesh", "box_mesh": "mesh",
     "DiscreteSystem": "system", "export_result": "export", "result_vtu_bytes": "export",
     "format_summary": "summary",
+    # verification problems (Land et al. 2015)
+    "problem1_case": "verification", "problem2_case": "verification",
 }
 
 __all__ = sorted(_EXPORTS)
