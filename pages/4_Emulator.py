@@ -133,7 +133,7 @@ run = st.button("Run the simulator at this point", disabled=space_dict is None,
                 help="one finite-element solve at the resolution the emulator was trained on")
 if run:
     from lvcore.campaigns.runner import recorded_resolution
-    from lvcore.campaigns.space import ParameterSpace
+    from lvcore.core.space import ParameterSpace
     import lvcore
 
     space = ParameterSpace.from_dict(space_dict)

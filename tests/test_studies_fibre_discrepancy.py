@@ -6,8 +6,15 @@ import pytest
 
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import samplers
-from lvcore.inference.forward import AnalyticForward
+from lvcore.core import AnalyticForward
 from lvcore.studies import fibre_discrepancy as fd
+
+
+class _NeverCalled:
+    input_names = ("a", "b", "af", "bf", "alpha_endo", "alpha_epi")
+
+    def evaluate(self, inputs, jacobian=False):
+        pytest.fail("must not simulate without an emulator")
 
 
 def test_missing_chapter_emulator_is_a_clear_error(tmp_path, monkeypatch):
@@ -16,7 +23,7 @@ def test_missing_chapter_emulator_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
     monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "none")
     with pytest.raises(EmulatorError, match="emulator 'chapter' not found.*build_emulators.py"):
-        fd.run_study(simulate_fn=lambda *a: pytest.fail("must not simulate without an emulator"))
+        fd.run_study(simulator=_NeverCalled())
 
 
 def test_design_is_the_chapters():
@@ -27,9 +34,8 @@ def test_design_is_the_chapters():
 def test_study_pipeline_on_stand_ins(tmp_path):
     """SYNTHETIC stand-ins passed explicitly: the 'simulator' shifts strains with the fibre angles."""
     truth = AnalyticForward(input_names=("a", "b", "af", "bf", "alpha_endo", "alpha_epi"))
-    sim = lambda th, ae, ap: np.asarray(truth({**th, "alpha_endo": ae, "alpha_epi": ap}))  # noqa: E731
     cfg = samplers.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2)
-    res = fd.run_study(AnalyticForward(), config=cfg, simulate_fn=sim, out=tmp_path, set_indices=(0, 11))
+    res = fd.run_study(AnalyticForward(), config=cfg, simulator=truth, out=tmp_path, set_indices=(0, 11))
     assert [s["set"] for s in res["sets"]] == [0, 11]
     assert res["sets"][1]["alpha_endo"] == 0.0 and res["sets"][1]["theta"]["bf"] == 5.0
     for s in res["sets"]:
