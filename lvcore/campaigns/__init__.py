@@ -1,18 +1,30 @@
 """Simulation campaigns: named design spaces, space-filling designs, crash-safe stores and executors.
 
 The forward model of a campaign is a registered :class:`lvcore.core.Forward`
-(see :mod:`lvcore.core.registry`); parameter spaces live in :mod:`lvcore.core.space`.
+(see :mod:`lvcore.core.registry`); parameter spaces live in :mod:`lvcore.core.space`. Names are imported on first use.
 """
 from __future__ import annotations
 
-from lvcore.campaigns.designs import Design, load_design, make_design, save_design
-from lvcore.campaigns.executors import DaskExecutor, LocalExecutor, make_executor
-from lvcore.campaigns.runner import campaign_status, resume_campaign, run_campaign
-from lvcore.campaigns.space import SPACE_NAMES, get_space
-from lvcore.campaigns.store import CampaignStore, StoreContents, StoreSummary, read_store
+from lvcore._exports import lazy_exports
 
-__all__ = [
-    "Design", "load_design", "make_design", "save_design", "DaskExecutor", "LocalExecutor", "make_executor",
-    "campaign_status", "resume_campaign", "run_campaign", "SPACE_NAMES", "get_space", "CampaignStore",
-    "StoreContents", "StoreSummary", "read_store",
-]
+_EXPORTS = {
+    "Design": "designs",
+    "load_design": "designs",
+    "make_design": "designs",
+    "save_design": "designs",
+    "DaskExecutor": "executors",
+    "LocalExecutor": "executors",
+    "make_executor": "executors",
+    "campaign_status": "runner",
+    "resume_campaign": "runner",
+    "run_campaign": "runner",
+    "SPACE_NAMES": "space",
+    "get_space": "space",
+    "CampaignStore": "store",
+    "StoreContents": "store",
+    "StoreSummary": "store",
+    "read_store": "store",
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

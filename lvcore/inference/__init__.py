@@ -9,28 +9,39 @@ InferenceData), :mod:`~lvcore.inference.calibrate` (one calibration end to
 end, and every subject x model), :mod:`~lvcore.inference.coverage`
 (credible-interval coverage check). One calibration is
 ``lvcore.inference.calibrate.calibrate`` (the name ``calibrate`` here is the
-module). The forward model is any JAX-traceable
+module). Names are imported on first use. The forward model is any JAX-traceable
 :class:`lvcore.core.Forward` (the emulator, :class:`lvcore.core.EmulatorForward`).
 """
 from __future__ import annotations
 
-from lvcore.inference.calibrate import (
-    CalibrationResult,
-    SubjectResult,
-    calibrate_subjects,
-    read_pc_scores,
-    result_record,
-    write_result,
-)
-from lvcore.inference.coverage import CoverageResult, coverage_study, simulate_data
-from lvcore.inference.data import MeasuredData, read_measured_csv, validate_measurements, write_measured_csv
-from lvcore.inference.diagnostics import Convergence, posterior_predictive, to_inference_data
-from lvcore.inference.models import MODEL_NAMES, get_model, prior_bounds
-from lvcore.inference.samplers import SamplerConfig, SamplerRun, run_model, use_host_devices
+from lvcore._exports import lazy_exports
 
-__all__ = [
-    "CalibrationResult", "SubjectResult", "calibrate_subjects", "read_pc_scores", "result_record",
-    "write_result", "CoverageResult", "coverage_study", "simulate_data", "MeasuredData", "read_measured_csv",
-    "validate_measurements", "write_measured_csv", "Convergence", "posterior_predictive", "to_inference_data",
-    "MODEL_NAMES", "get_model", "prior_bounds", "SamplerConfig", "SamplerRun", "run_model", "use_host_devices",
-]
+_EXPORTS = {
+    "calibrate": "calibrate",
+    "CalibrationResult": "calibrate",
+    "SubjectResult": "calibrate",
+    "calibrate_subjects": "calibrate",
+    "read_pc_scores": "calibrate",
+    "result_record": "calibrate",
+    "write_result": "calibrate",
+    "CoverageResult": "coverage",
+    "coverage_study": "coverage",
+    "simulate_data": "coverage",
+    "MeasuredData": "data",
+    "read_measured_csv": "data",
+    "validate_measurements": "data",
+    "write_measured_csv": "data",
+    "Convergence": "diagnostics",
+    "posterior_predictive": "diagnostics",
+    "to_inference_data": "diagnostics",
+    "MODEL_NAMES": "models",
+    "get_model": "models",
+    "prior_bounds": "models",
+    "SamplerConfig": "samplers",
+    "SamplerRun": "samplers",
+    "run_model": "samplers",
+    "use_host_devices": "samplers",
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

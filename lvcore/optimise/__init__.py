@@ -2,7 +2,16 @@
 SQP refit of the operator study (§9.3.3)."""
 from __future__ import annotations
 
-from lvcore.optimise.bayesopt import BOResult, StandardisedRSS, bayesian_optimise
-from lvcore.optimise.sqp import OperatorLoss, SQPResult, refit_theta
+from lvcore._exports import lazy_exports
 
-__all__ = ["BOResult", "StandardisedRSS", "bayesian_optimise", "OperatorLoss", "SQPResult", "refit_theta"]
+_EXPORTS = {
+    "BOResult": "bayesopt",
+    "StandardisedRSS": "bayesopt",
+    "bayesian_optimise": "bayesopt",
+    "OperatorLoss": "sqp",
+    "SQPResult": "sqp",
+    "refit_theta": "sqp",
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
