@@ -8,22 +8,11 @@ from __future__ import annotations
 from lvcore._exports import lazy_exports
 
 _EXPORTS = {
-    "Design": "designs",
-    "load_design": "designs",
-    "make_design": "designs",
-    "save_design": "designs",
-    "DaskExecutor": "executors",
-    "LocalExecutor": "executors",
-    "make_executor": "executors",
-    "campaign_status": "runner",
-    "resume_campaign": "runner",
-    "run_campaign": "runner",
-    "SPACE_NAMES": "space",
-    "get_space": "space",
-    "CampaignStore": "store",
-    "StoreContents": "store",
-    "StoreSummary": "store",
-    "read_store": "store",
+    "Design": "designs", "load_design": "designs", "make_design": "designs", "save_design": "designs",
+    "DaskExecutor": "executors", "LocalExecutor": "executors", "make_executor": "executors",
+    "campaign_status": "runner", "resume_campaign": "runner", "run_campaign": "runner",
+    "SPACE_NAMES": "space", "get_space": "space",
+    "CampaignStore": "store", "StoreContents": "store", "StoreSummary": "store", "read_store": "store",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -20,27 +20,13 @@ from __future__ import annotations
 from lvcore._exports import lazy_exports
 
 _EXPORTS = {
-    "Forward": "forward",
-    "ForwardBatch": "forward",
-    "SimulatorForward": "forward",
-    "EmulatorForward": "forward",
-    "AnalyticForward": "forward",
-    "emulator_forward": "forward",
-    "load_emulator_forward": "forward",
-    "register_forward": "registry",
-    "make_forward": "registry",
-    "forward_names": "registry",
+    "Forward": "forward", "ForwardBatch": "forward", "SimulatorForward": "forward", "EmulatorForward": "forward",
+    "AnalyticForward": "forward", "emulator_forward": "forward", "load_emulator_forward": "forward",
+    "register_forward": "registry", "make_forward": "registry", "forward_names": "registry",
     "registered_name": "registry",
-    "Parameter": "space",
-    "ParameterSpace": "space",
-    "build_case": "space",
-    "THETA_BOUNDS": "space",
-    "ANGLES_THETA_BOUNDS": "space",
-    "ANGLE_BOUNDS": "space",
-    "EDP_BOUNDS": "space",
-    "CHAPTER_ANGLES": "space",
-    "CHAPTER_EDP": "space",
-    "SIGMA_V_ML": "space",
+    "Parameter": "space", "ParameterSpace": "space", "build_case": "space", "THETA_BOUNDS": "space",
+    "ANGLES_THETA_BOUNDS": "space", "ANGLE_BOUNDS": "space", "EDP_BOUNDS": "space", "CHAPTER_ANGLES": "space",
+    "CHAPTER_EDP": "space", "SIGMA_V_ML": "space",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -17,30 +17,15 @@ from __future__ import annotations
 from lvcore._exports import lazy_exports
 
 _EXPORTS = {
-    "calibrate": "calibrate",
-    "CalibrationResult": "calibrate",
-    "SubjectResult": "calibrate",
-    "calibrate_subjects": "calibrate",
-    "read_pc_scores": "calibrate",
-    "result_record": "calibrate",
+    "calibrate": "calibrate", "CalibrationResult": "calibrate", "SubjectResult": "calibrate",
+    "calibrate_subjects": "calibrate", "read_pc_scores": "calibrate", "result_record": "calibrate",
     "write_result": "calibrate",
-    "CoverageResult": "coverage",
-    "coverage_study": "coverage",
-    "simulate_data": "coverage",
-    "MeasuredData": "data",
-    "read_measured_csv": "data",
-    "validate_measurements": "data",
+    "CoverageResult": "coverage", "coverage_study": "coverage", "simulate_data": "coverage",
+    "MeasuredData": "data", "read_measured_csv": "data", "validate_measurements": "data",
     "write_measured_csv": "data",
-    "Convergence": "diagnostics",
-    "posterior_predictive": "diagnostics",
-    "to_inference_data": "diagnostics",
-    "MODEL_NAMES": "models",
-    "get_model": "models",
-    "prior_bounds": "models",
-    "SamplerConfig": "samplers",
-    "SamplerRun": "samplers",
-    "run_model": "samplers",
-    "use_host_devices": "samplers",
+    "Convergence": "diagnostics", "posterior_predictive": "diagnostics", "to_inference_data": "diagnostics",
+    "MODEL_NAMES": "models", "get_model": "models", "prior_bounds": "models",
+    "SamplerConfig": "samplers", "SamplerRun": "samplers", "run_model": "samplers", "use_host_devices": "samplers",
 }
 
 __all__ = sorted(_EXPORTS)

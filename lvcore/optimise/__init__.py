@@ -5,12 +5,8 @@ from __future__ import annotations
 from lvcore._exports import lazy_exports
 
 _EXPORTS = {
-    "BOResult": "bayesopt",
-    "StandardisedRSS": "bayesopt",
-    "bayesian_optimise": "bayesopt",
-    "OperatorLoss": "sqp",
-    "SQPResult": "sqp",
-    "refit_theta": "sqp",
+    "BOResult": "bayesopt", "StandardisedRSS": "bayesopt", "bayesian_optimise": "bayesopt",
+    "OperatorLoss": "sqp", "SQPResult": "sqp", "refit_theta": "sqp",
 }
 
 __all__ = sorted(_EXPORTS)
