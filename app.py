@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 import streamlit as st  # noqa: E402
 
 from lvcore import units  # noqa: E402
-from lvcore.campaigns.space import THETA_BOUNDS  # noqa: E402
+from lvcore.core.space import THETA_BOUNDS  # noqa: E402
 from lvcore.exceptions import LVCoreError  # noqa: E402
 from lvcore.inference.samplers import use_host_devices  # noqa: E402
 from lvcore.mechanics.case import Case  # noqa: E402

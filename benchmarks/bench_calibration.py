@@ -44,14 +44,14 @@ def main(argv=None) -> int:
     from lvcore.exceptions import EmulatorError
     from lvcore.inference import diagnostics, kernels, samplers
     from lvcore.inference.coverage import simulate_data
-    from lvcore.inference.forward import AnalyticForward, load_forward
+    from lvcore.core.forward import AnalyticForward, load_emulator_forward
 
     h = [float(v) for v in args.h.split(",")]
     if args.forward == "analytic":
         forward = AnalyticForward()
     else:
         try:
-            forward = load_forward(args.emulator, h)
+            forward = load_emulator_forward(args.emulator, h)
         except EmulatorError as err:
             print(f"{err}\n(use --forward analytic for the SYNTHETIC closed-form stand-in)", file=sys.stderr)
             return 2

@@ -25,19 +25,22 @@ import numpy as np  # noqa: E402
 
 from lvcore.campaigns.designs import Design  # noqa: E402
 from lvcore.campaigns.executors import LocalExecutor  # noqa: E402
-from lvcore.campaigns.runner import DEFAULT_FORWARD, _drive, execute_row  # noqa: E402
+from lvcore.campaigns.runner import DEFAULT_FORWARD, _drive, execute_row, row_inputs  # noqa: E402
 from lvcore.campaigns.space import get_space  # noqa: E402
 from lvcore.campaigns.store import CampaignStore  # noqa: E402
+from lvcore.core.registry import make_forward, registered_name  # noqa: E402
 
 
 def throughput(workers: int, design: Design, forward: str, resolution: str) -> tuple[float, int, float]:
+    fwd = make_forward(forward, design.space, resolution)
     with LocalExecutor(workers) as ex, tempfile.TemporaryDirectory() as tmp:
-        warm = [ex.submit(execute_row, forward, -1, design.space.case(design.points[i], resolution)) for i in range(workers)]
+        warm = [ex.submit(execute_row, fwd, -1, row_inputs(design, i)) for i in range(workers)]
         for f in ex.as_completed(warm):
             f.result()
-        with CampaignStore.create(os.path.join(tmp, "s.h5"), design, forward=forward, resolution=resolution) as store:
+        with CampaignStore.create(os.path.join(tmp, "s.h5"), design, forward=registered_name(forward),
+                                  resolution=resolution) as store:
             t0 = time.perf_counter()
-            _drive(store, store.pending_rows(), ex, forward=forward, resolution=resolution, progress=False)
+            _drive(store, store.pending_rows(), ex, forward=fwd, progress=False)
             wall = time.perf_counter() - t0
             s = store.summary()
             secs = store.read().seconds
@@ -48,7 +51,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--rows", type=int, default=24)
     p.add_argument("--resolution", choices=("fast", "default"), default="fast")
-    p.add_argument("--forward", default=DEFAULT_FORWARD, help="module:function (default the FE simulator)")
+    p.add_argument("--forward", default=DEFAULT_FORWARD, help="registered forward name (default: simulator)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--repeats", type=int, default=2, help="alternate 1- and 2-worker runs this many times; best of each")
     args = p.parse_args(argv)

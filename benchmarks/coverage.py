@@ -35,13 +35,13 @@ def main(argv=None) -> int:
     import lvcore  # noqa: F401
     from lvcore.exceptions import EmulatorError
     from lvcore.inference import coverage, samplers
-    from lvcore.inference.forward import AnalyticForward, load_forward
+    from lvcore.core.forward import AnalyticForward, load_emulator_forward
 
     if args.forward == "analytic":
         forward = AnalyticForward()
     else:
         try:
-            forward = load_forward(args.emulator, [0.5, -0.4, 0.3, -0.2, 0.1])
+            forward = load_emulator_forward(args.emulator, [0.5, -0.4, 0.3, -0.2, 0.1])
         except EmulatorError as err:
             print(err, file=sys.stderr)
             return 2

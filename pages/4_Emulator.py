@@ -133,23 +133,21 @@ run = st.button("Run the simulator at this point", disabled=space_dict is None,
                 help="one finite-element solve at the resolution the emulator was trained on")
 if run:
     from lvcore.campaigns.runner import recorded_resolution
-    from lvcore.campaigns.space import ParameterSpace
-    import lvcore
+    from lvcore.core import ParameterSpace, SimulatorForward
 
-    space = ParameterSpace.from_dict(space_dict)
-    row = [values.get(n, emu.fixed.get(n)) for n in space.names]
-    resolution = recorded_resolution((source.get("resolution") or ["default"])[0], source.get("simulator_versions"))
-    with st.spinner("Simulating..."):
-        try:
-            res = lvcore.simulate(space.case(row, resolution))
-        except LVCoreError as err:
-            res = None
-            st.error(f"Simulator failed: {err}")
-    if res is not None and not res.converged:
-        st.error(f"Simulator did not converge: {res.message}")
+    res = None
+    try:
+        space = ParameterSpace.from_dict(space_dict)
+        resolution = recorded_resolution((source.get("resolution") or ["default"])[0], source.get("simulator_versions"))
+        sim = SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=resolution)
+        with st.spinner("Simulating..."):
+            res = sim.evaluate({n: [values.get(n, emu.fixed.get(n))] for n in space.names})
+    except LVCoreError as err:
+        st.error(f"Simulator failed: {err}")
+    if res is not None and not res.converged[0]:
+        st.error(f"Simulator did not converge: {res.messages[0]}")
     elif res is not None:
-        y_sim = np.asarray(res.outputs())
-        st.session_state["live"] = (x.tolist(), y_sim.tolist(), float(res.seconds))
+        st.session_state["live"] = (x.tolist(), res.outputs[0].tolist(), float(res.seconds[0]))
 live = st.session_state.get("live")
 if live and np.allclose(live[0], x):
     y_sim = np.asarray(live[1])

@@ -19,7 +19,7 @@ from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference.data import MeasuredData, read_measured_csv
-from lvcore.inference.forward import emulator_forward
+from lvcore.core.forward import emulator_forward
 from lvcore.inference.samplers import SamplerConfig, use_host_devices
 
 use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
@@ -116,12 +116,14 @@ job = st.session_state.get("calibration_job")
 
 
 def _worker(job: dict, y, forward, models, config, infer):
+    def progress(msg, frac):
+        job["message"] = msg
+        job["fraction"] = frac
+
     try:
-        for k, m in enumerate(models):
-            def progress(msg, frac, k=k):
-                job["message"] = msg
-                job["fraction"] = (k + frac) / len(models)
-            job["results"][m] = cal.calibrate(y, forward, m, config=config, infer_angles=infer, progress=progress)
+        cal.calibrate_subjects([(job["subject"], y, forward)], models, config=config, infer_angles=infer,
+                               progress=progress, on_result=lambda item: job["results"].__setitem__(item.model,
+                                                                                                    item.result))
         job["message"] = "done"
         job["fraction"] = 1.0
     except Exception as err:  # noqa: BLE001 - shown to the user

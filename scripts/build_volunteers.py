@@ -37,6 +37,7 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 import lvcore  # noqa: E402
+from lvcore.core.space import SIGMA_V_ML, build_case  # noqa: E402
 from lvcore.exceptions import SolverError  # noqa: E402
 from lvcore.geometry.cohort import ROLE_VOLUNTEER, load_cohort  # noqa: E402
 from lvcore.geometry.io import write_template_mesh  # noqa: E402
@@ -46,7 +47,6 @@ from lvcore.geometry.template import DEFAULT_TEMPLATE  # noqa: E402
 from lvcore.outputs import OUTPUT_COLUMNS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SIGMA_V_ML = 5.0
 SIGMA_S = 0.03
 EDP_MMHG = 8.0
 #: Ranges of the hidden truth: log-uniform θ around the population values, uniform angles (deg).
@@ -74,12 +74,8 @@ def main(argv=None) -> int:
         for attempt in range(5):  # a draw the solver cannot load is redrawn (and recorded in the truth file)
             theta = {k: float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) for k, (lo, hi) in THETA_RANGES.items()}
             angles = {k: float(rng.uniform(lo, hi)) for k, (lo, hi) in ANGLE_RANGES.items()}
-            case = {
-                "geometry": {"kind": "mesh", "path": str(geo), "resolution": args.resolution},
-                "material": {"law": "holzapfel-ogden", **theta},
-                "fibres": angles,
-                "load": {"pressure": EDP_MMHG, "units": "mmHg"},
-            }
+            case = build_case({**theta, **angles, "edp": EDP_MMHG}, geometry={"kind": "mesh", "path": str(geo)},
+                              resolution=args.resolution)
             t = time.perf_counter()
             try:
                 y_true = np.asarray(lvcore.simulate(case).outputs(), float)

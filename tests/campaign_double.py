@@ -1,8 +1,10 @@
 """TEST DOUBLE for the campaign machinery (not a feature, not a simulator).
 
-``forward(case)`` is a cheap, deterministic stand-in for :func:`lvcore.simulate`
-with the same return contract. It exists so the campaign tests can check the
-store and runner (crash safety, resume, failed rows, Dask) in seconds.
+:class:`DoubleForward` is a cheap, deterministic stand-in for the simulator's
+:class:`~lvcore.core.forward.Forward` with the same contract; importing this
+module registers it as the forward model ``"campaign-double"``. It exists so
+the campaign tests can check the store and runner (crash safety, resume,
+failed rows, Dask) in seconds.
 
 * The 25 "outputs" are a smooth closed-form function of the case numbers.
 * A case with ``material.a > FAIL_ABOVE_A`` returns ``converged=False``;
@@ -19,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lvcore.core import register_forward
 from lvcore.exceptions import SolverError
 
 FAIL_ABOVE_A = float(os.environ.get("LVCORE_TEST_FAIL_ABOVE_A", "inf"))
@@ -55,6 +58,7 @@ def _log(event: str, key: str) -> None:
 
 
 def forward(case: dict) -> DoubleResult:
+    """The double on a case dictionary (material section only)."""
     t0 = time.perf_counter()
     m = case["material"]
     key = repr(float(m["a"]))
@@ -68,3 +72,30 @@ def forward(case: dict) -> DoubleResult:
     if m["a"] > FAIL_ABOVE_A:
         return DoubleResult(False, "test double: line search failed", time.perf_counter() - t0, y)
     return DoubleResult(True, "", time.perf_counter() - t0, y)
+
+
+@dataclass(frozen=True)
+class DoubleForward:
+    """The double as a Forward over ``a, b, af, bf`` (one point at a time, as the campaign runner calls it)."""
+
+    input_names: tuple = ("a", "b", "af", "bf")
+    label: str = "campaign TEST DOUBLE"
+    provides_jacobian = False
+    traceable = False
+    input_bounds = {}
+
+    def evaluate(self, inputs, *, jacobian=False):
+        from lvcore.core.forward import ForwardBatch, as_columns
+
+        cols, n = as_columns(inputs, self.input_names, self.label)
+        rows = [forward({"material": {k: float(cols[k][i]) for k in self.input_names}}) for i in range(n)]
+        return ForwardBatch(np.stack([np.where(r.converged, r.y, np.nan) for r in rows]),
+                            np.array([r.converged for r in rows]), tuple(r.message for r in rows),
+                            seconds=np.array([r.seconds for r in rows]))
+
+    def __call__(self, params):
+        return self.evaluate({k: params[k] for k in self.input_names}).outputs[0]
+
+
+NAME = "campaign-double"
+register_forward(NAME, lambda space, resolution: DoubleForward(tuple(space.names)), overwrite=True)

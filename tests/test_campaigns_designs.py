@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from lvcore.campaigns.designs import Design, load_design, make_design, save_design, unit_design
-from lvcore.campaigns.space import Parameter, ParameterSpace, get_space
+from lvcore.campaigns.space import get_space
+from lvcore.core.space import Parameter, ParameterSpace
 from lvcore.exceptions import CampaignError
 
 SD = [10.0, 8.0, 6.0, 4.0, 2.0]  # PC score sds for spaces with PCs (no shape model needed)

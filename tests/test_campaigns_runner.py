@@ -4,12 +4,14 @@ import pytest
 
 import lvcore
 
+import campaign_double
 from campaign_double import closed_form
 from lvcore.campaigns.designs import make_design
 from lvcore.campaigns.executors import DaskExecutor, default_workers
-from lvcore.campaigns.runner import execute_row, resolve_forward, run_campaign
+from lvcore.campaigns.runner import execute_row, resume_campaign, run_campaign
 from lvcore.campaigns.space import get_space
-from lvcore.campaigns.store import read_store
+from lvcore.campaigns.store import CampaignStore, read_store
+from lvcore.core.registry import registered_name
 from lvcore.exceptions import CampaignError
 
 
@@ -17,7 +19,7 @@ def test_dask_localcluster_campaign_of_20_rows(tmp_path):
     design = make_design(get_space("material"), "sobol", 20, seed=4)
     with DaskExecutor(workers=2, processes=False) as ex:
         assert ex.workers == 2
-        summary = run_campaign(design, tmp_path / "s.h5", executor=ex, forward="campaign_double:forward", progress=False)
+        summary = run_campaign(design, tmp_path / "s.h5", executor=ex, forward=campaign_double.NAME, progress=False)
     assert summary.converged == 20 and summary.pending == 0
     c = read_store(tmp_path / "s.h5")
     np.testing.assert_allclose(c.outputs, [closed_form(*r) for r in design.points], rtol=1e-12)
@@ -31,23 +33,51 @@ def test_dask_executor_connects_to_a_scheduler_address(tmp_path):
         with DaskExecutor(scheduler=cluster.scheduler_address) as ex:
             assert cluster.scheduler_address in ex.describe()
             s = run_campaign(make_design(get_space("material"), "lhs", 5, seed=1), tmp_path / "s.h5", executor=ex,
-                             forward="campaign_double:forward", progress=False)
+                             forward=campaign_double.NAME, progress=False)
     assert s.converged == 5
 
 
 def test_bad_forward_and_scheduler_are_clear_errors(tmp_path):
-    with pytest.raises(CampaignError, match="module:function"):
-        resolve_forward("nocolon")
-    with pytest.raises(CampaignError, match="cannot import"):
-        resolve_forward("lvcore:no_such_function")
+    with pytest.raises(CampaignError, match="unknown forward model 'nocolon'"):
+        registered_name("nocolon")
+    with pytest.raises(CampaignError, match="no longer imported.*register_forward"):
+        registered_name("lvcore:no_such_function")
+    with pytest.raises(CampaignError, match="unknown forward model"):
+        run_campaign(make_design(get_space("material"), "lhs", 2, seed=0), tmp_path / "x.h5", executor=_Inline(),
+                     forward="campaign_double:forward", progress=False)
+    assert not (tmp_path / "x.h5").exists()
     with pytest.raises(CampaignError, match="tcp://"):
         DaskExecutor(scheduler="localhost:1234")
     assert default_workers() >= 1
 
 
+class _Raises:
+    input_names = ("a",)
+
+    def evaluate(self, inputs, jacobian=False):
+        raise ImportError("cannot import the model's data")
+
+
 def test_forward_exceptions_become_failed_rows():
-    r = execute_row("campaign_double:does_not_exist", 3, {})
+    r = execute_row(_Raises(), 3, {"a": 1.0})
     assert not r.converged and "cannot import" in r.reason and r.index == 3
+
+
+def test_a_store_naming_code_is_refused_and_nothing_runs(tmp_path, monkeypatch):
+    """A data file never chooses code: a store whose forward is 'builtins:print' is refused before any row runs."""
+    import builtins
+
+    path = tmp_path / "s.h5"
+    with CampaignStore.create(path, make_design(get_space("material"), "lhs", 3, seed=0),
+                              forward="builtins:print", resolution="fast"):
+        pass
+    calls = []
+    monkeypatch.setattr(builtins, "print", lambda *a, **k: calls.append(a))
+    with pytest.raises(CampaignError, match="unknown forward model 'builtins:print'"):
+        resume_campaign(path, executor=_Inline(), progress=True)
+    monkeypatch.undo()
+    assert calls == []
+    assert read_store(path).state.tolist() == [0, 0, 0] and read_store(path).record_count.sum() == 0
 
 
 def test_real_simulator_rows_at_fast_resolution(tmp_path):

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import campaign_double
 from campaign_double import closed_form
 from lvcore.campaigns.designs import make_design, save_design
 from lvcore.campaigns.runner import campaign_status, resume_campaign, run_campaign
@@ -23,7 +24,7 @@ from lvcore.campaigns.store import CONVERGED, FAILED, PENDING, CampaignStore, Ro
 from lvcore.exceptions import CampaignError
 
 TESTS = Path(__file__).parent
-DOUBLE = "campaign_double:forward"
+DOUBLE = campaign_double.NAME  # registered on import
 
 
 def _env(**extra):
@@ -34,7 +35,8 @@ def _env(**extra):
 
 
 def _cli(*args):
-    return [sys.executable, "-m", "lvcore.cli", *args]
+    """The lvcore CLI in a program that registered the test double first (as a user registers a forward)."""
+    return [sys.executable, "-c", "import sys, campaign_double; from lvcore.cli import main; sys.exit(main())", *args]
 
 
 def _log_events(path):

@@ -132,3 +132,14 @@ def test_registry_allows_names_only():
                      overwrite=True)
     with pytest.raises(CampaignError, match="does not read the space's inputs"):
         make_forward("test-wrong-inputs", space)
+
+
+@pytest.mark.slow
+def test_simulator_batch_on_a_process_pool_equals_serial(sim):
+    """workers=2 runs the batch on lvcore.campaigns.executors.LocalExecutor: same numbers as in-process."""
+    pts = {"a": [0.6, 1.2], "b": 1.3, "af": 1.0, "bf": 3.6}
+    pooled = SimulatorForward(resolution="fast", workers=2).evaluate(pts, jacobian=True)
+    serial = sim.evaluate(pts, jacobian=True)
+    assert pooled.converged.all()
+    np.testing.assert_array_equal(pooled.outputs, serial.outputs)
+    np.testing.assert_array_equal(pooled.jacobian, serial.jacobian)

@@ -62,7 +62,7 @@ def test_bundled_emulator_agrees_with_a_live_simulator_run(name):
     """At a physiological point inside the training box, the emulator reproduces a fresh FE solve."""
     emu = _bundled(name)
     from lvcore.campaigns.runner import recorded_resolution
-    from lvcore.campaigns.space import ParameterSpace
+    from lvcore.core.space import ParameterSpace
     from lvcore.mechanics.simulate import simulate
 
     x, mesh = LIVE_POINTS[name]

@@ -4,6 +4,7 @@ import json
 import numpy as np
 import pytest
 
+import campaign_double
 from campaign_double import closed_form
 from lvcore.campaigns.designs import make_design
 from lvcore.campaigns.runner import run_campaign
@@ -35,7 +36,7 @@ def test_train_from_store_and_info(tmp_path, capsys):
     space = get_space("material")
     for name, n, seed in (("train", 256, 1), ("test", 64, 2)):
         run_campaign(make_design(space, "sobol", n, seed), tmp_path / f"{name}.h5", executor=_Inline(),
-                     forward="campaign_double:forward", progress=False)
+                     forward=campaign_double.NAME, progress=False)
     out = tmp_path / "emu"
     rc = main(["emulator", "train", str(tmp_path / "train.h5"), "--out", str(out), "--inputs", "a", "b", "af", "bf",
                "--test", str(tmp_path / "test.h5"), "--architectures", "20x20", "--max-epochs", "300",
@@ -47,7 +48,7 @@ def test_train_from_store_and_info(tmp_path, capsys):
     np.testing.assert_allclose(emu.lower, space.lower) and np.testing.assert_allclose(emu.upper, space.upper)
     meta = emu.metadata
     assert meta["training"]["n_train"] + meta["training"]["n_valid"] == 256
-    assert meta["source"]["forward"] == ["campaign_double:forward"]
+    assert meta["source"]["forward"] == [campaign_double.NAME]
     assert meta["test"]["n"] == 64 and meta["test"]["lvv_rmse_ml"] < 1.0
     x = np.array([0.6, 1.3, 1.0, 3.6])
     assert abs(float(emu.predict(x)[0]) - closed_form(*x)[0]) < 1.5

@@ -9,7 +9,7 @@ import pytest
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import coverage, models, samplers
-from lvcore.inference.forward import AnalyticForward, emulator_forward
+from lvcore.core import AnalyticForward, emulator_forward
 from lvcore.outputs import THETA_NAMES, pc_names
 
 

@@ -7,7 +7,8 @@ import sys
 
 import pytest
 
-PACKAGES = ("lvcore.mechanics", "lvcore.geometry", "lvcore.emulator", "lvcore.viz", "lvcore.studies")
+PACKAGES = ("lvcore.mechanics", "lvcore.geometry", "lvcore.emulator", "lvcore.viz", "lvcore.studies",
+            "lvcore.core", "lvcore.campaigns", "lvcore.inference", "lvcore.optimise")
 
 
 @pytest.mark.parametrize("package", PACKAGES)

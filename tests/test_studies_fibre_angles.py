@@ -32,11 +32,15 @@ def test_case_matches_schema():
 
 
 def test_failures_are_kept_as_nan():
-    class Failed:
-        converged = False
-        message = "diverged (test double)"
+    from lvcore.core.forward import ForwardBatch
 
-    m = angle_map([-60, 0], [60], simulate_fn=lambda case: Failed())
+    class Failed:  # a forward model of the angles whose every point fails (test double)
+        input_names = ("alpha_endo", "alpha_epi")
+
+        def evaluate(self, inputs, jacobian=False):
+            return ForwardBatch(np.full((1, 25), np.nan), [False], ("diverged (test double)",))
+
+    m = angle_map([-60, 0], [60], forward=Failed())
     assert np.isnan(m.lvv_ml).all() and len(m.failures) == 2
     assert m.failures[0].message == "diverged (test double)"
 

@@ -6,9 +6,16 @@ import pytest
 
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import samplers
-from lvcore.inference.forward import AnalyticForward
+from lvcore.core import AnalyticForward, ForwardBatch
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies import fibre_discrepancy as fd
+
+
+class _NeverCalled:
+    input_names = ("a", "b", "af", "bf", "alpha_endo", "alpha_epi")
+
+    def evaluate(self, inputs, jacobian=False):
+        pytest.fail("must not simulate without an emulator")
 
 
 def test_missing_chapter_emulator_is_a_clear_error(tmp_path, monkeypatch):
@@ -17,7 +24,7 @@ def test_missing_chapter_emulator_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
     monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "none")
     with pytest.raises(EmulatorError, match="emulator 'chapter' not found.*build_emulators.py"):
-        fd.run_study(simulate_fn=lambda *a: pytest.fail("must not simulate without an emulator"))
+        fd.run_study(simulator=_NeverCalled())
 
 
 # The chapter's design (DESIGN.md, fibre-discrepancy study): simulator angles x true theta, noise sigma_V, sigma_S.
@@ -38,6 +45,22 @@ def _simulate_at_emulator_angles(theta, alpha_endo, alpha_epi):
     return _simulate(theta, -60.0, 60.0)
 
 
+class _FunctionSimulator:
+    """A forward model over theta and the fibre angles that calls ``fn(theta, alpha_endo, alpha_epi)`` per point."""
+
+    input_names = ("a", "b", "af", "bf", "alpha_endo", "alpha_epi")
+
+    def __init__(self, fn):
+        self.fn = fn
+
+    def evaluate(self, inputs, jacobian=False):
+        n = len(np.atleast_1d(inputs["a"]))
+        col = {k: np.atleast_1d(np.asarray(inputs[k], dtype=float)) for k in self.input_names}
+        ys = [self.fn({k: float(col[k][i]) for k in THETA_NAMES}, float(col["alpha_endo"][i]),
+                      float(col["alpha_epi"][i])) for i in range(n)]
+        return ForwardBatch(np.asarray(ys, dtype=float), np.ones(n, dtype=bool), ("",) * n)
+
+
 def test_test_sets_are_simulated_at_the_chapters_angles_and_theta_with_the_stated_noise():
     calls = []
 
@@ -45,7 +68,7 @@ def test_test_sets_are_simulated_at_the_chapters_angles_and_theta_with_the_state
         calls.append((alpha_endo, alpha_epi, tuple(theta[n] for n in THETA_NAMES)))
         return _simulate(theta, alpha_endo, alpha_epi)
 
-    sets = fd.make_test_sets(EMULATOR, simulate_fn=sim, seed=3)
+    sets = fd.make_test_sets(EMULATOR, simulator=_FunctionSimulator(sim), seed=3)
     design = [(ae, ap, th) for ae, ap in CHAPTER_ANGLES for th in CHAPTER_THETAS]
     assert sorted(calls) == sorted(design) and len(sets) == 12
     for s, call in zip(sets, calls):
@@ -64,7 +87,7 @@ def test_test_sets_are_simulated_at_the_chapters_angles_and_theta_with_the_state
     assert 0.5 < volume.std() < 1.6
     assert abs(np.corrcoef(noise[:-1, 1:].ravel(), noise[1:, 1:].ravel())[0, 1]) < 0.2
     # a subset of the sets sees exactly the same data as in the full study
-    subset = fd.make_test_sets(EMULATOR, simulate_fn=sim, seed=3, set_indices=(4, 11))
+    subset = fd.make_test_sets(EMULATOR, simulator=_FunctionSimulator(sim), seed=3, set_indices=(4, 11))
     assert [s.index for s in subset] == [4, 11]
     np.testing.assert_array_equal(subset[1].y, sets[11].y)
 
@@ -77,6 +100,8 @@ def test_default_test_data_come_from_the_fe_simulator_at_the_set_angles(monkeypa
     cases = []
 
     class _Result:
+        converged, message, seconds, sensitivities = True, "", 0.0, None
+
         def outputs(self):
             return np.zeros(25)
 
@@ -104,14 +129,14 @@ def study_mismatched(tmp_path_factory):
     """The study on sets 0 and 11, SYNTHETIC stand-ins: simulator angles differ from the emulator's."""
     cfg = samplers.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2)
     out = tmp_path_factory.mktemp("fibre_discrepancy")
-    return out, fd.run_study(EMULATOR, config=cfg, simulate_fn=_simulate, out=out, set_indices=(0, 11))
+    return out, fd.run_study(EMULATOR, config=cfg, simulator=_FunctionSimulator(_simulate), out=out, set_indices=(0, 11))
 
 
 @pytest.fixture(scope="module")
 def study_matched():
     """The control: the same sets with the simulator at the emulator's angles (no discrepancy)."""
     cfg = samplers.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2)
-    return fd.run_study(EMULATOR, config=cfg, simulate_fn=_simulate_at_emulator_angles, set_indices=(0, 11))
+    return fd.run_study(EMULATOR, config=cfg, simulator=_FunctionSimulator(_simulate_at_emulator_angles), set_indices=(0, 11))
 
 
 @pytest.mark.slow

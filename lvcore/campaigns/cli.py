@@ -25,8 +25,9 @@ def register(subparsers) -> None:
     run.add_argument("--out", required=True, help="HDF5 store to create")
     _add_executor_args(run)
     run.add_argument("--resolution", choices=RESOLUTIONS, default="default", help="simulator mesh resolution")
-    run.add_argument("--forward", default=None, metavar="MODULE:FUNCTION",
-                     help="forward model (default lvcore:simulate, the FE simulator); the tests pass a cheap double")
+    run.add_argument("--forward", default=None, metavar="NAME",
+                     help="registered forward model (default 'simulator', the FE simulator); others are registered "
+                          "in code with lvcore.core.register_forward")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
 

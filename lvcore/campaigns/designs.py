@@ -1,4 +1,4 @@
-"""Space-filling designs over a :class:`~lvcore.campaigns.space.ParameterSpace`.
+"""Space-filling designs over a :class:`~lvcore.core.space.ParameterSpace`.
 
 All designs are drawn with :mod:`scipy.stats.qmc` (or numpy's Generator for
 plain random sampling) from a seed, in the unit cube, and then mapped to the
@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
-from lvcore.campaigns.space import ParameterSpace
+from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
 from lvcore.outputs import THETA_NAMES
 

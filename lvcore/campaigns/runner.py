@@ -1,26 +1,25 @@
 """Run, resume and inspect simulation campaigns.
 
-A campaign runs every row of a design through a *forward model* and records
-each outcome in a :class:`~lvcore.campaigns.store.CampaignStore` as soon as
-it arrives. The forward model is given as ``"module:function"``; the default
-is the FE simulator :func:`lvcore.simulate`. It takes a case dictionary (see
-:meth:`~lvcore.campaigns.space.ParameterSpace.case`) and returns an object
-with ``.converged`` (bool), ``.message`` (str), ``.seconds`` (float) and
-``.outputs()`` (``(25,)`` array, [LVV mL, 24 strains]).
+A campaign runs every row of a design through a forward model (the
+:class:`~lvcore.core.forward.Forward` interface) and records each outcome in
+a :class:`~lvcore.campaigns.store.CampaignStore` as soon as it arrives. The
+forward model is named, never imported from a string: the store records the
+name (default ``"simulator"``, the FE simulator on the design's space at the
+store's resolution) and :func:`resume_campaign` looks it up in the
+allow-list of :mod:`lvcore.core.registry`; other forward models are
+registered in code with :func:`lvcore.core.register_forward`.
 
 Failures are data: a :class:`~lvcore.exceptions.SolverError` (or any other
-exception raised by the forward model) or ``converged=False`` is recorded as
-a failed row with its reason; rows are never dropped or filled in.
+exception raised by the forward model) or a point that did not converge is
+recorded as a failed row with its reason; rows are never dropped or filled in.
 
 Killing a campaign (even with SIGKILL) loses only the rows in flight;
 :func:`resume_campaign` runs exactly the rows not yet committed.
 """
 from __future__ import annotations
 
-import importlib
 import sys
 import time
-import traceback
 from pathlib import Path
 
 import numpy as np
@@ -29,14 +28,15 @@ import lvcore
 from lvcore.campaigns.designs import Design, load_design
 from lvcore.campaigns.executors import make_executor
 from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
-from lvcore.exceptions import CampaignError, SolverError
+from lvcore.core.forward import failure_reason
+from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
+from lvcore.exceptions import CampaignError
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
 
 #: The real simulator.
-DEFAULT_FORWARD = "lvcore:simulate"
+DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
 RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
-_FORWARD_CACHE: dict[str, object] = {}
 _VERSION: list[str] = []
 
 
@@ -76,31 +76,13 @@ def recorded_resolution(resolution: str, simulator_versions) -> str:
     return resolution
 
 
-def resolve_forward(spec: str):
-    """Import ``"module:function"`` and return the function.
-
-    Raises
-    ------
-    CampaignError
-        If the spec is malformed or the function cannot be imported.
-    """
-    if spec in _FORWARD_CACHE:
-        return _FORWARD_CACHE[spec]
-    module_name, sep, attr = str(spec).partition(":")
-    if not sep or not module_name or not attr:
-        raise CampaignError(f"forward model must be given as 'module:function', got {spec!r}")
-    try:
-        fn = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as err:
-        raise CampaignError(f"cannot import forward model {spec!r}: {err}") from err
-    if not callable(fn):
-        raise CampaignError(f"forward model {spec!r} is not callable")
-    _FORWARD_CACHE[spec] = fn
-    return fn
-
-
-def execute_row(forward: str, index: int, case: dict) -> RowResult:
+def execute_row(forward, index: int, inputs: dict) -> RowResult:
     """Run one row in a worker and turn every outcome into a :class:`RowResult`.
+
+    Parameters
+    ----------
+    forward : Forward
+        Pickled to the worker; ``inputs`` maps its ``input_names`` to this row's values.
 
     Never raises for a failing simulation: solver errors, non-convergence and
     any other exception of the forward model become failed rows with a reason.
@@ -108,32 +90,31 @@ def execute_row(forward: str, index: int, case: dict) -> RowResult:
     t0 = time.perf_counter()
     tag = worker_tag()
     try:
-        fn = resolve_forward(forward)
-        result = fn(case)
-        seconds = float(getattr(result, "seconds", time.perf_counter() - t0))
-        if not bool(result.converged):
-            reason = str(getattr(result, "message", "") or "did not converge")
+        batch = forward.evaluate({n: [float(v)] for n, v in inputs.items()})
+        seconds = float(batch.seconds[0]) if batch.seconds is not None else time.perf_counter() - t0
+        if not bool(batch.converged[0]):
+            reason = batch.messages[0] or "did not converge"
             return RowResult(index, np.full(25, np.nan), False, reason, seconds, simulator_version(), tag)
-        outputs = np.asarray(result.outputs(), dtype=float)
-        return RowResult(index, outputs, True, "", seconds, simulator_version(), tag)
-    except SolverError as err:
-        reason = f"SolverError: {err}"
+        return RowResult(index, batch.outputs[0], True, "", seconds, simulator_version(), tag)
     except Exception as err:  # noqa: BLE001 - recorded, never swallowed silently
-        last = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
-        where = f" ({Path(last.filename).name}:{last.lineno})" if last else ""
-        reason = f"{type(err).__name__}: {err}{where}"
+        reason = failure_reason(err)
     return RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, simulator_version(), tag)
 
 
-def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward: str, resolution: str,
-           progress: bool, allow_rerecord: bool = False) -> None:
-    """Submit ``rows`` and record their results as they complete."""
+def row_inputs(design: Design, i: int) -> dict:
+    """The named inputs of design row ``i`` (the space's varied inputs; the fixed ones are bound into the forward)."""
+    return {n: float(v) for n, v in zip(design.space.names, design.points[i])}
+
+
+def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progress: bool,
+           allow_rerecord: bool = False) -> None:
+    """Submit ``rows`` to ``forward`` (a Forward) and record their results as they complete."""
     if rows.size == 0:
         return
     from tqdm import tqdm
 
     design = store.design()
-    futures = [executor.submit(execute_row, forward, int(i), design.space.case(design.points[i], resolution)) for i in rows]
+    futures = [executor.submit(execute_row, forward, int(i), row_inputs(design, int(i))) for i in rows]
     bar = tqdm(total=rows.size, disable=not progress, file=sys.stderr, unit="run", desc="campaign")
     failed = 0
     try:
@@ -171,7 +152,8 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
     resolution : a preset name of :data:`lvcore.mechanics.resolution.RESOLUTION_PRESET_NAMES`
         Simulator mesh resolution preset.
     forward : str
-        Forward model ``"module:function"`` (default the FE simulator).
+        Name of a registered forward model (default ``"simulator"``, the FE
+        simulator; see :func:`lvcore.core.register_forward`). The store records the name.
     executor : optional
         An executor object (see :mod:`lvcore.campaigns.executors`) to use
         instead of creating one; it is not closed.
@@ -180,9 +162,10 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         raise CampaignError(f"--resolution must be one of {RESOLUTIONS}, got {resolution!r}")
     if not isinstance(design, Design):
         design = load_design(design)
-    resolve_forward(forward)  # fail early on a bad entry point
-    with CampaignStore.create(out, design, forward=forward, resolution=resolution, overwrite=overwrite) as store:
-        _run_with(store, store.pending_rows(), executor, workers, scheduler, forward, resolution, progress)
+    name = registered_name(forward)  # fail early on an unknown forward model
+    fwd = make_forward(name, design.space, resolution)
+    with CampaignStore.create(out, design, forward=name, resolution=resolution, overwrite=overwrite) as store:
+        _run_with(store, store.pending_rows(), executor, workers, scheduler, fwd, progress)
         return store.summary()
 
 
@@ -191,28 +174,29 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
     """Run the rows of an existing store that are not committed yet.
 
     With ``retry_failed`` the failed rows are run again too (their previous
-    reason is overwritten).
+    reason is overwritten). The store's forward model is looked up by name in
+    :mod:`lvcore.core.registry`; an unknown name (e.g. a ``"module:function"``
+    string) is a :class:`CampaignError` and nothing runs.
     """
     with CampaignStore.open(store_path, "r+") as store:
         attrs = store.attrs
-        forward = str(attrs["forward"])
         resolution = recorded_resolution(str(attrs["resolution"]), store.summary().versions)
-        resolve_forward(forward)
+        fwd = make_forward(str(attrs["forward"]), store.design().space, resolution)
         rows = store.pending_rows(retry_failed=retry_failed)
-        _run_with(store, rows, executor, workers, scheduler, forward, resolution, progress, allow_rerecord=retry_failed)
+        _run_with(store, rows, executor, workers, scheduler, fwd, progress, allow_rerecord=retry_failed)
         return store.summary()
 
 
-def _run_with(store, rows, executor, workers, scheduler, forward, resolution, progress, allow_rerecord=False):
+def _run_with(store, rows, executor, workers, scheduler, forward, progress, allow_rerecord=False):
     if rows.size == 0:
         return
     if executor is not None:
-        _drive(store, rows, executor, forward=forward, resolution=resolution, progress=progress, allow_rerecord=allow_rerecord)
+        _drive(store, rows, executor, forward=forward, progress=progress, allow_rerecord=allow_rerecord)
         return
     with make_executor(workers=workers, scheduler=scheduler) as ex:
         if progress:
             print(f"lvcore campaign: {rows.size} row(s) on {ex.describe()}", file=sys.stderr)
-        _drive(store, rows, ex, forward=forward, resolution=resolution, progress=progress, allow_rerecord=allow_rerecord)
+        _drive(store, rows, ex, forward=forward, progress=progress, allow_rerecord=allow_rerecord)
 
 
 def campaign_status(store_path: str | Path) -> StoreSummary:

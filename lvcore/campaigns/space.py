@@ -33,13 +33,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from lvcore.core.space import (  # noqa: F401 - Parameter, ParameterSpace and the boxes are re-exported for now
+from lvcore.core.space import (
     ANGLE_BOUNDS,
     ANGLES_THETA_BOUNDS,
     CHAPTER_ANGLES,
     CHAPTER_EDP,
     EDP_BOUNDS,
-    SCALES,
     THETA_BOUNDS,
     Parameter,
     ParameterSpace,
@@ -138,3 +137,5 @@ def get_space(name: str, n_pcs: int | None = None, score_sd: Sequence[float] | N
 
 
 SPACE_NAMES = ("material", "chapter", "angles", "bo4", "bo6")
+
+__all__ = ["get_space", "SPACE_NAMES", "theta_parameters", "pc_parameters", "pc_score_sd", "PC_SPAN_SD"]

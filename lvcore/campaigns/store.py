@@ -50,7 +50,7 @@ import numpy as np
 
 import lvcore
 from lvcore.campaigns.designs import Design
-from lvcore.campaigns.space import ParameterSpace
+from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
 from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
 

@@ -13,36 +13,21 @@
     The allow-list of named forwards that campaign stores may refer to.
 
 Campaigns, optimisation, inference, studies and the app take a
-:class:`Forward`; none of them builds a case dictionary by hand.
+:class:`Forward`; none of them builds a case dictionary by hand. Names are imported on first use.
 """
 from __future__ import annotations
 
-from lvcore.core.forward import (
-    AnalyticForward,
-    EmulatorForward,
-    Forward,
-    ForwardBatch,
-    SimulatorForward,
-    emulator_forward,
-    load_emulator_forward,
-)
-from lvcore.core.registry import forward_names, make_forward, register_forward, registered_name
-from lvcore.core.space import (
-    ANGLE_BOUNDS,
-    ANGLES_THETA_BOUNDS,
-    CHAPTER_ANGLES,
-    CHAPTER_EDP,
-    EDP_BOUNDS,
-    SIGMA_V_ML,
-    THETA_BOUNDS,
-    Parameter,
-    ParameterSpace,
-    build_case,
-)
+from lvcore._exports import lazy_exports
 
-__all__ = [
-    "Forward", "ForwardBatch", "SimulatorForward", "EmulatorForward", "AnalyticForward", "emulator_forward",
-    "load_emulator_forward", "register_forward", "make_forward", "forward_names", "registered_name",
-    "Parameter", "ParameterSpace", "build_case", "THETA_BOUNDS", "ANGLES_THETA_BOUNDS", "ANGLE_BOUNDS",
-    "EDP_BOUNDS", "CHAPTER_ANGLES", "CHAPTER_EDP", "SIGMA_V_ML",
-]
+_EXPORTS = {
+    "Forward": "forward", "ForwardBatch": "forward", "SimulatorForward": "forward", "EmulatorForward": "forward",
+    "AnalyticForward": "forward", "emulator_forward": "forward", "load_emulator_forward": "forward",
+    "register_forward": "registry", "make_forward": "registry", "forward_names": "registry",
+    "registered_name": "registry",
+    "Parameter": "space", "ParameterSpace": "space", "build_case": "space", "THETA_BOUNDS": "space",
+    "ANGLES_THETA_BOUNDS": "space", "ANGLE_BOUNDS": "space", "EDP_BOUNDS": "space", "CHAPTER_ANGLES": "space",
+    "CHAPTER_EDP": "space", "SIGMA_V_ML": "space",
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

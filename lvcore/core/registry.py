@@ -89,10 +89,10 @@ def make_forward(name: str, space, resolution: str = "default"):
     """Build registered forward model ``name`` for a campaign over ``space`` at ``resolution``."""
     key = registered_name(name)
     fwd = _REGISTRY[key](space, resolution)
-    missing = [n for n in space.names if n not in tuple(getattr(fwd, "input_names", ()))]
-    if missing or not callable(getattr(fwd, "evaluate", None)):
-        raise CampaignError(f"forward '{key}' does not read the space's inputs {missing or list(space.names)} "
-                            "(its factory must return a Forward with input_names = space.names)")
+    names = tuple(getattr(fwd, "input_names", ()))
+    if set(names) != set(space.names) or not callable(getattr(fwd, "evaluate", None)):
+        raise CampaignError(f"forward '{key}' does not read the space's inputs {list(space.names)} (it reads "
+                            f"{list(names)}; its factory must return a Forward with input_names = space.names)")
     return fwd
 
 

@@ -1,11 +1,32 @@
 """Bayesian calibration of theta = (a, b, af, bf) from LVV and 24 circumferential strains.
 
 Modules, in the order data flow through them: :mod:`~lvcore.inference.data`
-(measured data), :mod:`~lvcore.inference.forward` (forward-model protocol,
-emulator adapter), :mod:`~lvcore.inference.kernels` (polar GP kernel),
+(measured data), :mod:`~lvcore.inference.kernels` (polar GP kernel),
 :mod:`~lvcore.inference.models` (numpyro models (i)-(iii)),
 :mod:`~lvcore.inference.samplers` (NUTS, HMC-within-Gibbs),
-:mod:`~lvcore.inference.diagnostics` (R-hat, ESS, InferenceData),
-:mod:`~lvcore.inference.calibrate` (one calibration end to end),
-:mod:`~lvcore.inference.coverage` (credible-interval coverage check).
+:mod:`~lvcore.inference.diagnostics` (R-hat, ESS, posterior predictive,
+InferenceData), :mod:`~lvcore.inference.calibrate` (one calibration end to
+end, and every subject x model), :mod:`~lvcore.inference.coverage`
+(credible-interval coverage check). One calibration is
+``lvcore.inference.calibrate.calibrate`` (the name ``calibrate`` here is the
+module). Names are imported on first use. The forward model is any JAX-traceable
+:class:`lvcore.core.Forward` (the emulator, :class:`lvcore.core.EmulatorForward`).
 """
+from __future__ import annotations
+
+from lvcore._exports import lazy_exports
+
+_EXPORTS = {
+    "calibrate": "calibrate", "CalibrationResult": "calibrate", "SubjectResult": "calibrate",
+    "calibrate_subjects": "calibrate", "read_pc_scores": "calibrate", "result_record": "calibrate",
+    "write_result": "calibrate",
+    "CoverageResult": "coverage", "coverage_study": "coverage", "simulate_data": "coverage",
+    "MeasuredData": "data", "read_measured_csv": "data", "validate_measurements": "data",
+    "write_measured_csv": "data",
+    "Convergence": "diagnostics", "posterior_predictive": "diagnostics", "to_inference_data": "diagnostics",
+    "MODEL_NAMES": "models", "get_model": "models", "prior_bounds": "models",
+    "SamplerConfig": "samplers", "SamplerRun": "samplers", "run_model": "samplers", "use_host_devices": "samplers",
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

@@ -1,8 +1,10 @@
 """One calibration: measured data + geometry + forward model -> posterior, diagnostics, files.
 
-This is the layer the CLI (``lvcore calibrate``), the app page and the
-studies share. It runs a model with :func:`lvcore.inference.diagnostics.sample_until_converged`,
-wraps the draws in ArviZ InferenceData and writes netCDF plus a summary table.
+This is the layer the CLI (``lvcore calibrate``), the app page, the
+benchmarks and the studies share. :func:`calibrate` runs a model with
+:func:`lvcore.inference.diagnostics.sample_until_converged` and wraps the
+draws in ArviZ InferenceData; :func:`calibrate_subjects` does that for every
+(subject, model) pair and writes netCDF plus a summary table per pair.
 """
 from __future__ import annotations
 
@@ -10,11 +12,13 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable, Sequence
 
 import arviz as az
 import numpy as np
 import pandas as pd
 
+from lvcore.core.space import SIGMA_V_ML
 from lvcore.exceptions import GeometryError
 from lvcore.inference import diagnostics, models, samplers
 from lvcore.inference.data import validate_measurements
@@ -53,7 +57,7 @@ class CalibrationResult:
 
 
 def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig = samplers.SamplerConfig(),
-              sampler: str = "auto", sigma_v: float = models.DEFAULT_SIGMA_V_ML, infer_angles: bool = False,
+              sampler: str = "auto", sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
               rhat_max: float = diagnostics.DEFAULT_RHAT_MAX, ess_min: float = diagnostics.DEFAULT_ESS_MIN,
               max_rounds: int = 3, progress=None, attrs: dict | None = None) -> CalibrationResult:
     """Calibrate theta (and optionally the fibre angles) from one subject's data.
@@ -62,8 +66,8 @@ def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig 
     ----------
     y : array_like, shape (25,)
         ``[LVV (mL), 24 strains]``; validated with :func:`lvcore.inference.data.validate_measurements`.
-    forward : ForwardModel
-        E.g. :func:`lvcore.inference.forward.load_forward` (``h`` bound in).
+    forward : lvcore.core.Forward
+        JAX-traceable, e.g. :func:`lvcore.core.load_emulator_forward` (``h`` bound in).
     model : str
         ``volume``, ``iid`` or ``discrepancy``.
     sampler : str
@@ -86,6 +90,77 @@ def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig 
                                           extra_attrs=attrs)
     return CalibrationResult(model, run.method, idata, conv, diagnostics.summary_table(run.samples), run.wall_s,
                              diagnostics.ess_per_second(run))
+
+
+@dataclass(frozen=True)
+class SubjectResult:
+    """One (subject, model) calibration of :func:`calibrate_subjects`.
+
+    Attributes
+    ----------
+    subject : str
+    model : str
+    result : CalibrationResult
+    files : dict
+        Paths written by :func:`write_result` (empty without ``out_dir``).
+    """
+
+    subject: str
+    model: str
+    result: CalibrationResult = field(repr=False)
+    files: dict = field(default_factory=dict)
+
+    def record(self) -> dict:
+        """Plain-data summary: subject, :func:`result_record` and the file paths."""
+        return {"subject": self.subject, **result_record(self.result), **self.files}
+
+
+def calibrate_subjects(subjects: Sequence[tuple], model_names: Sequence[str], *,
+                       config: samplers.SamplerConfig = samplers.SamplerConfig(), sampler: str = "auto",
+                       sigma_v: float = SIGMA_V_ML, infer_angles: bool = False, out_dir=None,
+                       attrs: dict | None = None, progress: Callable[[str, float], None] | None = None,
+                       on_result: Callable[[SubjectResult], None] | None = None) -> list[SubjectResult]:
+    """Calibrate every model for every subject, in order (subject-major).
+
+    Parameters
+    ----------
+    subjects : sequence of (subject id, y, forward)
+        ``y`` the 25 measured values, ``forward`` a JAX-traceable
+        :class:`lvcore.core.Forward` with that subject's geometry bound in.
+    model_names : sequence of str
+        ``volume``, ``iid``, ``discrepancy``.
+    config, sampler, sigma_v, infer_angles
+        As in :func:`calibrate`.
+    out_dir : path, optional
+        Write ``<subject>_<model>.nc`` and ``_summary.csv`` there (:func:`write_result`).
+    attrs : dict, optional
+        Extra InferenceData attributes (``subject`` is added).
+    progress : callable, optional
+        ``progress(message, fraction of all pairs)``; messages start ``[subject / model]``.
+    on_result : callable, optional
+        Called with each :class:`SubjectResult` as soon as it is done.
+
+    Returns
+    -------
+    list of SubjectResult
+    """
+    bad = [m for m in model_names if m not in models.MODEL_NAMES]
+    if bad or not model_names:
+        raise ValueError(f"unknown or no model(s) {bad}; choose from {', '.join(models.MODEL_NAMES)}")
+    pairs = [(s, m) for s in subjects for m in model_names]
+    out = []
+    for k, ((subject, y, forward), m) in enumerate(pairs):
+        def step(msg, frac, k=k, tag=f"[{subject} / {m}]"):
+            progress(f"{tag} {msg}", (k + frac) / len(pairs))
+
+        res = calibrate(y, forward, m, config=config, sampler=sampler, sigma_v=sigma_v, infer_angles=infer_angles,
+                        progress=None if progress is None else step, attrs={"subject": str(subject), **(attrs or {})})
+        files = write_result(res, out_dir, str(subject)) if out_dir is not None else {}
+        item = SubjectResult(str(subject), m, res, files)
+        out.append(item)
+        if on_result is not None:
+            on_result(item)
+    return out
 
 
 # --------------------------------------------------------------------------- geometry input
@@ -187,4 +262,5 @@ def result_record(result: CalibrationResult) -> dict:
     return rec
 
 
-__all__ = ["CalibrationResult", "calibrate", "read_pc_scores", "write_result", "result_record"]
+__all__ = ["CalibrationResult", "SubjectResult", "calibrate", "calibrate_subjects", "read_pc_scores", "write_result",
+           "result_record"]

@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from lvcore.core.space import SIGMA_V_ML
+
 
 def register(subparsers) -> None:
     """Add the ``calibrate`` sub-command."""
@@ -27,7 +29,7 @@ def register(subparsers) -> None:
                    help="fixed alpha_epi (deg), used only by emulators that take angles (default 90); "
                         "the 'chapter' emulator is trained at (-60, 60) and ignores both")
     p.add_argument("--edp", type=float, default=8.0, help="end-diastolic pressure (mmHg) for emulators that take it")
-    p.add_argument("--sigma-v", type=float, default=5.0, help="LVV noise sd (mL), fixed")
+    p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML, help=f"LVV noise sd (mL), fixed (default {SIGMA_V_ML:g})")
     p.add_argument("--sampler", choices=("auto", "nuts", "hmc_gibbs"), default="auto",
                    help="auto: NUTS for volume/iid, HMC-within-Gibbs for discrepancy")
     p.add_argument("--chains", type=int, default=4)
@@ -45,10 +47,10 @@ def run_calibrate(args) -> int:
 
     use_host_devices(args.chains)
 
+    from lvcore.core.forward import load_emulator_forward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal
     from lvcore.inference.data import read_measured_csv
-    from lvcore.inference.forward import load_forward
     from lvcore.inference.models import MODEL_NAMES
     from lvcore.inference.samplers import SamplerConfig
 
@@ -64,24 +66,22 @@ def run_calibrate(args) -> int:
     h = cal.read_pc_scores(args.geometry)
     infer = args.angles == "infer"
     name = args.emulator or ("angles" if infer else "chapter")
-    forward = load_forward(name, h, infer_angles=infer, alpha_endo=args.alpha_endo, alpha_epi=args.alpha_epi,
-                           edp_mmhg=args.edp)
+    forward = load_emulator_forward(name, h, infer_angles=infer, alpha_endo=args.alpha_endo,
+                                    alpha_epi=args.alpha_epi, edp_mmhg=args.edp)
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
-    records = []
-    for row in rows:
-        for m in model_names:
-            res = cal.calibrate(row.y, forward, m, config=config, sampler=args.sampler, sigma_v=args.sigma_v,
-                                infer_angles=infer,
-                                progress=None if args.json else (lambda msg, frac: print(f"[{row.subject}] {msg}")),
-                                attrs={"subject": row.subject, "data_file": str(args.data), "emulator": name,
-                                       "angles": args.angles})
-            paths = cal.write_result(res, args.out, row.subject)
-            rec = {"subject": row.subject, **cal.result_record(res), **paths}
-            records.append(rec)
-            if not args.json:
-                print(f"\n== {row.subject} / {m} ({res.sampler}, {res.wall_s:.1f} s) ==")
-                print(res.summary.to_string())
-                print(res.convergence.message())
+
+    def show(item):
+        res = item.result
+        print(f"\n== {item.subject} / {item.model} ({res.sampler}, {res.wall_s:.1f} s) ==")
+        print(res.summary.to_string())
+        print(res.convergence.message())
+
+    results = cal.calibrate_subjects(
+        [(r.subject, r.y, forward) for r in rows], model_names, config=config, sampler=args.sampler,
+        sigma_v=args.sigma_v, infer_angles=infer, out_dir=args.out,
+        attrs={"data_file": str(args.data), "emulator": name, "angles": args.angles},
+        progress=None if args.json else (lambda msg, frac: print(msg)), on_result=None if args.json else show)
+    records = [item.record() for item in results]
     out = Path(args.out)
     (out / "summary.json").write_text(json.dumps(records, indent=2))
     if args.json:

@@ -22,6 +22,7 @@ import numpy as np
 from numpyro.infer.hmc import hmc
 from numpyro.infer.util import initialize_model
 
+from lvcore.core.space import SIGMA_V_ML
 from lvcore.inference import models, samplers
 from lvcore.outputs import THETA_NAMES
 
@@ -59,7 +60,7 @@ class CoverageResult:
         return float(np.sqrt(self.level * (1 - self.level) / n))
 
 
-def simulate_data(forward, theta: dict, rng: np.random.Generator, sigma_v: float = 5.0,
+def simulate_data(forward, theta: dict, rng: np.random.Generator, sigma_v: float = SIGMA_V_ML,
                   sigma_s: float = 0.03, discrepancy=None) -> np.ndarray:
     """SYNTHETIC data: ``forward(theta)`` plus Gaussian noise (and an optional strain discrepancy)."""
     y = np.asarray(forward(theta), dtype=float).copy()
@@ -109,7 +110,7 @@ def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
 
 
 def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.SamplerConfig,
-                       sigma_v: float = 5.0, sites=THETA_NAMES, group_by_chain: bool = False) -> dict:
+                       sigma_v: float = SIGMA_V_ML, sites=THETA_NAMES, group_by_chain: bool = False) -> dict:
     """Posterior draws for many data sets at once: one jit, vmapped over (data set x chain).
 
     Parameters
@@ -120,6 +121,7 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
         Return arrays of shape (n_datasets, num_chains, num_samples, ...) instead
         of (n_datasets, num_chains * num_samples, ...).
     """
+    models.check_traceable(forward)
     ys = jnp.asarray(ys, dtype=jnp.float64)
     n = ys.shape[0]
     if model_name == "discrepancy":
@@ -150,7 +152,7 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
 def coverage_study(forward, model_name: str = "iid", n_datasets: int = 50, *, level: float = 0.9,
                    config: samplers.SamplerConfig = samplers.SamplerConfig(num_warmup=500, num_samples=500,
                                                                            num_chains=2),
-                   seed: int = 0, sigma_v: float = 5.0, sigma_s: float = 0.03) -> CoverageResult:
+                   seed: int = 0, sigma_v: float = SIGMA_V_ML, sigma_s: float = 0.03) -> CoverageResult:
     """Coverage of central ``level`` credible intervals over ``n_datasets`` prior-drawn truths."""
     rng = np.random.default_rng(seed)
     truths = [prior_draw(rng) for _ in range(n_datasets)]

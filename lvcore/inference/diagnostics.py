@@ -18,6 +18,7 @@ import arviz as az
 import numpy as np
 import pandas as pd
 
+from lvcore.core.space import SIGMA_V_ML
 from lvcore.inference import models, samplers
 from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
 
@@ -144,22 +145,39 @@ def ess_per_second(run: samplers.SamplerRun, var_names=THETA_NAMES) -> dict:
     return out
 
 
-def _posterior_predictive(run: samplers.SamplerRun, sigma_v: float, seed: int = 1) -> np.ndarray:
-    """Replicated data (chain, draw, 25) under the model's likelihood."""
-    rng = np.random.default_rng(seed)
-    eta = np.asarray(run.samples["eta"])
+def posterior_predictive(samples: dict, sigma_v: float, rng: np.random.Generator) -> np.ndarray:
+    """Replicated data ``(..., 25)`` under the model's likelihood, one replicate per draw.
+
+    Parameters
+    ----------
+    samples : dict
+        Draws with common leading axes (e.g. (chain, draw)): ``eta`` (..., 25),
+        and for models (ii)/(iii) ``sigma_s2`` (...), for (iii) also ``disc``
+        (..., 24) and ``v`` (...).
+    sigma_v : float
+        LVV noise sd (mL).
+    rng : numpy Generator
+
+    Returns
+    -------
+    ndarray
+        ``y_rep[..., 0] ~ N(eta_0, sigma_v^2)``; strains ``~ N(eta_i + b_i + v, sigma_S^2)``
+        (without ``b, v`` for iid). The volume-only model does not model the
+        strains: there they are ``eta`` without noise.
+    """
+    eta = np.asarray(samples["eta"])
     y_rep = eta.copy()
     y_rep[..., 0] += sigma_v * rng.standard_normal(eta.shape[:-1])
-    if "sigma_s2" in run.samples:
+    if "sigma_s2" in samples:
         mean = eta[..., 1:]
-        if "disc" in run.samples:
-            mean = mean + run.samples["disc"] + run.samples["v"][..., None]
-        y_rep[..., 1:] = mean + np.sqrt(run.samples["sigma_s2"])[..., None] * rng.standard_normal(mean.shape)
+        if "disc" in samples:
+            mean = mean + np.asarray(samples["disc"]) + np.asarray(samples["v"])[..., None]
+        y_rep[..., 1:] = mean + np.sqrt(np.asarray(samples["sigma_s2"]))[..., None] * rng.standard_normal(mean.shape)
     return y_rep
 
 
 def to_inference_data(run: samplers.SamplerRun, y, *, convergence: Convergence | None = None,
-                      sigma_v: float = models.DEFAULT_SIGMA_V_ML, forward_label: str = "",
+                      sigma_v: float = SIGMA_V_ML, forward_label: str = "",
                       extra_attrs: dict | None = None) -> az.InferenceData:
     """ArviZ InferenceData with posterior, posterior_predictive, observed_data and sample_stats.
 
@@ -185,7 +203,7 @@ def to_inference_data(run: samplers.SamplerRun, y, *, convergence: Convergence |
     attrs.update(extra_attrs or {})
     return az.from_dict(
         posterior=posterior,
-        posterior_predictive={"y_rep": _posterior_predictive(run, sigma_v)},
+        posterior_predictive={"y_rep": posterior_predictive(run.samples, sigma_v, np.random.default_rng(1))},
         observed_data={"y": np.asarray(y, dtype=float)},
         sample_stats={k: np.asarray(v) for k, v in run.sample_stats.items()},
         coords=coords,
@@ -203,4 +221,5 @@ def save_netcdf(idata: az.InferenceData, path) -> Path:
 
 
 __all__ = ["Convergence", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table",
-           "check_convergence", "sample_until_converged", "ess_per_second", "to_inference_data", "save_netcdf"]
+           "check_convergence", "sample_until_converged", "ess_per_second", "posterior_predictive", "to_inference_data",
+           "save_netcdf"]

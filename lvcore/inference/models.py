@@ -2,13 +2,15 @@ r"""numpyro models for calibrating theta = (a, b, af, bf) from LVV and 24 strain
 
 Each model is a plain function of the measured data ``y`` (25 values: LVV in
 mL then 24 circumferential strains, :mod:`lvcore.outputs` order) and a
-forward model (:class:`lvcore.inference.forward.ForwardModel`). Priors follow
+JAX-traceable forward model (:class:`lvcore.core.Forward` with ``traceable``
+True, e.g. :class:`lvcore.core.EmulatorForward`). Priors follow
 the chapter's Table 9.1 and live in :data:`PRIORS` so that the blocked
 HMC-within-Gibbs sampler uses the very same densities.
 
 Models
 ------
-(i) :func:`volume_model` — LVV only: ``y0 ~ N(eta0, sigma_V^2)``, sigma_V fixed (5 mL).
+(i) :func:`volume_model` — LVV only: ``y0 ~ N(eta0, sigma_V^2)``, sigma_V fixed
+    (:data:`lvcore.core.space.SIGMA_V_ML`, 5 mL).
 (ii) :func:`iid_model` — LVV term plus ``y_i ~ N(eta_i, sigma_S^2)`` iid,
     ``sigma_S^2 ~ IG(0.001, 0.001)``.
 (iii) :func:`discrepancy_model` — LVV term plus
@@ -29,14 +31,10 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
-from lvcore.campaigns.space import THETA_BOUNDS  # Table 9.1: a, af in [0.05, 10] kPa; b, bf in [0.1, 30]
+from lvcore.core.space import ANGLE_BOUNDS, SIGMA_V_ML, THETA_BOUNDS  # Table 9.1 and the angle ranges
+from lvcore.exceptions import ForwardError
 from lvcore.inference import kernels
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
-
-#: Fixed LVV noise standard deviation (mL), chapter Table E.1.
-DEFAULT_SIGMA_V_ML = 5.0
-#: Uniform bounds of the fibre angles (degrees) when inferred.
-ANGLE_BOUNDS = {"alpha_endo": (-90.0, 0.0), "alpha_epi": (0.0, 90.0)}
 #: Inverse-gamma (shape, scale) of every variance prior.
 IG_SHAPE, IG_SCALE = 0.001, 0.001
 #: Standard deviation of the global strain bias v.
@@ -54,11 +52,11 @@ def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[fl
     ----------
     infer_angles : bool
         Include the fibre angles (degrees).
-    forward : ForwardModel, optional
-        If it has ``input_bounds`` (an emulator's training box, see
-        :class:`lvcore.inference.forward.EmulatorForward`), each prior is cut
-        to its intersection with that box: the ``angles`` emulator, for one,
-        is trained on b, bf >= 0.5 only.
+    forward : Forward, optional
+        Each prior is cut to its intersection with the forward model's
+        ``input_bounds`` (an emulator's training box, see
+        :class:`lvcore.core.EmulatorForward`): the ``angles`` emulator, for
+        one, is trained on b, bf >= 0.5 only.
 
     Raises
     ------
@@ -68,7 +66,7 @@ def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[fl
     bounds = {n: THETA_BOUNDS[n] for n in THETA_NAMES}
     if infer_angles:
         bounds.update({n: ANGLE_BOUNDS[n] for n in ANGLE_NAMES})
-    for n, (lo, hi) in (getattr(forward, "input_bounds", None) or {}).items():
+    for n, (lo, hi) in (dict(forward.input_bounds) if forward is not None else {}).items():
         if n in bounds:
             cut = (max(bounds[n][0], lo), min(bounds[n][1], hi))
             if not cut[0] < cut[1]:
@@ -108,6 +106,17 @@ def _check_y(y):
         raise ValueError(f"y must have shape ({N_OUTPUTS},) [LVV, 24 strains], got {jnp.shape(y)}")
 
 
+def check_traceable(forward, infer_angles: bool = False) -> None:
+    """Raise :class:`ForwardError` unless ``forward`` can be traced by JAX and reads the sampled parameters."""
+    if not getattr(forward, "traceable", False):
+        raise ForwardError(f"forward model '{getattr(forward, 'label', type(forward).__name__)}' is not JAX-traceable; "
+                           "NUTS needs gradients through it: calibrate with an emulator (lvcore.core.EmulatorForward)")
+    want = THETA_NAMES + (ANGLE_NAMES if infer_angles else ())
+    if tuple(forward.input_names) != want:
+        raise ForwardError(f"calibration samples {list(want)}; the forward model reads {list(forward.input_names)}"
+                           + (" (use infer_angles=True or bind the angles in)" if set(ANGLE_NAMES) <= set(forward.input_names) else ""))
+
+
 def _sample_params(infer_angles: bool, forward) -> dict:
     return {n: numpyro.sample(n, d) for n, d in theta_priors(infer_angles, forward).items()}
 
@@ -116,7 +125,7 @@ def _volume_term(eta0, y, sigma_v):
     numpyro.sample("lvv_obs", dist.Normal(eta0, sigma_v), obs=None if y is None else y[0])
 
 
-def volume_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_angles: bool = False):
+def volume_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False):
     """Model (i): LVV only, ``y0 ~ N(eta0(theta), sigma_v^2)``; strains are ignored."""
     _check_y(y)
     params = _sample_params(infer_angles, forward)
@@ -124,7 +133,7 @@ def volume_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_
     _volume_term(eta[0], y, sigma_v)
 
 
-def iid_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_angles: bool = False):
+def iid_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False):
     """Model (ii): LVV term plus iid Gaussian strains with inferred ``sigma_S^2``."""
     _check_y(y)
     params = _sample_params(infer_angles, forward)
@@ -135,7 +144,7 @@ def iid_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_ang
                    obs=None if y is None else y[1:])
 
 
-def discrepancy_model(y=None, *, forward, sigma_v: float = DEFAULT_SIGMA_V_ML, infer_angles: bool = False,
+def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
                       nugget: float = kernels.DEFAULT_NUGGET):
     """Model (iii): strains ``~ N(eta + b + v, sigma_S^2)`` with ``b = L b_tilde`` a polar GP.
 
@@ -169,7 +178,7 @@ def get_model(name: str):
 
 
 __all__ = [
-    "DEFAULT_SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
+    "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model",
 ]

@@ -38,6 +38,7 @@ from numpyro.infer import MCMC, NUTS
 from numpyro.infer.hmc import hmc
 from numpyro.infer.mcmc import MCMCKernel
 
+from lvcore.core.space import SIGMA_V_ML
 from lvcore.inference import kernels, models
 from lvcore.outputs import N_OUTPUTS
 
@@ -220,7 +221,8 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
         Name in :data:`lvcore.inference.models.MODELS`.
     y : array_like, shape (25,)
         Measured LVV (mL) and 24 strains.
-    forward : ForwardModel
+    forward : lvcore.core.Forward
+        JAX-traceable (``traceable`` True).
         Forward model (emulator adapter or stand-in).
     config : SamplerConfig
     **model_kwargs
@@ -270,7 +272,8 @@ class PolarGPGibbs(MCMCKernel):
 
     Parameters
     ----------
-    forward : ForwardModel
+    forward : lvcore.core.Forward
+        JAX-traceable (``traceable`` True).
         Forward model returning the 25 outputs.
     y : array_like, shape (25,)
         Measured data [LVV (mL), 24 strains].
@@ -289,7 +292,7 @@ class PolarGPGibbs(MCMCKernel):
 
     sample_field = "z"
 
-    def __init__(self, forward, y=None, *, sigma_v: float = models.DEFAULT_SIGMA_V_ML, infer_angles: bool = False,
+    def __init__(self, forward, y=None, *, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
                  nugget: float = kernels.DEFAULT_NUGGET, target_accept_prob: float = 0.8, max_tree_depth: int = 10):
         self.forward = forward
         self.y = None if y is None else jnp.asarray(y, dtype=jnp.float64)
@@ -479,8 +482,10 @@ def run_model(model_name: str, y, forward, config: SamplerConfig = SamplerConfig
               sampler: str = "auto", **model_kwargs) -> SamplerRun:
     """Run the default sampler of a model: NUTS for (i), (ii); HMC-within-Gibbs for (iii).
 
-    ``sampler="nuts"`` forces joint NUTS for the discrepancy model.
+    ``sampler="nuts"`` forces joint NUTS for the discrepancy model. ``forward``
+    must be JAX-traceable (:func:`lvcore.inference.models.check_traceable`).
     """
+    models.check_traceable(forward, model_kwargs.get("infer_angles", False))
     if model_name == "discrepancy" and sampler in ("auto", "hmc_gibbs"):
         return run_hmc_gibbs(y, forward, config, **model_kwargs)
     if model_name != "discrepancy":

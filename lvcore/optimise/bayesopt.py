@@ -29,13 +29,13 @@ from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
 from lvcore.campaigns.designs import make_design
-from lvcore.campaigns.space import ParameterSpace
+from lvcore.core.forward import Forward
+from lvcore.core.space import ParameterSpace
+from lvcore.exceptions import ForwardError, SolverError
 from lvcore.outputs import N_OUTPUTS
 
 #: The GP models log(f + floor): the RSS spans orders of magnitude over the box.
 _LOG_FLOOR = 1e-6
-#: A forward model for optimisation: (n, dim) physical inputs -> (n, 25) outputs.
-BatchForward = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -119,8 +119,25 @@ def _next_point(gp, dim: int, rng: np.random.Generator, U_best: np.ndarray, kapp
     return min(results, key=lambda r: r.fun).x
 
 
+def _outputs(forward: Forward, space: ParameterSpace, X: np.ndarray) -> np.ndarray:
+    """``(n, 25)`` outputs at the rows of ``X`` (columns ``space.names``); NaN rows where a point failed."""
+    return forward.evaluate(dict(zip(space.names, np.atleast_2d(X).T))).outputs
+
+
+def _objective(objective, Y: np.ndarray, f_seen: np.ndarray) -> np.ndarray:
+    """Objective per row; a failed point (NaN outputs) gets the worst value seen so far."""
+    f = objective(Y)
+    ok = np.isfinite(f)
+    if not ok.all():
+        finite = np.concatenate([f_seen[np.isfinite(f_seen)], f[ok]])
+        if finite.size == 0:
+            raise SolverError("every forward evaluation of the initial design failed")
+        f = np.where(ok, f, finite.max())
+    return f
+
+
 def bayesian_optimise(
-    forward: BatchForward,
+    forward: Forward,
     measured: np.ndarray,
     space: ParameterSpace,
     n_initial: int = 300,
@@ -135,9 +152,11 @@ def bayesian_optimise(
 
     Parameters
     ----------
-    forward : callable
-        ``(n, space.dim)`` physical inputs (columns ``space.names``) ->
-        ``(n, 25)`` outputs. An emulator or a batch of simulator runs.
+    forward : Forward
+        Reads ``space.names`` (its ``input_names``, in any order); evaluated in
+        batches (the initial design in one batch: a
+        :class:`~lvcore.core.SimulatorForward` with ``workers`` runs it on a
+        process pool). A point that fails gets the worst objective seen so far.
     measured : (25,) array
         Measured LVV (mL) and 24 strains.
     space : ParameterSpace
@@ -162,15 +181,16 @@ def bayesian_optimise(
     measured = np.asarray(measured, dtype=float)
     if measured.shape != (N_OUTPUTS,) or not np.all(np.isfinite(measured)):
         raise ValueError(f"measured data must be {N_OUTPUTS} finite numbers (LVV mL and 24 strains)")
+    if set(forward.input_names) != set(space.names):
+        raise ForwardError(f"the optimisation box varies {list(space.names)}; the forward model reads "
+                           f"{list(forward.input_names)}")
     design = make_design(space, "exp", n_initial, seed)
     X = np.array(design.points)
-    Y = np.asarray(forward(X), dtype=float)
-    if Y.shape != (len(X), N_OUTPUTS):
-        raise ValueError(f"forward model returned shape {Y.shape}, expected {(len(X), N_OUTPUTS)}")
-    scale = np.std(Y, axis=0)
-    scale[scale <= 0] = 1.0
+    Y = _outputs(forward, space, X)
+    scale = np.nanstd(Y, axis=0)
+    scale[~(scale > 0)] = 1.0
     objective = StandardisedRSS(measured, scale, lvv_weight)
-    f = objective(Y)
+    f = _objective(objective, Y, np.empty(0))
     U = space.to_unit(X)
     rng = np.random.default_rng(seed + 1)
     kernel = None
@@ -180,11 +200,11 @@ def bayesian_optimise(
         kernel = gp.kernel_
         u_new = _next_point(gp, space.dim, rng, U[np.argmin(f)], kappa)
         x_new = space.from_unit(u_new[None, :])
-        y_new = np.asarray(forward(x_new), dtype=float)
+        y_new = _outputs(forward, space, x_new)
         X = np.vstack([X, x_new])
         Y = np.vstack([Y, y_new])
         U = np.vstack([U, u_new[None, :]])
-        f = np.append(f, objective(y_new))
+        f = np.append(f, _objective(objective, y_new, f))
         if callback is not None:
             callback(it, float(f.min()))
     i = int(np.argmin(f))

@@ -10,22 +10,21 @@ by minimising the chapter's loss (9.11)::
 
 starting at θ̃, with scipy's SLSQP inside the prior box. The volume term
 compares the relative volume change, so the early volume of a reconstruction
-does not dominate. Gradients come from the forward model's sensitivities
-(the simulator's adjoint) when it provides them.
+does not dominate. Gradients come from the forward model's Jacobian (the
+simulator's adjoint, :class:`lvcore.core.SimulatorForward`) when it provides
+one (``provides_jacobian``), else from scipy's finite differences.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from scipy.optimize import minimize
 
-from lvcore.campaigns.space import THETA_BOUNDS
+from lvcore.core.forward import Forward
+from lvcore.core.space import THETA_BOUNDS
+from lvcore.exceptions import ForwardError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
-
-#: ``theta (4,) -> (outputs (25,), d outputs / d theta (25, 4) or None)``.
-ForwardWithJacobian = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray | None]]
 
 
 @dataclass(frozen=True)
@@ -68,7 +67,7 @@ class SQPResult:
 
 
 def refit_theta(
-    forward: ForwardWithJacobian,
+    forward: Forward,
     loss: OperatorLoss,
     theta_start: np.ndarray,
     bounds: dict | None = None,
@@ -79,32 +78,39 @@ def refit_theta(
 
     Parameters
     ----------
-    forward : callable
-        θ -> (25 outputs, (25, 4) Jacobian or None). Without a Jacobian the
-        gradient is taken by scipy's finite differences.
+    forward : Forward
+        Reads ``a, b, af, bf`` (``input_names`` in that order), e.g.
+        ``SimulatorForward(geometry=..., resolution=...)`` on the test
+        geometry. With ``provides_jacobian`` its Jacobian gives the gradient,
+        else scipy's finite differences do. A point that fails to converge
+        raises :class:`~lvcore.exceptions.SolverError`.
     loss : OperatorLoss
     theta_start : (4,) array
         Start (the truth θ̃ in the chapter), kPa for a and af.
     bounds : dict, optional
         Parameter bounds; default the prior box of Table 9.1.
     """
+    if tuple(forward.input_names) != THETA_NAMES:
+        raise ForwardError(f"the SQP refit varies {list(THETA_NAMES)}; the forward model reads "
+                           f"{list(forward.input_names)} (bind the other inputs into it)")
     bounds = THETA_BOUNDS if bounds is None else bounds
     box = [bounds[n] for n in THETA_NAMES]
+    has_jac = bool(forward.provides_jacobian)
     cache: dict = {}
     n_eval = [0]
 
     def evaluate(theta):
         key = tuple(np.round(theta, 14))
         if key not in cache:
-            y, jac = forward(np.asarray(theta, dtype=float))
+            batch = forward.evaluate(dict(zip(THETA_NAMES, np.asarray(theta, dtype=float))),
+                                     jacobian=has_jac).raise_on_failure()
             n_eval[0] += 1
-            value, g_y = loss.value_and_output_gradient(np.asarray(y, dtype=float))
-            grad = None if jac is None else np.asarray(jac).T @ g_y
-            cache[key] = (value, grad, np.asarray(y, dtype=float))
+            y = batch.outputs[0]
+            value, g_y = loss.value_and_output_gradient(y)
+            grad = batch.jacobian[0].T @ g_y if has_jac else None
+            cache[key] = (value, grad, y)
         return cache[key]
 
-    has_jac = forward(np.asarray(theta_start, dtype=float))[1] is not None
-    n_eval[0] += 1
     res = minimize(
         lambda t: evaluate(t)[0],
         np.asarray(theta_start, dtype=float),

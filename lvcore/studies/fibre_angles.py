@@ -6,7 +6,9 @@ respond: in the chapter, moving from (−60°, 90°) to (−30°, 60°) changed 
 LVV by about 2 mL but the lateral and inferior strains substantially.
 
 Everything here returns plain data (frozen dataclasses and arrays) that the
-app page and reports plot. Solves that fail are kept with their reason.
+app page and reports plot. Solves that fail are kept with their reason. The
+sweeps take any :class:`~lvcore.core.forward.Forward` of the two angles;
+the default is the FE simulator (:func:`angle_forward`).
 :func:`emulator_angle_map` fills the same map from an emulator that takes the
 angles as inputs (the bundled ``angles`` emulator): one batched prediction,
 fast enough to redraw while sliders move.
@@ -19,8 +21,10 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from lvcore import units
+from lvcore.core.forward import EmulatorForward, Forward, ForwardBatch, SimulatorForward
+from lvcore.exceptions import ForwardError
 from lvcore.geometry.template import N_REGIONS
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name, pc_names
 
 #: Angle pairs (α_endo, α_epi) in degrees used by the chapter (§9.3.2, Fig 9.5).
 CHAPTER_ANGLE_PAIRS = ((-60.0, 90.0), (-60.0, 60.0), (-30.0, 60.0), (0.0, 90.0))
@@ -66,51 +70,82 @@ def angle_case(
     base: str = "clamped",
 ) -> dict:
     """The simulation case dictionary of one sweep point (geometry default: the default LV)."""
+    return angle_forward(theta, edp_mmhg, geometry, resolution, base).case(
+        {ANGLE_NAMES[0]: alpha_endo, ANGLE_NAMES[1]: alpha_epi})
+
+
+def angle_forward(
+    theta: Mapping[str, float] | None = None,
+    edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+    geometry: Mapping | None = None,
+    resolution: str = "fast",
+    base: str = "clamped",
+    workers: int | None = 1,
+) -> SimulatorForward:
+    """The FE simulator as a forward model of the fibre angles (deg) at fixed material, EDP and geometry.
+
+    Parameters
+    ----------
+    theta : mapping, optional
+        a, b, af, bf (kPa, -, kPa, -); default the reference θ.
+    edp_mmhg : float
+    geometry : mapping, optional
+        The case's geometry section (default: the default LV).
+    resolution, base : str
+        Mesh preset and basal boundary condition.
+    workers : int, optional
+        Local processes for batches (see :class:`~lvcore.core.forward.SimulatorForward`).
+    """
     theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
-    geom = dict(geometry or {"kind": "default"})
-    geom.setdefault("resolution", resolution)
-    return {
-        "geometry": geom,
-        "material": {"law": "holzapfel-ogden", **theta},
-        "fibres": {"alpha_endo": float(alpha_endo), "alpha_epi": float(alpha_epi)},
-        "load": {"pressure": float(edp_mmhg), "units": "mmHg"},
-        "boundary": {"base": base},
-    }
+    return SimulatorForward(input_names=ANGLE_NAMES, conditions={**theta, EDP_NAME: float(edp_mmhg)},
+                            geometry=dict(geometry or {"kind": "default"}), resolution=resolution, base=base,
+                            workers=workers, label="FE simulator (fibre-angle sweep)")
 
 
-def _run(case: dict, simulate_fn: Callable) -> AngleRun:
-    r = simulate_fn(case)
-    alpha = case["fibres"]
-    if not r.converged:
-        return AngleRun(alpha["alpha_endo"], alpha["alpha_epi"], False, r.message, None, None)
-    y = np.asarray(r.outputs())
-    return AngleRun(alpha["alpha_endo"], alpha["alpha_epi"], True, r.message, float(y[0]), y[1:])
+def _check_angle_forward(forward) -> None:
+    if tuple(forward.input_names) != ANGLE_NAMES:
+        raise ForwardError(f"an angle sweep needs a forward model of {list(ANGLE_NAMES)} (deg); "
+                           f"this one reads {list(forward.input_names)}")
+
+
+def _runs(endo, epi, batch) -> list[AngleRun]:
+    out = []
+    for e, p, y, ok, msg in zip(endo, epi, batch.outputs, batch.converged, batch.messages):
+        out.append(AngleRun(float(e), float(p), bool(ok), msg, float(y[0]) if ok else None,
+                            y[1:].copy() if ok else None))
+    return out
 
 
 def angle_sweep(
     angle_pairs: Sequence[tuple[float, float]] = CHAPTER_ANGLE_PAIRS,
-    simulate_fn: Callable | None = None,
+    forward: Forward | None = None,
     progress: Callable[[int, int], None] | None = None,
     **case_options,
 ) -> list[AngleRun]:
-    """Simulate each (α_endo, α_epi) pair (degrees) at otherwise fixed conditions.
+    """Evaluate each (α_endo, α_epi) pair (degrees) at otherwise fixed conditions.
 
     Parameters
     ----------
     angle_pairs : sequence of (float, float)
-    simulate_fn : callable, optional
-        The forward simulator (default :func:`lvcore.simulate`).
+    forward : Forward, optional
+        A forward model reading ``alpha_endo, alpha_epi`` (default
+        :func:`angle_forward` with ``case_options``: the FE simulator).
     progress : callable, optional
-        Called as ``progress(done, total)`` after each run.
+        Called as ``progress(done, total)`` after each point.
     **case_options
         ``theta``, ``edp_mmhg``, ``geometry``, ``resolution``, ``base`` (see
-        :func:`angle_case`).
+        :func:`angle_forward`); only without ``forward``.
     """
-    if simulate_fn is None:
-        from lvcore import simulate as simulate_fn
+    if forward is None:
+        forward = angle_forward(**case_options)
+    elif case_options:
+        raise ForwardError(f"case options {sorted(case_options)} apply to the default simulator only; "
+                           "bind them into the forward model instead")
+    _check_angle_forward(forward)
     runs = []
     for n, (endo, epi) in enumerate(angle_pairs):
-        runs.append(_run(angle_case(endo, epi, **case_options), simulate_fn))
+        batch = forward.evaluate({ANGLE_NAMES[0]: [float(endo)], ANGLE_NAMES[1]: [float(epi)]})
+        runs += _runs([endo], [epi], batch)
         if progress is not None:
             progress(n + 1, len(angle_pairs))
     return runs
@@ -142,19 +177,23 @@ class AngleMap:
 def angle_map(
     alpha_endo: Sequence[float],
     alpha_epi: Sequence[float],
-    simulate_fn: Callable | None = None,
+    forward: Forward | None = None,
     progress: Callable[[int, int], None] | None = None,
     **case_options,
 ) -> AngleMap:
-    """Simulate every pair of the grid ``alpha_endo × alpha_epi`` (degrees).
+    """Evaluate every pair of the grid ``alpha_endo × alpha_epi`` (degrees).
 
-    Failed solves are NaN in the maps (so a contour plot shows a hole) and are
-    listed in :attr:`AngleMap.failures`.
+    ``forward`` and ``case_options`` as in :func:`angle_sweep`. Failed solves
+    are NaN in the maps (so a contour plot shows a hole) and are listed in
+    :attr:`AngleMap.failures`.
     """
     ae = np.asarray(alpha_endo, dtype=float)
     ap = np.asarray(alpha_epi, dtype=float)
     pairs = [(e, p) for p in ap for e in ae]
-    runs = angle_sweep(pairs, simulate_fn=simulate_fn, progress=progress, **case_options)
+    return _as_map(ae, ap, angle_sweep(pairs, forward=forward, progress=progress, **case_options))
+
+
+def _as_map(ae: np.ndarray, ap: np.ndarray, runs) -> AngleMap:
     lvv = np.array([np.nan if r.lvv_ml is None else r.lvv_ml for r in runs]).reshape(ap.size, ae.size)
     mean_e = np.array([np.nan if r.strains is None else float(np.mean(r.strains)) for r in runs])
     return AngleMap(ae, ap, lvv, mean_e.reshape(ap.size, ae.size), tuple(runs))
@@ -206,24 +245,19 @@ def emulator_angle_map(
     if not set(ANGLE_NAMES) <= set(names):
         raise EmulatorError(f"emulator '{emulator.name}' does not take the fibre angles (inputs {list(names)}); "
                             "use the 'angles' emulator or the simulator")
-    ae = np.asarray(alpha_endo, dtype=float)
-    ap = np.asarray(alpha_epi, dtype=float)
-    endo, epi = np.meshgrid(ae, ap)  # (n_epi, n_endo), row-major over alpha_epi as in angle_map
-    theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
-    pcs = [n for n in names if is_pc_name(n)]
+    pcs = pc_names(sum(1 for n in names if is_pc_name(n)))
     h = np.zeros(len(pcs)) if h is None else np.atleast_1d(np.asarray(h, dtype=float))
     if h.size < len(pcs):
         raise EmulatorError(f"emulator '{emulator.name}' needs {len(pcs)} PC scores, got {h.size}")
-    values = {**theta, ANGLE_NAMES[0]: endo, ANGLE_NAMES[1]: epi, EDP_NAME: float(edp_mmhg)}
-    values.update({n: float(h[int(n[1:]) - 1]) for n in pcs})
-    missing = [n for n in names if n not in values]
-    if missing:
-        raise EmulatorError(f"emulator '{emulator.name}' needs input(s) {missing}")
-    y = np.asarray(emulator.predict(**{n: values[n] for n in names}))  # (n_epi, n_endo, 25)
-    message = f"emulator '{emulator.name}'"
-    runs = tuple(AngleRun(float(e), float(p), True, message, float(yy[0]), yy[1:].copy())
-                 for e, p, yy in zip(endo.ravel(), epi.ravel(), y.reshape(-1, y.shape[-1])))
-    return AngleMap(ae, ap, y[..., 0], y[..., 1:].mean(axis=-1), runs)
+    theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
+    conditions = {**theta, EDP_NAME: float(edp_mmhg), **dict(zip(pcs, h[:len(pcs)].tolist()))}
+    fwd = EmulatorForward(emulator, conditions, ANGLE_NAMES, f"emulator '{emulator.name}'")
+    ae = np.asarray(alpha_endo, dtype=float)
+    ap = np.asarray(alpha_epi, dtype=float)
+    endo, epi = np.meshgrid(ae, ap)  # (n_epi, n_endo), row-major over alpha_epi as in angle_map
+    batch = fwd.evaluate({ANGLE_NAMES[0]: endo.ravel(), ANGLE_NAMES[1]: epi.ravel()})
+    batch = ForwardBatch(batch.outputs, batch.converged, tuple(m or fwd.label for m in batch.messages))
+    return _as_map(ae, ap, _runs(endo.ravel(), epi.ravel(), batch))
 
 
 def strain_table(runs: Sequence[AngleRun]) -> dict[str, np.ndarray]:

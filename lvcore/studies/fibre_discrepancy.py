@@ -28,20 +28,21 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import arviz as az
 import jax
 import numpy as np
 
-from lvcore.inference import coverage, samplers
-from lvcore.outputs import THETA_NAMES
+from lvcore.core.forward import Forward, SimulatorForward, load_emulator_forward
+from lvcore.core.space import CHAPTER_EDP, SIGMA_V_ML
+from lvcore.inference import coverage, diagnostics, samplers
+from lvcore.outputs import ANGLE_NAMES, THETA_NAMES, pc_names
 
 ANGLE_SETS = ((-60.0, 90.0), (-30.0, 60.0), (0.0, 90.0))
 THETA_SETS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), (1.0, 5.0, 1.0, 5.0))
 #: The synthetic geometry: a point in the shape model's standardised 5-PC space.
 DEFAULT_H = (0.5, -0.4, 0.3, -0.2, 0.1)
-SIGMA_V_ML, SIGMA_S = 5.0, 0.03
+SIGMA_S = 0.03
 MODELS = ("volume", "iid", "discrepancy")
 CHAPTER_SIGMA_S_DISCREPANCY = 0.024
 
@@ -59,25 +60,22 @@ class TestSet:
     benchmark: np.ndarray  # eta(theta, h): the emulator at the truth (25)
 
 
-def simulator_outputs(theta: dict, alpha_endo: float, alpha_epi: float, h, resolution: str = "default") -> np.ndarray:
-    """FE simulator outputs [LVV mL, 24 strains] at theta and fibre angles on the PCA geometry ``h``."""
-    from lvcore import simulate
-
-    case = {
-        "geometry": {"kind": "pca", "scores": [float(v) for v in h], "resolution": resolution},
-        "material": {"law": "holzapfel-ogden", **{n: float(theta[n]) for n in THETA_NAMES}},
-        "fibres": {"alpha_endo": float(alpha_endo), "alpha_epi": float(alpha_epi)},
-        "load": {"pressure": 8.0, "units": "mmHg"},
-        "boundary": {"base": "clamped"},
-    }
-    return np.asarray(simulate(case, raise_on_failure=True).outputs(), dtype=float)
+def data_simulator(h=DEFAULT_H, resolution: str = "default") -> SimulatorForward:
+    """The FE simulator that makes the test data: inputs theta and the fibre angles, on the PCA geometry ``h`` at 8 mmHg."""
+    return SimulatorForward(input_names=THETA_NAMES + ANGLE_NAMES,
+                            conditions={**dict(zip(pc_names(len(h)), map(float, h))), "edp": CHAPTER_EDP},
+                            resolution=resolution, label="FE simulator (fibre-discrepancy test data)")
 
 
-def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulate_fn: Callable | None = None,
+def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulator: Forward | None = None,
                    resolution: str = "default", progress=None, set_indices=None) -> list[TestSet]:
-    """The 12 SYNTHETIC test sets (or those in ``set_indices``); ``simulate_fn(theta, alpha_endo, alpha_epi)``
-    defaults to the FE simulator. Set ``i`` has angles ``ANGLE_SETS[i // 4]`` and theta ``THETA_SETS[i % 4]``."""
-    sim = simulate_fn or (lambda th, ae, ap: simulator_outputs(th, ae, ap, h, resolution))
+    """The 12 SYNTHETIC test sets (or those in ``set_indices``).
+
+    ``simulator`` reads ``a, b, af, bf, alpha_endo, alpha_epi`` and makes the
+    noise-free data (default :func:`data_simulator`); ``forward`` (theta only)
+    gives the benchmark. Set ``i`` has angles ``ANGLE_SETS[i // 4]`` and theta ``THETA_SETS[i % 4]``.
+    """
+    simulator = simulator or data_simulator(h, resolution)
     rng = np.random.default_rng(seed)
     out = []
     for i, ((ae, ap), th) in enumerate((a, t) for a in ANGLE_SETS for t in THETA_SETS):
@@ -87,7 +85,8 @@ def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulate_fn: Callable
             continue
         if progress:
             progress(f"simulating test set {i + 1}/12: angles ({ae:g}, {ap:g}), theta {th}", i / 12)
-        z = np.asarray(sim(theta, ae, ap), dtype=float)
+        point = {**theta, ANGLE_NAMES[0]: ae, ANGLE_NAMES[1]: ap}
+        z = simulator.evaluate({n: [point[n]] for n in simulator.input_names}).raise_on_failure().outputs[0]
         y = z + np.r_[SIGMA_V_ML, np.full(24, SIGMA_S)] * z_noise
         out.append(TestSet(i, ae, ap, theta, z, y, np.asarray(forward(theta), dtype=float)))
     return out
@@ -113,25 +112,25 @@ def _rhat(draws: dict, i: int, names) -> float:
 
 
 def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | None = None, seed: int = 0,
-              simulate_fn: Callable | None = None, resolution: str = "default", out: str | Path | None = None,
+              simulator: Forward | None = None, resolution: str = "default", out: str | Path | None = None,
               progress=None, set_indices=None, emulator: str = "chapter") -> dict:
     """Run the study; returns plain data (and writes it under ``out`` if given).
 
     Parameters
     ----------
-    forward : ForwardModel, optional
-        Default: emulator ``emulator`` (name or directory; ``chapter``) with ``h`` bound in
-        (:func:`lvcore.inference.forward.load_forward`); raises EmulatorError if absent.
-    simulate_fn : callable, optional
-        ``(theta, alpha_endo, alpha_epi) -> 25 outputs``; default the FE simulator.
+    forward : Forward, optional
+        JAX-traceable, reads theta. Default: emulator ``emulator`` (name or
+        directory; ``chapter``) with ``h`` bound in
+        (:func:`lvcore.core.load_emulator_forward`); raises EmulatorError if absent.
+    simulator : Forward, optional
+        Reads theta and the fibre angles and makes the test data; default
+        the FE simulator (:func:`data_simulator`).
     """
     t_start = time.perf_counter()
     config = config or samplers.SamplerConfig()
     if forward is None:
-        from lvcore.inference.forward import load_forward
-
-        forward = load_forward(emulator, h)
-    sets = make_test_sets(forward, h, seed=seed, simulate_fn=simulate_fn, resolution=resolution, progress=progress,
+        forward = load_emulator_forward(emulator, h)
+    sets = make_test_sets(forward, h, seed=seed, simulator=simulator, resolution=resolution, progress=progress,
                           set_indices=set_indices)
     t_sim = time.perf_counter() - t_start
     fits, timings = {}, {}
@@ -158,11 +157,10 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
                 sig = np.sqrt(d["sigma_s2"][pos].reshape(-1))
                 mr["sigma_s"] = {"median": float(np.median(sig)), "q05": float(np.quantile(sig, 0.05)),
                                  "q95": float(np.quantile(sig, 0.95))}
-                mean = eta[:, 1:]
-                if m == "discrepancy":
-                    mean = mean + d["disc"][pos].reshape(-1, 24) + d["v"][pos].reshape(-1, 1)
-                rng = np.random.default_rng(s.index)
-                rep = mean + sig[:, None] * rng.standard_normal(mean.shape)
+                draws = {"eta": eta, "sigma_s2": sig**2}
+                if "disc" in d:
+                    draws.update(disc=d["disc"][pos].reshape(-1, 24), v=d["v"][pos].reshape(-1))
+                rep = diagnostics.posterior_predictive(draws, SIGMA_V_ML, np.random.default_rng(s.index))[:, 1:]
                 q = np.quantile(rep, [0.05, 0.5, 0.95], axis=0)
                 mr["strain_predictive"] = {"q05": q[0].tolist(), "q50": q[1].tolist(), "q95": q[2].tolist()}
             rec["models"][m] = mr
