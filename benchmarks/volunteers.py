@@ -4,7 +4,7 @@
     python benchmarks/volunteers.py --models iid --chains 2 --warmup 500 --samples 500
     python benchmarks/volunteers.py --angles infer --emulator angles  # joint theta + fibre angles
 
-For each volunteer in ``assets/volunteers`` (measured LVV + 24 strains, made
+For each bundled volunteer (``lvcore/assets/volunteers``) (measured LVV + 24 strains, made
 by the FE simulator at hidden theta and hidden fibre angles, plus noise
 sigma_V = 5 mL, sigma_S = 0.03), the geometry (VTU) is projected on the
 shape model's first 5 PCs and each model is fitted with ``lvcore.inference.calibrate``
@@ -30,8 +30,6 @@ from pathlib import Path
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
-REPO = Path(__file__).resolve().parents[1]
-VOLUNTEERS = REPO / "assets" / "volunteers"
 
 
 def main(argv=None) -> int:
@@ -56,24 +54,26 @@ def main(argv=None) -> int:
 
     from lvcore.core.forward import load_emulator_forward
     from lvcore.inference import calibrate as cal
+    from lvcore.resources import volunteers_dir
     from lvcore.inference.data import read_measured_csv
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.outputs import ANGLE_NAMES, THETA_NAMES
 
     infer = args.angles == "infer"
     emulator = args.emulator or ("angles" if infer else "chapter")
-    truth = {t["subject"]: t for t in json.loads((VOLUNTEERS / "truth" / "SYNTHETIC_volunteers_truth.json").read_text())["volunteers"]}
+    vol_dir = volunteers_dir()
+    truth = {t["subject"]: t for t in json.loads((vol_dir / "truth" / "SYNTHETIC_volunteers_truth.json").read_text())["volunteers"]}
     wanted = set(args.subjects.split(",")) if args.subjects else None
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
     params = THETA_NAMES + (ANGLE_NAMES if infer else ())
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     subjects, scores = [], {}
-    for csv in sorted(VOLUNTEERS.glob("SYNTHETIC_HV*_measured.csv")):
+    for csv in sorted(vol_dir.glob("SYNTHETIC_HV*_measured.csv")):
         row = read_measured_csv(csv)[0]
         if wanted and row.subject not in wanted:
             continue
         stem = csv.name.replace("_measured.csv", "")
-        h = cal.read_pc_scores(VOLUNTEERS / f"{stem}_geometry.vtu")
+        h = cal.read_pc_scores(vol_dir / f"{stem}_geometry.vtu")
         scores[row.subject] = h
         subjects.append((row.subject, row.y, load_emulator_forward(emulator, h, infer_angles=infer,
                                                                    alpha_endo=args.alpha_endo, alpha_epi=args.alpha_epi)))

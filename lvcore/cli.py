@@ -14,6 +14,7 @@ COMMAND_MODULES = (
     "lvcore.emulator.cli",      # lvcore emulator train|info
     "lvcore.inference.cli",     # lvcore calibrate
     "lvcore.studies.cli",       # lvcore study ...
+    "lvcore.app.cli",           # lvcore app
 )
 
 
@@ -27,7 +28,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra and not getattr(args, "passthrough", False):  # only `lvcore app` passes options on (to streamlit)
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    args.extra = extra
     from lvcore.exceptions import LVCoreError
 
     try:

@@ -1,10 +1,45 @@
-"""The entry page (Simulator) under Streamlit's AppTest, at the fast resolution."""
+"""The app: navigation, `lvcore app`, and the home page (Simulator) under Streamlit's AppTest at the fast resolution."""
 from pathlib import Path
 
 import pytest
 from streamlit.testing.v1 import AppTest
 
+from lvcore.app import APP_DIR, ENTRY, PAGES  # noqa: E402
+
+#: The checkout's shim (`streamlit run app.py`): it runs the packaged entry, whose default page is the Simulator.
 APP = str(Path(__file__).resolve().parents[1] / "app.py")
+
+
+def test_navigation_lists_every_page_script_by_name():
+    scripts = {p.path for p in PAGES}
+    assert all(p.is_file() for p in scripts) and ENTRY.is_file()
+    assert scripts == {APP_DIR / "simulator.py", *(APP_DIR / "pages").glob("*.py")}  # no page left out
+    titles = [p.title for p in PAGES]
+    assert titles[0] == "Simulator" and "app" not in {t.lower() for t in titles}
+    assert len(set(titles)) == len(titles) and len({p.url_path for p in PAGES}) == len(PAGES)
+
+
+def test_lvcore_app_runs_streamlit_on_the_packaged_entry(monkeypatch):
+    import sys
+
+    from lvcore.cli import main
+
+    seen = {}
+    monkeypatch.setattr("os.execv", lambda exe, cmd: seen.update(exe=exe, cmd=cmd))
+    monkeypatch.setattr("os.name", "posix")
+    main(["app", "--port", "8765", "--server.headless", "true"])
+    assert seen["exe"] == sys.executable
+    assert seen["cmd"] == [sys.executable, "-m", "streamlit", "run", str(ENTRY), "--server.port", "8765",
+                           "--server.headless", "true"]
+    with pytest.raises(SystemExit):  # other commands still reject unknown options
+        main(["simulate", "case.json", "--server.headless", "true"])
+
+
+def test_switching_pages_by_navigation():
+    at = AppTest.from_file(APP, default_timeout=180).run()
+    at.switch_page(str(APP_DIR / "pages" / "2_Shape_model.py")).run()
+    assert not at.exception
+    assert at.title[0].value == "Shape model"
 
 
 def _lvv(at) -> float:

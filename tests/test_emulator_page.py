@@ -1,15 +1,15 @@
 """The Emulator page renders metrics, parity/residual plots and live sliders (Streamlit AppTest)."""
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from campaign_double import closed_form
 import lvcore.emulator.io as eio
+from lvcore.app import APP_DIR
 from lvcore.emulator.io import save_emulator
 from lvcore.emulator.training import TrainingConfig, train_emulator
 
-PAGE = Path(__file__).resolve().parents[1] / "pages" / "4_Emulator.py"
+PAGE = APP_DIR / "pages" / "4_Emulator.py"
 
 
 @pytest.fixture()
@@ -47,8 +47,8 @@ def test_page_labels_the_shipped_below_spec_demo(tmp_path, monkeypatch):
 
     monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
     monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "no-bundled-emulators")  # no spec emulators on the search path
-    demo = PAGE.parents[1] / "assets" / "emulators-below-spec" / "chapter"
-    assert demo.is_dir(), "the below-spec demonstration emulator ships in assets/emulators-below-spec"
+    demo = eio.BELOW_SPEC_DIR / "chapter"
+    assert demo.is_dir(), "the below-spec demonstration emulator ships in lvcore/assets/emulators-below-spec"
     at = AppTest.from_file(str(PAGE), default_timeout=60).run()
     assert not at.exception
     assert any("below spec" in o for o in at.selectbox[0].options)

@@ -4,9 +4,11 @@ from pathlib import Path
 
 from streamlit.testing.v1 import AppTest
 
+from lvcore.app import APP_DIR
+
 ROOT = Path(__file__).resolve().parents[1]
-PAGE1 = str(ROOT / "pages" / "1_Geometry_and_operators.py")
-PAGE2 = str(ROOT / "pages" / "2_Shape_model.py")
+PAGE1 = str(APP_DIR / "pages" / "1_Geometry_and_operators.py")
+PAGE2 = str(APP_DIR / "pages" / "2_Shape_model.py")
 
 
 def test_geometry_page_bundled_patient():

@@ -1,6 +1,5 @@
 """The bundled SYNTHETIC volunteers: public files hold no truth; data = simulation(truth) + noise."""
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -8,8 +7,9 @@ from lvcore.geometry.io import read_template_mesh
 from lvcore.geometry.measures import cavity_volume
 from lvcore.geometry.template import DEFAULT_TEMPLATE
 from lvcore.inference.data import read_measured_csv
+from lvcore.resources import volunteers_dir
 
-VOL = Path(__file__).resolve().parents[1] / "assets" / "volunteers"
+VOL = volunteers_dir()
 
 
 def test_volunteer_files_and_separate_truth():

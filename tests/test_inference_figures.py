@@ -1,13 +1,13 @@
 """Calibration figures and the Calibration page (AppTest)."""
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from lvcore.app import APP_DIR
 from lvcore.inference import diagnostics, samplers
 from lvcore.viz import inference_figures as figs
 
-PAGE = Path(__file__).resolve().parents[1] / "pages" / "5_Calibration.py"
+PAGE = APP_DIR / "pages" / "5_Calibration.py"
 
 
 @pytest.fixture(scope="module")

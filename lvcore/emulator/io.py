@@ -26,8 +26,8 @@ An emulator directory holds
     ``train_outputs``, ``valid_*`` and ``test_*``.
 
 :func:`load_emulator` takes a directory or a bare name: ``"chapter"`` is
-looked up in ``$LVCORE_EMULATORS`` (if set) and then in the repository's
-``assets/emulators/<name>/``.
+looked up in ``$LVCORE_EMULATORS`` (if set) and then in the bundled
+``lvcore/assets/emulators/<name>/`` (package data, see :mod:`lvcore.resources`).
 """
 from __future__ import annotations
 
@@ -43,11 +43,16 @@ from lvcore.emulator.model import Emulator
 from lvcore.emulator.network import from_arrays, to_arrays
 from lvcore.exceptions import EmulatorError
 from lvcore.outputs import OUTPUT_COLUMNS
+from lvcore.resources import asset_path
 
 FORMAT = "lvcore-emulator"
 FORMAT_VERSION = 1
-#: Bundled emulators live here (relative to the repository root).
-ASSETS_DIR = Path(__file__).resolve().parents[2] / "assets" / "emulators"
+#: Bundled emulators live here (package data, ``lvcore/assets/emulators``).
+ASSETS_DIR = asset_path("emulators")
+#: Demonstration emulators built below the spec, shipped as package data; never loaded by name.
+BELOW_SPEC_DIR = asset_path("emulators-below-spec")
+#: Where ``scripts/build_emulators.py`` puts below-spec emulators it builds (relative to the working directory).
+LOCAL_BELOW_SPEC_DIR = Path("build") / "emulators" / "below-spec"
 REQUIRED_KEYS = ("format", "format_version", "name", "input_names", "bounds", "log_inputs",
                  "input_scaler", "output_scaler", "architecture")
 
@@ -68,6 +73,31 @@ def available_emulators() -> list[str]:
         if d.is_dir():
             names += sorted(p.name for p in d.iterdir() if (p / "metadata.json").is_file() and p.name not in names)
     return names
+
+
+def below_spec_emulators(*, bundled: bool = True) -> dict[str, Path]:
+    """Below-spec (demonstration) emulators, labelled ``"<name> (below spec, demonstration)"``.
+
+    Parameters
+    ----------
+    bundled : bool
+        Include the ones shipped in :data:`BELOW_SPEC_DIR`; the ones in
+        :data:`LOCAL_BELOW_SPEC_DIR` (under the working directory) are always
+        included, the shipped one winning a name clash.
+
+    Returns
+    -------
+    dict
+        Label -> emulator directory, for loading by path.
+    """
+    found: dict[str, Path] = {}
+    for below in ((BELOW_SPEC_DIR,) if bundled else ()) + (LOCAL_BELOW_SPEC_DIR,):
+        if below.is_dir():
+            for d in sorted(below.iterdir()):
+                label = f"{d.name} (below spec, demonstration)"
+                if (d / "metadata.json").is_file() and label not in found:
+                    found[label] = d
+    return found
 
 
 def resolve_emulator_dir(name_or_path: str | Path) -> Path:

@@ -41,6 +41,7 @@ import numpy as np
 
 from lvcore.exceptions import GeometryError
 from lvcore.geometry.contours import ContourSlice, ContourStack, LongAxisContour, validate_contours
+from lvcore.resources import asset_path
 
 #: Early-diastolic cavity volumes accepted for synthetic LVs (mL).
 VOLUME_RANGE_ML = (60.0, 110.0)
@@ -301,8 +302,8 @@ def with_motion_error(operator: OperatorStyle, shift_mm: float = 3.5) -> Operato
 
 
 # ----------------------------------------------------------------------------- bundled assets
-#: Where ``scripts/build_cohort.py`` writes the SYNTHETIC cohort.
-COHORT_DIR = Path(__file__).resolve().parents[2] / "assets" / "cohort"
+#: The bundled SYNTHETIC cohort (package data, ``lvcore/assets/cohort``; written by ``scripts/build_cohort.py``).
+COHORT_DIR = asset_path("cohort")
 ROLE_TRAIN, ROLE_OPERATOR, ROLE_VOLUNTEER = "train", "operator-study", "volunteer"
 
 

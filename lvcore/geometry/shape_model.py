@@ -12,7 +12,7 @@ deviations along a mode. A case ``{"geometry": {"kind": "pca", "scores": [...]}}
 is ``reconstruct(scores)``: missing trailing scores are zero.
 
 Files: ``<stem>.npz`` (plain arrays, no pickle) + ``<stem>.json`` (metadata).
-The bundled model is ``assets/shape_model/SYNTHETIC_shape_model.{npz,json}``,
+The bundled model is ``lvcore/assets/shape_model/SYNTHETIC_shape_model.{npz,json}`` (package data),
 built by ``scripts/build_cohort.py`` from the SYNTHETIC cohort.
 """
 from __future__ import annotations
@@ -25,9 +25,10 @@ import numpy as np
 
 from lvcore.exceptions import GeometryError
 from lvcore.geometry.template import DEFAULT_TEMPLATE, LVTemplate
+from lvcore.resources import asset_path
 
-#: Default location of the bundled model (relative to the repository root).
-BUNDLED_MODEL = Path(__file__).resolve().parents[2] / "assets" / "shape_model" / "SYNTHETIC_shape_model.json"
+#: The bundled model (package data, see :mod:`lvcore.resources`).
+BUNDLED_MODEL = asset_path("shape_model", "SYNTHETIC_shape_model.json")
 
 
 @dataclass(frozen=True)

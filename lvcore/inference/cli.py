@@ -15,9 +15,11 @@ def register(subparsers) -> None:
         description="Bayesian calibration with an emulator: volume-only, iid or polar-GP discrepancy likelihood. "
                     "Writes ArviZ InferenceData (netCDF) and summary tables.",
     )
-    p.add_argument("--data", required=True, help="measured CSV: lvv_ml, strain_01..strain_24 (optional subject column)")
-    p.add_argument("--geometry", required=True,
+    p.add_argument("--data", help="measured CSV: lvv_ml, strain_01..strain_24 (optional subject column)")
+    p.add_argument("--geometry",
                    help="PC scores (.json/.csv) or a template mesh (.vtu/.vtk/.xdmf/.npy/.npz) to project")
+    p.add_argument("--volunteer", default=None, metavar="NAME",
+                   help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry")
     p.add_argument("--model", default="iid",
                    help="volume | iid | discrepancy, or a comma-separated list (default iid)")
     p.add_argument("--angles", choices=("fixed", "infer"), default="fixed",
@@ -54,6 +56,15 @@ def run_calibrate(args) -> int:
     from lvcore.inference.models import MODEL_NAMES
     from lvcore.inference.samplers import SamplerConfig
 
+    if args.volunteer is not None:
+        from lvcore.resources import volunteer_files
+
+        if args.data is not None or args.geometry is not None:
+            raise DataError("--volunteer replaces --data and --geometry: give one or the other")
+        vol = volunteer_files(args.volunteer)
+        args.data, args.geometry = str(vol.measured), str(vol.geometry)
+    elif args.data is None or args.geometry is None:
+        raise DataError("give --data and --geometry (your measurements), or --volunteer NAME (a bundled one)")
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
     if bad:

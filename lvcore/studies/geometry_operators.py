@@ -129,5 +129,5 @@ def add_study_parser(study_subparsers) -> None:
                                     help="Table 9.4: inter-operator vs PCA reconstruction error (SYNTHETIC)")
     p.add_argument("--json", action="store_true", help="print the table as JSON")
     p.add_argument("--model", default=None, help="shape model (.json/.npz); default the bundled SYNTHETIC one")
-    p.add_argument("--cohort", default=None, help="cohort directory; default assets/cohort")
+    p.add_argument("--cohort", default=None, help="cohort directory; default the bundled lvcore/assets/cohort")
     p.set_defaults(func=_run)

@@ -15,18 +15,16 @@ import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
-from lvcore.emulator.io import available_emulators, load_emulator
+from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.core.forward import emulator_forward
 from lvcore.inference.samplers import SamplerConfig, use_host_devices
+from lvcore.resources import bundled_volunteers, volunteer_files
 
 use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
 
-REPO = Path(__file__).resolve().parents[1]
-VOLUNTEERS = REPO / "assets" / "volunteers"
-BELOW_SPEC_DIR = REPO / "build" / "emulators" / "below-spec"
 MODEL_LABELS = {"volume": "(i) volume only", "iid": "(ii) iid strains", "discrepancy": "(iii) polar-GP discrepancy"}
 
 st.set_page_config(page_title="Calibration", layout="wide")
@@ -39,10 +37,8 @@ st.caption(
 
 # ----------------------------------------------------------------------------- emulator
 choices = {name: name for name in available_emulators()}
-if BELOW_SPEC_DIR.is_dir():
-    for d in sorted(BELOW_SPEC_DIR.iterdir()):
-        if (d / "metadata.json").is_file():
-            choices[f"{d.name} (below spec, demonstration)"] = str(d)
+for label_, d in below_spec_emulators(bundled=False).items():  # ones built locally; never loaded by name
+    choices.setdefault(label_, str(d))
 if not choices:
     st.info(
         "No trained emulator found, so calibration cannot run. Build the bundled ones with "
@@ -66,13 +62,14 @@ with left:
     geom_path: Path | None = None
     try:
         if source == "bundled volunteer":
-            files = sorted(VOLUNTEERS.glob("*_measured.csv"))
-            if not files:
-                st.warning("No bundled volunteers in assets/volunteers; upload data instead.")
+            names = bundled_volunteers()
+            if not names:
+                st.warning("No bundled volunteers in lvcore/assets/volunteers; upload data instead.")
             else:
-                name = st.selectbox("Volunteer", [f.name.replace("_measured.csv", "") for f in files])
-                data = read_measured_csv(VOLUNTEERS / f"{name}_measured.csv")[0]
-                geom_path = VOLUNTEERS / f"{name}_geometry.vtu"
+                name = st.selectbox("Volunteer", names)
+                vol = volunteer_files(name)
+                data = read_measured_csv(vol.measured)[0]
+                geom_path = vol.geometry
                 if name.startswith("SYNTHETIC"):
                     st.caption("⚠ SYNTHETIC volunteer: generated data, not a real subject.")
         else:

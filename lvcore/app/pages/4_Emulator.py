@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -13,13 +12,10 @@ import pandas as pd
 import plotly.graph_objects as go
 import streamlit as st
 
-from lvcore.emulator.io import available_emulators, load_emulator, load_validation
+from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import OUTPUT_NAMES
 
-REPO = Path(__file__).resolve().parents[1]
-#: Emulators built below the spec (demonstrations), never loaded by name.
-BELOW_SPEC_DIRS = (REPO / "assets" / "emulators-below-spec", REPO / "build" / "emulators" / "below-spec")
 
 st.set_page_config(page_title="Emulator", layout="wide")
 st.title("Emulator")
@@ -41,12 +37,8 @@ def _validation(path: str):
 
 
 choices = {name: name for name in available_emulators()}
-for below in BELOW_SPEC_DIRS:
-    if below.is_dir():
-        for d in sorted(below.iterdir()):
-            label_ = f"{d.name} (below spec, demonstration)"
-            if (d / "metadata.json").is_file() and label_ not in choices:
-                choices[label_] = str(d)
+for label_, d in below_spec_emulators().items():  # demonstrations, never loaded by name
+    choices.setdefault(label_, str(d))
 if not choices:
     st.info(
         "No trained emulator found. Build the bundled ones with `python scripts/build_emulators.py` "

@@ -1,0 +1,37 @@
+"""``lvcore app``: start the Streamlit app shipped with the package."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from lvcore.app import ENTRY
+
+
+def register(subparsers) -> None:
+    """Add the ``app`` sub-command."""
+    p = subparsers.add_parser(
+        "app",
+        help="start the Streamlit app (streamlit run on the packaged entry script)",
+        description="Start the LV Calibration Lab app. Options this command does not know are passed to "
+                    "`streamlit run`, e.g. `lvcore app --port 8502 --server.headless true "
+                    "--server.address 127.0.0.1`.",
+    )
+    p.add_argument("--port", type=int, default=None, help="port to serve on (default: Streamlit's, 8501)")
+    p.set_defaults(func=run_app, passthrough=True)
+
+
+def streamlit_command(port: int | None = None, extra=()) -> list[str]:
+    """The ``python -m streamlit run`` command line for the packaged app."""
+    cmd = [sys.executable, "-m", "streamlit", "run", str(ENTRY)]
+    if port is not None:
+        cmd += ["--server.port", str(int(port))]
+    return cmd + list(extra)
+
+
+def run_app(args) -> int:
+    cmd = streamlit_command(args.port, getattr(args, "extra", ()))
+    sys.stdout.flush()
+    if os.name == "posix":  # become the server, so signals (Ctrl-C, kill) reach it directly
+        os.execv(cmd[0], cmd)
+    return subprocess.call(cmd)  # pragma: no cover (Windows)

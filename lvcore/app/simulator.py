@@ -1,0 +1,236 @@
+"""LV Calibration Lab: the home page, the Simulator.
+
+Started through the app's navigation (``lvcore app`` or ``streamlit run
+app.py``; :mod:`lvcore.app.main`); the other pages live in ``pages/``. This
+page only gathers inputs and shows results: the science is in :mod:`lvcore`
+(simulation, export) and :mod:`lvcore.viz` (figures, 3-D pictures).
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+import json  # noqa: E402
+
+import numpy as np  # noqa: E402
+import streamlit as st  # noqa: E402
+
+from lvcore import units  # noqa: E402
+from lvcore.core.space import THETA_BOUNDS  # noqa: E402
+from lvcore.app import PAGES  # noqa: E402
+from lvcore.exceptions import LVCoreError  # noqa: E402
+from lvcore.inference.samplers import use_host_devices  # noqa: E402
+from lvcore.mechanics.case import Case  # noqa: E402
+from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES  # noqa: E402
+from lvcore.resources import example_cases  # noqa: E402
+
+use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (pages/5_Calibration.py)
+
+#: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-), log-spaced.
+THETA_RANGES = dict(THETA_BOUNDS)
+THETA_LABELS = {"a": "a (kPa)", "b": "b (–)", "af": "a_f (kPa)", "bf": "b_f (–)"}
+RESOLUTIONS = RESOLUTION_PRESET_NAMES
+
+st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
+
+
+def log_options(lo: float, hi: float, keep: float, n: int = 41) -> list[float]:
+    """Log-spaced slider stops (3 significant digits) that include ``keep``."""
+    values = {float(f"{v:.3g}") for v in np.geomspace(lo, hi, n)} | {float(keep)}
+    return sorted(values)
+
+
+@st.cache_data(show_spinner=False, max_entries=64)
+def run_simulation(case_json: str) -> dict:
+    """Simulate a case (given as JSON, the cache key); plain data for the page."""
+    from lvcore.mechanics.export import result_vtu_bytes
+    from lvcore.mechanics.simulate import simulate
+
+    case = Case.from_dict(json.loads(case_json))
+    try:
+        result = simulate(case)
+    except LVCoreError as err:
+        return {"converged": False, "error": f"{type(err).__name__}: {err}"}
+    out = {"converged": bool(result.converged), "summary": result.to_dict(),
+           "reference_nodes": np.asarray(result.reference_nodes), "elements": np.asarray(result.elements),
+           "displacement": None if result.displacement is None else np.asarray(result.displacement)}
+    if result.converged:
+        out["vtu"] = result_vtu_bytes(result, case)
+    return out
+
+
+@st.cache_data(show_spinner=False, max_entries=64)
+def render_picture(case_json: str, view: str) -> bytes:
+    """PNG of the reference (wireframe) and deformed (coloured by |u|) LV of a simulated case."""
+    from lvcore.viz.mesh3d import render_reference_and_deformed
+
+    sim = run_simulation(case_json)
+    ref = sim["reference_nodes"]
+    return render_reference_and_deformed(ref, ref + sim["displacement"], sim["elements"], view=view,
+                                         reference_label="reference (unloaded)",
+                                         window_size=(720, 560))
+
+
+def page_links() -> None:
+    others = PAGES[1:]  # the first is this page
+    st.markdown("**Pages**")
+    cols = st.columns(min(len(others), 4))
+    for k, page in enumerate(others):
+        with cols[k % len(cols)]:
+            st.page_link(str(page.path), label=page.title, icon=page.icon)
+
+
+# ----------------------------------------------------------------------------
+st.title("LV Calibration Lab")
+st.markdown(
+    "Estimate the passive stiffness of the left-ventricular (LV) myocardium from cardiac-MRI measurements: "
+    "a finite-element simulator of diastolic filling (Holzapfel–Ogden law), a PCA shape model of LV "
+    "geometry, neural-network emulators and Bayesian calibration with a model-discrepancy term. "
+    "Use the pages in the sidebar; this page is the **simulator**."
+)
+page_links()
+
+st.header("Simulator")
+st.caption(
+    "Inflates the default LV (an idealised truncated ellipsoid of physiological size; not patient data) from its "
+    "early-diastolic reference geometry to the end-diastolic pressure (EDP). Outputs: the end-diastolic cavity "
+    "volume LVV and 24 regional circumferential Green strains (end diastole as reference, negative in filling)."
+)
+
+with st.form("simulator"):
+    c1, c2, c3 = st.columns(3)
+    theta = {}
+    with c1:
+        st.markdown("**Material (Holzapfel–Ogden)**")
+        for name in ("a", "b"):
+            lo, hi = THETA_RANGES[name]
+            theta[name] = st.select_slider(THETA_LABELS[name], options=log_options(lo, hi, units.HO_REFERENCE_THETA[name]),
+                                           value=units.HO_REFERENCE_THETA[name], key=name)
+    with c2:
+        st.markdown("**Material, fibre terms**")
+        for name in ("af", "bf"):
+            lo, hi = THETA_RANGES[name]
+            theta[name] = st.select_slider(THETA_LABELS[name], options=log_options(lo, hi, units.HO_REFERENCE_THETA[name]),
+                                           value=units.HO_REFERENCE_THETA[name], key=name)
+        st.caption("Fixed: a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58 (Gao et al. 2017).")
+    with c3:
+        st.markdown("**Conditions**")
+        alpha_endo = st.slider("α_endo (deg)", -90, 90, int(units.DEFAULT_ALPHA_ENDO_DEG), key="alpha_endo")
+        alpha_epi = st.slider("α_epi (deg)", -90, 90, int(units.DEFAULT_ALPHA_EPI_DEG), key="alpha_epi")
+        edp = st.slider("EDP (mmHg)", 2.0, 30.0, float(units.DEFAULT_EDP_MMHG), step=0.5, key="edp")
+        resolution = st.radio("Resolution", RESOLUTIONS, index=0, horizontal=True, key="resolution",
+                              help="fast: seconds, for exploring; coarse (lvcore 0.1's default)/default/accurate: finer meshes (slower; the first "
+                                   "solve at a new resolution also compiles the FE kernels).")
+    st.form_submit_button("Simulate", type="primary")
+
+
+
+def show_failure(sim: dict) -> None:
+    """A clear message for a failed solve (no traceback)."""
+    reason = sim.get("error") or sim["summary"]["message"]
+    st.error(f"The solver did not converge for these inputs: {reason}. Try a lower pressure, stiffer parameters "
+             "or another resolution.")
+    if "summary" in sim:
+        with st.expander("Solver diagnostics"):
+            st.json(sim["summary"])
+
+
+def show_picture(case_json: str, key: str, caption: str) -> None:
+    view = st.radio("View", ("iso", "side", "front", "base", "apex"), horizontal=True, key=key)
+    try:
+        st.image(render_picture(case_json, view), caption=caption)
+    except Exception as err:  # rendering is optional: never hide the numbers
+        st.warning(f"3-D picture unavailable ({type(err).__name__}: {err})")
+
+
+def show_simulator_result(case: Case, case_json: str, sim: dict) -> None:
+    from lvcore.viz import figures
+
+    summary = sim["summary"]
+    vol = summary["cavity_volume_ml"]
+    m1, m2, m3, m4 = st.columns(4)
+    m1.metric("LVV (end diastole)", f"{vol['loaded']:.1f} mL")
+    m2.metric("V_early (reference)", f"{vol['reference']:.1f} mL")
+    m3.metric("EDV / V_early", f"{summary['lvv_standardised']:.3f}")
+    m4.metric("Mean E_cc", f"{np.mean(summary['strains']):.3f}")
+
+    left, right = st.columns([1.1, 1])
+    with left:
+        tab_map, tab_bull, tab_bars = st.tabs(["Strain map", "Bull's eye", "Bars"])
+        strains = np.asarray(summary["strains"])
+        with tab_map:
+            st.plotly_chart(figures.strain_heatmap(strains), width="stretch")
+        with tab_bull:
+            st.plotly_chart(figures.strain_bullseye(strains), width="stretch")
+        with tab_bars:
+            st.plotly_chart(figures.strain_bars({"simulated": strains}), width="stretch")
+    with right:
+        show_picture(case_json, "view", "Reference (black element edges) and end-diastolic LV coloured by "
+                                        "displacement (mm)")
+
+    with st.expander("Solver diagnostics"):
+        st.write(f"{summary['newton_iterations']} Newton iterations over {summary['load_steps']} load steps, "
+                 f"{summary['dofs']} degrees of freedom, {summary['seconds']:.2f} s "
+                 "(cached results are not re-timed).")
+        st.json({k: summary[k] for k in ("message", "apex", "newton_iterations", "load_steps", "dofs", "seconds")})
+
+    d1, d2, d3 = st.columns(3)
+    d1.download_button("Download mesh + displacement (VTU)", sim["vtu"], file_name="lv_simulation.vtu",
+                       mime="application/octet-stream", key="dl_vtu")
+    d2.download_button("Download result (JSON)", json.dumps(summary, indent=2), file_name="lv_simulation_result.json",
+                       mime="application/json", key="dl_json")
+    d3.download_button("Download case (JSON)", case.to_json(), file_name="lv_case.json", mime="application/json",
+                       key="dl_case", help="Run it again with `lvcore simulate lv_case.json`.")
+
+
+case = Case.default_lv(theta, alpha_endo, alpha_epi, edp, resolution)
+case_json = case.to_json(indent=None)
+with st.spinner("Solving…"):
+    sim = run_simulation(case_json)
+if sim["converged"]:
+    show_simulator_result(case, case_json, sim)
+else:
+    show_failure(sim)
+
+# ----------------------------------------------------------------------------
+st.header("Run a case file")
+st.caption("Any geometry, law and load of the case schema (docs/case_schema.md), e.g. the Land et al. (2015) "
+           "benchmarks. The same as `lvcore simulate CASE.json` on the command line.")
+EXAMPLES = example_cases()
+example = st.selectbox("Start from an example", list(EXAMPLES), key="example") if EXAMPLES else None
+with st.form("case_runner"):
+    text = st.text_area("Case JSON", EXAMPLES[example].read_text() if example else "", height=220,
+                        key=f"case_text_{example}")
+    run_case = st.form_submit_button("Run case")
+if run_case:
+    st.session_state["case_runner_input"] = (text, example)
+
+if "case_runner_input" in st.session_state:
+    from lvcore.mechanics.summary import format_summary
+
+    text, example = st.session_state["case_runner_input"]
+    base_dir = EXAMPLES[example].parent if example else None
+    try:
+        user_case = Case.from_dict(json.loads(text), base_dir=base_dir)
+    except json.JSONDecodeError as err:
+        st.error(f"This is not valid JSON: {err}")
+    except LVCoreError as err:
+        field = getattr(err, "field", None)
+        st.error(f"Bad case: field `{field}`: {err.problem}" if field else f"Bad case: {err}")
+    else:
+        user_json = user_case.to_json(indent=None)
+        with st.spinner("Solving the case…"):
+            user_sim = run_simulation(user_json)
+        if user_sim["converged"]:
+            c1, c2 = st.columns([1, 1])
+            c1.code(format_summary(user_sim["summary"]), language=None)
+            with c2:
+                show_picture(user_json, "case_view", f"Reference edges and deformed {user_case.geometry.source}, "
+                                                     "coloured by displacement (mm)")
+            st.download_button("Download mesh + displacement (VTU)", user_sim["vtu"], file_name="case_result.vtu",
+                               mime="application/octet-stream", key="dl_case_vtu")
+        else:
+            show_failure(user_sim)

@@ -1,0 +1,43 @@
+"""Bundled data is package data: every loader finds it through importlib.resources, from any working directory."""
+import importlib.resources
+
+import numpy as np
+import pytest
+
+from lvcore import resources
+from lvcore.exceptions import DataError
+
+
+def test_assets_are_the_package_data_folder():
+    assert resources.assets_dir() == importlib.resources.files("lvcore") / "assets"
+    assert resources.asset_path("shape_model", "SYNTHETIC_shape_model.json").is_file()
+
+
+def test_loaders_find_bundled_data_from_a_foreign_working_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # nothing of the checkout is reachable by a relative path
+    monkeypatch.delenv("LVCORE_EMULATORS", raising=False)
+    from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
+    from lvcore.geometry.cohort import load_cohort, load_operator_geometries
+    from lvcore.geometry.shape_model import load_shape_model
+    from lvcore.inference.data import read_measured_csv
+
+    model = load_shape_model()
+    assert model.n_modes > 5 and np.isfinite(model.reconstruct([0.5])).all()
+    cohort = load_cohort()
+    assert len(cohort.ids) == cohort.nodes.shape[0] > 0
+    ops = load_operator_geometries()
+    assert ops.contour_path(ops.patients[0], ops.operators[0]).is_file()
+    assert {"chapter", "angles"} <= set(available_emulators())
+    emu = load_emulator("chapter")
+    assert emu.name == "chapter"
+    assert "chapter (below spec, demonstration)" in below_spec_emulators()
+    names = resources.bundled_volunteers()
+    assert len(names) == 8 and all(n.startswith("SYNTHETIC_") for n in names)
+    vol = resources.volunteer_files(names[0])
+    assert read_measured_csv(vol.measured)[0].y.shape == (25,) and vol.geometry.suffix == ".vtu"
+    assert set(resources.example_cases()) >= {"default_lv.json", "land2015_problem1.json"}
+
+
+def test_unknown_volunteer_names_the_bundled_ones():
+    with pytest.raises(DataError, match="SYNTHETIC_HV1"):
+        resources.volunteer_files("HV99")
