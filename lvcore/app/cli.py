@@ -32,6 +32,7 @@ def streamlit_command(port: int | None = None, extra=()) -> list[str]:
 def run_app(args) -> int:
     cmd = streamlit_command(args.port, getattr(args, "extra", ()))
     sys.stdout.flush()
-    if os.name == "posix":  # become the server, so signals (Ctrl-C, kill) reach it directly
-        os.execv(cmd[0], cmd)
-    return subprocess.call(cmd)  # pragma: no cover (Windows)
+    if os.name != "posix":  # pragma: no cover (Windows)
+        return subprocess.call(cmd)
+    os.execv(cmd[0], cmd)  # become the server, so signals (Ctrl-C, kill) reach it directly; does not return
+    return 0
