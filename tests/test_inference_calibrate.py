@@ -156,3 +156,15 @@ def test_cli_joint_angle_inference_with_an_angles_emulator(tmp_path, monkeypatch
     rc = main(["calibrate", "--data", str(data), "--geometry", str(tmp_path / "h.json"), "--angles", "infer",
                "--emulator", "chapter", "--out", str(tmp_path / "o2")])
     assert rc == 2
+
+
+def test_cli_volunteer_option_finds_the_bundled_files_and_refuses_mixtures(tmp_path, capsys):
+    from lvcore.cli import main
+
+    out = str(tmp_path / "o")
+    assert main(["calibrate", "--volunteer", "HV99", "--out", out]) == 2
+    assert "SYNTHETIC_HV1" in capsys.readouterr().err  # the message lists the bundled volunteers
+    assert main(["calibrate", "--volunteer", "SYNTHETIC_HV1", "--data", "m.csv", "--out", out]) == 2
+    assert "--volunteer replaces --data and --geometry" in capsys.readouterr().err
+    assert main(["calibrate", "--data", "m.csv", "--out", out]) == 2
+    assert "--volunteer NAME" in capsys.readouterr().err
