@@ -8,7 +8,7 @@ from lvcore._exports import lazy_exports
 
 _EXPORTS = {
     "Emulator": "model", "ExtrapolationWarning": "model",
-    "load_emulator": "io", "save_emulator": "io", "available_emulators": "io",
+    "load_emulator": "io", "save_emulator": "io", "available_emulators": "io", "below_spec_emulators": "io",
     "TrainingConfig": "training", "train_emulator": "training",
 }
 
