@@ -13,7 +13,7 @@ APP = str(Path(__file__).resolve().parents[1] / "app.py")
 def test_navigation_lists_every_page_script_by_name():
     scripts = {p.path for p in PAGES}
     assert all(p.is_file() for p in scripts) and ENTRY.is_file()
-    assert scripts == {APP_DIR / "simulator.py", *(APP_DIR / "pages").glob("*.py")}  # no page left out
+    assert scripts == {APP_DIR / "simulator.py", *(APP_DIR / "views").glob("*.py")}  # no page left out
     titles = [p.title for p in PAGES]
     assert titles[0] == "Simulator" and "app" not in {t.lower() for t in titles}
     assert len(set(titles)) == len(titles) and len({p.url_path for p in PAGES}) == len(PAGES)
@@ -37,7 +37,7 @@ def test_lvcore_app_runs_streamlit_on_the_packaged_entry(monkeypatch):
 
 def test_switching_pages_by_navigation():
     at = AppTest.from_file(APP, default_timeout=180).run()
-    at.switch_page(str(APP_DIR / "pages" / "2_Shape_model.py")).run()
+    at.switch_page(str(APP_DIR / "views" / "2_Shape_model.py")).run()
     assert not at.exception
     assert at.title[0].value == "Shape model"
 

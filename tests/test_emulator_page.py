@@ -9,7 +9,7 @@ from lvcore.app import APP_DIR
 from lvcore.emulator.io import save_emulator
 from lvcore.emulator.training import TrainingConfig, train_emulator
 
-PAGE = APP_DIR / "pages" / "4_Emulator.py"
+PAGE = APP_DIR / "views" / "4_Emulator.py"
 
 
 @pytest.fixture()

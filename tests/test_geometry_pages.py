@@ -7,8 +7,8 @@ from streamlit.testing.v1 import AppTest
 from lvcore.app import APP_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGE1 = str(APP_DIR / "pages" / "1_Geometry_and_operators.py")
-PAGE2 = str(APP_DIR / "pages" / "2_Shape_model.py")
+PAGE1 = str(APP_DIR / "views" / "1_Geometry_and_operators.py")
+PAGE2 = str(APP_DIR / "views" / "2_Shape_model.py")
 
 
 def test_geometry_page_bundled_patient():

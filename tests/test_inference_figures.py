@@ -7,7 +7,7 @@ from lvcore.app import APP_DIR
 from lvcore.inference import diagnostics, samplers
 from lvcore.viz import inference_figures as figs
 
-PAGE = APP_DIR / "pages" / "5_Calibration.py"
+PAGE = APP_DIR / "views" / "5_Calibration.py"
 
 
 @pytest.fixture(scope="module")

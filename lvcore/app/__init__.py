@@ -30,14 +30,15 @@ class AppPage:
         return APP_DIR / self.script
 
 
-#: The app's pages in navigation order; the first is the home page.
+#: The app's pages in navigation order; the first is the home page. The page scripts sit in ``views/``, not
+#: ``pages/``: Streamlit lists a ``pages/`` folder beside the entry script by itself, with the entry as "main".
 PAGES = (
     AppPage("simulator.py", "Simulator", ":material/monitor_heart:", "simulator"),
-    AppPage("pages/1_Geometry_and_operators.py", "Geometry & operators", ":material/view_in_ar:", "geometry"),
-    AppPage("pages/2_Shape_model.py", "Shape model", ":material/scatter_plot:", "shape-model"),
-    AppPage("pages/3_Fibre_angles.py", "Fibre angles", ":material/tune:", "fibre-angles"),
-    AppPage("pages/4_Emulator.py", "Emulator", ":material/speed:", "emulator"),
-    AppPage("pages/5_Calibration.py", "Calibration", ":material/query_stats:", "calibration"),
+    AppPage("views/1_Geometry_and_operators.py", "Geometry & operators", ":material/view_in_ar:", "geometry"),
+    AppPage("views/2_Shape_model.py", "Shape model", ":material/scatter_plot:", "shape-model"),
+    AppPage("views/3_Fibre_angles.py", "Fibre angles", ":material/tune:", "fibre-angles"),
+    AppPage("views/4_Emulator.py", "Emulator", ":material/speed:", "emulator"),
+    AppPage("views/5_Calibration.py", "Calibration", ":material/query_stats:", "calibration"),
 )
 
 __all__ = ["APP_DIR", "ENTRY", "AppPage", "PAGES"]
