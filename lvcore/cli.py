@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import traceback
 
 #: Modules that contribute sub-commands, in the order of the data flow.
 COMMAND_MODULES = (
@@ -19,26 +20,57 @@ COMMAND_MODULES = (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="lvcore", description="LV Calibration Lab command line")
+    parser = argparse.ArgumentParser(
+        prog="lvcore", description="LV Calibration Lab command line",
+        epilog="exit codes: 0 success; 1 did not converge (solver or sampler); 2 bad input (the message names the "
+               "file and field); 3 internal error (rerun with --debug for the traceback)")
+    parser.add_argument("--debug", action="store_true",
+                        help="on an internal error print the full traceback (otherwise one line)")
     sub = parser.add_subparsers(dest="command", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
 
 
+#: Exit codes of ``lvcore`` (docs/reliability.md).
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+
+
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # --debug is global but accepted anywhere before a "--"
+    cut = argv.index("--") if "--" in argv else len(argv)
+    debug = "--debug" in argv[:cut]
+    argv = [a for a in argv[:cut] if a != "--debug"] + argv[cut:]
     parser = build_parser()
     args, extra = parser.parse_known_args(argv)
     if extra and not getattr(args, "passthrough", False):  # only `lvcore app` passes options on (to streamlit)
         parser.error(f"unrecognized arguments: {' '.join(extra)}")
     args.extra = extra
-    from lvcore.exceptions import LVCoreError
+    from lvcore.exceptions import LVCoreError, SolverError
 
     try:
         return int(args.func(args) or 0)
+    except SolverError as err:
+        print(f"lvcore: did not converge: {err}", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     except LVCoreError as err:
         print(f"lvcore: error: {err}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("lvcore: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # noqa: BLE001 - the last line of defence: one line, exit 3
+        if debug:
+            traceback.print_exc()
+        print(f"lvcore: internal error: {type(err).__name__}: {_one_line(err)}"
+              + ("" if debug else " (rerun with --debug for the traceback)"), file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+def _one_line(err: BaseException, limit: int = 2000) -> str:
+    text = " ".join(str(err).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -37,3 +37,7 @@ class CampaignError(LVCoreError, RuntimeError):
 
 class ForwardError(LVCoreError, ValueError):
     """A forward model was called with inputs it does not read, or in a way it does not support."""
+
+
+class LimitError(LVCoreError, ValueError):
+    """An input exceeds a limit of :mod:`lvcore.limits` (size, count, memory) or is not a regular file."""

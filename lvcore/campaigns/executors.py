@@ -24,6 +24,8 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
+import threading
+import time
 
 from lvcore.exceptions import CampaignError
 
@@ -40,8 +42,36 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _worker_init() -> None:
-    """Runs once in every local worker process."""
+#: How often a worker checks that its driver is alive (s).
+PARENT_POLL_S = 0.5
+
+
+def watch_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> threading.Thread:
+    """Exit this process (``os._exit``) as soon as ``parent_pid`` is no longer its parent.
+
+    A daemon thread polls :func:`os.getppid`: when the driver dies, even by
+    SIGKILL, the worker is re-parented (to init or a subreaper) and exits
+    within ``poll_s`` seconds, so no orphaned workers (and, once they are
+    gone, no orphaned multiprocessing resource tracker) stay behind. A thread
+    is used rather than ``prctl(PR_SET_PDEATHSIG)`` because the latter fires
+    when the *thread* that started the worker exits, which a pool may do
+    while the driver lives on.
+    """
+    def run():
+        while True:
+            if os.getppid() != parent_pid:
+                os._exit(1)
+            time.sleep(poll_s)
+
+    t = threading.Thread(target=run, name="lvcore-parent-watch", daemon=True)
+    t.start()
+    return t
+
+
+def _worker_init(parent_pid: int | None = None) -> None:
+    """Runs once in every local worker process: environment, JAX set-up, and death with the driver."""
+    if parent_pid is not None:
+        watch_parent(parent_pid)
     for k, v in WORKER_ENV.items():
         os.environ.setdefault(k, v)
     import lvcore  # noqa: F401 - float64 and the persistent compilation cache (lvcore.jax_cache)
@@ -63,7 +93,8 @@ class LocalExecutor:
         for k, v in WORKER_ENV.items():  # inherited by the spawned children
             os.environ.setdefault(k, v)
         self._pool = cf.ProcessPoolExecutor(
-            max_workers=self.workers, mp_context=mp.get_context("spawn"), initializer=_worker_init
+            max_workers=self.workers, mp_context=mp.get_context("spawn"), initializer=_worker_init,
+            initargs=(os.getpid(),),
         )
 
     def describe(self) -> str:

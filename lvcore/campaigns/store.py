@@ -232,19 +232,28 @@ class CampaignStore:
     @classmethod
     def open(cls, path: str | Path, mode: str = "r") -> "CampaignStore":
         """Open an existing store, ``mode`` ``"r"`` (read) or ``"r+"`` (write, locked)."""
-        path = Path(path)
-        if not path.is_file():
-            raise CampaignError(f"store '{path}' does not exist")
+        from lvcore import limits
+
+        path = limits.check_regular_file(path, float("inf"), "store", CampaignError)
         lock_fd = cls._lock(path) if mode == "r+" else None
         try:
             h5 = h5py.File(path, mode, locking=False) if mode == "r" else h5py.File(path, mode)
         except OSError as err:
             cls._unlock(lock_fd)
-            raise CampaignError(f"store '{path}' is not a readable HDF5 file: {err}") from err
-        if h5.attrs.get("format") != FORMAT:
+            if _is_lock_error(err):
+                # another process writes this file under another name (a hard link or a copy of the path):
+                # its <name>.lock differs, but HDF5's own lock on the file is held
+                raise CampaignError(f"store '{path}' is locked: it is being written by another process "
+                                    "(possibly opened under another name or hard link); wait for it to finish") from None
+            raise CampaignError(f"store '{path}' is not a readable HDF5 file: {err}") from None
+        try:
+            problem = _layout_problem(h5)
+        except Exception as err:  # noqa: BLE001 - any failure to read the layout means "not a store"
+            problem = f"cannot read its layout ({type(err).__name__}: {err})"
+        if problem:
             h5.close()
             cls._unlock(lock_fd)
-            raise CampaignError(f"'{path}' is not an lvcore campaign store (format attribute {h5.attrs.get('format')!r})")
+            raise CampaignError(f"'{path}' is not an lvcore campaign store: {problem}")
         return cls(path, h5, lock_fd)
 
     @staticmethod
@@ -380,6 +389,44 @@ class CampaignStore:
             resolution=str(c.attrs.get("resolution", "")),
             forward=str(c.attrs.get("forward", "")),
         )
+
+
+def _is_lock_error(err: OSError) -> bool:
+    text = str(err).lower()
+    return "lock" in text and ("errno = 11" in text or "temporarily unavailable" in text or "errno = 35" in text)
+
+
+#: Datasets of a store and their trailing shape (after the row dimension).
+_DATASETS = {"inputs": None, "outputs": (N_OUTPUTS,), "state": (), "seconds": (), "reason": (), "version": (),
+             "worker": (), "finished_at": (), "record_count": ()}
+
+
+def _layout_problem(h5: h5py.File) -> str | None:
+    """What is wrong with the layout of an opened store, or None if it is a store (format, attributes, datasets)."""
+    fmt = h5.attrs.get("format")
+    if isinstance(fmt, bytes):
+        fmt = fmt.decode("utf-8", "replace")
+    if fmt != FORMAT:
+        return f"format attribute {str(fmt)[:60]!r}, expected {FORMAT!r}"
+    for key in ("space", "design_seed", "design_method"):
+        if key not in h5.attrs:
+            return f"attribute '{key}' is missing"
+    try:
+        space = ParameterSpace.from_json(h5.attrs["space"])
+    except Exception as err:  # noqa: BLE001
+        return f"attribute 'space' is not a parameter space ({type(err).__name__}: {str(err)[:200]})"
+    n = None
+    for name, tail in _DATASETS.items():
+        if name not in h5 or not isinstance(h5[name], h5py.Dataset):
+            return f"dataset '{name}' is missing"
+        shape = h5[name].shape
+        if not shape:
+            return f"dataset '{name}' is a scalar"
+        n = shape[0] if n is None else n
+        expect = (n, len(space.names)) if name == "inputs" else (n,) + tail
+        if shape != expect:
+            return f"dataset '{name}' has shape {shape}, expected {expect}"
+    return None
 
 
 def read_store(path: str | Path) -> StoreContents:

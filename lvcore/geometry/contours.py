@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lvcore import limits
 from lvcore.exceptions import GeometryError
 
 SCHEMA = "lvcore.contours/1"
@@ -148,15 +149,10 @@ def read_contours(path) -> ContourStack:
         With a message naming the problem and what to fix.
     """
     path = Path(path)
-    if not path.exists():
-        raise GeometryError(f"contour file '{path}' does not exist")
-    text = path.read_text(errors="replace")
+    text = limits.read_text_file(path, limits.MAX_CONTOUR_BYTES, "contour file", GeometryError)
     if not text.strip():
         raise GeometryError(f"contour file '{path}' is empty; export the segmentation as JSON (schema {SCHEMA})")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise GeometryError(f"contour file '{path}' is not valid JSON ({err}); expected schema {SCHEMA}") from None
+    data = limits.loads_json(text, f"contour file '{path}' (expected schema {SCHEMA})", GeometryError)
     return contours_from_dict(data, source=str(path))
 
 
@@ -167,15 +163,38 @@ def contours_from_dict(data, source: str = "<dict>") -> ContourStack:
         raise GeometryError(f"{where}: top level must be a JSON object with 'slices', got {type(data).__name__}")
     schema = data.get("schema", SCHEMA)
     if schema != SCHEMA:
-        raise GeometryError(f"{where}: unknown schema '{schema}', expected '{SCHEMA}'")
+        raise GeometryError(f"{where}: unknown schema {_short(schema)}, expected '{SCHEMA}'")
     units = data.get("units", "mm")
-    if units not in _UNIT_TO_MM:
-        raise GeometryError(f"{where}: units '{units}' not understood; use one of {sorted(_UNIT_TO_MM)}")
+    if not isinstance(units, str) or units not in _UNIT_TO_MM:
+        raise GeometryError(f"{where}: units {_short(units)} not understood; use one of {sorted(_UNIT_TO_MM)}")
     scale = _UNIT_TO_MM[units]
     slices_in = data.get("slices")
     if not isinstance(slices_in, list) or not slices_in:
         raise GeometryError(f"{where}: 'slices' must be a non-empty list of short-axis slices "
                             "({'endo': [[x,y,z],...], 'epi': [[x,y,z],...]})")
+    la_in = data.get("long_axis") or []
+    if not isinstance(la_in, list):
+        raise GeometryError(f"{where}: 'long_axis' must be a list of long-axis views "
+                            f"({{'name': ..., 'endo': [[x,y,z],...], 'epi': [[x,y,z],...]}}), got {type(la_in).__name__}")
+    if len(slices_in) + len(la_in) > limits.MAX_CONTOUR_SLICES:
+        raise GeometryError(f"{where}: {len(slices_in)} slices and {len(la_in)} long-axis views are more than the "
+                            f"limit of {limits.MAX_CONTOUR_SLICES} (lvcore.limits.MAX_CONTOUR_SLICES)")
+    total = 0
+    for i, s in enumerate(list(slices_in) + list(la_in)):
+        if isinstance(s, dict):
+            for key in ("endo", "epi"):
+                if isinstance(s.get(key), list):
+                    total += len(s[key])
+    if total > limits.MAX_CONTOUR_POINTS:
+        raise GeometryError(f"{where}: {total:,} contour points in all is more than the limit of "
+                            f"{limits.MAX_CONTOUR_POINTS:,} (lvcore.limits.MAX_CONTOUR_POINTS); resample the contours")
+    for key in ("patient", "operator"):
+        if data.get(key) is not None and not isinstance(data[key], (str, int, float)):
+            raise GeometryError(f"{where}: '{key}' must be a string, got {type(data[key]).__name__}")
+    if not isinstance(data.get("synthetic", False), (bool, int)):
+        raise GeometryError(f"{where}: 'synthetic' must be true or false, got {_short(data.get('synthetic'))}")
+    if not isinstance(data.get("extra") or {}, dict):
+        raise GeometryError(f"{where}: 'extra' must be an object, got {type(data.get('extra')).__name__}")
     slices = []
     for i, s in enumerate(slices_in):
         if not isinstance(s, dict):
@@ -185,24 +204,35 @@ def contours_from_dict(data, source: str = "<dict>") -> ContourStack:
         epi = _points(s["epi"], f"{where}: slice {i} epi", scale)
         endo = None if s.get("endo") is None else _points(s["endo"], f"{where}: slice {i} endo", scale)
         pos = s.get("position")
-        if pos is not None and not isinstance(pos, (int, float)):
-            raise GeometryError(f"{where}: slice {i} 'position' must be a number, got {pos!r}")
+        if pos is not None and (isinstance(pos, bool) or not isinstance(pos, (int, float))
+                                or not np.isfinite(float(pos))):
+            raise GeometryError(f"{where}: slice {i} 'position' must be a finite number, got {_short(pos)}")
         slices.append(ContourSlice(epi=epi, endo=endo, position=None if pos is None else float(pos) * scale))
     la = []
-    for i, c in enumerate(data.get("long_axis") or []):
+    for i, c in enumerate(la_in):
         if not isinstance(c, dict):
             raise GeometryError(f"{where}: long_axis[{i}] must be an object with 'endo' and/or 'epi'")
         endo = None if c.get("endo") is None else _points(c["endo"], f"{where}: long_axis[{i}] endo", scale)
         epi = None if c.get("epi") is None else _points(c["epi"], f"{where}: long_axis[{i}] epi", scale)
         if endo is None and epi is None:
             raise GeometryError(f"{where}: long_axis[{i}] has neither 'endo' nor 'epi' points")
-        la.append(LongAxisContour(name=str(c.get("name", f"LA{i + 1}")), endo=endo, epi=epi))
+        name = c.get("name", f"LA{i + 1}")
+        if not isinstance(name, (str, int)) or isinstance(name, bool):
+            raise GeometryError(f"{where}: long_axis[{i}] 'name' must be a string, got {_short(name)}")
+        la.append(LongAxisContour(name=str(name)[:64], endo=endo, epi=epi))
     septum = None
     lm = data.get("landmarks") or {}
+    if not isinstance(lm, dict):
+        raise GeometryError(f"{where}: 'landmarks' must be an object such as {{\"septum\": [x, y, z]}}, "
+                            f"got {type(lm).__name__}")
     if "septum" in lm and lm["septum"] is not None:
-        septum = np.asarray(lm["septum"], dtype=float) * scale
-        if septum.shape != (3,) or not np.all(np.isfinite(septum)):
-            raise GeometryError(f"{where}: landmarks.septum must be one point [x, y, z]")
+        sep = lm["septum"]
+        if (not isinstance(sep, list) or len(sep) != 3
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in sep)):
+            raise GeometryError(f"{where}: landmarks.septum must be one point [x, y, z], got {_short(sep)}")
+        septum = np.asarray(sep, dtype=float) * scale
+        if not np.all(np.isfinite(septum)):
+            raise GeometryError(f"{where}: landmarks.septum must be one point [x, y, z] of finite numbers")
     stack = ContourStack(
         slices=tuple(slices),
         long_axis=tuple(la),
@@ -216,10 +246,25 @@ def contours_from_dict(data, source: str = "<dict>") -> ContourStack:
     return validate_contours(stack, declared_units=units)
 
 
+def _short(value, n: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
 def _points(value, where: str, scale: float) -> np.ndarray:
+    if not isinstance(value, (list, tuple, np.ndarray)):
+        raise GeometryError(f"{where}: points must be a list of [x, y, z] numbers, got {type(value).__name__}")
+    if len(value) > limits.MAX_POINTS_PER_CONTOUR:
+        raise GeometryError(f"{where}: {len(value):,} points is more than the limit of "
+                            f"{limits.MAX_POINTS_PER_CONTOUR:,} per contour (lvcore.limits.MAX_POINTS_PER_CONTOUR); "
+                            "resample the contour")
+    if not isinstance(value, np.ndarray) and any(
+            not isinstance(p, (list, tuple)) or any(isinstance(v, (bool, str)) or v is None for v in p)
+            for p in value):
+        raise GeometryError(f"{where}: points must be a list of [x, y, z] numbers")
     try:
         a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise GeometryError(f"{where}: points must be a list of [x, y, z] numbers") from None
     if a.ndim != 2 or a.shape[1] != 3:
         raise GeometryError(f"{where}: points must be a list of [x, y, z] triples, got array of shape {a.shape}")
@@ -254,37 +299,78 @@ def polygon_area(xy: np.ndarray) -> float:
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
+#: Most edge pairs (or point-edge pairs) handled in one vectorised block: bounds the memory of
+#: :func:`self_intersections` and :func:`_inside` to about 100 MB whatever the contour size.
+_BLOCK_PAIRS = 1_000_000
+
+
 def self_intersections(xy: np.ndarray) -> int:
-    """Number of crossing pairs of non-adjacent edges of a closed 2-D polygon."""
-    p = xy
-    q = np.roll(xy, -1, axis=0)
+    """Number of crossing pairs of non-adjacent edges of a closed 2-D polygon.
+
+    Edges are sorted by their smallest x; only pairs whose x-ranges overlap
+    (a sweep) and whose bounding boxes overlap get the orientation tests,
+    done in blocks of at most ``_BLOCK_PAIRS`` pairs, so memory stays bounded
+    (no n x n arrays) and a typical contour costs about O(n log n).
+    """
+    p = np.asarray(xy, dtype=float)
     n = len(p)
-    d = q - p
-    # orientation tests for all edge pairs
+    if n < 4:
+        return 0
+    q = np.roll(p, -1, axis=0)
+    lo, hi = np.minimum(p, q), np.maximum(p, q)
+    order = np.argsort(lo[:, 0], kind="stable")
+    lo_x_sorted = lo[order, 0]
+    # for edge order[k], candidates are order[k+1 : end[k]] (x-ranges overlap)
+    end = np.searchsorted(lo_x_sorted, hi[order, 0], side="right")
+    counts = np.maximum(end - np.arange(n) - 1, 0)
+    count = 0
+    k0 = 0
+    while k0 < n:
+        # a block of sweep positions whose candidate pairs fit in _BLOCK_PAIRS
+        csum = np.cumsum(counts[k0:])
+        k1 = k0 + max(1, int(np.searchsorted(csum, _BLOCK_PAIRS, side="right")))
+        ks = np.arange(k0, k1)
+        reps = counts[ks]
+        if reps.sum():
+            a_pos = np.repeat(ks, reps)
+            starts = np.repeat(ks + 1 - np.concatenate([[0], np.cumsum(reps)[:-1]]), reps)
+            b_pos = starts + np.arange(reps.sum())
+            i, j = order[a_pos], order[b_pos]
+            i, j = np.minimum(i, j), np.maximum(i, j)
+            keep = (j - i >= 2) & ~((i == 0) & (j == n - 1))  # adjacent edges share a vertex
+            keep &= (lo[i, 1] <= hi[j, 1]) & (lo[j, 1] <= hi[i, 1])
+            i, j = i[keep], j[keep]
+            if i.size:
+                count += _crossings(p[i], q[i] - p[i], p[j], q[j] - p[j])
+        k0 = k1
+    return count
+
+
+def _crossings(pi, di, pj, dj) -> int:
+    """Number of proper crossings of segment pairs (pi, pi + di) and (pj, pj + dj)."""
     def cross(a, b):
         return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
-    pi, di = p[:, None, :], d[:, None, :]
-    pj, dj = p[None, :, :], d[None, :, :]
     o1 = cross(di, pj - pi)
     o2 = cross(di, pj + dj - pi)
     o3 = cross(dj, pi - pj)
     o4 = cross(dj, pi + di - pj)
-    hit = (o1 * o2 < 0) & (o3 * o4 < 0)
-    i, j = np.triu_indices(n, k=2)
-    keep = ~((i == 0) & (j == n - 1))
-    return int(np.count_nonzero(hit[i[keep], j[keep]]))
+    return int(np.count_nonzero((o1 * o2 < 0) & (o3 * o4 < 0)))
 
 
 def _inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Even-odd point-in-polygon test (2-D)."""
-    x, y = pts[:, 0][:, None], pts[:, 1][:, None]
+    """Even-odd point-in-polygon test (2-D), in blocks of bounded memory."""
     x1, y1 = poly[:, 0][None, :], poly[:, 1][None, :]
     x2, y2 = np.roll(poly[:, 0], -1)[None, :], np.roll(poly[:, 1], -1)[None, :]
-    cond = (y1 > y) != (y2 > y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xint = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-    return np.count_nonzero(cond & (x < xint), axis=1) % 2 == 1
+    out = np.zeros(len(pts), dtype=bool)
+    step = max(1, _BLOCK_PAIRS // max(1, len(poly)))
+    for k in range(0, len(pts), step):
+        x, y = pts[k:k + step, 0][:, None], pts[k:k + step, 1][:, None]
+        cond = (y1 > y) != (y2 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xint = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+        out[k:k + step] = np.count_nonzero(cond & (x < xint), axis=1) % 2 == 1
+    return out
 
 
 # ----------------------------------------------------------------------------- validation

@@ -201,11 +201,9 @@ def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndar
     """
     import meshio
 
-    path = Path(path)
-    if not path.exists():
-        raise GeometryError(f"template mesh '{path}' does not exist")
-    if path.stat().st_size == 0:
-        raise GeometryError(f"template mesh '{path}' is an empty file")
+    from lvcore import limits
+
+    path = limits.check_regular_file(path, limits.MAX_MESH_BYTES, "template mesh", GeometryError)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

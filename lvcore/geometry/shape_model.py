@@ -199,16 +199,21 @@ def load_shape_model(path=None) -> ShapeModel:
     if not jpath.exists() or not npath.exists():
         hint = " (build it with `python scripts/build_cohort.py`)" if path == BUNDLED_MODEL else ""
         raise GeometryError(f"shape model files '{jpath.name}' and '{npath.name}' not found in '{stem.parent}'{hint}")
+    from lvcore import limits
+
+    meta = limits.read_json_file(jpath, limits.MAX_SHAPE_MODEL_BYTES, "shape model", GeometryError)
+    limits.check_regular_file(npath, limits.MAX_SHAPE_MODEL_BYTES, "shape model", GeometryError)
     try:
-        meta = json.loads(jpath.read_text())
         with np.load(npath, allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k], dtype=float) for k in ("mean", "components", "std", "explained_variance_ratio")}
-    except (ValueError, KeyError, OSError) as err:
+    except (ValueError, KeyError, OSError, TypeError, EOFError) as err:
         raise GeometryError(f"cannot read shape model '{stem}': {err}") from None
-    if meta.get("format") != "lvcore.shape_model/1":
+    if not isinstance(meta, dict) or meta.get("format") != "lvcore.shape_model/1":
+        meta = meta if isinstance(meta, dict) else {}
         raise GeometryError(f"'{jpath}' is not an lvcore shape model (format {meta.get('format')!r})")
     mean, comp = arrays["mean"], arrays["components"]
-    if comp.shape[1] != mean.size or arrays["std"].shape[0] != comp.shape[0]:
+    if (comp.ndim != 2 or arrays["std"].ndim != 1 or mean.size % 3 or comp.shape[1] != mean.size
+            or arrays["std"].shape[0] != comp.shape[0]):
         raise GeometryError(f"shape model '{stem}' arrays are inconsistent: mean {mean.shape}, components {comp.shape}")
     return ShapeModel(mean=mean.reshape(-1, 3), components=comp, std=arrays["std"],
                       explained_variance_ratio=arrays["explained_variance_ratio"],

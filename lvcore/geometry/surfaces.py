@@ -73,12 +73,10 @@ def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSu
         raise GeometryError(f"{name} surface: units '{units}' not understood; use mm, cm or m")
     source = "<mesh>"
     if isinstance(path_or_mesh, (str, Path)):
-        path = Path(path_or_mesh)
+        from lvcore import limits
+
+        path = limits.check_regular_file(path_or_mesh, limits.MAX_SURFACE_BYTES, f"{name} surface file", GeometryError)
         source = str(path)
-        if not path.exists():
-            raise GeometryError(f"{name} surface file '{path}' does not exist")
-        if path.stat().st_size == 0:
-            raise GeometryError(f"{name} surface file '{path}' is empty")
         mesh = None
         errors = []
         try:

@@ -8,7 +8,7 @@ draws in ArviZ InferenceData; :func:`calibrate_subjects` does that for every
 """
 from __future__ import annotations
 
-import json
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +18,7 @@ import arviz as az
 import numpy as np
 import pandas as pd
 
+from lvcore import limits
 from lvcore.core.space import SIGMA_V_ML
 from lvcore.exceptions import GeometryError
 from lvcore.inference import diagnostics, models, samplers
@@ -132,7 +133,8 @@ def calibrate_subjects(subjects: Sequence[tuple], model_names: Sequence[str], *,
     config, sampler, sigma_v, infer_angles
         As in :func:`calibrate`.
     out_dir : path, optional
-        Write ``<subject>_<model>.nc`` and ``_summary.csv`` there (:func:`write_result`).
+        Write ``<stem>_<model>.nc`` and ``_summary.csv`` there (:func:`write_result`), ``<stem>``
+        the subject's :func:`file_stem`; subjects with equal stems are refused (``DataError``).
     attrs : dict, optional
         Extra InferenceData attributes (``subject`` is added).
     progress : callable, optional
@@ -147,6 +149,8 @@ def calibrate_subjects(subjects: Sequence[tuple], model_names: Sequence[str], *,
     bad = [m for m in model_names if m not in models.MODEL_NAMES]
     if bad or not model_names:
         raise ValueError(f"unknown or no model(s) {bad}; choose from {', '.join(models.MODEL_NAMES)}")
+    # safe, unique file names, checked before any sampling (duplicates would overwrite each other's files)
+    stems = output_stems([str(s[0]) for s in subjects], source="subjects") if out_dir is not None else None
     pairs = [(s, m) for s in subjects for m in model_names]
     out = []
     for k, ((subject, y, forward), m) in enumerate(pairs):
@@ -155,7 +159,7 @@ def calibrate_subjects(subjects: Sequence[tuple], model_names: Sequence[str], *,
 
         res = calibrate(y, forward, m, config=config, sampler=sampler, sigma_v=sigma_v, infer_angles=infer_angles,
                         progress=None if progress is None else step, attrs={"subject": str(subject), **(attrs or {})})
-        files = write_result(res, out_dir, str(subject)) if out_dir is not None else {}
+        files = write_result(res, out_dir, stems[k // len(model_names)]) if out_dir is not None else {}
         item = SubjectResult(str(subject), m, res, files)
         out.append(item)
         if on_result is not None:
@@ -175,11 +179,9 @@ def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:
     Returns the first ``n_pc`` scores.
     """
     path = Path(path)
-    if not path.is_file():
-        raise GeometryError(f"geometry file {path} does not exist")
     suffix = path.suffix.lower()
     if suffix == ".json":
-        obj = json.loads(path.read_text())
+        obj = limits.read_json_file(path, limits.MAX_SCORES_BYTES, "geometry file", GeometryError)
         if isinstance(obj, dict):
             if "h" in obj:
                 h = obj["h"]
@@ -188,20 +190,31 @@ def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:
                 h = [obj[k] for k in keys]
         else:
             h = obj
+        h = _score_list(h, path.name)
     elif suffix == ".csv":
-        df = pd.read_csv(path)
-        cols = [c for c in df.columns if is_pc_name(c)]
-        if cols:
-            cols = sorted(cols, key=lambda c: int(str(c)[1:]))
-            h = df.loc[0, cols].to_numpy(dtype=float)
-        else:
-            h = np.loadtxt(path, delimiter=",").reshape(-1)
+        limits.check_regular_file(path, limits.MAX_SCORES_BYTES, "geometry file", GeometryError)
+        try:
+            df = pd.read_csv(path)
+            cols = [c for c in df.columns if is_pc_name(c)]
+            if cols:
+                cols = sorted(cols, key=lambda c: int(str(c)[1:]))
+                h = df.loc[0, cols].to_numpy(dtype=float)
+            else:
+                h = np.loadtxt(path, delimiter=",", ndmin=1).reshape(-1)
+        except (ValueError, TypeError, KeyError, IndexError, OverflowError, UnicodeDecodeError,
+                pd.errors.ParserError, pd.errors.EmptyDataError) as err:
+            raise GeometryError(f"{path.name}: cannot read PC scores from this CSV ({type(err).__name__}: "
+                                f"{str(err)[:200]}); give columns h1..h5 or one row of numbers") from None
     elif suffix in (".vtu", ".vtk", ".xdmf", ".npy", ".npz"):
+        limits.check_regular_file(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
         h = _project_mesh(path)
     else:
         raise GeometryError(f"{path.name}: unknown geometry format '{suffix}'; give PC scores as .json/.csv "
                             "or a template mesh (.vtu, .vtk, .xdmf, .npy, .npz)")
-    h = np.asarray(h, dtype=float).reshape(-1)
+    try:
+        h = np.asarray(h, dtype=float).reshape(-1)
+    except (TypeError, ValueError, OverflowError):
+        raise GeometryError(f"{path.name}: PC scores must be numbers") from None
     if h.size < n_pc:
         raise GeometryError(f"{path.name}: need {n_pc} PC scores, found {h.size}")
     if not np.all(np.isfinite(h[:n_pc])):
@@ -209,16 +222,37 @@ def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:
     return h[:n_pc]
 
 
-def _project_mesh(path: Path) -> np.ndarray:
-    if path.suffix.lower() == ".npy":
-        nodes = np.load(path)
-    elif path.suffix.lower() == ".npz":
-        with np.load(path) as z:
-            key = "nodes" if "nodes" in z else list(z.keys())[0]
-            nodes = z[key]
-    else:
-        from lvcore.geometry.io import read_template_mesh
+def _score_list(h, name: str) -> list:
+    """The scores of a JSON geometry file: a flat list of numbers."""
+    if not isinstance(h, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in h):
+        raise GeometryError(f"{name}: PC scores must be a list of numbers ({{\"h\": [h1, h2, ...]}}, "
+                            f"{{\"h1\": ..., \"h2\": ...}} or [h1, h2, ...])")
+    return h
 
+
+def _project_mesh(path: Path) -> np.ndarray:
+    from lvcore.geometry.io import _check_nodes, read_template_mesh
+    from lvcore.geometry.template import DEFAULT_TEMPLATE
+
+    if path.suffix.lower() in (".npy", ".npz"):
+        try:
+            if path.suffix.lower() == ".npy":
+                nodes = np.load(path, allow_pickle=False)
+            else:
+                with np.load(path, allow_pickle=False) as z:
+                    keys = list(z.keys())
+                    if not keys:
+                        raise GeometryError(f"{path.name}: the .npz archive holds no arrays; store the template "
+                                            "node positions as 'nodes'")
+                    nodes = z["nodes" if "nodes" in keys else keys[0]]
+            nodes = np.asarray(nodes, dtype=float)
+        except GeometryError:
+            raise
+        except (ValueError, TypeError, OSError, EOFError, KeyError, OverflowError) as err:
+            raise GeometryError(f"{path.name}: cannot read node positions ({type(err).__name__}: {str(err)[:200]}); "
+                                "give a numeric (n_nodes, 3) array of the template's nodes in mm") from None
+        nodes = _check_nodes(nodes, DEFAULT_TEMPLATE, path.name)
+    else:
         nodes = read_template_mesh(path)
     try:
         from lvcore.geometry.shape_model import load_shape_model
@@ -234,12 +268,62 @@ def _project_mesh(path: Path) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- output files
+#: Longest file stem made from a subject name.
+MAX_STEM_LENGTH = 64
+
+
+def file_stem(subject: str) -> str:
+    """A safe file-name stem for a subject name: letters, digits, ``.``, ``_`` and ``-`` only.
+
+    Path separators, ``..``, leading dots, control characters and anything
+    else become ``_``; the stem is cut to :data:`MAX_STEM_LENGTH` characters
+    and is never empty. The subject name itself is kept in the data
+    (``attrs["subject"]``, ``summary.json``).
+    """
+    stem = re.sub(r"[^A-Za-z0-9._-]", "_", str(subject))
+    stem = re.sub(r"\.{2,}", "_", stem).lstrip(".-_")[:MAX_STEM_LENGTH].rstrip(".")
+    return stem or "subject"
+
+
+def output_stems(subjects, source: str = "measured data") -> list[str]:
+    """:func:`file_stem` of each subject; refuses duplicates (which would overwrite each other's files).
+
+    Raises
+    ------
+    DataError
+        Naming both rows when two subjects are equal or map to the same file stem.
+    """
+    from lvcore.exceptions import DataError
+
+    seen: dict[str, int] = {}
+    stems = []
+    for i, subject in enumerate(subjects):
+        stem = file_stem(subject)
+        key = stem.lower()  # case-insensitive file systems
+        if key in seen:
+            j = seen[key]
+            same = "the same subject ID" if subjects[j] == subject else f"the same file name '{stem}'"
+            raise DataError(f"{source}: rows {j + 1} ('{str(subjects[j])[:80]}') and {i + 1} ('{str(subject)[:80]}') "
+                            f"have {same}; subject IDs must be unique, or their result files would overwrite "
+                            "each other")
+        seen[key] = i
+        stems.append(stem)
+    return stems
+
+
 def write_result(result: CalibrationResult, out_dir, stem: str) -> dict:
-    """Write ``<stem>_<model>.nc`` (InferenceData) and ``<stem>_<model>_summary.csv``; return the paths."""
+    """Write ``<stem>_<model>.nc`` (InferenceData) and ``<stem>_<model>_summary.csv``; return the paths.
+
+    ``stem`` is made safe with :func:`file_stem`, so nothing is written outside ``out_dir``.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    nc = diagnostics.save_netcdf(result.idata, out / f"{stem}_{result.model}.nc")
-    csv = out / f"{stem}_{result.model}_summary.csv"
+    stem = file_stem(stem)
+    nc_path, csv = out / f"{stem}_{result.model}.nc", out / f"{stem}_{result.model}_summary.csv"
+    for p in (nc_path, csv):
+        if p.resolve().parent != out.resolve():  # pragma: no cover - file_stem already prevents it
+            raise GeometryError(f"refusing to write '{p}' outside the output folder '{out}'")
+    nc = diagnostics.save_netcdf(result.idata, nc_path)
     result.summary.to_csv(csv)
     return {"netcdf": str(nc), "summary_csv": str(csv)}
 
@@ -263,4 +347,4 @@ def result_record(result: CalibrationResult) -> dict:
 
 
 __all__ = ["CalibrationResult", "SubjectResult", "calibrate", "calibrate_subjects", "read_pc_scores", "write_result",
-           "result_record"]
+           "result_record", "file_stem", "output_stems"]

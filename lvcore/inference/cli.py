@@ -44,9 +44,32 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_calibrate)
 
 
+def check_options(args) -> None:
+    """Refuse nonsensical sampler options before anything runs (DataError naming the option)."""
+    import math
+
+    from lvcore.exceptions import DataError
+
+    for name, value, lo in (("--chains", args.chains, 1), ("--warmup", args.warmup, 1), ("--samples", args.samples, 1)):
+        if value < lo:
+            raise DataError(f"{name} must be >= {lo}, got {value}")
+    if args.chains > 64:
+        raise DataError(f"--chains must be <= 64, got {args.chains}")
+    if args.warmup > 1_000_000 or args.samples > 1_000_000:
+        raise DataError("--warmup and --samples must be <= 1,000,000")
+    if not (math.isfinite(args.sigma_v) and args.sigma_v > 0):
+        raise DataError(f"--sigma-v must be a positive number of mL, got {args.sigma_v}")
+    if not (math.isfinite(args.edp) and args.edp >= 0):
+        raise DataError(f"--edp must be a finite pressure >= 0 (mmHg), got {args.edp}")
+    for name, value in (("--alpha-endo", args.alpha_endo), ("--alpha-epi", args.alpha_epi)):
+        if not (math.isfinite(value) and -180 <= value <= 180):
+            raise DataError(f"{name} must be an angle in [-180, 180] degrees, got {value}")
+
+
 def run_calibrate(args) -> int:
     from lvcore.inference.samplers import use_host_devices
 
+    check_options(args)
     use_host_devices(args.chains)
 
     from lvcore.core.forward import load_emulator_forward
@@ -67,13 +90,14 @@ def run_calibrate(args) -> int:
         raise DataError("give --data and --geometry (your measurements), or --volunteer NAME (a bundled one)")
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
-    if bad:
+    if bad or not model_names:
         raise DataError(f"--model {','.join(bad)}: choose from {', '.join(MODEL_NAMES)}")
     rows = read_measured_csv(args.data)
     if args.subject is not None:
         rows = [r for r in rows if r.subject == args.subject]
         if not rows:
             raise DataError(f"--subject {args.subject}: no such subject in {args.data}")
+    cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
     h = cal.read_pc_scores(args.geometry)
     infer = args.angles == "infer"
     name = args.emulator or ("angles" if infer else "chapter")
@@ -94,6 +118,7 @@ def run_calibrate(args) -> int:
         progress=None if args.json else (lambda msg, frac: print(msg)), on_result=None if args.json else show)
     records = [item.record() for item in results]
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(records, indent=2))
     if args.json:
         print(json.dumps(records, indent=2))

@@ -11,12 +11,15 @@ or in percent, and volumes in the wrong unit (m³, mm³, litres).
 """
 from __future__ import annotations
 
+import csv
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from lvcore import limits
 from lvcore.exceptions import DataError
 from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
 
@@ -119,14 +122,17 @@ def _is_number(s) -> bool:
 def read_measured_csv(path) -> list[MeasuredData]:
     """Read and validate a measured-data CSV (see module docstring); one :class:`MeasuredData` per row."""
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"measured-data file {path} does not exist")
+    text = limits.read_text_file(path, limits.MAX_MEASURED_BYTES, "measured-data file", DataError)
     try:
-        raw = pd.read_csv(path, header=None, dtype=str, skip_blank_lines=True, comment="#")
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
-        raise DataError(f"{path.name}: cannot parse as CSV ({err})") from None
+        raw = pd.read_csv(io.StringIO(text), header=None, dtype=str, skip_blank_lines=True, comment="#")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, ValueError, OverflowError,
+            csv.Error) as err:
+        raise DataError(f"{path.name}: cannot parse as CSV ({str(err)[:200]})") from None
     if raw.empty:
         raise DataError(f"{path.name}: no data rows")
+    if raw.shape[0] > limits.MAX_MEASURED_ROWS + 1:
+        raise DataError(f"{path.name}: {raw.shape[0]:,} rows is more than the limit of {limits.MAX_MEASURED_ROWS:,} "
+                        "(lvcore.limits.MAX_MEASURED_ROWS); split the file")
     first = [str(v).strip() for v in raw.iloc[0].tolist()]
     has_header = not all(_is_number(v) for v in first if v not in ("", "nan"))
     expected = ", ".join(OUTPUT_COLUMNS[:2]) + ", ..., " + OUTPUT_COLUMNS[-1]
@@ -157,9 +163,14 @@ def read_measured_csv(path) -> list[MeasuredData]:
     if body.empty:
         raise DataError(f"{path.name}: header but no data rows")
     out = []
+    seen: dict[str, int] = {}
     for i, (_, row) in enumerate(body.iterrows()):
         line = i + (2 if has_header else 1)
-        subject = str(row.iloc[subject_col]) if subject_col is not None else f"row{i + 1}"
+        subject = str(row.iloc[subject_col]).strip() if subject_col is not None else f"row{i + 1}"
+        if subject in seen:
+            raise DataError(f"{path.name}: subject '{subject[:80]}' appears on line {seen[subject]} and line {line}; "
+                            "subject IDs must be unique (rename or drop one of the rows)")
+        seen[subject] = line
         values = pd.to_numeric(row.iloc[data_cols], errors="coerce").to_numpy(dtype=float)
         nonnum = [OUTPUT_COLUMNS[j] for j, v in enumerate(row.iloc[data_cols])
                   if not _is_number(v) and str(v).strip().lower() not in ("", "nan")]

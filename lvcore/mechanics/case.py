@@ -21,7 +21,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lvcore import units
+from lvcore import limits, units
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE
@@ -226,13 +226,12 @@ class Case:
 def load_case(path: str | Path) -> Case:
     """Read and validate a case JSON file; relative paths inside resolve against its folder."""
     path = Path(path)
-    if not path.is_file():
-        raise CaseError("<file>", f"case file '{path}' does not exist")
-    try:
-        d = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise CaseError("<file>", f"'{path}' is not valid JSON: {err}") from None
+    d = limits.read_json_file(path, limits.MAX_CASE_BYTES, "case file", _file_error)
     return Case.from_dict(d, base_dir=path.parent)
+
+
+def _file_error(message: str) -> CaseError:
+    return CaseError("<file>", message)
 
 
 # ----------------------------------------------------------------------------
@@ -251,13 +250,19 @@ def _check_keys(d: Any, where: str, allowed, required=()) -> None:
             raise CaseError(_join(where, key), "missing (required)")
 
 
+def _short(value, n: int = 80) -> str:
+    """``repr(value)``, cut to ``n`` characters for messages."""
+    text = repr(value)
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
 def _join(where: str, key) -> str:
     return f"{where}.{key}" if where else str(key)
 
 
 def _number(value, where: str, positive=False, nonnegative=False, lo=None, hi=None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise CaseError(where, f"must be a number, got {type(value).__name__} {value!r}")
+        raise CaseError(where, f"must be a number, got {type(value).__name__} {_short(value)}")
     x = float(value)
     if not math.isfinite(x):
         raise CaseError(where, f"must be finite, got {x}")
@@ -272,7 +277,7 @@ def _number(value, where: str, positive=False, nonnegative=False, lo=None, hi=No
 
 def _string(value, where: str, choices) -> str:
     if not isinstance(value, str):
-        raise CaseError(where, f"must be a string, one of {', '.join(choices)}; got {value!r}")
+        raise CaseError(where, f"must be a string, one of {', '.join(choices)}; got {_short(value)}")
     if value not in choices:
         close = difflib.get_close_matches(value, list(choices), n=1, cutoff=0.5)
         hint = f" (did you mean '{close[0]}'?)" if close else ""
@@ -282,13 +287,13 @@ def _string(value, where: str, choices) -> str:
 
 def _vector(value, where: str, n=3, positive=False) -> tuple[float, ...]:
     if not isinstance(value, (list, tuple)) or len(value) != n:
-        raise CaseError(where, f"must be a list of {n} numbers, got {value!r}")
+        raise CaseError(where, f"must be a list of {n} numbers, got {_short(value)}")
     return tuple(_number(v, f"{where}[{i}]", positive=positive) for i, v in enumerate(value))
 
 
 def _resolve(path_value, where: str, base_dir: Path | None, suffixes=()) -> Path:
     if not isinstance(path_value, str) or not path_value:
-        raise CaseError(where, f"must be a file path string, got {path_value!r}")
+        raise CaseError(where, f"must be a file path string, got {_short(path_value)}")
     p = Path(path_value).expanduser()
     if not p.is_absolute() and base_dir is not None:
         p = base_dir / p
@@ -324,7 +329,7 @@ def _parse_resolution(value, where: str, kind: str) -> tuple[LVResolution | BoxR
     if kind == "box":
         if isinstance(value, (list, tuple)):
             if len(value) != 3:
-                raise CaseError(where, f"a box resolution is [nx, ny, nz], got {value!r}")
+                raise CaseError(where, f"a box resolution is [nx, ny, nz], got {_short(value)}")
             counts, paths = value, [f"{where}[{i}]" for i in range(3)]
         else:
             _check_keys(value, where, ("x", "y", "z"), required=("x", "y", "z"))
@@ -345,6 +350,11 @@ def _parse_resolution(value, where: str, kind: str) -> tuple[LVResolution | BoxR
     except ResolutionError as err:
         raise CaseError(f"{where}.{err.field}", err.problem) from None
     return res, None
+
+
+def _check_size(counts, kind: str, gauss_points: int, where: str) -> None:
+    """Refuse meshes over the limits of :mod:`lvcore.limits` before anything is allocated."""
+    limits.check_mesh_size(counts, kind, gauss_points, error=lambda msg: CaseError(where, msg), where="too large")
 
 
 def _parse_surface(d, where: str) -> EllipsoidSurface:
@@ -408,7 +418,7 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
             raise CaseError("geometry.scores", "missing (required for geometry kind 'pca')")
         scores = g["scores"]
         if not isinstance(scores, (list, tuple)) or len(scores) == 0:
-            raise CaseError("geometry.scores", f"must be a non-empty list of numbers, got {scores!r}")
+            raise CaseError("geometry.scores", f"must be a non-empty list of numbers, got {_short(scores)}")
         scores = [_number(v, f"geometry.scores[{i}]") for i, v in enumerate(scores)]
         model = _resolve(g["model"], "geometry.model", base_dir, suffixes=(".json",)) if "model" in g else None
         from lvcore.geometry.shape_model import load_shape_model  # lazy
@@ -425,6 +435,11 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
     if "size" not in g:
         raise CaseError("geometry.size", "missing (required for a box: [Lx, Ly, Lz] in mm)")
     size = _vector(g["size"], "geometry.size", positive=True)
+    if resolution is None:  # a preset: the counts follow from the size
+        from lvcore.mechanics.mesh import BOX_RESOLUTION_PRESETS
+
+        h = min(size) / BOX_RESOLUTION_PRESETS[preset or "default"]
+        _check_size([max(1, math.ceil(min(L / h, 1e9) - 1e-9)) for L in size], "box", 27, "geometry.resolution")
     return GeometrySpec(kind, resolution, preset, box_size=size, source=f"box {size[0]:g} x {size[1]:g} x {size[2]:g} mm")
 
 
@@ -468,7 +483,7 @@ def _parse_load(ld, geometry: GeometrySpec) -> LoadSpec:
     p = _number(ld["pressure"], "load.pressure", nonnegative=True)
     u = ld["units"]
     if not isinstance(u, str) or u.lower() not in PRESSURE_UNITS:
-        raise CaseError("load.units", f"must be 'kPa' or 'mmHg', got {u!r}")
+        raise CaseError("load.units", f"must be 'kPa' or 'mmHg', got {_short(u)}")
     p_kpa = p * PRESSURE_UNITS[u.lower()]
     if geometry.is_lv:
         surface = _string(ld.get("surface", "endocardium"), "load.surface", ("endocardium",))
@@ -486,14 +501,17 @@ def _parse_boundary(b, geometry: GeometrySpec) -> BoundarySpec:
     _check_keys(b, "boundary", ("clamped",), required=("clamped",))
     faces = b["clamped"]
     if not isinstance(faces, (list, tuple)) or not faces:
-        raise CaseError("boundary.clamped", f"must be a non-empty list of faces ({', '.join(BOX_FACES)}), got {faces!r}")
+        raise CaseError("boundary.clamped", f"must be a non-empty list of faces ({', '.join(BOX_FACES)}), got {_short(faces)}")
     faces = tuple(_string(v, f"boundary.clamped[{i}]", BOX_FACES) for i, v in enumerate(faces))
     return BoundarySpec(None, faces)
 
 
 def _parse_probes(p) -> tuple[tuple[float, float, float], ...]:
     if not isinstance(p, (list, tuple)):
-        raise CaseError("probes", f"must be a list of [x, y, z] points (mm), got {p!r}")
+        raise CaseError("probes", f"must be a list of [x, y, z] points (mm), got {_short(p)}")
+    if len(p) > limits.MAX_PROBES:
+        raise CaseError("probes", f"{len(p):,} points is more than the limit of {limits.MAX_PROBES:,} "
+                                  "(lvcore.limits.MAX_PROBES)")
     return tuple(_vector(v, f"probes[{i}]") for i, v in enumerate(p))
 
 

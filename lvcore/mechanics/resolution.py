@@ -5,7 +5,8 @@ This module is the one source of truth for resolutions:
 * :class:`LVResolution` - elements around, base to apex (evenly or per
   short-axis level) and through the wall of an LV mesh, and the Gauss
   points through the wall. Every bound is checked once, here, in
-  ``__post_init__``; a violation raises :class:`ResolutionError` naming the
+  ``__post_init__`` (including the size limits of :mod:`lvcore.limits`:
+  elements, degrees of freedom, estimated memory); a violation raises :class:`ResolutionError` naming the
   case-schema field (``circumferential``, ``longitudinal``, ``transmural``,
   ``transmural_gauss_points``), which :mod:`lvcore.mechanics.case` turns into
   a :class:`~lvcore.exceptions.CaseError`.
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 
 from lvcore.exceptions import GeometryError
 from lvcore.geometry.template import N_LEVELS, LVTemplate
+from lvcore.limits import check_mesh_size
 
 #: Largest number of Gauss points through the wall (the 1-D Gauss rule is exact to degree 19).
 MAX_TRANSMURAL_GAUSS_POINTS = 10
@@ -44,6 +46,13 @@ def _positive_int(value, field: str) -> int:
     if isinstance(value, bool) or not ok or value < 1:
         raise ResolutionError(field, f"must be a positive integer, got {value!r}")
     return int(value)
+
+
+def _check_limits(counts, fields, kind: str, gauss_points: int) -> None:
+    """Refuse meshes over the limits of :mod:`lvcore.limits` (elements, dofs, estimated memory),
+    before anything is allocated; the error names the field of the largest count."""
+    field = fields[max(range(len(counts)), key=lambda i: counts[i])]
+    check_mesh_size(counts, kind, gauss_points, error=lambda msg: ResolutionError(field, msg), where="mesh too large")
 
 
 def _levels(level_elements) -> tuple[int, ...]:
@@ -102,6 +111,7 @@ class LVResolution:
             if sum(le) != self.n_long:
                 raise ResolutionError("longitudinal", f"level counts {le} must sum to n_long={self.n_long}")
             set_(self, "level_elements", le)
+        _check_limits(self.counts, ("circumferential", "longitudinal", "transmural"), "lv", 9 * gp)
 
     @classmethod
     def graded(cls, n_circ: int, level_elements, n_trans: int, transmural_gauss_points: int = 3) -> "LVResolution":
@@ -165,6 +175,7 @@ class BoxResolution:
     def __post_init__(self):
         for name in ("nx", "ny", "nz"):
             object.__setattr__(self, name, _positive_int(getattr(self, name), name))
+        _check_limits(self.xyz, ("nx", "ny", "nz"), "box", 27)
 
     @property
     def xyz(self) -> tuple[int, int, int]:

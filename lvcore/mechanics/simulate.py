@@ -17,8 +17,8 @@ import numpy as np
 import jax
 import jax.numpy as jnp
 
-from lvcore import units
-from lvcore.exceptions import CaseError, SolverError
+from lvcore import limits, units
+from lvcore.exceptions import CaseError, GeometryError, SolverError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
 from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables
 from lvcore.mechanics.mesh import FEMesh, box_mesh, lv_mesh
@@ -54,6 +54,8 @@ class SimulationResult:
     elements: np.ndarray
     sensitivities: dict | None = None
     timings: dict = field(default_factory=dict)
+    #: Plausibility flags (e.g. a cavity more than 3 times its reference volume); the values are kept as computed.
+    warnings: tuple[str, ...] = ()
 
     def outputs(self) -> np.ndarray:
         """The 25 outputs [LVV (mL), 24 circumferential strains]; raises if unavailable."""
@@ -85,6 +87,7 @@ class SimulationResult:
             "load_steps": int(self.load_steps),
             "dofs": int(self.dofs),
             "seconds": float(self.seconds),
+            "warnings": list(self.warnings),
         }
 
 
@@ -182,6 +185,8 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         except ValueError as exc:
             raise CaseError("probes", str(exc)) from None
     v_ref = float(_cavity_volume(jnp.asarray(mesh.nodes), *_volume_args(mesh))) if is_lv else None
+    if is_lv:
+        check_reference_volumes(mesh, v_ref)
     if case.load.pressure_kpa == 0:
         res = newton.NewtonResult(True, "converged (zero load)", np.zeros(system.n_free), system.zero_pressure(),
                                   1.0, 0, 0, 0, {})
@@ -231,7 +236,44 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         newton_iterations=res.iterations, load_steps=res.load_steps, dofs=dofs,
         seconds=time.perf_counter() - t0, reference_nodes=mesh.nodes, displacement=u.reshape(-1, 3),
         elements=mesh.elements, sensitivities=sens, timings=res.timings,
+        warnings=plausibility_warnings(vol, standardised),
     )
+
+
+def check_reference_volumes(mesh: FEMesh, cavity_mm3: float) -> None:
+    """Refuse a degenerate LV: cavity or wall volume below the floors of :mod:`lvcore.limits` (mm³ in).
+
+    Raises
+    ------
+    GeometryError
+        E.g. a base plane just above the apex, which leaves a near-empty cavity.
+    """
+    from lvcore.mechanics.quadrature import reference_gradients
+
+    wall_ml = float(np.sum(reference_gradients(mesh.nodes, mesh.elements)[1])) / units.MM3_PER_ML
+    cavity_ml = float(cavity_mm3) / units.MM3_PER_ML
+    if not cavity_ml >= limits.MIN_CAVITY_ML:
+        raise GeometryError(f"degenerate geometry: the reference cavity volume is {cavity_ml:.3g} mL, below the floor "
+                            f"of {limits.MIN_CAVITY_ML} mL (lvcore.limits.MIN_CAVITY_ML); check the base plane "
+                            "(geometry.base_z must leave a cavity between the base and the apex) and the radii")
+    if not wall_ml >= limits.MIN_WALL_ML:
+        raise GeometryError(f"degenerate geometry: the wall volume is {wall_ml:.3g} mL, below the floor of "
+                            f"{limits.MIN_WALL_ML} mL (lvcore.limits.MIN_WALL_ML); check the geometry")
+
+
+def plausibility_warnings(volume_mm3, standardised) -> tuple[str, ...]:
+    """Flags for physiologically implausible LV results (values are kept, not hidden)."""
+    out = []
+    if volume_mm3 is not None and volume_mm3[1] is not None:
+        lvv = float(volume_mm3[1]) / units.MM3_PER_ML
+        if lvv > limits.PLAUSIBLE_MAX_LVV_ML:
+            out.append(f"implausible result: loaded cavity volume {lvv:.0f} mL exceeds "
+                       f"{limits.PLAUSIBLE_MAX_LVV_ML:.0f} mL (check the stiffness parameters and the pressure units)")
+    if standardised is not None and float(standardised) > limits.PLAUSIBLE_MAX_STANDARDISED_LVV:
+        out.append(f"implausible result: the cavity inflated to {float(standardised):.2f} times its reference "
+                   f"volume (more than {limits.PLAUSIBLE_MAX_STANDARDISED_LVV:g}); passive filling stays well below "
+                   "2, so check the stiffness parameters and the pressure units")
+    return tuple(out)
 
 
 __all__ = ["SimulationResult", "simulate", "build_mesh", "build_system", "RESOLUTION_PRESETS", "N_OUTPUTS"]

@@ -26,6 +26,8 @@ def format_summary(result) -> str:
         lines.append("circumferential strain E_cc (rows: levels base -> apex; columns: sectors S1..S6):")
         for name, row in zip(LEVEL_NAMES, strains_by_level(d["strains"])):
             lines.append(f"  {name:>10s} " + " ".join(f"{v:+.4f}" for v in row))
+    for w in d.get("warnings") or []:
+        lines.append(f"WARNING: {w}")
     sens = d.get("sensitivities") if isinstance(result, dict) else getattr(result, "sensitivities", None)
     if sens:
         lines.append("sensitivities: " + ", ".join(str(k) for k in sens) + " (use --json for values)")
