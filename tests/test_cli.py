@@ -1,15 +1,28 @@
-"""The ``lvcore`` command (lvcore.cli): every sub-command module is wired in, and a broken one fails loudly."""
+"""The ``lvcore`` command (lvcore.cli): every sub-command module is wired in, and a broken one fails loudly;
+exit codes 0 / 1 / 2 / 3, one-line errors, tracebacks only under --debug.
+
+Each bad input of issue 15 (binary and garbage files, deep nesting, huge
+integers, 1e400, object .npy, empty .npz, nested-dict geometry files,
+--chains 0, --sigma-v 0, contour fields of the wrong type, a plain HDF5 file
+as a store) must exit with 2 and a message naming the file, never a
+traceback.
+"""
 import argparse
 import importlib
+import json
+import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import lvcore
 from lvcore import cli
+from lvcore.cli import main
 from lvcore.studies import cli as study_cli
 
 
@@ -62,3 +75,257 @@ def test_a_missing_command_module_fails_loudly(monkeypatch, table, name):
     monkeypatch.setattr(table, name, getattr(table, name) + ("lvcore.no_such_module",))
     with pytest.raises(ModuleNotFoundError, match="lvcore.no_such_module"):
         cli.build_parser()
+
+
+# --------------------------------------------------------------------------- exit codes and hostile input (issue 15)
+ROOT = Path(__file__).resolve().parents[1]
+
+#: One SYNTHETIC measurement row (volunteer HV1 of the bundled SYNTHETIC set).
+HV1 = [151.802823, -0.144997, -0.134846, -0.122119, -0.142227, -0.186258, -0.133028, -0.246273, -0.188115,
+       -0.153984, -0.238188, -0.238619, -0.246458, -0.254813, -0.266240, -0.177445, -0.247525, -0.240524,
+       -0.200640, -0.159016, -0.118997, -0.164490, -0.224552, -0.207375, -0.162253]
+HEADER = "subject,lvv_ml," + ",".join(f"strain_{k:02d}" for k in range(1, 25))
+
+
+def measured_csv(path: Path, subjects) -> Path:
+    path.write_text(HEADER + "\n" + "".join(f"{s}," + ",".join(map(str, HV1)) + "\n" for s in subjects))
+    return path
+
+
+def run(argv, capsys):
+    rc = main(argv)
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+# --------------------------------------------------------------------------- bad case files: exit 2
+@pytest.mark.parametrize("name, content", [
+    ("binary.json", b"\x00\x01\xff\xfe\x89PNG garbage"),
+    ("garbage.json", b"this is not json {{{"),
+    ("deep.json", b"[" * 200_000 + b"]" * 200_000),
+    ("bigint.json", b'{"geometry": {"kind": "box", "size": [' + b"9" * 5000 + b', 1, 1]}}'),
+    ("inf.json", b'{"geometry": {"kind": "box", "size": [1e400, 1, 1]}}'),
+    ("dup.json", b'{"geometry": {"kind": "default"}, "geometry": {"kind": "default"}}'),
+])
+def test_bad_case_files_exit_2_naming_the_file(tmp_path, capsys, name, content):
+    p = tmp_path / name
+    p.write_bytes(content)
+    rc, out, err = run(["simulate", str(p)], capsys)
+    assert rc == 2
+    assert name in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("resolution", [
+    {"elements_box": [100, 100, 10]},
+    {"circumferential": 6, "longitudinal": [250, 250, 250, 250], "transmural": 1},
+    {"elements_box": [1000, 1000, 1000]},
+])
+def test_huge_resolutions_are_refused_in_milliseconds(tmp_path, capsys, resolution):
+    if "elements_box" in resolution:
+        case = {"geometry": {"kind": "box", "size": [10, 1, 1], "resolution": resolution["elements_box"]},
+                "material": {"law": "neo-hookean", "mu": 1}, "load": {"pressure": 1, "units": "kPa", "surface": "z0"},
+                "boundary": {"clamped": ["x0"]}}
+    else:
+        case = {"geometry": {"kind": "default", "resolution": resolution},
+                "material": {"law": "neo-hookean", "mu": 1}, "load": {"pressure": 1, "units": "kPa"}}
+    p = tmp_path / "big.json"
+    p.write_text(json.dumps(case))
+    t0 = time.perf_counter()
+    rc, out, err = run(["simulate", str(p)], capsys)
+    assert time.perf_counter() - t0 < 1.0
+    assert rc == 2 and "geometry.resolution" in err and "limit" in err
+
+
+def test_too_many_probes_are_refused(tmp_path, capsys):
+    case = {"geometry": {"kind": "default"}, "material": {"law": "neo-hookean", "mu": 1},
+            "load": {"pressure": 1, "units": "kPa"}, "probes": [[0, 0, -10]] * 2_000_000}
+    p = tmp_path / "probes.json"
+    p.write_text(json.dumps(case))
+    rc, out, err = run(["simulate", str(p)], capsys)
+    assert rc == 2 and ("probes" in err or "larger than the limit" in err)
+
+
+def test_non_regular_case_file_says_so(tmp_path, capsys):
+    rc, out, err = run(["simulate", str(tmp_path)], capsys)
+    assert rc == 2 and "not a regular file" in err and "does not exist" not in err
+
+
+def test_geometry_fit_dev_zero_returns_at_once(capsys):
+    t0 = time.perf_counter()
+    rc, out, err = run(["geometry", "fit", "/dev/zero"], capsys)
+    assert rc == 2 and "not a regular file" in err
+    assert time.perf_counter() - t0 < 2.0
+
+
+# --------------------------------------------------------------------------- contour fields of the wrong type
+def _contours():
+    return json.loads((ROOT / "examples" / "contours" / "SYNTHETIC_example_contours.json").read_text())
+
+
+@pytest.mark.parametrize("field, value", [
+    ("units", ["mm"]),
+    ("landmarks", [1, 2, 3]),
+    ("landmarks", {"septum": "left"}),
+    ("long_axis", 5),
+    ("long_axis", [{"name": "4CH", "endo": "x"}]),
+    ("slices", {"a": 1}),
+    ("patient", {"x": 1}),
+])
+def test_contour_fields_of_the_wrong_type_exit_2(tmp_path, capsys, field, value):
+    d = _contours()
+    d[field] = value
+    p = tmp_path / "c.json"
+    p.write_text(json.dumps(d))
+    rc, out, err = run(["geometry", "fit", str(p)], capsys)
+    assert rc == 2, err
+    assert "c.json" in err and "Traceback" not in err
+
+
+# --------------------------------------------------------------------------- calibrate inputs
+@pytest.fixture
+def data_csv(tmp_path):
+    return measured_csv(tmp_path / "m.csv", ["S1"])
+
+
+@pytest.mark.parametrize("option", [["--chains", "0"], ["--sigma-v", "0"], ["--sigma-v", "nan"], ["--warmup", "0"],
+                                    ["--samples", "-1"], ["--edp", "inf"]])
+def test_bad_sampler_options_exit_2(tmp_path, capsys, data_csv, option):
+    scores = tmp_path / "h.json"
+    scores.write_text('{"h": [0, 0, 0, 0, 0]}')
+    rc, out, err = run(["calibrate", "--data", str(data_csv), "--geometry", str(scores), "--out", str(tmp_path / "o"),
+                        *option], capsys)
+    assert rc == 2 and option[0] in err
+    assert not (tmp_path / "o").exists()
+
+
+def _geometry_files(tmp_path):
+    np.save(tmp_path / "object.npy", np.array([{"a": 1}, None], dtype=object), allow_pickle=True)
+    np.savez(tmp_path / "empty.npz")
+    (tmp_path / "nested.json").write_text('{"h": {"h1": {"h2": 3}}}')
+    (tmp_path / "strings.json").write_text('{"h": ["a", "b", "c", "d", "e"]}')
+    (tmp_path / "huge.json").write_text('{"h": [1e400, 0, 0, 0, 0]}')
+    (tmp_path / "garbage.csv").write_bytes(b"\x00\xff\xfe\x01,,,\n\n\x00")
+    (tmp_path / "wrong_shape.npy").write_bytes(b"")
+    np.save(tmp_path / "wrong_shape.npy", np.zeros((7, 2)))
+    return ["object.npy", "empty.npz", "nested.json", "strings.json", "huge.json", "garbage.csv", "wrong_shape.npy"]
+
+
+def test_bad_geometry_files_exit_2(tmp_path, capsys, data_csv):
+    for name in _geometry_files(tmp_path):
+        rc, out, err = run(["calibrate", "--data", str(data_csv), "--geometry", str(tmp_path / name),
+                            "--out", str(tmp_path / "o")], capsys)
+        assert rc == 2, (name, err)
+        assert name in err and "Traceback" not in err, (name, err)
+
+
+def test_duplicate_subjects_are_refused_naming_the_rows(tmp_path, capsys):
+    csv = measured_csv(tmp_path / "dup.csv", ["A", "B", "A"])
+    rc, out, err = run(["calibrate", "--data", str(csv), "--geometry", str(tmp_path / "h.json"),
+                        "--out", str(tmp_path / "o")], capsys)
+    assert rc == 2 and "'A'" in err and "line 2" in err and "line 4" in err
+
+
+def _fake_calibration(monkeypatch):
+    """Replace sampling by a tiny fixed posterior so the CLI's file handling runs in a second."""
+    import arviz as az
+    import pandas as pd
+
+    from lvcore.inference import calibrate as cal
+    from lvcore.inference import forward
+
+    class Conv:
+        converged = True
+
+        def message(self):
+            return "converged (fake)"
+
+    def fake(y, fwd, model, **kw):
+        idata = az.from_dict(posterior={"a": np.ones((1, 4))}, attrs=kw.get("attrs") or {})
+        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [1.0]}, index=["a"]), 0.1,
+                                     {"min": 1.0})
+
+    monkeypatch.setattr(cal, "calibrate", fake)
+    monkeypatch.setattr(forward, "load_forward", lambda *a, **k: None)
+
+
+def test_calibrate_never_writes_outside_out(tmp_path, capsys, monkeypatch):
+    _fake_calibration(monkeypatch)
+    work = tmp_path / "work"
+    work.mkdir()
+    target = tmp_path / "escaped"
+    subjects = ["../../x", str(target), "..", "a/b", ".hidden", "con\x07trol"]
+    csv = measured_csv(work / "evil.csv", [json.dumps(s) if "," in s else s for s in subjects])
+    scores = work / "h.json"
+    scores.write_text('{"h": [0, 0, 0, 0, 0]}')
+    out = work / "out"
+    before = {p for p in tmp_path.rglob("*")}
+    rc, stdout, err = run(["calibrate", "--data", str(csv), "--geometry", str(scores), "--out", str(out), "--json"],
+                          capsys)
+    assert rc == 0, err
+    written = {p for p in tmp_path.rglob("*")} - before
+    assert written and all(out in p.parents or p == out for p in written), written
+    records = json.loads((out / "summary.json").read_text())
+    assert [r["subject"] for r in records] == subjects  # the original names are kept in the data
+    assert len({r["netcdf"] for r in records}) == len(subjects)  # nothing overwritten
+
+
+def test_subjects_that_collide_after_sanitising_are_refused(tmp_path, capsys, monkeypatch):
+    _fake_calibration(monkeypatch)
+    csv = measured_csv(tmp_path / "m.csv", ["a/b", "a_b"])
+    scores = tmp_path / "h.json"
+    scores.write_text('{"h": [0, 0, 0, 0, 0]}')
+    rc, out, err = run(["calibrate", "--data", str(csv), "--geometry", str(scores), "--out", str(tmp_path / "o")],
+                       capsys)
+    assert rc == 2 and "rows 1" in err and "2" in err and "a_b" in err
+
+
+# --------------------------------------------------------------------------- stores
+def test_status_of_a_plain_hdf5_file_exits_2(tmp_path, capsys):
+    import h5py
+
+    p = tmp_path / "plain.h5"
+    with h5py.File(p, "w") as f:
+        f["x"] = np.arange(3)
+    rc, out, err = run(["campaign", "status", str(p)], capsys)
+    assert rc == 2 and "not an lvcore campaign store" in err
+
+
+# --------------------------------------------------------------------------- exit codes 1 and 3, --debug
+def test_solver_error_exits_1(monkeypatch, capsys):
+    from lvcore.exceptions import SolverError
+    from lvcore.mechanics import case as case_mod
+
+    def boom(path):
+        raise SolverError("Newton diverged at step 3")
+
+    monkeypatch.setattr(case_mod, "load_case", boom)
+    rc, out, err = run(["simulate", "x.json"], capsys)
+    assert rc == 1 and "did not converge" in err
+
+
+def test_internal_error_exits_3_with_one_line(monkeypatch, capsys):
+    from lvcore.mechanics import case as case_mod
+
+    def boom(path):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(case_mod, "load_case", boom)
+    rc, out, err = run(["simulate", "x.json"], capsys)
+    assert rc == 3
+    assert err.strip().splitlines() == ["lvcore: internal error: ZeroDivisionError: a bug "
+                                        "(rerun with --debug for the traceback)"]
+    for argv in (["--debug", "simulate", "x.json"], ["simulate", "x.json", "--debug"]):
+        rc, out, err = run(argv, capsys)
+        assert rc == 3 and "Traceback" in err and "ZeroDivisionError: a bug" in err
+
+
+def test_exit_codes_in_a_real_process(tmp_path):
+    """The installed entry point: exit 2 on a binary case file, no traceback."""
+    p = tmp_path / "bin.json"
+    p.write_bytes(os.urandom(256))
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, "-m", "lvcore.cli", "simulate", str(p)], capture_output=True, text=True,
+                       env=env, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr

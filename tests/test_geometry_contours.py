@@ -150,3 +150,108 @@ def test_unreadable_and_bad_surfaces(tmp_path):
      .save(tmp_path / "p.vtp"))
     with pytest.raises(GeometryError, match="swapped"):
         fit_surfaces(tmp_path / "e.vtp", tmp_path / "p.vtp")
+
+
+# ----------------------------------------------------------------------------- hostile input (issue 15)
+def test_huge_contour_is_refused_fast(good, tmp_path):
+    """A 15,000-point contour used to build n x n arrays (6 GB); it is now refused by the point limit."""
+    import time
+
+    d = copy.deepcopy(good)
+    th = np.linspace(0, 2 * np.pi, 15_000, endpoint=False)
+    z = float(np.mean(np.asarray(d["slices"][0]["epi"])[:, 2]))
+    d["slices"][0]["epi"] = np.c_[40 * np.cos(th), 40 * np.sin(th), np.full_like(th, z)].round(3).tolist()
+    p = tmp_path / "huge.json"
+    p.write_text(json.dumps(d))
+    t0 = time.perf_counter()
+    with pytest.raises(GeometryError, match="MAX_POINTS_PER_CONTOUR"):
+        read_contours(p)
+    assert time.perf_counter() - t0 < 2.0
+
+
+def test_too_many_points_in_all_are_refused(good, monkeypatch):
+    from lvcore import limits
+
+    monkeypatch.setattr(limits, "MAX_CONTOUR_POINTS", 100)
+    with pytest.raises(GeometryError, match="MAX_CONTOUR_POINTS"):
+        contours_from_dict(copy.deepcopy(good))
+
+
+def test_self_intersections_uses_bounded_memory():
+    """4,000 points (the per-contour limit): the old n x n version peaked at > 1 GB."""
+    import tracemalloc
+
+    from lvcore.geometry.contours import self_intersections
+
+    th = np.linspace(0, 2 * np.pi, 4000, endpoint=False)
+    circle = np.c_[30 * np.cos(th), 30 * np.sin(th)]
+    tracemalloc.start()
+    try:
+        assert self_intersections(circle) == 0
+        eight = np.c_[30 * np.sin(th), 15 * np.sin(2 * th)]  # a figure of eight crosses itself once
+        assert self_intersections(eight) == 1
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 200e6, peak
+
+
+def test_self_intersections_matches_brute_force():
+    from lvcore.geometry.contours import self_intersections
+
+    def brute(xy):
+        n = len(xy)
+        q = np.roll(xy, -1, axis=0)
+        count = 0
+        for i in range(n):
+            for j in range(i + 2, n):
+                if i == 0 and j == n - 1:
+                    continue
+                a, b, c, e = xy[i], q[i], xy[j], q[j]
+
+                def cr(u, v):
+                    return u[0] * v[1] - u[1] * v[0]
+
+                if cr(b - a, c - a) * cr(b - a, e - a) < 0 and cr(e - c, a - c) * cr(e - c, b - c) < 0:
+                    count += 1
+        return count
+
+    rng = np.random.default_rng(3)
+    for k in range(60):
+        xy = rng.normal(size=(int(rng.integers(3, 40)), 2))
+        if k % 4 == 0:
+            xy = np.round(xy)  # collinear and repeated points
+        assert self_intersections(xy) == brute(xy)
+
+
+@pytest.mark.parametrize("field, value, fragment", [
+    ("units", ["mm"], "units"),
+    ("landmarks", ["septum", [1, 2, 3]], "landmarks"),
+    ("landmarks", {"septum": "anterior"}, "septum"),
+    ("landmarks", {"septum": [1, 2]}, "septum"),
+    ("long_axis", 7, "long_axis"),
+    ("long_axis", [{"name": {"x": 1}, "endo": None, "epi": None}], "long_axis"),
+    ("synthetic", {"yes": 1}, "synthetic"),
+    ("extra", [1, 2], "extra"),
+])
+def test_fields_of_the_wrong_type(good, field, value, fragment):
+    d = copy.deepcopy(good)
+    d[field] = value
+    with pytest.raises(GeometryError, match=fragment):
+        contours_from_dict(d)
+
+
+def test_points_of_the_wrong_type(good):
+    for bad in ("abc", [[1, 2, "3"]] * 10, [[True, 2, 3]] * 10, [[1, 2, None]] * 10, 5):
+        d = copy.deepcopy(good)
+        d["slices"][0]["epi"] = bad
+        with pytest.raises(GeometryError, match="slice 0 epi"):
+            contours_from_dict(d)
+
+
+def test_duplicate_keys_are_refused(good, tmp_path):
+    text = json.dumps(good)
+    p = tmp_path / "dup.json"
+    p.write_text(text[:-1] + ', "units": "cm"}')
+    with pytest.raises(GeometryError, match="duplicate key 'units'"):
+        read_contours(p)

@@ -243,3 +243,63 @@ def test_pca_geometry_from_bundled_model():
     with pytest.raises(CaseError) as info:
         Case.from_dict(d)
     assert info.value.field == "geometry.scores" and "modes" in str(info.value)
+
+
+# ----------------------------------------------------------------------------- hostile input (issue 15)
+@pytest.mark.parametrize("resolution", [
+    {"circumferential": 100, "longitudinal": 100, "transmural": 10},
+    {"circumferential": 6, "longitudinal": [250, 250, 250, 250], "transmural": 1},
+    {"circumferential": 1000, "longitudinal": 1000, "transmural": 1000},
+])
+def test_huge_lv_resolutions_are_refused_before_allocation(resolution):
+    import time
+
+    t0 = time.perf_counter()
+    with pytest.raises(CaseError, match="geometry.resolution.*limit"):
+        Case.from_dict(_edit(HO, ("geometry", "resolution"), resolution))
+    assert time.perf_counter() - t0 < 0.1
+
+
+@pytest.mark.parametrize("resolution", [[100, 100, 10], [1000, 1000, 1000], {"x": 400, "y": 400, "z": 1}])
+def test_huge_box_resolutions_are_refused(resolution):
+    with pytest.raises(CaseError, match="geometry.resolution"):
+        Case.from_dict(_edit(BOX, ("geometry", "resolution"), resolution))
+
+
+def test_box_preset_on_a_needle_is_refused():
+    d = _edit(BOX, ("geometry", "resolution"), "accurate")
+    d["geometry"]["size"] = [1e6, 1, 1]
+    with pytest.raises(CaseError, match="geometry.resolution"):
+        Case.from_dict(d)
+
+
+def test_too_many_probes():
+    from lvcore import limits
+
+    Case.from_dict(_edit(LAND2, ("probes",), [[0, 0, -17]] * limits.MAX_PROBES))
+    with pytest.raises(CaseError, match="probes.*MAX_PROBES"):
+        Case.from_dict(_edit(LAND2, ("probes",), [[0, 0, -17]] * (limits.MAX_PROBES + 1)))
+
+
+def test_duplicate_keys_in_a_case_file(tmp_path):
+    p = tmp_path / "dup.json"
+    p.write_text('{"geometry": {"kind": "default"}, "material": {"law": "neo-hookean", "mu": 1, "mu": 5},'
+                 ' "load": {"pressure": 1, "units": "kPa"}}')
+    with pytest.raises(CaseError, match="duplicate key 'mu'"):
+        load_case(p)
+
+
+def test_non_regular_case_files(tmp_path):
+    with pytest.raises(CaseError, match="not a regular file"):
+        load_case(tmp_path)
+    with pytest.raises(CaseError, match="not a regular file"):
+        load_case("/dev/zero")
+    d = _edit(HO, ("geometry",), {"kind": "mesh", "path": "/dev/zero"})
+    with pytest.raises(CaseError, match="geometry.path.*not a regular file"):
+        Case.from_dict(d)
+
+
+def test_long_values_are_cut_in_messages():
+    with pytest.raises(CaseError) as info:
+        Case.from_dict(_edit(HO, ("load", "units"), "x" * 100_000))
+    assert len(str(info.value)) < 300

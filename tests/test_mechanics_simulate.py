@@ -117,3 +117,44 @@ def test_default_resolution_is_converged_and_plausible():
     # plausibility (documented in docs/simulator.md): the cavity roughly doubles, strains in the measured range
     assert 1.3 < r_def.lvv_standardised < 2.5
     assert np.all((y[1:] > -0.30) & (y[1:] < -0.05))
+
+
+# ----------------------------------------------------------------------------- degenerate and implausible (issue 15)
+def test_base_plane_just_above_the_apex_is_refused():
+    """base_z = -16.999 on rl = 17 left a 9e-9 mL cavity that was reported as converged."""
+    from lvcore.exceptions import GeometryError
+
+    case = Case.from_dict({
+        "geometry": {"kind": "ellipsoid", "endo": {"rs": 7, "rl": 17}, "epi": {"rs": 10, "rl": 20}, "base_z": -16.999,
+                     "resolution": "fast"},
+        "material": {"law": "neo-hookean", "mu": 10}, "load": {"pressure": 1, "units": "kPa"}})
+    with pytest.raises(GeometryError, match="degenerate geometry.*cavity"):
+        simulate(case)
+
+
+def test_ordinary_result_has_no_warnings(fast_result):
+    assert fast_result.warnings == ()
+    assert fast_result.to_dict()["warnings"] == []
+
+
+def test_plausibility_warnings():
+    from lvcore.mechanics.simulate import plausibility_warnings
+
+    assert plausibility_warnings((85e3, 120e3), 120 / 85) == ()
+    assert len(plausibility_warnings((85e3, 1751e3), 1751 / 85)) == 2
+    assert "times its reference" in plausibility_warnings((1e3, 3.5e3), 3.5)[0]
+    assert plausibility_warnings(None, None) == ()
+
+
+@pytest.mark.slow
+def test_softest_corner_at_30_mmhg_is_flagged_not_hidden():
+    """The softest corner of the chapter's box at 30 mmHg inflates the LV to ~2 L: kept, but flagged."""
+    r = simulate(Case.default_lv({"a": 0.05, "b": 0.1, "af": 0.05, "bf": 0.1}, edp_mmhg=30, resolution="fast"))
+    assert r.converged
+    lvv_ml = r.cavity_volume_mm3[1] / 1000
+    assert lvv_ml > 1000  # the value itself is reported as computed
+    d = r.to_dict()
+    assert any("implausible" in w for w in d["warnings"])
+    from lvcore.mechanics.cli import format_summary
+
+    assert "WARNING: implausible" in format_summary(r)

@@ -178,7 +178,7 @@ def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:
 
     Returns the first ``n_pc`` scores.
     """
-    path = Path(path)
+    path = limits.check_regular_file(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
     suffix = path.suffix.lower()
     if suffix == ".json":
         obj = limits.read_json_file(path, limits.MAX_SCORES_BYTES, "geometry file", GeometryError)
@@ -206,7 +206,6 @@ def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:
             raise GeometryError(f"{path.name}: cannot read PC scores from this CSV ({type(err).__name__}: "
                                 f"{str(err)[:200]}); give columns h1..h5 or one row of numbers") from None
     elif suffix in (".vtu", ".vtk", ".xdmf", ".npy", ".npz"):
-        limits.check_regular_file(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
         h = _project_mesh(path)
     else:
         raise GeometryError(f"{path.name}: unknown geometry format '{suffix}'; give PC scores as .json/.csv "

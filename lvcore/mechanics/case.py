@@ -298,6 +298,8 @@ def _resolve(path_value, where: str, base_dir: Path | None, suffixes=()) -> Path
     if not p.is_absolute() and base_dir is not None:
         p = base_dir / p
     if not p.is_file() and not any(p.with_suffix(sfx).is_file() for sfx in suffixes):
+        # says "does not exist", "not a regular file (a directory)", ... as the case may be
+        limits.check_regular_file(p, float("inf"), "file", lambda msg: CaseError(where, msg))
         raise CaseError(where, f"file '{p}' does not exist")
     return p
 
