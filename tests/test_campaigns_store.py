@@ -171,3 +171,63 @@ class _InlineExecutor:
 
     def as_completed(self, futures):
         return iter(futures)
+
+
+# ----------------------------------------------------------------------------- hostile stores (issue 15)
+def test_plain_hdf5_and_broken_layouts_are_not_stores(tmp_path):
+    import h5py
+
+    plain = tmp_path / "plain.h5"
+    with h5py.File(plain, "w") as f:
+        f["x"] = np.arange(3)
+    with pytest.raises(CampaignError, match="not an lvcore campaign store"):
+        campaign_status(plain)
+    design = make_design(get_space("material"), "lhs", 4, seed=0)
+    good = tmp_path / "good.h5"
+    CampaignStore.create(good, design, forward=DOUBLE, resolution="fast").close()
+    for damage in ("del space", "del state", "bad space", "short outputs", "scalar state"):
+        p = tmp_path / f"{damage.replace(' ', '_')}.h5"
+        p.write_bytes(good.read_bytes())
+        with h5py.File(p, "r+") as f:
+            if damage == "del space":
+                del f.attrs["space"]
+            elif damage == "del state":
+                del f["state"]
+            elif damage == "bad space":
+                f.attrs["space"] = "{not json"
+            elif damage == "short outputs":
+                del f["outputs"]
+                f["outputs"] = np.zeros((4, 3))
+            else:
+                del f["state"]
+                f["state"] = 1
+        with pytest.raises(CampaignError, match="not an lvcore campaign store"):
+            campaign_status(p)
+    with pytest.raises(CampaignError, match="not a regular file"):
+        campaign_status(tmp_path)
+
+
+HOLDER = """
+import sys, time
+from lvcore.campaigns.store import CampaignStore
+store = CampaignStore.open(sys.argv[1], "r+")
+print("held", flush=True)
+time.sleep(60)
+"""
+
+
+def test_store_opened_through_a_hard_link_says_locked(tmp_path):
+    design = make_design(get_space("material"), "lhs", 4, seed=0)
+    path, link = tmp_path / "s.h5", tmp_path / "link.h5"
+    CampaignStore.create(path, design, forward=DOUBLE, resolution="fast").close()
+    os.link(path, link)
+    holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(path)], env=_env(), stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(CampaignError, match="locked") as info:
+            CampaignStore.open(link, "r+")
+        assert "not a readable HDF5" not in str(info.value)
+        assert campaign_status(link).n == 4  # reading needs no lock
+    finally:
+        holder.kill()
+        holder.wait()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
@@ -200,7 +201,9 @@ def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:
                 cols = sorted(cols, key=lambda c: int(str(c)[1:]))
                 h = df.loc[0, cols].to_numpy(dtype=float)
             else:
-                h = np.loadtxt(path, delimiter=",", ndmin=1).reshape(-1)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # "input contained no data": reported below
+                    h = np.loadtxt(path, delimiter=",", ndmin=1).reshape(-1)
         except (ValueError, TypeError, KeyError, IndexError, OverflowError, UnicodeDecodeError,
                 pd.errors.ParserError, pd.errors.EmptyDataError) as err:
             raise GeometryError(f"{path.name}: cannot read PC scores from this CSV ({type(err).__name__}: "
@@ -244,6 +247,8 @@ def _project_mesh(path: Path) -> np.ndarray:
                         raise GeometryError(f"{path.name}: the .npz archive holds no arrays; store the template "
                                             "node positions as 'nodes'")
                     nodes = z["nodes" if "nodes" in keys else keys[0]]
+            if not (np.issubdtype(nodes.dtype, np.integer) or np.issubdtype(nodes.dtype, np.floating)):
+                raise GeometryError(f"{path.name}: node positions must be real numbers, got an array of {nodes.dtype}")
             nodes = np.asarray(nodes, dtype=float)
         except GeometryError:
             raise
