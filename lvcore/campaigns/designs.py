@@ -141,17 +141,14 @@ def load_design(path: str | Path) -> Design:
         columns that do not match its space, non-numeric or missing values,
         out-of-order row numbers or points outside the space's bounds.
     """
+    from lvcore import limits
+
     path = Path(path)
-    if not path.is_file():
-        raise CampaignError(f"design file '{path}' does not exist")
-    lines = path.read_text().splitlines()
+    lines = limits.read_text_file(path, limits.MAX_DESIGN_BYTES, "design file", CampaignError).splitlines()
     where = f"design file '{path}'"
     if not lines or not lines[0].startswith(HEADER_TAG):
         raise CampaignError(f"{where}: first line must be '{HEADER_TAG.strip()} {{...}}' (write designs with `lvcore design`)")
-    try:
-        meta = json.loads(lines[0][len(HEADER_TAG):])
-    except json.JSONDecodeError as err:
-        raise CampaignError(f"{where}: the metadata line is not valid JSON ({err})") from err
+    meta = limits.loads_json(lines[0][len(HEADER_TAG):], f"{where}: the metadata line", CampaignError)
     if not isinstance(meta, dict) or "space" not in meta:
         raise CampaignError(f"{where}: the metadata line has no 'space'")
     space = ParameterSpace.from_dict(meta["space"])

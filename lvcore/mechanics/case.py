@@ -230,6 +230,18 @@ def load_case(path: str | Path) -> Case:
     return Case.from_dict(d, base_dir=path.parent)
 
 
+def loads_case(text: str, base_dir: str | Path | None = None, source: str = "case JSON") -> Case:
+    """Validate a case given as JSON text (e.g. typed into the app), with the same limits as a case file.
+
+    Duplicate keys, non-finite numbers, deep nesting and text longer than
+    :data:`lvcore.limits.MAX_CASE_BYTES` are refused with a :class:`CaseError`.
+    """
+    if len(text.encode("utf-8", "replace")) > limits.MAX_CASE_BYTES:
+        raise CaseError("<text>", f"{source} is longer than the limit of {limits.MAX_CASE_BYTES // 1024} kB")
+    d = limits.loads_json(text, source, lambda msg: CaseError("<text>", msg))
+    return Case.from_dict(d, base_dir=base_dir)
+
+
 def _file_error(message: str) -> CaseError:
     return CaseError("<file>", message)
 

@@ -1,0 +1,160 @@
+"""Files uploaded to the app: per-session temporary folders and messages in the user's terms.
+
+The Streamlit pages keep no upload logic of their own; they call this module:
+
+* :class:`UploadSession` is one temporary folder per browser session
+  (:func:`session_uploads` keeps it in ``st.session_state``), so two users
+  never see or overwrite each other's files. The folder is removed when the
+  session ends (the object is garbage-collected) and at interpreter exit.
+* :meth:`UploadSession.read` saves an upload under a safe name, runs an
+  lvcore reader on it and turns *any* failure into an :class:`UploadError`
+  whose message names the user's file, never a server path.
+* :func:`fit_segmentation` fits uploaded contours or surfaces (the Geometry page).
+
+Uploads are limited to :data:`MAX_UPLOAD_MB` (the same value as
+``server.maxUploadSize`` in ``.streamlit/config.toml``, which Streamlit
+enforces in the browser; this module enforces it again on the server).
+"""
+from __future__ import annotations
+
+import re
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
+from lvcore.exceptions import LVCoreError
+
+#: Largest upload accepted (MB); keep equal to ``server.maxUploadSize`` in ``.streamlit/config.toml``.
+#: The largest legitimate uploads are surface meshes (a 50,000-triangle binary STL is 2.5 MB)
+#: and template meshes (the volunteers' VTU files are 50 kB).
+MAX_UPLOAD_MB = 10
+#: Prefix of the per-session folders under the system temporary directory.
+TMP_PREFIX = "lvcore_upload_"
+
+
+class UploadError(LVCoreError, ValueError):
+    """An uploaded file cannot be used; the message names the user's file name only."""
+
+
+def safe_name(name: str, default: str = "upload") -> str:
+    """A file name without folders or odd characters (letters, digits, ``.``, ``_``, ``-``), at most 80 characters."""
+    base = re.split(r"[\\/]", str(name))[-1]
+    base = re.sub(r"[^A-Za-z0-9._-]", "_", base)
+    base = re.sub(r"\.{2,}", "_", base).lstrip(".-_")[-80:]
+    return base or default
+
+
+class UploadSession:
+    """A temporary folder for one browser session's uploads.
+
+    Parameters
+    ----------
+    root : path, optional
+        Parent folder (default: the system temporary directory).
+    """
+
+    def __init__(self, root=None):
+        self._tmp = tempfile.TemporaryDirectory(prefix=TMP_PREFIX, dir=root)
+        self.path = Path(self._tmp.name)
+        self._names: dict[str, str] = {}  # saved path -> the user's file name
+
+    def save(self, name: str, data: bytes, slot: str | None = None) -> Path:
+        """Write an upload into this session's folder and return its path.
+
+        ``slot`` (e.g. ``"measured"``) gives a fixed stem, so a new upload to
+        the same widget replaces the previous one; the suffix of ``name`` is kept.
+        """
+        if len(data) > MAX_UPLOAD_MB * 1024 * 1024:
+            raise UploadError(f"'{_display(name)}' is {len(data) / 1024 ** 2:.1f} MB, more than the "
+                              f"{MAX_UPLOAD_MB} MB allowed for uploads")
+        if not self.path.is_dir():
+            raise UploadError("this session's upload folder was removed; reload the page")
+        clean = safe_name(name)
+        if slot is not None:
+            clean = safe_name(slot) + "".join(Path(clean).suffixes[-1:]).lower()
+        path = self.path / clean
+        path.write_bytes(data)
+        self._names[str(path)] = _display(name)
+        return path
+
+    def message(self, text: str) -> str:
+        """``text`` with this session's server paths replaced by the user's file names."""
+        for saved, shown in sorted(self._names.items(), key=lambda kv: -len(kv[0])):
+            text = text.replace(saved, shown).replace(Path(saved).name, shown)
+        return text.replace(str(self.path) + "/", "").replace(str(self.path), "<upload>")
+
+    def read(self, name: str, data: bytes, reader: Callable[[Path], Any], slot: str | None = None) -> Any:
+        """Save an upload and read it with ``reader(path)``.
+
+        Raises
+        ------
+        UploadError
+            For any failure (a bad file, or an unexpected error of the reader),
+            with a message that names ``name`` and no server path.
+        """
+        path = self.save(name, data, slot)
+        try:
+            return reader(path)
+        except LVCoreError as err:
+            raise UploadError(self.message(str(err))) from None
+        except Exception as err:  # noqa: BLE001 - shown to the user as a message, never as a traceback
+            raise UploadError(f"cannot read '{_display(name)}': {type(err).__name__}: "
+                              f"{self.message(str(err))[:300]}") from None
+
+    def cleanup(self) -> None:
+        """Remove the folder now (it is also removed when this object is garbage-collected)."""
+        self._tmp.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.cleanup()
+
+
+def _display(name: str) -> str:
+    """The user's file name as shown in messages (no folders, printable, at most 80 characters)."""
+    base = re.split(r"[\\/]", str(name))[-1]
+    return "".join(c if c.isprintable() else "?" for c in base)[:80] or "upload"
+
+
+def session_uploads(state=None, key: str = "_lvcore_uploads") -> UploadSession:
+    """The :class:`UploadSession` of the current Streamlit session (created on first use).
+
+    ``state`` is ``st.session_state`` (default) or any mutable mapping. The
+    session state is dropped when the browser session ends, and with it the
+    folder.
+    """
+    if state is None:
+        import streamlit as st
+
+        state = st.session_state
+    session = state.get(key)
+    if not isinstance(session, UploadSession) or not session.path.is_dir():
+        session = UploadSession()
+        state[key] = session
+    return session
+
+
+def fit_segmentation(kind: str, files) -> dict:
+    """Fit uploaded contours (``kind="contours"``, one file) or endo + epi surfaces (two files).
+
+    ``files`` are ``(name, bytes)`` pairs. Returns ``{"nodes", "summary"}``,
+    or ``{"error": message}`` with a message in terms of the user's file names.
+    """
+    from lvcore.geometry.fitting import fit_contours, fit_surfaces
+
+    with UploadSession() as session:
+        try:
+            paths = [session.save(name, data, slot=f"{kind}{i}") for i, (name, data) in enumerate(files)]
+
+            def fit(_):
+                return fit_contours(paths[0]) if kind == "contours" else fit_surfaces(paths[0], paths[1])
+
+            res = session.read(files[0][0], files[0][1], fit, slot=f"{kind}0")
+        except UploadError as err:
+            return {"error": str(err)}
+    return {"nodes": res.nodes, "summary": res.summary()}
+
+
+__all__ = ["MAX_UPLOAD_MB", "UploadError", "UploadSession", "session_uploads", "safe_name", "fit_segmentation"]

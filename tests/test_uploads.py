@@ -1,0 +1,83 @@
+"""lvcore.uploads: per-session upload folders, size limit, messages without server paths."""
+from __future__ import annotations
+
+import gc
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from lvcore import uploads
+from lvcore.exceptions import LVCoreError
+from lvcore.uploads import UploadError, UploadSession, fit_segmentation, safe_name, session_uploads
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_sessions_have_their_own_folders_and_clean_up():
+    a, b = UploadSession(), UploadSession()
+    pa = a.save("measured.csv", b"A", slot="measured")
+    pb = b.save("measured.csv", b"B", slot="measured")
+    assert pa.parent != pb.parent and pa.read_bytes() == b"A" and pb.read_bytes() == b"B"
+    folder = a.path
+    del a
+    gc.collect()
+    assert not folder.exists()  # removed with the session
+    b.cleanup()
+    assert not pb.exists()
+
+
+def test_session_uploads_lives_in_the_session_state():
+    state1, state2 = {}, {}
+    s1 = session_uploads(state1)
+    assert session_uploads(state1) is s1
+    assert session_uploads(state2).path != s1.path
+
+
+@pytest.mark.parametrize("name, expected", [
+    ("../../etc/passwd", "passwd"), ("/abs/path/x.csv", "x.csv"), ("..", "upload"), (".hidden.json", "hidden.json"),
+    ("a b\x00c.vtu", "a_b_c.vtu"), ("C:\\Users\\me\\geo.json", "geo.json"),
+])
+def test_safe_names_stay_in_the_folder(name, expected):
+    assert safe_name(name) == expected
+    with UploadSession() as s:
+        p = s.save(name, b"x")
+        assert p.parent == s.path
+
+
+def test_oversize_uploads_are_refused(monkeypatch):
+    monkeypatch.setattr(uploads, "MAX_UPLOAD_MB", 0.001)
+    with UploadSession() as s, pytest.raises(UploadError, match="big.csv.*MB"):
+        s.save("big.csv", b"x" * 5000)
+
+
+def test_read_errors_name_the_users_file_not_the_server_path():
+    from lvcore.inference.calibrate import read_pc_scores
+
+    with UploadSession() as s:
+        with pytest.raises(UploadError) as info:
+            s.read("my scores.json", b'{"h": {"h1": {"deep": 1}}}', read_pc_scores, slot="geometry")
+        msg = str(info.value)
+        assert "my scores.json" in msg and str(s.path) not in msg and "/tmp" not in msg
+        assert isinstance(info.value, LVCoreError)
+
+
+def test_unexpected_reader_errors_become_upload_errors():
+    def broken(path):
+        raise KeyError(f"internal trouble at {path}")
+
+    with UploadSession() as s, pytest.raises(UploadError, match="cannot read 'x.json': KeyError") as info:
+        s.read("x.json", b"{}", broken)
+    assert "/tmp" not in str(info.value)
+
+
+def test_fit_segmentation_reports_bad_uploads_by_name():
+    out = fit_segmentation("contours", (("op1 contours.json", b"[1, 2"),))
+    assert "op1 contours.json" in out["error"] and "/tmp" not in out["error"]
+    out = fit_segmentation("surfaces", (("endo.stl", b"solid x\nendsolid x\n"), ("epi.stl", b"garbage")))
+    assert "error" in out and "/tmp" not in out["error"]
+
+
+def test_streamlit_config_limits_uploads():
+    cfg = tomllib.loads((ROOT / ".streamlit" / "config.toml").read_text())
+    assert cfg["server"]["maxUploadSize"] == uploads.MAX_UPLOAD_MB <= 16
