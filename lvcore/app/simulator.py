@@ -23,7 +23,7 @@ from lvcore.core.space import THETA_BOUNDS  # noqa: E402
 from lvcore.app import PAGES  # noqa: E402
 from lvcore.exceptions import LVCoreError  # noqa: E402
 from lvcore.inference.samplers import use_host_devices  # noqa: E402
-from lvcore.mechanics.case import Case  # noqa: E402
+from lvcore.mechanics.case import Case, loads_case  # noqa: E402
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES  # noqa: E402
 from lvcore.resources import example_cases  # noqa: E402
 
@@ -151,6 +151,8 @@ def show_simulator_result(case: Case, case_json: str, sim: dict) -> None:
 
     summary = sim["summary"]
     vol = summary["cavity_volume_ml"]
+    for warning in summary.get("warnings") or []:  # implausible results are shown, and flagged
+        st.warning(warning)
     m1, m2, m3, m4 = st.columns(4)
     m1.metric("LVV (end diastole)", f"{vol['loaded']:.1f} mL")
     m2.metric("V_early (reference)", f"{vol['reference']:.1f} mL")
@@ -214,9 +216,7 @@ if "case_runner_input" in st.session_state:
     text, example = st.session_state["case_runner_input"]
     base_dir = EXAMPLES[example].parent if example else None
     try:
-        user_case = Case.from_dict(json.loads(text), base_dir=base_dir)
-    except json.JSONDecodeError as err:
-        st.error(f"This is not valid JSON: {err}")
+        user_case = loads_case(text, base_dir=base_dir)  # strict JSON and the limits of a case file
     except LVCoreError as err:
         field = getattr(err, "field", None)
         st.error(f"Bad case: field `{field}`: {err.problem}" if field else f"Bad case: {err}")

@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
-from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -28,19 +26,9 @@ st.caption(
 @st.cache_data(show_spinner="fitting the template…")
 def _fit_upload(kind: str, files: tuple) -> dict:
     """Fit an uploaded segmentation; files are (name, bytes) pairs. Returns nodes + summary or an error."""
-    from lvcore.geometry.fitting import fit_contours, fit_surfaces
+    from lvcore.uploads import fit_segmentation
 
-    with tempfile.TemporaryDirectory() as d:
-        paths = []
-        for name, data in files:
-            p = Path(d) / Path(name).name
-            p.write_bytes(data)
-            paths.append(p)
-        try:
-            res = fit_contours(paths[0]) if kind == "contours" else fit_surfaces(paths[0], paths[1])
-        except LVCoreError as err:
-            return {"error": str(err)}
-    return {"nodes": res.nodes, "summary": res.summary()}
+    return fit_segmentation(kind, files)
 
 
 @st.cache_data(show_spinner=False)

@@ -22,6 +22,7 @@ from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.core.forward import emulator_forward
 from lvcore.inference.samplers import SamplerConfig, use_host_devices
 from lvcore.resources import bundled_volunteers, volunteer_files
+from lvcore.uploads import session_uploads
 
 use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
 
@@ -59,38 +60,39 @@ with left:
     st.subheader("Data")
     source = st.radio("Source", ["bundled volunteer", "upload"], horizontal=True)
     data: MeasuredData | None = None
-    geom_path: Path | None = None
-    try:
-        if source == "bundled volunteer":
-            names = bundled_volunteers()
-            if not names:
-                st.warning("No bundled volunteers in lvcore/assets/volunteers; upload data instead.")
-            else:
-                name = st.selectbox("Volunteer", names)
+    h = None
+    if source == "bundled volunteer":
+        names = bundled_volunteers()
+        if not names:
+            st.warning("No bundled volunteers in lvcore/assets/volunteers; upload data instead.")
+        else:
+            name = st.selectbox("Volunteer", names)
+            try:
                 vol = volunteer_files(name)
                 data = read_measured_csv(vol.measured)[0]
-                geom_path = vol.geometry
-                if name.startswith("SYNTHETIC"):
-                    st.caption("⚠ SYNTHETIC volunteer: generated data, not a real subject.")
-        else:
-            up_data = st.file_uploader("Measured CSV (lvv_ml, strain_01..strain_24)", type=["csv"])
-            up_geom = st.file_uploader("Geometry: PC scores (.json/.csv) or template mesh (.vtu)",
-                                       type=["json", "csv", "vtu"])
-            tmp = Path(tempfile.gettempdir()) / "lvcore_calibration_upload"
-            tmp.mkdir(exist_ok=True)
-            if up_data is not None:
-                p = tmp / "measured.csv"
-                p.write_bytes(up_data.getvalue())
-                rows = read_measured_csv(p)
+                h = cal.read_pc_scores(vol.geometry)
+            except LVCoreError as err:
+                st.error(str(err))
+            if name.startswith("SYNTHETIC"):
+                st.caption("⚠ SYNTHETIC volunteer: generated data, not a real subject.")
+    else:  # uploads go to this browser session's own folder; errors name the user's file, the controls stay
+        uploads = session_uploads()
+        up_data = st.file_uploader("Measured CSV (lvv_ml, strain_01..strain_24)", type=["csv"], key="up_measured")
+        up_geom = st.file_uploader("Geometry: PC scores (.json/.csv) or template mesh (.vtu)",
+                                   type=["json", "csv", "vtu"], key="up_geometry")
+        if up_data is not None:
+            try:
+                rows = uploads.read(up_data.name, up_data.getvalue(), read_measured_csv, slot="measured")
+            except LVCoreError as err:
+                st.error(f"Measured data: {err}")
+            else:
                 subj = st.selectbox("Subject", [r.subject for r in rows])
                 data = next(r for r in rows if r.subject == subj)
-            if up_geom is not None:
-                geom_path = tmp / f"geometry{Path(up_geom.name).suffix}"
-                geom_path.write_bytes(up_geom.getvalue())
-        h = cal.read_pc_scores(geom_path) if geom_path is not None else None
-    except LVCoreError as err:
-        st.error(str(err))
-        st.stop()
+        if up_geom is not None:
+            try:
+                h = uploads.read(up_geom.name, up_geom.getvalue(), cal.read_pc_scores, slot="geometry")
+            except LVCoreError as err:
+                st.error(f"Geometry: {err}")
     if data is not None:
         st.write(f"LVV = {data.lvv_ml:.1f} mL; strains from {data.strains.min():.3f} to {data.strains.max():.3f}")
     if h is not None:
@@ -202,11 +204,11 @@ if job is not None and job["done"]:
                     st.plotly_chart(fig_disc, width="stretch")
                     downloads[f"{m}_discrepancy.html"] = fig_disc
                 with tempfile.TemporaryDirectory() as d:
-                    nc = Path(d) / f"{job['subject']}_{m}.nc"
+                    nc = Path(d) / f"{cal.file_stem(job['subject'])}_{m}.nc"
                     res.idata.to_netcdf(str(nc))
                     st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
                                        key=f"nc_{m}")
         st.subheader("Export figures")
         for name, fig in downloads.items():
-            st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{job['subject']}_{name}",
+            st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",
                                mime="text/html", key=f"html_{name}")

@@ -1,0 +1,204 @@
+"""Uploads in the app under AppTest (browser-free): malformed files on every upload widget show an
+error and keep the controls; two sessions keep their own data; messages never show server paths."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from streamlit.testing.v1 import AppTest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _page(fragment: str) -> str:
+    """A page script, wherever the app lives (pages/ or lvcore/app/pages/)."""
+    for base in (ROOT / "lvcore" / "app" / "pages", ROOT / "pages"):
+        hits = sorted(base.glob(f"*{fragment}*.py"))
+        if hits:
+            return str(hits[0])
+    raise FileNotFoundError(fragment)
+
+
+HV1 = [151.802823] + [-0.15] * 24
+HEADER = "subject,lvv_ml," + ",".join(f"strain_{k:02d}" for k in range(1, 25))
+
+
+def _csv(subject: str, lvv: float) -> bytes:
+    return (HEADER + "\n" + f"{subject},{lvv}," + ",".join(["-0.15"] * 24) + "\n").encode()
+
+
+BAD_MEASURED = {
+    "binary.csv": b"\x00\x01\xff\xfe\x89PNG",
+    "wrong_columns.csv": b"a,b,c\n1,2,3\n",
+    "huge_number.csv": HEADER.encode() + b"\nS," + b"9" * 500 + b"," + b",".join([b"-0.1"] * 24) + b"\n",
+    "duplicate.csv": _csv("A", 150) + _csv("A", 150).split(b"\n", 1)[1],
+}
+BAD_GEOMETRY = {
+    "nested.json": b'{"h": {"h1": {"h2": 3}}}',
+    "deep.json": b"[" * 100_000 + b"]" * 100_000,
+    "dup.json": b'{"h": [0, 0, 0, 0, 0], "h": [1, 1, 1, 1, 1]}',
+    "garbage.csv": b"\x00\xff,,\n\x01",
+    "letters.csv": b"h1,h2,h3,h4,h5\na,b,c,d,e\n",
+    "bad.vtu": b"<VTKFile>not really</VTKFile>",
+}
+
+
+@pytest.fixture
+def calibration_page(tmp_path, monkeypatch):
+    from lvcore.emulator.io import save_emulator
+    from test_inference_calibrate import _random_emulator
+
+    save_emulator(_random_emulator(), tmp_path / "chapter")
+    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+
+    def start():
+        at = AppTest.from_file(_page("Calibration"), default_timeout=120).run()
+        assert not at.exception, at.exception
+        at.radio[0].set_value("upload").run()
+        assert not at.exception, at.exception
+        return at
+
+    return start
+
+
+def _controls_present(at):
+    assert at.file_uploader(key="up_measured") is not None and at.file_uploader(key="up_geometry") is not None
+    assert any(b.label == "Run calibration" for b in at.button)
+    assert len(at.multiselect) == 1  # the model controls did not vanish
+
+
+def _no_server_paths(at):
+    for e in at.error:
+        assert "/tmp" not in e.value and "lvcore_upload_" not in e.value, e.value
+
+
+def test_malformed_measured_uploads_show_an_error_and_keep_the_controls(calibration_page):
+    at = calibration_page()
+    for name, content in BAD_MEASURED.items():
+        at.file_uploader(key="up_measured").upload(name, content, "text/csv")
+        at.run()
+        assert not at.exception, (name, at.exception)
+        assert at.error and name in at.error[0].value, (name, [e.value for e in at.error])
+        _controls_present(at)
+        _no_server_paths(at)
+        assert at.button[0].disabled
+
+
+def test_malformed_geometry_uploads_show_an_error_and_keep_the_controls(calibration_page):
+    at = calibration_page()
+    at.file_uploader(key="up_measured").upload("ok.csv", _csv("S1", 150), "text/csv")
+    for name, content in BAD_GEOMETRY.items():
+        at.file_uploader(key="up_geometry").upload(name, content, "application/octet-stream")
+        at.run()
+        assert not at.exception, (name, at.exception)
+        assert at.error and any(name in e.value for e in at.error), (name, [e.value for e in at.error])
+        _controls_present(at)
+        _no_server_paths(at)
+
+
+def test_two_sessions_keep_their_own_uploads(calibration_page):
+    a, b = calibration_page(), calibration_page()
+    a.file_uploader(key="up_measured").upload("a.csv", _csv("A", 120), "text/csv")
+    a.file_uploader(key="up_geometry").upload("h.json", b'{"h": [0, 0, 0, 0, 0]}', "application/json")
+    a.run()
+    b.file_uploader(key="up_measured").upload("b.csv", _csv("B", 180), "text/csv")
+    b.file_uploader(key="up_geometry").upload("h.json", b'{"h": [1, 0, 0, 0, 0]}', "application/json")
+    b.run()
+    a.run()
+    assert not a.exception and not b.exception
+    folder_a, folder_b = a.session_state["_lvcore_uploads"].path, b.session_state["_lvcore_uploads"].path
+    assert folder_a != folder_b
+    assert (folder_a / "measured.csv").read_bytes() == _csv("A", 120)
+    assert (folder_b / "measured.csv").read_bytes() == _csv("B", 180)
+    assert any("LVV = 120.0" in m.value for m in a.markdown)
+    assert any("LVV = 180.0" in m.value for m in b.markdown)
+
+
+def test_two_sessions_calibrating_at_once_keep_their_own_data(calibration_page, monkeypatch):
+    """Both sessions start a (stand-in) calibration; each result is computed from its own upload."""
+    import arviz as az
+    import pandas as pd
+
+    from lvcore.inference import calibrate as cal
+
+    seen = []
+
+    class Conv:
+        converged = True
+
+        def message(self):
+            return "converged (stand-in)"
+
+    def stand_in(y, forward, model, **kw):
+        seen.append(float(y[0]))
+        time.sleep(0.5)  # overlap the two runs
+        idata = az.from_dict(posterior={"a": np.full((1, 20), y[0])}, observed_data={"y": np.asarray(y)})
+        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
+                                     {"min": 1.0})
+
+    monkeypatch.setattr(cal, "calibrate", stand_in)
+    sessions = {}
+    for lvv in (120.0, 180.0):
+        at = calibration_page()
+        at.file_uploader(key="up_measured").upload("m.csv", _csv(f"S{int(lvv)}", lvv), "text/csv")
+        at.file_uploader(key="up_geometry").upload("h.json", b'{"h": [0, 0, 0, 0, 0]}', "application/json")
+        at.run()
+        at.multiselect[0].set_value(["volume"]).run()
+        sessions[lvv] = at
+    for at in sessions.values():  # start both before either finishes
+        at.button[0].click().run(timeout=60)
+    deadline = time.time() + 60
+    while time.time() < deadline and not all(at.session_state["calibration_job"]["done"]
+                                              for at in sessions.values()):
+        time.sleep(0.2)
+    assert sorted(seen) == [120.0, 180.0]
+    for lvv, at in sessions.items():
+        job = at.session_state["calibration_job"]
+        assert job["done"] and not job["error"], job["error"]
+        assert job["subject"] == f"S{int(lvv)}" and float(job["y"][0]) == lvv
+        assert float(job["results"]["volume"].summary["mean"].iloc[0]) == lvv
+
+
+# --------------------------------------------------------------------------- Geometry & operators page
+def test_geometry_page_malformed_uploads_show_errors_and_keep_the_controls():
+    at = AppTest.from_file(_page("Geometry"), default_timeout=120).run()
+    at.radio[0].set_value("Upload my own").run()
+    at.file_uploader(key="c0").upload("deep.json", b"[" * 100_000 + b"]" * 100_000, "application/json")
+    at.file_uploader(key="c1").upload("types.json", b'{"units": ["mm"], "slices": []}', "application/json")
+    at.file_uploader(key="e2").upload("endo.stl", b"solid x\nfacet garbage\n", "application/octet-stream")
+    at.file_uploader(key="p2").upload("epi.stl", b"\x00\x01\x02", "application/octet-stream")
+    at.run()
+    assert not at.exception, at.exception
+    messages = [e.value for e in at.error]
+    assert len(messages) == 3, messages
+    for name in ("deep.json", "types.json"):
+        assert any(name in m for m in messages), (name, messages)
+    for m in messages:
+        assert "/tmp" not in m and "lvcore_upload_" not in m, m
+    for i in range(3):  # every upload widget is still there
+        for kind in "cep":
+            assert at.file_uploader(key=f"{kind}{i}") is not None
+
+
+# --------------------------------------------------------------------------- the case box of the entry page
+def test_case_box_applies_the_case_file_limits():
+    app = ROOT / "lvcore" / "app" / "app.py"
+    app = app if app.exists() else ROOT / "app.py"
+    at = AppTest.from_file(str(app), default_timeout=180).run()
+    runner_key = "FormSubmitter:case_runner-Run case"
+    for text, fragment in (
+        ('{"geometry": {"kind": "default", "resolution": {"circumferential": 100, "longitudinal": 100, '
+         '"transmural": 10}}, "material": {"law": "neo-hookean", "mu": 1}, "load": {"pressure": 1, "units": "kPa"}}',
+         "limit"),
+        ('{"geometry": {"kind": "mesh", "path": "/dev/zero"}, "material": {"law": "neo-hookean", "mu": 1}, '
+         '"load": {"pressure": 1, "units": "kPa"}}', "not a regular file"),
+        ('{"geometry": {"kind": "default"}, "geometry": {"kind": "default"}}', "duplicate key"),
+    ):
+        at.text_area[0].set_value(text)
+        t0 = time.perf_counter()
+        at.form_submit_button(key=runner_key).click().run()
+        assert not at.exception, at.exception
+        assert at.error and fragment in at.error[0].value, [e.value for e in at.error]
+        assert time.perf_counter() - t0 < 30
