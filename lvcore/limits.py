@@ -45,6 +45,8 @@ MAX_MESH_BYTES = 32 * MiB
 MAX_SURFACE_BYTES = 64 * MiB
 #: Shape-model files (.json metadata and .npz arrays; the bundled .npz is 1.4 MB).
 MAX_SHAPE_MODEL_BYTES = 64 * MiB
+#: Emulator files (``metadata.json``, ``network.npz``; the bundled network is 0.4 MB).
+MAX_EMULATOR_BYTES = 64 * MiB
 #: Design CSV files (``lvcore design``): 100,000 points of 9 parameters are about 20 MB.
 MAX_DESIGN_BYTES = 64 * MiB
 

@@ -163,10 +163,12 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
     meta_path, net_path = directory / "metadata.json", directory / "network.npz"
     if not meta_path.is_file() or not net_path.is_file():
         raise EmulatorError(f"emulator directory '{directory}' needs metadata.json and network.npz")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except json.JSONDecodeError as err:
-        raise EmulatorError(f"'{meta_path}' is not valid JSON: {err}") from err
+    from lvcore import limits
+
+    meta = limits.read_json_file(meta_path, limits.MAX_EMULATOR_BYTES, "emulator metadata", EmulatorError)
+    limits.check_regular_file(net_path, limits.MAX_EMULATOR_BYTES, "emulator network", EmulatorError)
+    if not isinstance(meta, dict):
+        raise EmulatorError(f"'{meta_path}' must hold a JSON object")
     missing = [k for k in REQUIRED_KEYS if k not in meta]
     if missing:
         raise EmulatorError(f"'{meta_path}' lacks key(s) {missing}")
