@@ -39,7 +39,7 @@ MAX_CONTOUR_BYTES = 8 * MiB
 MAX_MEASURED_BYTES = 4 * MiB
 #: PC-score files (.json/.csv): a handful of numbers.
 MAX_SCORES_BYTES = 1 * MiB
-#: Template meshes (.vtu/.vtk/.xdmf/.npy/.npz); the default template's VTU is about 0.3 MB.
+#: Template meshes (.vtu/.vtk/.xdmf/.npy/.npz); the bundled volunteers' VTU files are 50 kB.
 MAX_MESH_BYTES = 32 * MiB
 #: Surface meshes (STL/VTK/PLY/OBJ...): 64 MB is about 1.3 M binary-STL triangles.
 MAX_SURFACE_BYTES = 64 * MiB
@@ -82,7 +82,7 @@ MIN_CAVITY_ML = 0.1
 #: Smallest reference wall (myocardium) volume of an LV geometry (mL); Land's ellipsoid has 3.2 mL.
 MIN_WALL_ML = 0.1
 #: A loaded cavity more than this many times its reference volume is flagged in the
-#: result's ``warnings`` (passive filling to 30 mmHg stays well under 2).
+#: result's ``warnings`` (a physiological passive LV stays well below it).
 PLAUSIBLE_MAX_STANDARDISED_LVV = 3.0
 #: A loaded cavity above this volume (mL) is flagged in the result's ``warnings``.
 PLAUSIBLE_MAX_LVV_ML = 1000.0
