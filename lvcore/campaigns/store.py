@@ -238,7 +238,7 @@ class CampaignStore:
         lock_fd = cls._lock(path) if mode == "r+" else None
         try:
             h5 = h5py.File(path, mode, locking=False) if mode == "r" else h5py.File(path, mode)
-        except OSError as err:
+        except (OSError, RuntimeError, ValueError) as err:
             cls._unlock(lock_fd)
             if _is_lock_error(err):
                 # another process writes this file under another name (a hard link or a copy of the path):
@@ -353,6 +353,13 @@ class CampaignStore:
 
     # ----- reading ----------------------------------------------------------
     def read(self) -> StoreContents:
+        try:
+            return self._read()
+        except (OSError, RuntimeError, ValueError, TypeError, KeyError) as err:  # damaged blocks of a valid layout
+            raise CampaignError(f"store '{self.path}' cannot be read ({type(err).__name__}: {err}); "
+                                "the file is damaged") from None
+
+    def _read(self) -> StoreContents:
         f = self._h5
         return StoreContents(
             space=self.space,
