@@ -109,7 +109,7 @@ def test_check_mesh_size_refuses_by_memory_estimate(monkeypatch):
 
 
 def test_presets_pass_the_limits():
-    from lvcore.mechanics.mesh import RESOLUTION_PRESETS
+    from lvcore.mechanics.resolution import RESOLUTION_PRESETS
 
     for res in RESOLUTION_PRESETS.values():
         limits.check_mesh_size(res.counts, "lv", 9 * res.transmural_gauss_points)

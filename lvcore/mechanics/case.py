@@ -28,6 +28,7 @@ from lvcore.geometry.template import DEFAULT_TEMPLATE
 from lvcore.mechanics.materials import LAWS, MaterialLaw
 from lvcore.mechanics.resolution import (
     BOX_RESOLUTION_PRESET_NAMES,
+    BOX_RESOLUTION_PRESETS,
     RESOLUTION_PRESET_NAMES,
     BoxResolution,
     LVResolution,
@@ -450,8 +451,6 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
         raise CaseError("geometry.size", "missing (required for a box: [Lx, Ly, Lz] in mm)")
     size = _vector(g["size"], "geometry.size", positive=True)
     if resolution is None:  # a preset: the counts follow from the size
-        from lvcore.mechanics.mesh import BOX_RESOLUTION_PRESETS
-
         h = min(size) / BOX_RESOLUTION_PRESETS[preset or "default"]
         _check_size([max(1, math.ceil(min(L / h, 1e9) - 1e-9)) for L in size], "box", 27, "geometry.resolution")
     return GeometrySpec(kind, resolution, preset, box_size=size, source=f"box {size[0]:g} x {size[1]:g} x {size[2]:g} mm")
