@@ -34,7 +34,7 @@ def test_outputs_and_json(fast_result):
     assert np.all(y[1:] < 0)  # circumferential strain w.r.t. end diastole is negative in filling
     d = json.loads(json.dumps(r.to_dict()))
     assert set(d) == {"converged", "message", "cavity_volume_ml", "cavity_volume_mm3", "lvv_standardised", "apex",
-                      "probes", "strains", "newton_iterations", "load_steps", "dofs", "seconds"}
+                      "probes", "strains", "newton_iterations", "load_steps", "dofs", "seconds", "warnings"}
     assert d["cavity_volume_ml"]["loaded"] == pytest.approx(y[0])
     assert d["lvv_standardised"] == pytest.approx(r.cavity_volume_mm3[1] / r.cavity_volume_mm3[0])
     assert len(d["strains"]) == 24
