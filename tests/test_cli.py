@@ -232,7 +232,7 @@ def _fake_calibration(monkeypatch):
     import pandas as pd
 
     from lvcore.inference import calibrate as cal
-    from lvcore.inference import forward
+    from lvcore.core import forward
 
     class Conv:
         converged = True
@@ -246,7 +246,7 @@ def _fake_calibration(monkeypatch):
                                      {"min": 1.0})
 
     monkeypatch.setattr(cal, "calibrate", fake)
-    monkeypatch.setattr(forward, "load_forward", lambda *a, **k: None)
+    monkeypatch.setattr(forward, "load_emulator_forward", lambda *a, **k: None)
 
 
 def test_calibrate_never_writes_outside_out(tmp_path, capsys, monkeypatch):
