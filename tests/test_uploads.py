@@ -81,3 +81,11 @@ def test_fit_segmentation_reports_bad_uploads_by_name():
 def test_streamlit_config_limits_uploads():
     cfg = tomllib.loads((ROOT / ".streamlit" / "config.toml").read_text())
     assert cfg["server"]["maxUploadSize"] == uploads.MAX_UPLOAD_MB <= 16
+
+
+def test_lvcore_app_passes_the_upload_limit_to_streamlit():
+    from lvcore.app.cli import streamlit_command
+
+    cmd = streamlit_command()
+    i = cmd.index("--server.maxUploadSize")
+    assert cmd[i + 1] == str(uploads.MAX_UPLOAD_MB)

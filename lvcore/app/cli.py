@@ -23,7 +23,10 @@ def register(subparsers) -> None:
 
 def streamlit_command(port: int | None = None, extra=()) -> list[str]:
     """The ``python -m streamlit run`` command line for the packaged app."""
-    cmd = [sys.executable, "-m", "streamlit", "run", str(ENTRY)]
+    from lvcore.uploads import MAX_UPLOAD_MB
+
+    # the upload limit travels with the command (a .streamlit/config.toml is read only from the working directory)
+    cmd = [sys.executable, "-m", "streamlit", "run", str(ENTRY), "--server.maxUploadSize", str(MAX_UPLOAD_MB)]
     if port is not None:
         cmd += ["--server.port", str(int(port))]
     return cmd + list(extra)
