@@ -11,9 +11,10 @@ The Streamlit pages keep no upload logic of their own; they call this module:
   whose message names the user's file, never a server path.
 * :func:`fit_segmentation` fits uploaded contours or surfaces (the Geometry page).
 
-Uploads are limited to :data:`MAX_UPLOAD_MB` (the same value as
-``server.maxUploadSize`` in ``.streamlit/config.toml``, which Streamlit
-enforces in the browser; this module enforces it again on the server).
+Uploads are limited to :data:`MAX_UPLOAD_MB` (Streamlit enforces it in the
+browser: ``lvcore app`` passes ``--server.maxUploadSize``, and
+``.streamlit/config.toml`` sets it for ``streamlit run app.py`` in a
+checkout; this module enforces it again on the server).
 """
 from __future__ import annotations
 
