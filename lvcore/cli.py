@@ -15,6 +15,7 @@ COMMAND_MODULES = (
     "lvcore.emulator.cli",      # lvcore emulator train|info
     "lvcore.inference.cli",     # lvcore calibrate
     "lvcore.studies.cli",       # lvcore study ...
+    "lvcore.report.cli",        # lvcore report
     "lvcore.app.cli",           # lvcore app
 )
 

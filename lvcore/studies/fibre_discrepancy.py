@@ -153,10 +153,14 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
             mr = {"rhat_max": _rhat(d, pos, list(THETA_NAMES) + ["sigma_s2", "v"]),
                   "abs_error_median": float(np.median(err)), "abs_error_mean": float(err.mean()),
                   "theta_median": {n: float(np.median(d[n][pos])) for n in THETA_NAMES}}
+            qe = np.quantile(eta, [0.05, 0.5, 0.95], axis=0)  # eta(theta_post, h), 25 outputs (Fig 9.8)
+            mr["eta_quantiles"] = {"q05": qe[0].tolist(), "q50": qe[1].tolist(), "q95": qe[2].tolist()}
             if "sigma_s2" in d:
                 sig = np.sqrt(d["sigma_s2"][pos].reshape(-1))
                 mr["sigma_s"] = {"median": float(np.median(sig)), "q05": float(np.quantile(sig, 0.05)),
-                                 "q95": float(np.quantile(sig, 0.95))}
+                                 "q95": float(np.quantile(sig, 0.95)),
+                                 # 200 evenly thinned draws for the density of Fig 9.7
+                                 "draws": sig[np.linspace(0, sig.size - 1, min(sig.size, 200)).astype(int)].tolist()}
                 draws = {"eta": eta, "sigma_s2": sig**2}
                 if "disc" in d:
                     draws.update(disc=d["disc"][pos].reshape(-1, 24), v=d["v"][pos].reshape(-1))
@@ -218,7 +222,8 @@ def write_study(result: dict, out) -> dict:
     paths["strain_predictive_csv"] = out / "strain_predictive.csv"
     pd.DataFrame(rows).to_csv(paths["strain_predictive_csv"], index=False)
     paths["sigma_s_csv"] = out / "sigma_s.csv"
-    pd.DataFrame([{"set": s["set"], "model": m, **s["models"][m]["sigma_s"], "truth": SIGMA_S}
+    pd.DataFrame([{"set": s["set"], "model": m, **{k: v for k, v in s["models"][m]["sigma_s"].items() if k != "draws"},
+                   "truth": SIGMA_S}
                   for s in result["sets"] for m in ("iid", "discrepancy")]).to_csv(paths["sigma_s_csv"], index=False)
     paths["errors_csv"] = out / "errors.csv"
     pd.DataFrame([{"model": m, "mean_abs_strain_error": e} for m, es in result["error_draws"].items()

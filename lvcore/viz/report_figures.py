@@ -1,0 +1,256 @@
+"""Plotly builders for the report's chapter figures that the app's builders do not cover.
+
+Pure functions of plain data (dicts, arrays, DataFrames) returning
+``plotly.graph_objects.Figure``; nothing here reads files or runs a model.
+The shared builders (strain bars, violins, densities, contours) are in
+:mod:`lvcore.viz.figures` and :mod:`lvcore.viz.inference_figures`.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+import plotly.graph_objects as go
+from plotly.subplots import make_subplots
+
+from lvcore.geometry.template import N_REGIONS, N_SECTORS
+from lvcore.outputs import LEVEL_NAMES
+from lvcore.viz.figures import SERIES_COLOURS
+
+#: Region tick labels "basal S1" ... for 24-strain line plots (r = 6 * level + sector).
+REGION_TICKS = tuple(f"{LEVEL_NAMES[r // N_SECTORS]} S{r % N_SECTORS + 1}" for r in range(N_REGIONS))
+
+
+def _strains24(values) -> np.ndarray:
+    y = np.asarray(values, dtype=float).ravel()
+    if y.size == N_REGIONS + 1:
+        y = y[1:]
+    if y.size != N_REGIONS:
+        raise ValueError(f"expected {N_REGIONS} strains (or 25 outputs), got {y.size} values")
+    return y
+
+
+def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
+    """Break a long title into lines of at most ``width`` characters (static exports do not wrap) and make room."""
+    import textwrap
+
+    text = fig.layout.title.text or ""
+    if "<br>" in text or len(text) <= width:
+        return fig
+    lines = textwrap.wrap(text, width)
+    top = max(fig.layout.margin.t or 60, 30 + 24 * len(lines))
+    fig.update_layout(title_text="<br>".join(lines), margin=dict(t=top))
+    if fig.layout.height:
+        fig.update_layout(height=fig.layout.height + 24 * (len(lines) - 1))
+    return fig
+
+
+def strain_lines(series: Mapping[str, Sequence[float]], *, title: str, height: int = 440) -> go.Figure:
+    """One line per series over the 24 regions (chapter Figs 9.5 and 9.10 style).
+
+    Parameters
+    ----------
+    series : dict label -> (24,) or (25,) array
+        Circumferential Green strains (-); a 25-vector's first entry (LVV) is dropped.
+    """
+    fig = go.Figure()
+    x = np.arange(1, N_REGIONS + 1)
+    for n, (label, values) in enumerate(series.items()):
+        fig.add_scatter(x=x, y=_strains24(values), mode="lines+markers", name=label,
+                        line=dict(color=SERIES_COLOURS[n % len(SERIES_COLOURS)]))
+    fig.update_layout(title=title, height=height, yaxis_title="E_cc (-)",
+                      xaxis=dict(title="region", tickvals=x, ticktext=list(REGION_TICKS), tickangle=-60),
+                      legend=dict(orientation="h", y=-0.45), margin=dict(l=50, r=20, t=60, b=10))
+    return fig
+
+
+def eta_band_grid(cases: Sequence[Mapping], models: Sequence[str], *, title: str, height: int = 720) -> go.Figure:
+    """Posterior 5–95 % bands and medians of eta's 24 strains against the benchmark (chapter Fig 9.8).
+
+    Parameters
+    ----------
+    cases : sequence of dict
+        Each with ``title`` (str), ``benchmark`` ((25,) eta(θ̃, h)) and
+        ``bands`` {model: {"q05", "q50", "q95"} each (25,)}.
+    models : sequence of str
+        Row order (one row per likelihood model).
+    """
+    fig = make_subplots(rows=len(models), cols=len(cases), shared_xaxes=True, shared_yaxes=True,
+                        subplot_titles=[f"{c['title']}<br>{m}" for m in models for c in cases],
+                        vertical_spacing=0.08, horizontal_spacing=0.03)
+    x = np.arange(1, N_REGIONS + 1)
+    for i, m in enumerate(models):
+        colour = SERIES_COLOURS[i % len(SERIES_COLOURS)]
+        for j, c in enumerate(cases):
+            b = c["bands"][m]
+            q05, q50, q95 = (_strains24(b[k]) for k in ("q05", "q50", "q95"))
+            first = j == 0
+            fig.add_scatter(x=np.r_[x, x[::-1]], y=np.r_[q95, q05[::-1]], fill="toself", mode="lines",
+                            line=dict(width=0), fillcolor=colour, opacity=0.3, name=f"{m} 5–95 %",
+                            legendgroup=m, showlegend=first, row=i + 1, col=j + 1)
+            fig.add_scatter(x=x, y=q50, mode="lines", line=dict(color=colour), name=f"{m} median",
+                            legendgroup=m, showlegend=first, row=i + 1, col=j + 1)
+            fig.add_scatter(x=x, y=_strains24(c["benchmark"]), mode="lines", line=dict(color="black", dash="dash"),
+                            name="benchmark η(θ̃, h)", legendgroup="bench", showlegend=i == 0 and first,
+                            row=i + 1, col=j + 1)
+    fig.update_xaxes(title_text="region r + 1", row=len(models))
+    fig.update_yaxes(title_text="E_cc (-)", col=1)
+    fig.update_layout(title=title, height=height, margin=dict(l=50, r=20, t=90, b=40), font=dict(size=11),
+                      legend=dict(orientation="h", y=-0.1))
+    return fig
+
+
+def table_figure(df: pd.DataFrame, *, title: str, float_format: str = ".4g", height: int | None = None,
+                 bold: Sequence[tuple[int, str]] = ()) -> go.Figure:
+    """A DataFrame drawn as a plotly table (for PNG/SVG export of the chapter's tables).
+
+    Parameters
+    ----------
+    bold : sequence of (row index, column name)
+        Cells shown in bold (e.g. Table 9.4's first k beating both operators).
+    """
+    def fmt(v):
+        if isinstance(v, (float, np.floating)):
+            return "" if not np.isfinite(v) else format(float(v), float_format)
+        return "" if v is None else str(v)
+
+    bold = set(bold)
+    cells = []
+    for col in df.columns:
+        cells.append([f"<b>{fmt(v)}</b>" if (r, col) in bold else fmt(v) for r, v in enumerate(df[col].tolist())])
+    fig = go.Figure(go.Table(header=dict(values=[f"<b>{c}</b>" for c in df.columns], fill_color="#e8ecf4",
+                                         align="center"),
+                             cells=dict(values=cells, align="center", height=26)))
+    fig.update_layout(title=title, height=height or 110 + 32 * (len(df) + 1), margin=dict(l=10, r=10, t=60, b=10))
+    return fig
+
+
+def grouped_violins(df: pd.DataFrame, *, panel: str, x: str, y: str, title: str, yaxis_title: str,
+                    order: Sequence[str] | None = None, height_per_panel: int = 300) -> go.Figure:
+    """Violins of ``df[y]`` by ``df[x]``, one panel per value of ``df[panel]`` (chapter Figs 9.11 and 9.14).
+
+    Parameters
+    ----------
+    df : DataFrame in long form
+    panel, x, y : str
+        Column names: the panel (e.g. main operator), the violin category (e.g. test geometry) and the value.
+    order : sequence of str, optional
+        Order of the x categories (default: first appearance).
+    """
+    panels = list(dict.fromkeys(df[panel]))
+    cats = list(order) if order is not None else list(dict.fromkeys(df[x]))
+    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"main {panel.replace('_', ' ')}: {p}"
+                                                                  for p in panels], vertical_spacing=0.12)
+    for i, p in enumerate(panels):
+        sub = df[df[panel] == p]
+        for k, c in enumerate(cats):
+            vals = sub.loc[sub[x] == c, y].to_numpy(dtype=float)
+            if vals.size == 0:
+                continue
+            fig.add_violin(y=vals, name=str(c), box_visible=True, meanline_visible=True, points="all",
+                           line_color=SERIES_COLOURS[k % len(SERIES_COLOURS)], showlegend=False, row=i + 1, col=1)
+        fig.update_yaxes(title_text=yaxis_title, row=i + 1, col=1)
+    fig.update_layout(title=title, height=max(360, height_per_panel * len(panels)),
+                      margin=dict(l=50, r=20, t=70, b=30))
+    return fig
+
+
+def error_strips(df: pd.DataFrame, *, panel: str, param: str, x: str, y: str, title: str, yaxis_title: str,
+                 height_per_panel: int = 300) -> go.Figure:
+    """Per-case markers and median ticks of errors by parameter and test geometry (chapter Fig 9.12).
+
+    One panel per ``df[panel]``; within a panel the x axis is ``param`` × ``x``
+    (e.g. a: op2, op3, pc5, pc10; b: ...), every case a small marker and the
+    median a wide tick.
+    """
+    panels = list(dict.fromkeys(df[panel]))
+    params = list(dict.fromkeys(df[param]))
+    cats = list(dict.fromkeys(df[x]))
+    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"main {panel.replace('_', ' ')}: {p}"
+                                                                  for p in panels], vertical_spacing=0.12)
+    for i, p in enumerate(panels):
+        sub = df[df[panel] == p]
+        for k, c in enumerate(cats):
+            colour = SERIES_COLOURS[k % len(SERIES_COLOURS)]
+            px, py, mx, my = ([], []), [], ([], []), []
+            for q in params:
+                vals = sub.loc[(sub[x] == c) & (sub[param] == q), y].to_numpy(dtype=float)
+                px[0].extend([q] * vals.size)
+                px[1].extend([str(c)] * vals.size)
+                py.extend(vals.tolist())
+                if vals.size:
+                    mx[0].append(q)
+                    mx[1].append(str(c))
+                    my.append(float(np.median(vals)))
+            fig.add_scatter(x=[list(px[0]), list(px[1])], y=py, mode="markers", name=str(c),
+                            marker=dict(symbol="line-ew-open", size=10, color=colour), legendgroup=str(c),
+                            showlegend=i == 0, row=i + 1, col=1)
+            fig.add_scatter(x=[list(mx[0]), list(mx[1])], y=my, mode="markers",
+                            marker=dict(symbol="line-ew-open", size=26, color=colour, line=dict(width=3)),
+                            name=f"{c} median", legendgroup=str(c), showlegend=False, row=i + 1, col=1)
+        fig.update_yaxes(title_text=yaxis_title, row=i + 1, col=1)
+    fig.update_layout(title=title, height=max(360, height_per_panel * len(panels)),
+                      margin=dict(l=50, r=20, t=70, b=30))
+    return fig
+
+
+def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping[str, tuple[float, float]], *,
+                           truth: Mapping[str, float] | None = None, units: Mapping[str, str] | None = None,
+                           title: str, bins: int = 40, height: int = 360) -> go.Figure:
+    """Posterior histograms (density) of each parameter with the uniform prior overlaid and the truth marked.
+
+    Parameters
+    ----------
+    draws : dict name -> 1-D array of posterior draws
+    bounds : dict name -> (lo, hi)
+        Uniform prior bounds; the prior density 1/(hi - lo) is drawn over them.
+    truth : dict name -> float, optional
+        The generating value of a SYNTHETIC subject (red dashed line).
+    """
+    names = list(draws)
+    units = units or {}
+    fig = make_subplots(rows=1, cols=len(names),
+                        subplot_titles=[f"{n} ({units.get(n, '-')})" for n in names], horizontal_spacing=0.05)
+    for j, n in enumerate(names):
+        d = np.asarray(draws[n], dtype=float).ravel()
+        lo, hi = bounds[n]
+        fig.add_histogram(x=d, histnorm="probability density", nbinsx=bins, marker_color=SERIES_COLOURS[0],
+                          opacity=0.75, name="posterior", legendgroup="post", showlegend=j == 0, row=1, col=j + 1)
+        fig.add_scatter(x=[lo, lo, hi, hi], y=[0, 1.0 / (hi - lo), 1.0 / (hi - lo), 0], mode="lines",
+                        line=dict(color="grey", dash="dot"), name="prior (uniform)", legendgroup="prior",
+                        showlegend=j == 0, row=1, col=j + 1)
+        if truth and n in truth:
+            fig.add_vline(x=float(truth[n]), line=dict(color="red", dash="dash", width=2), row=1, col=j + 1)
+        fig.update_xaxes(range=[lo, hi], row=1, col=j + 1)
+    if truth:
+        fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="truth (SYNTHETIC)")
+    fig.update_yaxes(title_text="density", col=1)
+    fig.update_layout(title=title, height=height, bargap=0.02, margin=dict(l=50, r=20, t=80, b=40),
+                      legend=dict(orientation="h", y=-0.2))
+    return fig
+
+
+def interval_figure(rows: Sequence[Mapping], *, truth: float | None, title: str, xaxis_title: str,
+                    height: int = 420) -> go.Figure:
+    """Median and 5–95 % interval per (label, series) row, e.g. σ_S per test set and model (Fig 9.7 summary).
+
+    ``rows``: dicts with ``label``, ``series``, ``median``, ``q05``, ``q95``.
+    """
+    fig = go.Figure()
+    series = list(dict.fromkeys(r["series"] for r in rows))
+    for k, s in enumerate(series):
+        rs = [r for r in rows if r["series"] == s]
+        med = np.array([r["median"] for r in rs])
+        fig.add_scatter(x=med, y=[r["label"] for r in rs], mode="markers", name=s,
+                        marker=dict(color=SERIES_COLOURS[k % len(SERIES_COLOURS)], size=8),
+                        error_x=dict(type="data", symmetric=False, array=np.array([r["q95"] for r in rs]) - med,
+                                     arrayminus=med - np.array([r["q05"] for r in rs])))
+    if truth is not None:
+        fig.add_vline(x=truth, line=dict(color="black", dash="dash"), annotation_text="truth")
+    fig.update_layout(title=title, xaxis_title=xaxis_title, height=height, margin=dict(l=10, r=20, t=60, b=40))
+    return fig
+
+
+__all__ = ["wrap_title", "strain_lines", "eta_band_grid", "table_figure", "grouped_violins", "error_strips",
+           "posterior_prior_figure", "interval_figure", "REGION_TICKS"]
