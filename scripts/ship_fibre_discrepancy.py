@@ -5,8 +5,8 @@ The study (``lvcore study fibre-discrepancy``) fits 12 SYNTHETIC test sets
 with three likelihoods by MCMC and takes minutes (BENCHMARKS.md), too long
 for ``lvcore report``'s default run. This script runs it and writes
 ``<assets>/studies/fibre_discrepancy.json``: the study's JSON with the
-per-draw error arrays (Fig 9.9) thinned to ``--keep`` draws per set and model,
-so the file stays small. Everything in it is SYNTHETIC. Run from the
+per-draw error arrays (Fig 9.9) thinned to ``--keep`` draws per set and model
+and floats rounded to 6 significant digits, so the file stays small. Everything in it is SYNTHETIC. Run from the
 repository root::
 
     OMP_NUM_THREADS=1 python scripts/ship_fibre_discrepancy.py              # chapter budget, ~15 min
@@ -45,6 +45,17 @@ def thin_result(result: dict, keep: int = 250) -> dict:
     return out
 
 
+def round_floats(obj, digits: int = 6):
+    """Every float rounded to ``digits`` significant digits (the shipped file stays small)."""
+    if isinstance(obj, float):
+        return float(f"{obj:.{digits}g}")
+    if isinstance(obj, dict):
+        return {k: round_floats(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [round_floats(v, digits) for v in obj]
+    return obj
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--warmup", type=int, default=500)
@@ -67,7 +78,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     res = fd.run_study(config=cfg, seed=args.seed, out=args.work,
                        progress=lambda msg, frac: print(msg, flush=True))
-    small = thin_result(res, args.keep)
+    small = round_floats(thin_result(res, args.keep))
     small["shipped"] = {"script": "scripts/ship_fibre_discrepancy.py", "argv": sys.argv[1:],
                         "wall_s": time.perf_counter() - t0, "date": time.strftime("%Y-%m-%d")}
     dest = Path(args.dest) if args.dest else studies_dir() / "fibre_discrepancy.json"

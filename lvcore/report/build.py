@@ -558,13 +558,14 @@ def export_static(figs: list, paths: list[Path]) -> None:
     import plotly.io as pio
 
     widths = [1100] * len(figs)
+    heights = [int(f.layout.height or 500) for f in figs]  # kaleido would use 500 px whatever the layout says
     try:
-        pio.write_images(figs, [str(p) for p in paths], width=widths)
+        pio.write_images(figs, [str(p) for p in paths], width=widths, height=heights)
     except Exception as err:  # kaleido raises its own types (ChromeNotFoundError, ...)
         raise ReportError(
-            f"static export (PNG/SVG) failed: {type(err).__name__}: {err}. It needs kaleido and a Chromium: "
-            "install Debian's chromium (apt-get install chromium) or run `plotly_get_chrome`; or write HTML only "
-            "with --formats ''") from err
+            f"static export (PNG/SVG) failed: {type(err).__name__}: {err}. It needs kaleido "
+            "(pip install 'lvcore[report]') and a Chromium: install Debian's chromium (apt-get install chromium); "
+            "or write HTML only with --formats ''") from err
 
 
 def _index_html(manifest: dict) -> str:

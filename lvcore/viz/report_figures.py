@@ -77,8 +77,8 @@ def eta_band_grid(cases: Sequence[Mapping], models: Sequence[str], *, title: str
         Row order (one row per likelihood model).
     """
     fig = make_subplots(rows=len(models), cols=len(cases), shared_xaxes=True, shared_yaxes=True,
-                        subplot_titles=[f"{c['title']}<br>{m}" for m in models for c in cases],
-                        vertical_spacing=0.08, horizontal_spacing=0.03)
+                        subplot_titles=[c["title"] for c in cases] + [""] * (len(cases) * (len(models) - 1)),
+                        vertical_spacing=0.05, horizontal_spacing=0.03)
     x = np.arange(1, N_REGIONS + 1)
     for i, m in enumerate(models):
         colour = SERIES_COLOURS[i % len(SERIES_COLOURS)]
@@ -95,9 +95,10 @@ def eta_band_grid(cases: Sequence[Mapping], models: Sequence[str], *, title: str
                             name="benchmark η(θ̃, h)", legendgroup="bench", showlegend=i == 0 and first,
                             row=i + 1, col=j + 1)
     fig.update_xaxes(title_text="region r + 1", row=len(models))
-    fig.update_yaxes(title_text="E_cc (-)", col=1)
-    fig.update_layout(title=title, height=height, margin=dict(l=50, r=20, t=90, b=40), font=dict(size=11),
-                      legend=dict(orientation="h", y=-0.1))
+    for i, m in enumerate(models):
+        fig.update_yaxes(title_text=f"{m}<br>E_cc (-)", row=i + 1, col=1)
+    fig.update_layout(title=title, height=height, margin=dict(l=70, r=20, t=90, b=130), font=dict(size=11),
+                      legend=dict(orientation="h", y=-0.12, yanchor="top"))
     return fig
 
 

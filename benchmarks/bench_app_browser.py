@@ -1,0 +1,115 @@
+"""Page timings of the Streamlit app as a user sees them in a real browser (Debian Chromium + playwright).
+
+    python benchmarks/bench_app_browser.py                      # every page x 3 sessions, 7 redraws
+    python benchmarks/bench_app_browser.py --repeats 5 --redraws 11
+    python benchmarks/bench_app_browser.py --screenshots docs/screenshots   # also refresh the docs' small PNGs
+
+Starts ``streamlit run app.py`` on 127.0.0.1 and, for every page linked in the
+sidebar, opens it in a fresh browser session and measures the time from
+navigation until the script has finished and every element is drawn (no
+skeletons). The first visit after the server starts ("cold": imports, caches,
+JIT compilation) is reported separately from the median of the later sessions
+("warm"). On Fibre angles it shows the live (α_endo, α_epi) map and measures
+slider-to-redraw: from the key press on the sidebar's first slider to the
+change of the plotted data, alternating ArrowRight/ArrowLeft. Prints a
+Markdown table for BENCHMARKS.md (target: redraw median <= 300 ms).
+
+Uses /usr/bin/chromium; never ``playwright install``.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import statistics
+import sys
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--repeats", type=int, default=3, help="fresh sessions per page (the first one is cold)")
+    p.add_argument("--redraws", type=int, default=7, help="slider presses timed on Fibre angles")
+    p.add_argument("--screenshots", type=Path, default=None, help="write small PNGs of every page here")
+    args = p.parse_args(argv)
+
+    from playwright.sync_api import sync_playwright
+
+    from lvcore.testing import browser as drv
+
+    shots = REPO / "build" / "screenshots"
+    shots.mkdir(parents=True, exist_ok=True)
+    rows = []
+    t_start = time.perf_counter()
+    with drv.StreamlitServer(app=REPO / "app.py", log=REPO / "build" / "streamlit_bench.log") as server, \
+            sync_playwright() as pw:
+        t_server = time.perf_counter() - t_start
+        b = drv.launch(pw)
+
+        def session():
+            ctx = b.new_context(viewport={"width": 1400, "height": 1000})
+            page = ctx.new_page()
+            page.set_default_timeout(300_000)
+            return ctx, page
+
+        ctx, page = session()
+        page.goto(server.url)
+        drv.wait_idle(page)
+        links = drv.page_links(page)
+        ctx.close()
+        for label, href in links:
+            times = []
+            for r in range(args.repeats):
+                ctx, page = session()
+                t0 = time.perf_counter()
+                page.goto(href)
+                drv.wait_idle(page)
+                times.append(time.perf_counter() - t0)
+                if r == 0:
+                    page.screenshot(path=str(shots / f"{drv.slug(label)}.png"), full_page=True)
+                    if args.screenshots:
+                        drv.shrink_png(shots / f"{drv.slug(label)}.png", args.screenshots / f"{drv.slug(label)}.png")
+                errs = drv.exceptions(page)
+                ctx.close()
+                if errs:
+                    print(f"{label}: exception on the page: {errs}", file=sys.stderr)
+            warm = times[1:] or times
+            rows.append((label, times[0], statistics.median(warm), len(warm)))
+            print(f"{label}: first render {times[0]:.2f} s, warm {['%.2f' % t for t in warm]}", flush=True)
+
+        redraw = None
+        fa = [h for lab, h in links if re.search(r"fibre\s*angles", lab, re.I)]
+        if fa:
+            ctx, page = session()
+            page.goto(fa[0])
+            drv.wait_idle(page)
+            drv.open_live_map(page)
+            slider = page.locator(f"[data-testid=stSidebar] :is({drv.SLIDER})").first
+            slider_label = slider.get_attribute("aria-label")
+            redraw = drv.redraw_times(page, slider, n=args.redraws)
+            page.screenshot(path=str(shots / "fibre_angles_live_map.png"), full_page=True)
+            if args.screenshots:
+                drv.shrink_png(shots / "fibre_angles_live_map.png", args.screenshots / "fibre_angles_live_map.png")
+            ctx.close()
+        b.close()
+
+    print(f"\nserver start {t_server:.1f} s; {args.repeats} fresh sessions per page; cpus {os.cpu_count()}, "
+          f"load average {os.getloadavg()[0]:.1f}")
+    print("| page | first render, cold server (s) | first render, new session, median (s) |")
+    print("|---|---|---|")
+    for label, cold, warm, n in rows:
+        print(f"| {label} | {cold:.2f} | {warm:.2f} (n={n}) |")
+    if redraw:
+        print(f"\nFibre angles live map, slider '{slider_label}' -> redraw: median {statistics.median(redraw) * 1000:.0f} ms, "
+              f"min {min(redraw) * 1000:.0f}, max {max(redraw) * 1000:.0f} (n={len(redraw)}; target <= 300 ms)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
