@@ -168,6 +168,10 @@ def test_study_pipeline_on_stand_ins(study_mismatched):
         assert set(s["models"]) == {"volume", "iid", "discrepancy"}
         assert len(s["models"]["discrepancy"]["strain_predictive"]["q50"]) == 24
         assert "sigma_s" not in s["models"]["volume"]
+        for m in ("volume", "iid", "discrepancy"):  # Fig 9.8: eta(theta_post, h) bands of all 25 outputs
+            q = s["models"][m]["eta_quantiles"]
+            assert len(q["q50"]) == 25 and np.all(np.asarray(q["q05"]) <= np.asarray(q["q95"]))
+        assert 0 < len(s["models"]["iid"]["sigma_s"]["draws"]) <= 200  # Fig 9.7 density
     # set 11 has angles (0, 90): a strain discrepancy the iid model can only absorb into noise
     s11 = res["sets"][1]["models"]
     assert s11["iid"]["sigma_s"]["median"] > s11["discrepancy"]["sigma_s"]["median"]
