@@ -96,6 +96,12 @@ class ReportItem:
 
 def studies_dir() -> Path:
     """The package's bundled study results folder (``<assets>/studies``)."""
+    try:
+        from lvcore.resources import asset_path
+    except ImportError:  # before the assets moved into the package (lvcore.resources)
+        pass
+    else:
+        return asset_path("studies")
     here = Path(__file__).resolve().parents[1]  # lvcore/
     for cand in (here / "assets", here.parent / "assets"):
         if cand.is_dir():
