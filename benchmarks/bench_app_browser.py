@@ -3,6 +3,7 @@
     python benchmarks/bench_app_browser.py                      # every page x 3 sessions, 7 redraws
     python benchmarks/bench_app_browser.py --repeats 5 --redraws 11
     python benchmarks/bench_app_browser.py --screenshots docs/screenshots   # also refresh the docs' small PNGs
+    python benchmarks/bench_app_browser.py --calibration   # also time a calibration, click to results
 
 Starts ``streamlit run app.py`` on 127.0.0.1 and, for every page linked in the
 sidebar, opens it in a fresh browser session and measures the time from
@@ -37,6 +38,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=3, help="fresh sessions per page (the first one is cold)")
     p.add_argument("--redraws", type=int, default=7, help="slider presses timed on Fibre angles")
     p.add_argument("--screenshots", type=Path, default=None, help="write small PNGs of every page here")
+    p.add_argument("--calibration", action="store_true",
+                   help="also time 'Run calibration' on the Calibration page with its defaults, click to results")
     args = p.parse_args(argv)
 
     from playwright.sync_api import sync_playwright
@@ -97,6 +100,24 @@ def main(argv=None) -> int:
             if args.screenshots:
                 drv.shrink_png(shots / "fibre_angles_live_map.png", args.screenshots / "fibre_angles_live_map.png")
             ctx.close()
+        calib = None
+        cp = [h for lab, h in links if re.search(r"calibration", lab, re.I)]
+        if args.calibration and cp:
+            ctx, page = session()
+            page.goto(cp[0])
+            drv.wait_idle(page)
+            button = page.get_by_role("button", name=re.compile("run calibration", re.I))
+            t0 = time.perf_counter()
+            button.click()
+            page.get_by_text(re.compile("^Results for")).first.wait_for(timeout=1_800_000)
+            calib = time.perf_counter() - t0
+            drv.wait_idle(page)
+            page.screenshot(path=str(shots / "calibration_results.png"), full_page=True)
+            if args.screenshots:
+                drv.shrink_png(shots / "calibration_results.png", args.screenshots / "calibration_results.png")
+            errs = drv.exceptions(page)
+            ctx.close()
+            print(f"calibration: click to results {calib:.1f} s" + (f"; exceptions {errs}" if errs else ""), flush=True)
         b.close()
 
     print(f"\nserver start {t_server:.1f} s; {args.repeats} fresh sessions per page; cpus {os.cpu_count()}, "
@@ -108,6 +129,8 @@ def main(argv=None) -> int:
     if redraw:
         print(f"\nFibre angles live map, slider '{slider_label}' -> redraw: median {statistics.median(redraw) * 1000:.0f} ms, "
               f"min {min(redraw) * 1000:.0f}, max {max(redraw) * 1000:.0f} (n={len(redraw)}; target <= 300 ms)")
+    if calib is not None:
+        print(f"Calibration page, 'Run calibration' with the page's defaults -> results shown: {calib:.1f} s")
     return 0
 
 
