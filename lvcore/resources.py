@@ -17,6 +17,7 @@ The layout under ``lvcore/assets/``::
     emulators-below-spec/   demonstration emulators, loaded only by path
     volunteers/             SYNTHETIC volunteers: <name>_measured.csv, <name>_geometry.vtu
     volunteers/truth/       the volunteers' hidden true parameters
+    studies/                saved study results read by ``lvcore report`` (scripts/ship_fibre_discrepancy.py)
 
 Building these files is a script's job (``scripts/build_cohort.py``,
 ``scripts/build_volunteers.py``, ``scripts/build_emulators.py``); their

@@ -24,7 +24,7 @@ Sections and where their numbers come from:
   (``operators.json``); listed as missing when absent.
 
 Study results are looked up in ``results_dir`` first, then in the package's
-bundled ``assets/studies``.
+bundled ``lvcore/assets/studies``.
 """
 from __future__ import annotations
 
@@ -95,26 +95,14 @@ class ReportItem:
 
 
 def studies_dir() -> Path:
-    """The package's bundled study results folder (``<assets>/studies``)."""
-    try:
-        from lvcore.resources import asset_path
-    except ImportError:  # before the assets moved into the package (lvcore.resources)
-        pass
-    else:
-        return asset_path("studies")
-    here = Path(__file__).resolve().parents[1]  # lvcore/
-    for cand in (here / "assets", here.parent / "assets"):
-        if cand.is_dir():
-            return cand / "studies"
-    return here / "assets" / "studies"
+    """The package's bundled study results folder (``lvcore/assets/studies``)."""
+    from lvcore.resources import asset_path
 
-
-def _assets_dir() -> Path:
-    return studies_dir().parent
+    return asset_path("studies")
 
 
 def find_study_file(name: str, results_dir=None) -> Path | None:
-    """``results_dir/name`` if it exists, else the bundled ``<assets>/studies/name``, else None."""
+    """``results_dir/name`` if it exists, else the bundled ``lvcore/assets/studies/name``, else None."""
     for d in ([Path(results_dir)] if results_dir else []) + [studies_dir()]:
         if (d / name).is_file():
             return d / name
@@ -391,14 +379,15 @@ def calibration_items(subject: str = "SYNTHETIC-HV1", *, num_warmup: int = 500, 
         why = ("missing: the `chapter` emulator is not installed; build it with python scripts/build_emulators.py "
                "--emulators chapter")
         return [ReportItem(n, t, missing=why) for n, t in titles.items()]
-    vol = _assets_dir() / "volunteers"
-    stem = subject.replace("-", "_")
-    row = read_measured_csv(vol / f"{stem}_measured.csv")[0]
-    h = read_pc_scores(vol / f"{stem}_geometry.vtu")
+    from lvcore.resources import volunteer_files, volunteers_dir
+
+    files = volunteer_files(subject.replace("-", "_"))
+    row = read_measured_csv(files.measured)[0]
+    h = read_pc_scores(files.geometry)
     forward = load_forward("chapter", h)
     config = SamplerConfig(num_warmup=num_warmup, num_samples=num_samples, num_chains=num_chains, seed=0)
     res = calibrate(row.y, forward, "iid", config=config, max_rounds=1)
-    truth_file = vol / "truth" / "SYNTHETIC_volunteers_truth.json"
+    truth_file = volunteers_dir() / "truth" / "SYNTHETIC_volunteers_truth.json"
     truth = None
     if truth_file.is_file():  # the hidden truth scores the fit; it never enters it
         truth = next((t["theta"] for t in json.loads(truth_file.read_text())["volunteers"]
@@ -614,7 +603,7 @@ def build_report(out, results_dir=None, *, sweep: str = "emulator", calibration:
         Output folder (created).
     results_dir : path, optional
         Folder with saved study results (``fibre_discrepancy.json``, ``bo_fibres.json``,
-        ``operators.json``); each file falls back to the bundled ``<assets>/studies``.
+        ``operators.json``); each file falls back to the bundled ``lvcore/assets/studies``.
     sweep : {"emulator", "simulator"}
         Fig 9.5 by the bundled ``angles`` emulator or by the FE simulator (fast mesh).
     calibration : bool

@@ -7,7 +7,7 @@ def register(subparsers) -> None:
         "report", help="regenerate the chapter's figures and tables (PNG, SVG, HTML, data, index.html, manifest.json)",
         description="Regenerate every figure and table of the chapter that the project reproduces. Study results "
                     "come from --from RESULTS (the --out folders of `lvcore study ...`) or else the package's "
-                    "bundled assets/studies; figures without results are listed as missing in manifest.json.")
+                    "bundled lvcore/assets/studies; figures without results are listed as missing in manifest.json.")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--from", dest="results", default=None,
                    help="folder with study results (fibre_discrepancy.json, bo_fibres.json, operators.json)")
