@@ -149,7 +149,9 @@ def page_links(page) -> list[tuple[str, str]]:
     for i in range(links.count()):
         a = links.nth(i)
         href = a.get_attribute("href")
-        label = a.inner_text().strip()
+        label = a.evaluate("e => { const c = e.cloneNode(true);"  # without the icon's ligature text
+                           " c.querySelectorAll('[data-testid=stIconMaterial]').forEach(x => x.remove());"
+                           " return c.innerText.trim(); }")
         if href and (label, href) not in out:
             out.append((label, href))
     return out
