@@ -2,6 +2,8 @@
 
 * ``lvcore geometry fit CONTOURS.json --out MESH.vtu [--json]``
 * ``lvcore geometry fit --endo ENDO.stl --epi EPI.stl [--units mm] --out MESH.vtu [--json]``
+* ``lvcore geometry fit --mesh LV.inp|LV.msh|LV.vtu [--units mm] --out MESH.vtu [--json]``: a volumetric
+  tet/hex mesh, split into endo/epi/base automatically (:mod:`lvcore.geometry.volume_mesh`)
 * ``lvcore geometry info MESH.vtu [--json]``: cavity volume, wall volume, length
 * ``lvcore geometry compare A.vtu B.vtu [--json]``: node MSE (cm²), max node distance
 * ``lvcore geometry pca SCORES... --out MESH.vtu [--model M.json]``: reconstruct from PC scores
@@ -21,19 +23,28 @@ def _fit(args) -> int:
     from lvcore.geometry.fitting import fit_contours, fit_surfaces
     from lvcore.geometry.io import write_template_mesh
 
-    if args.contours and (args.endo or args.epi):
-        raise GeometryError("give either a contour file or --endo/--epi surfaces, not both")
-    if args.contours:
+    given = [n for n, v in (("CONTOURS.json", args.contours), ("--endo/--epi", args.endo or args.epi),
+                            ("--mesh", getattr(args, "mesh", None))) if v]
+    if len(given) > 1:
+        raise GeometryError(f"give one input to fit, not {' and '.join(given)}")
+    mesh_fit = None
+    if getattr(args, "mesh", None):
+        from lvcore.geometry.volume_mesh import fit_volume_mesh
+
+        mesh_fit = fit_volume_mesh(args.mesh, units=args.units, base_z=args.base_z)
+        res = mesh_fit.fit
+    elif args.contours:
         res = fit_contours(args.contours, base_z=args.base_z)
     elif args.endo and args.epi:
         res = fit_surfaces(args.endo, args.epi, units=args.units, base_z=args.base_z)
     else:
-        raise GeometryError("nothing to fit: give CONTOURS.json or both --endo and --epi surface files")
+        raise GeometryError("nothing to fit: give CONTOURS.json, both --endo and --epi surface files, "
+                            "or a volumetric mesh with --mesh")
     out = None
     if args.out:
         meta = {"label": res.label, "residual_mean_mm": f"{res.residual_mean_mm:.4f}"}
         out = write_template_mesh(args.out, res.nodes, metadata=meta)
-    summary = {**res.summary(), "out": str(out) if out else None}
+    summary = {**(mesh_fit.summary() if mesh_fit else res.summary()), "out": str(out) if out else None}
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
@@ -42,7 +53,12 @@ def _fit(args) -> int:
               f"(endo {res.residual_endo_mean_mm:.3f}, epi {res.residual_epi_mean_mm:.3f}; {res.n_points} points, "
               f"{res.n_above_base} above the base plane ignored)")
         print(f"  cavity volume {res.cavity_volume_ml:.1f} mL, base-apex length {res.length_mm:.1f} mm")
-        for w in res.warnings:
+        if mesh_fit:
+            b = mesh_fit.boundary
+            print(f"  volume mesh: {b.n_tets} tetrahedra, {b.n_hexes} hexahedra; boundary triangles endo "
+                  f"{b.n_faces['endo']}, epi {b.n_faces['epi']}, base {b.n_faces['base']}; the mesh's own cavity "
+                  f"{b.cavity_volume_ml:.2f} mL ({summary['cavity_volume_change_pct']:+.2f} % after fitting)")
+        for w in summary["warnings"]:
             print(f"  warning: {w}")
         if out:
             print(f"  wrote {out}  (use it as {{\"geometry\": {{\"kind\": \"mesh\", \"path\": \"{out}\"}}}})")
@@ -105,11 +121,14 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("geometry", help="fit segmentations to the LV template, inspect meshes, PCA")
     sub = p.add_subparsers(dest="geometry_command", required=True)
 
-    f = sub.add_parser("fit", help="fit the template to a contour stack (JSON) or endo/epi surfaces")
+    f = sub.add_parser("fit", help="fit the template to a contour stack (JSON), endo/epi surfaces or a volume mesh")
     f.add_argument("contours", nargs="?", help="contour stack JSON (schema lvcore.contours/1)")
     f.add_argument("--endo", help="endocardial surface (VTK/VTP/STL/PLY/OBJ), open at the base")
     f.add_argument("--epi", help="epicardial surface, open at the base")
-    f.add_argument("--units", default="mm", choices=("mm", "cm", "m"), help="units of surface files (default mm)")
+    f.add_argument("--mesh", help="volumetric LV mesh (tetrahedra/hexahedra; .inp, .msh, .vtu, .vtk, .xdmf, ... - "
+                                  "anything meshio reads), truncated by a flat base")
+    f.add_argument("--units", default="mm", choices=("mm", "cm", "m"),
+                   help="units of surface or volume-mesh files (default mm)")
     f.add_argument("--base-z", type=float, default=0.0, help="height of the base plane in the output (mm, default 0)")
     f.add_argument("--out", help="write the fitted mesh here (.vtu)")
     f.add_argument("--json", action="store_true", help="print the fit summary as JSON")
