@@ -168,3 +168,19 @@ def test_cli_volunteer_option_finds_the_bundled_files_and_refuses_mixtures(tmp_p
     assert "--volunteer replaces --data and --geometry" in capsys.readouterr().err
     assert main(["calibrate", "--data", "m.csv", "--out", out]) == 2
     assert "--volunteer NAME" in capsys.readouterr().err
+
+
+def test_summary_keeps_small_variances(tmp_path):
+    """sigma_s2 of order 1e-4 survives the summary table and its CSV (ArviZ rounds to 2 decimals by default)."""
+    import pandas as pd
+
+    from lvcore.inference import diagnostics
+
+    rng = np.random.default_rng(0)
+    samples = {"a": rng.normal(1.0, 0.1, (2, 50)), "sigma_s2": rng.normal(1.234e-4, 1e-6, (2, 50))}
+    table = diagnostics.summary_table(samples)
+    assert table.loc["sigma_s2", "mean"] == pytest.approx(1.234e-4, rel=1e-2)
+    p = tmp_path / "s.csv"
+    table.to_csv(p, float_format=cal.SUMMARY_FLOAT_FORMAT)
+    back = pd.read_csv(p, index_col=0)
+    assert back.loc["sigma_s2", "mean"] == pytest.approx(table.loc["sigma_s2", "mean"], rel=1e-5)

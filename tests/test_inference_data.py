@@ -98,3 +98,73 @@ def test_non_numeric_and_missing_file(tmp_path):
         data.read_measured_csv(p)
     with pytest.raises(DataError, match="does not exist"):
         data.read_measured_csv(tmp_path / "nope.csv")
+
+
+# --------------------------------------------------------------------------- readers: JSON, MATLAB, AHA segments
+def test_mat_reader_one_and_many_subjects(tmp_path):
+    import scipy.io
+
+    from lvcore.inference.segments import aha_to_lvcore
+
+    y = _good()
+    p = tmp_path / "one.mat"
+    scipy.io.savemat(p, {"lvv_ml": y[0], "strains": y[1:], "subject": "HV7"})
+    (got,) = data.read_measurements(p)
+    np.testing.assert_allclose(got.y, y)
+    assert got.subject == "HV7" and got.source == str(p)
+    # several subjects, one row each, AHA segments declared in the file, with an offset
+    aha = np.linspace(-0.2, -0.08, 16)
+    p2 = tmp_path / "many.mat"
+    scipy.io.savemat(p2, {"lvv_ml": np.array([120.0, 150.0]), "strains": np.vstack([aha, aha + 0.01]),
+                          "subject": np.array(["A", "B"], dtype=object), "segments": "aha",
+                          "segment_offset_deg": 30.0})
+    a, b = data.read_measurements(p2)
+    assert (a.subject, b.subject) == ("A", "B")
+    np.testing.assert_allclose(a.y, np.r_[120.0, aha_to_lvcore(aha, 30.0)])
+    np.testing.assert_allclose(b.y[1:], aha_to_lvcore(aha + 0.01, 30.0))
+    # the file's convention and --segments must agree
+    with pytest.raises(DataError, match="--segments"):
+        data.read_measurements(p2, segments="lvcore")
+
+
+def test_mat_reader_errors(tmp_path):
+    import scipy.io
+
+    p = tmp_path / "bad.mat"
+    scipy.io.savemat(p, {"volume": 130.0, "strains": np.full(24, -0.1)})
+    with pytest.raises(DataError, match="'lvv_ml' not found.*volume"):
+        data.read_measurements(p)
+    scipy.io.savemat(p, {"lvv_ml": 130.0, "strains": np.full(20, -0.1)})
+    with pytest.raises(DataError, match="20 strains"):
+        data.read_measurements(p)
+    scipy.io.savemat(p, {"lvv_ml": 130.0, "strains": np.full(16, -0.1)})
+    with pytest.raises(DataError, match="--segments aha"):
+        data.read_measurements(p)
+    assert data.read_measurements(p, segments="aha")[0].y.shape == (25,)
+    (tmp_path / "junk.mat").write_bytes(b"not a mat file at all" * 10)
+    with pytest.raises(DataError, match="MATLAB"):
+        data.read_measurements(tmp_path / "junk.mat")
+
+
+def test_json_and_aha_csv_readers(tmp_path):
+    import json
+
+    from lvcore.inference.segments import AHA_COLUMNS, aha_to_lvcore
+
+    y = _good()
+    p = tmp_path / "m.json"
+    p.write_text(json.dumps([{"subject": "S1", "lvv_ml": y[0], "strains": list(y[1:])},
+                             {"lvv_ml": 140.0, "segments": "aha", "strains": [-0.1] * 16}]))
+    a, b = data.read_measurements(p)
+    np.testing.assert_allclose(a.y, y)
+    assert b.subject == "row2" and np.allclose(b.y[1:], -0.1)
+    aha = np.linspace(-0.2, -0.05, 16)
+    c = tmp_path / "aha.csv"
+    c.write_text("subject,lvv_ml," + ",".join(AHA_COLUMNS) + "\nV1,130," + ",".join(str(v) for v in aha) + "\n")
+    (r,) = data.read_measurements(c, offset_deg=-20.0)
+    assert r.subject == "V1"
+    np.testing.assert_allclose(r.y, np.r_[130.0, aha_to_lvcore(aha, -20.0)])
+    # the lvcore CSV path is unchanged
+    np.testing.assert_allclose(data.read_measurements(_write(tmp_path, [y]))[0].y, y)
+    with pytest.raises(DataError, match="unknown measured-data format"):
+        data.read_measurements(tmp_path / "m.xlsx") if (tmp_path / "m.xlsx").write_text("x") else None

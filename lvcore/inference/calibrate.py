@@ -26,6 +26,9 @@ from lvcore.inference import diagnostics, models, samplers
 from lvcore.inference.data import validate_measurements
 from lvcore.outputs import is_pc_name
 
+#: Number format of the summary CSV: 6 significant digits, so sigma_s2 ~ 1e-4 is not rounded to 0.0.
+SUMMARY_FLOAT_FORMAT = "%.6g"
+
 
 @dataclass(frozen=True)
 class CalibrationResult:
@@ -328,7 +331,7 @@ def write_result(result: CalibrationResult, out_dir, stem: str) -> dict:
         if p.resolve().parent != out.resolve():  # pragma: no cover - file_stem already prevents it
             raise GeometryError(f"refusing to write '{p}' outside the output folder '{out}'")
     nc = diagnostics.save_netcdf(result.idata, nc_path)
-    result.summary.to_csv(csv)
+    result.summary.to_csv(csv, float_format=SUMMARY_FLOAT_FORMAT)
     return {"netcdf": str(nc), "summary_csv": str(csv)}
 
 

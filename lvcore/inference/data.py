@@ -1,9 +1,26 @@
 """Measured data for calibration: LVV (mL) and 24 circumferential strains.
 
-CSV layout: a header row with the columns of
-:data:`lvcore.outputs.OUTPUT_COLUMNS` (``lvv_ml, strain_01 .. strain_24``),
-optionally preceded by a ``subject`` column, and one row per measurement.
-A header-less file of 25 numbers per row in that order is also accepted.
+Three file formats are read by :func:`read_measurements` (by suffix):
+
+CSV (``.csv``)
+    A header row with the columns of :data:`lvcore.outputs.OUTPUT_COLUMNS`
+    (``lvv_ml, strain_01 .. strain_24``), or ``lvv_ml, aha_01 .. aha_16``
+    (``aha_17``, the apical cap, allowed and unused) for AHA segments,
+    optionally preceded by a ``subject`` column, one row per measurement.
+    A header-less file of 25 numbers per row (lvcore order) is also accepted.
+JSON (``.json``)
+    One object or a list of objects (or ``{"subjects": [...]}``), each
+    ``{"subject": "HV1", "lvv_ml": 140.2, "strains": [24 or 16 values],
+    "segments": "lvcore" | "aha", "segment_offset_deg": 0}``; the last two
+    are optional; ``strain_01..`` / ``aha_01..`` keys may replace ``strains``.
+MATLAB (``.mat``, read with :func:`scipy.io.loadmat`)
+    Variables ``lvv_ml`` (scalar or n-vector, mL), ``strains`` (24 or 16
+    values, or an n x 24 / n x 16 matrix, one row per subject), optional
+    ``subject`` (char array or cell array of n names), ``segments``
+    (``'lvcore'`` or ``'aha'``) and ``segment_offset_deg`` (scalar).
+
+Strains in AHA segments (or lvcore sectors rotated by an offset) are mapped
+onto lvcore's 6 x 4 grid with :mod:`lvcore.inference.segments`.
 
 Validation raises :class:`lvcore.exceptions.DataError` with what to fix:
 wrong column count, missing values, strains with the wrong sign convention
@@ -181,6 +198,201 @@ def read_measured_csv(path) -> list[MeasuredData]:
     return out
 
 
+# --------------------------------------------------------------------------- any format, any segment convention
+#: File suffixes :func:`read_measurements` understands.
+MEASUREMENT_SUFFIXES = (".csv", ".json", ".mat")
+
+
+def _resolve_convention(file_value, cli_value, where: str) -> str:
+    from lvcore.inference.segments import CONVENTIONS
+
+    for v, who in ((file_value, "the file"), (cli_value, "--segments")):
+        if v is not None and v not in CONVENTIONS:
+            raise DataError(f"{where}: segment convention {v!r} from {who} not understood; use lvcore or aha")
+    if file_value is not None and cli_value is not None and file_value != cli_value:
+        raise DataError(f"{where}: the file says its strains are in '{file_value}' segments but --segments says "
+                        f"'{cli_value}'; drop one or make them agree")
+    return file_value or cli_value or "lvcore"
+
+
+def _row(lvv, strains, subject, where: str, convention: str, offset_deg: float, source: str) -> MeasuredData:
+    from lvcore.inference.segments import N_AHA, to_lvcore
+
+    try:
+        st = np.asarray(strains, dtype=float).reshape(-1)
+        lv = float(np.asarray(lvv, dtype=float).reshape(-1)[0]) if np.size(lvv) == 1 else float("nan")
+    except (TypeError, ValueError) as err:
+        raise DataError(f"{where}: values must be numbers ({err})") from None
+    if np.size(lvv) != 1:
+        raise DataError(f"{where}: lvv_ml must be one number per subject, got {np.size(lvv)}")
+    expected = {"lvcore": (N_OUTPUTS - 1,), "aha": (N_AHA, N_AHA + 1)}[convention]
+    if st.size not in expected:
+        raise DataError(f"{where}: {st.size} strains for '{convention}' segments; expected "
+                        f"{' or '.join(str(e) for e in expected)}"
+                        + (" (use --segments aha for AHA 16-segment data)" if st.size in (N_AHA, N_AHA + 1) else "")
+                        + (" (use --segments lvcore for lvcore's 24 regions)" if st.size == N_OUTPUTS - 1 else ""))
+    if not np.all(np.isfinite(st)):
+        raise DataError(f"{where}: missing or non-finite strains; fill them in or drop the subject")
+    y = validate_measurements(np.r_[lv, to_lvcore(st, convention, offset_deg)], where=where)
+    return MeasuredData(y=y, subject=str(subject), source=source)
+
+
+def _read_json(path: Path, segments, offset_deg) -> list[MeasuredData]:
+    import json
+
+    from lvcore.inference.segments import AHA_COLUMNS
+
+    try:
+        obj = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise DataError(f"{path.name}: not valid JSON ({err})") from None
+    if isinstance(obj, dict) and "subjects" in obj:
+        obj = obj["subjects"]
+    items = obj if isinstance(obj, list) else [obj]
+    if not items:
+        raise DataError(f"{path.name}: no subjects")
+    out = []
+    for i, it in enumerate(items):
+        where = f"{path.name} subject {i + 1}"
+        if not isinstance(it, dict):
+            raise DataError(f"{where}: expected an object with lvv_ml and strains, got {type(it).__name__}")
+        if "lvv_ml" not in it:
+            raise DataError(f"{where}: missing 'lvv_ml' (end-diastolic volume, mL)")
+        conv = _resolve_convention(it.get("segments"), segments, where)
+        off = float(it.get("segment_offset_deg", 0.0)) if offset_deg is None else float(offset_deg)
+        if "strains" in it:
+            st = it["strains"]
+        else:
+            keys = OUTPUT_COLUMNS[1:] if conv == "lvcore" else AHA_COLUMNS
+            missing = [k for k in keys if k not in it]
+            if missing:
+                raise DataError(f"{where}: missing 'strains' (a list) or the keys {', '.join(missing[:4])}...")
+            st = [it[k] for k in keys]
+        out.append(_row(it["lvv_ml"], st, it.get("subject", f"row{i + 1}"), where, conv, off, str(path)))
+    return out
+
+
+def _mat_string(v) -> str | None:
+    if v is None:
+        return None
+    a = np.asarray(v)
+    if a.dtype.kind in "US":
+        return "".join(str(x) for x in a.reshape(-1)).strip()
+    if a.dtype == object and a.size == 1:
+        return _mat_string(a.reshape(-1)[0])
+    return str(a)
+
+
+def _read_mat(path: Path, segments, offset_deg) -> list[MeasuredData]:
+    import scipy.io
+
+    try:
+        mat = scipy.io.loadmat(path, squeeze_me=False, chars_as_strings=True)
+    except (ValueError, TypeError, OSError, NotImplementedError) as err:
+        raise DataError(f"{path.name}: cannot read as a MATLAB .mat file ({err}); v7.3 (HDF5) files must be "
+                        "saved with -v7 or converted") from None
+    names = sorted(k for k in mat if not k.startswith("__"))
+    for req in ("lvv_ml", "strains"):
+        if req not in mat:
+            raise DataError(f"{path.name}: MATLAB variable '{req}' not found (found: {', '.join(names) or 'none'}); "
+                            "see docs/calibration.md for the variable names")
+    conv = _resolve_convention(_mat_string(mat.get("segments")), segments, path.name)
+    off = float(np.asarray(mat.get("segment_offset_deg", 0.0), dtype=float).reshape(-1)[0])         if offset_deg is None else float(offset_deg)
+    try:
+        lvv = np.asarray(mat["lvv_ml"], dtype=float).reshape(-1)
+        st = np.asarray(mat["strains"], dtype=float)
+    except (TypeError, ValueError) as err:
+        raise DataError(f"{path.name}: lvv_ml and strains must be numeric arrays ({err})") from None
+    n = lvv.size
+    if st.ndim == 1 or 1 in st.shape and n == 1:
+        st = st.reshape(1, -1)
+    elif st.ndim == 2 and st.shape[0] != n and st.shape[1] == n:
+        st = st.T  # strains stored one column per subject
+    if st.ndim != 2 or st.shape[0] != n:
+        raise DataError(f"{path.name}: 'strains' has shape {np.shape(mat['strains'])} but 'lvv_ml' has {n} value(s); "
+                        "give one row of strains per subject")
+    subjects = [f"row{i + 1}" for i in range(n)]
+    if "subject" in mat:
+        raw = np.asarray(mat["subject"])
+        if raw.dtype == object:
+            subjects = [_mat_string(v) for v in raw.reshape(-1)]
+        elif raw.dtype.kind in "US":
+            subjects = [str(v).strip() for v in raw.reshape(-1)] if n > 1 else ["".join(raw.reshape(-1)).strip()]
+        if len(subjects) != n:
+            raise DataError(f"{path.name}: 'subject' names {len(subjects)} subjects, 'lvv_ml' {n}")
+    return [_row(lvv[i], st[i], subjects[i], f"{path.name} subject {subjects[i]}", conv, off, str(path))
+            for i in range(n)]
+
+
+def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
+    from lvcore.inference.segments import AHA_COLUMNS
+
+    try:
+        head = pd.read_csv(path, header=None, dtype=str, nrows=1, comment="#")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise DataError(f"{path.name}: cannot parse as CSV ({err})") from None
+    first = [str(v).strip() for v in head.iloc[0].tolist()] if not head.empty else []
+    is_aha = any(v in AHA_COLUMNS for v in first)
+    conv = _resolve_convention("aha" if is_aha else None, segments, path.name)
+    if conv == "lvcore" and not is_aha:
+        rows = read_measured_csv(path)
+        off = 0.0 if offset_deg is None else float(offset_deg)
+        if off == 0.0:
+            return rows
+        from lvcore.inference.segments import rotate_lvcore
+
+        return [MeasuredData(y=np.r_[r.y[0], rotate_lvcore(r.y[1:], off)], subject=r.subject, source=r.source)
+                for r in rows]
+    if not is_aha:
+        raise DataError(f"{path.name}: --segments aha needs columns lvv_ml, aha_01 .. aha_16 (aha_17 optional)")
+    df = pd.read_csv(path, comment="#")
+    cols = [c for c in AHA_COLUMNS if c in df.columns]
+    if len(cols) != len(AHA_COLUMNS) or "lvv_ml" not in df.columns:
+        missing = [c for c in ("lvv_ml",) + AHA_COLUMNS if c not in df.columns]
+        raise DataError(f"{path.name}: AHA data need columns lvv_ml, aha_01 .. aha_16; missing {', '.join(missing)}")
+    subj = next((c for c in df.columns if str(c).lower() in ("subject", "id", "subject_id")), None)
+    off = 0.0 if offset_deg is None else float(offset_deg)
+    out = []
+    for i, row in df.iterrows():
+        vals = pd.to_numeric(row[list(cols)], errors="coerce").to_numpy(dtype=float)
+        lvv = pd.to_numeric(pd.Series([row["lvv_ml"]]), errors="coerce").to_numpy(dtype=float)
+        name = str(row[subj]) if subj else f"row{i + 1}"
+        out.append(_row(lvv, vals, name, f"{path.name} line {i + 2}", "aha", off, str(path)))
+    return out
+
+
+def read_measurements(path, segments: str | None = None, offset_deg: float | None = None) -> list[MeasuredData]:
+    """Read measured data from CSV, JSON or MATLAB ``.mat`` (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+    segments : {"lvcore", "aha"}, optional
+        Segment convention of the strains; default: what the file says, else
+        ``lvcore``. A contradiction between the two is an error.
+    offset_deg : float, optional
+        lvcore angle φ (deg) of the data's septal centre (AHA) or of the data's
+        sector-0 start (lvcore); default: the file's ``segment_offset_deg``, else 0.
+
+    Returns
+    -------
+    list of MeasuredData, strains on lvcore's 6 x 4 grid.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"measured-data file {path} does not exist (or is not a file)")
+    if offset_deg is not None and not np.isfinite(offset_deg):
+        raise DataError(f"--segment-offset must be a finite angle in degrees, got {offset_deg}")
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        return _read_json(path, segments, offset_deg)
+    if suffix == ".mat":
+        return _read_mat(path, segments, offset_deg)
+    if suffix in (".csv", ".txt", ""):
+        return _read_csv_any(path, segments, offset_deg)
+    raise DataError(f"{path.name}: unknown measured-data format '{suffix}'; use {', '.join(MEASUREMENT_SUFFIXES)}")
+
+
 def write_measured_csv(path, rows: list[MeasuredData]) -> Path:
     """Write measurements in the layout :func:`read_measured_csv` reads (with a subject column)."""
     path = Path(path)
@@ -191,4 +403,5 @@ def write_measured_csv(path, rows: list[MeasuredData]) -> Path:
     return path
 
 
-__all__ = ["MeasuredData", "validate_measurements", "read_measured_csv", "write_measured_csv", "LVV_RANGE_ML"]
+__all__ = ["MeasuredData", "validate_measurements", "read_measured_csv", "read_measurements", "write_measured_csv",
+           "LVV_RANGE_ML", "MEASUREMENT_SUFFIXES"]

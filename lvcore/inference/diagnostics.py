@@ -75,10 +75,14 @@ class Convergence:
 
 
 def summary_table(samples: dict, var_names=None) -> pd.DataFrame:
-    """ArviZ summary (mean, sd, HDI 90%, MCSE, ESS bulk/tail, R-hat) of scalar parameters."""
+    """ArviZ summary (mean, sd, HDI 90%, MCSE, ESS bulk/tail, R-hat) of scalar parameters.
+
+    Unrounded (``round_to="none"``): ArviZ's default of 2 decimals turns a
+    strain variance sigma_s2 of order 1e-4 into 0.0.
+    """
     var_names = monitored_names(samples) if var_names is None else list(var_names)
     data = az.from_dict(posterior={n: np.asarray(samples[n]) for n in var_names})
-    return az.summary(data, hdi_prob=0.9)
+    return az.summary(data, hdi_prob=0.9, round_to="none")
 
 
 def n_chains(run: samplers.SamplerRun) -> int:
