@@ -1,7 +1,17 @@
-"""``lvcore calibrate``: Bayesian calibration of theta from a measured-data CSV and a geometry."""
+"""``lvcore calibrate``: Bayesian calibration of theta from measured data and a geometry.
+
+Guards (exit code 2, see :mod:`lvcore.inference.guards`): ``--geometry`` is
+required (``mean`` is allowed with a bias warning); PC scores and conditions
+outside the emulator's training box are refused unless ``--allow-extrapolation``;
+``--edp``/angles given to an emulator trained at fixed values, or an EDP outside
+2-40 mmHg, are refused. After sampling, a posterior-predictive check
+(:mod:`lvcore.inference.plausibility`) flags data the model cannot reach; the
+flags are warnings, printed and recorded in ``summary.json``.
+"""
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 from lvcore.core.space import SIGMA_V_ML
@@ -15,23 +25,42 @@ def register(subparsers) -> None:
         description="Bayesian calibration with an emulator: volume-only, iid or polar-GP discrepancy likelihood. "
                     "Writes ArviZ InferenceData (netCDF) and summary tables.",
     )
-    p.add_argument("--data", help="measured CSV: lvv_ml, strain_01..strain_24 (optional subject column)")
+    p.add_argument("--data",
+                   help="measured data: CSV (lvv_ml, strain_01..strain_24 or aha_01..aha_16; optional subject "
+                        "column), JSON or MATLAB .mat (see docs/calibration.md)")
+    p.add_argument("--segments", choices=("lvcore", "aha"), default=None,
+                   help="segment convention of the strains (default: what the file says, else lvcore)")
+    p.add_argument("--segment-offset", type=float, default=None, metavar="DEG",
+                   help="lvcore angle (deg, counter-clockwise seen from the base) of the data's septal centre "
+                        "(aha) or sector-0 start (lvcore); default 0")
     p.add_argument("--geometry",
-                   help="PC scores (.json/.csv) or a template mesh (.vtu/.vtk/.xdmf/.npy/.npz) to project")
+                   help="(required with --data) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
+                        "volumetric mesh (.inp/.msh/.vtu) to fit and project; or 'mean' (warned: biased "
+                        "estimates when the subject's shape differs)")
     p.add_argument("--volunteer", default=None, metavar="NAME",
                    help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry")
+    p.add_argument("--geometry-units", choices=("mm", "cm", "m"), default="mm",
+                   help="units of a volumetric --geometry mesh (default mm)")
+    p.add_argument("--allow-extrapolation", action="store_true",
+                   help="run even when PC scores or conditions lie outside the emulator's training box "
+                        "(recorded as a warning in the output)")
     p.add_argument("--model", default="iid",
                    help="volume | iid | discrepancy, or a comma-separated list (default iid)")
     p.add_argument("--angles", choices=("fixed", "infer"), default="fixed",
                    help="fibre angles fixed at the emulator's values, or inferred (needs the 'angles' emulator)")
     p.add_argument("--emulator", default=None, help="emulator name (default: chapter, or angles with --angles infer)")
-    p.add_argument("--alpha-endo", type=float, default=-60.0,
-                   help="fixed alpha_endo (deg), used only by emulators that take angles (default -60)")
-    p.add_argument("--alpha-epi", type=float, default=90.0,
-                   help="fixed alpha_epi (deg), used only by emulators that take angles (default 90); "
-                        "the 'chapter' emulator is trained at (-60, 60) and ignores both")
-    p.add_argument("--edp", type=float, default=8.0, help="end-diastolic pressure (mmHg) for emulators that take it")
+    p.add_argument("--alpha-endo", type=float, default=None,
+                   help="fixed alpha_endo (deg) for emulators that take angles (default -60); an error with "
+                        "emulators trained at fixed angles (e.g. 'chapter', trained at -60/60)")
+    p.add_argument("--alpha-epi", type=float, default=None,
+                   help="fixed alpha_epi (deg) for emulators that take angles (default 90); an error with "
+                        "emulators trained at fixed angles")
+    p.add_argument("--edp", type=float, default=None,
+                   help="end-diastolic pressure (mmHg, 2-40) for emulators that take it (default 8); an error "
+                        "with emulators trained at a fixed EDP (e.g. 'chapter', 8 mmHg)")
     p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML, help=f"LVV noise sd (mL), fixed (default {SIGMA_V_ML:g})")
+    p.add_argument("--strain-noise", type=float, default=None,
+                   help="reference strain noise sd of the plausibility check (default 0.035)")
     p.add_argument("--sampler", choices=("auto", "nuts", "hmc_gibbs"), default="auto",
                    help="auto: NUTS for volume/iid, HMC-within-Gibbs for discrepancy")
     p.add_argument("--chains", type=int, default=4)
@@ -45,7 +74,11 @@ def register(subparsers) -> None:
 
 
 def check_options(args) -> None:
-    """Refuse nonsensical sampler options before anything runs (DataError naming the option)."""
+    """Refuse nonsensical sampler options before anything runs (DataError naming the option).
+
+    The EDP and the fixed angles are checked against the emulator by
+    :func:`lvcore.inference.guards.check_conditions`.
+    """
     import math
 
     from lvcore.exceptions import DataError
@@ -59,10 +92,8 @@ def check_options(args) -> None:
         raise DataError("--warmup and --samples must be <= 1,000,000")
     if not (math.isfinite(args.sigma_v) and args.sigma_v > 0):
         raise DataError(f"--sigma-v must be a positive number of mL, got {args.sigma_v}")
-    if not (math.isfinite(args.edp) and args.edp >= 0):
-        raise DataError(f"--edp must be a finite pressure >= 0 (mmHg), got {args.edp}")
     for name, value in (("--alpha-endo", args.alpha_endo), ("--alpha-epi", args.alpha_epi)):
-        if not (math.isfinite(value) and -180 <= value <= 180):
+        if value is not None and not (math.isfinite(value) and -180 <= value <= 180):
             raise DataError(f"{name} must be an angle in [-180, 180] degrees, got {value}")
 
 
@@ -72,12 +103,16 @@ def run_calibrate(args) -> int:
     check_options(args)
     use_host_devices(args.chains)
 
-    from lvcore.core.forward import load_emulator_forward
+    import numpy as np
+
+    from lvcore.core.forward import emulator_forward, load_emulator_forward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal
-    from lvcore.inference.data import read_measured_csv
+    from lvcore.inference import guards, plausibility
+    from lvcore.inference.data import read_measurements
     from lvcore.inference.models import MODEL_NAMES
     from lvcore.inference.samplers import SamplerConfig
+    from lvcore.outputs import is_pc_name
 
     if args.volunteer is not None:
         from lvcore.resources import volunteer_files
@@ -87,41 +122,81 @@ def run_calibrate(args) -> int:
         vol = volunteer_files(args.volunteer)
         args.data, args.geometry = str(vol.measured), str(vol.geometry)
     elif args.data is None or args.geometry is None:
-        raise DataError("give --data and --geometry (your measurements), or --volunteer NAME (a bundled one)")
+        raise DataError("give --data and --geometry (your measurements and the subject's geometry; "
+                        "'--geometry mean' to use the mean shape knowingly), or --volunteer NAME (a bundled one)")
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
     if bad or not model_names:
         raise DataError(f"--model {','.join(bad)}: choose from {', '.join(MODEL_NAMES)}")
-    rows = read_measured_csv(args.data)
+    sigma_ref = plausibility.DEFAULT_SIGMA_REF if args.strain_noise is None else float(args.strain_noise)
+    if not (np.isfinite(sigma_ref) and sigma_ref > 0):
+        raise DataError(f"--strain-noise {args.strain_noise}: must be a positive strain sd (e.g. 0.035)")
+    rows = read_measurements(args.data, segments=args.segments, offset_deg=args.segment_offset)
     if args.subject is not None:
         rows = [r for r in rows if r.subject == args.subject]
         if not rows:
             raise DataError(f"--subject {args.subject}: no such subject in {args.data}")
     cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
-    h = cal.read_pc_scores(args.geometry)
     infer = args.angles == "infer"
     name = args.emulator or ("angles" if infer else "chapter")
-    forward = load_emulator_forward(name, h, infer_angles=infer, alpha_endo=args.alpha_endo,
-                                    alpha_epi=args.alpha_epi, edp_mmhg=args.edp)
+    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
+    cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
+    n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
+    geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
+    box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, cond, emulator, infer), emulator,
+                                             args.allow_extrapolation, what="--geometry scores or conditions")
+    warnings = list(geo.warnings) + extrap
+    for w in warnings:
+        print(f"lvcore: warning: {w}", file=sys.stderr)
+    forward = emulator_forward(emulator, geo.h, name=name, infer_angles=infer, alpha_endo=cond["alpha_endo"],
+                               alpha_epi=cond["alpha_epi"], edp_mmhg=cond["edp_mmhg"])
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
+    out = Path(args.out)
+    y_of = {r.subject: r.y for r in rows}
+    extra = {}
 
-    def show(item):
+    def finish(item):
+        """Plausibility check, its CSV and the guard records of one (subject, model) result."""
         res = item.result
-        print(f"\n== {item.subject} / {item.model} ({res.sampler}, {res.wall_s:.1f} s) ==")
-        print(res.summary.to_string())
-        print(res.convergence.message())
+        check = plausibility.check_result(res, y_of[item.subject], args.sigma_v, sigma_ref, seed=args.seed)
+        out.mkdir(parents=True, exist_ok=True)
+        ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"
+        ppc_csv.write_text("output,p_value\n" + "".join(f"{k},{v:.6g}\n"
+                                                        for k, v in check.record()["p_values"].items()))
+        extra[(item.subject, item.model)] = {
+            "ppc_csv": str(ppc_csv),
+            "geometry": {**geo.record(), "box": [b for b in box if is_pc_name(b["name"])]},
+            "conditions": {"emulator": name, "edp_mmhg": cond["edp_mmhg"],
+                           "alpha_endo": None if infer else cond["alpha_endo"],
+                           "alpha_epi": None if infer else cond["alpha_epi"],
+                           "fixed_by_emulator": cond["fixed"],
+                           "box": [b for b in box if not is_pc_name(b["name"])]},
+            "extrapolation_allowed": bool(args.allow_extrapolation),
+            "plausibility": check.record(),
+            "warnings": warnings + [f"PLAUSIBILITY: {f}" for f in check.flags]}
+        for f in check.flags:
+            print(f"lvcore: warning: [{item.subject}/{item.model}] data look implausible: {f}", file=sys.stderr)
+        if not args.json:
+            print(f"\n== {item.subject} / {item.model} ({res.sampler}, {res.wall_s:.1f} s) ==")
+            print(res.summary.to_string(float_format=lambda v: f"{v:.4g}"))
+            print(res.convergence.message())
+            names = list(check.record()["p_values"])
+            worst = np.argsort(check.p_values)[:3]
+            print("posterior-predictive p-values (smallest): "
+                  + ", ".join(f"{names[i]} {check.p_values[i]:.2g}" for i in worst)
+                  + ("" if check.plausible else "  -> IMPLAUSIBLE, see warnings"))
 
     results = cal.calibrate_subjects(
         [(r.subject, r.y, forward) for r in rows], model_names, config=config, sampler=args.sampler,
         sigma_v=args.sigma_v, infer_angles=infer, out_dir=args.out,
-        attrs={"data_file": str(args.data), "emulator": name, "angles": args.angles},
-        progress=None if args.json else (lambda msg, frac: print(msg)), on_result=None if args.json else show)
-    records = [item.record() for item in results]
-    out = Path(args.out)
+        attrs={"data_file": str(args.data), "emulator": name, "angles": args.angles, "geometry": geo.source,
+               "pc_scores": json.dumps([float(v) for v in geo.h])},
+        progress=None if args.json else (lambda msg, frac: print(msg)), on_result=finish)
+    records = [{**item.record(), **extra[(item.subject, item.model)]} for item in results]
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(records, indent=2))
     if args.json:
         print(json.dumps(records, indent=2))
     else:
-        print(f"\nwrote {out}/summary.json and per-model .nc / _summary.csv")
+        print(f"\nwrote {out}/summary.json and per-model .nc / _summary.csv / _ppc.csv")
     return 0 if all(r["converged"] for r in records) else 1
