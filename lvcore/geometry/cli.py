@@ -31,12 +31,14 @@ def _fit(args) -> int:
     if getattr(args, "mesh", None):
         from lvcore.geometry.volume_mesh import fit_volume_mesh
 
-        mesh_fit = fit_volume_mesh(args.mesh, units=args.units, base_z=args.base_z)
+        mesh_fit = fit_volume_mesh(args.mesh, units=args.units, base_z=args.base_z, septum=args.septum)
         res = mesh_fit.fit
     elif args.contours:
         res = fit_contours(args.contours, base_z=args.base_z)
     elif args.endo and args.epi:
-        res = fit_surfaces(args.endo, args.epi, units=args.units, base_z=args.base_z)
+        septum = None if args.septum is None else [v * {"mm": 1.0, "cm": 10.0, "m": 1000.0}[args.units]
+                                                    for v in args.septum]
+        res = fit_surfaces(args.endo, args.epi, units=args.units, base_z=args.base_z, septum=septum)
     else:
         raise GeometryError("nothing to fit: give CONTOURS.json, both --endo and --epi surface files, "
                             "or a volumetric mesh with --mesh")
@@ -129,6 +131,9 @@ def register(subparsers) -> None:
                                   "anything meshio reads), truncated by a flat base")
     f.add_argument("--units", default="mm", choices=("mm", "cm", "m"),
                    help="units of surface or volume-mesh files (default mm)")
+    f.add_argument("--septum", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+                   help="a point on the septum (file coordinates and --units) fixing phi = 0 for --mesh or --endo/--epi "
+                        "(default: the file's x axis projected onto the base plane)")
     f.add_argument("--base-z", type=float, default=0.0, help="height of the base plane in the output (mm, default 0)")
     f.add_argument("--out", help="write the fitted mesh here (.vtu)")
     f.add_argument("--json", action="store_true", help="print the fit summary as JSON")

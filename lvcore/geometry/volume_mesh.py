@@ -405,7 +405,7 @@ def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None
         Base-plane height of the fitted template (mm; default that of
         :func:`~lvcore.geometry.fitting.fit_surfaces`).
     septum : (3,) array, optional
-        A point on the septum (file coordinates, mm) fixing phi = 0.
+        A point on the septum (file coordinates, in ``units``) fixing phi = 0.
     **fit_kwargs
         Passed to :func:`~lvcore.geometry.fitting.fit_surfaces` (``template``, ``degree``, ``smoothing``).
 
@@ -421,6 +421,8 @@ def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None
     kw = dict(fit_kwargs)
     if base_z is not None:
         kw["base_z"] = base_z
+    if septum is not None:
+        septum = np.asarray(septum, float) * UNIT_SCALE[units]
     fit = fit_surfaces(b.endo, b.epi, septum=septum, **kw)
     return VolumeMeshFit(fit=fit, boundary=b)
 
