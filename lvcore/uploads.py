@@ -138,23 +138,29 @@ def session_uploads(state=None, key: str = "_lvcore_uploads") -> UploadSession:
 
 
 def fit_segmentation(kind: str, files) -> dict:
-    """Fit uploaded contours (``kind="contours"``, one file) or endo + epi surfaces (two files).
+    """Fit uploaded contours (``kind="contours"``, one file), endo + epi surfaces (two files) or a
+    volumetric mesh (``kind="mesh"``, one file, :func:`lvcore.geometry.volume_mesh.fit_volume_mesh`).
 
     ``files`` are ``(name, bytes)`` pairs. Returns ``{"nodes", "summary"}``,
     or ``{"error": message}`` with a message in terms of the user's file names.
     """
     from lvcore.geometry.fitting import fit_contours, fit_surfaces
+    from lvcore.geometry.volume_mesh import fit_volume_mesh
 
     with UploadSession() as session:
         try:
             paths = [session.save(name, data, slot=f"{kind}{i}") for i, (name, data) in enumerate(files)]
 
             def fit(_):
+                if kind == "mesh":
+                    return fit_volume_mesh(paths[0])
                 return fit_contours(paths[0]) if kind == "contours" else fit_surfaces(paths[0], paths[1])
 
             res = session.read(files[0][0], files[0][1], fit, slot=f"{kind}0")
         except UploadError as err:
             return {"error": str(err)}
+    if kind == "mesh":
+        return {"nodes": res.fit.nodes, "summary": res.summary()}
     return {"nodes": res.nodes, "summary": res.summary()}
 
 

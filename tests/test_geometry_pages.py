@@ -54,3 +54,22 @@ def test_geometry_page_upload_good_and_bad_contours():
     assert any("at least 4" in e.value for e in at.error)
     assert any("fitted: residual" in s.value for s in at.success)
     assert len(at.get("image")) >= 1
+
+
+def test_geometry_page_upload_volume_mesh(tmp_path):
+    """A volumetric tetrahedral mesh (ABAQUS .inp) is accepted and fitted like surfaces."""
+    import pytest
+
+    pytest.importorskip("gmsh")
+    from lvcore.geometry.analytic import DEFAULT_LV
+    from lvcore.geometry.meshing import ellipsoid_tet_mesh
+
+    path = tmp_path / "lv.inp"
+    ellipsoid_tet_mesh(DEFAULT_LV, 6.0, path)
+    at = AppTest.from_file(PAGE1, default_timeout=180).run()
+    at.radio[0].set_value("Upload my own").run()
+    at.file_uploader(key="m0").upload("lv.inp", path.read_bytes(), "application/octet-stream")
+    at.run()
+    assert not at.exception, at.exception
+    assert not at.error, [e.value for e in at.error]
+    assert any("fitted: residual" in s.value for s in at.success)

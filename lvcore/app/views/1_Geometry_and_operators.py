@@ -72,7 +72,8 @@ if source.startswith("Bundled"):
                 "plane), like the chapter's operator 1 on its first patient.")
 else:
     st.write("For each operator, upload either a contour stack (JSON, schema `lvcore.contours/1`, see "
-             "docs/geometry.md) or an endocardial and an epicardial surface (VTK/VTP/STL/PLY/OBJ, open at the base).")
+             "docs/geometry.md), an endocardial and an epicardial surface (VTK/VTP/STL/PLY/OBJ, open at the base), "
+             "or a volumetric LV mesh (tetrahedra/hexahedra, mm: ABAQUS .inp, gmsh .msh, VTU, ...; flat base).")
     cols = st.columns(3)
     for i, col in enumerate(cols):
         with col:
@@ -80,8 +81,11 @@ else:
             cfile = st.file_uploader("Contour stack (.json)", type=["json"], key=f"c{i}")
             efile = st.file_uploader("or endocardial surface", key=f"e{i}")
             pfile = st.file_uploader("and epicardial surface", key=f"p{i}")
+            mfile = st.file_uploader("or a volumetric mesh", key=f"m{i}")
             out = None
-            if cfile is not None:
+            if mfile is not None:
+                out = _fit_upload("mesh", ((mfile.name, mfile.getvalue()),))
+            elif cfile is not None:
                 out = _fit_upload("contours", ((cfile.name, cfile.getvalue()),))
             elif efile is not None and pfile is not None:
                 out = _fit_upload("surfaces", ((efile.name, efile.getvalue()), (pfile.name, pfile.getvalue())))
