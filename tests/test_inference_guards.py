@@ -127,3 +127,22 @@ def test_check_conditions_unit():
         guards.check_conditions(angles, 1.0)
     with pytest.raises(EmulatorError, match="do not also fix"):
         guards.check_conditions(angles, alpha_endo=-60.0, infer_angles=True)
+
+
+def test_resolve_geometry_from_a_volume_mesh(tmp_path):
+    """--geometry LV.inp: the volume mesh is fitted, projected, and the source recorded."""
+    pytest.importorskip("gmsh")
+    from lvcore.exceptions import GeometryError
+    from lvcore.geometry.analytic import DEFAULT_LV
+    from lvcore.geometry.meshing import ellipsoid_tet_mesh
+
+    path = tmp_path / "lv.inp"
+    ellipsoid_tet_mesh(DEFAULT_LV, 6.0, path)
+    g = guards.resolve_geometry(str(path))
+    assert g.kind == "volume-mesh" and g.source == str(path) and g.h.shape == (5,)
+    assert g.fit_residual_mm < 0.5 and g.projection_mse_cm2 < 1.0
+    assert np.all(np.abs(g.h) < 2.0)
+    with pytest.raises(GeometryError, match="required"):
+        guards.resolve_geometry("")
+    with pytest.raises(GeometryError, match="no such file"):
+        guards.resolve_geometry(str(tmp_path / "nope.json"))
