@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     fig.suptitle("Strain segments seen from the base (phi counter-clockwise); colours = AHA segment", fontsize=10)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110, bbox_inches="tight")
+    fig.savefig(out, dpi=85, bbox_inches="tight")
     print(f"wrote {out}")
     return 0
 
