@@ -95,8 +95,9 @@ def main(argv=None) -> int:
               f"{r['mean_strain_clamped']:.4f} | {r['mean_strain_sliding']:.4f} | {r['mean_abs_diff']:.4f} | "
               f"{r['max_abs_diff']:.4f} (r{r['max_abs_diff_region'] + 1}) | {lv} | {r['pattern_corr']:.3f} | "
               f"{r['corr_below_base_level']:.3f} | {r['pattern_sd_clamped']:.4f} / {r['pattern_sd_sliding']:.4f} |")
-    print("\nPer-region strains (reference theta), level x sector, clamped | sliding:")
-    r = rows.get("reference") or next(iter(rows.values()))
+    shown = "reference" if "reference" in rows else next(iter(rows))
+    r = rows[shown]
+    print(f"\nPer-region strains ({shown} theta), level x sector, clamped | sliding:")
     for k in range(4):
         c = " ".join(f"{v:+.4f}" for v in r["strain_clamped"][6 * k:6 * k + 6])
         s = " ".join(f"{v:+.4f}" for v in r["strain_sliding"][6 * k:6 * k + 6])
