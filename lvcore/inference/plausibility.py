@@ -88,11 +88,13 @@ def posterior_predictive_check(y, eta_draws, sigma_v: float, sigma_ref: float = 
     sigma_ref : float
         Reference strain noise sd.
     """
+    from lvcore.inference.diagnostics import posterior_predictive
+
     y = np.asarray(y, float).reshape(-1)
     eta = np.asarray(eta_draws, float).reshape(-1, y.size)
-    rng = np.random.default_rng(seed)
-    sd = np.r_[float(sigma_v), np.full(y.size - 1, float(sigma_ref))]
-    y_rep = eta + rng.standard_normal(eta.shape) * sd
+    # the iid model's replicate formula, with sigma_S^2 fixed at the reference noise
+    y_rep = posterior_predictive({"eta": eta, "sigma_s2": np.full(eta.shape[0], float(sigma_ref) ** 2)},
+                                 float(sigma_v), np.random.default_rng(seed))
     n = eta.shape[0]
     upper = (np.sum(y_rep >= y, axis=0) + 1) / (n + 1)
     lower = (np.sum(y_rep <= y, axis=0) + 1) / (n + 1)

@@ -176,12 +176,12 @@ if job is not None and job["done"]:
         st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
         if job["synthetic"]:
             st.caption("⚠ SYNTHETIC data.")
-        from lvcore.inference.models import DEFAULT_SIGMA_V_ML
+        from lvcore.core.space import SIGMA_V_ML
         from lvcore.inference.plausibility import check_result
 
         for m, res in results.items():
             (st.success if res.convergence.converged else st.error)(f"{MODEL_LABELS[m]}: {res.convergence.message()}")
-            for flag in check_result(res, job["y"], DEFAULT_SIGMA_V_ML).flags:  # posterior-predictive check
+            for flag in check_result(res, job["y"], SIGMA_V_ML).flags:  # posterior-predictive check
                 st.warning(f"{MODEL_LABELS[m]}: the data look implausible for this model: {flag}")
         idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
         fig_pred = figs.predictive_density_figure(idatas, job["y"])
