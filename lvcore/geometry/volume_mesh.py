@@ -151,12 +151,13 @@ def read_volume_cells(path_or_mesh, units: str = "mm"):
     if isinstance(path_or_mesh, meshio.Mesh):
         mesh, source = path_or_mesh, "<mesh>"
     else:
+        from lvcore import limits
+
         path = Path(path_or_mesh)
         source = str(path)
-        if not path.is_file():
-            raise GeometryError(f"volume mesh '{path}' does not exist (or is not a file)")
-        if path.stat().st_size == 0:
-            raise GeometryError(f"volume mesh '{path}' is an empty file")
+        if not path.exists():
+            raise GeometryError(f"volume mesh '{path}' does not exist")
+        limits.check_regular_file(path, limits.MAX_SURFACE_BYTES, "volume mesh", GeometryError)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

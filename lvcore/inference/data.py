@@ -238,19 +238,17 @@ def _row(lvv, strains, subject, where: str, convention: str, offset_deg: float, 
 
 
 def _read_json(path: Path, segments, offset_deg) -> list[MeasuredData]:
-    import json
-
     from lvcore.inference.segments import AHA_COLUMNS
 
-    try:
-        obj = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise DataError(f"{path.name}: not valid JSON ({err})") from None
+    obj = limits.read_json_file(path, limits.MAX_MEASURED_BYTES, "measured-data file", DataError)
     if isinstance(obj, dict) and "subjects" in obj:
         obj = obj["subjects"]
     items = obj if isinstance(obj, list) else [obj]
     if not items:
         raise DataError(f"{path.name}: no subjects")
+    if len(items) > limits.MAX_MEASURED_ROWS:
+        raise DataError(f"{path.name}: {len(items):,} subjects is more than the limit of {limits.MAX_MEASURED_ROWS:,} "
+                        "(lvcore.limits.MAX_MEASURED_ROWS); split the file")
     out = []
     for i, it in enumerate(items):
         where = f"{path.name} subject {i + 1}"
@@ -286,6 +284,7 @@ def _mat_string(v) -> str | None:
 def _read_mat(path: Path, segments, offset_deg) -> list[MeasuredData]:
     import scipy.io
 
+    limits.check_regular_file(path, limits.MAX_MEASURED_BYTES, "measured-data file", DataError)
     try:
         mat = scipy.io.loadmat(path, squeeze_me=False, chars_as_strings=True)
     except (ValueError, TypeError, OSError, NotImplementedError) as err:
@@ -304,7 +303,9 @@ def _read_mat(path: Path, segments, offset_deg) -> list[MeasuredData]:
     except (TypeError, ValueError) as err:
         raise DataError(f"{path.name}: lvv_ml and strains must be numeric arrays ({err})") from None
     n = lvv.size
-    if st.ndim == 1 or 1 in st.shape and n == 1:
+    if n > limits.MAX_MEASURED_ROWS:
+        raise DataError(f"{path.name}: {n:,} subjects is more than the limit of {limits.MAX_MEASURED_ROWS:,}")
+    if st.ndim == 1 or (1 in st.shape and n == 1):
         st = st.reshape(1, -1)
     elif st.ndim == 2 and st.shape[0] != n and st.shape[1] == n:
         st = st.T  # strains stored one column per subject
@@ -327,11 +328,11 @@ def _read_mat(path: Path, segments, offset_deg) -> list[MeasuredData]:
 def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
     from lvcore.inference.segments import AHA_COLUMNS
 
-    try:
-        head = pd.read_csv(path, header=None, dtype=str, nrows=1, comment="#")
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
-        raise DataError(f"{path.name}: cannot parse as CSV ({err})") from None
-    first = [str(v).strip() for v in head.iloc[0].tolist()] if not head.empty else []
+    import io
+
+    text = limits.read_text_file(path, limits.MAX_MEASURED_BYTES, "measured-data file", DataError)
+    first_line = next((ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+    first = [v.strip() for v in first_line.split(",")]
     is_aha = any(v in AHA_COLUMNS for v in first)
     conv = _resolve_convention("aha" if is_aha else None, segments, path.name)
     if conv == "lvcore" and not is_aha:
@@ -345,7 +346,12 @@ def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
                 for r in rows]
     if not is_aha:
         raise DataError(f"{path.name}: --segments aha needs columns lvv_ml, aha_01 .. aha_16 (aha_17 optional)")
-    df = pd.read_csv(path, comment="#")
+    try:
+        df = pd.read_csv(io.StringIO(text), comment="#")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as err:
+        raise DataError(f"{path.name}: cannot parse as CSV ({err})") from None
+    if len(df) > limits.MAX_MEASURED_ROWS:
+        raise DataError(f"{path.name}: {len(df):,} rows is more than the limit of {limits.MAX_MEASURED_ROWS:,}")
     cols = [c for c in AHA_COLUMNS if c in df.columns]
     if len(cols) != len(AHA_COLUMNS) or "lvv_ml" not in df.columns:
         missing = [c for c in ("lvv_ml",) + AHA_COLUMNS if c not in df.columns]
