@@ -241,12 +241,20 @@ def _fake_calibration(monkeypatch):
             return "converged (fake)"
 
     def fake(y, fwd, model, **kw):
-        idata = az.from_dict(posterior={"a": np.ones((1, 4))}, attrs=kw.get("attrs") or {})
+        eta = np.broadcast_to(np.asarray(y, float), (1, 4, 25))  # posterior outputs = the data (plausible)
+        idata = az.from_dict(posterior={"a": np.ones((1, 4)), "eta": eta}, attrs=kw.get("attrs") or {})
         return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [1.0]}, index=["a"]), 0.1,
                                      {"min": 1.0})
 
+    from types import SimpleNamespace
+
+    names = ("a", "b", "af", "bf", "h1", "h2", "h3", "h4", "h5")  # the 'chapter' emulator's inputs and box
+    emulator = SimpleNamespace(name="chapter", input_names=names, lower=np.r_[0.05, 0.1, 0.05, 0.1, [-2.0] * 5],
+                               upper=np.r_[10.0, 30.0, 10.0, 30.0, [2.0] * 5],
+                               fixed={"alpha_endo": -60.0, "alpha_epi": 60.0, "edp": 8.0})
     monkeypatch.setattr(cal, "calibrate", fake)
-    monkeypatch.setattr(forward, "load_emulator_forward", lambda *a, **k: None)
+    monkeypatch.setattr(forward, "load_emulator_forward", lambda *a, **k: SimpleNamespace(emulator=emulator))
+    monkeypatch.setattr(forward, "emulator_forward", lambda *a, **k: None)
 
 
 def test_calibrate_never_writes_outside_out(tmp_path, capsys, monkeypatch):

@@ -16,6 +16,8 @@ _EXPORTS = {
     "read_contours": "contours", "ContourStack": "contours",
     "read_surface": "surfaces",
     "fit_contours": "fitting", "fit_surfaces": "fitting", "FitResult": "fitting",
+    "fit_volume_mesh": "volume_mesh", "extract_lv_boundary": "volume_mesh", "VolumeMeshFit": "volume_mesh",
+    "ellipsoid_tet_mesh": "meshing",
     "ShapeModel": "shape_model", "load_shape_model": "shape_model", "fit_shape_model": "shape_model",
     "Cohort": "cohort", "load_cohort": "cohort", "load_operator_geometries": "cohort",
 }

@@ -7,7 +7,10 @@ Modules, in the order data flow through them: :mod:`~lvcore.inference.data`
 :mod:`~lvcore.inference.diagnostics` (R-hat, ESS, posterior predictive,
 InferenceData), :mod:`~lvcore.inference.calibrate` (one calibration end to
 end, and every subject x model), :mod:`~lvcore.inference.coverage`
-(credible-interval coverage check). One calibration is
+(credible-interval coverage check); around them :mod:`~lvcore.inference.segments`
+(AHA <-> lvcore strain segments), :mod:`~lvcore.inference.guards` (what
+``lvcore calibrate`` refuses) and :mod:`~lvcore.inference.plausibility`
+(posterior-predictive check of the data). One calibration is
 ``lvcore.inference.calibrate.calibrate`` (the name ``calibrate`` here is the
 module). Names are imported on first use. The forward model is any JAX-traceable
 :class:`lvcore.core.Forward` (the emulator, :class:`lvcore.core.EmulatorForward`).
@@ -21,8 +24,12 @@ _EXPORTS = {
     "calibrate_subjects": "calibrate", "read_pc_scores": "calibrate", "result_record": "calibrate",
     "write_result": "calibrate",
     "CoverageResult": "coverage", "coverage_study": "coverage", "simulate_data": "coverage",
-    "MeasuredData": "data", "read_measured_csv": "data", "validate_measurements": "data",
-    "write_measured_csv": "data",
+    "MeasuredData": "data", "read_measured_csv": "data", "read_measurements": "data",
+    "validate_measurements": "data", "write_measured_csv": "data",
+    "aha_to_lvcore": "segments", "lvcore_to_aha": "segments", "to_lvcore": "segments",
+    "GeometrySource": "guards", "resolve_geometry": "guards", "check_conditions": "guards",
+    "check_inputs_in_box": "guards",
+    "PlausibilityCheck": "plausibility", "posterior_predictive_check": "plausibility",
     "Convergence": "diagnostics", "posterior_predictive": "diagnostics", "to_inference_data": "diagnostics",
     "MODEL_NAMES": "models", "get_model": "models", "prior_bounds": "models",
     "SamplerConfig": "samplers", "SamplerRun": "samplers", "run_model": "samplers", "use_host_devices": "samplers",
