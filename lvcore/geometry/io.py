@@ -177,6 +177,37 @@ def _append_metadata(path: Path, metadata: dict) -> None:
         path.write_text(comment + text)
 
 
+def read_meshio_file(path, what: str, max_bytes: int, hint: str):
+    """Read a mesh file with meshio, every failure a :class:`GeometryError`.
+
+    Parameters
+    ----------
+    path : str or Path
+        A regular file of at most ``max_bytes`` bytes.
+    what : str
+        What the file is, for messages (e.g. ``"template mesh"``).
+    max_bytes : int
+        Size limit (:mod:`lvcore.limits`).
+    hint : str
+        What to do instead, appended to the message when meshio cannot read it.
+
+    Returns
+    -------
+    meshio.Mesh
+    """
+    import meshio
+
+    from lvcore import limits
+
+    path = limits.check_regular_file(path, max_bytes, what, GeometryError)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return meshio.read(path)
+    except (Exception, SystemExit) as err:  # meshio raises many types, and sys.exit()s on some files
+        raise GeometryError(f"cannot read {what} '{path}' ({type(err).__name__}: {err}); {hint}") from None
+
+
 def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
     """Read a template mesh written by :func:`write_template_mesh` (or an equivalent VTU).
 
@@ -199,18 +230,10 @@ def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndar
         the template, has non-finite coordinates, looks like it is in metres or
         centimetres, or has inverted elements.
     """
-    import meshio
-
     from lvcore import limits
 
-    path = limits.check_regular_file(path, limits.MAX_MESH_BYTES, "template mesh", GeometryError)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            mesh = meshio.read(path)
-    except (Exception, SystemExit) as err:  # meshio raises many types, and sys.exit()s on some files
-        raise GeometryError(f"cannot read template mesh '{path}' ({type(err).__name__}: {err}); "
-                            "write it with `lvcore geometry fit ... --out MESH.vtu` or write_template_mesh()") from None
+    mesh = read_meshio_file(path, "template mesh", limits.MAX_MESH_BYTES,
+                            "write it with `lvcore geometry fit ... --out MESH.vtu` or write_template_mesh()")
     if _FIELD_TEMPLATE in mesh.field_data:
         dims = tuple(int(v) for v in np.ravel(mesh.field_data[_FIELD_TEMPLATE])[:3])
         if dims != (template.n_circ, template.n_long, template.n_trans):

@@ -32,14 +32,13 @@ All lengths in mm (``units`` converts cm or m on reading).
 """
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from lvcore.exceptions import GeometryError
-from lvcore.geometry.io import check_extent_is_mm
+from lvcore.geometry.io import check_extent_is_mm, read_meshio_file
 from lvcore.geometry.surfaces import LVSurface
 
 #: Unit -> mm factor.
@@ -157,14 +156,8 @@ def read_volume_cells(path_or_mesh, units: str = "mm"):
         source = str(path)
         if not path.exists():
             raise GeometryError(f"volume mesh '{path}' does not exist")
-        limits.check_regular_file(path, limits.MAX_SURFACE_BYTES, "volume mesh", GeometryError)
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                mesh = meshio.read(path)
-        except (Exception, SystemExit) as err:  # meshio raises many types, and sys.exit()s on some files
-            raise GeometryError(f"cannot read volume mesh '{path}' ({type(err).__name__}: {err}); give a format "
-                                "meshio reads (.inp, .msh, .vtu, .vtk, .xdmf, .med, ...)") from None
+        mesh = read_meshio_file(path, "volume mesh", limits.MAX_SURFACE_BYTES,
+                                "give a format meshio reads (.inp, .msh, .vtu, .vtk, .xdmf, .med, ...)")
     pts = np.asarray(mesh.points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3) or len(pts) == 0:
         raise GeometryError(f"volume mesh '{source}' has no 3-D points")
