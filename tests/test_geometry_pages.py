@@ -58,9 +58,6 @@ def test_geometry_page_upload_good_and_bad_contours():
 
 def test_geometry_page_upload_volume_mesh(tmp_path):
     """A volumetric tetrahedral mesh (ABAQUS .inp) is accepted and fitted like surfaces."""
-    import pytest
-
-    pytest.importorskip("gmsh")
     from lvcore.geometry.analytic import DEFAULT_LV
     from lvcore.geometry.meshing import ellipsoid_tet_mesh
 

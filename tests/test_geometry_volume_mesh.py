@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-pytest.importorskip("gmsh")
+import gmsh  # noqa: F401,E402 - a test dependency; a missing one fails, never skips
 import meshio  # noqa: E402
 
 from lvcore.cli import main  # noqa: E402

@@ -131,7 +131,6 @@ def test_check_conditions_unit():
 
 def test_resolve_geometry_from_a_volume_mesh(tmp_path):
     """--geometry LV.inp: the volume mesh is fitted, projected, and the source recorded."""
-    pytest.importorskip("gmsh")
     from lvcore.exceptions import GeometryError
     from lvcore.geometry.analytic import DEFAULT_LV
     from lvcore.geometry.meshing import ellipsoid_tet_mesh
