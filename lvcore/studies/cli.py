@@ -7,6 +7,8 @@ import importlib
 STUDY_MODULES = (
     "lvcore.studies.geometry_operators",   # lvcore study geometry-operators
     "lvcore.studies.fibre_discrepancy",    # lvcore study fibre-discrepancy
+    "lvcore.studies.bo_fibres",            # lvcore study bo-fibres
+    "lvcore.studies.operators",            # lvcore study operators
 )
 
 
