@@ -1,0 +1,74 @@
+"""Wall time of the optimisation studies on small budgets (issue 13's speed targets).
+
+    OMP_NUM_THREADS=1 python benchmarks/bench_studies.py bo [--initial 30] [--iterations 30] [--workers 2]
+    OMP_NUM_THREADS=1 python benchmarks/bench_studies.py operators [--patients SYNTHETIC-P01] [--workers 2]
+
+``bo``: one volunteer (default SYNTHETIC-HV1) in both modes (fixed, free) with
+a 30 + 30 budget through the same code path as ``lvcore study bo-fibres``
+(target <= 3 min on 2 cores). ``operators``: every fit of one patient (3 main
+operators x 4 test geometries = 12 SQP refits with adjoint gradients) as
+``lvcore study operators`` runs them (target <= 5 min). Each run starts in a
+fresh temporary folder, so nothing is resumed. The machine is shared: the
+load average (1 min) before and after and the sparse linear solver are
+printed with the result; compare numbers only at similar load.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+
+for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_k, "1")
+os.environ.setdefault("LVCORE_NO_PNG", "1")  # time the study, not Chrome starting for PNG export
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("study", choices=("bo", "operators"))
+    p.add_argument("--subject", default="SYNTHETIC-HV1")
+    p.add_argument("--initial", type=int, default=30)
+    p.add_argument("--iterations", type=int, default=30)
+    p.add_argument("--patients", default="SYNTHETIC-P01")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--resolution", default="default")
+    p.add_argument("--out", default=None, help="keep the outputs here (default: a temporary folder)")
+    args = p.parse_args(argv)
+
+    from lvcore.mechanics.linear import available_backends
+
+    load0 = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        out = args.out or tmp
+        if args.study == "bo":
+            from lvcore.studies import bo_fibres
+
+            entries = bo_fibres.run_study([args.subject], out=out, n_initial=args.initial,
+                                          n_iterations=args.iterations, workers=args.workers,
+                                          resolution=args.resolution)
+            detail = {e["mode"]: {"seconds": e["seconds"], "evaluations": e["evaluations"],
+                                  "failed": e["failed_evaluations"]["count"],
+                                  "lvv_abs_error_ml": round(e["lvv_abs_error_ml"], 2)} for e in entries}
+            what = f"bo-fibres {args.subject}, both modes, {args.initial} + {args.iterations}"
+        else:
+            from lvcore.studies import operators
+
+            res = operators.run_study(args.patients.split(","), out=out, workers=args.workers,
+                                      resolution=args.resolution)
+            fits = res["fits"]
+            detail = {"fits": len(fits), "converged": sum(f["converged"] for f in fits),
+                      "simulations": res["meta"]["simulations"]}
+            what = f"operators {args.patients} ({len(fits)} SQP refits)"
+    wall = time.perf_counter() - t0
+    print(json.dumps({"study": what, "wall_s": round(wall, 1), "workers": args.workers,
+                      "resolution": args.resolution, "linear_solver": available_backends()[0],
+                      "load_avg_1min_before": round(load0, 2), "load_avg_1min_after": round(os.getloadavg()[0], 2),
+                      "cpus": os.cpu_count(), "detail": detail}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,550 @@
+"""Three-operator parameter-estimation study (chapter §9.3.3, Figs 9.11–9.14; findings F4/F5).
+
+For each SYNTHETIC patient of the operator study and each of the 3
+(imitation) operators taken as the *main* one, data are simulated at the
+truth θ̃ = (0.60, 1.30, 1.00, 3.60) on the main operator's geometry g:
+``y* = ζ(θ̃, g)``. θ is then refitted from θ̃ on each *test* geometry ĝ —
+the two other operators' geometries and the 5- and 10-PC reconstructions of
+g — by SLSQP on the chapter's loss (9.11)
+(:func:`lvcore.optimise.sqp.refit_theta`) with the simulator's adjoint
+gradients (:class:`lvcore.core.SimulatorForward`). 6 patients × 3 mains × 4
+tests = 72 fits.
+
+Each fit records:
+
+* ``strain_rmse_forward`` — RMS over the 24 regions of ζ(θ̃, ĝ) − y*
+  (the forward strain error of the geometry alone, Fig 9.11);
+* ``theta_hat``, ``theta_abs_error`` (Fig 9.12);
+* ``output_rmse_refit`` — RMS over the 24 strains of ζ(θ̂, g) − y*, the
+  refitted parameters run on the main (true) geometry against the benchmark
+  simulation (Fig 9.14: parameter errors measured in output space);
+* beyond the chapter: the Gauss–Newton/Laplace covariance of θ̂ and the
+  Mahalanobis distance of θ̂ from θ̃. Loss (9.11) is a sum of 25 squared
+  residuals r(θ); read as the negative log-likelihood of i.i.d. Gaussian
+  residuals of standard deviation σ (:data:`SIGMA_RESIDUAL`, the volunteers'
+  strain noise), the Laplace covariance at θ̂ is ``Σ = σ² (JᵀJ)⁻¹`` with J =
+  dr/dθ from the adjoint Jacobian, and ``d = sqrt(Δθᵀ Σ⁻¹ Δθ)``;
+* the loss surface over each parameter pair around θ̂ (Fig 9.13): by default
+  its Gauss–Newton model ``|r(θ̂) + J Δθ|²`` (no extra simulations), with
+  ``--surface-grid N`` the simulator's loss on an N × N grid per pair.
+
+Fits run in parallel on the campaign executors (local pool or Dask); each
+finished fit is written to ``DIR/fits/`` so an interrupted study resumes.
+Everything is SYNTHETIC: the operators are imitations
+(:mod:`lvcore.geometry.cohort`).
+"""
+from __future__ import annotations
+
+import json
+import time
+from itertools import combinations
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
+from lvcore.exceptions import LVCoreError
+from lvcore.outputs import THETA_NAMES
+from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
+
+#: The chapter's ground truth θ̃ (a, af in kPa).
+THETA_TRUE = (0.60, 1.30, 1.00, 3.60)
+#: Numbers of PCA modes of the reconstructed test geometries.
+PC_TESTS = (5, 10)
+#: Standard deviation (strain units) of the residuals of loss (9.11) in the Laplace approximation.
+SIGMA_RESIDUAL = 0.03
+#: Parameter pairs of the loss surfaces (Fig 9.13).
+PAIRS = tuple(combinations(THETA_NAMES, 2))
+#: Gauss–Newton surface: grid points per axis and the span (factor around θ̂, log scale).
+GN_GRID, SURFACE_SPAN = 9, 2.0
+#: The chapter's geometric finding (Table 9.4): 10 PCs beat a new operator in 94 % of cases.
+CHAPTER_SHARE_10PC = 0.94
+
+
+# ----------------------------------------------------------------------------- geometry
+def early_volume_ml(nodes) -> float:
+    """Early-diastolic (reference) cavity volume of a template geometry (mL)."""
+    from lvcore.geometry.measures import cavity_volume
+    from lvcore.geometry.template import DEFAULT_TEMPLATE
+
+    return float(cavity_volume(np.asarray(nodes, float), DEFAULT_TEMPLATE)) / 1000.0
+
+
+def patient_geometries(patient: str, out_dir, operator_geometries=None, shape_model=None) -> dict:
+    """Write the patient's geometries as VTU under ``out_dir``; name -> {path, v_early_ml}.
+
+    Names: each operator (``op1``...) and ``<main>/pc5``, ``<main>/pc10`` for
+    the PC reconstructions of each main operator's geometry.
+    """
+    from lvcore.geometry.cohort import load_operator_geometries
+    from lvcore.geometry.io import write_template_mesh
+    from lvcore.geometry.shape_model import load_shape_model
+
+    og = operator_geometries or load_operator_geometries()
+    sm = shape_model or load_shape_model()
+    if patient not in og.patients:
+        raise LVCoreError(f"--patients: unknown patient '{patient}' (operator study: {', '.join(og.patients)})")
+    if patient in set(sm.train_ids):
+        raise LVCoreError(f"patient '{patient}' is in the shape model's training set; hold it out")
+    p = og.patients.index(patient)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    geoms = {}
+
+    def put(name, nodes):
+        path = out_dir / f"{patient.replace('-', '_')}_{name.replace('/', '_')}.vtu"
+        if not path.is_file():
+            write_template_mesh(path, nodes, metadata={"source": f"SYNTHETIC operator study {patient} {name}"})
+        geoms[name] = {"path": str(path), "v_early_ml": early_volume_ml(nodes)}
+
+    for o, op in enumerate(og.operators):
+        g = og.nodes[p, o]
+        put(op, g)
+        for k in PC_TESTS:
+            put(f"{op}/pc{k}", sm.reconstruct_nodes(g, k))
+    return geoms
+
+
+def test_geometries(main: str, operators: Sequence[str]) -> list[tuple[str, str]]:
+    """``(test_geometry label, geometry name)`` for one main operator: the other operators, then pc5, pc10."""
+    return [(o, o) for o in operators if o != main] + [(f"pc{k}", f"{main}/pc{k}") for k in PC_TESTS]
+
+
+# ----------------------------------------------------------------------------- forward with a cache
+class CachedForward:
+    """One-point cache around a Forward (the SQP asks for the same θ more than once; the Jacobian is reused)."""
+
+    traceable = False
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.input_names = tuple(inner.input_names)
+        self.label = inner.label
+        self.provides_jacobian = inner.provides_jacobian
+        self.cache: dict = {}
+        self.simulations = 0
+
+    @property
+    def input_bounds(self):
+        return self.inner.input_bounds
+
+    def evaluate(self, inputs, *, jacobian: bool = False) -> ForwardBatch:
+        cols, n = as_columns(inputs, self.input_names, self.label)
+        if n != 1:
+            self.simulations += n
+            return self.inner.evaluate(cols, jacobian=jacobian)
+        key = tuple(float(cols[k][0]) for k in self.input_names)
+        hit = self.cache.get(key)
+        if hit is None or (jacobian and hit.jacobian is None):
+            hit = self.inner.evaluate(cols, jacobian=jacobian or self.provides_jacobian)
+            self.simulations += 1
+            self.cache[key] = hit
+        return hit
+
+    def __call__(self, params):
+        return self.evaluate({k: params[k] for k in self.input_names}).raise_on_failure().outputs[0]
+
+
+def residual_jacobian(loss, y: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals ``r`` (25,) of loss (9.11) (``L = |r|²``) and ``dr/dθ`` (25, 4) from outputs and their Jacobian."""
+    y0s = loss.measured[0]
+    r = np.empty(len(y))
+    r[0] = (loss.v_early_main - y0s) / y0s - (loss.v_early_test - y[0]) / y[0]
+    r[1:] = loss.measured[1:] - y[1:]
+    J = np.empty_like(jac)
+    J[0] = loss.v_early_test / y[0] ** 2 * jac[0]
+    J[1:] = -jac[1:]
+    return r, J
+
+
+def laplace_covariance(J: np.ndarray, sigma: float = SIGMA_RESIDUAL) -> np.ndarray:
+    """Gauss–Newton/Laplace covariance ``σ² (JᵀJ)⁻¹`` of θ (pseudo-inverse where JᵀJ is singular)."""
+    return sigma**2 * np.linalg.pinv(J.T @ J)
+
+
+def mahalanobis(theta_hat, theta_true, cov) -> float:
+    d = np.asarray(theta_hat, float) - np.asarray(theta_true, float)
+    return float(np.sqrt(max(d @ np.linalg.pinv(cov) @ d, 0.0)))
+
+
+def gauss_newton_surfaces(theta_hat, r, J, n: int = GN_GRID, span: float = SURFACE_SPAN) -> list[dict]:
+    """Gauss–Newton model of the loss over each parameter pair around θ̂ (others held at θ̂)."""
+    th = np.asarray(theta_hat, float)
+    out = []
+    for a, b in PAIRS:
+        i, j = THETA_NAMES.index(a), THETA_NAMES.index(b)
+        xs = th[i] * np.geomspace(1 / span, span, n)
+        ys = th[j] * np.geomspace(1 / span, span, n)
+        rss = np.empty((n, n))
+        for q, yv in enumerate(ys):
+            for p_, xv in enumerate(xs):
+                d = np.zeros(4)
+                d[i], d[j] = xv - th[i], yv - th[j]
+                rss[q, p_] = float(np.sum((r + J @ d) ** 2))
+        out.append({"x": a, "y": b, "x_values": xs.tolist(), "y_values": ys.tolist(),
+                    "rss": np.round(rss, 8).tolist()})
+    return out
+
+
+def simulator_surfaces(forward, loss, theta_hat, n: int, span: float = SURFACE_SPAN) -> list[dict]:
+    """The simulator's loss (9.11) over each parameter pair on an ``n × n`` grid around θ̂ (6 n² simulations)."""
+    th = np.asarray(theta_hat, float)
+    out = []
+    for a, b in PAIRS:
+        i, j = THETA_NAMES.index(a), THETA_NAMES.index(b)
+        xs = th[i] * np.geomspace(1 / span, span, n)
+        ys = th[j] * np.geomspace(1 / span, span, n)
+        X, Y = np.meshgrid(xs, ys)
+        pts = np.tile(th, (n * n, 1))
+        pts[:, i], pts[:, j] = X.ravel(), Y.ravel()
+        b_ = forward.evaluate(dict(zip(THETA_NAMES, pts.T)))
+        rss = np.array([loss.value_and_output_gradient(y)[0] if ok else np.nan
+                        for y, ok in zip(b_.outputs, b_.converged)]).reshape(n, n)
+        out.append({"x": a, "y": b, "x_values": xs.tolist(), "y_values": ys.tolist(), "rss": rss.tolist()})
+    return out
+
+
+# ----------------------------------------------------------------------------- one fit
+def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution: str = "default",
+            forward_factory=None, surface_grid: int = 0) -> dict:
+    """One SQP refit of θ on test geometry ``test`` against data ``y_star`` from ``main`` (a fit record).
+
+    ``geoms``: :func:`patient_geometries`. ``forward_factory(geometry_name)``
+    replaces the simulator (tests). Runs in worker processes; failures are
+    recorded, not raised.
+    """
+    from lvcore.optimise.sqp import OperatorLoss, refit_theta
+
+    t0 = time.perf_counter()
+    name = dict(test_geometries(main, [k for k in geoms if "/" not in k]))[test]
+
+    def make(geom_name):
+        if forward_factory is not None:
+            return CachedForward(forward_factory(geom_name))
+        return CachedForward(SimulatorForward(geometry={"kind": "mesh", "path": geoms[geom_name]["path"]},
+                                              resolution=resolution, label=f"FE simulator on {patient} {geom_name}"))
+
+    y_star = np.asarray(y_star, float)
+    truth = np.array(THETA_TRUE)
+    rec = {"patient": patient, "main_operator": main, "test_geometry": test, "converged": False,
+           "theta_true": list(THETA_TRUE)}
+    try:
+        fwd = make(name)
+        loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
+        y_fwd = fwd.evaluate(dict(zip(THETA_NAMES, truth)), jacobian=True).raise_on_failure().outputs[0]
+        err_fwd = y_fwd[1:] - y_star[1:]
+        res = refit_theta(fwd, loss, truth)
+        b_hat = fwd.evaluate(dict(zip(THETA_NAMES, res.theta)), jacobian=True).raise_on_failure()
+        r, J = residual_jacobian(loss, b_hat.outputs[0], b_hat.jacobian[0])
+        cov = laplace_covariance(J)
+        main_fwd = fwd if name == main else make(main)
+        y_main_hat = main_fwd.evaluate(dict(zip(THETA_NAMES, res.theta))).raise_on_failure().outputs[0]
+        err_out = y_main_hat[1:] - y_star[1:]
+        surfaces = {"method": "gauss-newton model at theta_hat (adjoint Jacobian)",
+                    "pairs": gauss_newton_surfaces(res.theta, r, J)}
+        if surface_grid:
+            surfaces = {"method": f"simulator, {surface_grid} x {surface_grid} grid per pair",
+                        "pairs": simulator_surfaces(fwd, loss, res.theta, surface_grid)}
+        rec.update({
+            "converged": bool(res.success),
+            "message": res.message,
+            "theta_hat": res.theta.tolist(),
+            "theta_abs_error": np.abs(res.theta - truth).tolist(),
+            "loss": float(res.loss),
+            "strain_rmse_forward": float(np.sqrt(np.mean(err_fwd**2))),
+            "strain_errors_forward": err_fwd.tolist(),
+            "lvv_forward_ml": float(y_fwd[0]),
+            "output_rmse_refit": float(np.sqrt(np.mean(err_out**2))),
+            "output_distance_refit": float(np.linalg.norm(err_out)),
+            "covariance": cov.tolist(),
+            "sigma_residual": SIGMA_RESIDUAL,
+            "mahalanobis": mahalanobis(res.theta, truth, cov),
+            "sqp_evaluations": int(res.n_evaluations),
+            "simulations": fwd.simulations + (0 if main_fwd is fwd else main_fwd.simulations),
+            "rss_surface": surfaces,
+        })
+    except Exception as err:  # noqa: BLE001 - a failed fit is data (the study goes on), with its reason
+        from lvcore.core.forward import failure_reason
+
+        rec["message"] = failure_reason(err)
+    rec["seconds"] = round(time.perf_counter() - t0, 2)
+    return rec
+
+
+def _data_task(patient, main, geoms, resolution, forward_factory):
+    """``y* = ζ(θ̃, g_main)`` (worker task)."""
+    if forward_factory is not None:
+        f = forward_factory(main)
+    else:
+        f = SimulatorForward(geometry={"kind": "mesh", "path": geoms[main]["path"]}, resolution=resolution)
+    return f.evaluate(dict(zip(THETA_NAMES, THETA_TRUE))).raise_on_failure().outputs[0].tolist()
+
+
+# ----------------------------------------------------------------------------- the study
+def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, scheduler: str | None = None,
+              resolution: str = "default", surface_grid: int = 0, forward_factory=None, progress: bool = False,
+              operator_geometries=None, shape_model=None) -> dict:
+    """Run every fit of ``patients`` (default: all 6) and write ``out/operators.json`` and the figures.
+
+    Returns ``{"fits": [...], "findings": {...}, "meta": {...}}``. Finished
+    fits are kept in ``out/fits/`` and not repeated when the study is re-run
+    with the same ``out``.
+    """
+    from lvcore.geometry.cohort import load_operator_geometries
+
+    og = operator_geometries or load_operator_geometries()
+    patients = list(patients) if patients else list(og.patients)
+    out = Path(out)
+    fits_dir = out / "fits"
+    fits_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    geoms = {p: patient_geometries(p, out / "geometries", og, shape_model) for p in patients}
+    ops = list(og.operators)
+    settings = {"resolution": resolution if forward_factory is None else "stand-in", "theta_true": THETA_TRUE,
+                "surface_grid": surface_grid}
+    executor = None
+    if scheduler or workers > 1:
+        from lvcore.campaigns.executors import make_executor
+
+        executor = make_executor(workers=workers, scheduler=scheduler)
+
+    def submit(fn, *args):
+        if executor is None:
+            class _Done:
+                def __init__(self, v):
+                    self.v = v
+
+                def result(self):
+                    return self.v
+            return _Done(fn(*args))
+        return executor.submit(fn, *args)
+
+    def fit_path(p, m, t):
+        return fits_dir / f"{p}_{m}_{t}.json".replace("-", "_")
+
+    records = {}
+    try:
+        todo = []
+        for p in patients:
+            for m in ops:
+                for t, _ in test_geometries(m, ops):
+                    fp = fit_path(p, m, t)
+                    if fp.is_file():
+                        d = json.loads(fp.read_text())
+                        if d.get("settings") == clean(settings):
+                            records[(p, m, t)] = d["fit"]
+                            continue
+                    todo.append((p, m, t))
+        with progress_bar(len(todo) + len({(p, m) for p, m, _ in todo}), "operators", progress) as bar:
+            mains = sorted({(p, m) for p, m, _ in todo})
+            data_f = {pm: submit(_data_task, pm[0], pm[1], geoms[pm[0]], resolution, forward_factory) for pm in mains}
+            y_star = {}
+            for pm, f in data_f.items():
+                y_star[pm] = f.result()
+                bar.update(1)
+            fut = {submit(fit_one, p, m, t, y_star[(p, m)], geoms[p], resolution, forward_factory,
+                          surface_grid): (p, m, t) for p, m, t in todo}
+            pending = list(fut)
+            done_iter = executor.as_completed(pending) if executor is not None else pending
+            for f in done_iter:
+                key = fut[f]
+                rec = f.result()
+                records[key] = rec
+                write_json_atomic(fit_path(*key), {"settings": clean(settings), "fit": clean(rec)})
+                bar.update(1)
+    finally:
+        if executor is not None:
+            executor.close()
+    order = [(p, m, t) for p in patients for m in ops for t, _ in test_geometries(m, ops)]
+    fits = [records[k] for k in order if k in records]
+    result = {"fits": fits, "findings": findings(fits, ops),
+              "meta": {"study": "operators", "label": "SYNTHETIC operator study (imitation operators on synthetic LVs)",
+                       "patients": patients, "operators": ops, "n_fits": len(fits),
+                       "complete_study": len(patients) == len(og.patients),
+                       "budget": (f"{len(patients)} of {len(og.patients)} patients" +
+                                  ("" if len(patients) == len(og.patients) else " (PARTIAL run; the chapter used all 6)")),
+                       "settings": settings, "seconds_this_session": round(time.perf_counter() - t0, 1),
+                       "simulations": int(sum(f.get("simulations", 0) for f in fits)),
+                       "fit_seconds_total": round(sum(f.get("seconds", 0.0) for f in fits), 1),
+                       "workers": workers, "executor": "dask" if scheduler else "local"}}
+    write_outputs(result, out)
+    return result
+
+
+# ----------------------------------------------------------------------------- findings and outputs
+def findings(fits: Sequence[dict], operators: Sequence[str]) -> dict:
+    """F4/F5 on this data: PCs vs new operators, in forward strain error and in output space after the refit."""
+    ok = [f for f in fits if "strain_rmse_forward" in f]
+    by = {(f["patient"], f["main_operator"], f["test_geometry"]): f for f in ok}
+    cases = sorted({(f["patient"], f["main_operator"]) for f in ok})
+    out = {"n_fits": len(fits), "n_fits_ok": len(ok), "n_converged": int(sum(f["converged"] for f in fits)),
+           "chapter_share_10pc_beats_operator_geometry": CHAPTER_SHARE_10PC}
+    for metric in ("strain_rmse_forward", "output_rmse_refit"):
+        res = {}
+        for k in PC_TESTS:
+            beats_both, no_worse, comps = [], [], 0
+            for p, m in cases:
+                pc = by.get((p, m, f"pc{k}"))
+                others = [by.get((p, m, o)) for o in operators if o != m]
+                others = [o for o in others if o is not None]
+                if pc is None or not others:
+                    continue
+                beats_both.append(all(pc[metric] < o[metric] for o in others))
+                no_worse += [pc[metric] <= o[metric] for o in others]
+                comps += len(others)
+            res[f"pc{k}"] = {"share_beats_both_operators": float(np.mean(beats_both)) if beats_both else None,
+                             "share_no_worse_than_an_operator": float(np.mean(no_worse)) if no_worse else None,
+                             "n_cases": len(beats_both), "n_comparisons": comps}
+        res["median"] = {t: float(np.median([f[metric] for f in ok if _group(f) == t]))
+                         for t in ("operator", "pc5", "pc10") if any(_group(f) == t for f in ok)}
+        out[metric] = res
+    if ok:
+        out["median_mahalanobis"] = {t: float(np.median([f["mahalanobis"] for f in ok if _group(f) == t]))
+                                     for t in ("operator", "pc5", "pc10") if any(_group(f) == t for f in ok)}
+        out["median_theta_abs_error"] = {t: dict(zip(THETA_NAMES, np.median(
+            [f["theta_abs_error"] for f in ok if _group(f) == t], axis=0).tolist()))
+            for t in ("operator", "pc5", "pc10") if any(_group(f) == t for f in ok)}
+    return out
+
+
+def _group(f: dict) -> str:
+    return f["test_geometry"] if f["test_geometry"].startswith("pc") else "operator"
+
+
+def fits_frame(fits: Sequence[dict]):
+    """One row per fit (CSV behind the figures)."""
+    import pandas as pd
+
+    rows = []
+    for f in fits:
+        row = {k: f.get(k) for k in ("patient", "main_operator", "test_geometry", "converged", "strain_rmse_forward",
+                                      "output_rmse_refit", "mahalanobis", "loss", "sqp_evaluations", "seconds")}
+        for i, n in enumerate(THETA_NAMES):
+            row[f"{n}_hat"] = f["theta_hat"][i] if "theta_hat" in f else None
+            row[f"{n}_abs_error"] = f["theta_abs_error"][i] if "theta_abs_error" in f else None
+        row["message"] = f.get("message", "")
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def violin_figure(fits: Sequence[dict], metric: str, title: str, yaxis: str, per_region: bool = False):
+    """Violins of ``metric`` per test geometry, one panel per main operator (Figs 9.11 and 9.14)."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    mains = sorted({f["main_operator"] for f in fits})
+    fig = make_subplots(rows=1, cols=max(1, len(mains)), subplot_titles=[f"main operator {m}" for m in mains],
+                        shared_yaxes=True)
+    for c, m in enumerate(mains, start=1):
+        tests = [t for t in dict.fromkeys(f["test_geometry"] for f in fits if f["main_operator"] == m)]
+        for t in tests:
+            vals = []
+            for f in fits:
+                if f["main_operator"] == m and f["test_geometry"] == t and metric in f:
+                    vals += list(np.abs(f[metric])) if per_region else [f[metric]]
+            fig.add_trace(go.Violin(x=[t] * len(vals), y=vals, name=t, box_visible=True, points="all",
+                                    showlegend=False, line_color="#1f77b4" if t.startswith("pc") else "#d62728"),
+                          row=1, col=c)
+    fig.update_layout(title=title, height=450)
+    fig.update_yaxes(title_text=yaxis, col=1)
+    return fig
+
+
+def surface_figure(fit: dict):
+    """Contours of the loss over the parameter pairs of one fit (Fig 9.13), θ̃ marked."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    pairs = fit["rss_surface"]["pairs"]
+    fig = make_subplots(rows=2, cols=3, subplot_titles=[f"{p['x']}–{p['y']}" for p in pairs])
+    for i, p in enumerate(pairs):
+        r, c = divmod(i, 3)
+        z = np.log10(np.maximum(np.asarray(p["rss"], float), 1e-12))
+        fig.add_trace(go.Contour(x=p["x_values"], y=p["y_values"], z=z, showscale=i == 0, colorscale="Viridis",
+                                 colorbar={"title": "log10 loss"}), row=r + 1, col=c + 1)
+        ti, tj = THETA_NAMES.index(p["x"]), THETA_NAMES.index(p["y"])
+        fig.add_trace(go.Scatter(x=[THETA_TRUE[ti]], y=[THETA_TRUE[tj]], mode="markers", showlegend=False,
+                                 marker={"symbol": "x", "color": "red", "size": 11}), row=r + 1, col=c + 1)
+        fig.update_xaxes(type="log", title_text=p["x"], row=r + 1, col=c + 1)
+        fig.update_yaxes(type="log", title_text=p["y"], row=r + 1, col=c + 1)
+    fig.update_layout(title=f"Loss (9.11) around θ̂: {fit['patient']}, main {fit['main_operator']}, test "
+                            f"{fit['test_geometry']} ({fit['rss_surface']['method']}); red X: θ̃", height=650)
+    return fig
+
+
+def write_outputs(result: dict, out) -> dict:
+    """``operators.json`` (fits without the surfaces), ``rss_surfaces.json``, CSVs and figures."""
+    out = Path(out)
+    fits = result["fits"]
+    slim = [{k: v for k, v in f.items() if k != "rss_surface"} for f in fits]
+    paths = {"json": str(write_json_atomic(out / "operators.json", clean({**result, "fits": slim})))}
+    surfaces = [{"patient": f["patient"], "main_operator": f["main_operator"], "test_geometry": f["test_geometry"],
+                 **f["rss_surface"]} for f in fits if "rss_surface" in f]
+    paths["surfaces"] = str(write_json_atomic(out / "rss_surfaces.json", clean(surfaces)))
+    fits_frame(fits).to_csv(out / "operators_fits.csv", index=False)
+    paths["csv"] = str(out / "operators_fits.csv")
+    ok = [f for f in fits if "strain_rmse_forward" in f]
+    if ok:
+        paths["fig_9_11"] = save_figure(violin_figure(ok, "strain_errors_forward",
+                                                      "Fig 9.11 (SYNTHETIC): |forward strain error| at θ̃, test vs main geometry",
+                                                      "|ζ(θ̃, ĝ) − y*| per region", per_region=True),
+                                        out / "fig_9_11_forward_strain_errors")
+        paths["fig_9_14"] = save_figure(violin_figure(ok, "output_rmse_refit",
+                                                      "Fig 9.14 (SYNTHETIC): output-space error of θ̂ on the main geometry",
+                                                      "RMS strain error ζ(θ̂, g) − y*"), out / "fig_9_14_output_errors")
+        paths["fig_mahalanobis"] = save_figure(violin_figure(ok, "mahalanobis",
+                                                             "Beyond the chapter: Mahalanobis distance of θ̂ from θ̃",
+                                                             "Mahalanobis distance"), out / "fig_mahalanobis")
+        ex = next((f for f in ok if f["test_geometry"] == "pc5"), ok[0])
+        paths["fig_9_13"] = save_figure(surface_figure(ex), out / "fig_9_13_loss_surface")
+    return paths
+
+
+def format_findings(f: dict) -> str:
+    lines = [f"{f['n_converged']}/{f['n_fits']} fits converged ({f['n_fits_ok']} completed)"]
+    for metric, what in (("strain_rmse_forward", "forward strain RMSE at θ̃ (Fig 9.11)"),
+                         ("output_rmse_refit", "output-space RMSE at θ̂ (Fig 9.14)")):
+        if metric not in f:
+            continue
+        for k in PC_TESTS:
+            d = f[metric][f"pc{k}"]
+            if d["share_beats_both_operators"] is None:
+                continue
+            lines.append(f"{what}: {k} PCs beat both other operators in {100 * d['share_beats_both_operators']:.0f} % "
+                         f"of {d['n_cases']} cases, no worse than an operator in "
+                         f"{100 * d['share_no_worse_than_an_operator']:.0f} % of {d['n_comparisons']} comparisons")
+        lines.append(f"  medians: " + ", ".join(f"{k} {v:.4f}" for k, v in f[metric]["median"].items()))
+    if "median_mahalanobis" in f:
+        lines.append("median Mahalanobis distance: " + ", ".join(f"{k} {v:.2f}" for k, v in f["median_mahalanobis"].items()))
+    lines.append(f"(chapter, geometry domain: 10 PCs beat a new operator in {100 * CHAPTER_SHARE_10PC:.0f} % of cases)")
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- CLI
+def add_study_parser(study_subparsers) -> None:
+    """``lvcore study operators``."""
+    p = study_subparsers.add_parser("operators", help="§9.3.3: SQP refits of theta on other operators' and PCA "
+                                                      "geometries (adjoint gradients; Figs 9.11-9.14, SYNTHETIC)")
+    p.add_argument("--patients", default=None, help="comma-separated, e.g. SYNTHETIC-P01,SYNTHETIC-P02 (default: all 6)")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes (fits run in parallel)")
+    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler")
+    p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
+    p.add_argument("--surface-grid", type=int, default=0,
+                   help="N > 0: simulator loss surfaces on N x N grids per parameter pair (6 N^2 runs per fit); "
+                        "default 0: Gauss-Newton model surfaces")
+    p.add_argument("--json", action="store_true", help="print the findings as JSON")
+    p.add_argument("--out", required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
+    p.set_defaults(func=_cli)
+
+
+def _cli(args) -> int:
+    patients = [s.strip() for s in args.patients.split(",") if s.strip()] if args.patients else None
+    res = run_study(patients, out=args.out, workers=args.workers, scheduler=args.scheduler,
+                    resolution=args.resolution, surface_grid=args.surface_grid, progress=not args.json)
+    if args.json:
+        print(json.dumps(clean({"findings": res["findings"], "meta": res["meta"]}), indent=1))
+    else:
+        print(format_findings(res["findings"]))
+        print(f"{res['meta']['budget']}; wrote {args.out}/operators.json, operators_fits.csv and figures")
+    return 0
