@@ -45,6 +45,7 @@ from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
 from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
+from lvcore.viz import study_figures
 from lvcore.studies._common import bundled_path, clean, progress_bar, save_figure, write_json_atomic
 
 #: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2).
@@ -437,47 +438,6 @@ def tables(entries: Sequence[dict]):
     return df.sort_values("subject", key=lambda c: c.str.len() * 1000 + c.str[-1].map(ord)).reset_index(drop=True)
 
 
-def residual_figure(entries: Sequence[dict]):
-    """Strain residuals (model − data) at the best point, fixed vs free angles, per subject (box plot)."""
-    import plotly.graph_objects as go
-
-    fig = go.Figure()
-    colours = {"fixed": "#d62728", "free": "#1f77b4"}
-    for m in MODES:
-        xs, ys = [], []
-        for e in entries:
-            if e["mode"] == m:
-                xs += [e["subject"].replace("SYNTHETIC-", "")] * len(e["strain_residuals"])
-                ys += e["strain_residuals"]
-        if ys:
-            label = "before: angles fixed (−60°, 90°)" if m == "fixed" else "after: angles optimised"
-            fig.add_trace(go.Box(x=xs, y=ys, name=label, marker_color=colours[m], boxpoints="all", jitter=0.4,
-                                 pointpos=0))
-    fig.add_hline(y=0, line_dash="dot")
-    fig.update_layout(boxmode="group", title="SYNTHETIC volunteers: strain residuals at the BO optimum",
-                      xaxis_title="volunteer", yaxis_title="model − measured circumferential strain")
-    return fig
-
-
-def convergence_figure(entries: Sequence[dict]):
-    """Best objective so far against evaluations, one line per subject and mode."""
-    import plotly.graph_objects as go
-
-    fig = go.Figure()
-    for e in entries:
-        c = e.get("convergence") or []
-        fig.add_trace(go.Scatter(y=c, mode="lines", name=f"{e['subject'].replace('SYNTHETIC-', '')} {e['mode']}",
-                                 line={"dash": "solid" if e["mode"] == "free" else "dot"}))
-        if e.get("n_initial"):
-            pass
-    if entries:
-        fig.add_vline(x=entries[0].get("n_initial", 0) - 0.5, line_dash="dash",
-                      annotation_text="end of initial design")
-    fig.update_layout(title="SYNTHETIC volunteers: BO convergence (best standardised RSS so far)",
-                      xaxis_title="evaluation", yaxis_title="best objective", yaxis_type="log")
-    return fig
-
-
 def write_outputs(entries: Sequence[dict], out, settings: dict | None = None) -> dict:
     """Write ``bo_fibres.json``, ``bo_fibres_meta.json``, ``tables.csv`` and the figures under ``out``."""
     out = Path(out)
@@ -494,8 +454,8 @@ def write_outputs(entries: Sequence[dict], out, settings: dict | None = None) ->
     paths["meta"] = str(write_json_atomic(out / "bo_fibres_meta.json", clean(meta)))
     tables(entries).to_csv(out / "tables.csv", index=False)
     paths["tables"] = str(out / "tables.csv")
-    paths["fig_residuals"] = save_figure(residual_figure(entries), out / "fig_strain_residuals")
-    paths["fig_convergence"] = save_figure(convergence_figure(entries), out / "fig_convergence")
+    paths["fig_residuals"] = save_figure(study_figures.residual_figure(entries), out / "fig_strain_residuals")
+    paths["fig_convergence"] = save_figure(study_figures.convergence_figure(entries), out / "fig_convergence")
     return paths
 
 

@@ -46,6 +46,7 @@ import numpy as np
 from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import THETA_NAMES
+from lvcore.viz import study_figures
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
 #: The chapter's ground truth θ̃ (a, af in kPa).
@@ -428,51 +429,6 @@ def fits_frame(fits: Sequence[dict]):
     return pd.DataFrame(rows)
 
 
-def violin_figure(fits: Sequence[dict], metric: str, title: str, yaxis: str, per_region: bool = False):
-    """Violins of ``metric`` per test geometry, one panel per main operator (Figs 9.11 and 9.14)."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
-    mains = sorted({f["main_operator"] for f in fits})
-    fig = make_subplots(rows=1, cols=max(1, len(mains)), subplot_titles=[f"main operator {m}" for m in mains],
-                        shared_yaxes=True)
-    for c, m in enumerate(mains, start=1):
-        tests = [t for t in dict.fromkeys(f["test_geometry"] for f in fits if f["main_operator"] == m)]
-        for t in tests:
-            vals = []
-            for f in fits:
-                if f["main_operator"] == m and f["test_geometry"] == t and metric in f:
-                    vals += list(np.abs(f[metric])) if per_region else [f[metric]]
-            fig.add_trace(go.Violin(x=[t] * len(vals), y=vals, name=t, box_visible=True, points="all",
-                                    showlegend=False, line_color="#1f77b4" if t.startswith("pc") else "#d62728"),
-                          row=1, col=c)
-    fig.update_layout(title=title, height=450)
-    fig.update_yaxes(title_text=yaxis, col=1)
-    return fig
-
-
-def surface_figure(fit: dict):
-    """Contours of the loss over the parameter pairs of one fit (Fig 9.13), θ̃ marked."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
-    pairs = fit["rss_surface"]["pairs"]
-    fig = make_subplots(rows=2, cols=3, subplot_titles=[f"{p['x']}–{p['y']}" for p in pairs])
-    for i, p in enumerate(pairs):
-        r, c = divmod(i, 3)
-        z = np.log10(np.maximum(np.asarray(p["rss"], float), 1e-12))
-        fig.add_trace(go.Contour(x=p["x_values"], y=p["y_values"], z=z, showscale=i == 0, colorscale="Viridis",
-                                 colorbar={"title": "log10 loss"}), row=r + 1, col=c + 1)
-        ti, tj = THETA_NAMES.index(p["x"]), THETA_NAMES.index(p["y"])
-        fig.add_trace(go.Scatter(x=[THETA_TRUE[ti]], y=[THETA_TRUE[tj]], mode="markers", showlegend=False,
-                                 marker={"symbol": "x", "color": "red", "size": 11}), row=r + 1, col=c + 1)
-        fig.update_xaxes(type="log", title_text=p["x"], row=r + 1, col=c + 1)
-        fig.update_yaxes(type="log", title_text=p["y"], row=r + 1, col=c + 1)
-    fig.update_layout(title=f"Loss (9.11) around θ̂: {fit['patient']}, main {fit['main_operator']}, test "
-                            f"{fit['test_geometry']} ({fit['rss_surface']['method']}); red X: θ̃", height=650)
-    return fig
-
-
 def write_outputs(result: dict, out) -> dict:
     """``operators.json`` (fits without the surfaces), ``rss_surfaces.json``, CSVs and figures."""
     out = Path(out)
@@ -486,18 +442,18 @@ def write_outputs(result: dict, out) -> dict:
     paths["csv"] = str(out / "operators_fits.csv")
     ok = [f for f in fits if "strain_rmse_forward" in f]
     if ok:
-        paths["fig_9_11"] = save_figure(violin_figure(ok, "strain_errors_forward",
+        paths["fig_9_11"] = save_figure(study_figures.violin_figure(ok, "strain_errors_forward",
                                                       "Fig 9.11 (SYNTHETIC): |forward strain error| at θ̃, test vs main geometry",
                                                       "|ζ(θ̃, ĝ) − y*| per region", per_region=True),
                                         out / "fig_9_11_forward_strain_errors")
-        paths["fig_9_14"] = save_figure(violin_figure(ok, "output_rmse_refit",
+        paths["fig_9_14"] = save_figure(study_figures.violin_figure(ok, "output_rmse_refit",
                                                       "Fig 9.14 (SYNTHETIC): output-space error of θ̂ on the main geometry",
                                                       "RMS strain error ζ(θ̂, g) − y*"), out / "fig_9_14_output_errors")
-        paths["fig_mahalanobis"] = save_figure(violin_figure(ok, "mahalanobis",
+        paths["fig_mahalanobis"] = save_figure(study_figures.violin_figure(ok, "mahalanobis",
                                                              "Beyond the chapter: Mahalanobis distance of θ̂ from θ̃",
                                                              "Mahalanobis distance"), out / "fig_mahalanobis")
         ex = next((f for f in ok if f["test_geometry"] == "pc5"), ok[0])
-        paths["fig_9_13"] = save_figure(surface_figure(ex), out / "fig_9_13_loss_surface")
+        paths["fig_9_13"] = save_figure(study_figures.surface_figure(ex, THETA_TRUE), out / "fig_9_13_loss_surface")
     return paths
 
 

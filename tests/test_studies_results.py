@@ -1,0 +1,60 @@
+"""Finding and loading saved study results, background runs, and the Studies page on saved results."""
+import json
+import time
+
+import pytest
+from streamlit.testing.v1 import AppTest
+
+from lvcore.core import AnalyticForward
+from lvcore.studies import bo_fibres, operators, results
+from tests.test_studies_operators import stand_in
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    root = tmp_path_factory.mktemp("studies")
+    fac = lambda s, m: AnalyticForward(input_names=bo_fibres.bo_space(m).names)  # noqa: E731
+    bo_fibres.run_study(["SYNTHETIC-HV1"], out=root / "bo", n_initial=5, n_iterations=1, forward_factory=fac)
+    operators.run_study(["SYNTHETIC-P01"], out=root / "ops", forward_factory=stand_in)
+    return root
+
+
+def test_sources_and_loaders(saved):
+    src = results.result_sources([saved])
+    assert (f"{saved}: bo", saved / "bo") in src["bo-fibres"]
+    assert (f"{saved}: ops", saved / "ops") in src["operators"]
+    entries, meta = results.load_bo(saved / "bo")
+    assert len(entries) == 2 and "REDUCED" in meta["budget"]["label"]
+    data = results.load_operators(saved / "ops")
+    assert len(data["fits"]) == 12 and len(data["surfaces"]) == 12
+
+
+def test_bundled_results_exist_and_are_labelled():
+    src = results.result_sources()
+    assert src["bo-fibres"] and src["operators"], "ship results in the bundled studies/ folder"
+    entries, meta = results.load_bo(src["bo-fibres"][0][1])
+    assert meta["budget"]["label"] and "chapter_budget" in meta["budget"]
+    assert {e["mode"] for e in entries} == {"fixed", "free"}
+    ops = results.load_operators(src["operators"][0][1])
+    assert ops["meta"]["budget"] and ops["fits"]
+
+
+def test_studies_page_renders_saved_results(saved):
+    at = AppTest.from_file("pages/6_Studies.py", default_timeout=240).run()
+    assert not at.exception
+    at.sidebar.text_input[0].set_value(str(saved)).run()
+    assert not at.exception
+    assert any("REDUCED" in w.value for w in at.warning)
+    assert len(at.dataframe) >= 2
+
+
+@pytest.mark.slow
+def test_background_run_finishes_with_progress(tmp_path):
+    run = results.small_run("bo-fibres", tmp_path, n_initial=3, n_iterations=0)
+    assert run.running or run.returncode == 0
+    t0 = time.time()
+    while run.running and time.time() - t0 < 600:
+        time.sleep(2)
+    assert run.returncode == 0, run.log_tail()
+    assert run.fraction == 1.0
+    assert len(json.loads((tmp_path / "bo_fibres.json").read_text())) == 2
