@@ -88,3 +88,10 @@ def test_tiny_simulator_run_records_failures_and_best(subject, tmp_path):
     e = bf.run_one(subject, "fixed", n_initial=3, n_iterations=1, resolution="fast", state_dir=tmp_path)
     assert e["evaluations"] == 4 and e["failed_evaluations"]["count"] <= 4
     assert np.isfinite(e["lvv_abs_error_ml"])
+
+
+def test_cli_names_a_bad_subject(tmp_path, capsys):
+    from lvcore.cli import main
+
+    assert main(["study", "bo-fibres", "--subjects", "SYNTHETIC-HV99", "--out", str(tmp_path)]) == 2
+    assert "SYNTHETIC-HV1" in capsys.readouterr().err

@@ -128,3 +128,10 @@ def test_fit_on_the_main_operators_own_geometry_returns_the_truth_with_the_simul
 def test_unknown_patient_names_the_study_patients(tmp_path):
     with pytest.raises(ops.LVCoreError, match="SYNTHETIC-P01"):
         ops.patient_geometries("SYNTHETIC-P99", tmp_path)
+
+
+def test_cli_names_a_bad_patient(tmp_path, capsys):
+    from lvcore.cli import main
+
+    assert main(["study", "operators", "--patients", "SYNTHETIC-P99", "--out", str(tmp_path)]) == 2
+    assert "SYNTHETIC-P01" in capsys.readouterr().err

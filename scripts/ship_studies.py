@@ -1,0 +1,110 @@
+"""Regenerate the bundled study results (``studies/`` under the bundled assets) shown by the app's Studies page.
+
+    python scripts/ship_studies.py --work /tmp/studies_ship --bo-initial 30 --bo-iterations 30 --workers 2
+    python scripts/ship_studies.py --work /tmp/studies_ship --patients SYNTHETIC-P01,SYNTHETIC-P02 --skip-bo
+    python scripts/ship_studies.py --work /tmp/studies_ship --copy-only      # copy finished results, run nothing
+
+Runs ``lvcore study bo-fibres`` and ``lvcore study operators`` into ``--work``
+(both resume from their state files, so a killed run can be restarted with
+the same command) and copies the small result files (JSON/CSV; no state, no
+geometries, no figures) into ``<assets>/studies/bo-fibres`` and
+``<assets>/studies/operators``. The JSON metadata records the budget
+actually run: a reduced budget is labelled as such and is not the chapter's
+full run (300 + 300 BO evaluations, all 6 operator patients).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+from pathlib import Path
+
+for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_k, "1")
+
+BO_FILES = ("bo_fibres.json", "bo_fibres_meta.json", "tables.csv")
+OP_FILES = ("operators.json", "operators_fits.csv", "rss_surfaces.json")
+
+
+def copy_results(work: Path, dest: Path) -> list[Path]:
+    """Copy the finished results under ``work`` into ``dest`` (the bundled studies folder)."""
+    copied = []
+    for sub, names in (("bo-fibres", BO_FILES), ("operators", OP_FILES)):
+        src = work / sub
+        if not (src / names[0]).is_file():
+            continue
+        (dest / sub).mkdir(parents=True, exist_ok=True)
+        for n in names:
+            if (src / n).is_file():
+                shutil.copy2(src / n, dest / sub / n)
+                copied.append(dest / sub / n)
+    return copied
+
+
+def refresh(work: Path) -> None:
+    """Re-write the summaries (findings, tables, figures) of finished runs with this version of lvcore."""
+    from lvcore.studies import bo_fibres, operators
+
+    bo = work / "bo-fibres"
+    if (bo / "bo_fibres.json").is_file():
+        entries = json.loads((bo / "bo_fibres.json").read_text())
+        meta = json.loads((bo / "bo_fibres_meta.json").read_text()) if (bo / "bo_fibres_meta.json").is_file() else {}
+        settings = meta.get("settings") or {"n_initial": entries[0]["n_initial"], "n_iterations": entries[0]["n_iterations"]}
+        bo_fibres.write_outputs(entries, bo, settings)
+    op = work / "operators"
+    if (op / "operators.json").is_file():
+        data = json.loads((op / "operators.json").read_text())
+        surfaces = {(s["patient"], s["main_operator"], s["test_geometry"]): s
+                    for s in (json.loads((op / "rss_surfaces.json").read_text()) if (op / "rss_surfaces.json").is_file() else [])}
+        fits = []
+        for f in data["fits"]:
+            s = surfaces.get((f["patient"], f["main_operator"], f["test_geometry"]))
+            fits.append({**f, **({"rss_surface": {k: s[k] for k in ("method", "pairs")}} if s else {})})
+        data["fits"] = fits
+        data["findings"] = operators.findings(fits, data["meta"]["operators"])
+        operators.write_outputs(data, op)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--work", type=Path, required=True, help="where the studies run (state files, geometries)")
+    p.add_argument("--dest", type=Path, default=None, help="default: the bundled assets' studies/ folder")
+    p.add_argument("--subjects", default=None, help="BO volunteers (default all 8)")
+    p.add_argument("--bo-initial", type=int, default=300)
+    p.add_argument("--bo-iterations", type=int, default=300)
+    p.add_argument("--patients", default=None, help="operator-study patients (default all 6)")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--resolution", default="default")
+    p.add_argument("--skip-bo", action="store_true")
+    p.add_argument("--skip-operators", action="store_true")
+    p.add_argument("--copy-only", action="store_true", help="run nothing; copy what is finished in --work")
+    args = p.parse_args(argv)
+
+    from lvcore.studies import bo_fibres, operators
+    from lvcore.studies.results import bundled_studies_dir
+
+    dest = args.dest or bundled_studies_dir()
+    if not args.copy_only and not args.skip_bo:
+        subjects = args.subjects.split(",") if args.subjects else None
+        bo_fibres.run_study(subjects, out=args.work / "bo-fibres", n_initial=args.bo_initial,
+                            n_iterations=args.bo_iterations, workers=args.workers, resolution=args.resolution,
+                            progress=True, log=print)
+    if not args.copy_only and not args.skip_operators:
+        patients = args.patients.split(",") if args.patients else None
+        res = operators.run_study(patients, out=args.work / "operators", workers=args.workers,
+                                  resolution=args.resolution, progress=True)
+        print(operators.format_findings(res["findings"]))
+    refresh(args.work)
+    copied = copy_results(args.work, dest)
+    for c in copied:
+        print(f"wrote {c} ({c.stat().st_size / 1024:.0f} KiB)")
+    meta = dest / "bo-fibres" / "bo_fibres_meta.json"
+    if meta.is_file():
+        print("bo-fibres budget:", json.loads(meta.read_text())["budget"]["label"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
