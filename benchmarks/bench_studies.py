@@ -10,7 +10,10 @@ operators x 4 test geometries = 12 SQP refits with adjoint gradients) as
 ``lvcore study operators`` runs them (target <= 5 min). Each run starts in a
 fresh temporary folder, so nothing is resumed. The machine is shared: the
 load average (1 min) before and after and the sparse linear solver are
-printed with the result; compare numbers only at similar load.
+printed with the result; compare numbers only at similar load. The CPU
+seconds of the process and its workers do not depend on the load:
+``cpu_s / workers`` estimates the wall time on idle cores (it ignores the
+serial GP/acquisition part of BO, which runs while the workers wait).
 """
 from __future__ import annotations
 
@@ -39,8 +42,11 @@ def main(argv=None) -> int:
 
     from lvcore.mechanics.linear import available_backends
 
+    import resource
+
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
+    cpu0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or tmp
         if args.study == "bo":
@@ -63,7 +69,11 @@ def main(argv=None) -> int:
                       "simulations": res["meta"]["simulations"]}
             what = f"operators {args.patients} ({len(fits)} SQP refits)"
     wall = time.perf_counter() - t0
-    print(json.dumps({"study": what, "wall_s": round(wall, 1), "workers": args.workers,
+    # CPU seconds of this process and of its (finished) worker processes: independent of the machine's load
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = time.process_time() - cpu0 + children.ru_utime + children.ru_stime
+    print(json.dumps({"study": what, "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),
+                      "wall_on_idle_cores_estimate_s": round(cpu / max(1, args.workers), 1), "workers": args.workers,
                       "resolution": args.resolution, "linear_solver": available_backends()[0],
                       "load_avg_1min_before": round(load0, 2), "load_avg_1min_after": round(os.getloadavg()[0], 2),
                       "cpus": os.cpu_count(), "detail": detail}, indent=1))
