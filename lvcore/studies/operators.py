@@ -285,12 +285,13 @@ def _data_task(patient, main, geoms, resolution, forward_factory):
 # ----------------------------------------------------------------------------- the study
 def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, scheduler: str | None = None,
               resolution: str = "default", surface_grid: int = 0, forward_factory=None, progress: bool = False,
-              operator_geometries=None, shape_model=None) -> dict:
+              operator_geometries=None, shape_model=None, collect_only: bool = False) -> dict:
     """Run every fit of ``patients`` (default: all 6) and write ``out/operators.json`` and the figures.
 
     Returns ``{"fits": [...], "findings": {...}, "meta": {...}}``. Finished
     fits are kept in ``out/fits/`` and not repeated when the study is re-run
-    with the same ``out``.
+    with the same ``out``. ``collect_only``: run nothing, summarise the fits
+    already in ``out/fits/`` (the result is then marked partial).
     """
     from lvcore.geometry.cohort import load_operator_geometries
 
@@ -305,7 +306,7 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
     settings = {"resolution": resolution if forward_factory is None else "stand-in", "theta_true": THETA_TRUE,
                 "surface_grid": surface_grid}
     executor = None
-    if scheduler or workers > 1:
+    if not collect_only and (scheduler or workers > 1):
         from lvcore.campaigns.executors import make_executor
 
         executor = make_executor(workers=workers, scheduler=scheduler)
@@ -337,6 +338,8 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
                             records[(p, m, t)] = d["fit"]
                             continue
                     todo.append((p, m, t))
+        if collect_only:
+            todo = []
         with progress_bar(len(todo) + len({(p, m) for p, m, _ in todo}), "operators", progress) as bar:
             mains = sorted({(p, m) for p, m, _ in todo})
             data_f = {pm: submit(_data_task, pm[0], pm[1], geoms[pm[0]], resolution, forward_factory) for pm in mains}
@@ -362,9 +365,11 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
     result = {"fits": fits, "findings": findings(fits, ops),
               "meta": {"study": "operators", "label": "SYNTHETIC operator study (imitation operators on synthetic LVs)",
                        "patients": patients, "operators": ops, "n_fits": len(fits),
-                       "complete_study": len(patients) == len(og.patients),
-                       "budget": (f"{len(patients)} of {len(og.patients)} patients" +
-                                  ("" if len(patients) == len(og.patients) else " (PARTIAL run; the chapter used all 6)")),
+                       "complete_study": len(fits) == len(og.patients) * len(ops) * (len(ops) - 1 + len(PC_TESTS)),
+                       "budget": (f"{len(fits)} of {len(og.patients) * len(ops) * (len(ops) - 1 + len(PC_TESTS))} fits "
+                                  f"({', '.join(sorted({f['patient'] for f in fits}))})" +
+                                  ("" if len(fits) == len(og.patients) * len(ops) * (len(ops) - 1 + len(PC_TESTS))
+                                   else " (PARTIAL run; the chapter made all 72)")),
                        "settings": settings, "seconds_this_session": round(time.perf_counter() - t0, 1),
                        "simulations": int(sum(f.get("simulations", 0) for f in fits)),
                        "fit_seconds_total": round(sum(f.get("seconds", 0.0) for f in fits), 1),
@@ -489,6 +494,8 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--surface-grid", type=int, default=0,
                    help="N > 0: simulator loss surfaces on N x N grids per parameter pair (6 N^2 runs per fit); "
                         "default 0: Gauss-Newton model surfaces")
+    p.add_argument("--collect-only", action="store_true",
+                   help="run nothing: summarise the fits already saved in OUT/fits (an interrupted run)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
     p.add_argument("--out", required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
     p.set_defaults(func=_cli)
@@ -497,7 +504,8 @@ def add_study_parser(study_subparsers) -> None:
 def _cli(args) -> int:
     patients = [s.strip() for s in args.patients.split(",") if s.strip()] if args.patients else None
     res = run_study(patients, out=args.out, workers=args.workers, scheduler=args.scheduler,
-                    resolution=args.resolution, surface_grid=args.surface_grid, progress=not args.json)
+                    resolution=args.resolution, surface_grid=args.surface_grid, progress=not args.json,
+                    collect_only=args.collect_only)
     if args.json:
         print(json.dumps(clean({"findings": res["findings"], "meta": res["meta"]}), indent=1))
     else:
