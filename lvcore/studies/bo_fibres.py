@@ -451,6 +451,9 @@ def write_outputs(entries: Sequence[dict], out, settings: dict | None = None) ->
     meta = {"study": "bo-fibres", "label": "SYNTHETIC volunteers (generated data, not real subjects)",
             "budget": {"n_initial": n0, "n_iterations": n1, "label": budget_label(n0, n1),
                        "chapter_budget": n0 >= CHAPTER_INITIAL and n1 >= CHAPTER_ITERATIONS},
+            "subjects": sorted({e["subject"] for e in entries}, key=lambda s: (len(s), s)),
+            "runs": [f"{e['subject']} {e['mode']}" for e in entries],
+            "complete_study": len({(e["subject"], e["mode"]) for e in entries}) == 2 * len(available_subjects()),
             "objective": "FE simulator on each volunteer's geometry", "settings": settings,
             "findings": findings(entries)}
     paths["meta"] = str(write_json_atomic(out / "bo_fibres_meta.json", clean(meta)))
