@@ -61,8 +61,9 @@ with tab_bo:
             entries = []
         if entries:
             budget = meta.get("budget", {})
-            if budget and not budget.get("chapter_budget"):
-                st.warning(f"Budget: {budget.get('label')}. This is not the chapter's full run.")
+            runs = f"{len(meta.get('runs', entries))} of 16 volunteer × mode runs"
+            if budget and (not budget.get("chapter_budget") or not meta.get("complete_study", True)):
+                st.warning(f"Budget: {budget.get('label')}; {runs}. This is not the chapter's full run.")
             elif budget:
                 st.success(f"Budget: {budget.get('label')}")
             st.markdown("**Findings**\n\n" + bo_findings_text(meta.get("findings", {})).replace("\n", "\n\n"))
