@@ -1,6 +1,7 @@
 """Finding and loading saved study results, background runs, and the Studies page on saved results."""
 import json
 import time
+from pathlib import Path
 
 import pytest
 from streamlit.testing.v1 import AppTest
@@ -8,6 +9,8 @@ from streamlit.testing.v1 import AppTest
 from lvcore.core import AnalyticForward
 from lvcore.studies import bo_fibres, operators, results
 from tests.test_studies_operators import stand_in
+
+PAGE = str(Path(__file__).resolve().parents[1] / "pages" / "6_Studies.py")
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +43,7 @@ def test_bundled_results_exist_and_are_labelled():
 
 
 def test_studies_page_renders_saved_results(saved):
-    at = AppTest.from_file("pages/6_Studies.py", default_timeout=240).run()
+    at = AppTest.from_file(PAGE, default_timeout=240).run()
     assert not at.exception
     at.sidebar.text_input[0].set_value(str(saved)).run()
     assert not at.exception
