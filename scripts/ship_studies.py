@@ -25,7 +25,7 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_k, "1")
 
 BO_FILES = ("bo_fibres.json", "bo_fibres_meta.json", "tables.csv")
-OP_FILES = ("operators.json", "operators_fits.csv", "rss_surfaces.json")
+OP_FILES = ("operators.json", "operators_fits.csv", "rss_surfaces.json", "rss_surfaces_simulator.json")
 
 
 def copy_results(work: Path, dest: Path) -> list[Path]:
@@ -41,6 +41,24 @@ def copy_results(work: Path, dest: Path) -> list[Path]:
                 shutil.copy2(src / n, dest / sub / n)
                 copied.append(dest / sub / n)
     return copied
+
+
+def example_surface(op_dir: Path, n: int, resolution: str, workers: int) -> None:
+    """Fig 9.13 on the simulator for the first finished operator fit -> rss_surfaces_simulator.json."""
+    from lvcore.studies import operators
+    from lvcore.studies._common import clean, write_json_atomic
+
+    fits = sorted((op_dir / "fits").glob("*.json"))
+    if not fits:
+        print("no finished operator fit for the example surface")
+        return
+    fit = json.loads(fits[0].read_text())["fit"]
+    geoms = operators.patient_geometries(fit["patient"], op_dir / "geometries")
+    y_star = fit.get("y_star") or operators._data_task(fit["patient"], fit["main_operator"], geoms, resolution, None)
+    rec = operators.surface_for_fit(fit, geoms, y_star, n, resolution=resolution, workers=workers)
+    write_json_atomic(op_dir / "rss_surfaces_simulator.json", clean([rec]))
+    print(f"example surface for {fit['patient']} main {fit['main_operator']} test {fit['test_geometry']}: "
+          f"{6 * n * n} simulations")
 
 
 def refresh(work: Path) -> None:
@@ -80,6 +98,8 @@ def main(argv=None) -> int:
     p.add_argument("--skip-bo", action="store_true")
     p.add_argument("--skip-operators", action="store_true")
     p.add_argument("--copy-only", action="store_true", help="run nothing; copy what is finished in --work")
+    p.add_argument("--example-surface", type=int, default=0,
+                   help="N > 0: a simulator loss surface (N x N per pair) for the first finished operator fit")
     args = p.parse_args(argv)
 
     from lvcore.studies import bo_fibres, operators
@@ -96,6 +116,8 @@ def main(argv=None) -> int:
         res = operators.run_study(patients, out=args.work / "operators", workers=args.workers,
                                   resolution=args.resolution, progress=True)
         print(operators.format_findings(res["findings"]))
+    if args.example_surface:
+        example_surface(args.work / "operators", args.example_surface, args.resolution, args.workers)
     refresh(args.work)
     copied = copy_results(args.work, dest)
     for c in copied:

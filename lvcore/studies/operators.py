@@ -188,22 +188,46 @@ def gauss_newton_surfaces(theta_hat, r, J, n: int = GN_GRID, span: float = SURFA
     return out
 
 
-def simulator_surfaces(forward, loss, theta_hat, n: int, span: float = SURFACE_SPAN) -> list[dict]:
-    """The simulator's loss (9.11) over each parameter pair on an ``n × n`` grid around θ̂ (6 n² simulations)."""
+def surface_axes(theta_hat, theta_true, n: int, margin: float = 1.5) -> list[np.ndarray]:
+    """Log-spaced axes per parameter spanning θ̂ and θ̃ (widened by ``margin`` on each side)."""
+    th, tt = np.asarray(theta_hat, float), np.asarray(theta_true, float)
+    return [np.geomspace(min(a, b) / margin, max(a, b) * margin, n) for a, b in zip(th, tt)]
+
+
+def simulator_surfaces(forward, loss, theta_hat, n: int, theta_true=THETA_TRUE) -> list[dict]:
+    """The simulator's loss (9.11) over each parameter pair on an ``n × n`` log grid spanning θ̂ and θ̃.
+
+    The other two parameters are held at θ̂; 6 n² simulations in batches
+    (``forward.evaluate``; a :class:`SimulatorForward` with workers runs them in parallel).
+    """
     th = np.asarray(theta_hat, float)
+    axes = surface_axes(th, theta_true, n)
     out = []
     for a, b in PAIRS:
         i, j = THETA_NAMES.index(a), THETA_NAMES.index(b)
-        xs = th[i] * np.geomspace(1 / span, span, n)
-        ys = th[j] * np.geomspace(1 / span, span, n)
+        xs, ys = axes[i], axes[j]
         X, Y = np.meshgrid(xs, ys)
         pts = np.tile(th, (n * n, 1))
         pts[:, i], pts[:, j] = X.ravel(), Y.ravel()
         b_ = forward.evaluate(dict(zip(THETA_NAMES, pts.T)))
         rss = np.array([loss.value_and_output_gradient(y)[0] if ok else np.nan
                         for y, ok in zip(b_.outputs, b_.converged)]).reshape(n, n)
-        out.append({"x": a, "y": b, "x_values": xs.tolist(), "y_values": ys.tolist(), "rss": rss.tolist()})
+        out.append({"x": a, "y": b, "x_values": xs.tolist(), "y_values": ys.tolist(), "rss": rss.tolist(),
+                    "failed": int(np.sum(~b_.converged))})
     return out
+
+
+def surface_for_fit(fit: dict, geoms: dict, y_star, n: int, *, resolution: str = "default", workers: int = 1) -> dict:
+    """A simulator loss surface (Fig 9.13) for one finished fit: a ``rss_surfaces.json`` record."""
+    from lvcore.optimise.sqp import OperatorLoss
+
+    name = dict(test_geometries(fit["main_operator"], [k for k in geoms if "/" not in k]))[fit["test_geometry"]]
+    fwd = SimulatorForward(geometry={"kind": "mesh", "path": geoms[name]["path"]}, resolution=resolution,
+                           workers=workers)
+    loss = OperatorLoss(np.asarray(y_star, float), geoms[fit["main_operator"]]["v_early_ml"], geoms[name]["v_early_ml"])
+    return {"patient": fit["patient"], "main_operator": fit["main_operator"], "test_geometry": fit["test_geometry"],
+            "method": f"simulator, {n} x {n} log grid per pair spanning theta_hat and theta_true (others at theta_hat)",
+            "theta_hat": fit["theta_hat"], "pairs": simulator_surfaces(fwd, loss, fit["theta_hat"], n)}
 
 
 # ----------------------------------------------------------------------------- one fit
@@ -229,7 +253,7 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
     y_star = np.asarray(y_star, float)
     truth = np.array(THETA_TRUE)
     rec = {"patient": patient, "main_operator": main, "test_geometry": test, "converged": False,
-           "theta_true": list(THETA_TRUE)}
+           "theta_true": list(THETA_TRUE), "y_star": y_star.tolist()}
     try:
         fwd = make(name)
         loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
@@ -242,11 +266,13 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
         main_fwd = fwd if name == main else make(main)
         y_main_hat = main_fwd.evaluate(dict(zip(THETA_NAMES, res.theta))).raise_on_failure().outputs[0]
         err_out = y_main_hat[1:] - y_star[1:]
-        surfaces = {"method": "gauss-newton model at theta_hat (adjoint Jacobian)",
+        surfaces = {"method": "gauss-newton model at theta_hat (adjoint Jacobian), x1/2..x2 around theta_hat",
                     "pairs": gauss_newton_surfaces(res.theta, r, J)}
         if surface_grid:
-            surfaces = {"method": f"simulator, {surface_grid} x {surface_grid} grid per pair",
+            surfaces = {"method": f"simulator, {surface_grid} x {surface_grid} log grid per pair spanning theta_hat "
+                                  "and theta_true (others at theta_hat)",
                         "pairs": simulator_surfaces(fwd, loss, res.theta, surface_grid)}
+        surfaces["theta_hat"] = res.theta.tolist()
         rec.update({
             "converged": bool(res.success),
             "message": res.message,

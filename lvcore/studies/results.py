@@ -76,8 +76,10 @@ def load_operators(folder) -> dict:
     """``operators.json`` of a result folder, with ``surfaces`` from ``rss_surfaces.json`` when present."""
     folder = Path(folder)
     data = _read(folder / "operators.json")
-    s = folder / "rss_surfaces.json"
-    data["surfaces"] = _read(s) if s.is_file() else []
+    data["surfaces"] = []
+    for name in ("rss_surfaces_simulator.json", "rss_surfaces.json"):  # simulator surfaces first
+        if (folder / name).is_file():
+            data["surfaces"] += _read(folder / name)
     return data
 
 

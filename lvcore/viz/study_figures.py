@@ -98,8 +98,14 @@ def surface_figure(fit: dict, theta_true=THETA_TRUE):
         ti, tj = THETA_NAMES.index(p["x"]), THETA_NAMES.index(p["y"])
         fig.add_trace(go.Scatter(x=[theta_true[ti]], y=[theta_true[tj]], mode="markers", showlegend=False,
                                  marker={"symbol": "x", "color": "red", "size": 11}), row=r + 1, col=c + 1)
+        th = fit.get("theta_hat") or fit["rss_surface"].get("theta_hat")
+        if th is not None:
+            fig.add_trace(go.Scatter(x=[th[ti]], y=[th[tj]], mode="markers", showlegend=False,
+                                     marker={"symbol": "circle-open", "color": "white", "size": 11,
+                                             "line": {"width": 2}}), row=r + 1, col=c + 1)
         fig.update_xaxes(type="log", title_text=p["x"], row=r + 1, col=c + 1)
         fig.update_yaxes(type="log", title_text=p["y"], row=r + 1, col=c + 1)
     fig.update_layout(title=f"Loss (9.11) around θ̂: {fit['patient']}, main {fit['main_operator']}, test "
-                            f"{fit['test_geometry']} ({fit['rss_surface']['method']}); red X: θ̃", height=650)
+                            f"{fit['test_geometry']}<br><sup>{fit['rss_surface']['method']}; red X: θ̃, white circle: θ̂</sup>",
+                      height=680)
     return fig
