@@ -17,7 +17,7 @@ _EXPORTS = {
     "render_shape": "geometry_views", "explained_variance_figure": "geometry_views",
     # modules, for the remaining builders
     "figures": "figures", "inference_figures": "inference_figures", "mesh3d": "mesh3d",
-    "geometry_views": "geometry_views", "report_figures": "report_figures",
+    "geometry_views": "geometry_views", "report_figures": "report_figures", "study_figures": "study_figures",
 }
 
 __all__ = sorted(_EXPORTS)
