@@ -10,7 +10,7 @@ from lvcore.core import AnalyticForward
 from lvcore.studies import bo_fibres, operators, results
 from tests.test_studies_operators import stand_in
 
-PAGE = str(Path(__file__).resolve().parents[1] / "pages" / "6_Studies.py")
+PAGE = str(Path(__file__).resolve().parents[1] / "lvcore" / "app" / "views" / "6_Studies.py")
 
 
 @pytest.fixture(scope="module")

@@ -13,10 +13,8 @@ import numpy as np
 
 def bundled_path(*parts: str) -> Path:
     """Path of a bundled data file (``lvcore/assets/...`` once installed as package data)."""
-    try:
-        from lvcore.resources import asset_path
-    except ImportError:  # TEMPORARY until the assets move into the package (helper pkg); removed at rebase
-        return Path(__file__).resolve().parents[2] / "assets" / Path(*parts)
+    from lvcore.resources import asset_path
+
     return asset_path(*parts)
 
 

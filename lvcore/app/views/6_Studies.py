@@ -21,7 +21,6 @@ from lvcore.studies.operators import fits_frame
 from lvcore.studies.operators import format_findings as op_findings_text
 from lvcore.viz import figures, study_figures
 
-st.set_page_config(page_title="Studies", layout="wide")
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
            "of `lvcore study ...`. Everything here is SYNTHETIC (generated volunteers, imitation operators).")
