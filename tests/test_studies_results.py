@@ -1,16 +1,16 @@
 """Finding and loading saved study results, background runs, and the Studies page on saved results."""
 import json
 import time
-from pathlib import Path
 
 import pytest
 from streamlit.testing.v1 import AppTest
 
+from lvcore.app import APP_DIR, ENTRY, PAGES
 from lvcore.core import AnalyticForward
 from lvcore.studies import bo_fibres, operators, results
 from tests.test_studies_operators import stand_in
 
-PAGE = str(Path(__file__).resolve().parents[1] / "lvcore" / "app" / "views" / "6_Studies.py")
+PAGE = str(APP_DIR / "views" / "6_Studies.py")
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +49,15 @@ def test_studies_page_renders_saved_results(saved):
     assert not at.exception
     assert any("REDUCED" in w.value for w in at.warning)
     assert len(at.dataframe) >= 2
+
+
+def test_studies_page_is_in_the_navigation_and_shows_the_bundled_results():
+    assert "Studies" in [p.title for p in PAGES]
+    at = AppTest.from_file(str(ENTRY), default_timeout=240).run()
+    at.switch_page(PAGE).run()
+    assert not at.exception
+    assert at.title[0].value == "Studies"
+    assert any("not the chapter's full run" in w.value for w in at.warning)   # reduced budget, said so
 
 
 @pytest.mark.slow
