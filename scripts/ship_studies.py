@@ -7,8 +7,9 @@
 Runs ``lvcore study bo-fibres`` and ``lvcore study operators`` into ``--work``
 (both resume from their state files, so a killed run can be restarted with
 the same command) and copies the small result files (JSON/CSV; no state, no
-geometries, no figures) into ``<assets>/studies/bo-fibres`` and
-``<assets>/studies/operators``. The JSON metadata records the budget
+geometries, no figures) into ``lvcore/assets/studies/`` (flat, where
+``lvcore report`` and the app look; ``tables.csv`` becomes
+``bo_fibres_tables.csv``). The JSON metadata records the budget
 actually run: a reduced budget is labelled as such and is not the chapter's
 full run (300 + 300 BO evaluations, all 6 operator patients).
 """
@@ -24,8 +25,11 @@ from pathlib import Path
 for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_k, "1")
 
-BO_FILES = ("bo_fibres.json", "bo_fibres_meta.json", "tables.csv")
-OP_FILES = ("operators.json", "operators_fits.csv", "rss_surfaces.json", "rss_surfaces_simulator.json")
+#: Source file in the run's folder -> name in the bundled (flat) studies folder, where reports look for them.
+BO_FILES = {"bo_fibres.json": "bo_fibres.json", "bo_fibres_meta.json": "bo_fibres_meta.json",
+            "tables.csv": "bo_fibres_tables.csv"}
+OP_FILES = {"operators.json": "operators.json", "operators_fits.csv": "operators_fits.csv",
+            "rss_surfaces.json": "rss_surfaces.json", "rss_surfaces_simulator.json": "rss_surfaces_simulator.json"}
 
 
 def copy_results(work: Path, dest: Path) -> list[Path]:
@@ -33,13 +37,13 @@ def copy_results(work: Path, dest: Path) -> list[Path]:
     copied = []
     for sub, names in (("bo-fibres", BO_FILES), ("operators", OP_FILES)):
         src = work / sub
-        if not (src / names[0]).is_file():
+        if not (src / next(iter(names))).is_file():
             continue
-        (dest / sub).mkdir(parents=True, exist_ok=True)
-        for n in names:
+        dest.mkdir(parents=True, exist_ok=True)
+        for n, target in names.items():
             if (src / n).is_file():
-                shutil.copy2(src / n, dest / sub / n)
-                copied.append(dest / sub / n)
+                shutil.copy2(src / n, dest / target)
+                copied.append(dest / target)
     return copied
 
 
@@ -122,7 +126,7 @@ def main(argv=None) -> int:
     copied = copy_results(args.work, dest)
     for c in copied:
         print(f"wrote {c} ({c.stat().st_size / 1024:.0f} KiB)")
-    meta = dest / "bo-fibres" / "bo_fibres_meta.json"
+    meta = dest / "bo_fibres_meta.json"
     if meta.is_file():
         print("bo-fibres budget:", json.loads(meta.read_text())["budget"]["label"])
     return 0

@@ -465,9 +465,13 @@ def write_outputs(result: dict, out) -> dict:
     out = Path(out)
     fits = result["fits"]
     slim = [{k: v for k, v in f.items() if k != "rss_surface"} for f in fits]
-    paths = {"json": str(write_json_atomic(out / "operators.json", clean({**result, "fits": slim})))}
     surfaces = [{"patient": f["patient"], "main_operator": f["main_operator"], "test_geometry": f["test_geometry"],
                  **f["rss_surface"]} for f in fits if "rss_surface" in f]
+    sim = out / "rss_surfaces_simulator.json"
+    examples = (json.loads(sim.read_text()) if sim.is_file() else []) + surfaces[:1]
+    paths = {"json": str(write_json_atomic(out / "operators.json", clean(
+        {**{k: v for k, v in result.items() if k != "surfaces"}, "fits": slim,
+         "rss_surfaces": flat_surfaces(examples)})))}
     paths["surfaces"] = str(write_json_atomic(out / "rss_surfaces.json", clean(surfaces)))
     fits_frame(fits).to_csv(out / "operators_fits.csv", index=False)
     paths["csv"] = str(out / "operators_fits.csv")
@@ -486,6 +490,23 @@ def write_outputs(result: dict, out) -> dict:
         ex = next((f for f in ok if f["test_geometry"] == "pc5"), ok[0])
         paths["fig_9_13"] = save_figure(study_figures.surface_figure(ex, THETA_TRUE), out / "fig_9_13_loss_surface")
     return paths
+
+
+def flat_surfaces(records: Sequence[dict]) -> list[dict]:
+    """One record per parameter pair (``params``, ``x``, ``y``, ``rss``, ``truth``, ``method``, fit keys).
+
+    The form kept inside ``operators.json`` (``rss_surfaces``) for reports;
+    ``rss_surfaces.json`` keeps every fit's surfaces grouped by fit.
+    """
+    flat = []
+    for r in records:
+        for p in r["pairs"]:
+            i, j = THETA_NAMES.index(p["x"]), THETA_NAMES.index(p["y"])
+            flat.append({"patient": r["patient"], "main_operator": r["main_operator"],
+                         "test_geometry": r["test_geometry"], "method": r["method"], "params": [p["x"], p["y"]],
+                         "x": p["x_values"], "y": p["y_values"], "rss": p["rss"],
+                         "truth": [THETA_TRUE[i], THETA_TRUE[j]]})
+    return flat
 
 
 def format_findings(f: dict) -> str:

@@ -80,6 +80,7 @@ def load_operators(folder) -> dict:
     for name in ("rss_surfaces_simulator.json", "rss_surfaces.json"):  # simulator surfaces first
         if (folder / name).is_file():
             data["surfaces"] += _read(folder / name)
+    data.pop("rss_surfaces", None)  # the flat copy for reports; the page uses the grouped files
     return data
 
 
