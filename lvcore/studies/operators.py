@@ -472,7 +472,7 @@ def write_outputs(result: dict, out) -> dict:
     paths = {"json": str(write_json_atomic(out / "operators.json", clean(
         {**{k: v for k, v in result.items() if k != "surfaces"}, "fits": slim,
          "rss_surfaces": flat_surfaces(examples)})))}
-    paths["surfaces"] = str(write_json_atomic(out / "rss_surfaces.json", clean(surfaces)))
+    paths["surfaces"] = str(write_json_atomic(out / "rss_surfaces.json", clean([_rounded(r) for r in surfaces])))
     fits_frame(fits).to_csv(out / "operators_fits.csv", index=False)
     paths["csv"] = str(out / "operators_fits.csv")
     ok = [f for f in fits if "strain_rmse_forward" in f]
@@ -490,6 +490,20 @@ def write_outputs(result: dict, out) -> dict:
         ex = next((f for f in ok if f["test_geometry"] == "pc5"), ok[0])
         paths["fig_9_13"] = save_figure(study_figures.surface_figure(ex, THETA_TRUE), out / "fig_9_13_loss_surface")
     return paths
+
+
+def _sig(values, digits: int = 4):
+    """``values`` (nested lists) rounded to ``digits`` significant digits (smaller files; NaN kept)."""
+    a = np.asarray(values, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mag = np.where(np.isfinite(a) & (a != 0), np.floor(np.log10(np.abs(a))), 0)
+    scale = 10.0 ** (digits - 1 - mag)
+    return (np.round(a * scale) / scale).tolist()
+
+
+def _rounded(record: dict) -> dict:
+    pairs = [{**p, **{k: _sig(p[k]) for k in ("x_values", "y_values", "rss")}} for p in record.get("pairs", [])]
+    return {**record, "pairs": pairs}
 
 
 def flat_surfaces(records: Sequence[dict]) -> list[dict]:
