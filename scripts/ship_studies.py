@@ -29,7 +29,7 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 BO_FILES = {"bo_fibres.json": "bo_fibres.json", "bo_fibres_meta.json": "bo_fibres_meta.json",
             "tables.csv": "bo_fibres_tables.csv"}
 OP_FILES = {"operators.json": "operators.json", "operators_fits.csv": "operators_fits.csv",
-            "rss_surfaces.json": "rss_surfaces.json", "rss_surfaces_simulator.json": "rss_surfaces_simulator.json"}
+            "rss_surfaces_simulator.json": "rss_surfaces_simulator.json"}  # per-fit rss_surfaces.json: ~10 KiB a fit
 
 
 def copy_results(work: Path, dest: Path) -> list[Path]:
