@@ -159,11 +159,11 @@ def main(argv=None) -> int:
         smoke.step("install wheel", [py, "-m", "pip", "install", "-q", "--no-compile", wheel])  # no .pyc: faster
         out = smoke.step("simulate pca + emulators", [py, "-c", SIMULATE_AND_EMULATE])
         print("    " + out.strip().splitlines()[-1])
-        smoke.step("calibrate", [bin_ / "lvcore", "calibrate", "--volunteer", "SYNTHETIC_HV1", "--model", "iid",
+        smoke.step("calibrate", [bin_ / "lvcore", "calibrate", "--volunteer", "SYNTHETIC_HV3", "--model", "iid",
                                  "--chains", "1", "--warmup", "50", "--samples", "50", "--out", "cal", "--json"],
                    ok=(0, 1))  # 1 = ran, but a chain this short is not declared converged
         summary = json.loads((work / "run" / "cal" / "summary.json").read_text())
-        assert summary and summary[0]["subject"] == "SYNTHETIC-HV1", summary
+        assert summary and summary[0]["subject"] == "SYNTHETIC-HV3", summary
         smoke.app(bin_ / "lvcore")
     finally:
         if args.keep:

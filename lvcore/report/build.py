@@ -18,7 +18,7 @@ Sections and where their numbers come from:
   SYNTHETIC cohort and shape model (seconds); Fig 9.10 evaluates the
   ``chapter`` emulator on the patients' 5-PC projections.
 * Calibration posterior: a short live NUTS run on the bundled SYNTHETIC
-  volunteer HV1, prior overlaid, hidden truth marked.
+  volunteer HV3 (its PC scores lie inside the emulator box; HV1 and HV5 do not), prior overlaid, hidden truth marked.
 * Tables 9.2/9.3 and Figs 9.11–9.14 (optimisation studies): saved results of
   ``lvcore study bo-fibres`` (``bo_fibres.json``) and ``lvcore study operators``
   (``operators.json``); listed as missing when absent.
@@ -358,7 +358,7 @@ def operators_items() -> list[ReportItem]:
 
 
 # ----------------------------------------------------------------------------- calibration
-def calibration_items(subject: str = "SYNTHETIC-HV1", *, num_warmup: int = 500, num_samples: int = 500,
+def calibration_items(subject: str = "SYNTHETIC-HV3", *, num_warmup: int = 500, num_samples: int = 500,
                       num_chains: int = 4) -> list[ReportItem]:
     """Posterior of θ for a bundled SYNTHETIC volunteer (iid model, ``chapter`` emulator), prior and truth shown."""
     import pandas as pd
@@ -607,7 +607,7 @@ def build_report(out, results_dir=None, *, sweep: str = "emulator", calibration:
     sweep : {"emulator", "simulator"}
         Fig 9.5 by the bundled ``angles`` emulator or by the FE simulator (fast mesh).
     calibration : bool
-        Run the short live calibration of SYNTHETIC-HV1 (~10–40 s).
+        Run the short live calibration of SYNTHETIC-HV3 (~10–40 s).
     formats : tuple of str
         Static formats (``png``, ``svg``); empty for HTML only.
 
