@@ -80,11 +80,11 @@ with tab_sweep:
     runs = st.session_state.get("angle_runs")
     if runs:
         st.plotly_chart(figures.strain_bars(strain_table(runs), title="Circumferential strain by region and angle pair"),
-                        use_container_width=True)
+                        width="stretch")
         st.dataframe(pd.DataFrame([{"α_endo (°)": r.alpha_endo, "α_epi (°)": r.alpha_epi,
                                     "LVV (mL)": r.lvv_ml, "mean E_cc": None if r.strains is None else float(np.mean(r.strains)),
                                     "converged": r.converged, "message": r.message} for r in runs]),
-                     hide_index=True, use_container_width=True)
+                     hide_index=True, width="stretch")
 
 EMULATOR_ENGINE = "`angles` emulator (live)"
 
@@ -98,10 +98,10 @@ def _draw_map(amap):
     left, right = st.columns(2)
     left.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.lvv_ml, title="LVV (mL)",
                                       xaxis_title="α_endo (°)", yaxis_title="α_epi (°)", colorbar_title="mL"),
-                      use_container_width=True)
+                      width="stretch")
     right.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.mean_strain, title="Mean E_cc",
                                        xaxis_title="α_endo (°)", yaxis_title="α_epi (°)"),
-                       use_container_width=True)
+                       width="stretch")
 
 
 with tab_map:

@@ -103,11 +103,11 @@ else:
     ])
     fig.update_layout(title=f"Parity: {OUTPUT_NAMES[k]}", xaxis_title=f"simulator{unit}", yaxis_title=f"emulator{unit}",
                       height=420, margin=dict(l=10, r=10, t=40, b=10))
-    left.plotly_chart(fig, use_container_width=True)
+    left.plotly_chart(fig, width="stretch")
     hist = go.Figure(go.Histogram(x=p - y, nbinsx=40))
     hist.update_layout(title=f"Residuals: {OUTPUT_NAMES[k]}", xaxis_title=f"emulator − simulator{unit}",
                        yaxis_title="count", height=420, margin=dict(l=10, r=10, t=40, b=10))
-    right.plotly_chart(hist, use_container_width=True)
+    right.plotly_chart(hist, width="stretch")
 
 # ----- live check ----------------------------------------------------------------
 st.subheader("Live check: emulator vs one simulator run")
@@ -148,4 +148,4 @@ if live and np.allclose(live[0], x):
     fig = go.Figure([go.Bar(x=list(OUTPUT_NAMES[1:]), y=y_sim[1:], name="simulator"),
                      go.Bar(x=list(OUTPUT_NAMES[1:]), y=y_emu[1:], name="emulator")])
     fig.update_layout(barmode="group", yaxis_title="circumferential strain", height=380, margin=dict(l=10, r=10, t=20, b=10))
-    st.plotly_chart(fig, use_container_width=True)
+    st.plotly_chart(fig, width="stretch")
