@@ -20,8 +20,10 @@ from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.core.forward import emulator_forward
+from lvcore.inference.diagnostics import banner_status
+from lvcore.inference.models import PARAMETER_HELP, prior_bounds
 from lvcore.inference.samplers import SamplerConfig, use_host_devices
-from lvcore.resources import bundled_volunteers, volunteer_files
+from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
 
 use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
@@ -102,7 +104,13 @@ with right:
     st.subheader("Model")
     emu_label = st.selectbox("Emulator", list(choices))
     models = st.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid", "discrepancy"],
-                            format_func=MODEL_LABELS.get)
+                            format_func=MODEL_LABELS.get,
+                            help="Parameters reported:\n\n" + "\n\n".join(
+                                f"- {PARAMETER_HELP[n]}" for n in ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam",
+                                                                   "sigma1_sq", "sigma2_sq", "c", "tau")))
+    with st.expander("What the parameters mean"):
+        st.markdown("\n".join(f"- **{n}** — {PARAMETER_HELP[n]}" for n in
+                               ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau")))
     angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
                       help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
     c1, c2, c3 = st.columns(3)
@@ -143,44 +151,50 @@ if run_clicked:
     config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains))
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
-           "synthetic": data.subject.startswith("SYNTHETIC")}
+           "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward)}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
 
 
-@st.fragment(run_every=1.0)
 def _progress():
+    """Progress bar and elapsed time, visible; reruns itself once a second only while a run is in flight."""
     j = st.session_state.get("calibration_job")
     if j is None or j.get("shown"):
         return
     if not j["done"]:
-        with st.status(f"Sampling… {j['message']}", expanded=False):
-            st.progress(min(1.0, j["fraction"]), text=f"{time.perf_counter() - j['t0']:.0f} s elapsed")
+        st.progress(min(1.0, j["fraction"]),
+                    text=f"Sampling: {j['message']} — {time.perf_counter() - j['t0']:.0f} s elapsed")
     else:
         j["shown"] = True
         st.rerun()
 
 
-_progress()
+_job = st.session_state.get("calibration_job")
+if _job is not None and not _job["done"]:  # the 1 Hz timer exists only while sampling: no idle reruns
+    st.fragment(run_every=1.0)(_progress)()
 
 # ----------------------------------------------------------------------------- results
 job = st.session_state.get("calibration_job")
 if job is not None and job["done"]:
     from lvcore.viz import inference_figures as figs
+    from lvcore.viz import report_figures as rfigs
 
     if job["error"]:
         st.error(job["error"])
     results = job["results"]
     if results:
         st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
+        truth = volunteer_truth(job["subject"]) if job["synthetic"] else None
         if job["synthetic"]:
-            st.caption("⚠ SYNTHETIC data.")
+            st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
+                                              "never enters the fit)." if truth else ""))
         from lvcore.core.space import SIGMA_V_ML
         from lvcore.inference.plausibility import check_result
 
         for m, res in results.items():
-            (st.success if res.convergence.converged else st.error)(f"{MODEL_LABELS[m]}: {res.convergence.message()}")
+            level, text = banner_status(res.convergence)
+            getattr(st, level)(f"{MODEL_LABELS[m]}: {text}")
             for flag in check_result(res, job["y"], SIGMA_V_ML).flags:  # posterior-predictive check
                 st.warning(f"{MODEL_LABELS[m]}: the data look implausible for this model: {flag}")
         idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
@@ -190,10 +204,22 @@ if job is not None and job["done"]:
         tabs = st.tabs([MODEL_LABELS[m] for m in results])
         for tab, (m, res) in zip(tabs, results.items()):
             with tab:
-                st.dataframe(res.summary)
+                table = res.summary.copy()
+                table.insert(0, "meaning", [PARAMETER_HELP.get(str(n), "") for n in table.index])
+                if truth:
+                    table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
+                st.dataframe(table, width="stretch",
+                             column_config={"meaning": st.column_config.TextColumn(width="large")})
+                bounds = job.get("bounds") or {}
+                post = {n: np.asarray(res.idata.posterior[n]).reshape(-1) for n in bounds if n in res.idata.posterior}
+                if post:
+                    st.plotly_chart(rfigs.posterior_prior_figure(
+                        post, bounds, truth=truth, units=figs.UNITS,
+                        title="Posterior (histogram) with the uniform prior (dotted)"
+                              + (" and the hidden truth (red)" if truth else "")), width="stretch")
                 st.caption(f"sampler {res.sampler}; {res.wall_s:.1f} s incl. compilation; "
                            f"min bulk ESS/s over θ {res.ess_per_s['min']:.1f}")
-                fig_pair = figs.pair_figure(res.idata)
+                fig_pair = figs.pair_figure(res.idata, truth=truth)
                 st.plotly_chart(fig_pair, width="stretch")
                 names = [n for n in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "sigma_s2")
                          if n in res.idata.posterior]
