@@ -98,3 +98,5 @@ def test_page_runs_a_short_calibration_and_reports_honestly(tmp_path, monkeypatc
     assert any("ESS" in w.value for w in at.warning)  # 2 x 50 draws: amber, never green
     assert any("hidden generating value" in c.value for c in at.caption)
     assert any("meaning" in df.value.columns for df in at.dataframe)
+    at.number_input[1].set_value(100).run()  # warm-up 50 -> 100: the shown result is stale
+    assert any("Inputs changed, re-run" in w.value and "warm-up" in w.value for w in at.warning)

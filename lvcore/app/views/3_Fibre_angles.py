@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import streamlit as st
 
+from lvcore.app import freshness
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
@@ -37,6 +38,7 @@ with st.sidebar:
     resolution = st.selectbox("Mesh", ["fast", "default", "accurate"], index=0,
                               help="fast: a few seconds per angle pair; default: the campaigns' mesh")
 options = dict(theta={"a": a, "b": b, "af": af, "bf": bf}, edp_mmhg=edp, resolution=resolution)
+conditions = {"a (kPa)": a, "b (–)": b, "a_f (kPa)": af, "b_f (–)": bf, "EDP (mmHg)": edp, "mesh": resolution}
 
 tab_sweep, tab_map = st.tabs(["Angle pairs (Fig 9.5)", "Map over (α_endo, α_epi)"])
 
@@ -71,20 +73,24 @@ with tab_sweep:
     except ValueError:
         st.error(f"Could not read '{extra}': write pairs as 'α_endo α_epi' in degrees, separated by ';'.")
         pairs = []
+    sweep_inputs = {**conditions, "pairs (α_endo, α_epi)": [tuple(p) for p in pairs]}
     if pairs and st.button("Run sweep", type="primary"):
         with st.spinner(f"Simulating {len(pairs)} angle pairs..."):
             try:
-                st.session_state["angle_runs"] = _sweep(tuple(pairs), _frozen(options))
+                freshness.remember("angle_runs", _sweep(tuple(pairs), _frozen(options)), sweep_inputs)
             except LVCoreError as err:
                 st.error(str(err))
-    runs = st.session_state.get("angle_runs")
-    if runs:
-        st.plotly_chart(figures.strain_bars(strain_table(runs), title="Circumferential strain by region and angle pair"),
-                        width="stretch")
-        st.dataframe(pd.DataFrame([{"α_endo (°)": r.alpha_endo, "α_epi (°)": r.alpha_epi,
-                                    "LVV (mL)": r.lvv_ml, "mean E_cc": None if r.strains is None else float(np.mean(r.strains)),
-                                    "converged": r.converged, "message": r.message} for r in runs]),
-                     hide_index=True, width="stretch")
+    stored = freshness.recall("angle_runs")
+    if stored is not None and stored.result:
+        runs = stored.result
+        with freshness.shown(stored, sweep_inputs, "angle_runs"):
+            st.plotly_chart(figures.strain_bars(strain_table(runs),
+                                                title="Circumferential strain by region and angle pair"),
+                            width="stretch")
+            st.dataframe(pd.DataFrame([{"α_endo (°)": r.alpha_endo, "α_epi (°)": r.alpha_epi, "LVV (mL)": r.lvv_ml,
+                                        "mean E_cc": None if r.strains is None else float(np.mean(r.strains)),
+                                        "converged": r.converged, "message": r.message} for r in runs]),
+                         hide_index=True, width="stretch")
 
 EMULATOR_ENGINE = "`angles` emulator (live)"
 
@@ -129,11 +135,14 @@ with tab_map:
             st.warning(str(w.message))
     else:
         st.caption(f"{n * n} simulations.")
+        map_inputs = {**conditions, "grid": n, "α_endo range (°)": tuple(endo_range),
+                      "α_epi range (°)": tuple(epi_range)}
         if st.button("Run map"):
             with st.spinner(f"Simulating {n * n} angle pairs..."):
-                st.session_state["angle_map"] = _map(endo, epi, _frozen(options))
-        amap = st.session_state.get("angle_map")
-        if amap is not None:
-            _draw_map(amap)
-            for r in amap.failures:
-                st.warning(f"({r.alpha_endo:g}°, {r.alpha_epi:g}°) did not converge: {r.message}")
+                freshness.remember("angle_map", _map(endo, epi, _frozen(options)), map_inputs)
+        stored_map = freshness.recall("angle_map")
+        if stored_map is not None:
+            with freshness.shown(stored_map, map_inputs, "angle_map"):
+                _draw_map(stored_map.result)
+                for r in stored_map.result.failures:
+                    st.warning(f"({r.alpha_endo:g}°, {r.alpha_epi:g}°) did not converge: {r.message}")

@@ -15,6 +15,7 @@ import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
+from lvcore.app import freshness
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
@@ -120,6 +121,9 @@ with right:
 
 # ----------------------------------------------------------------------------- background run
 job = st.session_state.get("calibration_job")
+cal_inputs = {"subject": None if data is None else data.subject, "emulator": emu_label,
+              "likelihoods": [MODEL_LABELS[m] for m in models], "fibre angles": angles, "chains": int(chains),
+              "warm-up": int(warmup), "draws": int(samples)}
 
 
 def _worker(job: dict, y, forward, models, config, infer):
@@ -151,7 +155,8 @@ if run_clicked:
     config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains))
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
-           "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward)}
+           "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward),
+           "inputs": dict(cal_inputs)}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
@@ -184,62 +189,64 @@ if job is not None and job["done"]:
         st.error(job["error"])
     results = job["results"]
     if results:
-        st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
-        truth = volunteer_truth(job["subject"]) if job["synthetic"] else None
-        if job["synthetic"]:
-            st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
-                                              "never enters the fit)." if truth else ""))
-        from lvcore.core.space import SIGMA_V_ML
-        from lvcore.inference.plausibility import check_result
+        with freshness.shown(freshness.Stored(results, job.get("inputs", cal_inputs)), cal_inputs,
+                             "calibration"):
+            st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
+            truth = volunteer_truth(job["subject"]) if job["synthetic"] else None
+            if job["synthetic"]:
+                st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
+                                                  "never enters the fit)." if truth else ""))
+            from lvcore.core.space import SIGMA_V_ML
+            from lvcore.inference.plausibility import check_result
 
-        for m, res in results.items():
-            level, text = banner_status(res.convergence)
-            getattr(st, level)(f"{MODEL_LABELS[m]}: {text}")
-            for flag in check_result(res, job["y"], SIGMA_V_ML).flags:  # posterior-predictive check
-                st.warning(f"{MODEL_LABELS[m]}: the data look implausible for this model: {flag}")
-        idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
-        fig_pred = figs.predictive_density_figure(idatas, job["y"])
-        st.plotly_chart(fig_pred, width="stretch")
-        downloads = {"posterior_predictive.html": fig_pred}
-        tabs = st.tabs([MODEL_LABELS[m] for m in results])
-        for tab, (m, res) in zip(tabs, results.items()):
-            with tab:
-                table = res.summary.copy()
-                table.insert(0, "meaning", [PARAMETER_HELP.get(str(n), "") for n in table.index])
-                if truth:
-                    table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
-                st.dataframe(table, width="stretch",
-                             column_config={"meaning": st.column_config.TextColumn(width="large")})
-                bounds = job.get("bounds") or {}
-                post = {n: np.asarray(res.idata.posterior[n]).reshape(-1) for n in bounds if n in res.idata.posterior}
-                if post:
-                    st.plotly_chart(rfigs.posterior_prior_figure(
-                        post, bounds, truth=truth, units=figs.UNITS,
-                        title="Posterior (histogram) with the uniform prior (dotted)"
-                              + (" and the hidden truth (red)" if truth else "")), width="stretch")
-                st.caption(f"sampler {res.sampler}; {res.wall_s:.1f} s incl. compilation; "
-                           f"min bulk ESS/s over θ {res.ess_per_s['min']:.1f}")
-                fig_pair = figs.pair_figure(res.idata, truth=truth)
-                st.plotly_chart(fig_pair, width="stretch")
-                names = [n for n in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "sigma_s2")
-                         if n in res.idata.posterior]
-                fig_trace = figs.trace_figure(res.idata, names)
-                fig_rank = figs.rank_figure(res.idata, names)
-                t1, t2 = st.columns(2)
-                t1.plotly_chart(fig_trace, width="stretch")
-                t2.plotly_chart(fig_rank, width="stretch")
-                downloads.update({f"{m}_pair.html": fig_pair, f"{m}_trace.html": fig_trace,
-                                  f"{m}_rank.html": fig_rank})
-                if m == "discrepancy":
-                    fig_disc = figs.discrepancy_figure(res.idata)
-                    st.plotly_chart(fig_disc, width="stretch")
-                    downloads[f"{m}_discrepancy.html"] = fig_disc
-                with tempfile.TemporaryDirectory() as d:
-                    nc = Path(d) / f"{cal.file_stem(job['subject'])}_{m}.nc"
-                    res.idata.to_netcdf(str(nc))
-                    st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
-                                       key=f"nc_{m}")
-        st.subheader("Export figures")
-        for name, fig in downloads.items():
-            st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",
-                               mime="text/html", key=f"html_{name}")
+            for m, res in results.items():
+                level, text = banner_status(res.convergence)
+                getattr(st, level)(f"{MODEL_LABELS[m]}: {text}")
+                for flag in check_result(res, job["y"], SIGMA_V_ML).flags:  # posterior-predictive check
+                    st.warning(f"{MODEL_LABELS[m]}: the data look implausible for this model: {flag}")
+            idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
+            fig_pred = figs.predictive_density_figure(idatas, job["y"])
+            st.plotly_chart(fig_pred, width="stretch")
+            downloads = {"posterior_predictive.html": fig_pred}
+            tabs = st.tabs([MODEL_LABELS[m] for m in results])
+            for tab, (m, res) in zip(tabs, results.items()):
+                with tab:
+                    table = res.summary.copy()
+                    table.insert(0, "meaning", [PARAMETER_HELP.get(str(n), "") for n in table.index])
+                    if truth:
+                        table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
+                    st.dataframe(table, width="stretch",
+                                 column_config={"meaning": st.column_config.TextColumn(width="large")})
+                    bounds = job.get("bounds") or {}
+                    post = {n: np.asarray(res.idata.posterior[n]).reshape(-1) for n in bounds if n in res.idata.posterior}
+                    if post:
+                        st.plotly_chart(rfigs.posterior_prior_figure(
+                            post, bounds, truth=truth, units=figs.UNITS,
+                            title="Posterior (histogram) with the uniform prior (dotted)"
+                                  + (" and the hidden truth (red)" if truth else "")), width="stretch")
+                    st.caption(f"sampler {res.sampler}; {res.wall_s:.1f} s incl. compilation; "
+                               f"min bulk ESS/s over θ {res.ess_per_s['min']:.1f}")
+                    fig_pair = figs.pair_figure(res.idata, truth=truth)
+                    st.plotly_chart(fig_pair, width="stretch")
+                    names = [n for n in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "sigma_s2")
+                             if n in res.idata.posterior]
+                    fig_trace = figs.trace_figure(res.idata, names)
+                    fig_rank = figs.rank_figure(res.idata, names)
+                    t1, t2 = st.columns(2)
+                    t1.plotly_chart(fig_trace, width="stretch")
+                    t2.plotly_chart(fig_rank, width="stretch")
+                    downloads.update({f"{m}_pair.html": fig_pair, f"{m}_trace.html": fig_trace,
+                                      f"{m}_rank.html": fig_rank})
+                    if m == "discrepancy":
+                        fig_disc = figs.discrepancy_figure(res.idata)
+                        st.plotly_chart(fig_disc, width="stretch")
+                        downloads[f"{m}_discrepancy.html"] = fig_disc
+                    with tempfile.TemporaryDirectory() as d:
+                        nc = Path(d) / f"{cal.file_stem(job['subject'])}_{m}.nc"
+                        res.idata.to_netcdf(str(nc))
+                        st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
+                                           key=f"nc_{m}")
+            st.subheader("Export figures")
+            for name, fig in downloads.items():
+                st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",
+                                   mime="text/html", key=f"html_{name}")
