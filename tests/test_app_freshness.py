@@ -35,6 +35,18 @@ def test_fibre_sweep_greys_out_after_a_sidebar_slider_moves(monkeypatch):
     assert not at.exception, at.exception
     assert any(c.value.startswith("Computed with:") and "a (kPa) 0.6" in c.value for c in at.caption)
     assert not any("Inputs changed" in w.value for w in at.warning)
-    at.sidebar.slider[0].set_value(0.65).run()  # a: 0.60 -> 0.65, the example
+    from lvcore.app.controls import THETA_RANGES, log_options
+
+    stops = log_options(*THETA_RANGES["a"], 0.6)
+    at.sidebar.select_slider[0].set_value(stops[stops.index(0.6) + 1]).run()  # a: 0.60 -> the next log stop
     assert any("Inputs changed, re-run" in w.value and "a (kPa)" in w.value for w in at.warning)
     assert any("a (kPa) 0.6;" in c.value for c in at.caption)  # still credited to the inputs it ran with
+
+
+def test_fibre_page_stiffness_sliders_are_log_scaled_with_units():
+    at = AppTest.from_file(FIBRE_PAGE, default_timeout=120).run()
+    labels = [s.label for s in at.sidebar.select_slider]
+    assert labels[:4] == ["a (kPa)", "b (–)", "a_f (kPa)", "b_f (–)"]
+    opts = [float(o) for o in at.sidebar.select_slider[0].options]
+    ratios = np.diff(np.log(opts))
+    assert ratios.max() < 3 * np.median(ratios)  # geometric stops, not 0.05-kPa steps

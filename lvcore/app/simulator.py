@@ -19,7 +19,6 @@ import numpy as np  # noqa: E402
 import streamlit as st  # noqa: E402
 
 from lvcore import units  # noqa: E402
-from lvcore.core.space import THETA_BOUNDS  # noqa: E402
 from lvcore.app import PAGES  # noqa: E402
 from lvcore.exceptions import LVCoreError  # noqa: E402
 from lvcore.inference.samplers import use_host_devices  # noqa: E402
@@ -29,18 +28,10 @@ from lvcore.resources import example_cases  # noqa: E402
 
 use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (views/5_Calibration.py)
 
-#: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-), log-spaced.
-THETA_RANGES = dict(THETA_BOUNDS)
-THETA_LABELS = {"a": "a (kPa)", "b": "b (–)", "af": "a_f (kPa)", "bf": "b_f (–)"}
+from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options  # noqa: E402,F401  (shared log sliders)
 RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
 st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
-
-
-def log_options(lo: float, hi: float, keep: float, n: int = 41) -> list[float]:
-    """Log-spaced slider stops (3 significant digits) that include ``keep``."""
-    values = {float(f"{v:.3g}") for v in np.geomspace(lo, hi, n)} | {float(keep)}
-    return sorted(values)
 
 
 @st.cache_data(show_spinner=False, max_entries=64)

@@ -13,6 +13,7 @@ import pandas as pd
 import streamlit as st
 
 from lvcore.app import freshness
+from lvcore.app.controls import theta_slider
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
@@ -30,10 +31,10 @@ st.caption(
 
 with st.sidebar:
     st.header("Conditions")
-    a = st.slider("a (kPa)", 0.05, 5.0, 0.60, 0.05)
-    b = st.slider("b (–)", 0.1, 10.0, 1.30, 0.1)
-    af = st.slider("a_f (kPa)", 0.05, 5.0, 1.00, 0.05)
-    bf = st.slider("b_f (–)", 0.1, 10.0, 3.60, 0.1)
+    a = theta_slider("a", 0.60, key="fa_a")  # log-scaled, as on every page
+    b = theta_slider("b", 1.30, key="fa_b")
+    af = theta_slider("af", 1.00, key="fa_af")
+    bf = theta_slider("bf", 3.60, key="fa_bf")
     edp = st.slider("EDP (mmHg)", 4.0, 30.0, 8.0, 0.5)
     resolution = st.selectbox("Mesh", ["fast", "default", "accurate"], index=0,
                               help="fast: a few seconds per angle pair; default: the campaigns' mesh")

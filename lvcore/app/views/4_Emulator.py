@@ -12,6 +12,8 @@ import pandas as pd
 import plotly.graph_objects as go
 import streamlit as st
 
+from lvcore.app.controls import input_label, log_options
+
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import OUTPUT_NAMES
@@ -115,7 +117,11 @@ values = {}
 cols = st.columns(3)
 for i, (name, lo, hi, log) in enumerate(zip(emu.input_names, emu.lower, emu.upper, emu.log_inputs)):
     mid = float(np.sqrt(lo * hi)) if log else float(0.5 * (lo + hi))
-    values[name] = cols[i % 3].slider(name, float(lo), float(hi), mid, key=f"in_{name}")
+    if log:  # log-scaled stops over a log-scaled input (the stiffnesses)
+        values[name] = cols[i % 3].select_slider(input_label(name), options=log_options(float(lo), float(hi), float(f"{mid:.3g}")),
+                                                 value=float(f"{mid:.3g}"), key=f"in_{name}")
+    else:
+        values[name] = cols[i % 3].slider(input_label(name), float(lo), float(hi), mid, key=f"in_{name}")
 x = np.array([values[n] for n in emu.input_names])
 y_emu = np.asarray(emu.predict(x, strict=True))
 st.write(f"Emulator: LVV **{y_emu[0]:.1f} mL**, mean strain **{y_emu[1:].mean():.4f}** (instant).")
