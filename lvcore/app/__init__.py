@@ -39,6 +39,7 @@ PAGES = (
     AppPage("views/3_Fibre_angles.py", "Fibre angles", ":material/tune:", "fibre-angles"),
     AppPage("views/4_Emulator.py", "Emulator", ":material/speed:", "emulator"),
     AppPage("views/5_Calibration.py", "Calibration", ":material/query_stats:", "calibration"),
+    AppPage("views/7_Report.py", "Report", ":material/summarize:", "report"),
 )
 
 __all__ = ["APP_DIR", "ENTRY", "AppPage", "PAGES"]
