@@ -50,3 +50,33 @@ def test_fibre_page_stiffness_sliders_are_log_scaled_with_units():
     opts = [float(o) for o in at.sidebar.select_slider[0].options]
     ratios = np.diff(np.log(opts))
     assert ratios.max() < 3 * np.median(ratios)  # geometric stops, not 0.05-kPa steps
+
+
+def test_live_map_and_background_fe_verification(monkeypatch):
+    import time
+
+    import lvcore.studies.fibre_angles as fa
+    from lvcore.emulator.io import available_emulators
+
+    if "angles" not in available_emulators():
+        import pytest
+        pytest.skip("the bundled angles emulator is not built")
+
+    def fake_sweep(pairs, **kw):
+        time.sleep(0.5)
+        return [fa.AngleRun(alpha_endo=e, alpha_epi=p, converged=True, message="", lvv_ml=151.0,
+                            strains=np.full(24, -0.1)) for e, p in pairs]
+
+    monkeypatch.setattr(fa, "angle_sweep", fake_sweep)
+    at = AppTest.from_file(FIBRE_PAGE, default_timeout=120).run()
+    at.radio[0].set_value(next(o for o in at.radio[0].options if "emulator" in o)).run()
+    assert not at.exception, at.exception
+    assert len(at.get("plotly_chart")) >= 2  # the live map
+    next(b for b in at.button if b.label == "Verify with the FE simulator").click().run()
+    assert not at.exception, at.exception
+    t0 = time.time()
+    while not at.session_state["angle_verify"]["done"] and time.time() - t0 < 30:
+        time.sleep(0.2)
+    at.run()
+    assert not at.exception, at.exception
+    assert any("FE simulator (" in m.value and "151.0 mL" in m.value for m in at.markdown)

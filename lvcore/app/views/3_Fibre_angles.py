@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import os
+import threading
+import time
 import warnings
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -111,29 +113,96 @@ def _draw_map(amap):
                        width="stretch")
 
 
+def _verify_worker(job: dict, point, theta, edp_mmhg, resolution) -> None:
+    try:
+        job["runs"] = angle_sweep([point], theta=theta, edp_mmhg=edp_mmhg, resolution=resolution)
+    except Exception as err:  # noqa: BLE001 - shown to the user
+        job["error"] = f"{type(err).__name__}: {err}"
+    finally:
+        job["elapsed"] = time.perf_counter() - job["t0"]
+        job["done"] = True
+
+
+def _verify_status() -> None:
+    job = st.session_state.get("angle_verify")
+    if job is not None and not job["done"]:
+        st.progress(0.5, text=f"FE simulator running at {job['point']}: "
+                              f"{time.perf_counter() - job['t0']:.0f} s elapsed")
+    elif job is not None and not job.get("shown"):
+        job["shown"] = True
+        st.rerun()  # once, to show the result in the map fragment
+
+
+@st.fragment
+def _live_map(theta, edp_mmhg, resolution) -> None:
+    """The emulator's map and its grid/range sliders: moving them reruns only this fragment, not the page."""
+    c1, c2, c3 = st.columns(3)
+    n = c1.slider("Grid points per angle", 5, 41, 21)
+    endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
+    epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
+    endo = tuple(np.linspace(*endo_range, n))
+    epi = tuple(np.linspace(*epi_range, n))
+    st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0), not the analytic "
+               "default LV; the mesh choice does not apply.")
+    emu = _angles_emulator()  # cached resource: the emulator and its compiled prediction live across reruns
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            _draw_map(emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=edp_mmhg))
+        except LVCoreError as err:
+            st.error(str(err))
+    for w in caught:
+        st.warning(str(w.message))
+
+    st.markdown("**Verify a point with the FE simulator** (runs in the background; the map stays live)")
+    v1, v2, v3 = st.columns([1, 1, 1])
+    pe = v1.number_input("α_endo (°)", -90.0, 0.0, -60.0, 5.0, key="verify_endo")
+    pp = v2.number_input("α_epi (°)", 0.0, 90.0, 60.0, 5.0, key="verify_epi")
+    job = st.session_state.get("angle_verify")
+    busy = job is not None and not job["done"]
+    inputs = {"a (kPa)": theta["a"], "b (–)": theta["b"], "a_f (kPa)": theta["af"], "b_f (–)": theta["bf"],
+              "EDP (mmHg)": edp_mmhg, "mesh": resolution, "point (α_endo, α_epi)": (pe, pp)}
+    if v3.button("Verify with the FE simulator", disabled=busy):
+        job = {"done": False, "t0": time.perf_counter(), "point": (pe, pp), "inputs": inputs, "error": None}
+        st.session_state["angle_verify"] = job
+        threading.Thread(target=_verify_worker, args=(job, (pe, pp), dict(theta), edp_mmhg, resolution),
+                         daemon=True).start()
+        busy = True
+    if busy:  # a 1 s timer only while the simulator runs: no idle reruns
+        st.fragment(run_every=1.0)(_verify_status)()
+    elif job is not None:
+        with freshness.shown(freshness.Stored(job, job["inputs"]), inputs, "angle_verify"):
+            if job["error"]:
+                st.error(job["error"])
+            else:
+                r = job["runs"][0]
+                if not r.converged:
+                    st.error(f"The simulator did not converge at {job['point']}: {r.message}")
+                else:
+                    e_map = emulator_angle_map(emu, (job["point"][0],), (job["point"][1],), theta=theta,
+                                               edp_mmhg=edp_mmhg)
+                    st.write(f"FE simulator ({job['elapsed']:.0f} s, analytic default LV, {resolution} mesh): "
+                             f"LVV **{r.lvv_ml:.1f} mL**, mean E_cc **{float(np.mean(r.strains)):.4f}**; emulator "
+                             f"(shape model's mean LV): LVV **{float(np.ravel(e_map.lvv_ml)[0]):.1f} mL**, mean E_cc "
+                             f"**{float(np.ravel(e_map.mean_strain)[0]):.4f}**. The two geometries differ, so "
+                             "expect an offset; the check is whether the trends agree.")
+
+
 with tab_map:
     engines = ["FE simulator"] + ([EMULATOR_ENGINE] if "angles" in available_emulators() else [])
     engine = st.radio("Computed by", engines, horizontal=True,
                       help="The emulator answers in milliseconds, so its map follows the sliders live; build it with "
                            "`python scripts/build_emulators.py --emulators angles` if it is missing.")
-    c1, c2, c3 = st.columns(3)
     live = engine == EMULATOR_ENGINE
-    n = c1.slider("Grid points per angle", *((5, 41, 21) if live else (2, 6, 3)))  # (min, max, default)
-    endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
-    epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
-    endo = tuple(np.linspace(*endo_range, n))
-    epi = tuple(np.linspace(*epi_range, n))
+    if not live:
+        c1, c2, c3 = st.columns(3)
+        n = c1.slider("Grid points per angle", 2, 6, 3)
+        endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
+        epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
+        endo = tuple(np.linspace(*endo_range, n))
+        epi = tuple(np.linspace(*epi_range, n))
     if live:
-        st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0), not the analytic "
-                   "default LV; the mesh choice does not apply.")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                _draw_map(emulator_angle_map(_angles_emulator(), endo, epi, theta=options["theta"], edp_mmhg=edp))
-            except LVCoreError as err:
-                st.error(str(err))
-        for w in caught:
-            st.warning(str(w.message))
+        _live_map(options["theta"], edp, resolution)
     else:
         st.caption(f"{n * n} simulations.")
         map_inputs = {**conditions, "grid": n, "α_endo range (°)": tuple(endo_range),
