@@ -52,4 +52,67 @@ def input_label(name: str) -> str:
     return name
 
 
-__all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label"]
+
+
+# ----------------------------------------------------------------------------- the shared sidebar
+#: session_state key of the values of the shared sidebar (a plain dict, read by every page).
+SHARED = "shared_inputs"
+_BY_MAIN = "_shared_sidebar_by_main"
+
+
+def _shared_defaults() -> dict:
+    return {"theta": dict(units.HO_REFERENCE_THETA), "edp_mmhg": float(units.DEFAULT_EDP_MMHG),
+            "subject": None, "emulator": None}
+
+
+def shared_sidebar() -> dict:
+    """Render the sidebar shared by every page and return its values (also in ``st.session_state[SHARED]``).
+
+    Subject (a bundled SYNTHETIC volunteer), emulator, θ (log-scaled, with units) and EDP. The entry script
+    (:mod:`lvcore.app.main`) renders it before the page runs, so the values and the widgets' state are the
+    same on every page.
+    """
+    import streamlit as st
+
+    from lvcore.emulator.io import available_emulators
+    from lvcore.resources import bundled_volunteers
+
+    values = _shared_defaults()
+    with st.sidebar:
+        st.header("Shared inputs")
+        subjects = bundled_volunteers()
+        if subjects:
+            values["subject"] = st.selectbox("Subject (SYNTHETIC volunteer)", subjects, key="shared_subject",
+                                             help="Used by Calibration; bundled SYNTHETIC volunteers.")
+        emulators = available_emulators()
+        if emulators:
+            values["emulator"] = st.selectbox("Emulator", emulators, key="shared_emulator",
+                                              help="Default emulator of the Emulator and Calibration pages.")
+        for name in ("a", "b", "af", "bf"):
+            values["theta"][name] = theta_slider(name, key=f"shared_{name}")
+        values["edp_mmhg"] = float(st.slider("EDP (mmHg)", 2.0, 30.0, float(units.DEFAULT_EDP_MMHG), 0.5,
+                                             key="shared_edp"))
+    st.session_state[SHARED] = values
+    return values
+
+
+def render_shared_sidebar() -> dict:
+    """The entry script's call: render the shared sidebar and mark that the pages need not."""
+    import streamlit as st
+
+    st.session_state[_BY_MAIN] = True
+    return shared_sidebar()
+
+
+def shared_inputs() -> dict:
+    """For a page: the shared sidebar's values; renders the sidebar itself when the page runs on its own
+    (``streamlit run`` of one page, AppTest), so every page works with and without the navigation."""
+    import streamlit as st
+
+    if st.session_state.get(_BY_MAIN) and SHARED in st.session_state:
+        return st.session_state[SHARED]
+    return shared_sidebar()
+
+
+__all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label", "SHARED",
+           "shared_sidebar", "render_shared_sidebar", "shared_inputs"]

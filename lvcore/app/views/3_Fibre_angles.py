@@ -15,7 +15,7 @@ import pandas as pd
 import streamlit as st
 
 from lvcore.app import freshness
-from lvcore.app.controls import theta_slider
+from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
@@ -31,13 +31,11 @@ st.caption(
     "some regional strains substantially: a fibre-angle error hides in the strains, not in the volume."
 )
 
+shared = shared_inputs()  # θ and EDP from the shared sidebar (log-scaled, with units)
+a, b, af, bf = (shared["theta"][n] for n in ("a", "b", "af", "bf"))
+edp = shared["edp_mmhg"]
 with st.sidebar:
-    st.header("Conditions")
-    a = theta_slider("a", 0.60, key="fa_a")  # log-scaled, as on every page
-    b = theta_slider("b", 1.30, key="fa_b")
-    af = theta_slider("af", 1.00, key="fa_af")
-    bf = theta_slider("bf", 3.60, key="fa_bf")
-    edp = st.slider("EDP (mmHg)", 4.0, 30.0, 8.0, 0.5)
+    st.header("Fibre angles")
     resolution = st.selectbox("Mesh", ["fast", "default", "accurate"], index=0,
                               help="fast: a few seconds per angle pair; default: the campaigns' mesh")
 options = dict(theta={"a": a, "b": b, "af": af, "bf": bf}, edp_mmhg=edp, resolution=resolution)

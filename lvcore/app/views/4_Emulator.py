@@ -12,7 +12,7 @@ import pandas as pd
 import plotly.graph_objects as go
 import streamlit as st
 
-from lvcore.app.controls import input_label, log_options
+from lvcore.app.controls import input_label, log_options, shared_inputs
 
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
@@ -49,7 +49,9 @@ if not choices:
     )
     st.stop()
 
-label = st.selectbox("Emulator", list(choices))
+_shared_emu = shared_inputs().get("emulator")
+label = st.selectbox("Emulator", list(choices), index=list(choices).index(_shared_emu) if _shared_emu in choices else 0,
+                     help="Defaults to the shared sidebar's emulator.")
 try:
     emu = _load(choices[label])
 except LVCoreError as err:

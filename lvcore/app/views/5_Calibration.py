@@ -16,6 +16,7 @@ import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
 from lvcore.app import freshness
+from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
@@ -57,6 +58,9 @@ def _emulator(path: str):
     return load_emulator(path)
 
 
+shared = shared_inputs()  # the shared sidebar's subject and emulator are this page's defaults
+shared_subject, shared_emu = shared.get("subject"), shared.get("emulator")
+
 # ----------------------------------------------------------------------------- data
 left, right = st.columns(2)
 with left:
@@ -69,7 +73,8 @@ with left:
         if not names:
             st.warning("No bundled volunteers in lvcore/assets/volunteers; upload data instead.")
         else:
-            name = st.selectbox("Volunteer", names)
+            name = st.selectbox("Volunteer", names, index=names.index(shared_subject) if shared_subject in names else 0,
+                                help="Defaults to the shared sidebar's subject.")
             try:
                 vol = volunteer_files(name)
                 data = read_measured_csv(vol.measured)[0]
@@ -103,7 +108,9 @@ with left:
 
 with right:
     st.subheader("Model")
-    emu_label = st.selectbox("Emulator", list(choices))
+    emu_label = st.selectbox("Emulator", list(choices),
+                             index=list(choices).index(shared_emu) if shared_emu in choices else 0,
+                             help="Defaults to the shared sidebar's emulator.")
     models = st.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid", "discrepancy"],
                             format_func=MODEL_LABELS.get,
                             help="Parameters reported:\n\n" + "\n\n".join(
