@@ -14,7 +14,7 @@ def test_report_page_is_in_the_navigation():
 
 
 def test_report_page_builds_a_zip(monkeypatch):
-    import lvcore.report as report
+    from lvcore import report
 
     calls = []
 

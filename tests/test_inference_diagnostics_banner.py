@@ -4,7 +4,8 @@ from lvcore.inference.models import PARAMETER_HELP
 
 
 def _conv(**kw):
-    base = dict(converged=True, max_rhat=1.004, min_ess_bulk=900.0, min_ess_tail=800.0, n_divergent=0, failing=())
+    base = {"converged": True, "max_rhat": 1.004, "min_ess_bulk": 900.0, "min_ess_tail": 800.0, "n_divergent": 0,
+            "failing": ()}
     return Convergence(**{**base, **kw})
 
 
