@@ -102,5 +102,25 @@ def volunteer_files(name: str) -> VolunteerFiles:
     return files_
 
 
+def volunteer_truth(subject: str) -> dict[str, float] | None:
+    """The hidden generating parameters of a SYNTHETIC volunteer (θ and fibre angles), for display only.
+
+    ``subject`` is the measured CSV's subject (``SYNTHETIC-HV1``) or the bundled name (``SYNTHETIC_HV1``).
+    Returns None for a subject without a recorded truth (a real subject, an upload). The truth scores a fit;
+    it must never enter one.
+    """
+    import json
+
+    path = volunteers_dir() / "truth" / "SYNTHETIC_volunteers_truth.json"
+    if not path.is_file():
+        return None
+    key = subject.replace("_", "-")
+    for t in json.loads(path.read_text()).get("volunteers", []):
+        if str(t.get("subject", "")).replace("_", "-") == key:
+            return {**{k: float(v) for k, v in t.get("theta", {}).items()},
+                    **{k: float(v) for k, v in t.get("fibres_deg", {}).items()}}
+    return None
+
+
 __all__ = ["ASSETS", "asset_path", "assets_dir", "example_cases", "VolunteerFiles", "volunteers_dir", "bundled_volunteers",
-           "volunteer_files"]
+           "volunteer_files", "volunteer_truth"]

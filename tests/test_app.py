@@ -42,6 +42,20 @@ def test_switching_pages_by_navigation():
     assert at.title[0].value == "Shape model"
 
 
+def test_shared_sidebar_keeps_its_state_across_pages():
+    """main.py renders one sidebar (subject, emulator, log-scaled θ with units, EDP) before the page runs."""
+    at = AppTest.from_file(APP, default_timeout=180).run()
+    a = next(s for s in at.sidebar.select_slider if s.key == "shared_a")
+    assert a.label == "a (kPa)"
+    new = a.options[a.options.index(str(a.value)) + 2] if str(a.value) in a.options else a.options[-5]
+    a.set_value(float(new)).run()
+    at.switch_page(str(APP_DIR / "views" / "3_Fibre_angles.py")).run()
+    assert not at.exception, at.exception
+    assert [s.key for s in at.sidebar.select_slider].count("shared_a") == 1  # rendered once, by main.py
+    assert float(at.session_state["shared_inputs"]["theta"]["a"]) == float(new)
+    assert float(next(s for s in at.sidebar.select_slider if s.key == "shared_a").value) == float(new)
+
+
 def _lvv(at) -> float:
     (metric,) = [m for m in at.metric if m.label.startswith("LVV")]
     return float(metric.value.split()[0])

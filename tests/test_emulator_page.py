@@ -34,9 +34,12 @@ def test_page_renders_with_an_emulator(emulator_dir):
     at = AppTest.from_file(str(PAGE), default_timeout=60).run()
     assert not at.exception, at.exception
     assert any("TEST DOUBLE" in w.value for w in at.warning)
-    assert len(at.slider) == 4
+    controls = list(at.main.slider) + list(at.main.select_slider)  # the shared sidebar aside
+    assert len(controls) == 4
+    assert {c.label for c in controls} == {"a (kPa)", "b (–)", "a_f (kPa)", "b_f (–)"}  # units in the labels
     assert at.metric[0].value == "100"
-    at.slider[0].set_value(2.0).run()
+    first = at.main.select_slider[0] if len(at.main.select_slider) else at.main.slider[0]  # log inputs: log stops
+    first.set_value(first.options[-3] if len(at.main.select_slider) else 2.0).run()
     assert not at.exception
     assert any("Emulator: LVV" in m.value for m in at.markdown)
     assert len(at.get("plotly_chart")) == 2
@@ -54,4 +57,7 @@ def test_page_labels_the_shipped_below_spec_demo(tmp_path, monkeypatch):
     assert any("below spec" in o for o in at.selectbox[0].options)
     at.selectbox[0].select(next(o for o in at.selectbox[0].options if o.startswith("chapter (below spec"))).run()
     assert any("BELOW SPEC" in w.value for w in at.warning)
-    assert len(at.slider) == 9
+    controls = list(at.main.slider) + list(at.main.select_slider)  # the shared sidebar aside
+    assert len(controls) == 9
+    labels = {c.label for c in controls}
+    assert "EDP (mmHg)" in labels or any(lab.startswith("h1: PC score 1") for lab in labels), labels

@@ -26,4 +26,7 @@ def test_renders_and_figures():
     table = {"ks": [5, 6], "blocks": [{"main": "op1", "others": ["op2"], "rows": [
         {"patient": "SYNTHETIC-P01", "operator_mse": {"op2": 0.01}, "pca_mse": {"5": 0.02, "6": 0.005}}]}]}
     fig = operator_mse_figure(table, "op1")
-    assert len(fig.data) == 2 and fig.data[1].y[0] == 0.01
+    assert fig.data[1].y[0] == 0.01
+    # one legend entry per patient plus one per line style, not one per line (the 18 entries)
+    assert [t.name for t in fig.data if t.showlegend is not False] == ["P01", "solid: k-mode PCA", "dashed: vs op2"]
+    assert fig.layout.yaxis.dtick == 1  # log ticks at decades only

@@ -64,3 +64,39 @@ def test_page_renders_controls_with_an_emulator(tmp_path, monkeypatch):
     assert any("chapter" in str(o) for o in at.selectbox[-1].options)
     assert at.button[0].label == "Run calibration"
     assert len(at.multiselect) == 1
+
+
+def test_page_runs_a_short_calibration_and_reports_honestly(tmp_path, monkeypatch):
+    """A short run: the banner states divergences/R-hat/ESS (amber: 50 draws cannot reach ESS 400), the
+    posterior is drawn over its prior with the SYNTHETIC truth, and no timer reruns the page afterwards."""
+    import time
+
+    from streamlit.testing.v1 import AppTest
+
+    from lvcore.emulator.io import save_emulator
+    from test_inference_calibrate import _random_emulator
+
+    save_emulator(_random_emulator(), tmp_path / "chapter")
+    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+    at = AppTest.from_file(str(PAGE), default_timeout=120).run()
+    at.multiselect[0].set_value(["iid"])
+    at.number_input[0].set_value(2)
+    at.number_input[1].set_value(50)
+    at.number_input[2].set_value(50)
+    at.button[0].click().run()
+    assert not at.exception, at.exception
+    t0 = time.time()
+    while not at.session_state["calibration_job"]["done"] and time.time() - t0 < 240:
+        time.sleep(2)
+    at.run()
+    at.run()
+    assert not at.exception, at.exception
+    job = at.session_state["calibration_job"]
+    assert job["done"] and not job["error"], job.get("error")
+    banners = [w.value for w in at.warning] + [s.value for s in at.success]
+    assert any("divergences" in b and "R-hat" in b and "ESS" in b for b in banners), banners
+    assert any("ESS" in w.value for w in at.warning)  # 2 x 50 draws: amber, never green
+    assert any("hidden generating value" in c.value for c in at.caption)
+    assert any("meaning" in df.value.columns for df in at.dataframe)
+    at.number_input[1].set_value(100).run()  # warm-up 50 -> 100: the shown result is stale
+    assert any("Inputs changed, re-run" in w.value and "warm-up" in w.value for w in at.warning)

@@ -41,3 +41,13 @@ def test_loaders_find_bundled_data_from_a_foreign_working_directory(tmp_path, mo
 def test_unknown_volunteer_names_the_bundled_ones():
     with pytest.raises(DataError, match="SYNTHETIC_HV1"):
         resources.volunteer_files("HV99")
+
+
+def test_volunteer_truth_for_synthetic_subjects_only():
+    from lvcore.resources import bundled_volunteers, volunteer_truth
+
+    name = bundled_volunteers()[0]
+    t = volunteer_truth(name)
+    assert t is not None and {"a", "b", "af", "bf"} <= set(t)
+    assert volunteer_truth(name.replace("_", "-")) == t  # the CSV's subject spelling
+    assert volunteer_truth("real-subject-7") is None

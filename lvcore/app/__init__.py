@@ -40,6 +40,7 @@ PAGES = (
     AppPage("views/4_Emulator.py", "Emulator", ":material/speed:", "emulator"),
     AppPage("views/5_Calibration.py", "Calibration", ":material/query_stats:", "calibration"),
     AppPage("views/6_Studies.py", "Studies", ":material/science:", "studies"),
+    AppPage("views/7_Report.py", "Report", ":material/summarize:", "report"),
 )
 
 __all__ = ["APP_DIR", "ENTRY", "AppPage", "PAGES"]

@@ -26,7 +26,11 @@ def main() -> None:
     st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
     pages = [st.Page(p.path, title=p.title, icon=p.icon, url_path=p.url_path, default=(k == 0))
              for k, p in enumerate(PAGES)]
-    st.navigation(pages).run()
+    pg = st.navigation(pages)
+    from lvcore.app.controls import render_shared_sidebar
+
+    render_shared_sidebar()  # subject, emulator, θ, EDP: one sidebar, one state, every page
+    pg.run()
 
 
 if __name__ == "__main__":

@@ -19,7 +19,6 @@ import numpy as np  # noqa: E402
 import streamlit as st  # noqa: E402
 
 from lvcore import units  # noqa: E402
-from lvcore.core.space import THETA_BOUNDS  # noqa: E402
 from lvcore.app import PAGES  # noqa: E402
 from lvcore.exceptions import LVCoreError  # noqa: E402
 from lvcore.inference.samplers import use_host_devices  # noqa: E402
@@ -29,18 +28,10 @@ from lvcore.resources import example_cases  # noqa: E402
 
 use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (views/5_Calibration.py)
 
-#: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-), log-spaced.
-THETA_RANGES = dict(THETA_BOUNDS)
-THETA_LABELS = {"a": "a (kPa)", "b": "b (–)", "af": "a_f (kPa)", "bf": "b_f (–)"}
+from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options  # noqa: E402,F401  (shared log sliders)
 RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
 st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
-
-
-def log_options(lo: float, hi: float, keep: float, n: int = 41) -> list[float]:
-    """Log-spaced slider stops (3 significant digits) that include ``keep``."""
-    values = {float(f"{v:.3g}") for v in np.geomspace(lo, hi, n)} | {float(keep)}
-    return sorted(values)
 
 
 @st.cache_data(show_spinner=False, max_entries=64)
@@ -95,10 +86,28 @@ page_links()
 
 st.header("Simulator")
 st.caption(
-    "Inflates the default LV (an idealised truncated ellipsoid of physiological size; not patient data) from its "
+    "Inflates the default LV (a mildly elliptical, tapered truncated ellipsoid of physiological size; not patient "
+    "data) from its "
     "early-diastolic reference geometry to the end-diastolic pressure (EDP). Outputs: the end-diastolic cavity "
     "volume LVV and 24 regional circumferential Green strains (end diastole as reference, negative in filling)."
 )
+
+with st.expander("Explain the numbers"):
+    st.markdown(
+        "- **EDV / V_early ≈ 2.1 at 8 mmHg with the chapter θ** (a = 0.60 kPa, b = 1.30, a_f = 1.00 kPa, b_f = 3.60). "
+        "V_early is the cavity of the *unloaded, stress-free* reference geometry (about 85 mL for the default LV), "
+        "not an early-diastolic volume measured under pressure. The Holzapfel–Ogden law is soft at small stretch "
+        "(its exponentials only stiffen once the tissue is stretched), the wall is thin (9–10 mm for a 24 mm "
+        "cavity radius), and the model has no residual stress, pericardium or active tension; so 8 mmHg "
+        "(1.07 kPa) roughly doubles the passive cavity. The same simulator generates the emulators and the "
+        "SYNTHETIC data, so the calibration is consistent with it; the ratio is a property of this model, "
+        "not a claim about real ventricles.\n"
+        "- **Sector-to-sector strain differences on the default LV.** The default LV is not axisymmetric: its "
+        "cross-section is mildly elliptical (endocardial short radii 24.0 and 21.5 mm, epicardial 33.5 and "
+        "31.0 mm) and it tapers to the apex, the base is clamped, and the rule-based fibres wind helically "
+        "through the wall. Curvature, wall thickness and fibre direction therefore vary around each ring, and "
+        "so does the circumferential strain, even though no patient data are involved."
+    )
 
 with st.form("simulator"):
     c1, c2, c3 = st.columns(3)

@@ -224,6 +224,38 @@ def save_netcdf(idata: az.InferenceData, path) -> Path:
     return path
 
 
-__all__ = ["Convergence", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table",
+#: Bulk ESS below which the app's banner is amber even when the run passed its convergence check.
+BANNER_ESS_MIN = 400.0
+
+
+def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN) -> tuple[str, str]:
+    """The level and text of the app's convergence banner for one run.
+
+    Green (``"success"``) only when the run converged (R-hat and ESS
+    thresholds of the check), had no divergent transitions and every monitored
+    parameter has bulk ESS >= ``ess_min``; otherwise ``"warning"`` (amber).
+    The text always states the divergences, the worst R-hat and the
+    smallest bulk and tail ESS, so a user never has to trust a colour.
+
+    Returns
+    -------
+    level : {"success", "warning"}
+    text : str
+    """
+    problems = []
+    if not conv.converged:
+        problems.append("not converged" + (f" ({', '.join(conv.failing)})" if conv.failing else ""))
+    if conv.n_divergent > 0:
+        problems.append(f"{conv.n_divergent} divergent transition{'s' if conv.n_divergent != 1 else ''}")
+    if not conv.min_ess_bulk >= ess_min:
+        problems.append(f"bulk ESS {conv.min_ess_bulk:.0f} < {ess_min:.0f}")
+    numbers = (f"divergences {conv.n_divergent}, max R-hat {conv.max_rhat:.3f}, min bulk ESS "
+               f"{conv.min_ess_bulk:.0f}, min tail ESS {conv.min_ess_tail:.0f}, {conv.rounds} round(s)")
+    if problems:
+        return "warning", "Treat with care: " + "; ".join(problems) + ". " + numbers
+    return "success", "Converged: " + numbers
+
+
+__all__ = ["Convergence", "BANNER_ESS_MIN", "banner_status", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table",
            "check_convergence", "sample_until_converged", "ess_per_second", "posterior_predictive", "to_inference_data",
            "save_netcdf"]

@@ -177,8 +177,27 @@ def get_model(name: str):
         raise ValueError(f"unknown model '{name}'; choose one of {MODEL_NAMES}") from None
 
 
+#: One-line meaning of every parameter a calibration reports (the app's tooltips and tables).
+PARAMETER_HELP = {
+    "a": "a (kPa): isotropic stiffness of the Holzapfel-Ogden law, scales the matrix term a/(2b)(e^{b(I1-3)}-1).",
+    "b": "b (-): isotropic exponent; how fast the matrix stiffens with stretch.",
+    "af": "a_f (kPa): fibre stiffness, scales the fibre term a_f/(2b_f)(e^{b_f(I4f-1)²}-1).",
+    "bf": "b_f (-): fibre exponent; how fast the fibres stiffen with stretch.",
+    "alpha_endo": "α_endo (deg): fibre angle at the endocardium (inferred only with 'infer' fibre angles).",
+    "alpha_epi": "α_epi (deg): fibre angle at the epicardium (inferred only with 'infer' fibre angles).",
+    "sigma_s_sq": "σ_S² (strain²): variance of the iid strain measurement noise; prior IG(0.001, 0.001).",
+    "sigma_s2": "σ_S² (strain²): variance of the iid strain measurement noise; prior IG(0.001, 0.001).",
+    "v": "v (strain): global strain bias of the discrepancy b(x), the same offset in all 24 segments; prior N(0, 0.05²).",
+    "lam": "λ (levels): correlation length of the polar-GP discrepancy across the three short-axis levels; prior Gamma(2, 2).",
+    "sigma1_sq": "σ₁² (strain²): variance of the discrepancy's circumferential component (polar Wendland kernel around each ring); prior IG(0.001, 0.001).",
+    "sigma2_sq": "σ₂² (strain²): variance of the discrepancy's base-to-apex (level) component; prior IG(0.001, 0.001).",
+    "c": "c (rad): compact-support radius of the polar kernel: segments further apart than c around the ring are uncorrelated; prior U(0, π).",
+    "tau": "τ (-): shape/smoothness exponent of the polar Wendland kernel (positive definite for τ ≥ 4); prior U(4, 10).",
+}
+
+
 __all__ = [
     "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
-    "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
+    "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model",
 ]

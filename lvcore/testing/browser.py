@@ -190,7 +190,8 @@ def open_live_map(page) -> None:
     if tab.count():
         tab.first.click()
         wait_rerun(page)
-    live = page.locator("label").filter(has_text=re.compile("emulator", re.I))
+    # the engine radio in the main area (the shared sidebar also has an "Emulator" selectbox label)
+    live = page.locator("[data-testid=stMain] [data-testid=stRadio] label").filter(has_text=re.compile("emulator", re.I))
     if live.count():
         live.first.click()
         wait_rerun(page)

@@ -126,18 +126,27 @@ def operator_mse_figure(table: Mapping, main: str, log_y: bool = True):
     ks = list(table["ks"])
     fig = go.Figure()
     palette = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+    others: list[str] = []
     for i, row in enumerate(block["rows"]):
         c = palette[i % len(palette)]
         name = row["patient"].replace("SYNTHETIC-", "")
         fig.add_scatter(x=ks, y=[row["pca_mse"][str(k)] for k in ks], mode="lines+markers", line=dict(color=c),
-                        name=f"{name}: k-mode PCA", legendgroup=name)
+                        name=name, legendgroup=name)
         for j, (other, v) in enumerate(row["operator_mse"].items()):
+            if other not in others:
+                others.append(other)
             fig.add_scatter(x=[ks[0], ks[-1]], y=[v, v], mode="lines",
                             line=dict(color=c, dash="dash" if j == 0 else "dot"),
-                            name=f"{name}: vs {other}", legendgroup=name)
+                            name=f"{name}: vs {other}", legendgroup=name, showlegend=False,
+                            hovertemplate=f"{name} vs {other}: %{{y:.4f}} cm²<extra></extra>")
+    # one legend entry per patient (colour) plus one per line style, not one per line
+    fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="grey"), name="solid: k-mode PCA")
+    for j, other in enumerate(others[:2]):
+        fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="grey", dash="dash" if j == 0 else "dot"),
+                        name=f"{'dashed' if j == 0 else 'dotted'}: vs {other}")
     fig.update_layout(title=f"Reconstruction error vs k; main operator {main} (SYNTHETIC)",
                       xaxis_title="number of PCA modes k", yaxis_title="mean squared node distance (cm²)",
                       height=460, margin=dict(l=50, r=20, t=50, b=40))
-    if log_y:
-        fig.update_yaxes(type="log")
+    if log_y:  # ticks at decades only (0.001, 0.01, 0.1), minor grid between: no "0.01, 2, 3, 4"
+        fig.update_yaxes(type="log", dtick=1, tickformat="~g", minor=dict(showgrid=True, ticks=""))
     return fig

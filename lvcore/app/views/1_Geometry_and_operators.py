@@ -67,9 +67,11 @@ if source.startswith("Bundled"):
     for o, op in enumerate(operators):
         geoms[op] = nodes[p, o]
         summaries[op] = fits[f"{patient}/{op}"]
-    if any(summaries[o].get("motion_error_mm") for o in operators):
-        st.info("One segmentation of this patient carries an imitated motion-correction error (slices shifted in "
-                "plane), like the chapter's operator 1 on its first patient.")
+    moved = {o: summaries[o]["motion_error_mm"] for o in operators if summaries[o].get("motion_error_mm")}
+    if moved:
+        which = ", ".join(f"{o} ({mm:g} mm)" for o, mm in moved.items())
+        st.info(f"The segmentation by {which} carries an imitated motion-correction error (apical slices shifted "
+                "in plane by that distance), like the chapter's operator 1 on its first patient.")
 else:
     st.write("For each operator, upload either a contour stack (JSON, schema `lvcore.contours/1`, see "
              "docs/geometry.md), an endocardial and an epicardial surface (VTK/VTP/STL/PLY/OBJ, open at the base), "
@@ -121,12 +123,12 @@ with left:
                       "SYNTHETIC " + patient.replace("SYNTHETIC-", "") if source.startswith("Bundled") else "uploaded"))
 with right:
     st.subheader("Volumes and fit residuals")
-    st.dataframe(pd.DataFrame(rows).set_index("operator"))
+    st.dataframe(pd.DataFrame(rows).set_index("operator"), width="stretch")
     if len(names) > 1:
         mse = pd.DataFrame([[node_mse_cm2(geoms[a], geoms[b]) for b in names] for a in names], index=names,
                            columns=names).round(4)
         st.markdown("**Mean squared node distance (cm²)**")
-        st.dataframe(mse)
+        st.dataframe(mse, width="stretch")
 
 if len(names) > 1:
     st.subheader("Per-node distance between two geometries")

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import os
+import threading
+import time
 import warnings
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -12,6 +14,8 @@ import numpy as np
 import pandas as pd
 import streamlit as st
 
+from lvcore.app import freshness
+from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
@@ -27,16 +31,15 @@ st.caption(
     "some regional strains substantially: a fibre-angle error hides in the strains, not in the volume."
 )
 
+shared = shared_inputs()  # θ and EDP from the shared sidebar (log-scaled, with units)
+a, b, af, bf = (shared["theta"][n] for n in ("a", "b", "af", "bf"))
+edp = shared["edp_mmhg"]
 with st.sidebar:
-    st.header("Conditions")
-    a = st.slider("a (kPa)", 0.05, 5.0, 0.60, 0.05)
-    b = st.slider("b (–)", 0.1, 10.0, 1.30, 0.1)
-    af = st.slider("a_f (kPa)", 0.05, 5.0, 1.00, 0.05)
-    bf = st.slider("b_f (–)", 0.1, 10.0, 3.60, 0.1)
-    edp = st.slider("EDP (mmHg)", 4.0, 30.0, 8.0, 0.5)
+    st.header("Fibre angles")
     resolution = st.selectbox("Mesh", ["fast", "default", "accurate"], index=0,
                               help="fast: a few seconds per angle pair; default: the campaigns' mesh")
 options = dict(theta={"a": a, "b": b, "af": af, "bf": bf}, edp_mmhg=edp, resolution=resolution)
+conditions = {"a (kPa)": a, "b (–)": b, "a_f (kPa)": af, "b_f (–)": bf, "EDP (mmHg)": edp, "mesh": resolution}
 
 tab_sweep, tab_map = st.tabs(["Angle pairs (Fig 9.5)", "Map over (α_endo, α_epi)"])
 
@@ -71,20 +74,24 @@ with tab_sweep:
     except ValueError:
         st.error(f"Could not read '{extra}': write pairs as 'α_endo α_epi' in degrees, separated by ';'.")
         pairs = []
+    sweep_inputs = {**conditions, "pairs (α_endo, α_epi)": [tuple(p) for p in pairs]}
     if pairs and st.button("Run sweep", type="primary"):
         with st.spinner(f"Simulating {len(pairs)} angle pairs..."):
             try:
-                st.session_state["angle_runs"] = _sweep(tuple(pairs), _frozen(options))
+                freshness.remember("angle_runs", _sweep(tuple(pairs), _frozen(options)), sweep_inputs)
             except LVCoreError as err:
                 st.error(str(err))
-    runs = st.session_state.get("angle_runs")
-    if runs:
-        st.plotly_chart(figures.strain_bars(strain_table(runs), title="Circumferential strain by region and angle pair"),
-                        use_container_width=True)
-        st.dataframe(pd.DataFrame([{"α_endo (°)": r.alpha_endo, "α_epi (°)": r.alpha_epi,
-                                    "LVV (mL)": r.lvv_ml, "mean E_cc": None if r.strains is None else float(np.mean(r.strains)),
-                                    "converged": r.converged, "message": r.message} for r in runs]),
-                     hide_index=True, use_container_width=True)
+    stored = freshness.recall("angle_runs")
+    if stored is not None and stored.result:
+        runs = stored.result
+        with freshness.shown(stored, sweep_inputs, "angle_runs"):
+            st.plotly_chart(figures.strain_bars(strain_table(runs),
+                                                title="Circumferential strain by region and angle pair"),
+                            width="stretch")
+            st.dataframe(pd.DataFrame([{"α_endo (°)": r.alpha_endo, "α_epi (°)": r.alpha_epi, "LVV (mL)": r.lvv_ml,
+                                        "mean E_cc": None if r.strains is None else float(np.mean(r.strains)),
+                                        "converged": r.converged, "message": r.message} for r in runs]),
+                         hide_index=True, width="stretch")
 
 EMULATOR_ENGINE = "`angles` emulator (live)"
 
@@ -98,10 +105,85 @@ def _draw_map(amap):
     left, right = st.columns(2)
     left.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.lvv_ml, title="LVV (mL)",
                                       xaxis_title="α_endo (°)", yaxis_title="α_epi (°)", colorbar_title="mL"),
-                      use_container_width=True)
+                      width="stretch")
     right.plotly_chart(figures.contour(amap.alpha_endo, amap.alpha_epi, amap.mean_strain, title="Mean E_cc",
                                        xaxis_title="α_endo (°)", yaxis_title="α_epi (°)"),
-                       use_container_width=True)
+                       width="stretch")
+
+
+def _verify_worker(job: dict, point, theta, edp_mmhg, resolution) -> None:
+    try:
+        job["runs"] = angle_sweep([point], theta=theta, edp_mmhg=edp_mmhg, resolution=resolution)
+    except Exception as err:  # noqa: BLE001 - shown to the user
+        job["error"] = f"{type(err).__name__}: {err}"
+    finally:
+        job["elapsed"] = time.perf_counter() - job["t0"]
+        job["done"] = True
+
+
+def _verify_status() -> None:
+    job = st.session_state.get("angle_verify")
+    if job is not None and not job["done"]:
+        st.progress(0.5, text=f"FE simulator running at {job['point']}: "
+                              f"{time.perf_counter() - job['t0']:.0f} s elapsed")
+    elif job is not None and not job.get("shown"):
+        job["shown"] = True
+        st.rerun()  # once, to show the result in the map fragment
+
+
+@st.fragment
+def _live_map(theta, edp_mmhg, resolution) -> None:
+    """The emulator's map and its grid/range sliders: moving them reruns only this fragment, not the page."""
+    c1, c2, c3 = st.columns(3)
+    n = c1.slider("Grid points per angle", 5, 41, 21)
+    endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
+    epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
+    endo = tuple(np.linspace(*endo_range, n))
+    epi = tuple(np.linspace(*epi_range, n))
+    st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0), not the analytic "
+               "default LV; the mesh choice does not apply.")
+    emu = _angles_emulator()  # cached resource: the emulator and its compiled prediction live across reruns
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            _draw_map(emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=edp_mmhg))
+        except LVCoreError as err:
+            st.error(str(err))
+    for w in caught:
+        st.warning(str(w.message))
+
+    st.markdown("**Verify a point with the FE simulator** (runs in the background; the map stays live)")
+    v1, v2, v3 = st.columns([1, 1, 1])
+    pe = v1.number_input("α_endo (°)", -90.0, 0.0, -60.0, 5.0, key="verify_endo")
+    pp = v2.number_input("α_epi (°)", 0.0, 90.0, 60.0, 5.0, key="verify_epi")
+    job = st.session_state.get("angle_verify")
+    busy = job is not None and not job["done"]
+    inputs = {"a (kPa)": theta["a"], "b (–)": theta["b"], "a_f (kPa)": theta["af"], "b_f (–)": theta["bf"],
+              "EDP (mmHg)": edp_mmhg, "mesh": resolution, "point (α_endo, α_epi)": (pe, pp)}
+    if v3.button("Verify with the FE simulator", disabled=busy):
+        job = {"done": False, "t0": time.perf_counter(), "point": (pe, pp), "inputs": inputs, "error": None}
+        st.session_state["angle_verify"] = job
+        threading.Thread(target=_verify_worker, args=(job, (pe, pp), dict(theta), edp_mmhg, resolution),
+                         daemon=True).start()
+        busy = True
+    if busy:  # a 1 s timer only while the simulator runs: no idle reruns
+        st.fragment(run_every=1.0)(_verify_status)()
+    elif job is not None:
+        with freshness.shown(freshness.Stored(job, job["inputs"]), inputs, "angle_verify"):
+            if job["error"]:
+                st.error(job["error"])
+            else:
+                r = job["runs"][0]
+                if not r.converged:
+                    st.error(f"The simulator did not converge at {job['point']}: {r.message}")
+                else:
+                    e_map = emulator_angle_map(emu, (job["point"][0],), (job["point"][1],), theta=theta,
+                                               edp_mmhg=edp_mmhg)
+                    st.write(f"FE simulator ({job['elapsed']:.0f} s, analytic default LV, {resolution} mesh): "
+                             f"LVV **{r.lvv_ml:.1f} mL**, mean E_cc **{float(np.mean(r.strains)):.4f}**; emulator "
+                             f"(shape model's mean LV): LVV **{float(np.ravel(e_map.lvv_ml)[0]):.1f} mL**, mean E_cc "
+                             f"**{float(np.ravel(e_map.mean_strain)[0]):.4f}**. The two geometries differ, so "
+                             "expect an offset; the check is whether the trends agree.")
 
 
 with tab_map:
@@ -109,31 +191,26 @@ with tab_map:
     engine = st.radio("Computed by", engines, horizontal=True,
                       help="The emulator answers in milliseconds, so its map follows the sliders live; build it with "
                            "`python scripts/build_emulators.py --emulators angles` if it is missing.")
-    c1, c2, c3 = st.columns(3)
     live = engine == EMULATOR_ENGINE
-    n = c1.slider("Grid points per angle", *((5, 41, 21) if live else (2, 6, 3)))  # (min, max, default)
-    endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
-    epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
-    endo = tuple(np.linspace(*endo_range, n))
-    epi = tuple(np.linspace(*epi_range, n))
+    if not live:
+        c1, c2, c3 = st.columns(3)
+        n = c1.slider("Grid points per angle", 2, 6, 3)
+        endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
+        epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
+        endo = tuple(np.linspace(*endo_range, n))
+        epi = tuple(np.linspace(*epi_range, n))
     if live:
-        st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0), not the analytic "
-                   "default LV; the mesh choice does not apply.")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                _draw_map(emulator_angle_map(_angles_emulator(), endo, epi, theta=options["theta"], edp_mmhg=edp))
-            except LVCoreError as err:
-                st.error(str(err))
-        for w in caught:
-            st.warning(str(w.message))
+        _live_map(options["theta"], edp, resolution)
     else:
         st.caption(f"{n * n} simulations.")
+        map_inputs = {**conditions, "grid": n, "α_endo range (°)": tuple(endo_range),
+                      "α_epi range (°)": tuple(epi_range)}
         if st.button("Run map"):
             with st.spinner(f"Simulating {n * n} angle pairs..."):
-                st.session_state["angle_map"] = _map(endo, epi, _frozen(options))
-        amap = st.session_state.get("angle_map")
-        if amap is not None:
-            _draw_map(amap)
-            for r in amap.failures:
-                st.warning(f"({r.alpha_endo:g}°, {r.alpha_epi:g}°) did not converge: {r.message}")
+                freshness.remember("angle_map", _map(endo, epi, _frozen(options)), map_inputs)
+        stored_map = freshness.recall("angle_map")
+        if stored_map is not None:
+            with freshness.shown(stored_map, map_inputs, "angle_map"):
+                _draw_map(stored_map.result)
+                for r in stored_map.result.failures:
+                    st.warning(f"({r.alpha_endo:g}°, {r.alpha_epi:g}°) did not converge: {r.message}")

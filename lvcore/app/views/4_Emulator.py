@@ -12,6 +12,8 @@ import pandas as pd
 import plotly.graph_objects as go
 import streamlit as st
 
+from lvcore.app.controls import input_label, log_options, shared_inputs
+
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import OUTPUT_NAMES
@@ -47,7 +49,9 @@ if not choices:
     )
     st.stop()
 
-label = st.selectbox("Emulator", list(choices))
+_shared_emu = shared_inputs().get("emulator")
+label = st.selectbox("Emulator", list(choices), index=list(choices).index(_shared_emu) if _shared_emu in choices else 0,
+                     help="Defaults to the shared sidebar's emulator.")
 try:
     emu = _load(choices[label])
 except LVCoreError as err:
@@ -103,11 +107,11 @@ else:
     ])
     fig.update_layout(title=f"Parity: {OUTPUT_NAMES[k]}", xaxis_title=f"simulator{unit}", yaxis_title=f"emulator{unit}",
                       height=420, margin=dict(l=10, r=10, t=40, b=10))
-    left.plotly_chart(fig, use_container_width=True)
+    left.plotly_chart(fig, width="stretch")
     hist = go.Figure(go.Histogram(x=p - y, nbinsx=40))
     hist.update_layout(title=f"Residuals: {OUTPUT_NAMES[k]}", xaxis_title=f"emulator − simulator{unit}",
                        yaxis_title="count", height=420, margin=dict(l=10, r=10, t=40, b=10))
-    right.plotly_chart(hist, use_container_width=True)
+    right.plotly_chart(hist, width="stretch")
 
 # ----- live check ----------------------------------------------------------------
 st.subheader("Live check: emulator vs one simulator run")
@@ -115,7 +119,11 @@ values = {}
 cols = st.columns(3)
 for i, (name, lo, hi, log) in enumerate(zip(emu.input_names, emu.lower, emu.upper, emu.log_inputs)):
     mid = float(np.sqrt(lo * hi)) if log else float(0.5 * (lo + hi))
-    values[name] = cols[i % 3].slider(name, float(lo), float(hi), mid, key=f"in_{name}")
+    if log:  # log-scaled stops over a log-scaled input (the stiffnesses)
+        values[name] = cols[i % 3].select_slider(input_label(name), options=log_options(float(lo), float(hi), float(f"{mid:.3g}")),
+                                                 value=float(f"{mid:.3g}"), key=f"in_{name}")
+    else:
+        values[name] = cols[i % 3].slider(input_label(name), float(lo), float(hi), mid, key=f"in_{name}")
 x = np.array([values[n] for n in emu.input_names])
 y_emu = np.asarray(emu.predict(x, strict=True))
 st.write(f"Emulator: LVV **{y_emu[0]:.1f} mL**, mean strain **{y_emu[1:].mean():.4f}** (instant).")
@@ -148,4 +156,4 @@ if live and np.allclose(live[0], x):
     fig = go.Figure([go.Bar(x=list(OUTPUT_NAMES[1:]), y=y_sim[1:], name="simulator"),
                      go.Bar(x=list(OUTPUT_NAMES[1:]), y=y_emu[1:], name="emulator")])
     fig.update_layout(barmode="group", yaxis_title="circumferential strain", height=380, margin=dict(l=10, r=10, t=20, b=10))
-    st.plotly_chart(fig, use_container_width=True)
+    st.plotly_chart(fig, width="stretch")

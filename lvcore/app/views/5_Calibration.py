@@ -15,13 +15,17 @@ import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
+from lvcore.app import freshness
+from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.core.forward import emulator_forward
+from lvcore.inference.diagnostics import banner_status
+from lvcore.inference.models import PARAMETER_HELP, prior_bounds
 from lvcore.inference.samplers import SamplerConfig, use_host_devices
-from lvcore.resources import bundled_volunteers, volunteer_files
+from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
 
 use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
@@ -54,6 +58,9 @@ def _emulator(path: str):
     return load_emulator(path)
 
 
+shared = shared_inputs()  # the shared sidebar's subject and emulator are this page's defaults
+shared_subject, shared_emu = shared.get("subject"), shared.get("emulator")
+
 # ----------------------------------------------------------------------------- data
 left, right = st.columns(2)
 with left:
@@ -66,7 +73,8 @@ with left:
         if not names:
             st.warning("No bundled volunteers in lvcore/assets/volunteers; upload data instead.")
         else:
-            name = st.selectbox("Volunteer", names)
+            name = st.selectbox("Volunteer", names, index=names.index(shared_subject) if shared_subject in names else 0,
+                                help="Defaults to the shared sidebar's subject.")
             try:
                 vol = volunteer_files(name)
                 data = read_measured_csv(vol.measured)[0]
@@ -100,9 +108,17 @@ with left:
 
 with right:
     st.subheader("Model")
-    emu_label = st.selectbox("Emulator", list(choices))
+    emu_label = st.selectbox("Emulator", list(choices),
+                             index=list(choices).index(shared_emu) if shared_emu in choices else 0,
+                             help="Defaults to the shared sidebar's emulator.")
     models = st.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid", "discrepancy"],
-                            format_func=MODEL_LABELS.get)
+                            format_func=MODEL_LABELS.get,
+                            help="Parameters reported:\n\n" + "\n\n".join(
+                                f"- {PARAMETER_HELP[n]}" for n in ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam",
+                                                                   "sigma1_sq", "sigma2_sq", "c", "tau")))
+    with st.expander("What the parameters mean"):
+        st.markdown("\n".join(f"- **{n}** — {PARAMETER_HELP[n]}" for n in
+                               ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau")))
     angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
                       help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
     c1, c2, c3 = st.columns(3)
@@ -112,6 +128,9 @@ with right:
 
 # ----------------------------------------------------------------------------- background run
 job = st.session_state.get("calibration_job")
+cal_inputs = {"subject": None if data is None else data.subject, "emulator": emu_label,
+              "likelihoods": [MODEL_LABELS[m] for m in models], "fibre angles": angles, "chains": int(chains),
+              "warm-up": int(warmup), "draws": int(samples)}
 
 
 def _worker(job: dict, y, forward, models, config, infer):
@@ -143,77 +162,98 @@ if run_clicked:
     config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains))
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
-           "synthetic": data.subject.startswith("SYNTHETIC")}
+           "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward),
+           "inputs": dict(cal_inputs)}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
 
 
-@st.fragment(run_every=1.0)
 def _progress():
+    """Progress bar and elapsed time, visible; reruns itself once a second only while a run is in flight."""
     j = st.session_state.get("calibration_job")
     if j is None or j.get("shown"):
         return
     if not j["done"]:
-        with st.status(f"Sampling… {j['message']}", expanded=False):
-            st.progress(min(1.0, j["fraction"]), text=f"{time.perf_counter() - j['t0']:.0f} s elapsed")
+        st.progress(min(1.0, j["fraction"]),
+                    text=f"Sampling: {j['message']} — {time.perf_counter() - j['t0']:.0f} s elapsed")
     else:
         j["shown"] = True
         st.rerun()
 
 
-_progress()
+_job = st.session_state.get("calibration_job")
+if _job is not None and not _job["done"]:  # the 1 Hz timer exists only while sampling: no idle reruns
+    st.fragment(run_every=1.0)(_progress)()
 
 # ----------------------------------------------------------------------------- results
 job = st.session_state.get("calibration_job")
 if job is not None and job["done"]:
     from lvcore.viz import inference_figures as figs
+    from lvcore.viz import report_figures as rfigs
 
     if job["error"]:
         st.error(job["error"])
     results = job["results"]
     if results:
-        st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
-        if job["synthetic"]:
-            st.caption("⚠ SYNTHETIC data.")
-        from lvcore.core.space import SIGMA_V_ML
-        from lvcore.inference.plausibility import check_result
+        with freshness.shown(freshness.Stored(results, job.get("inputs", cal_inputs)), cal_inputs,
+                             "calibration"):
+            st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
+            truth = volunteer_truth(job["subject"]) if job["synthetic"] else None
+            if job["synthetic"]:
+                st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
+                                                  "never enters the fit)." if truth else ""))
+            from lvcore.core.space import SIGMA_V_ML
+            from lvcore.inference.plausibility import check_result
 
-        for m, res in results.items():
-            (st.success if res.convergence.converged else st.error)(f"{MODEL_LABELS[m]}: {res.convergence.message()}")
-            for flag in check_result(res, job["y"], SIGMA_V_ML).flags:  # posterior-predictive check
-                st.warning(f"{MODEL_LABELS[m]}: the data look implausible for this model: {flag}")
-        idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
-        fig_pred = figs.predictive_density_figure(idatas, job["y"])
-        st.plotly_chart(fig_pred, width="stretch")
-        downloads = {"posterior_predictive.html": fig_pred}
-        tabs = st.tabs([MODEL_LABELS[m] for m in results])
-        for tab, (m, res) in zip(tabs, results.items()):
-            with tab:
-                st.dataframe(res.summary)
-                st.caption(f"sampler {res.sampler}; {res.wall_s:.1f} s incl. compilation; "
-                           f"min bulk ESS/s over θ {res.ess_per_s['min']:.1f}")
-                fig_pair = figs.pair_figure(res.idata)
-                st.plotly_chart(fig_pair, width="stretch")
-                names = [n for n in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "sigma_s2")
-                         if n in res.idata.posterior]
-                fig_trace = figs.trace_figure(res.idata, names)
-                fig_rank = figs.rank_figure(res.idata, names)
-                t1, t2 = st.columns(2)
-                t1.plotly_chart(fig_trace, width="stretch")
-                t2.plotly_chart(fig_rank, width="stretch")
-                downloads.update({f"{m}_pair.html": fig_pair, f"{m}_trace.html": fig_trace,
-                                  f"{m}_rank.html": fig_rank})
-                if m == "discrepancy":
-                    fig_disc = figs.discrepancy_figure(res.idata)
-                    st.plotly_chart(fig_disc, width="stretch")
-                    downloads[f"{m}_discrepancy.html"] = fig_disc
-                with tempfile.TemporaryDirectory() as d:
-                    nc = Path(d) / f"{cal.file_stem(job['subject'])}_{m}.nc"
-                    res.idata.to_netcdf(str(nc))
-                    st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
-                                       key=f"nc_{m}")
-        st.subheader("Export figures")
-        for name, fig in downloads.items():
-            st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",
-                               mime="text/html", key=f"html_{name}")
+            for m, res in results.items():
+                level, text = banner_status(res.convergence)
+                getattr(st, level)(f"{MODEL_LABELS[m]}: {text}")
+                for flag in check_result(res, job["y"], SIGMA_V_ML).flags:  # posterior-predictive check
+                    st.warning(f"{MODEL_LABELS[m]}: the data look implausible for this model: {flag}")
+            idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
+            fig_pred = figs.predictive_density_figure(idatas, job["y"])
+            st.plotly_chart(fig_pred, width="stretch")
+            downloads = {"posterior_predictive.html": fig_pred}
+            tabs = st.tabs([MODEL_LABELS[m] for m in results])
+            for tab, (m, res) in zip(tabs, results.items()):
+                with tab:
+                    table = res.summary.copy()
+                    table.insert(0, "meaning", [PARAMETER_HELP.get(str(n), "") for n in table.index])
+                    if truth:
+                        table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
+                    st.dataframe(table, width="stretch",
+                                 column_config={"meaning": st.column_config.TextColumn(width="large")})
+                    bounds = job.get("bounds") or {}
+                    post = {n: np.asarray(res.idata.posterior[n]).reshape(-1) for n in bounds if n in res.idata.posterior}
+                    if post:
+                        st.plotly_chart(rfigs.posterior_prior_figure(
+                            post, bounds, truth=truth, units=figs.UNITS,
+                            title="Posterior (histogram) with the uniform prior (dotted)"
+                                  + (" and the hidden truth (red)" if truth else "")), width="stretch")
+                    st.caption(f"sampler {res.sampler}; {res.wall_s:.1f} s incl. compilation; "
+                               f"min bulk ESS/s over θ {res.ess_per_s['min']:.1f}")
+                    fig_pair = figs.pair_figure(res.idata, truth=truth)
+                    st.plotly_chart(fig_pair, width="stretch")
+                    names = [n for n in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "sigma_s2")
+                             if n in res.idata.posterior]
+                    fig_trace = figs.trace_figure(res.idata, names)
+                    fig_rank = figs.rank_figure(res.idata, names)
+                    t1, t2 = st.columns(2)
+                    t1.plotly_chart(fig_trace, width="stretch")
+                    t2.plotly_chart(fig_rank, width="stretch")
+                    downloads.update({f"{m}_pair.html": fig_pair, f"{m}_trace.html": fig_trace,
+                                      f"{m}_rank.html": fig_rank})
+                    if m == "discrepancy":
+                        fig_disc = figs.discrepancy_figure(res.idata)
+                        st.plotly_chart(fig_disc, width="stretch")
+                        downloads[f"{m}_discrepancy.html"] = fig_disc
+                    with tempfile.TemporaryDirectory() as d:
+                        nc = Path(d) / f"{cal.file_stem(job['subject'])}_{m}.nc"
+                        res.idata.to_netcdf(str(nc))
+                        st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
+                                           key=f"nc_{m}")
+            st.subheader("Export figures")
+            for name, fig in downloads.items():
+                st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",
+                                   mime="text/html", key=f"html_{name}")

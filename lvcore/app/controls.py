@@ -1,0 +1,118 @@
+"""Shared controls of the app: log-scaled stiffness sliders with units, and input labels with units.
+
+Every page that sets θ = (a, b, a_f, b_f) uses :func:`theta_slider`, so the
+stiffness sliders are log-scaled with units everywhere.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from lvcore import units
+from lvcore.core.space import THETA_BOUNDS
+
+#: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-).
+THETA_RANGES = dict(THETA_BOUNDS)
+#: θ labels with units.
+THETA_LABELS = {"a": "a (kPa)", "b": "b (–)", "af": "a_f (kPa)", "bf": "b_f (–)"}
+THETA_HELP = {
+    "a": "Isotropic (matrix) stiffness of the Holzapfel–Ogden law; log-scaled slider.",
+    "b": "Isotropic exponent: how fast the matrix stiffens; log-scaled slider.",
+    "af": "Fibre stiffness; log-scaled slider.",
+    "bf": "Fibre exponent: how fast the fibres stiffen; log-scaled slider.",
+}
+
+
+def log_options(lo: float, hi: float, keep: float, n: int = 41) -> list[float]:
+    """Log-spaced slider stops (3 significant digits) between ``lo`` and ``hi`` that include ``keep``."""
+    values = {float(f"{v:.3g}") for v in np.geomspace(lo, hi, n)} | {float(keep)}
+    return sorted(values)
+
+
+def theta_slider(name: str, value: float | None = None, *, key: str | None = None, container=None) -> float:
+    """A log-scaled select slider for θ component ``name`` (a, b, af, bf) with its unit in the label."""
+    import streamlit as st
+
+    lo, hi = THETA_RANGES[name]
+    value = float(units.HO_REFERENCE_THETA[name] if value is None else value)
+    where = container if container is not None else st
+    return where.select_slider(THETA_LABELS[name], options=log_options(lo, hi, value), value=value, key=key,
+                               help=THETA_HELP[name])
+
+
+def input_label(name: str) -> str:
+    """Label with units of an emulator input (θ, fibre angles, EDP, PC scores h1…h5)."""
+    if name in THETA_LABELS:
+        return THETA_LABELS[name]
+    if name.lower() in ("edp", "edp_mmhg"):
+        return "EDP (mmHg)"
+    if name in ("alpha_endo", "alpha_epi"):
+        return f"α_{name.split('_')[1]} (°)"
+    if len(name) >= 2 and name[0] == "h" and name[1:].isdigit():
+        return f"{name}: PC score {name[1:]} of the shape model (standard deviations)"
+    return name
+
+
+
+
+# ----------------------------------------------------------------------------- the shared sidebar
+#: session_state key of the values of the shared sidebar (a plain dict, read by every page).
+SHARED = "shared_inputs"
+_BY_MAIN = "_shared_sidebar_by_main"
+
+
+def _shared_defaults() -> dict:
+    return {"theta": dict(units.HO_REFERENCE_THETA), "edp_mmhg": float(units.DEFAULT_EDP_MMHG),
+            "subject": None, "emulator": None}
+
+
+def shared_sidebar() -> dict:
+    """Render the sidebar shared by every page and return its values (also in ``st.session_state[SHARED]``).
+
+    Subject (a bundled SYNTHETIC volunteer), emulator, θ (log-scaled, with units) and EDP. The entry script
+    (:mod:`lvcore.app.main`) renders it before the page runs, so the values and the widgets' state are the
+    same on every page.
+    """
+    import streamlit as st
+
+    from lvcore.emulator.io import available_emulators
+    from lvcore.resources import bundled_volunteers
+
+    values = _shared_defaults()
+    with st.sidebar:
+        st.header("Shared inputs")
+        subjects = bundled_volunteers()
+        if subjects:
+            values["subject"] = st.selectbox("Subject (SYNTHETIC volunteer)", subjects, key="shared_subject",
+                                             help="Used by Calibration; bundled SYNTHETIC volunteers.")
+        emulators = available_emulators()
+        if emulators:
+            values["emulator"] = st.selectbox("Emulator", emulators, key="shared_emulator",
+                                              help="Default emulator of the Emulator and Calibration pages.")
+        for name in ("a", "b", "af", "bf"):
+            values["theta"][name] = theta_slider(name, key=f"shared_{name}")
+        values["edp_mmhg"] = float(st.slider("EDP (mmHg)", 2.0, 30.0, float(units.DEFAULT_EDP_MMHG), 0.5,
+                                             key="shared_edp"))
+    st.session_state[SHARED] = values
+    return values
+
+
+def render_shared_sidebar() -> dict:
+    """The entry script's call: render the shared sidebar and mark that the pages need not."""
+    import streamlit as st
+
+    st.session_state[_BY_MAIN] = True
+    return shared_sidebar()
+
+
+def shared_inputs() -> dict:
+    """For a page: the shared sidebar's values; renders the sidebar itself when the page runs on its own
+    (``streamlit run`` of one page, AppTest), so every page works with and without the navigation."""
+    import streamlit as st
+
+    if st.session_state.get(_BY_MAIN) and SHARED in st.session_state:
+        return st.session_state[SHARED]
+    return shared_sidebar()
+
+
+__all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label", "SHARED",
+           "shared_sidebar", "render_shared_sidebar", "shared_inputs"]

@@ -1,0 +1,35 @@
+"""The app's convergence banner (diagnostics.banner_status) and the parameter glossary."""
+from lvcore.inference.diagnostics import Convergence, banner_status
+from lvcore.inference.models import PARAMETER_HELP
+
+
+def _conv(**kw):
+    base = {"converged": True, "max_rhat": 1.004, "min_ess_bulk": 900.0, "min_ess_tail": 800.0, "n_divergent": 0,
+            "failing": ()}
+    return Convergence(**{**base, **kw})
+
+
+def test_green_only_when_clean():
+    level, text = banner_status(_conv())
+    assert level == "success"
+    assert "divergences 0" in text and "R-hat 1.004" in text and "ESS 900" in text
+
+
+def test_divergences_make_it_amber_even_when_converged():
+    level, text = banner_status(_conv(n_divergent=11))
+    assert level == "warning" and "11 divergent" in text
+
+
+def test_low_ess_makes_it_amber_even_when_the_check_passed():
+    level, text = banner_status(_conv(min_ess_bulk=250.0))  # above the check's 100, below the banner's 400
+    assert level == "warning" and "250 < 400" in text
+
+
+def test_not_converged_is_amber_and_names_the_parameters():
+    level, text = banner_status(_conv(converged=False, max_rhat=1.2, failing=("a", "bf")))
+    assert level == "warning" and "a, bf" in text
+
+
+def test_every_reported_parameter_is_explained():
+    for n in ("a", "b", "af", "bf", "sigma_s_sq", "sigma_s2", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau"):
+        assert PARAMETER_HELP[n].strip()
