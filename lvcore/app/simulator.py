@@ -28,7 +28,7 @@ from lvcore.resources import example_cases  # noqa: E402
 
 use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (views/5_Calibration.py)
 
-from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options  # noqa: E402,F401  (shared log sliders)
+from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: E402,F401  (shared log sliders)
 RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
 st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
@@ -115,15 +115,11 @@ with st.form("simulator"):
     with c1:
         st.markdown("**Material (Holzapfel–Ogden)**")
         for name in ("a", "b"):
-            lo, hi = THETA_RANGES[name]
-            theta[name] = st.select_slider(THETA_LABELS[name], options=log_options(lo, hi, units.HO_REFERENCE_THETA[name]),
-                                           value=units.HO_REFERENCE_THETA[name], key=name)
+            theta[name] = theta_slider(name, key=name)
     with c2:
         st.markdown("**Material, fibre terms**")
         for name in ("af", "bf"):
-            lo, hi = THETA_RANGES[name]
-            theta[name] = st.select_slider(THETA_LABELS[name], options=log_options(lo, hi, units.HO_REFERENCE_THETA[name]),
-                                           value=units.HO_REFERENCE_THETA[name], key=name)
+            theta[name] = theta_slider(name, key=name)
         st.caption("Fixed: a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58 (Gao et al. 2017).")
     with c3:
         st.markdown("**Conditions**")

@@ -131,15 +131,19 @@ def _verify_status() -> None:
         st.rerun()  # once, to show the result in the map fragment
 
 
+def _grid_controls(n_min: int, n_max: int, n_default: int):
+    """Grid size and α ranges of an angle map: ``(n, endo angles, epi angles)`` in degrees."""
+    c1, c2, c3 = st.columns(3)
+    n = c1.slider("Grid points per angle", n_min, n_max, n_default)
+    endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
+    epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
+    return n, tuple(np.linspace(*endo_range, n)), tuple(np.linspace(*epi_range, n))
+
+
 @st.fragment
 def _live_map(theta, edp_mmhg, resolution) -> None:
     """The emulator's map and its grid/range sliders: moving them reruns only this fragment, not the page."""
-    c1, c2, c3 = st.columns(3)
-    n = c1.slider("Grid points per angle", 5, 41, 21)
-    endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
-    epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
-    endo = tuple(np.linspace(*endo_range, n))
-    epi = tuple(np.linspace(*epi_range, n))
+    n, endo, epi = _grid_controls(5, 41, 21)
     st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0), not the analytic "
                "default LV; the mesh choice does not apply.")
     emu = _angles_emulator()  # cached resource: the emulator and its compiled prediction live across reruns
@@ -193,18 +197,13 @@ with tab_map:
                            "`python scripts/build_emulators.py --emulators angles` if it is missing.")
     live = engine == EMULATOR_ENGINE
     if not live:
-        c1, c2, c3 = st.columns(3)
-        n = c1.slider("Grid points per angle", 2, 6, 3)
-        endo_range = c2.slider("α_endo range (°)", -90, 0, (-90, 0))
-        epi_range = c3.slider("α_epi range (°)", 0, 90, (0, 90))
-        endo = tuple(np.linspace(*endo_range, n))
-        epi = tuple(np.linspace(*epi_range, n))
+        n, endo, epi = _grid_controls(2, 6, 3)
     if live:
         _live_map(options["theta"], edp, resolution)
     else:
         st.caption(f"{n * n} simulations.")
-        map_inputs = {**conditions, "grid": n, "α_endo range (°)": tuple(endo_range),
-                      "α_epi range (°)": tuple(epi_range)}
+        map_inputs = {**conditions, "grid": n, "α_endo range (°)": (float(endo[0]), float(endo[-1])),
+                      "α_epi range (°)": (float(epi[0]), float(epi[-1]))}
         if st.button("Run map"):
             with st.spinner(f"Simulating {n * n} angle pairs..."):
                 freshness.remember("angle_map", _map(endo, epi, _frozen(options)), map_inputs)
