@@ -200,3 +200,36 @@ def test_case_box_applies_the_case_file_limits():
         assert not at.exception, at.exception
         assert at.error and fragment in at.error[0].value, [e.value for e in at.error]
         assert time.perf_counter() - t0 < 30
+
+
+def test_pc_scores_outside_the_emulator_box_are_flagged_on_the_page(calibration_page, monkeypatch):
+    """The CLI refuses scores outside the training box; the page runs but records and shows the extrapolation."""
+    import arviz as az
+    import pandas as pd
+
+    from lvcore.inference import calibrate as cal
+
+    class Conv:
+        converged = True
+
+        def message(self):
+            return "converged (stand-in)"
+
+    def stand_in(y, forward, model, **kw):
+        idata = az.from_dict(posterior={"a": np.full((1, 20), y[0])}, observed_data={"y": np.asarray(y)})
+        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
+                                     {"min": 1.0})
+
+    monkeypatch.setattr(cal, "calibrate", stand_in)
+    jobs = {}
+    for h1 in (0.0, 2.5):
+        at = calibration_page()
+        at.file_uploader(key="up_measured").upload("m.csv", _csv("S1", 140.0), "text/csv")
+        at.file_uploader(key="up_geometry").upload("h.json", f'{{"h": [{h1}, 0, 0, 0, 0]}}'.encode(),
+                                                   "application/json")
+        at.run()
+        at.multiselect[0].set_value(["volume"]).run()
+        at.button[0].click().run(timeout=60)
+        jobs[h1] = at.session_state["calibration_job"]
+    assert jobs[0.0]["extrapolation"] == []
+    assert len(jobs[2.5]["extrapolation"]) == 1 and "h1 = 2.5" in jobs[2.5]["extrapolation"][0]

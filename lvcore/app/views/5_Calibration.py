@@ -20,6 +20,7 @@ from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
+from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.core.forward import emulator_forward
 from lvcore.inference.diagnostics import banner_status
@@ -27,6 +28,11 @@ from lvcore.inference.models import PARAMETER_HELP, prior_bounds
 from lvcore.inference.samplers import SamplerConfig, use_host_devices
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
+from lvcore.units import DEFAULT_ALPHA_ENDO_DEG, DEFAULT_ALPHA_EPI_DEG, DEFAULT_EDP_MMHG
+
+#: The conditions emulator_forward binds by default (checked against the emulator's training box).
+DEFAULT_CONDITIONS = {"edp_mmhg": DEFAULT_EDP_MMHG, "alpha_endo": DEFAULT_ALPHA_ENDO_DEG,
+                      "alpha_epi": DEFAULT_ALPHA_EPI_DEG}
 
 use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
 
@@ -155,7 +161,12 @@ run_clicked = st.button("Run calibration", type="primary",
                         disabled=data is None or h is None or not models or (job is not None and not job["done"]))
 if run_clicked:
     try:
-        forward = emulator_forward(_emulator(choices[emu_label]), h, infer_angles=angles == "infer", name=emu_label)
+        emulator = _emulator(choices[emu_label])
+        forward = emulator_forward(emulator, h, infer_angles=angles == "infer", name=emu_label)
+        # the CLI refuses scores outside the training box without --allow-extrapolation; here it runs, flagged
+        _, extrapolation = guards.check_inputs_in_box(
+            guards.fixed_inputs(h, DEFAULT_CONDITIONS, emulator, angles == "infer"), emulator,
+            allow_extrapolation=True, what="PC scores")
     except LVCoreError as err:
         st.error(str(err))
         st.stop()
@@ -163,7 +174,7 @@ if run_clicked:
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
            "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward),
-           "inputs": dict(cal_inputs)}
+           "inputs": dict(cal_inputs), "extrapolation": extrapolation}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
@@ -199,6 +210,8 @@ if job is not None and job["done"]:
         with freshness.shown(freshness.Stored(results, job.get("inputs", cal_inputs)), cal_inputs,
                              "calibration"):
             st.subheader(f"Results for {job['subject']} ({job['elapsed']:.0f} s, emulator {job['emulator']})")
+            for message in job.get("extrapolation", ()):
+                st.warning(message)
             truth = volunteer_truth(job["subject"]) if job["synthetic"] else None
             if job["synthetic"]:
                 st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
