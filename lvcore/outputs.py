@@ -24,6 +24,8 @@ THETA_NAMES = ("a", "b", "af", "bf")
 #: Names of physiological inputs: fibre angles (deg) and EDP (mmHg).
 ANGLE_NAMES = ("alpha_endo", "alpha_epi")
 EDP_NAME = "edp"
+#: LV base boundary conditions (the case schema's ``boundary.base``; a campaign space's ``base``).
+BASE_CONDITIONS = ("clamped", "sliding")
 
 
 def strain_vector(values, where: str = "strains") -> np.ndarray:

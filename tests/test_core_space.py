@@ -76,3 +76,19 @@ def test_parameter_space_maps_the_unit_cube_and_builds_cases():
         Parameter("a", 1.0, 1.0)
     with pytest.raises(CampaignError, match="material parameter"):
         ParameterSpace("m", (Parameter("a", 0.1, 1.0),)).case([0.5])
+
+
+def test_the_chapter_space_builds_sliding_cases_and_old_descriptions_read_as_clamped():
+    from lvcore.campaigns.space import get_space
+    from lvcore.core.space import ParameterSpace
+
+    chapter = get_space("chapter")
+    assert chapter.base == "sliding"
+    assert chapter.case([1.0] * chapter.dim)["boundary"] == {"base": "sliding"}
+    assert ParameterSpace.from_json(chapter.to_json()) == chapter
+    old = chapter.to_dict()
+    del old["base"]  # stores written before the field existed
+    assert ParameterSpace.from_dict(old).base == "clamped"
+    assert get_space("angles").case([1.0] * get_space("angles").dim)["boundary"] == {"base": "clamped"}
+    with pytest.raises(Exception, match="base must be one of"):
+        ParameterSpace("x", chapter.parameters, (), base="pinned")

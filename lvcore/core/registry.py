@@ -38,7 +38,8 @@ _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 def _simulator_factory(space, resolution: str):
     from lvcore.core.forward import SimulatorForward
 
-    return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=resolution)
+    return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=resolution,
+                            base=space.base)
 
 
 _REGISTRY: dict[str, ForwardFactory] = {DEFAULT_FORWARD_NAME: _simulator_factory}

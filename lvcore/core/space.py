@@ -25,7 +25,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from lvcore.exceptions import CampaignError, CaseError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
+from lvcore.outputs import ANGLE_NAMES, BASE_CONDITIONS, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
 
 #: Fibre angles (deg) at which the chapter's emulator was trained.
 CHAPTER_ANGLES = (-60.0, 60.0)
@@ -170,13 +170,20 @@ class ParameterSpace:
         Varied inputs, in design-column order.
     fixed : tuple of (str, float)
         Inputs held fixed (e.g. ``("alpha_endo", -60.0)``).
+    base : {"clamped", "sliding"}
+        LV base boundary condition of every case built from this space
+        (recorded in designs and stores; descriptions without it read as
+        ``"clamped"``, the condition of every store before it existed).
     """
 
     name: str
     parameters: tuple[Parameter, ...]
     fixed: tuple[tuple[str, float], ...] = field(default_factory=tuple)
+    base: str = "clamped"
 
     def __post_init__(self):
+        if self.base not in BASE_CONDITIONS:
+            raise CampaignError(f"space '{self.name}': base must be one of {BASE_CONDITIONS}, got {self.base!r}")
         names = [p.name for p in self.parameters] + [k for k, _ in self.fixed]
         if len(set(names)) != len(names):
             raise CampaignError(f"space '{self.name}': duplicate input names in {names}")
@@ -247,7 +254,7 @@ class ParameterSpace:
         missing = [n for n in THETA_NAMES if n not in v]
         if missing:
             raise CampaignError(f"space '{self.name}' does not define material parameter(s) {missing}")
-        return build_case(v, resolution=resolution)
+        return build_case(v, resolution=resolution, base=self.base)
 
     # ----- serialisation ----------------------------------------------------
     def to_dict(self) -> dict:
@@ -255,6 +262,7 @@ class ParameterSpace:
             "name": self.name,
             "parameters": [{"name": p.name, "lower": p.lower, "upper": p.upper, "scale": p.scale} for p in self.parameters],
             "fixed": {k: v for k, v in self.fixed},
+            "base": self.base,
         }
 
     def to_json(self) -> str:
@@ -265,7 +273,7 @@ class ParameterSpace:
         try:
             params = tuple(Parameter(str(p["name"]), float(p["lower"]), float(p["upper"]), str(p.get("scale", "linear"))) for p in d["parameters"])
             fixed = tuple((str(k), float(v)) for k, v in dict(d.get("fixed", {})).items())
-            return cls(str(d["name"]), params, fixed)
+            return cls(str(d["name"]), params, fixed, str(d.get("base", "clamped")))
         except (KeyError, TypeError, ValueError) as err:
             raise CampaignError(f"malformed parameter-space description: {err!r}") from err
 

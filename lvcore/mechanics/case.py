@@ -23,6 +23,7 @@ import numpy as np
 
 from lvcore import limits, units
 from lvcore.exceptions import CaseError, LVCoreError
+from lvcore.outputs import BASE_CONDITIONS
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE
 from lvcore.mechanics.materials import LAWS, MaterialLaw
@@ -40,7 +41,6 @@ LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
 #: Law names of ``material.law``; parameters, required ones and defaults come from :data:`materials.LAWS`.
 MATERIAL_LAWS = tuple(LAWS)
 BOX_FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
-BASE_CONDITIONS = ("clamped", "sliding")
 STRAIN_LAYERS = ("endocardial", "wall")
 PRESSURE_UNITS = {"kpa": 1.0, "mmhg": units.KPA_PER_MMHG}
 
