@@ -51,9 +51,9 @@ def test_bundled_emulator_meets_the_accuracy_targets(name):
 
 LIVE_POINTS = {  # physiological points inside each training box, off the design points
     "chapter": ({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1},
-                "coarse"),  # trained on lvcore 0.1's default mesh
+                "coarse", "clamped"),  # trained on lvcore 0.1's default mesh, before the base was recorded
     "angles": ({"a": 0.6, "b": 2.0, "af": 1.0, "bf": 3.6, "alpha_endo": -45.0, "alpha_epi": 70.0, "edp": 10.0,
-                "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1}, "default"),
+                "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1}, "default", "clamped"),
 }
 
 
@@ -61,17 +61,13 @@ LIVE_POINTS = {  # physiological points inside each training box, off the design
 def test_bundled_emulator_agrees_with_a_live_simulator_run(name):
     """At a physiological point inside the training box, the emulator reproduces a fresh FE solve."""
     emu = _bundled(name)
-    from lvcore.campaigns.runner import recorded_resolution
-    from lvcore.core.space import ParameterSpace
-    from lvcore.mechanics.simulate import simulate
-
-    x, mesh = LIVE_POINTS[name]
-    space = ParameterSpace.from_dict(emu.metadata["source"]["space"])
-    resolution = recorded_resolution(emu.metadata["source"]["resolution"][0], emu.metadata["source"]["simulator_versions"])
-    assert resolution == mesh
-    sim = simulate(space.case([x[n] for n in space.names], resolution=resolution))
-    assert sim.converged, sim.message
-    y_sim = sim.outputs()
+    x, mesh, base = LIVE_POINTS[name]
+    assert (emu.resolution, emu.base) == (mesh, base)
+    sim = emu.simulator()
+    assert (sim.resolution, sim.base) == (mesh, base)
+    res = sim.evaluate({n: [x[n]] for n in sim.input_names})
+    assert res.converged[0], res.messages[0]
+    y_sim = res.outputs[0]
     y_emu = np.asarray(emu.predict(**x))
     assert abs(y_emu[0] - y_sim[0]) < 0.03 * y_sim[0], (y_emu[0], y_sim[0])   # LVV within 3 %
     assert np.max(np.abs(y_emu[1:] - y_sim[1:])) < 0.015                     # strains (noise sd 0.03)
@@ -87,3 +83,24 @@ def test_bundled_training_data_if_shipped_matches_the_metadata():
             assert z["train_inputs"].shape == (meta["training"]["n_train"], len(meta["input_names"]))
             assert z["train_outputs"].shape == (meta["training"]["n_train"], 25)
             assert z["valid_inputs"].shape[0] == meta["training"]["n_valid"]
+
+
+def test_emulator_reports_the_base_condition_it_was_trained_with(tmp_path):
+    """The base is read from the recorded training space; emulators built before it was recorded are clamped."""
+    import copy
+    import dataclasses
+
+    from lvcore.core import EmulatorForward
+
+    emu = _bundled("chapter")
+    meta = copy.deepcopy(emu.metadata)
+    meta["source"]["space"].pop("base", None)
+    old = dataclasses.replace(emu, metadata=meta)
+    assert old.base == "clamped"
+    meta["source"]["space"]["base"] = "sliding"
+    new = dataclasses.replace(emu, metadata=meta)
+    assert new.base == "sliding" and new.simulator().base == "sliding"
+    assert EmulatorForward(new, conditions={f"h{i}": 0.0 for i in range(1, 6)}).base == "sliding"
+    meta["source"].pop("space")
+    with pytest.raises(Exception, match="does not record"):
+        dataclasses.replace(emu, metadata=meta).simulator()

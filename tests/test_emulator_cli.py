@@ -56,6 +56,7 @@ def test_train_from_store_and_info(tmp_path, capsys):
     assert main(["emulator", "info", str(out)]) == 0
     text = capsys.readouterr().out
     assert "LVV RMSE" in text and "(log scale)" in text
+    assert f"base {space.base}" in text and emu.base == space.base   # the training simulations' base condition
     assert main(["emulator", "info", str(out), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["name"] == "emu"
     # an input that varies in the data cannot be dropped

@@ -31,7 +31,7 @@ from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worke
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
-from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
+from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, recorded_resolution
 
 #: The real simulator.
 DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
@@ -58,22 +58,6 @@ def simulator_version() -> str:
                 h.update(f.read_bytes())
         _VERSION.append(f"{lvcore.__version__}+src.{h.hexdigest()[:10]}")
     return _VERSION[0]
-
-
-def recorded_resolution(resolution: str, simulator_versions) -> str:
-    """The preset name that reproduces rows recorded as ``resolution`` by ``simulator_versions``.
-
-    lvcore 0.1's ``"default"`` mesh (12 x 4 x 1 elements, 3 Gauss points
-    through the wall) is called ``"coarse"`` since lvcore 0.2, whose
-    ``"default"`` is a graded mesh that meets the 1 % mesh-convergence check.
-    Stores and emulators made by 0.1 keep saying ``"default"``; this maps
-    them to the mesh they used (for resuming a campaign or checking an
-    emulator against a live solve).
-    """
-    versions = [str(v) for v in (simulator_versions or [])]
-    if resolution == "default" and versions and all(v.startswith("0.1.") for v in versions):
-        return "coarse"
-    return resolution
 
 
 def execute_row(forward, index: int, inputs: dict) -> RowResult:

@@ -390,6 +390,11 @@ class EmulatorForward(_JaxForward):
             raise EmulatorError(f"emulator '{self.label}' has no input(s) {extra}; its inputs: {list(names)}")
 
     @property
+    def base(self) -> str:
+        """Basal boundary condition of the simulations the emulator was trained on."""
+        return str(getattr(self.emulator, "base", "clamped"))
+
+    @property
     def input_bounds(self) -> dict[str, tuple[float, float]]:
         """The emulator's training box over ``input_names`` (physical units).
 

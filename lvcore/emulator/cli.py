@@ -123,6 +123,10 @@ def format_info(meta: dict) -> str:
         lines.append(f"    {n:<11s} [{a:.4g}, {b:.4g}]{'  (log scale)' if n in log else ''}")
     if meta.get("fixed_inputs"):
         lines.append(f"  fixed in training: {meta['fixed_inputs']}")
+    source = meta.get("source") or {}
+    base = (source.get("space") or {}).get("base", "clamped")
+    lines.append(f"  simulations: mesh {', '.join(map(str, source.get('resolution') or ['?']))}, base {base}, "
+                 f"simulator {', '.join(map(str, source.get('simulator_versions') or ['?']))}")
     arch = meta.get("architecture", {})
     lines.append(f"  network: {meta.get('input_names') and len(meta['input_names'])} -> {arch.get('hidden')} (tanh) -> 25")
     tr = meta.get("training", {})

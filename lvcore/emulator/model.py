@@ -129,6 +129,61 @@ class Emulator:
     def output_names(self) -> tuple[str, ...]:
         return OUTPUT_COLUMNS
 
+    # ----- what it emulates -------------------------------------------------
+    @property
+    def training_space(self):
+        """The :class:`~lvcore.core.space.ParameterSpace` of the campaigns it was
+        trained on (from ``metadata["source"]["space"]``), or None if unrecorded."""
+        from lvcore.core.space import ParameterSpace
+
+        d = (self.metadata.get("source") or {}).get("space")
+        return None if d is None else ParameterSpace.from_dict(d)
+
+    @property
+    def base(self) -> str:
+        """Basal boundary condition of the training simulations, ``"clamped"`` or
+        ``"sliding"`` (emulators built before it was recorded: ``"clamped"``)."""
+        space = self.training_space
+        return "clamped" if space is None else space.base
+
+    @property
+    def resolution(self) -> str:
+        """Mesh preset that reproduces the training simulations (lvcore 0.1's
+        ``"default"`` is today's ``"coarse"``)."""
+        from lvcore.mechanics.resolution import recorded_resolution
+
+        source = self.metadata.get("source") or {}
+        return recorded_resolution(str((source.get("resolution") or ["default"])[0]), source.get("simulator_versions"))
+
+    def simulator(self, geometry=None):
+        """The FE forward model this emulator emulates, for checking it against a live solve.
+
+        Parameters
+        ----------
+        geometry : mapping, optional
+            Geometry description for :func:`lvcore.core.space.build_case`;
+            default: the PC-score geometry of the training space.
+
+        Returns
+        -------
+        lvcore.core.forward.SimulatorForward
+            Over the training space's inputs and fixed conditions, at the
+            training resolution and base condition.
+
+        Raises
+        ------
+        EmulatorError
+            If the emulator does not record its training space.
+        """
+        from lvcore.core.forward import SimulatorForward
+
+        space = self.training_space
+        if space is None:
+            raise EmulatorError(f"emulator '{self.name}' does not record the parameter space it was trained on")
+        kwargs = {} if geometry is None else {"geometry": dict(geometry)}
+        return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=self.resolution,
+                                base=space.base, **kwargs)
+
     # ----- inputs -----------------------------------------------------------
     def as_array(self, x=None, **named) -> np.ndarray:
         """Assemble ``(..., d)`` inputs from an array, a mapping or keywords.

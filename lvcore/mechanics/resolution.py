@@ -216,6 +216,22 @@ def resolution_label(spec: str) -> str:
     return f"{spec}: {described}" if spec in RESOLUTION_PRESETS else described
 
 
+def recorded_resolution(resolution: str, simulator_versions) -> str:
+    """The preset name that reproduces rows recorded as ``resolution`` by ``simulator_versions``.
+
+    lvcore 0.1's ``"default"`` mesh (12 x 4 x 1 elements, 3 Gauss points
+    through the wall) is called ``"coarse"`` since lvcore 0.2, whose
+    ``"default"`` is a graded mesh that meets the 1 % mesh-convergence check.
+    Stores and emulators made by 0.1 keep saying ``"default"``; this maps
+    them to the mesh they used (for resuming a campaign or checking an
+    emulator against a live solve).
+    """
+    versions = [str(v) for v in (simulator_versions or [])]
+    if resolution == "default" and versions and all(v.startswith("0.1.") for v in versions):
+        return "coarse"
+    return resolution
+
+
 __all__ = ["LVResolution", "BoxResolution", "ResolutionError", "RESOLUTION_PRESETS", "BOX_RESOLUTION_PRESETS",
            "RESOLUTION_PRESET_NAMES", "BOX_RESOLUTION_PRESET_NAMES", "MAX_TRANSMURAL_GAUSS_POINTS",
-           "resolution_label"]
+           "resolution_label", "recorded_resolution"]

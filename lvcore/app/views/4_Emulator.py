@@ -82,7 +82,7 @@ with st.expander("Inputs and training box"):
     }), hide_index=True)
     if emu.fixed:
         st.write("Fixed during training:", emu.fixed)
-    st.caption(f"Resolution: {source.get('resolution', '?')}; simulator versions: {source.get('simulator_versions', '?')}; "
+    st.caption(f"Resolution: {source.get('resolution', '?')} (mesh preset `{emu.resolution}`); base: **{emu.base}**; simulator versions: {source.get('simulator_versions', '?')}; "
                f"training-set hash {str(tr.get('set_hash', ''))[:16]}")
 
 # ----- accuracy ----------------------------------------------------------------
@@ -130,18 +130,13 @@ st.write(f"Emulator: LVV **{y_emu[0]:.1f} mL**, mean strain **{y_emu[1:].mean():
 
 space_dict = source.get("space")
 run = st.button("Run the simulator at this point", disabled=space_dict is None,
-                help="one finite-element solve at the resolution the emulator was trained on")
+                help="one finite-element solve at the resolution and base condition the emulator was trained on")
 if run:
-    from lvcore.campaigns.runner import recorded_resolution
-    from lvcore.core import ParameterSpace, SimulatorForward
-
     res = None
     try:
-        space = ParameterSpace.from_dict(space_dict)
-        resolution = recorded_resolution((source.get("resolution") or ["default"])[0], source.get("simulator_versions"))
-        sim = SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=resolution)
+        sim = emu.simulator()
         with st.spinner("Simulating..."):
-            res = sim.evaluate({n: [values.get(n, emu.fixed.get(n))] for n in space.names})
+            res = sim.evaluate({n: [values.get(n, emu.fixed.get(n))] for n in sim.input_names})
     except LVCoreError as err:
         st.error(f"Simulator failed: {err}")
     if res is not None and not res.converged[0]:
