@@ -1,7 +1,6 @@
 """The emulators bundled in lvcore/assets/emulators: provenance, size of the training set, and agreement with a live
 simulator run. Both emulators ship with the package: a missing one is a failure, never a skip."""
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest

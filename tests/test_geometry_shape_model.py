@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lvcore.exceptions import GeometryError
-from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
+from lvcore.geometry.analytic import EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.measures import node_mse_cm2
 from lvcore.geometry.shape_model import fit_shape_model, load_shape_model
 from lvcore.geometry.template import DEFAULT_TEMPLATE

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from lvcore.geometry.analytic import LAND_LV
-from lvcore.mechanics import boundary, materials, newton
+from lvcore.mechanics import boundary, materials
 from lvcore.mechanics.mesh import box_mesh, lv_mesh
 from lvcore.mechanics.quadrature import gauss_hex
 from lvcore.mechanics.simulate import build_frames

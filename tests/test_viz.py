@@ -1,6 +1,5 @@
 """Plotly figure builders and off-screen PyVista rendering (no display needed)."""
 import io
-import os
 
 import numpy as np
 import pytest

@@ -9,7 +9,6 @@ draws in ArviZ InferenceData; :func:`calibrate_subjects` does that for every
 from __future__ import annotations
 
 import re
-import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path

@@ -11,7 +11,7 @@ parameters listed: non-convergence is reported, never hidden.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import arviz as az
