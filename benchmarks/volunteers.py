@@ -45,6 +45,10 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--subjects", default=None, help="comma-separated subset, e.g. SYNTHETIC-HV1,SYNTHETIC-HV2")
     p.add_argument("--out", type=Path, default=None, help="write the per-subject records as JSON here")
+    p.add_argument("--allow-extrapolation", action="store_true",
+                   help="also calibrate volunteers whose PC scores lie outside the emulator's training box "
+                        "(flagged EXTRAPOLATION in the output); by default they are skipped and listed, as "
+                        "`lvcore calibrate` refuses them")
     args = p.parse_args(argv)
 
     from lvcore.inference.samplers import use_host_devices
@@ -53,7 +57,9 @@ def main(argv=None) -> int:
     import numpy as np
 
     from lvcore.core.forward import load_emulator_forward
+    from lvcore.exceptions import EmulatorError
     from lvcore.inference import calibrate as cal
+    from lvcore.inference.guards import check_inputs_in_box
     from lvcore.resources import volunteers_dir
     from lvcore.inference.data import read_measured_csv
     from lvcore.inference.samplers import SamplerConfig
@@ -67,23 +73,33 @@ def main(argv=None) -> int:
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
     params = THETA_NAMES + (ANGLE_NAMES if infer else ())
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    subjects, scores = [], {}
+    subjects, scores, skipped, extrapolated = [], {}, [], {}
     for csv in sorted(vol_dir.glob("SYNTHETIC_HV*_measured.csv")):
         row = read_measured_csv(csv)[0]
         if wanted and row.subject not in wanted:
             continue
         stem = csv.name.replace("_measured.csv", "")
         h = cal.read_pc_scores(vol_dir / f"{stem}_geometry.vtu")
+        forward = load_emulator_forward(emulator, h, infer_angles=infer, alpha_endo=args.alpha_endo,
+                                        alpha_epi=args.alpha_epi)
+        try:  # the CLI's guard: PC scores outside the training box are refused unless allowed
+            _, warned = check_inputs_in_box({f"h{i + 1}": float(v) for i, v in enumerate(h)}, forward.emulator,
+                                            args.allow_extrapolation, what="PC scores")
+        except EmulatorError as err:
+            skipped.append((row.subject, str(err)))
+            print(f"{row.subject:15s} SKIPPED: {err}", flush=True)
+            continue
         scores[row.subject] = h
-        subjects.append((row.subject, row.y, load_emulator_forward(emulator, h, infer_angles=infer,
-                                                                   alpha_endo=args.alpha_endo, alpha_epi=args.alpha_epi)))
+        extrapolated[row.subject] = warned
+        subjects.append((row.subject, row.y, forward))
     records = []
 
     def check(item):
         res, t = item.result, truth[item.subject]
         hidden = {**t["theta"], **t["fibres_deg"]}
         rec = {"subject": item.subject, "model": item.model, "wall_s": round(res.wall_s, 1),
-               "converged": res.convergence.converged, "h": [round(float(v), 3) for v in scores[item.subject]]}
+               "converged": res.convergence.converged, "h": [round(float(v), 3) for v in scores[item.subject]],
+               "extrapolation": extrapolated[item.subject]}
         for n in params:
             draws = np.asarray(res.idata.posterior[n]).reshape(-1)
             lo, med, hi = np.quantile(draws, [0.05, 0.5, 0.95])
@@ -93,13 +109,20 @@ def main(argv=None) -> int:
             rec["sigma_s_median"] = float(np.median(np.sqrt(np.asarray(res.idata.posterior["sigma_s2"]))))
         records.append(rec)
         print(f"{item.subject:15s} {item.model:12s} {rec['wall_s']:6.1f} s  converged={rec['converged']}  "
+              + ("EXTRAPOLATION  " if rec["extrapolation"] else "")
               + "  ".join(f"{n} {rec[n]['median']:.3g} [{rec[n]['q05']:.3g}, {rec[n]['q95']:.3g}] "
                           f"(truth {rec[n]['truth']:.3g}){'' if rec[n]['covered'] else ' MISS'}" for n in params),
               flush=True)
 
     cal.calibrate_subjects(subjects, models, config=config, infer_angles=infer, on_result=check)
 
-    print(f"\nemulator '{emulator}', angles {args.angles}, {args.chains} chains x ({args.warmup} + {args.samples})")
+    base = getattr(subjects[0][2], "base", "?") if subjects else "?"
+    print(f"\nemulator '{emulator}' (simulations with a {base} base), angles {args.angles}, "
+          f"{args.chains} chains x ({args.warmup} + {args.samples})")
+    for subject, why in skipped:
+        print(f"skipped {subject} (--allow-extrapolation to include it): {why.split('; check')[0]}")
+    if any(extrapolated.values()):
+        print("calibrated with EXTRAPOLATION: " + ", ".join(s for s, w in extrapolated.items() if w))
     print("| model | " + " | ".join(params) + " | all | median sigma_S | all converged |")
     print("|---|" + "---|" * (len(params) + 3))
     for m in models:
@@ -114,6 +137,7 @@ def main(argv=None) -> int:
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"emulator": emulator, "angles": args.angles, "config": dataclasses.asdict(config),
+                                        "skipped": [{"subject": s, "reason": w} for s, w in skipped],
                                         "records": records}, indent=2, default=str))
         print(f"wrote {args.out}")
     return 0
