@@ -187,6 +187,16 @@ FD_TITLES = {
 MODEL_LABELS = {"volume": "volume only", "iid": "iid (chapter: None)", "discrepancy": "polar-GP discrepancy"}
 
 
+
+def _build_label(build) -> str:
+    """``(emulator of <date>, <mesh> mesh, <base> base)`` from a study's ``forward_build`` record."""
+    if not build:
+        return "(build not recorded)"
+    parts = [f"built {build['created_at'][:10]}" if build.get("created_at") else None,
+             f"{build['resolution']} mesh" if build.get("resolution") else None,
+             f"{build['base']} base" if build.get("base") else None]
+    return "(" + ", ".join(p for p in parts if p) + ")"
+
 def fibre_discrepancy_items(results_dir=None) -> list[ReportItem]:
     """Figs 9.6–9.9 and the findings table from a saved ``fibre_discrepancy.json``."""
     import pandas as pd
@@ -200,7 +210,7 @@ def fibre_discrepancy_items(results_dir=None) -> list[ReportItem]:
         return [_missing(n, FD_TITLES[n], "fibre_discrepancy.json", results_dir) for n in FD_NAMES]
     res = json.loads(path.read_text())
     src = f"{path.name} ({'bundled' if path.parent == studies_dir() else path.parent}), forward model " \
-          f"{res.get('forward_model', '?')}, sampler {res.get('sampler', {})}"
+          f"{res.get('forward_model', '?')} {_build_label(res.get('forward_build'))}, sampler {res.get('sampler', {})}"
     sets = res["sets"]
     tag = "SYNTHETIC"
     ex = next((s for s in sets if (s["alpha_endo"], s["alpha_epi"]) == (0.0, 90.0)), sets[-1])

@@ -60,11 +60,15 @@ class TestSet:
     benchmark: np.ndarray  # eta(theta, h): the emulator at the truth (25)
 
 
-def data_simulator(h=DEFAULT_H, resolution: str = "default") -> SimulatorForward:
-    """The FE simulator that makes the test data: inputs theta and the fibre angles, on the PCA geometry ``h`` at 8 mmHg."""
+def data_simulator(h=DEFAULT_H, resolution: str = "default", base: str = "clamped") -> SimulatorForward:
+    """The FE simulator that makes the test data: inputs theta and the fibre angles, on the PCA geometry ``h`` at 8 mmHg.
+
+    ``base`` is the basal boundary condition; the study passes the emulator's
+    own, so that the fibre angles are the only discrepancy between data and model.
+    """
     return SimulatorForward(input_names=THETA_NAMES + ANGLE_NAMES,
                             conditions={**dict(zip(pc_names(len(h)), map(float, h))), "edp": CHAPTER_EDP},
-                            resolution=resolution, label="FE simulator (fibre-discrepancy test data)")
+                            resolution=resolution, base=base, label="FE simulator (fibre-discrepancy test data)")
 
 
 def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulator: Forward | None = None,
@@ -75,7 +79,7 @@ def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulator: Forward | 
     noise-free data (default :func:`data_simulator`); ``forward`` (theta only)
     gives the benchmark. Set ``i`` has angles ``ANGLE_SETS[i // 4]`` and theta ``THETA_SETS[i % 4]``.
     """
-    simulator = simulator or data_simulator(h, resolution)
+    simulator = simulator or data_simulator(h, resolution, getattr(forward, "base", "clamped"))
     rng = np.random.default_rng(seed)
     out = []
     for i, ((ae, ap), th) in enumerate((a, t) for a in ANGLE_SETS for t in THETA_SETS):
@@ -109,6 +113,15 @@ def _rhat(draws: dict, i: int, names) -> float:
     post = {n: draws[n][i] for n in names if n in draws}
     r = az.rhat(az.from_dict(posterior=post))
     return float(max(float(r[n]) for n in r.data_vars))
+
+
+def _build_record(forward) -> dict:
+    """Which emulator build (creation time, mesh, base condition) the study calibrated with."""
+    emu = getattr(forward, "emulator", None)
+    if emu is None:
+        return {"base": getattr(forward, "base", None)}
+    return {"name": emu.name, "created_at": emu.metadata.get("created_at"), "resolution": emu.resolution,
+            "base": emu.base, "lvcore_version": emu.metadata.get("lvcore_version")}
 
 
 def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | None = None, seed: int = 0,
@@ -186,6 +199,7 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
         "study": "fibre-discrepancy",
         "synthetic": True,
         "forward_model": getattr(forward, "label", type(forward).__name__),
+        "forward_build": _build_record(forward),
         "h": [float(v) for v in h],
         "noise": {"sigma_v_ml": SIGMA_V_ML, "sigma_s": SIGMA_S},
         "sampler": {"num_warmup": config.num_warmup, "num_samples": config.num_samples,
