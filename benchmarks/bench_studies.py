@@ -2,6 +2,7 @@
 
     OMP_NUM_THREADS=1 python benchmarks/bench_studies.py bo [--initial 30] [--iterations 30] [--workers 2]
     OMP_NUM_THREADS=1 python benchmarks/bench_studies.py operators [--patients SYNTHETIC-P01] [--workers 2]
+    OMP_NUM_THREADS=1 python benchmarks/bench_studies.py gp [--initial 300] [--iterations 300] [--refit-every 10,20]
 
 ``bo``: one volunteer (default SYNTHETIC-HV1) in both modes (fixed, free) with
 a 30 + 30 budget through the same code path as ``lvcore study bo-fibres``
@@ -14,6 +15,12 @@ printed with the result; compare numbers only at similar load. The CPU
 seconds of the process and its workers do not depend on the load:
 ``cpu_s / workers`` estimates the wall time on idle cores (it ignores the
 serial GP/acquisition part of BO, which runs while the workers wait).
+``gp``: that serial part alone. The BO loop of the ``free`` mode (6 inputs)
+runs on :class:`lvcore.core.AnalyticForward` (microseconds per point), so
+its CPU time is the GP fits and the acquisition search of one run of the
+study at the given budget, once per ``--refit-every`` value. Sixteen runs
+(8 volunteers x 2 modes) make the chapter's study; the 4-input mode costs
+less.
 """
 from __future__ import annotations
 
@@ -30,13 +37,14 @@ os.environ.setdefault("LVCORE_NO_PNG", "1")  # time the study, not Chrome starti
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("study", choices=("bo", "operators"))
+    p.add_argument("study", choices=("bo", "operators", "gp"))
     p.add_argument("--subject", default="SYNTHETIC-HV1")
     p.add_argument("--initial", type=int, default=30)
     p.add_argument("--iterations", type=int, default=30)
     p.add_argument("--patients", default="SYNTHETIC-P01")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--resolution", default="default")
+    p.add_argument("--refit-every", default="20", help="gp: comma-separated values to compare (default 20)")
     p.add_argument("--out", default=None, help="keep the outputs here (default: a temporary folder)")
     args = p.parse_args(argv)
 
@@ -44,6 +52,8 @@ def main(argv=None) -> int:
 
     import resource
 
+    if args.study == "gp":
+        return _bench_gp(args)
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     cpu0 = time.process_time()
@@ -77,6 +87,40 @@ def main(argv=None) -> int:
                       "resolution": args.resolution, "linear_solver": available_backends()[0],
                       "load_avg_1min_before": round(load0, 2), "load_avg_1min_after": round(os.getloadavg()[0], 2),
                       "cpus": os.cpu_count(), "detail": detail}, indent=1))
+    return 0
+
+
+def _bench_gp(args) -> int:
+    """CPU time of the GP + acquisition loop of one free-mode BO run per --refit-every value."""
+    import warnings
+
+    import numpy as np
+    from sklearn.exceptions import ConvergenceWarning
+
+    from lvcore.core import AnalyticForward
+    from lvcore.optimise.bayesopt import bayesian_optimise
+    from lvcore.studies import bo_fibres
+
+    space = bo_fibres.bo_space("free")
+    fwd = AnalyticForward(input_names=space.names)
+    truth = {"a": 0.8, "b": 2.0, "af": 1.5, "bf": 4.0, "alpha_endo": -50.0, "alpha_epi": 55.0}
+    measured = np.asarray(fwd(truth))
+    rows = []
+    for refit in (int(v) for v in args.refit_every.split(",")):
+        load0 = os.getloadavg()[0]
+        c0, t0 = time.process_time(), time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            res = bayesian_optimise(fwd, measured, space, n_initial=args.initial, n_iterations=args.iterations,
+                                    seed=0, refit_every=refit)
+        cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+        rows.append((refit, cpu, wall, res.f_best, load0, os.getloadavg()[0]))
+    print(f"GP + acquisition of one free-mode BO run, {args.initial} + {args.iterations}, AnalyticForward "
+          f"(OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')})")
+    print("| refit every | CPU s | wall s | best objective | x16 runs, CPU min | load before/after |")
+    print("|---|---|---|---|---|---|")
+    for refit, cpu, wall, fbest, l0, l1 in rows:
+        print(f"| {refit} | {cpu:.1f} | {wall:.1f} | {fbest:.3g} | {16 * cpu / 60:.1f} | {l0:.1f}/{l1:.1f} |")
     return 0
 
 

@@ -143,3 +143,16 @@ def test_simulator_batch_on_a_process_pool_equals_serial(sim):
     assert pooled.converged.all()
     np.testing.assert_array_equal(pooled.outputs, serial.outputs)
     np.testing.assert_array_equal(pooled.jacobian, serial.jacobian)
+
+
+def test_simulator_warm_start_reproduces_cold_solves(sim):
+    """warm_start=True (SQP refits): Newton starts from the last converged state; same outputs and Jacobian."""
+    warm = SimulatorForward(resolution="fast", warm_start=True)
+    near = THETA * np.array([1.05, 0.97, 1.02, 1.04])
+    first = warm.evaluate(dict(zip(THETA_NAMES, THETA)))
+    assert first.messages[0] == "converged"  # nothing to start from yet
+    b = warm.evaluate(dict(zip(THETA_NAMES, near)), jacobian=True)
+    assert b.messages[0] == "converged (warm start)"
+    cold = sim.evaluate(dict(zip(THETA_NAMES, near)), jacobian=True)
+    np.testing.assert_allclose(b.outputs, cold.outputs, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(b.jacobian, cold.jacobian, rtol=1e-5, atol=1e-8)

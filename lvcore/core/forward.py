@@ -216,17 +216,21 @@ class _JaxForward:
 
 
 # --------------------------------------------------------------------------- the simulator
-def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool):
+def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, warm: dict | None = None):
     """One simulator run -> ``(outputs (25,), converged, message, jacobian (25, p) or None, seconds)``.
 
-    Runs in worker processes; never raises for a failing simulation.
+    Runs in worker processes; never raises for a failing simulation. ``warm``
+    (in-process only): a dict whose ``"state"`` warm-starts the solve and is
+    replaced by this solve's state when it converges.
     """
     t0 = time.perf_counter()
     nan_jac = np.full((N_OUTPUTS, len(input_names)), np.nan) if jacobian else None
     try:
         from lvcore import simulate
 
-        r = simulate(case, with_sensitivities=jacobian)
+        r = simulate(case, with_sensitivities=jacobian, initial=None if warm is None else warm.get("state"))
+        if warm is not None and r.converged:
+            warm["state"] = r.solver_state
         seconds = float(getattr(r, "seconds", time.perf_counter() - t0))
         if not r.converged:
             return np.full(N_OUTPUTS, np.nan), False, str(r.message or "did not converge"), nan_jac, seconds
@@ -268,6 +272,13 @@ class SimulatorForward:
     scheduler : str, optional
         ``tcp://HOST:PORT`` of a Dask scheduler for batches (overrides ``workers``).
     label : str
+    warm_start : bool
+        Points run in this process start Newton from the last converged
+        state of this forward (:func:`lvcore.mechanics.newton.solve`), which
+        saves most of the load stepping in a sequence of nearby points (an SQP
+        or line search). A failed warm start falls back to a cold solve, and
+        the result satisfies the same tolerances; points sent to a pool are
+        always solved cold.
 
     Notes
     -----
@@ -285,6 +296,8 @@ class SimulatorForward:
     workers: int | None = 1
     scheduler: str | None = None
     label: str = "FE simulator"
+    warm_start: bool = False
+    _warm: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     traceable: ClassVar[bool] = False
 
@@ -336,7 +349,8 @@ class SimulatorForward:
 
     def _run(self, cases, jacobian, executor):
         if executor is None:
-            return [_simulate_point(c, self.input_names, jacobian) for c in cases]
+            warm = self._warm if self.warm_start else None
+            return [_simulate_point(c, self.input_names, jacobian, warm) for c in cases]
         futures = [executor.submit(_simulate_point, c, self.input_names, jacobian) for c in cases]
         return [f.result() for f in futures]
 

@@ -56,6 +56,9 @@ class SimulationResult:
     timings: dict = field(default_factory=dict)
     #: Plausibility flags (e.g. a cavity more than 3 times its reference volume); the values are kept as computed.
     warnings: tuple[str, ...] = ()
+    #: ``(free displacements, element pressures)`` of the converged solve: pass as ``simulate(..., initial=)``
+    #: to warm-start a solve of the same mesh at nearby parameters.
+    solver_state: tuple | None = field(default=None, repr=False)
 
     def outputs(self) -> np.ndarray:
         """The 25 outputs [LVV (mL), 24 circumferential strains]; raises if unavailable."""
@@ -157,7 +160,7 @@ def _as_case(case):
 
 
 def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptions | None = None,
-             raise_on_failure: bool = False) -> SimulationResult:
+             raise_on_failure: bool = False, initial: tuple | None = None) -> SimulationResult:
     """Run one forward simulation.
 
     Parameters
@@ -168,6 +171,10 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     options : Newton settings.
     raise_on_failure : raise :class:`SolverError` instead of returning
         ``converged=False``.
+    initial : optional ``solver_state`` of an earlier converged result on the
+        same mesh and boundary conditions (a Newton warm start at full load,
+        see :func:`lvcore.mechanics.newton.solve`; ignored if its shapes do
+        not match, and a cold solve follows if it does not converge).
 
     Returns
     -------
@@ -191,7 +198,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         res = newton.NewtonResult(True, "converged (zero load)", np.zeros(system.n_free), system.zero_pressure(),
                                   1.0, 0, 0, 0, {})
     else:
-        res = newton.solve(system, options)
+        res = newton.solve(system, options, initial=initial)
     dofs = system.n_free
     if not res.converged:
         if raise_on_failure:
@@ -236,7 +243,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         newton_iterations=res.iterations, load_steps=res.load_steps, dofs=dofs,
         seconds=time.perf_counter() - t0, reference_nodes=mesh.nodes, displacement=u.reshape(-1, 3),
         elements=mesh.elements, sensitivities=sens, timings=res.timings,
-        warnings=plausibility_warnings(vol, standardised),
+        warnings=plausibility_warnings(vol, standardised), solver_state=(res.u, res.p),
     )
 
 

@@ -96,12 +96,22 @@ class BOResult:
         return np.minimum.accumulate(self.f)
 
 
-def _fit_gp(U: np.ndarray, f: np.ndarray, kernel=None, seed: int = 0) -> GaussianProcessRegressor:
+def _fit_gp(U: np.ndarray, f: np.ndarray, kernel=None, seed: int = 0, optimise: bool = True
+            ) -> GaussianProcessRegressor:
+    """GP on ``(U, f)``.
+
+    ``kernel=None``: hyperparameters estimated from the default start plus one
+    random restart. With a fitted ``kernel``: ``optimise=True`` re-estimates
+    them from that kernel's values (a warm start, no restart);
+    ``optimise=False`` keeps them and only conditions on the data.
+    """
     if kernel is None:
         kernel = ConstantKernel(1.0, (1e-3, 1e3)) * Matern(
             length_scale=np.full(U.shape[1], 0.3), length_scale_bounds=(1e-2, 1e1), nu=2.5
         ) + WhiteKernel(1e-4, (1e-8, 1e-1))
         gp = GaussianProcessRegressor(kernel, normalize_y=True, n_restarts_optimizer=1, random_state=seed)
+    elif optimise:
+        gp = GaussianProcessRegressor(kernel, normalize_y=True, n_restarts_optimizer=0, random_state=seed)
     else:
         gp = GaussianProcessRegressor(kernel, normalize_y=True, optimizer=None)
     return gp.fit(U, f)
@@ -145,7 +155,7 @@ def bayesian_optimise(
     seed: int = 0,
     lvv_weight: float = 2.0,
     kappa: float = 2.0,
-    refit_every: int = 10,
+    refit_every: int = 20,
     callback: Callable[[int, float], None] | None = None,
 ) -> BOResult:
     """Minimise the standardised RSS of ``forward`` against ``measured`` by BO.
@@ -169,8 +179,13 @@ def bayesian_optimise(
     lvv_weight, kappa : float
         LVV weight in the objective and LCB exploration weight.
     refit_every : int
-        Re-estimate the GP hyperparameters every this many iterations (the
-        GP is refitted to all data with fixed hyperparameters in between).
+        Re-estimate the GP hyperparameters every this many iterations, warm
+        started from the previous estimate (the first estimate starts from the
+        default kernel plus one random restart). In between, the GP is
+        conditioned on all data with fixed hyperparameters. The
+        hyperparameter fit is the cost that grows with the data (O(n³) per
+        likelihood evaluation, about a hundred evaluations per fit); see
+        ``benchmarks/bench_studies.py gp``.
     callback : callable, optional
         Called as ``callback(iteration, best_objective)``.
 
@@ -193,10 +208,11 @@ def bayesian_optimise(
     f = _objective(objective, Y, np.empty(0))
     U = space.to_unit(X)
     rng = np.random.default_rng(seed + 1)
+    if refit_every < 1:
+        raise ValueError("refit_every must be at least 1")
     kernel = None
     for it in range(n_iterations):
-        fit_hyper = kernel is None or it % refit_every == 0
-        gp = _fit_gp(U, np.log(f + _LOG_FLOOR), None if fit_hyper else kernel, seed)
+        gp = _fit_gp(U, np.log(f + _LOG_FLOOR), kernel, seed, optimise=it % refit_every == 0)
         kernel = gp.kernel_
         u_new = _next_point(gp, space.dim, rng, U[np.argmin(f)], kappa)
         x_new = space.from_unit(u_new[None, :])

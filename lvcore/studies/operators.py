@@ -247,8 +247,10 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
     def make(geom_name):
         if forward_factory is not None:
             return CachedForward(forward_factory(geom_name))
+        # warm start: each SQP step starts Newton from the previous converged state (same mesh, nearby θ)
         return CachedForward(SimulatorForward(geometry={"kind": "mesh", "path": geoms[geom_name]["path"]},
-                                              resolution=resolution, label=f"FE simulator on {patient} {geom_name}"))
+                                              resolution=resolution, label=f"FE simulator on {patient} {geom_name}",
+                                              warm_start=True))
 
     y_star = np.asarray(y_star, float)
     truth = np.array(THETA_TRUE)
