@@ -4,6 +4,7 @@
     python benchmarks/bench_app_browser.py --repeats 5 --redraws 11
     python benchmarks/bench_app_browser.py --screenshots docs/screenshots   # also refresh the docs' small PNGs
     python benchmarks/bench_app_browser.py --calibration   # also time a calibration, click to results
+    python benchmarks/bench_app_browser.py --redraw-only --redraws 15   # only the Fibre-angles slider-to-redraw
 
 Starts ``streamlit run app.py`` on 127.0.0.1 and, for every page linked in the
 sidebar, opens it in a fresh browser session and measures the time from
@@ -40,6 +41,10 @@ def main(argv=None) -> int:
     p.add_argument("--screenshots", type=Path, default=None, help="write small PNGs of every page here")
     p.add_argument("--calibration", action="store_true",
                    help="also time 'Run calibration' on the Calibration page with its defaults, click to results")
+    p.add_argument("--redraw-only", action="store_true", help="skip the page timings; only slider-to-redraw")
+    p.add_argument("--slider", choices=("sidebar", "map"), default="sidebar",
+                   help="slider timed on Fibre angles: the shared sidebar's first θ slider (the whole page reruns) "
+                        "or the map's first slider (only the map's fragment reruns)")
     args = p.parse_args(argv)
 
     from playwright.sync_api import sync_playwright
@@ -66,7 +71,7 @@ def main(argv=None) -> int:
         drv.wait_idle(page)
         links = drv.page_links(page)
         ctx.close()
-        for label, href in links:
+        for label, href in ([] if args.redraw_only else links):
             times = []
             for r in range(args.repeats):
                 ctx, page = session()
@@ -93,7 +98,8 @@ def main(argv=None) -> int:
             page.goto(fa[0])
             drv.wait_idle(page)
             drv.open_live_map(page)
-            slider = page.locator(f"[data-testid=stSidebar] :is({drv.SLIDER})").first
+            where = "[data-testid=stSidebar]" if args.slider == "sidebar" else "[data-testid=stMain]"
+            slider = page.locator(f"{where} :is({drv.SLIDER})").first
             slider_label = slider.get_attribute("aria-label")
             redraw = drv.redraw_times(page, slider, n=args.redraws)
             page.screenshot(path=str(shots / "fibre_angles_live_map.png"), full_page=True)

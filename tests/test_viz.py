@@ -153,3 +153,16 @@ def test_overlay_and_scalar_map():
     assert png[:4] == b"\x89PNG"
     with pytest.raises(ValueError, match="one entry per node"):
         mesh3d.render_scalar_map(a, tmpl.elements, np.zeros(5))
+
+
+def test_map_pair_draws_both_maps_in_one_figure():
+    xs, ys = np.linspace(-90, 0, 4), np.linspace(0, 90, 3)
+    left, right = np.add.outer(ys, xs), np.multiply.outer(ys, xs)
+    fig = figures.map_pair(xs, ys, left, right, titles=("LVV (mL)", "Mean E_cc"), xaxis_title="α_endo (°)")
+    assert [t.type for t in fig.data] == ["heatmap", "heatmap"]
+    np.testing.assert_array_equal(fig.data[0].z, left)
+    np.testing.assert_array_equal(fig.data[1].z, right)
+    assert fig.data[0].xaxis == "x" and fig.data[1].xaxis == "x2"  # side by side, own axes and colour bars
+    assert fig.data[0].colorbar.x != fig.data[1].colorbar.x
+    with pytest.raises(ValueError, match="shape"):
+        figures.map_pair(xs, ys, left, right.T)

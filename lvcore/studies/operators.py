@@ -538,7 +538,7 @@ def format_findings(f: dict) -> str:
             lines.append(f"{what}: {k} PCs beat both other operators in {100 * d['share_beats_both_operators']:.0f} % "
                          f"of {d['n_cases']} cases, no worse than an operator in "
                          f"{100 * d['share_no_worse_than_an_operator']:.0f} % of {d['n_comparisons']} comparisons")
-        lines.append(f"  medians: " + ", ".join(f"{k} {v:.4f}" for k, v in f[metric]["median"].items()))
+        lines.append("  medians: " + ", ".join(f"{k} {v:.4f}" for k, v in f[metric]["median"].items()))
     if "median_mahalanobis" in f:
         lines.append("median Mahalanobis distance: " + ", ".join(f"{k} {v:.2f}" for k, v in f["median_mahalanobis"].items()))
     lines.append(f"(chapter, geometry domain: 10 PCs beat a new operator in {100 * CHAPTER_SHARE_10PC:.0f} % of cases)")

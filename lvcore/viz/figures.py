@@ -215,3 +215,39 @@ def contour(x, y, z, *, title: str = "", xaxis_title: str = "", yaxis_title: str
     if log_y:
         fig.update_yaxes(type="log")
     return fig
+
+
+def map_pair(x, y, z_left, z_right, *, titles: tuple[str, str] = ("", ""), colorbar_titles: tuple[str, str] = ("", ""),
+             xaxis_title: str = "", yaxis_title: str = "", colorscales: tuple[str, str] = ("Viridis", "Viridis"),
+             height: int = 420) -> go.Figure:
+    """Two maps over the same grid side by side in ONE figure (heat maps, smoothed in the browser).
+
+    Made for live redraws (the Fibre-angles page's emulator map): one figure
+    and two image-like heat-map traces cost the browser far less per redraw
+    than two labelled :func:`contour` figures (the contour lines and their
+    labels are recomputed in JavaScript on every update).
+
+    Parameters
+    ----------
+    x : (nx,) array; y : (ny,) array; z_left, z_right : (ny, nx) arrays
+        ``z[j, i]`` at ``(x[i], y[j])``.
+    """
+    from plotly.subplots import make_subplots
+
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    zs = [np.asarray(z, dtype=float) for z in (z_left, z_right)]
+    for z in zs:
+        if z.shape != (y.size, x.size):
+            raise ValueError(f"z must have shape (len(y), len(x)) = {(y.size, x.size)}, got {z.shape}")
+    fig = make_subplots(rows=1, cols=2, subplot_titles=titles, horizontal_spacing=0.14)
+    for k, z in enumerate(zs):
+        fig.add_trace(go.Heatmap(x=x, y=y, z=z, zsmooth="fast", colorscale=colorscales[k],
+                                 colorbar=dict(title=colorbar_titles[k], x=0.43 if k == 0 else 1.0, len=0.9),
+                                 hovertemplate=f"{xaxis_title} %{{x:.3g}}<br>{yaxis_title} %{{y:.3g}}<br>"
+                                               f"{titles[k]} %{{z:.4g}}<extra></extra>"), row=1, col=k + 1)
+        fig.update_xaxes(title_text=xaxis_title, row=1, col=k + 1)
+        fig.update_yaxes(title_text=yaxis_title, row=1, col=k + 1)
+    fig.update_layout(height=height, margin=dict(l=10, r=10, t=50, b=10))
+    return fig
+
