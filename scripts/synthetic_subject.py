@@ -9,12 +9,13 @@ What a user brings, generated from a known truth:
    16 AHA-segment circumferential strains ``strains`` (``segments = 'aha'``),
    simulated with lvcore's finite-element model on the subject's fitted
    geometry at a known theta (chapter conditions: fibre angles -60/60 deg,
-   EDP 8 mmHg) plus Gaussian noise;
+   EDP 8 mmHg; the base condition of the bundled ``chapter`` emulator unless
+   ``--base`` says otherwise) plus Gaussian noise;
 3. ``truth.json``: the true theta, the noise and how everything was made.
 
 Usage::
 
-    python scripts/synthetic_subject.py --out subject/ [--size 4] [--seed 1]
+    python scripts/synthetic_subject.py --out subject/ [--size 4] [--seed 1] [--base clamped|sliding]
 
 Everything written is labelled SYNTHETIC.
 """
@@ -57,6 +58,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="synthetic_subject", help="output folder")
     ap.add_argument("--size", type=float, default=4.0, help="tetrahedron size (mm)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--base", choices=("clamped", "sliding"), default=None,
+                    help="base boundary condition of the simulated data (default: that of the bundled `chapter` "
+                         "emulator, so the worked example has no base-condition discrepancy)")
     args = ap.parse_args(argv)
 
     import scipy.io
@@ -69,6 +73,11 @@ def main(argv=None) -> int:
     from lvcore.mechanics.case import Case
     from lvcore.mechanics.simulate import simulate
 
+    base = args.base
+    if base is None:
+        from lvcore.emulator import load_emulator
+
+        base = load_emulator("chapter").base
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -89,6 +98,7 @@ def main(argv=None) -> int:
         "material": {"law": "holzapfel-ogden", **TRUE_THETA},
         "fibres": {"alpha_endo": CHAPTER_ANGLES[0], "alpha_epi": CHAPTER_ANGLES[1]},
         "load": {"pressure": CHAPTER_EDP, "units": "mmHg"},
+        "boundary": {"base": base},
     })
     res = simulate(case, raise_on_failure=True)
     y = res.outputs()
@@ -100,13 +110,13 @@ def main(argv=None) -> int:
         "lvv_ml": lvv, "strains": aha, "subject": "SYNTHETIC-S1", "segments": "aha", "segment_offset_deg": 0.0,
         "note": "SYNTHETIC data from scripts/synthetic_subject.py"})
     truth = {"label": "SYNTHETIC subject (scripts/synthetic_subject.py)", "theta": TRUE_THETA, "noise": NOISE,
-             "seed": args.seed, "edp_mmhg": CHAPTER_EDP, "angles_deg": list(CHAPTER_ANGLES),
+             "seed": args.seed, "edp_mmhg": CHAPTER_EDP, "base": base, "angles_deg": list(CHAPTER_ANGLES),
              "ellipsoid": {"endo": [geo.endo.rs, geo.endo.ry, geo.endo.rl], "epi": [geo.epi.rs, geo.epi.ry, geo.epi.rl],
                            "base_z": geo.base_z},
              "noise_free_outputs": [float(v) for v in y], "lvv_ml": lvv, "aha_strains": [float(v) for v in aha],
              "simulator": {"dofs": res.dofs, "seconds": res.seconds}}
     (out / "truth.json").write_text(json.dumps(truth, indent=1))
-    print(f"simulated at theta {TRUE_THETA}: LVV {y[0]:.1f} mL (measured {lvv:.1f}), mean strain {y[1:].mean():.4f}; "
+    print(f"simulated ({base} base) at theta {TRUE_THETA}: LVV {y[0]:.1f} mL (measured {lvv:.1f}), mean strain {y[1:].mean():.4f}; "
           f"wrote {out / 'subject_aha.mat'} (16 AHA strains) and truth.json ({time.perf_counter() - t0:.0f} s)")
     return 0
 
