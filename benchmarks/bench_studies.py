@@ -3,6 +3,7 @@
     OMP_NUM_THREADS=1 python benchmarks/bench_studies.py bo [--initial 30] [--iterations 30] [--workers 2]
     OMP_NUM_THREADS=1 python benchmarks/bench_studies.py operators [--patients SYNTHETIC-P01] [--workers 2]
     OMP_NUM_THREADS=1 python benchmarks/bench_studies.py gp [--initial 300] [--iterations 300] [--refit-every 10,20]
+    OMP_NUM_THREADS=1 python benchmarks/bench_studies.py sqp-warm [--patients SYNTHETIC-P02] [--test op2]
 
 ``bo``: one volunteer (default SYNTHETIC-HV1) in both modes (fixed, free) with
 a 30 + 30 budget through the same code path as ``lvcore study bo-fibres``
@@ -21,6 +22,11 @@ its CPU time is the GP fits and the acquisition search of one run of the
 study at the given budget, once per ``--refit-every`` value. Sixteen runs
 (8 volunteers x 2 modes) make the chapter's study; the 4-input mode costs
 less.
+``sqp-warm``: one SQP refit of the operator study (data from the patient's
+first operator, refitted on ``--test``: another operator, ``pc5`` or
+``pc10``) twice in this process, with the Newton warm start
+(``SimulatorForward(warm_start=True)``, as the study runs) and cold; prints
+CPU seconds, simulations and the difference of the two θ̂.
 """
 from __future__ import annotations
 
@@ -37,7 +43,8 @@ os.environ.setdefault("LVCORE_NO_PNG", "1")  # time the study, not Chrome starti
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("study", choices=("bo", "operators", "gp"))
+    p.add_argument("study", choices=("bo", "operators", "gp", "sqp-warm"))
+    p.add_argument("--test", default="pc10", help="sqp-warm: test geometry (another operator's name, pc5 or pc10)")
     p.add_argument("--subject", default="SYNTHETIC-HV1")
     p.add_argument("--initial", type=int, default=30)
     p.add_argument("--iterations", type=int, default=30)
@@ -54,6 +61,8 @@ def main(argv=None) -> int:
 
     if args.study == "gp":
         return _bench_gp(args)
+    if args.study == "sqp-warm":
+        return _bench_sqp_warm(args)
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     cpu0 = time.process_time()
@@ -87,6 +96,48 @@ def main(argv=None) -> int:
                       "resolution": args.resolution, "linear_solver": available_backends()[0],
                       "load_avg_1min_before": round(load0, 2), "load_avg_1min_after": round(os.getloadavg()[0], 2),
                       "cpus": os.cpu_count(), "detail": detail}, indent=1))
+    return 0
+
+
+def _bench_sqp_warm(args) -> int:
+    """One operator-study refit with and without the Newton warm start (same process, same data)."""
+    import numpy as np
+
+    from lvcore.core import SimulatorForward
+    from lvcore.core.space import THETA_NAMES
+    from lvcore.mechanics.linear import available_backends
+    from lvcore.optimise.sqp import OperatorLoss, refit_theta
+    from lvcore.studies import operators as ops
+    from lvcore.studies.operators import CachedForward
+
+    patient = args.patients.split(",")[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        geoms = ops.patient_geometries(patient, tmp)
+        main = [k for k in geoms if "/" not in k][0]
+        name = dict(ops.test_geometries(main, [k for k in geoms if "/" not in k]))[args.test]
+        truth = np.array(ops.THETA_TRUE)
+        y_star = SimulatorForward(geometry={"kind": "mesh", "path": geoms[main]["path"]},
+                                  resolution=args.resolution)(dict(zip(THETA_NAMES, truth)))
+        loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
+        rows = {}
+        for warm in (True, False):
+            fwd = CachedForward(SimulatorForward(geometry={"kind": "mesh", "path": geoms[name]["path"]},
+                                                 resolution=args.resolution, warm_start=warm))
+            load0 = os.getloadavg()[0]
+            c0, t0 = time.process_time(), time.perf_counter()
+            res = refit_theta(fwd, loss, truth)
+            rows[warm] = (time.process_time() - c0, time.perf_counter() - t0, fwd.simulations, res, load0)
+    print(f"operator-study SQP refit: {patient}, data from {main}, refitted on {args.test} ({name}), "
+          f"{args.resolution} mesh, {available_backends()[0]}, one process")
+    print("| Newton start | CPU s | wall s | simulations (value + adjoint) | SLSQP evaluations | loss | load before |")
+    print("|---|---|---|---|---|---|---|")
+    for warm, (cpu, wall, sims, res, l0) in rows.items():
+        print(f"| {'warm' if warm else 'cold'} | {cpu:.1f} | {wall:.1f} | {sims} | {res.n_evaluations} | "
+              f"{res.loss:.6g} | {l0:.1f} |")
+    a, b = rows[True][3].theta, rows[False][3].theta
+    print(f"theta_hat warm {np.round(a, 5).tolist()} vs cold {np.round(b, 5).tolist()}: "
+          f"max relative difference {np.max(np.abs(a - b) / np.abs(b)):.2e}; "
+          f"CPU ratio cold/warm {rows[False][0] / rows[True][0]:.2f}")
     return 0
 
 

@@ -117,15 +117,34 @@ def _fit_gp(U: np.ndarray, f: np.ndarray, kernel=None, seed: int = 0, optimise: 
     return gp.fit(U, f)
 
 
+#: Step of the forward differences of the acquisition (unit-cube coordinates).
+_FD_STEP = 1e-6
+
+
 def _next_point(gp, dim: int, rng: np.random.Generator, U_best: np.ndarray, kappa: float) -> np.ndarray:
+    """Minimiser of the LCB: best of 2,200 candidates, the three best polished by L-BFGS-B in the unit cube.
+
+    The polish gets its gradient by forward differences evaluated in ONE
+    GP prediction of ``dim + 1`` points (stepping inwards at the upper
+    bound), instead of ``dim + 1`` separate predictions: the per-call cost
+    of the GP's predict dominates at these sizes.
+    """
     def lcb(u):
         mu, sd = gp.predict(np.atleast_2d(u), return_std=True)
         return mu - kappa * sd
 
+    steps = np.eye(dim) * _FD_STEP
+
+    def lcb_and_gradient(u):
+        h = np.where(u + _FD_STEP <= 1.0, 1.0, -1.0)
+        v = lcb(np.vstack([u, u + steps * h[:, None]]))
+        return float(v[0]), (v[1:] - v[0]) / (_FD_STEP * h)
+
     cand = np.vstack([rng.random((2000, dim)), np.clip(U_best + 0.05 * rng.standard_normal((200, dim)), 0, 1)])
     vals = lcb(cand)
     best = cand[np.argsort(vals)[:3]]
-    results = [minimize(lambda u: float(lcb(u)[0]), u0, method="L-BFGS-B", bounds=[(0.0, 1.0)] * dim) for u0 in best]
+    results = [minimize(lcb_and_gradient, u0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * dim)
+               for u0 in best]
     return min(results, key=lambda r: r.fun).x
 
 
