@@ -23,9 +23,10 @@ For each emulator it
    the 24 strains together (best validation iterate kept), reports
    accuracy on the held-out test set, and saves ``network.npz`` +
    ``metadata.json`` + ``validation.npz`` + ``training_data.npz`` (the
-   converged rows). ``angles`` trains longer: 1,000 epochs (halved every
-   150, patience 150) and 10,000 L-BFGS iterations (``SCHEDULES``); an
-   option given on the command line overrides the schedule.
+   converged rows). The bundled ``chapter`` and ``angles`` train longer:
+   1,000 epochs (halved every 150, patience 150) and 10,000 L-BFGS
+   iterations (``SCHEDULES``); an option given on the command line
+   overrides the schedule.
 
 Emulators (the chapter's, Section 9.2.4):
 
@@ -72,9 +73,12 @@ def _bundled_training():
 
 #: Schedule options in which a bundled emulator differs from :func:`_bundled_training`, as shipped.
 #: `angles` (12 inputs) gets 2.5x the Adam epochs and 10,000 L-BFGS iterations (about 30 min on 2 cores).
+#: `chapter` gets the same since its 2026-11-25 rebuild (sliding base, default mesh): with the base schedule it
+#: missed the LVV target (test RMSE 1.14 mL against <= 1 mL; every architecture still improving at 400 epochs).
+_LONG = {"max_epochs": 1000, "decay_epochs": 150, "patience": 150, "lbfgs_iterations": 10_000}
 SCHEDULES = {
-    "chapter": {},
-    "angles": {"max_epochs": 1000, "decay_epochs": 150, "patience": 150, "lbfgs_iterations": 10_000},
+    "chapter": dict(_LONG),
+    "angles": dict(_LONG),
 }
 SCHEDULE_OPTIONS = ("max_epochs", "decay_epochs", "patience", "lbfgs_iterations")
 

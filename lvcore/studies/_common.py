@@ -5,10 +5,15 @@ import json
 import math
 import os
 import sys
+import threading
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+#: Seconds a study waits for one PNG export (kaleido starts Chromium) before it goes on with the HTML only.
+PNG_TIMEOUT_S = 120.0
 
 
 def bundled_path(*parts: str) -> Path:
@@ -66,9 +71,24 @@ def save_figure(fig, stem: Path) -> list[str]:
     paths = [str(html)]
     if os.environ.get("LVCORE_NO_PNG"):
         return paths
-    try:
-        fig.write_image(stem.with_suffix(".png"), width=1000, height=600)
-        paths.append(str(stem.with_suffix(".png")))
-    except Exception:  # noqa: BLE001 - kaleido/Chrome missing or broken: HTML is the figure, PNG is optional
-        pass
+    png = stem.with_suffix(".png")
+    done = threading.Event()
+
+    def export():
+        try:
+            fig.write_image(png, width=1000, height=600)
+            done.set()
+        except Exception:  # noqa: BLE001 - kaleido/Chrome missing or broken: HTML is the figure, PNG is optional
+            pass
+
+    # a hung Chrome (seen on a starved machine: kaleido blocked for 30+ min) must not hang the study:
+    # the export runs in a daemon thread and is abandoned after PNG_TIMEOUT_S
+    worker = threading.Thread(target=export, daemon=True, name=f"png-export-{stem.name}")
+    worker.start()
+    worker.join(PNG_TIMEOUT_S)
+    if done.is_set():
+        paths.append(str(png))
+    elif worker.is_alive():
+        warnings.warn(f"PNG export of {stem.name} gave no answer in {PNG_TIMEOUT_S:.0f} s (kaleido/Chromium); "
+                      f"the HTML figure {html} is written, the PNG is not", RuntimeWarning, stacklevel=2)
     return paths

@@ -1,0 +1,28 @@
+"""Shared study helpers (lvcore.studies._common)."""
+import threading
+
+import plotly.graph_objects as go
+import pytest
+
+from lvcore.studies import _common
+
+
+def test_a_hung_png_export_is_abandoned_and_the_html_kept(tmp_path, monkeypatch):
+    release = threading.Event()
+    monkeypatch.setattr(_common, "PNG_TIMEOUT_S", 0.5)
+    monkeypatch.delenv("LVCORE_NO_PNG", raising=False)
+    monkeypatch.setattr(go.Figure, "write_image", lambda self, *a, **k: release.wait(30))  # a Chrome that never answers
+    with pytest.warns(RuntimeWarning, match="no answer"):
+        paths = _common.save_figure(go.Figure(), tmp_path / "fig")
+    release.set()
+    assert paths == [str(tmp_path / "fig.html")] and (tmp_path / "fig.html").is_file()
+
+
+def test_a_failing_png_export_keeps_the_html(tmp_path, monkeypatch):
+    monkeypatch.delenv("LVCORE_NO_PNG", raising=False)
+
+    def broken(self, *a, **k):
+        raise RuntimeError("no Chrome")
+
+    monkeypatch.setattr(go.Figure, "write_image", broken)
+    assert _common.save_figure(go.Figure(), tmp_path / "fig") == [str(tmp_path / "fig.html")]
