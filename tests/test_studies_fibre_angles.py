@@ -1,4 +1,5 @@
 """Fibre-angle sweeps run the real simulator and keep failures; the page runs."""
+import json
 
 import numpy as np
 import pytest
@@ -104,7 +105,9 @@ def test_page_draws_the_live_emulator_map(tmp_path, monkeypatch):
     assert "`angles` emulator (live)" in radio.options
     radio.set_value("`angles` emulator (live)").run()
     assert not at.exception and not at.warning
-    assert len(at.get("plotly_chart")) >= 2
+    charts = at.get("plotly_chart")
+    assert len(charts) == 1  # both maps (LVV, mean strain) in one figure: one redraw per slider move
+    assert [t["type"] for t in json.loads(charts[0].proto.spec)["data"]] == ["heatmap", "heatmap"]
     edp = next(s for s in at.sidebar.slider if "EDP" in s.label)
     edp.set_value(30.0).run()  # outside the emulator's training box: said, not hidden
     assert any("outside the training box" in w.value for w in at.warning)
