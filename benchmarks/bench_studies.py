@@ -113,8 +113,8 @@ def _bench_sqp_warm(args) -> int:
     patient = args.patients.split(",")[0]
     with tempfile.TemporaryDirectory() as tmp:
         geoms = ops.patient_geometries(patient, tmp)
-        main = [k for k in geoms if "/" not in k][0]
-        name = dict(ops.test_geometries(main, [k for k in geoms if "/" not in k]))[args.test]
+        main = ops.operator_names(geoms)[0]
+        name = ops.test_geometry_name(main, args.test, geoms)
         truth = np.array(ops.THETA_TRUE)
         y_star = SimulatorForward(geometry={"kind": "mesh", "path": geoms[main]["path"]},
                                   resolution=args.resolution)(dict(zip(THETA_NAMES, truth)))

@@ -208,11 +208,14 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
     r1, _, _, _ = system.residual(u, p, 1.0)
     scale = max(np.linalg.norm(r1), 1e-30)
     vol = float(np.max(np.sum(system.wdet, axis=1)))
+
+    def tolerances(rtol):  # (force, volume) tolerances of a load step solved to relative tolerance rtol
+        return rtol * scale, rtol * 1e-2 * vol
+
     if initial is not None:
         u0, p0 = (np.asarray(v, dtype=float) for v in initial)
         if u0.shape == u.shape and p0.shape == np.shape(p) and np.all(np.isfinite(u0)) and np.all(np.isfinite(p0)):
-            ok, u_w, p_w, _, _ = _newton_at(system, u0, p0, 1.0, opts.rtol * scale, opts.rtol * 1e-2 * vol, opts,
-                                            stats)
+            ok, u_w, p_w, _, _ = _newton_at(system, u0, p0, 1.0, *tolerances(opts.rtol), opts, stats)
             stats["warm_start"] = bool(ok)
             if ok:
                 stats["seconds"] = time.perf_counter() - t_start
@@ -234,8 +237,8 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
             if system.residual(u_try, p_try, target)[2] > opts.min_jacobian:
                 u_start, p_start = u_try, p_try
             stats["residuals"] += 1
-        ok, u_new, p_new, reason, last = _newton_at(system, u_start, p_start, target, rtol * scale,
-                                                    rtol * 1e-2 * vol, opts, stats, can_cut=step > 4 * opts.min_step,
+        ok, u_new, p_new, reason, last = _newton_at(system, u_start, p_start, target, *tolerances(rtol),
+                                                    opts, stats, can_cut=step > 4 * opts.min_step,
                                                     reuse=carry if predict else None)
         if ok:
             prev = (lam, u, p)

@@ -215,6 +215,8 @@ def bayesian_optimise(
     measured = np.asarray(measured, dtype=float)
     if measured.shape != (N_OUTPUTS,) or not np.all(np.isfinite(measured)):
         raise ValueError(f"measured data must be {N_OUTPUTS} finite numbers (LVV mL and 24 strains)")
+    if refit_every < 1:
+        raise ValueError("refit_every must be at least 1")
     if set(forward.input_names) != set(space.names):
         raise ForwardError(f"the optimisation box varies {list(space.names)}; the forward model reads "
                            f"{list(forward.input_names)}")
@@ -227,8 +229,6 @@ def bayesian_optimise(
     f = _objective(objective, Y, np.empty(0))
     U = space.to_unit(X)
     rng = np.random.default_rng(seed + 1)
-    if refit_every < 1:
-        raise ValueError("refit_every must be at least 1")
     kernel = None
     for it in range(n_iterations):
         gp = _fit_gp(U, np.log(f + _LOG_FLOOR), kernel, seed, optimise=it % refit_every == 0)

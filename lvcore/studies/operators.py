@@ -112,6 +112,16 @@ def test_geometries(main: str, operators: Sequence[str]) -> list[tuple[str, str]
     return [(o, o) for o in operators if o != main] + [(f"pc{k}", f"{main}/pc{k}") for k in PC_TESTS]
 
 
+def operator_names(geoms: dict) -> list[str]:
+    """The operators' own geometries among :func:`patient_geometries` (not their ``<op>/pcK`` reconstructions)."""
+    return [k for k in geoms if "/" not in k]
+
+
+def test_geometry_name(main: str, test: str, geoms: dict) -> str:
+    """Name in ``geoms`` of test geometry ``test`` (another operator, ``pc5`` or ``pc10``) for main operator ``main``."""
+    return dict(test_geometries(main, operator_names(geoms)))[test]
+
+
 # ----------------------------------------------------------------------------- forward with a cache
 class CachedForward:
     """One-point cache around a Forward (the SQP asks for the same θ more than once; the Jacobian is reused)."""
@@ -221,7 +231,7 @@ def surface_for_fit(fit: dict, geoms: dict, y_star, n: int, *, resolution: str =
     """A simulator loss surface (Fig 9.13) for one finished fit: a ``rss_surfaces.json`` record."""
     from lvcore.optimise.sqp import OperatorLoss
 
-    name = dict(test_geometries(fit["main_operator"], [k for k in geoms if "/" not in k]))[fit["test_geometry"]]
+    name = test_geometry_name(fit["main_operator"], fit["test_geometry"], geoms)
     fwd = SimulatorForward(geometry={"kind": "mesh", "path": geoms[name]["path"]}, resolution=resolution,
                            workers=workers)
     loss = OperatorLoss(np.asarray(y_star, float), geoms[fit["main_operator"]]["v_early_ml"], geoms[name]["v_early_ml"])
@@ -242,7 +252,7 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
     from lvcore.optimise.sqp import OperatorLoss, refit_theta
 
     t0 = time.perf_counter()
-    name = dict(test_geometries(main, [k for k in geoms if "/" not in k]))[test]
+    name = test_geometry_name(main, test, geoms)
 
     def make(geom_name):
         if forward_factory is not None:

@@ -185,6 +185,18 @@ def density_overlay(samples: Mapping[str, Sequence[float]], *, reference: float 
     return fig
 
 
+def _grid(x, y, *zs):
+    """``x``, ``y`` and each ``z`` as float arrays; every ``z`` must be ``(len(y), len(x))`` (``z[j, i]`` at
+    ``(x[i], y[j])``)."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    out = [np.asarray(z, dtype=float) for z in zs]
+    for z in out:
+        if z.shape != (y.size, x.size):
+            raise ValueError(f"z must have shape (len(y), len(x)) = {(y.size, x.size)}, got {z.shape}")
+    return (x, y, *out)
+
+
 def contour(x, y, z, *, title: str = "", xaxis_title: str = "", yaxis_title: str = "", colorbar_title: str = "",
             points: Mapping[str, tuple[Sequence[float], Sequence[float]]] | None = None, log_x: bool = False,
             log_y: bool = False, colorscale: str = "Viridis", height: int = 420) -> go.Figure:
@@ -196,11 +208,7 @@ def contour(x, y, z, *, title: str = "", xaxis_title: str = "", yaxis_title: str
     points : dict label -> (xs, ys), optional
         Scatter overlays (e.g. design points, the optimum, the truth).
     """
-    z = np.asarray(z, dtype=float)
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if z.shape != (y.size, x.size):
-        raise ValueError(f"z must have shape (len(y), len(x)) = {(y.size, x.size)}, got {z.shape}")
+    x, y, z = _grid(x, y, z)
     fig = go.Figure(go.Contour(x=x, y=y, z=z, colorscale=colorscale, colorbar={"title": colorbar_title},
                                contours=dict(showlabels=True)))
     symbols = ("x", "star", "circle", "diamond", "cross", "triangle-up")
@@ -234,12 +242,7 @@ def map_pair(x, y, z_left, z_right, *, titles: tuple[str, str] = ("", ""), color
     """
     from plotly.subplots import make_subplots
 
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    zs = [np.asarray(z, dtype=float) for z in (z_left, z_right)]
-    for z in zs:
-        if z.shape != (y.size, x.size):
-            raise ValueError(f"z must have shape (len(y), len(x)) = {(y.size, x.size)}, got {z.shape}")
+    x, y, *zs = _grid(x, y, z_left, z_right)
     fig = make_subplots(rows=1, cols=2, subplot_titles=titles, horizontal_spacing=0.14)
     for k, z in enumerate(zs):
         fig.add_trace(go.Heatmap(x=x, y=y, z=z, zsmooth="fast", colorscale=colorscales[k],
@@ -250,4 +253,3 @@ def map_pair(x, y, z_left, z_right, *, titles: tuple[str, str] = ("", ""), color
         fig.update_yaxes(title_text=yaxis_title, row=1, col=k + 1)
     fig.update_layout(height=height, margin=dict(l=10, r=10, t=50, b=10))
     return fig
-
