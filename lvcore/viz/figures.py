@@ -243,13 +243,16 @@ def map_pair(x, y, z_left, z_right, *, titles: tuple[str, str] = ("", ""), color
     from plotly.subplots import make_subplots
 
     x, y, *zs = _grid(x, y, z_left, z_right)
-    fig = make_subplots(rows=1, cols=2, subplot_titles=titles, horizontal_spacing=0.14)
+    # the left map's colour bar sits in the gap between the maps; the shared y axis is titled once, on the left,
+    # so the right map's axis title cannot run into that colour bar
+    fig = make_subplots(rows=1, cols=2, subplot_titles=titles, horizontal_spacing=0.16)
     for k, z in enumerate(zs):
         fig.add_trace(go.Heatmap(x=x, y=y, z=z, zsmooth="fast", colorscale=colorscales[k],
-                                 colorbar=dict(title=colorbar_titles[k], x=0.43 if k == 0 else 1.0, len=0.9),
+                                 colorbar=dict(title=colorbar_titles[k], x=0.43 if k == 0 else 1.0, len=0.9,
+                                               thickness=15),
                                  hovertemplate=f"{xaxis_title} %{{x:.3g}}<br>{yaxis_title} %{{y:.3g}}<br>"
                                                f"{titles[k]} %{{z:.4g}}<extra></extra>"), row=1, col=k + 1)
         fig.update_xaxes(title_text=xaxis_title, row=1, col=k + 1)
-        fig.update_yaxes(title_text=yaxis_title, row=1, col=k + 1)
+    fig.update_yaxes(title_text=yaxis_title, row=1, col=1)
     fig.update_layout(height=height, margin=dict(l=10, r=10, t=50, b=10))
     return fig
