@@ -10,6 +10,7 @@
    * checks that ``lvcore`` is imported from that environment;
    * runs the simulator on a ``pca`` geometry of the bundled shape model;
    * loads both bundled emulators (``chapter``, ``angles``) and evaluates them;
+   * finds the live chart's page (``lvcore.app.live_chart``) and plotly.js;
    * calibrates on a bundled SYNTHETIC volunteer with a tiny chain
      (``lvcore calibrate --volunteer``);
    * starts the app (``lvcore app``, headless on 127.0.0.1, a free port), waits
@@ -67,6 +68,9 @@ for name in ("chapter", "angles"):
     y = np.asarray(emu.predict(x, strict=True))
     assert y.shape == (25,) and np.isfinite(y).all() and 20 < y[0] < 400, (name, y)
     out[f"{name}_inputs"] = len(emu.input_names)
+from lvcore.app.live_chart import frontend_dir  # the live charts' page ships in the wheel; plotly.js from plotly
+live = frontend_dir()
+assert (live / "index.html").is_file() and (live / "plotly.min.js").stat().st_size > 1_000_000, live
 print(json.dumps(out))
 """
 

@@ -71,7 +71,7 @@ def test_live_map_and_background_fe_verification(monkeypatch):
     at = AppTest.from_file(FIBRE_PAGE, default_timeout=120).run()
     at.radio[0].set_value(next(o for o in at.radio[0].options if "emulator" in o)).run()
     assert not at.exception, at.exception
-    assert len(at.get("plotly_chart")) >= 1  # the live map (one figure, both maps)
+    assert len(at.get("component_instance")) == 2  # the live map (one figure, both maps) and strain chart
     next(b for b in at.button if b.label == "Verify with the FE simulator").click().run()
     assert not at.exception, at.exception
     t0 = time.time()

@@ -135,6 +135,24 @@ def test_prediction_is_batched(trained):
     assert np.asarray(emu.predict(xs.reshape(3, 100, 3))).shape == (3, 100, 25)
 
 
+def test_batches_are_padded_to_few_compiled_shapes(trained):
+    """predict pads a batch to a few row counts (one compilation each) and returns exactly the unpadded rows."""
+    from lvcore.emulator.model import PAD_ROWS, padded_rows
+
+    emu, xs = trained
+    assert [padded_rows(n) for n in (0, 1, 2, 3, 441, 484, 529)] == [1, 1, 2, 4, 512, 512, 1024]
+    assert padded_rows(PAD_ROWS) == PAD_ROWS and padded_rows(PAD_ROWS + 1) == 2 * PAD_ROWS
+    assert padded_rows(100_000) == 25 * PAD_ROWS  # at most one PAD_ROWS block extra
+    for n in (3, 37, 300):
+        np.testing.assert_array_equal(np.asarray(emu.predict(xs[:n])), np.asarray(emu.apply(xs[:n])))
+    # grid sizes 17..22 squared share one compiled shape (512 rows): no new compilation as a grid slider moves
+    sizes = {emu._apply._cache_size()}
+    for n in range(17, 23):
+        emu.predict(np.repeat(xs[:1], n * n, axis=0))
+        sizes.add(emu._apply._cache_size())
+    assert max(sizes) - min(sizes) <= 1
+
+
 def test_network_arrays_round_trip_and_init_scale():
     net = MLP(9, 25, (100, 200), seed=3)
     assert net.hidden == (100, 200)

@@ -88,6 +88,34 @@ def test_emulator_angle_map_is_one_batched_prediction():
         emulator_angle_map(_random_emulator(), endo, epi)
 
 
+def _n_values(array_json) -> int:
+    """Length of an array in plotly's JSON: a list, or (plotly >= 6) a typed array {"dtype", "bdata"}."""
+    if isinstance(array_json, dict):
+        import base64
+
+        return len(base64.b64decode(array_json["bdata"])) // np.dtype(array_json["dtype"]).itemsize
+    return len(array_json)
+
+
+def test_emulator_angle_sweep_matches_the_map_at_the_same_points():
+    """The live strain chart's runs are the map's runs at the chapter's pairs (one batched prediction)."""
+    from test_inference_calibrate import _random_emulator
+
+    from lvcore.exceptions import EmulatorError
+    from lvcore.studies.fibre_angles import CHAPTER_ANGLE_PAIRS, emulator_angle_map, emulator_angle_sweep
+
+    emu = _random_emulator("angles", angles=True)  # UNTRAINED: the plumbing only
+    theta = {"a": 0.7, "b": 2.0, "af": 1.2, "bf": 4.0}
+    runs = emulator_angle_sweep(emu, CHAPTER_ANGLE_PAIRS, theta=theta, edp_mmhg=10.0)
+    assert [(r.alpha_endo, r.alpha_epi) for r in runs] == list(CHAPTER_ANGLE_PAIRS)
+    for r in runs:
+        one = emulator_angle_map(emu, [r.alpha_endo], [r.alpha_epi], theta=theta, edp_mmhg=10.0).runs[0]
+        assert r.converged and r.lvv_ml == pytest.approx(one.lvv_ml, rel=1e-12)
+        np.testing.assert_allclose(r.strains, one.strains, rtol=1e-12)
+    with pytest.raises(EmulatorError, match="fibre angles"):
+        emulator_angle_sweep(_random_emulator())
+
+
 def test_page_draws_the_live_emulator_map(tmp_path, monkeypatch):
     """With an emulator named 'angles' on the search path the map tab offers it and draws without a button."""
     from streamlit.testing.v1 import AppTest
@@ -105,9 +133,15 @@ def test_page_draws_the_live_emulator_map(tmp_path, monkeypatch):
     assert "`angles` emulator (live)" in radio.options
     radio.set_value("`angles` emulator (live)").run()
     assert not at.exception and not at.warning
-    charts = at.get("plotly_chart")
-    assert len(charts) == 1  # both maps (LVV, mean strain) in one figure: one redraw per slider move
-    assert [t["type"] for t in json.loads(charts[0].proto.spec)["data"]] == ["heatmap", "heatmap"]
+    # live charts (lvcore.app.live_chart): a component kept mounted, its figure updated in place
+    assert not at.get("plotly_chart")
+    figs = [json.loads(c.proto.json_args)["figure"] for c in at.get("component_instance")]
+    assert len(figs) == 2
+    # both maps (LVV, mean strain) in one figure: one redraw per slider move
+    assert [t["type"] for t in figs[0]["data"]] == ["heatmap", "heatmap"]
+    # the chapter's four angle pairs' regional strains (Fig 9.5), from the emulator
+    assert [t["type"] for t in figs[1]["data"]] == ["bar"] * 4
+    assert all(_n_values(t["y"]) == 24 for t in figs[1]["data"])
     edp = next(s for s in at.sidebar.slider if "EDP" in s.label)
     edp.set_value(30.0).run()  # outside the emulator's training box: said, not hidden
     assert any("outside the training box" in w.value for w in at.warning)

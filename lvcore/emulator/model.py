@@ -36,6 +36,8 @@ from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS, THETA_NAMES
 
 #: Inputs that are log-transformed before standardisation (positive, scale-like).
 LOG_INPUTS = THETA_NAMES
+#: Batches up to this many rows are padded to the next power of two, larger ones to a multiple of it.
+PAD_ROWS = 4096
 
 
 class ExtrapolationWarning(UserWarning):
@@ -271,14 +273,45 @@ class Emulator:
         -------
         jax.Array
             ``(..., 25)``; a single point gives shape ``(25,)``.
+
+        Notes
+        -----
+        The compiled function is specialised to the batch shape, and a new
+        shape costs a compilation (about 0.3 s). Concrete batches are therefore
+        padded to a few row counts (:func:`padded_rows`) and the padding is cut
+        off again, so a live view whose grid size changes compiles a handful of
+        times, not once per size.
         """
         mapping = named if x is None else x
         given_fixed = {k: v for k, v in mapping.items() if k in self.fixed} if isinstance(mapping, Mapping) else {}
         arr = self.as_array(x, **named)
         traced = isinstance(arr, jax.core.Tracer) or any(isinstance(v, jax.core.Tracer) for v in given_fixed.values())
-        if not traced:
-            self.check_inputs(arr, strict, given_fixed)
-        return self.apply(arr)
+        if traced:
+            return self.apply(arr)
+        self.check_inputs(arr, strict, given_fixed)
+        if np.ndim(arr) < 2:
+            return self.apply(arr)
+        lead = np.shape(arr)[:-1]
+        rows = np.reshape(np.asarray(arr, dtype=float), (-1, self.dim))
+        n = rows.shape[0]
+        if n == 0:
+            return self.apply(arr)
+        padded = np.concatenate([rows, np.repeat(rows[:1], padded_rows(n) - n, axis=0)])
+        return self.apply(padded)[:n].reshape(*lead, N_OUTPUTS)
+
+
+def padded_rows(n: int) -> int:
+    """Row count a batch of ``n`` rows is padded to before the compiled prediction.
+
+    The next power of two up to :data:`PAD_ROWS`, above it the next multiple
+    of :data:`PAD_ROWS` (at most 4 % extra work from 100,000 rows up).
+    """
+    n = int(n)
+    if n <= 1:
+        return max(n, 1)
+    if n <= PAD_ROWS:
+        return 1 << (n - 1).bit_length()
+    return -(-n // PAD_ROWS) * PAD_ROWS
 
 
 def _make_apply(emu: Emulator):

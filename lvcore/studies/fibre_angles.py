@@ -239,6 +239,30 @@ def emulator_angle_map(
         If the emulator does not take the fibre angles, or needs an input
         that cannot be supplied.
     """
+    ae = np.asarray(alpha_endo, dtype=float)
+    ap = np.asarray(alpha_epi, dtype=float)
+    endo, epi = np.meshgrid(ae, ap)  # (n_epi, n_endo), row-major over alpha_epi as in angle_map
+    return _as_map(ae, ap, _emulator_runs(emulator, endo.ravel(), epi.ravel(), theta, edp_mmhg, h))
+
+
+def emulator_angle_sweep(
+    emulator,
+    angle_pairs: Sequence[tuple[float, float]] = CHAPTER_ANGLE_PAIRS,
+    theta: Mapping[str, float] | None = None,
+    edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+    h: Sequence[float] | None = None,
+) -> list[AngleRun]:
+    """The runs of :func:`angle_sweep` predicted by an emulator with angle inputs.
+
+    Parameters and errors as :func:`emulator_angle_map`, with the angle pairs
+    (α_endo, α_epi) in degrees instead of a grid; one batched prediction.
+    """
+    pairs = np.asarray(angle_pairs, dtype=float).reshape(-1, 2)
+    return _emulator_runs(emulator, pairs[:, 0], pairs[:, 1], theta, edp_mmhg, h)
+
+
+def _emulator_runs(emulator, endo: np.ndarray, epi: np.ndarray, theta, edp_mmhg: float, h) -> list[AngleRun]:
+    """One batched emulator prediction at the angle pairs ``(endo[i], epi[i])``, everything else fixed."""
     from lvcore.exceptions import EmulatorError
 
     names = tuple(emulator.input_names)
@@ -252,12 +276,9 @@ def emulator_angle_map(
     theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
     conditions = {**theta, EDP_NAME: float(edp_mmhg), **dict(zip(pcs, h[:len(pcs)].tolist()))}
     fwd = EmulatorForward(emulator, conditions, ANGLE_NAMES, f"emulator '{emulator.name}'")
-    ae = np.asarray(alpha_endo, dtype=float)
-    ap = np.asarray(alpha_epi, dtype=float)
-    endo, epi = np.meshgrid(ae, ap)  # (n_epi, n_endo), row-major over alpha_epi as in angle_map
-    batch = fwd.evaluate({ANGLE_NAMES[0]: endo.ravel(), ANGLE_NAMES[1]: epi.ravel()})
+    batch = fwd.evaluate({ANGLE_NAMES[0]: endo, ANGLE_NAMES[1]: epi})
     batch = ForwardBatch(batch.outputs, batch.converged, tuple(m or fwd.label for m in batch.messages))
-    return _as_map(ae, ap, _runs(endo.ravel(), epi.ravel(), batch))
+    return _runs(endo, epi, batch)
 
 
 def strain_table(runs: Sequence[AngleRun]) -> dict[str, np.ndarray]:

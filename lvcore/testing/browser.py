@@ -36,9 +36,13 @@ _IDLE_JS = ("() => { const a = document.querySelector('[data-testid=stApp]');"
             " && !document.querySelector('[data-testid=stSkeleton]'); }")
 _RUNNING_JS = ("() => { const a = document.querySelector('[data-testid=stApp]');"
                " return !!a && a.getAttribute('data-test-script-state') !== 'notRunning'; }")
-#: The data of every plotly chart in the main area, as one string (changes when a figure is redrawn with new data).
-_PLOTS_JS = ("() => Array.from(document.querySelectorAll('[data-testid=stMain] .js-plotly-plot'))"
-             ".map(g => JSON.stringify((g.data || []).map(d => [d.x, d.y, d.z]))).join('|')")
+#: The data of every plotly chart in the main area (and in its live-chart iframes), as one string (changes when a figure is redrawn with new data).
+_EACH_PLOT_JS = ("() => Array.from(document.querySelectorAll('[data-testid=stMain] .js-plotly-plot')).concat("
+                 " ...Array.from(document.querySelectorAll('[data-testid=stMain] iframe')).map(f => {"
+                 "   try { return Array.from(f.contentDocument.querySelectorAll('.js-plotly-plot')); }"
+                 "   catch (e) { return []; } }))"  # live charts (lvcore.app.live_chart) draw in a same-origin iframe
+                 ".map(g => JSON.stringify((g.data || []).map(d => [d.x, d.y, d.z])))")
+_PLOTS_JS = f"() => ({_EACH_PLOT_JS})().join('|')"
 
 
 def repo_root() -> Path:
@@ -184,6 +188,11 @@ def plots_signature(page) -> str:
     return page.evaluate(_PLOTS_JS)
 
 
+def plot_count(page) -> int:
+    """Plotly charts drawn in the main area, live charts in their frames included."""
+    return len(page.evaluate(_EACH_PLOT_JS))
+
+
 def open_live_map(page) -> None:
     """On the Fibre angles page: show the (α_endo, α_epi) map computed by the emulator, where the page has them."""
     tab = page.get_by_role("tab", name=re.compile("map", re.I))
@@ -197,20 +206,26 @@ def open_live_map(page) -> None:
         wait_rerun(page)
 
 
-def redraw_times(page, slider, n: int = 5, timeout_s: float = 30.0) -> list[float]:
-    """Seconds from a slider key press to the first change of the main area's plot data, ``n`` times.
+def redraw_times(page, slider, n: int = 5, timeout_s: float = 30.0, every_plot: bool = False) -> list[float]:
+    """Seconds from a slider key press to the change of the main area's plot data, ``n`` times.
 
-    Alternates ArrowRight and ArrowLeft so the value stays near its default;
-    waits for the page to be idle between presses.
+    By default the clock stops at the first plot whose data change; with
+    ``every_plot`` only when every plot shown has new data (for a slider that
+    all of them follow). Alternates ArrowRight and ArrowLeft so the value
+    stays near its default; waits for the page to be idle between presses.
     """
     times = []
     for k in range(n):
         wait_idle(page)
-        before = plots_signature(page)
+        before = page.evaluate(_EACH_PLOT_JS)
         slider.focus()
         t0 = time.perf_counter()
         page.keyboard.press("ArrowRight" if k % 2 == 0 else "ArrowLeft")
-        page.wait_for_function(f"(b) => ({_PLOTS_JS})() !== b", arg=before, timeout=timeout_s * 1000, polling=10)
+        page.wait_for_function(f"([b, every]) => {{ const now = ({_EACH_PLOT_JS})();"
+                               " if (now.length !== b.length) return now.length > 0;"
+                               " const changed = now.map((s, i) => s !== b[i]);"
+                               " return every ? changed.every(Boolean) : changed.some(Boolean); }",
+                               arg=[before, every_plot], timeout=timeout_s * 1000, polling=10)
         times.append(time.perf_counter() - t0)
     wait_idle(page)
     return times
@@ -237,5 +252,5 @@ def shrink_png(src, dst, width: int = 900, max_bytes: int = 200_000) -> Path:
 
 
 __all__ = ["CHROMIUM", "LAUNCH_ARGS", "SLIDER", "EXCEPTION", "StreamlitServer", "launch", "wait_idle", "wait_rerun",
-           "page_links", "slug", "exceptions", "move_slider", "slider_value", "plots_signature", "open_live_map",
+           "page_links", "slug", "exceptions", "move_slider", "slider_value", "plots_signature", "plot_count", "open_live_map",
            "redraw_times", "shrink_png", "free_port", "repo_root"]

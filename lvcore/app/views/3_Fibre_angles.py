@@ -16,10 +16,11 @@ import streamlit as st
 
 from lvcore.app import freshness
 from lvcore.app.controls import shared_inputs
+from lvcore.app.live_chart import live_plotly_chart
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
-                                         strain_table)
+                                         emulator_angle_sweep, strain_table)
 from lvcore.viz import figures
 
 st.set_page_config(page_title="Fibre angles", layout="wide")
@@ -101,13 +102,15 @@ def _angles_emulator():
     return load_emulator("angles")
 
 
-def _draw_map(amap):
+def _draw_map(amap, live: bool = False):
     # one figure with two heat maps: far cheaper for the browser to redraw than two labelled contour plots
-    st.plotly_chart(figures.map_pair(amap.alpha_endo, amap.alpha_epi, amap.lvv_ml, amap.mean_strain,
-                                     titles=("LVV (mL)", "Mean E_cc"), colorbar_titles=("mL", "–"),
-                                     xaxis_title="α_endo (°)", yaxis_title="α_epi (°)",
-                                     colorscales=("Viridis", "RdBu")),
-                    width="stretch")
+    fig = figures.map_pair(amap.alpha_endo, amap.alpha_epi, amap.lvv_ml, amap.mean_strain,
+                           titles=("LVV (mL)", "Mean E_cc"), colorbar_titles=("mL", "–"),
+                           xaxis_title="α_endo (°)", yaxis_title="α_epi (°)", colorscales=("Viridis", "RdBu"))
+    if live:  # stays mounted and is updated in place (Plotly.react) as the sliders move
+        live_plotly_chart(fig, key="fibre_angle_live_map")
+    else:
+        st.plotly_chart(fig, width="stretch")
 
 
 def _verify_worker(job: dict, point, theta, edp_mmhg, resolution) -> None:
@@ -149,10 +152,17 @@ def _live_map(theta, edp_mmhg, resolution) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            _draw_map(emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=edp_mmhg))
+            _draw_map(emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=edp_mmhg), live=True)
         except LVCoreError as err:
             st.error(str(err))
-    for w in caught:
+        try:  # the chapter's angle pairs (Fig 9.5), live: how the regional strains move with θ and EDP
+            runs = emulator_angle_sweep(emu, CHAPTER_ANGLE_PAIRS, theta=theta, edp_mmhg=edp_mmhg)
+            live_plotly_chart(figures.strain_bars(strain_table(runs), title="Circumferential strain by region at the "
+                                                  "chapter's angle pairs (α_endo, α_epi), emulator"),
+                              key="fibre_angle_live_strains")
+        except LVCoreError as err:
+            st.error(str(err))
+    for w in {str(w.message): w for w in caught}.values():  # each warning once (both views may raise it)
         st.warning(str(w.message))
 
     st.markdown("**Verify a point with the FE simulator** (runs in the background; the map stays live)")
