@@ -81,8 +81,9 @@ def live_plotly_chart(fig, *, key: str, config: dict | None = None) -> None:
     import streamlit.components.v1 as components
 
     global _component
+    served = frontend_dir()  # cheap when it exists; remade if a temp-folder cleaner removed it
     if _component is None:
-        _component = components.declare_component(COMPONENT_NAME, path=str(frontend_dir()))
+        _component = components.declare_component(COMPONENT_NAME, path=str(served))
     import plotly.graph_objects as go
 
     fig = go.Figure(fig)  # a copy: the caller's figure is not restyled
