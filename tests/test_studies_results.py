@@ -47,6 +47,9 @@ def test_studies_page_renders_saved_results(saved):
     assert not at.exception
     at.sidebar.text_input[0].set_value(str(saved)).run()
     assert not at.exception
+    bo_src = next(s for s in at.selectbox if s.key == "bo_src")
+    bo_src.set_value(next(o for o in bo_src.options if str(saved) in o)).run()  # the saved set, not the bundled one
+    assert not at.exception
     assert any("REDUCED" in w.value for w in at.warning)
     assert len(at.dataframe) >= 2
 
@@ -57,7 +60,9 @@ def test_studies_page_is_in_the_navigation_and_shows_the_bundled_results():
     at.switch_page(PAGE).run()
     assert not at.exception
     assert at.title[0].value == "Studies"
-    assert any("not the chapter's full run" in w.value for w in at.warning)   # reduced budget, said so
+    # the bundled BO run is the chapter's full budget (300 + 300), and the page says which budget it is
+    assert not any("not the chapter's full run" in w.value for w in at.warning)
+    assert any("the chapter's full budget" in m.value for m in at.success)
 
 
 @pytest.mark.slow
