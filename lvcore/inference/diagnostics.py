@@ -20,7 +20,7 @@ import pandas as pd
 
 from lvcore.core.space import SIGMA_V_ML
 from lvcore.inference import models, samplers
-from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
+from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES, is_pc_name
 
 #: Default convergence thresholds.
 DEFAULT_RHAT_MAX = 1.05
@@ -30,6 +30,9 @@ DEFAULT_ESS_MIN = 100.0
 def monitored_names(samples: dict) -> list[str]:
     """Scalar parameters whose convergence is checked (theta, angles, sigma_S^2, v, GP hyperparameters)."""
     order = THETA_NAMES + ANGLE_NAMES + ("sigma_s2", "v") + models.HYPER_NAMES
+    # the geometry of --geometry infer: PC scores h1..hk and the scale (lvcore.inference.geometry_prior)
+    pcs = sorted((n for n in samples if is_pc_name(n) and np.ndim(samples[n]) == 2), key=lambda n: int(n[1:]))
+    order = order + tuple(pcs) + ("scale",)
     return [n for n in order if n in samples]
 
 
