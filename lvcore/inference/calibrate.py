@@ -71,7 +71,7 @@ def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig 
     y : array_like, shape (25,)
         ``[LVV (mL), 24 strains]``; validated with :func:`lvcore.inference.data.validate_measurements`.
     forward : lvcore.core.Forward
-        JAX-traceable, e.g. :func:`lvcore.core.load_emulator_forward` (``h`` bound in).
+        JAX-traceable, e.g. :func:`lvcore.emulator.load_emulator_forward` (``h`` bound in).
     model : str
         ``volume``, ``iid`` or ``discrepancy``.
     sampler : str

@@ -346,7 +346,7 @@ def operators_items() -> list[ReportItem]:
                                 missing="missing: the `chapter` emulator is not installed; build it with "
                                         "python scripts/build_emulators.py --emulators chapter"))
         return items
-    from lvcore.core.forward import load_emulator_forward as load_forward
+    from lvcore.emulator.forward import load_emulator_forward as load_forward
 
     theta = dict(units.HO_REFERENCE_THETA)
     series, data = {}, []
@@ -377,7 +377,7 @@ def calibration_items(subject: str = "SYNTHETIC-HV3", *, num_warmup: int = 500, 
     from lvcore.inference import models
     from lvcore.inference.calibrate import calibrate, read_pc_scores
     from lvcore.inference.data import read_measured_csv
-    from lvcore.core.forward import load_emulator_forward as load_forward
+    from lvcore.emulator.forward import load_emulator_forward as load_forward
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.outputs import THETA_NAMES
     from lvcore.viz.inference_figures import UNITS
