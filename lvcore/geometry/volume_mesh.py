@@ -126,9 +126,17 @@ class VolumeMeshFit:
         s = self.fit.summary()
         s["warnings"] = list(self.boundary.warnings) + list(s.get("warnings", []))
         s["mesh"] = self.boundary.summary()
-        s["cavity_volume_change_pct"] = 100.0 * (self.fit.cavity_volume_ml - self.boundary.cavity_volume_ml) \
-            / self.boundary.cavity_volume_ml
+        s["cavity_volume_change_pct"] = 100.0 * (self.fit.cavity_volume_ml - self.mesh_cavity_ml) / self.mesh_cavity_ml
+        s["mesh_cavity_below_cut_ml"] = self.mesh_cavity_ml
         return s
+
+    @property
+    def mesh_cavity_ml(self) -> float:
+        """The mesh's own cavity (mL) over the part the fit kept: below the base cut when the base was cut."""
+        base = getattr(self.fit, "base", None)
+        if base is not None and base.cut_depth_mm > 0:
+            return float(base.cavity_kept_ml)
+        return float(self.boundary.cavity_volume_ml)
 
 
 # ----------------------------------------------------------------------------- reading
@@ -388,7 +396,7 @@ def extract_lv_boundary(path_or_mesh, units: str = "mm") -> LVBoundary:
 
 
 def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None, septum=None,
-                    **fit_kwargs) -> VolumeMeshFit:
+                    base_cut_mm: float | None = None, **fit_kwargs) -> VolumeMeshFit:
     """Fit the LV template to a volumetric mesh (see the module docstring).
 
     Parameters
@@ -400,6 +408,9 @@ def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None
         :func:`~lvcore.geometry.fitting.fit_surfaces`).
     septum : (3,) array, optional
         A point on the septum (file coordinates, in ``units``) fixing phi = 0.
+    base_cut_mm : float, optional
+        Depth of the base cut below the endocardial base ring's centre (mm); default the rule of
+        :mod:`lvcore.geometry.base_plane` (no cut for a flat base).
     **fit_kwargs
         Passed to :func:`~lvcore.geometry.fitting.fit_surfaces` (``template``, ``degree``, ``smoothing``).
 
@@ -417,7 +428,7 @@ def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None
         kw["base_z"] = base_z
     if septum is not None:
         septum = np.asarray(septum, float) * UNIT_SCALE[units]
-    fit = fit_surfaces(b.endo, b.epi, septum=septum, **kw)
+    fit = fit_surfaces(b.endo, b.epi, septum=septum, base_cut_mm=base_cut_mm, **kw)
     return VolumeMeshFit(fit=fit, boundary=b)
 
 
