@@ -281,15 +281,18 @@ def _project_mesh(path: Path, n_pc: int | None = None, with_scale: bool = False)
 
     if path.suffix.lower() in (".npy", ".npz"):
         try:
+            from lvcore import limits
+            from lvcore.headers import load_npy, load_npz
+
+            # array headers are checked against the limits before numpy allocates (lvcore.headers)
             if path.suffix.lower() == ".npy":
-                nodes = np.load(path, allow_pickle=False)
+                nodes = load_npy(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
             else:
-                with np.load(path, allow_pickle=False) as z:
-                    keys = list(z.keys())
-                    if not keys:
-                        raise GeometryError(f"{path.name}: the .npz archive holds no arrays; store the template "
-                                            "node positions as 'nodes'")
-                    nodes = z["nodes" if "nodes" in keys else keys[0]]
+                arrays = load_npz(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
+                if not arrays:
+                    raise GeometryError(f"{path.name}: the .npz archive holds no arrays; store the template "
+                                        "node positions as 'nodes'")
+                nodes = arrays["nodes"] if "nodes" in arrays else next(iter(arrays.values()))
             if not (np.issubdtype(nodes.dtype, np.integer) or np.issubdtype(nodes.dtype, np.floating)):
                 raise GeometryError(f"{path.name}: node positions must be real numbers, got an array of {nodes.dtype}")
             nodes = np.asarray(nodes, dtype=float)
