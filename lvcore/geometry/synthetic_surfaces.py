@@ -71,6 +71,8 @@ class SyntheticSurfacePair:
         The ellipsoids, in their own frame (apex on −z).
     rotation, shift : arrays
         The pose: ``x_scanner = rotation @ x + shift``.
+    endo_ring, epi_ring : int arrays
+        Vertex indices of each surface's base ring, in φ order.
     description : str
     """
 
@@ -82,6 +84,8 @@ class SyntheticSurfacePair:
     lv: TruncatedEllipsoidLV
     rotation: np.ndarray
     shift: np.ndarray
+    endo_ring: np.ndarray
+    epi_ring: np.ndarray
     description: str = ""
 
     def to_local(self, x) -> np.ndarray:
@@ -98,6 +102,62 @@ class SyntheticSurfacePair:
         n = np.asarray(normal, float) @ self.rotation
         e = self.lv.endo
         return ellipsoid_volume_below_plane(e.rs, e.ry if e.ry is not None else e.rs, e.rl, p, n) / 1000.0
+
+    def closed_wall(self) -> tuple[np.ndarray, np.ndarray]:
+        """The myocardium's closed boundary: endo + epi (+ a base band between their rings unless they share one).
+
+        Returns points (n, 3) and triangles (m, 3), scanner coordinates (mm).
+        """
+        ne = len(self.endo_points)
+        pts = np.vstack([self.endo_points, self.epi_points])
+        re, rp = self.endo_ring, self.epi_ring + ne
+        tris = [self.endo_triangles[:, ::-1], self.epi_triangles + ne]
+        if np.allclose(self.endo_points[self.endo_ring], self.epi_points[self.epi_ring]):
+            remap = np.arange(len(pts))
+            remap[rp] = re
+            tris = [remap[t] for t in tris]
+        else:
+            re1, rp1 = np.roll(re, -1), np.roll(rp, -1)
+            tris.append(np.vstack([np.stack([re, rp, rp1], 1), np.stack([re, rp1, re1], 1)]))
+        tri = np.vstack(tris)
+        used, inv = np.unique(tri, return_inverse=True)
+        return pts[used], inv.reshape(-1, 3)
+
+    def tet_mesh(self, size_mm: float = 4.0):
+        """A tetrahedral mesh of the wall (gmsh, from :meth:`closed_wall`), as a ``meshio.Mesh`` (mm)."""
+        import gmsh
+        import meshio
+
+        pts, tri = self.closed_wall()
+        own = not gmsh.isInitialized()
+        if own:
+            gmsh.initialize(readConfigFiles=False)
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.model.add("wall")
+            s = gmsh.model.addDiscreteEntity(2)
+            gmsh.model.mesh.addNodes(2, s, np.arange(1, len(pts) + 1), pts.ravel())
+            gmsh.model.mesh.addElementsByType(s, 2, [], (tri + 1).ravel())
+            loop = gmsh.model.geo.addSurfaceLoop([s])
+            gmsh.model.geo.addVolume([loop])
+            gmsh.model.geo.synchronize()
+            gmsh.option.setNumber("Mesh.MeshSizeMax", float(size_mm))
+            gmsh.option.setNumber("General.NumThreads", 1)
+            gmsh.model.mesh.generate(3)
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            _, enodes = gmsh.model.mesh.getElementsByType(4)
+        finally:
+            gmsh.model.remove() if gmsh.isInitialized() else None
+            if own:
+                gmsh.finalize()
+        xyz = np.asarray(coords, float).reshape(-1, 3)
+        index = np.full(int(np.max(tags)) + 1, -1, dtype=np.int64)
+        index[np.asarray(tags, dtype=np.int64)] = np.arange(len(tags))
+        cells = index[np.asarray(enodes, dtype=np.int64)].reshape(-1, 4)
+        used = np.unique(cells)
+        remap = np.full(len(xyz), -1, dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        return meshio.Mesh(xyz[used], [("tetra", remap[cells])])
 
     def polydata(self, which: str):
         """The endo or epi surface as a ``pyvista.PolyData``."""
@@ -230,9 +290,12 @@ def synthetic_surface_pair(case: str, seed: int = 0, n_phi: int = 96, n_psi: int
         "notch": f"outflow notch {NOTCH_DEPTH_MM:g} mm deep, {NOTCH_WIDTH_DEG:g}° wide",
         "deep_notch": f"outflow notch {DEEP_NOTCH_DEPTH_MM:g} mm deep, {NOTCH_WIDTH_DEG:g}° wide",
     }[case]
+    rings = {k: 1 + np.arange(n_phi) * ((len(p) - 1) // n_phi) + (len(p) - 1) // n_phi - 1
+             for k, p in (("endo", pe), ("epi", pp))}
     return SyntheticSurfacePair(case=case, endo_points=pe @ rotation.T + shift, endo_triangles=te,
                                 epi_points=pp @ rotation.T + shift, epi_triangles=tp, lv=lv, rotation=rotation,
-                                shift=shift, description=f"SYNTHETIC {desc}")
+                                shift=shift, endo_ring=rings["endo"], epi_ring=rings["epi"],
+                                description=f"SYNTHETIC {desc}")
 
 
 __all__ = ["SyntheticSurfacePair", "synthetic_surface_pair", "random_pose", "CASES", "SURFACE_LV"]
