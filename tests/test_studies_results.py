@@ -5,12 +5,12 @@ import time
 import pytest
 from streamlit.testing.v1 import AppTest
 
-from lvcore.app import APP_DIR, ENTRY, PAGES
+from lvcore.app import PAGES_DIR, ENTRY, PAGES
 from lvcore.core import AnalyticForward
 from lvcore.studies import bo_fibres, operators, results
 from tests.test_studies_operators import stand_in
 
-PAGE = str(APP_DIR / "views" / "6_Studies.py")
+PAGE = str(PAGES_DIR / "6_Studies.py")
 
 
 @pytest.fixture(scope="module")

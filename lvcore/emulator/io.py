@@ -27,7 +27,7 @@ An emulator directory holds
 
 :func:`load_emulator` takes a directory or a bare name: ``"chapter"`` is
 looked up in ``$LVCORE_EMULATORS`` (if set) and then in the bundled
-``lvcore/assets/emulators/<name>/`` (package data, see :mod:`lvcore.resources`).
+``assets/emulators/<name>/`` (package data, see :mod:`lvcore.resources`).
 """
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ from lvcore.resources import asset_path
 
 FORMAT = "lvcore-emulator"
 FORMAT_VERSION = 1
-#: Bundled emulators live here (package data, ``lvcore/assets/emulators``).
+#: Bundled emulators live here (package data, ``assets/emulators``).
 ASSETS_DIR = asset_path("emulators")
 #: Demonstration emulators built below the spec, shipped as package data; never loaded by name.
 BELOW_SPEC_DIR = asset_path("emulators-below-spec")

@@ -302,7 +302,7 @@ def with_motion_error(operator: OperatorStyle, shift_mm: float = 3.5) -> Operato
 
 
 # ----------------------------------------------------------------------------- bundled assets
-#: The bundled SYNTHETIC cohort (package data, ``lvcore/assets/cohort``; written by ``scripts/build_cohort.py``).
+#: The bundled SYNTHETIC cohort (package data, ``assets/cohort``; written by ``scripts/build_cohort.py``).
 COHORT_DIR = asset_path("cohort")
 ROLE_TRAIN, ROLE_OPERATOR, ROLE_VOLUNTEER = "train", "operator-study", "volunteer"
 

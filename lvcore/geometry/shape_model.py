@@ -12,7 +12,7 @@ deviations along a mode. A case ``{"geometry": {"kind": "pca", "scores": [...]}}
 is ``reconstruct(scores)``: missing trailing scores are zero.
 
 Files: ``<stem>.npz`` (plain arrays, no pickle) + ``<stem>.json`` (metadata).
-The bundled model is ``lvcore/assets/shape_model/SYNTHETIC_shape_model.{npz,json}`` (package data),
+The bundled model is ``assets/shape_model/SYNTHETIC_shape_model.{npz,json}`` (package data),
 built by ``scripts/build_cohort.py`` from the SYNTHETIC cohort.
 """
 from __future__ import annotations
