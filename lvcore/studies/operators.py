@@ -463,9 +463,11 @@ def fits_frame(fits: Sequence[dict]):
     for f in fits:
         row = {k: f.get(k) for k in ("patient", "main_operator", "test_geometry", "converged", "strain_rmse_forward",
                                       "output_rmse_refit", "mahalanobis", "loss", "sqp_evaluations", "seconds")}
-        for i, n in enumerate(THETA_NAMES):
-            row[f"{n}_hat"] = f["theta_hat"][i] if "theta_hat" in f else None
-            row[f"{n}_abs_error"] = f["theta_abs_error"][i] if "theta_abs_error" in f else None
+        hat = _theta(f["theta_hat"]) if "theta_hat" in f else {}
+        err = _theta(f["theta_abs_error"]) if "theta_abs_error" in f else {}
+        for n in THETA_NAMES:
+            row[f"{n}_hat"] = hat.get(n)
+            row[f"{n}_abs_error"] = err.get(n)
         row["message"] = f.get("message", "")
         rows.append(row)
     return pd.DataFrame(rows)
@@ -566,6 +568,8 @@ def tables(result: dict) -> dict:
             [{"patient": f["patient"], "main_operator": f["main_operator"], "test_geometry": f["test_geometry"],
               "parameter": n, "abs_error": v} for f in fits if "theta_abs_error" in f
              for n, v in _theta(f["theta_abs_error"]).items()])
+    if result.get("surfaces"):
+        out["fig9_13_rss_surface"] = result["surfaces"][0]
     if fits:
         out["fits"] = fits_frame(fits)
     return out

@@ -42,18 +42,15 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
     from lvcore.inference.calibrate import calibrate, read_pc_scores
     from lvcore.inference.data import read_measured_csv
     from lvcore.inference.samplers import SamplerConfig
-    from lvcore.resources import volunteer_files
-    from lvcore.studies.bo_fibres import hidden_truth
+    from lvcore.resources import volunteer_files, volunteer_truth
 
     files = volunteer_files(subject.replace("-", "_"))
     row = read_measured_csv(files.measured)[0]
     forward = load_emulator_forward("chapter", read_pc_scores(files.geometry))
     config = SamplerConfig(num_warmup=num_warmup, num_samples=num_samples, num_chains=num_chains, seed=seed)
     res = calibrate(row.y, forward, "iid", config=config, max_rounds=1)
-    try:  # the hidden truth scores the fit; it never enters it
-        truth = hidden_truth().get(row.subject, {}).get("theta")
-    except OSError:
-        truth = None
+    truth = volunteer_truth(row.subject)  # the hidden truth scores the fit; it never enters it
+    truth = {n: truth[n] for n in THETA_NAMES if n in truth} if truth else None
     stats = res.idata.sample_stats
     n_div = int(np.asarray(stats["diverging"]).sum()) if "diverging" in stats else 0
     summary = res.summary.reset_index().rename(columns={"index": "parameter"})
