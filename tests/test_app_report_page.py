@@ -4,9 +4,9 @@ from pathlib import Path
 
 from streamlit.testing.v1 import AppTest
 
-from lvcore.app import APP_DIR, PAGES
+from lvcore.app import PAGES_DIR, PAGES
 
-PAGE = str(APP_DIR / "views" / "7_Report.py")
+PAGE = str(PAGES_DIR / "7_Report.py")
 
 
 def test_report_page_is_in_the_navigation():

@@ -4,11 +4,11 @@ from pathlib import Path
 
 from streamlit.testing.v1 import AppTest
 
-from lvcore.app import APP_DIR
+from lvcore.app import PAGES_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGE1 = str(APP_DIR / "views" / "1_Geometry_and_operators.py")
-PAGE2 = str(APP_DIR / "views" / "2_Shape_model.py")
+PAGE1 = str(PAGES_DIR / "1_Geometry_and_operators.py")
+PAGE2 = str(PAGES_DIR / "2_Shape_model.py")
 
 
 def test_geometry_page_bundled_patient():

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from lvcore.app import APP_DIR
+from lvcore.app import PAGES_DIR
 from lvcore.inference import diagnostics, samplers
 from lvcore.viz import inference_figures as figs
 
-PAGE = APP_DIR / "views" / "5_Calibration.py"
+PAGE = PAGES_DIR / "5_Calibration.py"
 
 
 @pytest.fixture(scope="module")

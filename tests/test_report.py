@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from lvcore.report import build as rb
+from lvcore.report import export
+from lvcore.studies import results
 
 OPERATORS = ("op1", "op2", "op3")
 PATIENTS = ("SYNTHETIC-P01", "SYNTHETIC-P02")
@@ -37,8 +39,16 @@ def _write_optimisation_results(d):
 def no_bundled_studies(tmp_path, monkeypatch):
     empty = tmp_path / "bundled" / "studies"
     empty.mkdir(parents=True)
-    monkeypatch.setattr(rb, "studies_dir", lambda: empty)
+    monkeypatch.setattr(results, "bundled_studies_dir", lambda: empty)
     return empty
+
+
+def _section(study):
+    return next(s for s in rb.SECTIONS if s.study == study)
+
+
+def _items(study, results_dir=None):
+    return rb.section_items(_section(study), results_dir)
 
 
 def test_manifest_lists_every_figure_and_says_what_is_missing(tmp_path, no_bundled_studies):
@@ -47,11 +57,11 @@ def test_manifest_lists_every_figure_and_says_what_is_missing(tmp_path, no_bundl
     names = [f["name"] for f in m["figures"]]
     assert names == list(rb.FIGURE_NAMES)
     by = {f["name"]: f for f in m["figures"]}
-    for n in rb.FD_NAMES:
+    for n in _section("fibre_discrepancy").names:
         assert by[n]["status"] == "missing" and "run lvcore study fibre-discrepancy" in by[n]["missing"]
-    for n in rb.BO_TITLES:
+    for n in _section("bo_fibres").names:
         assert by[n]["status"] == "missing" and "run lvcore study bo-fibres" in by[n]["missing"]
-    for n in rb.OP_TITLES:
+    for n in _section("operators").names:
         assert by[n]["status"] == "missing" and "run lvcore study operators" in by[n]["missing"]
         assert by[n]["png"] is None and by[n]["html"] is None
     for n in ("fig9_5_angle_sweep", "fig9_5_angle_map", "table9_4_operators_pca", "fig9_10_geometry_effect"):
@@ -67,9 +77,8 @@ def test_manifest_lists_every_figure_and_says_what_is_missing(tmp_path, no_bundl
 
 def test_study_sections_draw_saved_results_with_synthetic_titles(tmp_path):
     _write_optimisation_results(tmp_path)
-    items = rb.bo_items(tmp_path) + rb.operators_study_items(tmp_path)
-    assert [it.name for it in items] == list(rb.BO_TITLES) + ["fig9_11_forward_strain_error", "fig9_14_output_error",
-                                                              "fig9_12_parameter_error", "fig9_13_rss_surface"]
+    items = _items("bo_fibres", tmp_path) + _items("operators", tmp_path)
+    assert [it.name for it in items] == list(_section("bo_fibres").names) + list(_section("operators").names)
     for it in items:
         assert it.fig is not None and it.missing is None, it
         assert "SYNTHETIC" in it.fig.layout.title.text, it.name
@@ -80,10 +89,10 @@ def test_study_sections_draw_saved_results_with_synthetic_titles(tmp_path):
 
 
 def test_bundled_fibre_discrepancy_results_give_figs_9_6_to_9_9():
-    path = rb.find_study_file("fibre_discrepancy.json")
+    path = results.find_result("fibre_discrepancy.json")
     assert path is not None, "the package must ship assets/studies/fibre_discrepancy.json (scripts/ship_fibre_discrepancy.py)"
-    items = {it.name: it for it in rb.fibre_discrepancy_items()}
-    assert list(items) == list(rb.FD_NAMES)
+    items = {it.name: it for it in _items("fibre_discrepancy")}
+    assert list(items) == list(_section("fibre_discrepancy").names)
     for it in items.values():
         assert it.fig is not None, it.missing
         assert "SYNTHETIC" in it.fig.layout.title.text, it.name
@@ -99,8 +108,8 @@ def test_static_export_failure_is_a_clear_error(monkeypatch):
         raise RuntimeError("no browser")
 
     monkeypatch.setattr(pio, "write_images", boom)
-    with pytest.raises(rb.ReportError, match="chromium"):
-        rb.export_static([go.Figure()], ["x.png"])
+    with pytest.raises(export.StaticExportError, match="chromium"):
+        export.export_static([go.Figure()], ["x.png"])
 
 
 def test_cli_rejects_a_missing_results_folder(tmp_path, capsys):
@@ -129,12 +138,14 @@ def test_png_and_svg_are_written(tmp_path, no_bundled_studies):
 
 @pytest.mark.slow
 def test_calibration_posterior_shows_prior_and_truth():
-    items = rb.calibration_items(num_warmup=150, num_samples=150, num_chains=2)
-    fig = items[0].fig
+    from lvcore.studies import volunteer_calibration as vc
+
+    res = vc.compute(num_warmup=150, num_samples=150, num_chains=2)
+    fig = vc.figures(res)["fig_calibration_posterior"]
     assert "SYNTHETIC" in fig.layout.title.text
     names = {t.name for t in fig.data}
     assert {"posterior", "prior (uniform)", "truth (SYNTHETIC)"} <= names
     assert len([s for s in fig.layout.shapes if s.line.color == "red"]) == 4  # one truth line per parameter
-    summary = items[1].data
+    summary = vc.tables(res)["table_calibration_summary"]
     theta_rows = summary[summary["parameter"].isin(["a", "b", "af", "bf"])]
     assert len(theta_rows) == 4 and theta_rows["truth"].notna().all()

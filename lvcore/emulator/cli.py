@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -139,11 +140,15 @@ def _train(args) -> int:
         xt, yt = t.inputs, t.outputs
     config = training_config(args, seed=args.seed)
     name = args.name or Path(args.out).name
-    print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed and {data.n_pending} pending rows excluded), "
-          f"validating on {xv.shape[0]}; inputs {list(data.input_names)}")
+    if data.n_inconsistent:
+        print(f"WARNING: {data.n_inconsistent} inconsistent store row(s) excluded (lvcore campaign status --check):\n  "
+              + "\n  ".join(data.problems), file=sys.stderr)
+    print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed, {data.n_pending} pending and "
+          f"{data.n_inconsistent} inconsistent rows excluded), validating on {xv.shape[0]}; inputs {list(data.input_names)}")
     emu = train_emulator(x, y, xv, yv, input_names=data.input_names, name=name, lower=data.lower, upper=data.upper,
                          fixed=data.fixed, config=config, x_test=xt, y_test=yt,
-                         source={**data.info, "n_failed_excluded": data.n_failed}, log=print,
+                         source={**data.info, "n_failed_excluded": data.n_failed,
+                                 "n_inconsistent_excluded": data.n_inconsistent}, log=print,
                          workers=args.workers)
     pred_x, pred_y = (xt, yt) if xt is not None else (xv, yv)
     save_emulator(emu, args.out, validation={"inputs": pred_x, "outputs": pred_y, "predictions": np.asarray(emu.apply(pred_x))})

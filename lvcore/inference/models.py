@@ -42,6 +42,8 @@ V_SD = 0.05
 #: GP hyperparameter names, in a fixed order.
 HYPER_NAMES = ("lam", "sigma1_sq", "sigma2_sq", "c", "tau")
 MODEL_NAMES = ("volume", "iid", "discrepancy")
+#: How the likelihood models are named wherever a user reads them (app, report, study figures).
+MODEL_LABELS = {"volume": "(i) volume only", "iid": "(ii) iid strains", "discrepancy": "(iii) polar-GP discrepancy"}
 
 
 def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[float, float]]:
@@ -197,7 +199,7 @@ PARAMETER_HELP = {
 
 
 __all__ = [
-    "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
+    "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model",
 ]

@@ -176,7 +176,7 @@ def strain_predictive_figure(bands: Mapping[str, Mapping[str, np.ndarray]], y_me
 def error_violin_figure(errors: Mapping[str, np.ndarray]) -> go.Figure:
     """Violins of |eta(theta_post, h) - eta(theta_true, h)| per model over all test sets (Fig. 9.9)."""
     return violin(errors, title="|η(θ_post, h) − η(θ̃, h)| over the 24 strains and all test sets",
-                  yaxis_title="absolute strain error (-)")
+                  yaxis_title="absolute strain error (-)", nonnegative=True)
 
 
 def write_html(fig: go.Figure, path) -> Path:

@@ -77,7 +77,7 @@ with left:
     if source == "bundled volunteer":
         names = bundled_volunteers()
         if not names:
-            st.warning("No bundled volunteers in lvcore/assets/volunteers; upload data instead.")
+            st.warning("No bundled volunteers in assets/volunteers; upload data instead.")
         else:
             name = st.selectbox("Volunteer", names, index=names.index(shared_subject) if shared_subject in names else 0,
                                 help="Defaults to the shared sidebar's subject.")
