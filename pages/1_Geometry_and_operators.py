@@ -127,7 +127,8 @@ with left:
                       "SYNTHETIC " + patient.replace("SYNTHETIC-", "") if source.startswith("Bundled") else "uploaded"))
 with right:
     st.subheader("Volumes and fit residuals")
-    st.dataframe(pd.DataFrame(rows).set_index("operator"), width="stretch")
+    # one column per operator: the narrow column holds the table whole, without clipping the right-hand columns
+    st.dataframe(pd.DataFrame(rows).set_index("operator").T, width="stretch")
     if len(names) > 1:
         mse = pd.DataFrame([[node_mse_cm2(geoms[a], geoms[b]) for b in names] for a in names], index=names,
                            columns=names).round(4)

@@ -17,6 +17,9 @@ def test_geometry_page_bundled_patient():
     assert any("SYNTHETIC" in c.value for c in at.caption)
     assert len(at.get("image")) >= 2  # overlay + distance map
     assert len(at.dataframe) == 2  # volumes/residuals and the MSE matrix
+    # the volumes table sits in the narrow right-hand column: one column per operator, so none is clipped
+    volumes = at.dataframe[0].value
+    assert list(volumes.columns) == ["op1", "op2", "op3"] and "cavity volume (mL)" in volumes.index
     at.selectbox[0].set_value("SYNTHETIC-P02").run()
     assert not at.exception, at.exception
     assert any("node MSE" in m.label for m in at.metric)
