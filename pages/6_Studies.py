@@ -1,4 +1,8 @@
-"""Studies: the chapter's optimisation and discrepancy studies from saved results, and small background runs."""
+"""Studies: the chapter's optimisation and discrepancy studies from saved results, and small background runs.
+
+Every tab draws through its study module (``load``, ``tables``, ``figures``), the same calls as
+``lvcore report``; this page only lays them out.
+"""
 from __future__ import annotations
 
 import os
@@ -9,17 +13,10 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
-import numpy as np
-import pandas as pd
 import streamlit as st
 
 from lvcore.exceptions import LVCoreError
-from lvcore.studies import results
-from lvcore.studies.bo_fibres import format_findings as bo_findings_text
-from lvcore.studies.bo_fibres import tables as bo_tables
-from lvcore.studies.operators import fits_frame
-from lvcore.studies.operators import format_findings as op_findings_text
-from lvcore.viz import figures, study_figures
+from lvcore.studies import bo_fibres, fibre_discrepancy, geometry_operators, operators, results
 
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
@@ -35,127 +32,85 @@ with st.sidebar:
 sources = results.result_sources(folders)
 
 
-def pick(study: str, key: str):
+def load(study: str, module, key: str):
+    """The chosen result set of ``study`` loaded by its module, or None (with a message saying why)."""
     opts = sources[study]
     if not opts:
         st.info(f"No saved results of `{study}` found (bundled folder: {results.bundled_studies_dir()}). "
                 f"Run `lvcore study {study} --out DIR` and add DIR in the sidebar.")
         return None
     label = st.selectbox("Result set", [o[0] for o in opts], key=key)
-    return dict(opts)[label]
+    try:
+        return module.load(dict(opts)[label])
+    except (LVCoreError, KeyError, TypeError, ValueError) as err:
+        st.error(f"cannot read the {study} results in {dict(opts)[label]}: {err}")
+        return None
+
+
+def show(module, result, figures=None, tables=()) -> None:
+    """The module's figures (all, or those named) with their titles, then the named tables as data frames."""
+    figs = module.figures(result)
+    tabs = module.tables(result)
+    for name in figures or figs:
+        if name in figs:
+            st.plotly_chart(figs[name], width="stretch", key=f"{module.__name__}.{name}")
+    for name in tables:
+        if name in tabs:
+            st.caption(module.TITLES.get(name, name.replace("_", " ")))
+            st.dataframe(tabs[name].round(4), hide_index=True, width="stretch")
 
 
 tab_bo, tab_ops, tab_fd, tab_geo, tab_run = st.tabs(
     ["Fibre-angle BO (Tables 9.2/9.3)", "Operators (Figs 9.11–9.14)", "Fibre discrepancy (Figs 9.6–9.9)",
      "Operators, geometry (Table 9.4)", "Run a small study"])
 
-# ----------------------------------------------------------------------------- BO
 with tab_bo:
-    folder = pick("bo-fibres", "bo_src")
-    if folder is not None:
-        try:
-            entries, meta = results.load_bo(folder)
-        except LVCoreError as err:
-            st.error(str(err))
-            entries = []
-        if entries:
-            budget = meta.get("budget", {})
-            runs = f"{len(meta.get('runs', entries))} of 16 volunteer × mode runs"
-            if budget and (not budget.get("chapter_budget") or not meta.get("complete_study", True)):
-                st.warning(f"Budget: {budget.get('label')}; {runs}. This is not the chapter's full run.")
-            elif budget:
-                st.success(f"Budget: {budget.get('label')}")
-            st.markdown("**Findings**\n\n" + bo_findings_text(meta.get("findings", {})).replace("\n", "\n\n"))
-            st.subheader("Tables 9.2 (angles fixed at −60°, 90°) and 9.3 (angles optimised), side by side")
-            st.dataframe(bo_tables(entries).round(4), hide_index=True, width="stretch")
-            c1, c2 = st.columns(2)
-            c1.plotly_chart(study_figures.residual_figure(entries), width="stretch")
-            c2.plotly_chart(study_figures.convergence_figure(entries), width="stretch")
-            lvv = {m: [e["lvv_abs_error_ml"] for e in entries if e["mode"] == m] for m in ("fixed", "free")}
-            st.plotly_chart(figures.violin({f"LVV |error| (mL), {m}": v for m, v in lvv.items() if v},
-                                           title="LVV error at the optimum, fixed vs free angles"),
-                            width="stretch")
-            hidden = meta.get("findings", {}).get("angles_vs_hidden")
-            if hidden:
-                st.caption("Found angles against the volunteers' hidden ones (used for this report only, never the fit)")
-                st.dataframe(pd.DataFrame(hidden).round(1), hide_index=True)
+    res = load("bo-fibres", bo_fibres, "bo_src")
+    if res is not None and res["entries"]:
+        meta = res["meta"]
+        budget = meta.get("budget", {})
+        runs = f"{len(meta.get('runs', res['entries']))} of 16 volunteer × mode runs"
+        if budget and (not budget.get("chapter_budget") or not meta.get("complete_study", True)):
+            st.warning(f"Budget: {budget.get('label')}; {runs}. This is not the chapter's full run.")
+        elif budget:
+            st.success(f"Budget: {budget.get('label')}")
+        st.markdown("**Findings**\n\n" + bo_fibres.format_findings(meta.get("findings", {})).replace("\n", "\n\n"))
+        st.subheader("Tables 9.2 (angles fixed at −60°, 90°) and 9.3 (angles optimised)")
+        show(bo_fibres, res, figures=["fig_bo_lvv_error", "fig_strain_residuals", "fig_convergence"],
+             tables=["table9_2_bo_fixed_angles", "table9_3_bo_free_angles", "angles_vs_hidden"])
 
-# ----------------------------------------------------------------------------- operators
 with tab_ops:
-    folder = pick("operators", "ops_src")
-    if folder is not None:
-        try:
-            data = results.load_operators(folder)
-        except LVCoreError as err:
-            st.error(str(err))
-            data = {"fits": []}
-        fits = [f for f in data["fits"] if "strain_rmse_forward" in f]
-        if data.get("meta"):
-            m = data["meta"]
+    res = load("operators", operators, "ops_src")
+    if res is not None:
+        m = res.get("meta")
+        if m:
             (st.warning if not m.get("complete_study") else st.info)(
-                f"{m.get('budget')}; {m.get('n_fits')} fits, settings {m.get('settings')}")
-        if data.get("findings"):
-            st.markdown("**Findings**\n\n" + op_findings_text(data["findings"]).replace("\n", "\n\n"))
-        if fits:
-            st.plotly_chart(study_figures.violin_figure(fits, "strain_errors_forward",
-                                                        "Fig 9.11: |forward strain error| at θ̃ (test vs main geometry)",
-                                                        "|ζ(θ̃, ĝ) − y*| per region", per_region=True),
-                            width="stretch")
-            st.plotly_chart(study_figures.violin_figure(fits, "output_rmse_refit",
-                                                        "Fig 9.14: output-space error of θ̂ on the main geometry",
-                                                        "RMS strain error"), width="stretch")
-            st.plotly_chart(study_figures.violin_figure(fits, "mahalanobis",
-                                                        "Beyond the chapter: Mahalanobis distance of θ̂ from θ̃ "
-                                                        "(Laplace covariance from the adjoint Jacobian)",
-                                                        "Mahalanobis distance"), width="stretch")
-            st.subheader("Fig 9.12: absolute parameter errors per fit")
-            st.dataframe(fits_frame(fits).round(4), hide_index=True, width="stretch")
-            if data.get("surfaces"):
-                labels = [f"{s['patient']} main {s['main_operator']} test {s['test_geometry']}" for s in data["surfaces"]]
-                i = st.selectbox("Loss surface (Fig 9.13) of fit", range(len(labels)), format_func=labels.__getitem__)
-                st.plotly_chart(study_figures.surface_figure({**data["surfaces"][i], "rss_surface": data["surfaces"][i]}),
-                                width="stretch")
+                f"{m.get('budget')}; {m.get('n_fits')} fits, resolution {m.get('settings', {}).get('resolution')}")
+        if res.get("findings"):
+            st.markdown("**Findings**\n\n" + operators.format_findings(res["findings"]).replace("\n", "\n\n"))
+        show(operators, res, figures=["fig9_11_forward_strain_error", "fig9_14_output_error", "fig_mahalanobis",
+                                      "fig9_12_parameter_error"], tables=["fits"])
+        if res.get("surfaces"):
+            labels = [f"{s['patient']} main {s['main_operator']} test {s['test_geometry']}" for s in res["surfaces"]]
+            i = st.selectbox("Loss surface (Fig 9.13) of fit", range(len(labels)), format_func=labels.__getitem__)
+            st.plotly_chart(operators.surface_figure(res, i), width="stretch")
 
-# ----------------------------------------------------------------------------- fibre discrepancy
 with tab_fd:
-    folder = pick("fibre-discrepancy", "fd_src")
-    if folder is not None:
-        from lvcore.viz import inference_figures
+    res = load("fibre-discrepancy", fibre_discrepancy, "fd_src")
+    if res is not None:
+        st.caption(fibre_discrepancy.source_line(res))
+        show(fibre_discrepancy, res, tables=["sets"])
 
-        try:
-            fd = results.load_fibre_discrepancy(folder)
-        except LVCoreError as err:
-            st.error(str(err))
-            fd = {}
-        if fd:
-            st.json(fd.get("findings", {}), expanded=False)
-            draws = {m: np.asarray(v) for m, v in fd.get("error_draws", {}).items()}
-            if draws:
-                st.plotly_chart(inference_figures.error_violin_figure(draws), width="stretch")
-                st.plotly_chart(figures.density_overlay(draws, title="Density of the mean |strain error| per draw"),
-                                width="stretch")
-            sets = fd.get("sets", [])
-            if sets:
-                rows = [{"set": s["set"], "alpha_endo": s["alpha_endo"], "alpha_epi": s["alpha_epi"], "model": m,
-                         "median |error|": r["abs_error_median"],
-                         "sigma_S median": r.get("sigma_s", {}).get("median")}
-                        for s in sets for m, r in s["models"].items()]
-                st.dataframe(pd.DataFrame(rows).round(4), hide_index=True, width="stretch")
-
-# ----------------------------------------------------------------------------- Table 9.4
 with tab_geo:
-    from lvcore.studies.geometry_operators import format_table, operator_table
-
     @st.cache_data(show_spinner=False)
     def _table94():
-        return operator_table()
+        return {"table": geometry_operators.operator_table(), "geometry_effect": None}
 
     try:
-        st.code(format_table(_table94()))
+        show(geometry_operators, _table94())
     except LVCoreError as err:
         st.error(str(err))
 
-# ----------------------------------------------------------------------------- background runs
 with tab_run:
     st.write("Start a small run (fast mesh) in the background; the page stays usable while it runs and its "
              "results appear in the tabs above when it is done.")
@@ -163,7 +118,7 @@ with tab_run:
     c1, c2, c3 = st.columns(3)
     study = c1.selectbox("Study", ["bo-fibres", "operators"])
     if study == "bo-fibres":
-        subject = c2.selectbox("Volunteer", [f"SYNTHETIC-HV{i}" for i in range(1, 9)])
+        subject = c2.selectbox("Volunteer", bo_fibres.available_subjects())
         n0 = c3.number_input("initial design", 3, 300, 6)
         n1 = c3.number_input("iterations", 0, 300, 4)
     else:

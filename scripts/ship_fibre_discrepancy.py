@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     from lvcore.inference import samplers
 
     samplers.use_host_devices(args.chains)
-    from lvcore.report import studies_dir
+    from lvcore.studies.results import bundled_studies_dir
     from lvcore.studies import fibre_discrepancy as fd
 
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     small = round_floats(thin_result(res, args.keep))
     small["shipped"] = {"script": "scripts/ship_fibre_discrepancy.py", "argv": sys.argv[1:],
                         "wall_s": time.perf_counter() - t0, "date": time.strftime("%Y-%m-%d")}
-    dest = Path(args.dest) if args.dest else studies_dir() / "fibre_discrepancy.json"
+    dest = Path(args.dest) if args.dest else bundled_studies_dir() / "fibre_discrepancy.json"
     dest.parent.mkdir(parents=True, exist_ok=True)
     dest.write_text(json.dumps(small, separators=(",", ":")))
     print(json.dumps(res["findings"], indent=1))

@@ -47,7 +47,7 @@ def test_measures_are_differentiable(shape):
 
 
 def test_forward_with_sampled_geometry_is_the_scaled_emulator():
-    from lvcore.core.forward import emulator_forward
+    from lvcore.emulator.forward import emulator_forward
     from lvcore.emulator import load_emulator
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.inference.geometry_prior import inferred_geometry_forward

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lvcore.core.forward import AnalyticForward
+from lvcore.testing.analytic import AnalyticForward
 from lvcore.inference import verdict
 
 THETA = {"a": 0.6, "b": 5.0, "af": 1.5, "bf": 5.0}
@@ -12,7 +12,7 @@ THETA = {"a": 0.6, "b": 5.0, "af": 1.5, "bf": 5.0}
 
 def _y(theta=THETA, strains_from=None):
     f = AnalyticForward()
-    y = np.asarray(f(theta), float)
+    y = np.array(f(theta), dtype=float)
     if strains_from is not None:
         y[1:] = np.asarray(f(strains_from), float)[1:]
     return y

@@ -26,12 +26,13 @@ import numpy as np
 
 import lvcore
 from lvcore.campaigns.designs import Design, load_design
-from lvcore.campaigns.executors import make_executor
 from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
+from lvcore.mechanics import forward as _simulator_forward  # noqa: F401 - registers the default forward "simulator"
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, recorded_resolution
+from lvcore.parallel import make_executor
 
 #: The real simulator.
 DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
@@ -139,7 +140,7 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         Name of a registered forward model (default ``"simulator"``, the FE
         simulator; see :func:`lvcore.core.register_forward`). The store records the name.
     executor : optional
-        An executor object (see :mod:`lvcore.campaigns.executors`) to use
+        An executor object (see :mod:`lvcore.parallel`) to use
         instead of creating one; it is not closed.
     """
     if resolution not in RESOLUTIONS:
@@ -164,7 +165,10 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
     """
     with CampaignStore.open(store_path, "r+") as store:
         attrs = store.attrs
-        resolution = recorded_resolution(str(attrs["resolution"]), store.summary().versions)
+        before = store.summary()  # the store check: inconsistent rows are reported and never run or counted
+        if before.inconsistent and progress:
+            print("\n".join(before.format().splitlines()[2:]), file=sys.stderr)
+        resolution = recorded_resolution(str(attrs["resolution"]), before.versions)
         fwd = make_forward(str(attrs["forward"]), store.design().space, resolution)
         rows = store.pending_rows(retry_failed=retry_failed)
         _run_with(store, rows, executor, workers, scheduler, fwd, progress, allow_rerecord=retry_failed)

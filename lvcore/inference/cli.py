@@ -49,11 +49,12 @@ def register(subparsers) -> None:
                    help="lvcore angle (deg, counter-clockwise seen from the base) of the data's septal centre "
                         "(aha) or sector-0 start (lvcore); default 0")
     p.add_argument("--geometry",
-                   help="(required with --data) the subject's geometry: PC scores (.json/.csv, optional 'scale'), a "
-                        "template mesh (.vtu/.npy/.npz) or a volumetric mesh (.inp/.msh/.vtu) to fit and project "
-                        "(size-normalised: scores plus a scale); 'infer' (no mesh: PC scores and scale sampled with "
-                        "theta, give --reference-volume); or 'mean' (warned: biased estimates when the subject's "
-                        "shape or size differs)")
+                   help="(required with --data, unless --emulator is a subject-specific one from `lvcore emulator "
+                        "build`, whose geometry is bound in) the subject's geometry: PC scores (.json/.csv, "
+                        "optional 'scale'), a template mesh (.vtu/.npy/.npz) or a volumetric mesh (.inp/.msh/.vtu) "
+                        "to fit and project (size-normalised: scores plus a scale); 'infer' (no mesh: PC scores and "
+                        "scale sampled with theta, give --reference-volume); or 'mean' (warned: biased estimates "
+                        "when the subject's shape or size differs)")
     p.add_argument("--reference-volume", type=float, default=None, metavar="ML",
                    help="with --geometry infer: the subject's early-diastolic (reference) cavity volume in mL; "
                         "also a data column reference_volume_ml (default: none, size and stiffness trade off)")
@@ -75,9 +76,10 @@ def register(subparsers) -> None:
     p.add_argument("--angles", choices=("fixed", "infer"), default="fixed",
                    help="fibre angles fixed at the emulator's values, or inferred (needs the 'angles' emulator)")
     p.add_argument("--emulator", default=None,
-                   help=f"emulator name (default: {DEFAULT_EMULATOR}, the app's default too; 'angles' takes the EDP "
-                        "and fibre angles as inputs and is needed for --angles infer and per-subject edp_mmhg "
-                        "other than 8)")
+                   help=f"emulator name or directory (default: {DEFAULT_EMULATOR}, the app's default too, or angles "
+                        "with --angles infer; 'angles' takes the EDP and fibre angles as inputs and is needed for "
+                        "per-subject edp_mmhg other than 8); a subject-specific emulator directory (`lvcore emulator "
+                        "build`) needs no --geometry")
     p.add_argument("--alpha-endo", type=float, default=None,
                    help="fixed alpha_endo (deg) for emulators that take angles (default -60); an error with "
                         "emulators trained at fixed angles (e.g. 'chapter', trained at -60/60)")
@@ -151,7 +153,7 @@ def run_calibrate(args) -> int:
 
     import numpy as np
 
-    from lvcore.core.forward import emulator_forward, load_emulator_forward
+    from lvcore.emulator.forward import emulator_forward, load_emulator_forward
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal
@@ -161,19 +163,29 @@ def run_calibrate(args) -> int:
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.outputs import is_pc_name
 
+    infer = args.angles == "infer"
+    name = args.emulator or ("angles" if infer else DEFAULT_EMULATOR)
+    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
+    subject = bool(getattr(emulator, "is_subject", False))  # geometry bound in (lvcore emulator build)
+    if subject and args.geometry is not None:
+        raise DataError(f"--geometry: the emulator '{name}' is subject-specific, built on the geometry "
+                        f"{emulator.metadata['subject'].get('geometry_source')}, which is bound in; leave --geometry "
+                        "out, or build an emulator for this geometry with `lvcore emulator build --geometry FILE`")
     if args.volunteer is not None:
         from lvcore.resources import volunteer_files
 
         if args.data is not None or args.geometry is not None:
             raise DataError("--volunteer replaces --data and --geometry: give one or the other")
         vol = _volunteer(args.volunteer, volunteer_files)
-        args.data, args.geometry = str(vol.measured), str(vol.geometry)
+        args.data, args.geometry = str(vol.measured), None if subject else str(vol.geometry)
         geometry_option = f"--volunteer {args.volunteer} (its bundled geometry)"
-    elif args.data is None or args.geometry is None:
+    elif args.data is None or (args.geometry is None and not subject):
         raise DataError("give --data and --geometry (your measurements and the subject's geometry; "
                         "'--geometry mean' to use the mean shape knowingly), or --volunteer NAME (a bundled one)")
     else:
         geometry_option = f"--geometry {args.geometry}"
+    if subject:
+        geometry_option = f"--emulator {name} (its own geometry)"
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
     if bad or not model_names:
@@ -187,9 +199,6 @@ def run_calibrate(args) -> int:
         if not rows:
             raise DataError(f"--subject {args.subject}: no such subject in {args.data}")
     cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
-    infer = args.angles == "infer"
-    name = args.emulator or ("angles" if infer else DEFAULT_EMULATOR)
-    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
     cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
     base = str(getattr(emulator, "base", "clamped"))
@@ -200,7 +209,14 @@ def run_calibrate(args) -> int:
     if cli_measures and not inferred:
         raise DataError(f"{', '.join(geometry_prior.MEASURE_OPTIONS[k] for k in cli_measures)} inform an inferred "
                         "geometry; use them with --geometry infer (a mesh or PC scores already fix the size)")
-    geo = None if inferred else guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
+    if inferred:
+        geo = None
+    elif subject:
+        sub = emulator.metadata["subject"]
+        geo = guards.GeometrySource(np.zeros(0), str(sub.get("geometry_source")), "subject-emulator",
+                                    fit_residual_mm=(sub.get("geometry_record") or {}).get("fit_residual_mm"))
+    else:
+        geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
     warnings = [] if geo is None else list(geo.warnings)
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
     out = Path(args.out)

@@ -263,7 +263,7 @@ def inferred_geometry_forward(emulator, *, name: str | None = None, measures: Ma
     Parameters are those of :func:`lvcore.core.forward.emulator_forward`
     (``None``: its defaults), plus ``measures`` (:data:`MEASURE_NAMES`).
     """
-    from lvcore.core.forward import EmulatorForward, emulator_forward
+    from lvcore.emulator.forward import EmulatorForward, emulator_forward
 
     kwargs = {k: v for k, v in (("alpha_endo", alpha_endo), ("alpha_epi", alpha_epi), ("edp_mmhg", edp_mmhg))
               if v is not None}
