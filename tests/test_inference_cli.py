@@ -62,7 +62,7 @@ def test_data_edp_is_refused_by_a_fixed_edp_emulator(tmp_path, capsys):
     assert code == 2 and "edp_mmhg = 10" in err and "'chapter'" in err and "angles" in err
     # the same EDP as the emulator's is fine up to the sampling (checked by the guard itself)
     from lvcore.emulator import load_emulator
-    from lvcore.inference.cli import _subject_edp
+    from lvcore.inference.guards import subject_edp as _subject_edp
     from lvcore.inference.data import read_measurements
     from lvcore.inference.guards import check_conditions
 

@@ -223,7 +223,7 @@ def run_calibrate(args) -> int:
     by_subject = {}   # subject -> (row, forward, conditions, box, warnings, geometry record)
 
     for r in rows:
-        edp = _subject_edp(r, cond, emulator, name, args.edp)
+        edp = guards.subject_edp(r, cond, emulator, name, args.edp)
         c = {**cond, "edp_mmhg": edp}
         w = list(warnings)
         if inferred:
@@ -277,7 +277,7 @@ def run_calibrate(args) -> int:
             "ppc_csv": str(ppc_csv),
             "geometry": geometry,
             "conditions": {"emulator": name, "base": base, "edp_mmhg": c["edp_mmhg"],
-                           "edp_source": _edp_source(r, args.edp, emulator),
+                           "edp_source": guards.edp_source(r, args.edp, emulator),
                            "alpha_endo": None if infer else c["alpha_endo"],
                            "alpha_epi": None if infer else c["alpha_epi"],
                            "fixed_by_emulator": c["fixed"],
@@ -324,44 +324,6 @@ def run_calibrate(args) -> int:
     if not all(r["converged"] for r in records):
         return 1
     return EXIT_FLAGGED if any(r["flags"] for r in records) else 0
-
-
-def _subject_edp(row, cond: dict, emulator, name: str, cli_edp) -> float:
-    """The EDP (mmHg) of one subject: the data's ``edp_mmhg``, else ``--edp``, else the emulator's.
-
-    Raises
-    ------
-    DataError
-        The data and ``--edp`` disagree.
-    EmulatorError
-        The data's EDP differs from a fixed-EDP emulator's.
-    """
-    from lvcore.exceptions import DataError, EmulatorError
-    from lvcore.outputs import EDP_NAME
-
-    edp = row.edp_mmhg
-    if edp is None:
-        return float(cond["edp_mmhg"])
-    if cli_edp is not None and abs(float(cli_edp) - edp) > 1e-9:
-        raise DataError(f"subject {row.subject}: the data's edp_mmhg {edp:g} and --edp {cli_edp:g} disagree; drop "
-                        "one of them")
-    if EDP_NAME not in emulator.input_names:
-        fixed = dict(getattr(emulator, "fixed", None) or {}).get(EDP_NAME, cond["edp_mmhg"])
-        if abs(float(fixed) - edp) > 1e-6:
-            raise EmulatorError(f"subject {row.subject}: edp_mmhg = {edp:g} in the data, but the '{name}' emulator "
-                                f"was trained at a fixed EDP of {float(fixed):g} mmHg and cannot honour another; use "
-                                "an emulator with an 'edp' input (--emulator angles) or drop the column")
-    return float(edp)
-
-
-def _edp_source(row, cli_edp, emulator) -> str:
-    from lvcore.outputs import EDP_NAME
-
-    if row.edp_mmhg is not None:
-        return "data (edp_mmhg)"
-    if cli_edp is not None:
-        return "--edp"
-    return "emulator default" if EDP_NAME in emulator.input_names else "fixed by the emulator"
 
 
 def _subject_measures(row, cli_measures: dict) -> dict:

@@ -231,7 +231,7 @@ def save_netcdf(idata: az.InferenceData, path) -> Path:
 BANNER_ESS_MIN = 400.0
 
 
-def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN) -> tuple[str, str]:
+def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN, flags=()) -> tuple[str, str]:
     """The level and text of the app's convergence banner for one run.
 
     Green (``"success"``) only when the run converged (R-hat and ESS
@@ -239,6 +239,9 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN) -> tuple[s
     parameter has bulk ESS >= ``ess_min``; otherwise ``"warning"`` (amber).
     The text always states the divergences, the worst R-hat and the
     smallest bulk and tail ESS, so a user never has to trust a colour.
+    ``flags`` are the verdict's (:mod:`lvcore.inference.verdict`, posterior
+    mass on a prior bound included): any flag makes the banner amber and is
+    listed, as ``lvcore calibrate`` exits with 4 for them.
 
     Returns
     -------
@@ -252,6 +255,8 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN) -> tuple[s
         problems.append(f"{conv.n_divergent} divergent transition{'s' if conv.n_divergent != 1 else ''}")
     if not conv.min_ess_bulk >= ess_min:
         problems.append(f"bulk ESS {conv.min_ess_bulk:.0f} < {ess_min:.0f}")
+    if flags:
+        problems.append(f"results flagged (the CLI's exit code 4): {'; '.join(flags)}")
     numbers = (f"divergences {conv.n_divergent}, max R-hat {conv.max_rhat:.3f}, min bulk ESS "
                f"{conv.min_ess_bulk:.0f}, min tail ESS {conv.min_ess_tail:.0f}, {conv.rounds} round(s)")
     if problems:

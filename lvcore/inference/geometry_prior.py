@@ -205,8 +205,14 @@ class InferredGeometryForward:
         out[SCALE_NAME] = tuple(float(v) for v in self.scale_bounds)
         return out
 
-    traceable = True
-    provides_jacobian = False
+    def _latent_only(self, *args, **kwargs):
+        from lvcore.exceptions import ForwardError
+
+        raise ForwardError("an inferred geometry is sampled inside the model: evaluate it at (theta, h, scale) "
+                           "with forward(params); batch evaluation over theta alone is undefined")
+
+    # TraceableForward: __call__ traces; batches need the latent geometry, which only the model supplies
+    evaluate = jacobian = apply = _latent_only
 
     @property
     def label(self) -> str:
@@ -260,7 +266,7 @@ def inferred_geometry_forward(emulator, *, name: str | None = None, measures: Ma
                               scale_bounds=None) -> InferredGeometryForward:
     """Bind conditions into ``emulator`` and let calibration sample its PC scores and a scale.
 
-    Parameters are those of :func:`lvcore.core.forward.emulator_forward`
+    Parameters are those of :func:`lvcore.emulator.forward.emulator_forward`
     (``None``: its defaults), plus ``measures`` (:data:`MEASURE_NAMES`).
     """
     from lvcore.emulator.forward import EmulatorForward, emulator_forward
