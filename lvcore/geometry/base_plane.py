@@ -439,7 +439,7 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
         return float(np.percentile(thick[sel], 10)) if sel.sum() >= 8 else float("nan")
 
     msgs = []
-    deepest = max(rings, key=lambda r: r.depth_mm)
+    deepest = max(rings, key=lambda r: (round(r.depth_mm, 1), r.surface == "endo", r.is_base))
     kind = "endocardium" if deepest.surface == "endo" else "epicardium"
     max_cut = MAX_CUT_FRACTION * length
     meet_text = (f"the endocardium and epicardium meet at the base (wall thickness {t_ring:.1f} mm at the ring)"

@@ -4,6 +4,9 @@
 * ``lvcore geometry fit --endo ENDO.stl --epi EPI.stl [--units mm] --out MESH.vtu [--json]``
 * ``lvcore geometry fit --mesh LV.inp|LV.msh|LV.vtu [--units mm] --out MESH.vtu [--json]``: a volumetric
   tet/hex mesh, split into endo/epi/base automatically (:mod:`lvcore.geometry.volume_mesh`)
+* ``--base-cut MM`` (any input): cut the LV MM below the base ring's centre (contours: drop the slices
+  above); default: :mod:`lvcore.geometry.base_plane`'s rule. Every fit prints the base plane, the cut and
+  the cavity volume removed (``"base"`` in ``--json``)
 * ``lvcore geometry info MESH.vtu [--json]``: cavity volume, wall volume, length
 * ``lvcore geometry compare A.vtu B.vtu [--json]``: node MSE (cm²), max node distance
 * ``lvcore geometry pca SCORES... --out MESH.vtu [--model M.json]``: reconstruct from PC scores

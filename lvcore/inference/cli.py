@@ -41,7 +41,8 @@ def register(subparsers) -> None:
                    help="lvcore angle (deg, counter-clockwise seen from the base) of the data's septal centre "
                         "(aha) or sector-0 start (lvcore); default 0")
     p.add_argument("--geometry",
-                   help="(required with --data) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
+                   help="(required with --data, unless --emulator is a subject-specific one from `lvcore emulator "
+                        "build`, whose geometry is bound in) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
                         "volumetric mesh (.inp/.msh/.vtu) to fit and project; or 'mean' (warned: biased "
                         "estimates when the subject's shape differs); default: none, give it or --volunteer")
     p.add_argument("--volunteer", default=None, metavar="NAME",
@@ -56,7 +57,9 @@ def register(subparsers) -> None:
                    help="volume | iid | discrepancy, or a comma-separated list (default iid)")
     p.add_argument("--angles", choices=("fixed", "infer"), default="fixed",
                    help="fibre angles fixed at the emulator's values, or inferred (needs the 'angles' emulator)")
-    p.add_argument("--emulator", default=None, help="emulator name (default: chapter, or angles with --angles infer)")
+    p.add_argument("--emulator", default=None,
+                   help="emulator name or directory (default: chapter, or angles with --angles infer); a "
+                        "subject-specific emulator directory (`lvcore emulator build`) needs no --geometry")
     p.add_argument("--alpha-endo", type=float, default=None,
                    help="fixed alpha_endo (deg) for emulators that take angles (default -60); an error with "
                         "emulators trained at fixed angles (e.g. 'chapter', trained at -60/60)")
@@ -156,19 +159,29 @@ def run_calibrate(args) -> int:
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.outputs import is_pc_name
 
+    infer = args.angles == "infer"
+    name = args.emulator or ("angles" if infer else "chapter")
+    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
+    subject = bool(getattr(emulator, "is_subject", False))  # geometry bound in (lvcore emulator build)
+    if subject and args.geometry is not None:
+        raise DataError(f"--geometry: the emulator '{name}' is subject-specific, built on the geometry "
+                        f"{emulator.metadata['subject'].get('geometry_source')}, which is bound in; leave --geometry "
+                        "out, or build an emulator for this geometry with `lvcore emulator build --geometry FILE`")
     if args.volunteer is not None:
         from lvcore.resources import volunteer_files
 
         if args.data is not None or args.geometry is not None:
             raise DataError("--volunteer replaces --data and --geometry: give one or the other")
         vol = _volunteer(args.volunteer, volunteer_files)
-        args.data, args.geometry = str(vol.measured), str(vol.geometry)
+        args.data, args.geometry = str(vol.measured), None if subject else str(vol.geometry)
         geometry_option = f"--volunteer {args.volunteer} (its bundled geometry)"
-    elif args.data is None or args.geometry is None:
+    elif args.data is None or (args.geometry is None and not subject):
         raise DataError("give --data and --geometry (your measurements and the subject's geometry; "
                         "'--geometry mean' to use the mean shape knowingly), or --volunteer NAME (a bundled one)")
     else:
         geometry_option = f"--geometry {args.geometry}"
+    if subject:
+        geometry_option = f"--emulator {name} (its own geometry)"
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
     if bad or not model_names:
@@ -182,12 +195,14 @@ def run_calibrate(args) -> int:
         if not rows:
             raise DataError(f"--subject {args.subject}: no such subject in {args.data}")
     cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
-    infer = args.angles == "infer"
-    name = args.emulator or ("angles" if infer else "chapter")
-    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
     cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
-    geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
+    if subject:
+        sub = emulator.metadata["subject"]
+        geo = guards.GeometrySource(np.zeros(0), str(sub.get("geometry_source")), "subject-emulator",
+                                    fit_residual_mm=(sub.get("geometry_record") or {}).get("fit_residual_mm"))
+    else:
+        geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
     box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, cond, emulator, infer), emulator,
                                              args.allow_extrapolation,
                                              what=f"{geometry_option}: the PC scores (or conditions)")

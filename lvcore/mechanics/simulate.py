@@ -121,10 +121,31 @@ def build_system(case, mesh: FEMesh | None = None) -> DiscreteSystem:
     """The discrete system of ``case`` (mesh, fibres, material, load, boundary conditions)."""
     mesh = mesh or build_mesh(case)
     law = case.material
-    model = materials.ConstitutiveModel(law, materials.MixedPenalty(KAPPA_FACTOR * law.modulus()))
+    scale, modulus = element_scale(case, mesh)
+    model = materials.ConstitutiveModel(law, materials.MixedPenalty(KAPPA_FACTOR * modulus))
     fixed = boundary.fixed_dofs(mesh, case.boundary.base, case.boundary.clamped_faces)
     surface = case.load.surface if mesh.kind == "box" else "endocardium"
-    return DiscreteSystem(mesh, model, build_frames(mesh, case.fibres), surface, case.load.pressure_kpa, fixed)
+    b = case.boundary
+    spring = ("epicardium", b.epicardial_spring, b.spring_direction) if getattr(b, "epicardial_spring", 0) else None
+    return DiscreteSystem(mesh, model, build_frames(mesh, case.fibres), surface, case.load.pressure_kpa, fixed,
+                          element_scale=scale, spring=spring)
+
+
+def element_scale(case, mesh: FEMesh):
+    """(per-element parameter multipliers or None, stiffness scale (kPa) of the bulk penalty).
+
+    Without ``case.regional`` the law is homogeneous (``None``, its
+    :meth:`~lvcore.mechanics.materials.MaterialLaw.modulus`); with it, each
+    element takes the multipliers of its region, and the bulk penalty follows
+    the stiffest region, so uniform multipliers m give exactly the system of
+    the homogeneous law with its stiffnesses times m.
+    """
+    law, regional = case.material, getattr(case, "regional", None)
+    if regional is None:
+        return None, law.modulus()
+    per_region = regional.multipliers(law)
+    modulus = max(law.scaled(row).modulus() for row in per_region)
+    return per_region[mesh.template.element_regions], modulus
 
 
 def _volume_args(mesh: FEMesh):
