@@ -198,7 +198,7 @@ def check_regular_file(path, max_bytes: int, what: str, error: Callable[[str], E
     except PermissionError:
         _raise(error, f"{what} '{echo(path)}' cannot be read (permission denied)")
     except (OSError, ValueError) as err:
-        _raise(error, f"{what} '{echo(path)}' cannot be opened ({err})")
+        _raise(error, f"{what} '{echo(path)}' cannot be opened ({getattr(err, 'strerror', None) or err})")
     _check_stat(st, path, max_bytes, what, error)
     return path
 

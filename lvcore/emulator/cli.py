@@ -65,7 +65,7 @@ def register(subparsers) -> None:
                    help="other bounds for a varied input, e.g. --bound a=0.3,3 (repeatable)")
     b.add_argument("--name", default=None, help="emulator name (default subject-<file stem>)")
     b.add_argument("--workers", type=int, default=2, help="FE worker processes, one continuation chain each")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the design and training, 0 to 2^32 - 1 (default 0)")
     from lvcore.emulator.subject import default_training_config
 
     add_training_arguments(b, default_training_config())
