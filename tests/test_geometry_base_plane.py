@@ -192,3 +192,17 @@ def test_analyse_base_reports_rings_and_axis():
     assert b.axis @ axis > np.cos(np.radians(3.0))
     apex = pair.rotation @ np.array([0.0, 0.0, -pair.lv.epi.rl]) + pair.shift
     assert np.linalg.norm(b.apex - apex) < 2.0
+
+
+def test_separate_outflow_opening_is_closed_by_the_cut():
+    """A second boundary loop (an outflow opening through both walls just below a flat base): the cut goes below
+    it, the opening is reported, and the cavity is the closed form below the cut."""
+    from lvcore.geometry.synthetic_surfaces import HOLE_DEPTH_MM
+
+    pair, res, exact = _fit("outflow_hole", seed=3)
+    b = res.base
+    extra = [r for r in b.rings if not r.is_base]
+    assert {r.surface for r in extra} == {"endo", "epi"}
+    assert b.cut_depth_mm >= max(r.depth_mm for r in extra) >= HOLE_DEPTH_MM - 1.0
+    assert abs(res.cavity_volume_ml / exact - 1) < 0.02, (res.cavity_volume_ml, exact)
+    assert any("extra opening" in w for w in res.warnings)

@@ -323,8 +323,13 @@ def _inverted_message(nodes, template, label: str, base) -> str:
     where = ", ".join(sorted({("base" if r < template.n_long / 3 else "mid-ventricle" if r < 2 * template.n_long / 3
                                else "apex") for r in rows}))
     w = fitted_wall_thickness(nodes, template)
+    i, j = np.meshgrid(np.arange(template.nc), np.arange(template.nl - 1), indexing="xy")
+    r_endo = np.hypot(*nodes[template.node_index(i, j, 0)][..., :2].transpose(2, 0, 1))
+    r_epi = np.hypot(*nodes[template.node_index(i, j, template.nt - 1)][..., :2].transpose(2, 0, 1))
+    n_out = int(np.sum(r_endo[1:] > r_epi[1:]))  # below the base row: endocardium further from the axis
     msg = (f"{label}: the fitted mesh has {bad.size} inverted elements (near the {where}; thinnest fitted wall "
-           f"{w.min():.1f} mm)")
+           f"{w.min():.1f} mm" + (f"; the fitted endocardium lies outside the epicardium at {n_out} of "
+                                  f"{r_endo[1:].size} node pairs" if n_out else "") + ")")
     if base is not None and getattr(base, "walls_meet", False):
         return (msg + f"; {base.messages[0] if base.messages else 'the walls meet at the base'}: cut lower with "
                 "--base-cut MM (base_cut_mm=)")

@@ -198,8 +198,22 @@ PARAMETER_HELP = {
 }
 
 
+def parameter_meaning(name: str, max_chars: int = 48) -> str:
+    """The short meaning of a parameter for a table cell (:data:`PARAMETER_HELP` up to its first clause).
+
+    ``"a"`` -> ``"isotropic stiffness of the Holzapfel-Ogden law"``. Table cells
+    stay narrow enough to show whole; the full text stays in :data:`PARAMETER_HELP`.
+    """
+    import re
+
+    text = PARAMETER_HELP.get(str(name), "")
+    text = text.split(": ", 1)[-1]
+    text = re.split(r"[;,:]| \(|\. | across ", text)[0].strip().rstrip(".")
+    return text if len(text) <= max_chars else text[: max_chars - 1].rstrip() + "…"
+
+
 __all__ = [
-    "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
+    "parameter_meaning", "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model",
 ]

@@ -272,7 +272,7 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
                         showlegend=j == 0, row=1, col=j + 1)
         if truth and n in truth:
             fig.add_vline(x=float(truth[n]), line=dict(color="red", dash="dash", width=2), row=1, col=j + 1)
-        fig.update_xaxes(range=[lo, hi], row=1, col=j + 1)
+        fig.update_xaxes(range=[lo, hi], title_text=f"{n} ({units.get(n, '-')})", row=1, col=j + 1)
     if truth:
         fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="truth (SYNTHETIC)")
     fig.update_yaxes(title_text="density", col=1)
@@ -282,7 +282,7 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
 
 
 def interval_figure(rows: Sequence[Mapping], *, truth: float | None, title: str, xaxis_title: str,
-                    height: int = 420) -> go.Figure:
+                    yaxis_title: str = "test set", height: int = 420) -> go.Figure:
     """Median and 5–95 % interval per (label, series) row, e.g. σ_S per test set and model (Fig 9.7 summary).
 
     ``rows``: dicts with ``label``, ``series``, ``median``, ``q05``, ``q95``.
@@ -298,7 +298,8 @@ def interval_figure(rows: Sequence[Mapping], *, truth: float | None, title: str,
                                      arrayminus=med - np.array([r["q05"] for r in rs])))
     if truth is not None:
         fig.add_vline(x=truth, line=dict(color="black", dash="dash"), annotation_text="truth")
-    fig.update_layout(title=title, xaxis_title=xaxis_title, height=height, margin=dict(l=10, r=20, t=60, b=40))
+    fig.update_layout(title=title, xaxis_title=xaxis_title, yaxis_title=yaxis_title, height=height,
+                      margin=dict(l=10, r=20, t=60, b=40))
     return fig
 
 
