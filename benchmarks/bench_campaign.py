@@ -2,7 +2,7 @@
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_campaign.py [--rows 24] [--resolution fast]
 
-Each configuration starts a fresh :class:`~lvcore.campaigns.executors.LocalExecutor`,
+Each configuration starts a fresh :class:`~lvcore.parallel.LocalExecutor`,
 runs one warm-up row per worker (process start, imports, JIT compile; JAX's
 persistent cache is shared), then times ``--rows`` rows of a seeded LHS
 design over the ``material`` space through the same code path as
@@ -24,7 +24,7 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 from lvcore.campaigns.designs import Design  # noqa: E402
-from lvcore.campaigns.executors import LocalExecutor  # noqa: E402
+from lvcore.parallel import LocalExecutor  # noqa: E402
 from lvcore.campaigns.runner import DEFAULT_FORWARD, _drive, execute_row, row_inputs  # noqa: E402
 from lvcore.campaigns.space import get_space  # noqa: E402
 from lvcore.campaigns.store import CampaignStore  # noqa: E402

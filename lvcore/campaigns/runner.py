@@ -26,12 +26,13 @@ import numpy as np
 
 import lvcore
 from lvcore.campaigns.designs import Design, load_design
-from lvcore.campaigns.executors import make_executor
 from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
+from lvcore.mechanics import forward as _simulator_forward  # noqa: F401 - registers the default forward "simulator"
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, recorded_resolution
+from lvcore.parallel import make_executor
 
 #: The real simulator.
 DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
@@ -139,7 +140,7 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         Name of a registered forward model (default ``"simulator"``, the FE
         simulator; see :func:`lvcore.core.register_forward`). The store records the name.
     executor : optional
-        An executor object (see :mod:`lvcore.campaigns.executors`) to use
+        An executor object (see :mod:`lvcore.parallel`) to use
         instead of creating one; it is not closed.
     """
     if resolution not in RESOLUTIONS:

@@ -184,7 +184,7 @@ def bayesian_optimise(
     forward : Forward
         Reads ``space.names`` (its ``input_names``, in any order); evaluated in
         batches (the initial design in one batch: a
-        :class:`~lvcore.core.SimulatorForward` with ``workers`` runs it on a
+        :class:`~lvcore.mechanics.SimulatorForward` with ``workers`` runs it on a
         process pool). A point that fails gets the worst objective seen so far.
     measured : (25,) array
         Measured LVV (mL) and 24 strains.
