@@ -584,7 +584,8 @@ def tables(result: dict) -> dict:
 def surface_title(surface: dict) -> str:
     """Fig 9.13's title for one fit's surfaces: the patient, the main and test geometries."""
     who = surface.get("patient") or "patient not recorded"
-    return (f"Fig 9.13 — SYNTHETIC {who}: loss (9.11) over parameter pairs, data from main operator "
+    who = who if "SYNTHETIC" in who else f"SYNTHETIC {who}"
+    return (f"Fig 9.13 — {who}: loss (9.11) over parameter pairs, data from main operator "
             f"{surface.get('main_operator') or '?'}'s geometry, θ refitted on test geometry "
             f"{surface.get('test_geometry') or '?'}")
 
