@@ -14,7 +14,7 @@ import json
 import sys
 from pathlib import Path
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore.conditions import SIGMA_V_ML
 
 
 def register(subparsers) -> None:
