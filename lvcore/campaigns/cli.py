@@ -47,6 +47,9 @@ def _add_executor_args(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
     g.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT")
+    p.add_argument("--cold", action="store_true",
+                   help="solve every row cold, one task per row (default: warm-started continuation chains of "
+                        "nearby rows, split across the workers; same results within the solver tolerance)")
 
 
 def _design(args) -> int:
@@ -62,7 +65,7 @@ def _run(args) -> int:
 
     summary = run_campaign(args.design, args.out, workers=args.workers, scheduler=args.scheduler,
                            resolution=args.resolution, forward=args.forward or DEFAULT_FORWARD,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, chained=not args.cold)
     print(summary.format())
     return 0
 
@@ -71,7 +74,7 @@ def _resume(args) -> int:
     from lvcore.campaigns.runner import resume_campaign
 
     summary = resume_campaign(args.store, workers=args.workers, scheduler=args.scheduler,
-                              retry_failed=args.retry_failed, progress=not args.no_progress)
+                              retry_failed=args.retry_failed, progress=not args.no_progress, chained=not args.cold)
     print(summary.format())
     return 0
 
