@@ -176,6 +176,9 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
             if not chord:
                 fac = factorize(K, symmetric=system.potential, cache=system.pattern.cache)
                 last = (fac, D)
+                t1 = time.perf_counter()
+                stats["t_factor"] += t1 - t0
+                t0 = t1
             du = -fac.solve(rhs)
         except RuntimeError as exc:  # singular factor
             return False, u, p, f"linear solve failed: {exc}", last
@@ -231,7 +234,8 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
     """
     opts = opts or NewtonOptions()
     t_start = time.perf_counter()
-    stats = {"iterations": 0, "tangents": 0, "residuals": 0, "t_tangent": 0.0, "t_solve": 0.0, "t_line": 0.0}
+    stats = {"iterations": 0, "tangents": 0, "residuals": 0, "t_tangent": 0.0, "t_factor": 0.0, "t_solve": 0.0,
+             "t_line": 0.0}
     u = np.zeros(system.n_free)
     p = system.zero_pressure()
     r1, _, _, _ = system.residual(u, p, 1.0)
