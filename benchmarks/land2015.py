@@ -110,7 +110,8 @@ def profile(specs, repeats: int, solvers) -> None:
             if solver == "cholmod":
                 from sksparse.cholmod import analyze
 
-                p = sim.prepare_case(case).system.with_model(sim.constitutive_model(case.material))
+                prep = sim.prepare_case(case)
+                p = prep.system.with_model(sim.constitutive_model(case, prep.mesh))
                 _, K, _, _ = p.tangent(*r.solver_state, 1.0)
                 A = linear._as_csc(K, True)
                 ta, tf = [], []

@@ -4,7 +4,7 @@
     python benchmarks/volunteers.py --models iid --chains 2 --warmup 500 --samples 500
     python benchmarks/volunteers.py --angles infer --emulator angles  # joint theta + fibre angles
 
-For each bundled volunteer (``lvcore/assets/volunteers``) (measured LVV + 24 strains, made
+For each bundled volunteer (``assets/volunteers``) (measured LVV + 24 strains, made
 by the FE simulator at hidden theta and hidden fibre angles, plus noise
 sigma_V = 5 mL, sigma_S = 0.03), the geometry (VTU) is projected on the
 shape model's first 5 PCs and each model is fitted with ``lvcore.inference.calibrate``

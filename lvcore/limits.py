@@ -95,6 +95,31 @@ MAX_CONTOUR_POINTS = 100_000
 #: Most short-axis slices plus long-axis views in a stack.
 MAX_CONTOUR_SLICES = 500
 
+# ----------------------------------------------------------------------------- declared sizes (file headers)
+#: Most points (vertices, nodes) a mesh file may declare in its header (lvcore.headers); a 64 MB binary
+#: STL holds about 4 M vertex records, a real LV surface or volume mesh well under 1 M.
+MAX_DECLARED_POINTS = 5_000_000
+#: Most cells (faces, triangles, elements) a mesh file may declare.
+MAX_DECLARED_CELLS = 5_000_000
+#: Largest array (bytes) a ``.npy`` file or one ``.npz`` member may declare; the bundled
+#: arrays are below 2 MB (shape model 1.4 MB, emulator network 0.4 MB).
+MAX_ARRAY_BYTES = 256 * MiB
+#: Most arrays in one ``.npz`` archive (the shape model has 4, an emulator network about 10).
+MAX_NPZ_MEMBERS = 256
+#: Most rows of a design and of a campaign store (``lvcore design --n``); 100,000 points of 9
+#: parameters are about 20 MB, within :data:`MAX_DESIGN_BYTES`.
+MAX_DESIGN_POINTS = 100_000
+#: Most values (rows x parameters) of a design, so that every design ``lvcore design`` writes is
+#: below :data:`MAX_DESIGN_BYTES` (about 25 bytes per value in the CSV).
+MAX_DESIGN_VALUES = 2_000_000
+#: Most columns (parameters) of a design or campaign store.
+MAX_DESIGN_DIMENSIONS = 64
+#: Extra address space (bytes) the child process that parses an untrusted mesh file with VTK or
+#: meshio may allocate (lvcore.isolation); a crafted file that asks for more fails there, not in the caller.
+MAX_READER_MEMORY_BYTES = 3 * 1024 * MiB
+#: Seconds the child process that parses a mesh file may run.
+MAX_READER_SECONDS = 120.0
+
 # ----------------------------------------------------------------------------- measured data
 #: Most rows (subjects) in a measured-data CSV.
 MAX_MEASURED_ROWS = 10_000

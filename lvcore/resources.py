@@ -1,14 +1,19 @@
-"""Where the bundled data lives: one place that finds files shipped inside the package.
+"""Where the bundled data lives: one place that finds the data files and the app's page scripts.
 
-Everything the package ships (the SYNTHETIC cohort, the PCA shape model, the
-emulators, the below-spec demonstration emulators and the SYNTHETIC
-volunteers) sits in ``lvcore/assets/`` and is installed with the package as
-package data. Loaders ask this module for it, through
-:func:`importlib.resources.files`, so a wheel installed into any
-environment finds its data from any working directory; nothing reads the
-repository checkout.
+The repository keeps them at its top level: ``assets/`` (the SYNTHETIC cohort,
+the PCA shape model, the emulators, the below-spec demonstration emulators,
+the SYNTHETIC volunteers, example cases, shipped study results) and
+``pages/`` (the app's page scripts). The wheel carries them inside the package
+as ``lvcore/assets/`` and ``lvcore/app/views/`` (pyproject maps the folders with
+setuptools' ``package-dir``). Loaders ask this module for them:
 
-The layout under ``lvcore/assets/``::
+* from a source checkout (an editable install, or the checkout on
+  ``PYTHONPATH``) they are the checkout's top-level folders, beside the
+  ``lvcore`` package;
+* from an installed wheel they are package data, found through
+  :func:`importlib.resources.files`, from any working directory.
+
+The layout under ``assets/``::
 
     cases/                  example case files (docs/case_schema.md), shown by the app
     cohort/                 SYNTHETIC cohort, operator study, contour stacks
@@ -21,7 +26,7 @@ The layout under ``lvcore/assets/``::
 
 Building these files is a script's job (``scripts/build_cohort.py``,
 ``scripts/build_volunteers.py``, ``scripts/build_emulators.py``); their
-``--out`` defaults point here.
+``--out`` defaults point at the checkout's ``assets/``.
 """
 from __future__ import annotations
 
@@ -33,33 +38,62 @@ from pathlib import Path
 
 from lvcore.exceptions import DataError
 
-#: The bundled-data folder inside the package.
+#: The bundled-data folder: ``assets/`` in a checkout, ``lvcore/assets/`` (package data) in a wheel.
 ASSETS = "assets"
+#: The app's page scripts: ``pages/`` in a checkout, ``lvcore/app/views/`` (package data) in a wheel.
+PAGES = "pages"
+#: Where the wheel puts each top-level folder inside the package (pyproject's ``package-dir``).
+_IN_PACKAGE = {ASSETS: ("assets",), PAGES: ("app", "views")}
+
+#: The folder holding the ``lvcore`` package: the repository root when running from a checkout.
+_ROOT = Path(__file__).resolve().parent.parent
 
 _extracted = contextlib.ExitStack()  # holds files extracted from a zipped install until exit
 atexit.register(_extracted.close)
 
 
-def asset_path(*parts: str) -> Path:
-    """A file system path to ``lvcore/assets/<parts...>`` (which need not exist).
+def _checkout_folder(name: str) -> Path | None:
+    """``<repository>/<name>`` when lvcore runs from a source checkout, else None.
 
-    A normal install (wheel, editable or source checkout) keeps the files on
-    disk and this is their path. From a zipped install the file or folder is
-    extracted to a temporary location that lives until the interpreter exits.
+    A checkout is recognised by its ``pyproject.toml`` beside the package. It is asked first, so a checkout on
+    ``PYTHONPATH`` reads its own data even where another checkout is installed editable in the same environment.
     """
-    resource = files("lvcore").joinpath(ASSETS, *parts)
+    folder = _ROOT / name
+    return folder if (_ROOT / "pyproject.toml").is_file() and folder.is_dir() else None
+
+
+def _data_path(name: str, *parts: str) -> Path:
+    folder = _checkout_folder(name)
+    if folder is not None:
+        return folder.joinpath(*parts)
+    resource = files("lvcore").joinpath(*_IN_PACKAGE[name], *parts)
     if isinstance(resource, Path):
         return resource
     return _extracted.enter_context(as_file(resource))  # pragma: no cover (zipimport only)
 
 
+def asset_path(*parts: str) -> Path:
+    """A file system path to ``assets/<parts...>`` (which need not exist).
+
+    A checkout's top-level ``assets/``, else the installed package data ``lvcore/assets/``. A normal install
+    (wheel or editable) keeps the files on disk and this is their path. From a zipped install the file or folder
+    is extracted to a temporary location that lives until the interpreter exits.
+    """
+    return _data_path(ASSETS, *parts)
+
+
 def assets_dir() -> Path:
-    """The bundled-data folder ``lvcore/assets``."""
+    """The bundled-data folder (``assets/``)."""
     return asset_path()
 
 
+def pages_dir() -> Path:
+    """The folder of the app's page scripts: a checkout's ``pages/``, else the installed ``lvcore/app/views/``."""
+    return _data_path(PAGES)
+
+
 def example_cases() -> dict[str, Path]:
-    """The bundled example case files (``lvcore/assets/cases/*.json``), file name -> path, sorted."""
+    """The bundled example case files (``assets/cases/*.json``), file name -> path, sorted."""
     return {p.name: p for p in sorted(asset_path("cases").glob("*.json"))}
 
 
@@ -122,5 +156,5 @@ def volunteer_truth(subject: str) -> dict[str, float] | None:
     return None
 
 
-__all__ = ["ASSETS", "asset_path", "assets_dir", "example_cases", "VolunteerFiles", "volunteers_dir", "bundled_volunteers",
-           "volunteer_files", "volunteer_truth"]
+__all__ = ["ASSETS", "PAGES", "asset_path", "assets_dir", "pages_dir", "example_cases", "VolunteerFiles",
+           "volunteers_dir", "bundled_volunteers", "volunteer_files", "volunteer_truth"]

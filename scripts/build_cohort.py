@@ -7,16 +7,16 @@ One command, seeded and reproducible (from the repository root)::
 
 It writes (all labelled SYNTHETIC; nothing here is patient data):
 
-* ``lvcore/assets/cohort/SYNTHETIC_cohort.{npz,json}`` — every synthetic LV fitted from
+* ``assets/cohort/SYNTHETIC_cohort.{npz,json}`` — every synthetic LV fitted from
   a careful reference segmentation: training shapes, the 6 operator-study
   patients (P01..P06) and the 8 volunteers (HV1..HV8), with shape parameters,
   true and fitted cavity volumes and fit residuals;
-* ``lvcore/assets/cohort/contours/SYNTHETIC_Pxx_opN.json`` — the 6 × 3 imitation
+* ``assets/cohort/contours/SYNTHETIC_Pxx_opN.json`` — the 6 × 3 imitation
   operators' contour stacks (op1 has a motion-correction error on P01, as the
   chapter's operator 1 did on its first patient);
-* ``lvcore/assets/cohort/SYNTHETIC_operators.{npz,json}`` — those stacks fitted with
+* ``assets/cohort/SYNTHETIC_operators.{npz,json}`` — those stacks fitted with
   the same pipeline as a user's segmentation (:func:`lvcore.geometry.fitting.fit_contours`);
-* ``lvcore/assets/shape_model/SYNTHETIC_shape_model.{npz,json}`` — PCA of the training
+* ``assets/shape_model/SYNTHETIC_shape_model.{npz,json}`` — PCA of the training
   shapes only (operator-study patients and volunteers held out).
 """
 from __future__ import annotations
@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seed", type=int, default=20240601, help="master seed (default 20240601)")
     ap.add_argument("--n-train", type=int, default=66, help="training shapes for the PCA (default 66)")
-    ap.add_argument("--out", type=Path, default=ROOT / "lvcore" / "assets", help="assets directory (default lvcore/assets, the package data)")
+    ap.add_argument("--out", type=Path, default=ROOT / "assets", help="assets directory (default the checkout's assets/, shipped as package data)")
     ap.add_argument("--motion-error-mm", type=float, default=3.5,
                     help="in-plane shift of op1's apical slices on P01 (default 3.5 mm)")
     args = ap.parse_args(argv)

@@ -38,7 +38,7 @@ Emulators (the chapter's, Section 9.2.4):
 Defaults meet the spec: 10,000 training, 1,000 validation and 1,000 test
 simulations per emulator at the ``default`` resolution. An emulator built
 below that spec (fewer runs or the ``fast`` mesh) is never written to
-``lvcore/assets/emulators/``: it goes to ``<workdir>/below-spec/<name>/`` (or
+``assets/emulators/``: it goes to ``<workdir>/below-spec/<name>/`` (or
 ``--below-spec-out``) and its metadata carries a ``spec_note`` saying so.
 """
 from __future__ import annotations
@@ -106,10 +106,10 @@ def parse_args(argv=None):
                    help="local worker processes for the campaigns and the architecture search (default one per core)")
     g.add_argument("--scheduler", default=None, help="Dask scheduler tcp://HOST:PORT")
     p.add_argument("--workdir", type=Path, default=REPO / "build" / "emulators", help="designs and campaign stores")
-    p.add_argument("--out", type=Path, default=REPO / "lvcore" / "assets" / "emulators",
-                   help="where spec-compliant emulators go (default lvcore/assets/emulators, the package data)")
+    p.add_argument("--out", type=Path, default=REPO / "assets" / "emulators",
+                   help="where spec-compliant emulators go (default assets/emulators, the package data)")
     p.add_argument("--below-spec-out", type=Path, default=None,
-                   help="where below-spec emulators go (default <workdir>/below-spec); never lvcore/assets/emulators")
+                   help="where below-spec emulators go (default <workdir>/below-spec); never assets/emulators")
     add_training_arguments(p, _bundled_training())
     # None = the emulator's shipped schedule (SCHEDULES, else the defaults above); a given option wins
     p.set_defaults(**{k: None for k in SCHEDULE_OPTIONS})

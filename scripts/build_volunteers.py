@@ -11,12 +11,12 @@ runs the simulator (``lvcore.simulate``) at EDP = 8 mmHg, and adds noise
 σ_V = 5 mL to the LVV and σ_S = 0.03 to each of the 24 strains (the chapter's
 values). It writes, all labelled SYNTHETIC:
 
-* ``lvcore/assets/volunteers/SYNTHETIC_HV<i>_geometry.vtu`` — the early-diastolic geometry;
-* ``lvcore/assets/volunteers/SYNTHETIC_HV<i>_measured.csv`` — one row ``subject, lvv_ml,
+* ``assets/volunteers/SYNTHETIC_HV<i>_geometry.vtu`` — the early-diastolic geometry;
+* ``assets/volunteers/SYNTHETIC_HV<i>_measured.csv`` — one row ``subject, lvv_ml,
   strain_01..strain_24`` (the :mod:`lvcore.inference.data` layout);
-* ``lvcore/assets/volunteers/SYNTHETIC_volunteers.json`` — what a user may know: the
+* ``assets/volunteers/SYNTHETIC_volunteers.json`` — what a user may know: the
   files, EDP, early-diastolic cavity volume, noise levels, PCA scores h1..h5;
-* ``lvcore/assets/volunteers/truth/SYNTHETIC_volunteers_truth.json`` — the hidden
+* ``assets/volunteers/truth/SYNTHETIC_volunteers_truth.json`` — the hidden
   generating θ, fibre angles, noise-free outputs and the noise drawn. Keep it
   out of any calibration input; it exists to score calibrations.
 """
@@ -58,7 +58,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seed", type=int, default=20240602)
     ap.add_argument("--resolution", default="default", help="simulator resolution preset (default 'default')")
-    ap.add_argument("--out", type=Path, default=ROOT / "lvcore" / "assets" / "volunteers")
+    ap.add_argument("--out", type=Path, default=ROOT / "assets" / "volunteers")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     ids, nodes = load_cohort().select(ROLE_VOLUNTEER)

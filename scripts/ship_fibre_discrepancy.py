@@ -4,7 +4,7 @@
 The study (``lvcore study fibre-discrepancy``) fits 12 SYNTHETIC test sets
 with three likelihoods by MCMC and takes minutes (BENCHMARKS.md), too long
 for ``lvcore report``'s default run. This script runs it and writes
-``lvcore/assets/studies/fibre_discrepancy.json``: the study's JSON with the
+``assets/studies/fibre_discrepancy.json``: the study's JSON with the
 per-draw error arrays (Fig 9.9) thinned to ``--keep`` draws per set and model
 and floats rounded to 6 significant digits, so the file stays small. Everything in it is SYNTHETIC. Run from the
 repository root::
@@ -64,13 +64,13 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--keep", type=int, default=250, help="error draws kept per set and model")
     p.add_argument("--work", default="build/study_fibre_discrepancy", help="full study output folder")
-    p.add_argument("--dest", default=None, help="shipped JSON (default lvcore/assets/studies/fibre_discrepancy.json)")
+    p.add_argument("--dest", default=None, help="shipped JSON (default assets/studies/fibre_discrepancy.json)")
     args = p.parse_args(argv)
 
     from lvcore.inference import samplers
 
     samplers.use_host_devices(args.chains)
-    from lvcore.report import studies_dir
+    from lvcore.studies.results import bundled_studies_dir
     from lvcore.studies import fibre_discrepancy as fd
 
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     small = round_floats(thin_result(res, args.keep))
     small["shipped"] = {"script": "scripts/ship_fibre_discrepancy.py", "argv": sys.argv[1:],
                         "wall_s": time.perf_counter() - t0, "date": time.strftime("%Y-%m-%d")}
-    dest = Path(args.dest) if args.dest else studies_dir() / "fibre_discrepancy.json"
+    dest = Path(args.dest) if args.dest else bundled_studies_dir() / "fibre_discrepancy.json"
     dest.parent.mkdir(parents=True, exist_ok=True)
     dest.write_text(json.dumps(small, separators=(",", ":")))
     print(json.dumps(res["findings"], indent=1))

@@ -7,7 +7,7 @@
 Runs ``lvcore study bo-fibres`` and ``lvcore study operators`` into ``--work``
 (both resume from their state files, so a killed run can be restarted with
 the same command) and copies the small result files (JSON/CSV; no state, no
-geometries, no figures) into ``lvcore/assets/studies/`` (flat, where
+geometries, no figures) into ``assets/studies/`` (flat, where
 ``lvcore report`` and the app look; ``tables.csv`` becomes
 ``bo_fibres_tables.csv``). The JSON metadata records the budget
 actually run: a reduced budget is labelled as such and is not the chapter's

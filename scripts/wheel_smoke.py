@@ -11,6 +11,8 @@
    * runs the simulator on a ``pca`` geometry of the bundled shape model;
    * loads both bundled emulators (``chapter``, ``angles``) and evaluates them;
    * finds the live chart's page (``lvcore.app.live_chart``) and plotly.js;
+   * finds the bundled data and every page script inside the installed package
+     (the repository's top-level ``assets/`` and ``pages/``, mapped by pyproject);
    * calibrates on a bundled SYNTHETIC volunteer with a tiny chain
      (``lvcore calibrate --volunteer``);
    * starts the app (``lvcore app``, headless on 127.0.0.1, a free port), waits
@@ -71,6 +73,11 @@ for name in ("chapter", "angles"):
 from lvcore.app.live_chart import frontend_dir  # the live charts' page ships in the wheel; plotly.js from plotly
 live = frontend_dir()
 assert (live / "index.html").is_file() and (live / "plotly.min.js").stat().st_size > 1_000_000, live
+from lvcore.app import PAGES  # assets/ and pages/ are mapped into the wheel (pyproject package-dir)
+from lvcore.resources import assets_dir
+assert venv in assets_dir().resolve().parents and assets_dir().parts[-2:] == ("lvcore", "assets"), assets_dir()
+assert all(p.path.is_file() and venv in p.path.resolve().parents for p in PAGES), [str(p.path) for p in PAGES]
+out["pages"] = len(PAGES)
 print(json.dumps(out))
 """
 

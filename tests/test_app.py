@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 from streamlit.testing.v1 import AppTest
 
-from lvcore.app import APP_DIR, ENTRY, PAGES  # noqa: E402
+from lvcore.app import APP_DIR, PAGES_DIR, ENTRY, PAGES  # noqa: E402
 
 #: The checkout's shim (`streamlit run app.py`): it runs the packaged entry, whose default page is the Simulator.
 APP = str(Path(__file__).resolve().parents[1] / "app.py")
@@ -13,7 +13,7 @@ APP = str(Path(__file__).resolve().parents[1] / "app.py")
 def test_navigation_lists_every_page_script_by_name():
     scripts = {p.path for p in PAGES}
     assert all(p.is_file() for p in scripts) and ENTRY.is_file()
-    assert scripts == {APP_DIR / "simulator.py", *(APP_DIR / "views").glob("*.py")}  # no page left out
+    assert scripts == {APP_DIR / "simulator.py", *PAGES_DIR.glob("*.py")}  # no page left out
     titles = [p.title for p in PAGES]
     assert titles[0] == "Simulator" and "app" not in {t.lower() for t in titles}
     assert len(set(titles)) == len(titles) and len({p.url_path for p in PAGES}) == len(PAGES)
@@ -37,7 +37,7 @@ def test_lvcore_app_runs_streamlit_on_the_packaged_entry(monkeypatch):
 
 def test_switching_pages_by_navigation():
     at = AppTest.from_file(APP, default_timeout=180).run()
-    at.switch_page(str(APP_DIR / "views" / "2_Shape_model.py")).run()
+    at.switch_page(str(PAGES_DIR / "2_Shape_model.py")).run()
     assert not at.exception
     assert at.title[0].value == "Shape model"
 
@@ -49,7 +49,7 @@ def test_shared_sidebar_keeps_its_state_across_pages():
     assert a.label == "a (kPa)"
     new = a.options[a.options.index(str(a.value)) + 2] if str(a.value) in a.options else a.options[-5]
     a.set_value(float(new)).run()
-    at.switch_page(str(APP_DIR / "views" / "3_Fibre_angles.py")).run()
+    at.switch_page(str(PAGES_DIR / "3_Fibre_angles.py")).run()
     assert not at.exception, at.exception
     assert [s.key for s in at.sidebar.select_slider].count("shared_a") == 1  # rendered once, by main.py
     assert float(at.session_state["shared_inputs"]["theta"]["a"]) == float(new)

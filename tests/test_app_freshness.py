@@ -2,10 +2,10 @@
 import numpy as np
 from streamlit.testing.v1 import AppTest
 
-from lvcore.app import APP_DIR
+from lvcore.app import PAGES_DIR
 from lvcore.app.freshness import changed_inputs, describe
 
-FIBRE_PAGE = str(APP_DIR / "views" / "3_Fibre_angles.py")
+FIBRE_PAGE = str(PAGES_DIR / "3_Fibre_angles.py")
 
 
 def test_changed_inputs_names_what_moved():

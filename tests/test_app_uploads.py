@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from streamlit.testing.v1 import AppTest
 
+from lvcore.app import PAGES_DIR
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _page(fragment: str) -> str:
-    """A page script of the app (lvcore/app/views/)."""
-    for base in (ROOT / "lvcore" / "app" / "views",):
-        hits = sorted(base.glob(f"*{fragment}*.py"))
-        if hits:
-            return str(hits[0])
+    """A page script of the app (``pages/``)."""
+    hits = sorted(PAGES_DIR.glob(f"*{fragment}*.py"))
+    if hits:
+        return str(hits[0])
     raise FileNotFoundError(fragment)
 
 

@@ -231,3 +231,95 @@ def test_store_opened_through_a_hard_link_says_locked(tmp_path):
     finally:
         holder.kill()
         holder.wait()
+
+
+# ----------------------------------------------------------------------------- the store check (issue 28, finding 4)
+def _tampered_store(tmp_path, edit):
+    import h5py
+
+    design = make_design(get_space("material"), "lhs", 4, seed=0)
+    path = tmp_path / "t.h5"
+    with CampaignStore.create(path, design, forward=DOUBLE, resolution="fast") as store:
+        for i in range(3):
+            store.record(RowResult(i, closed_form(*design.points[i]), True, seconds=0.1, worker="w"))
+    with h5py.File(path, "r+") as f:
+        edit(f)
+    return path
+
+
+@pytest.mark.parametrize("value", [7, -3])
+def test_a_state_outside_0_1_2_is_reported_and_the_counts_add_up(tmp_path, value):
+    def edit(f):
+        f["state"][1] = value
+    path = _tampered_store(tmp_path, edit)
+    s = campaign_status(path)
+    assert s.converged + s.failed + s.pending + s.inconsistent == s.n == 4
+    assert s.inconsistent == 1 and s.converged == 2
+    assert f"row 1: state value {value}" in s.format()
+
+
+def test_converged_rows_with_nan_outputs_or_record_count_5_are_not_healthy(tmp_path):
+    from lvcore.cli import main
+
+    def edit(f):
+        f["outputs"][0, 3] = np.nan
+        f["record_count"][2] = 5
+    path = _tampered_store(tmp_path, edit)
+    s = campaign_status(path)
+    assert s.converged == 1 and s.inconsistent == 2
+    text = s.format()
+    assert "row 0: converged but its outputs contain NaN" in text and "row 2: converged but recorded 5 times" in text
+    c = read_store(path)
+    assert c.converged.tolist() == [False, True, False, False]  # what emulator training takes
+    assert main(["campaign", "status", str(path), "--check"]) == 2
+    assert main(["campaign", "status", str(path)]) == 0
+
+
+def test_emulator_training_data_exclude_inconsistent_rows(tmp_path):
+    from lvcore.emulator.training import load_store_data
+
+    def edit(f):
+        f["outputs"][0, 3] = np.inf
+        f["inputs"][1, 0] = 1e9  # outside the space
+    path = _tampered_store(tmp_path, edit)
+    data = load_store_data([path])
+    assert data.inputs.shape[0] == 1 and data.n_inconsistent == 2
+    assert np.all(np.isfinite(data.outputs))
+    assert any("row 1" in p and "outside" in p for p in data.problems)
+
+
+def test_resume_reports_inconsistent_rows_and_never_runs_them(tmp_path, capsys):
+    def edit(f):
+        f["state"][1] = 7
+    path = _tampered_store(tmp_path, edit)
+    s = resume_campaign(path, executor=_InlineExecutor(), progress=True)
+    assert "row 1: state value 7" in capsys.readouterr().err
+    c = read_store(path)
+    assert c.state.tolist() == [CONVERGED, 7, CONVERGED, CONVERGED] and s.inconsistent == 1 and s.converged == 3
+
+
+def test_a_clean_store_passes_the_check(tmp_path):
+    from lvcore.cli import main
+
+    path = _tampered_store(tmp_path, lambda f: None)
+    assert campaign_status(path).inconsistent == 0 and read_store(path).check() == ()
+    assert main(["campaign", "status", str(path), "--check"]) == 0
+
+
+def test_a_store_declaring_a_billion_rows_is_refused_before_reading(tmp_path):
+    """HDF5 dataset shapes are checked on opening (a chunked store of 10^9 rows is a few kB on disk)."""
+    import h5py
+
+    good = _tampered_store(tmp_path, lambda f: None)
+    p = tmp_path / "huge.h5"
+    with h5py.File(good, "r") as src, h5py.File(p, "w") as f:
+        for k, v in src.attrs.items():
+            f.attrs[k] = v
+        n = 10 ** 9
+        for name in ("inputs", "outputs", "state", "seconds", "reason", "version", "worker", "finished_at",
+                     "record_count"):
+            shape = (n,) + src[name].shape[1:]
+            f.create_dataset(name, shape=shape, dtype=src[name].dtype, chunks=(1024,) + src[name].shape[1:])
+    assert p.stat().st_size < 100_000
+    with pytest.raises(CampaignError, match="1,000,000,000 rows"):
+        campaign_status(p)

@@ -1,4 +1,4 @@
-"""The emulators bundled in lvcore/assets/emulators: provenance, size of the training set, and agreement with a live
+"""The emulators bundled in assets/emulators: provenance, size of the training set, and agreement with a live
 simulator run. Both emulators ship with the package: a missing one is a failure, never a skip."""
 import json
 
@@ -21,7 +21,7 @@ def _bundled(name):
 def test_bundled_emulator_meets_the_data_spec_and_records_provenance(name):
     emu = _bundled(name)
     meta = emu.metadata
-    assert "spec_note" not in meta, "a below-spec emulator must never be bundled in lvcore/assets/emulators"
+    assert "spec_note" not in meta, "a below-spec emulator must never be bundled in assets/emulators"
     # >= 10,000 training simulations were run; failed rows are kept in the store and reported, never filled in
     n_failed = meta["source"]["n_failed_excluded"]
     assert meta["training"]["n_train"] + n_failed >= 10_000 and n_failed <= 0.01 * meta["training"]["n_train"]

@@ -5,11 +5,11 @@ import pytest
 
 from campaign_double import closed_form
 import lvcore.emulator.io as eio
-from lvcore.app import APP_DIR
+from lvcore.app import PAGES_DIR
 from lvcore.emulator.io import save_emulator
 from lvcore.emulator.training import TrainingConfig, train_emulator
 
-PAGE = APP_DIR / "views" / "4_Emulator.py"
+PAGE = PAGES_DIR / "4_Emulator.py"
 
 
 @pytest.fixture()
@@ -51,7 +51,7 @@ def test_page_labels_the_shipped_below_spec_demo(tmp_path, monkeypatch):
     monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
     monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "no-bundled-emulators")  # no spec emulators on the search path
     demo = eio.BELOW_SPEC_DIR / "chapter"
-    assert demo.is_dir(), "the below-spec demonstration emulator ships in lvcore/assets/emulators-below-spec"
+    assert demo.is_dir(), "the below-spec demonstration emulator ships in assets/emulators-below-spec"
     at = AppTest.from_file(str(PAGE), default_timeout=60).run()
     assert not at.exception
     assert any("below spec" in o for o in at.selectbox[0].options)

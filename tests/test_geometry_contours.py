@@ -255,3 +255,49 @@ def test_duplicate_keys_are_refused(good, tmp_path):
     p.write_text(text[:-1] + ', "units": "cm"}')
     with pytest.raises(GeometryError, match="duplicate key 'units'"):
         read_contours(p)
+
+
+def _outflow_stack(good, arc_deg=60.0, inset=1.0):
+    """The basal slice cut through the outflow tract: over ``arc_deg`` the epicardial contour runs along the
+    endocardial one (``inset`` < 1 puts it just inside, so the endocardium pokes out)."""
+    d = copy.deepcopy(good)
+    s0 = d["slices"][0]
+    endo, epi = np.asarray(s0["endo"]), np.asarray(s0["epi"])
+    ph = 2 * np.pi * np.arange(len(epi)) / len(epi)
+    sel = np.abs(np.angle(np.exp(1j * (ph - 1.0)))) < np.radians(arc_deg) / 2
+    epi[sel] = endo[sel] * [inset, inset, 1.0]
+    s0["epi"] = epi.tolist()
+    return d
+
+
+@pytest.mark.parametrize("inset", [1.0, 0.97])
+def test_basal_slice_through_the_outflow_tract_is_dropped(good, inset):
+    from lvcore.geometry.analytic import ellipsoid_volume_below_plane
+    from lvcore.geometry.fitting import fit_contours
+
+    st = contours_from_dict(_outflow_stack(good, inset=inset))
+    with pytest.warns(GeometryWarning, match="includes the outflow tract"):
+        res = fit_contours(st)
+    b = res.base
+    assert len(b.dropped) == 1 and b.walls_meet and b.rule == "outflow tract" and b.wall_at_ring_mm < 0.5
+    assert b.cut_depth_mm == pytest.approx(8.0, abs=1e-6)  # the next slice, 8 mm down
+    e, zb = DEFAULT_LV.endo, DEFAULT_LV.base_z - 8.0
+    exact = ellipsoid_volume_below_plane(e.rs, e.ry, e.rl, [0, 0, zb], [0, 0, 1]) / 1000
+    assert abs(res.cavity_volume_ml / exact - 1) < 0.02, (res.cavity_volume_ml, exact)
+    removed = DEFAULT_LV.cavity_volume_mm3() / 1000 - exact
+    assert b.cavity_removed_ml == pytest.approx(removed, rel=0.05)
+    s = res.summary()["base"]
+    assert s["cut"]["dropped_slices"] and s["cavity_removed_ml"] > 10
+    # keeping that slice as the base is refused with the cause
+    with pytest.raises(GeometryError, match="includes the outflow tract"):
+        fit_contours(st, base_cut_mm=0.0)
+
+
+def test_complete_basal_slice_is_kept(good):
+    from lvcore.geometry.fitting import fit_contours
+
+    res = fit_contours(contours_from_dict(good))
+    assert res.base.dropped == () and res.base.cut_depth_mm == 0.0 and not res.base.walls_meet
+    assert res.base.cavity_removed_ml == 0.0
+    res2 = fit_contours(contours_from_dict(good), base_cut_mm=5.0)  # drops the basal slice (8 mm spacing)
+    assert len(res2.base.dropped) == 1 and res2.base.rule == "base_cut_mm"

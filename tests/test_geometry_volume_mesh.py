@@ -127,3 +127,31 @@ def test_missing_and_empty_files(tmp_path):
     (tmp_path / "empty.inp").write_text("")
     with pytest.raises(GeometryError, match="empty"):
         fit_volume_mesh(tmp_path / "empty.inp")
+
+
+@pytest.mark.parametrize("case", ["joined", "oblique", "uneven", "notch"])
+def test_volume_mesh_whose_base_is_not_one_flat_patch(case, tmp_path):
+    """SYNTHETIC tetrahedral walls (scanner pose) whose base is a shared ring, an oblique, uneven or notched cap:
+    split at sharp edges, cut below the base, cavity within 2 % of the closed form below the cut."""
+    from lvcore.geometry.synthetic_surfaces import synthetic_surface_pair
+
+    pair = synthetic_surface_pair(case, seed=4, n_phi=48, n_psi=24)
+    path = tmp_path / f"{case}.inp"
+    meshio.write(path, pair.tet_mesh(4.0), file_format="abaqus")
+    res = fit_volume_mesh(path)
+    b = res.fit.base
+    exact = pair.exact_cavity_below_ml(b.cut_origin, b.cut_normal)
+    assert abs(res.fit.cavity_volume_ml / exact - 1) < 0.02, (res.fit.cavity_volume_ml, exact)
+    assert b.cut_depth_mm > 1.0 and b.cavity_removed_ml > 2.0
+    assert abs(res.summary()["cavity_volume_change_pct"]) < 2.0  # against the mesh's own cavity below the cut
+    if case == "joined":
+        assert b.walls_meet and res.boundary.n_faces["base"] == 0
+
+
+def test_volume_mesh_with_a_deep_outflow_opening_is_refused():
+    from lvcore.geometry.synthetic_surfaces import synthetic_surface_pair
+
+    pair = synthetic_surface_pair("deep_notch", seed=4, n_phi=48, n_psi=24)
+    with pytest.raises(GeometryError, match="outflow tract") as err:
+        fit_volume_mesh(pair.tet_mesh(4.0))
+    assert "--base-cut" in str(err.value) and "swapped" not in str(err.value)

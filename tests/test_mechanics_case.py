@@ -34,6 +34,15 @@ HO = {
     "material": {"law": "holzapfel-ogden", "a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6},
     "load": {"pressure": 8, "units": "mmHg"},
 }
+#: Every model-data mismatch field set away from its default.
+HO_MISMATCH = {
+    "geometry": {"kind": "default", "resolution": "fast"},
+    "material": {"law": "holzapfel-ogden", "a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "as": 0.0, "bs": 3.0,
+                 "afs": 1.2, "bfs": 5.0, "kappa": 0.1,
+                 "regional": {"a": [1.0 + 0.05 * i for i in range(24)], "af": [2.0] * 24}},
+    "load": {"pressure": 8, "units": "mmHg"},
+    "boundary": {"base": "sliding", "epicardial_spring": {"k": 0.2, "direction": "full"}},
+}
 
 
 def test_land_problem2_fields():
@@ -50,7 +59,7 @@ def test_land_problem2_fields():
     assert case.outputs.strain_layer == "endocardial"
 
 
-@pytest.mark.parametrize("d", [LAND2, BOX, HO], ids=["land2", "box", "ho"])
+@pytest.mark.parametrize("d", [LAND2, BOX, HO, HO_MISMATCH], ids=["land2", "box", "ho", "ho-mismatch"])
 def test_round_trip(d):
     case = Case.from_dict(d)
     again = Case.from_dict(json.loads(json.dumps(case.to_dict())))
@@ -138,7 +147,25 @@ BAD = [
     (HO, ("material", "a"), None, True, "material.a", "missing"),
     (HO, ("material", "a"), -0.5, False, "material.a", "> 0"),
     (HO, ("material", "bf"), 0, False, "material.bf", "> 0"),
-    (HO, ("material", "as"), 0.0, False, "material.as", "> 0"),
+    (HO, ("material", "bs"), 0.0, False, "material.bs", "> 0"),
+    (HO, ("material", "as"), -0.1, False, "material.as", ">= 0"),
+    (HO, ("material", "bfs"), -2, False, "material.bfs", "> 0"),
+    (HO, ("material", "kappa"), 0.34, False, "material.kappa", "[0, 0.333333]"),
+    (HO, ("material", "kappa"), -0.01, False, "material.kappa", "[0, 0.333333]"),
+    (LAND2, ("material", "kappa"), 0.1, False, "material.kappa", "unknown key"),
+    (HO, ("material", "regional"), {"b": [1.0] * 24}, False, "material.regional.b", "unknown key"),
+    (HO, ("material", "regional"), {"a": [1.0] * 16}, False, "material.regional.a", "24 multipliers"),
+    (HO, ("material", "regional"), {"a": [1.0] * 23 + [0.0]}, False, "material.regional.a[23]", "[0.01, 100"),
+    (HO, ("material", "regional"), {}, False, "material.regional", "at least one"),
+    (BOX, ("material", "regional"), {"C": [1.0] * 24}, False, "material.regional", "LV geometry"),
+    (HO, ("boundary",), {"epicardial_spring": {"k": -1}}, False, "boundary.epicardial_spring.k", "[0.0, 100"),
+    (HO, ("boundary",), {"epicardial_spring": {"k": 1, "direction": "tangential"}}, False,
+     "boundary.epicardial_spring.direction", "normal"),
+    (HO, ("boundary",), {"epicardial_spring": {"direction": "normal"}}, False, "boundary.epicardial_spring.k",
+     "missing"),
+    (HO, ("boundary",), {"epicardial_spring": 0.5}, False, "boundary.epicardial_spring", "JSON object"),
+    (BOX, ("boundary",), {"clamped": ["x0"], "epicardial_spring": {"k": 1}}, False, "boundary.epicardial_spring",
+     "LV geometry"),
     (LAND2, ("material", "C"), -10, False, "material.C", "> 0"),
     (HO, ("material", "b"), "1.3", False, "material.b", "number"),
     (HO, ("material", "b"), True, False, "material.b", "number"),
@@ -303,3 +330,19 @@ def test_long_values_are_cut_in_messages():
     with pytest.raises(CaseError) as info:
         Case.from_dict(_edit(HO, ("load", "units"), "x" * 100_000))
     assert len(str(info.value)) < 300
+
+
+def test_mismatch_fields_parse_and_default_to_todays_model():
+    plain = Case.from_dict(HO)
+    assert plain.material.params["kappa"] == 0.0 and plain.regional is None
+    assert plain.boundary.epicardial_spring == 0.0 and plain.boundary.spring_direction == "normal"
+    assert "epicardial_spring" not in plain.to_dict()["boundary"] and "regional" not in plain.to_dict()["material"]
+    c = Case.from_dict(HO_MISMATCH)
+    assert c.material.params == {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "as": 0.0, "bs": 3.0, "afs": 1.2,
+                                 "bfs": 5.0, "kappa": 0.1}
+    m = c.regional.multipliers(c.material)
+    assert m.shape == (24, 9) and m[5, 0] == 1.25 and np.all(m[:, 2] == 2.0) and np.all(m[:, [1, 3, 4, 8]] == 1)
+    assert not c.regional.is_uniform()
+    assert c.boundary.epicardial_spring == 0.2 and c.boundary.spring_direction == "full"
+    # the Python constructor and explicit κ = 0 give the same case as leaving it out
+    assert Case.from_dict(copy.deepcopy(HO) | {"material": {**HO["material"], "kappa": 0}}) == plain

@@ -61,6 +61,7 @@ def test_ho_reference_stress_free_and_tension_only():
 
 @pytest.mark.parametrize("law,params", [
     ("holzapfel-ogden", HO),
+    ("holzapfel-ogden", np.array([0.6, 1.3, 1.0, 3.6, 1.2, 2.0, 0.5, 4.0, 0.2])),  # sheet terms moved, κ = 0.2
     ("guccione", np.array([2.0, 8.0, 2.0, 4.0])),
     ("neo-hookean", np.array([1.5])),
 ])
@@ -86,7 +87,7 @@ def test_autodiff_stress_matches_finite_differences(law, params):
 
 def test_param_vector_fills_ho_defaults_and_rejects_missing():
     v = materials.HolzapfelOgden.from_params({"a": 1, "b": 2, "af": 3, "bf": 4}).vector()
-    np.testing.assert_allclose(v[4:], [0.69, 1.11, 0.31, 2.58])
+    np.testing.assert_allclose(v[4:], [0.69, 1.11, 0.31, 2.58, 0.0])  # sheet terms and κ = 0
     with pytest.raises(ValueError, match="needs parameters"):
         materials.Guccione.from_params({"C": 1})
     with pytest.raises(ValueError, match="unknown material law"):
@@ -125,3 +126,150 @@ def test_composed_model_jits_once_per_law():
     assert len(calls) == 2
     expect = HO_LAW.strain_energy(F, FRAME) + 0.2 * np.linalg.det(np.asarray(F))
     assert float(w1) == pytest.approx(float(expect), rel=1e-14)
+
+
+# ----------------------------------------------------------------------------
+# fibre dispersion (Gasser-Ogden-Holzapfel κ) and the sheet terms
+# ----------------------------------------------------------------------------
+def _todays_ho_energy(law, F, frame):
+    """The HO law as it was before the dispersion (kept verbatim as the κ = 0 reference)."""
+    C = F.T @ F
+    f0, s0 = frame[0], frame[1]
+    i4f, i4s, i8 = f0 @ C @ f0, s0 @ C @ s0, f0 @ C @ s0
+    ef = jnp.where(i4f > 1.0, i4f - 1.0, 0.0)
+    es = jnp.where(i4s > 1.0, i4s - 1.0, 0.0)
+    i1bar = jnp.linalg.det(F) ** (-2.0 / 3.0) * jnp.trace(C)
+
+    def t(a, b, x):
+        return a / (2.0 * b) * jnp.expm1(b * x)
+
+    return (t(law.a, law.b, i1bar - 3.0) + t(law.a_f, law.b_f, ef * ef) + t(law.a_s, law.b_s, es * es)
+            + t(law.a_fs, law.b_fs, i8 * i8))
+
+
+def _random_frame(rng):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q.T  # rows f0, s0, n0: orthonormal
+
+
+def test_dispersion_zero_is_todays_law_to_round_off():
+    """κ = 0 (the default) gives today's energy, stress and tangent (1e-14 relative) on random F and frames."""
+    rng = np.random.default_rng(7)
+    law = materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6})
+    assert law.kappa_f == 0.0
+    Fs = jnp.asarray(np.eye(3) + 0.2 * rng.normal(size=(40, 3, 3)))
+    frames = jnp.asarray(np.stack([_random_frame(rng) for _ in range(40)]))
+    for op in (lambda f: f, jax.grad, jax.hessian):
+        new = np.asarray(jax.jit(jax.vmap(op(law.strain_energy)))(Fs, frames))
+        old = np.asarray(jax.jit(jax.vmap(op(lambda F, fr: _todays_ho_energy(law, F, fr))))(Fs, frames))
+        np.testing.assert_allclose(new, old, rtol=1e-14, atol=1e-14 * np.abs(old).max())
+
+
+def _analytic_ho_stress(p, F, frame):
+    """First Piola-Kirchhoff stress of the dispersed HO law written out by hand (kPa)."""
+    a, b, af, bf, as_, bs, afs, bfs, kap = p
+    C = F.T @ F
+    J = np.linalg.det(F)
+    Finv_T = np.linalg.inv(F).T
+    f0, s0 = frame[0], frame[1]
+    i1 = np.trace(C)
+    i1bar = J ** (-2 / 3) * i1
+    P = a / 2 * np.exp(b * (i1bar - 3)) * J ** (-2 / 3) * (2 * F - 2 / 3 * i1 * Finv_T)
+    H = kap * np.eye(3) + (1 - 3 * kap) * np.outer(f0, f0)
+    E = np.sum(H * C) - 1
+    if E > 0:
+        P += 2 * af * E * np.exp(bf * E**2) * F @ H
+    i4s = s0 @ C @ s0
+    if i4s > 1:
+        P += 2 * as_ * (i4s - 1) * np.exp(bs * (i4s - 1) ** 2) * F @ np.outer(s0, s0)
+    i8 = f0 @ C @ s0
+    P += afs * i8 * np.exp(bfs * i8**2) * F @ (np.outer(f0, s0) + np.outer(s0, f0))
+    return P
+
+
+@pytest.mark.parametrize("kappa", [0.0, 0.1, 0.25, 1 / 3])
+def test_dispersed_stress_matches_the_hand_derivation(kappa):
+    """Autodiff stress = the hand-written ∂W/∂F (E_f = H:C − 1, H = κI + (1−3κ) f0⊗f0) on random F."""
+    rng = np.random.default_rng(3)
+    p = np.array([0.6, 1.3, 1.0, 3.6, 0.9, 2.0, 0.4, 3.0, kappa])
+    law = materials.HolzapfelOgden.from_vector(p)
+    for _ in range(10):
+        F = np.eye(3) + 0.15 * rng.normal(size=(3, 3))
+        frame = _random_frame(rng)
+        P = np.asarray(jax.grad(law.strain_energy)(jnp.asarray(F), jnp.asarray(frame)))
+        np.testing.assert_allclose(P, _analytic_ho_stress(p, F, frame), rtol=1e-11, atol=1e-12)
+
+
+def test_dispersed_fibre_term_uniaxial_analytic():
+    """Isochoric stretch λ across the mean fibre: I4f = 1/λ < 1, yet the dispersed family is stretched
+    (E_f = κ(λ² + 2/λ − 3) + (1 − 3κ)(1/λ − 1) > 0 for κ = 0.3, λ = 1.2) and contributes; at κ = 0 it does not."""
+    lam = 1.2
+    F = jnp.diag(jnp.array([lam ** -0.5, lam, lam ** -0.5]))  # fibre along e1, stretch along e2
+    frame = np.eye(3)[[0, 2, 1]]  # sheet along e3 (compressed: off)
+    base = {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "afs": 0.31, "bfs": 2.58}
+    i1 = lam**2 + 2 / lam
+    matrix = 0.6 / (2 * 1.3) * np.expm1(1.3 * (i1 - 3))
+    for kap in (0.0, 0.3):
+        W = float(materials.HolzapfelOgden.from_params({**base, "kappa": kap}).strain_energy(F, frame))
+        E = kap * (i1 - 3) + (1 - 3 * kap) * (1 / lam - 1)
+        fibre = 1.0 / (2 * 3.6) * np.expm1(3.6 * E**2) if E > 0 else 0.0
+        assert W == pytest.approx(matrix + fibre, rel=1e-13)
+        assert (fibre > 0) == (kap == 0.3)
+
+
+def test_isotropic_dispersion_does_not_see_the_fibre_direction():
+    """κ = 1/3: the fibre family is isotropic (E_f = (I1 − 3)/3); with the sheet terms off the energy
+    does not depend on the frame."""
+    rng = np.random.default_rng(5)
+    law = materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "as": 0.0,
+                                                "afs": 0.0, "kappa": 1 / 3})
+    F = jnp.asarray(np.eye(3) + 0.2 * rng.normal(size=(3, 3)))
+    w = [float(law.strain_energy(F, jnp.asarray(_random_frame(rng)))) for _ in range(5)]
+    np.testing.assert_allclose(w, w[0], rtol=1e-13)
+
+
+def test_dispersed_switch_acts_on_the_dispersed_invariant():
+    """F = diag(λ, μ, 1/(λμ)), μ = 1.15: at λ = 1 the mean fibre is unstretched (I4f = 1) but I1 > 3, so
+    E_f = κ(I1 − 3) > 0 and the fibre family is on; a switch on I4f would make W jump there. W is
+    continuous where E_f itself crosses 0."""
+    kap, mu = 0.2, 1.15
+    law = materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "as": 0.0,
+                                                "afs": 0.0, "kappa": kap})
+    off = materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1e-300, "bf": 3.6, "as": 0.0,
+                                                "afs": 0.0})
+    frame = jnp.eye(3)
+    W = jax.jit(jax.vmap(lambda l: law.strain_energy(jnp.diag(jnp.array([l, mu, 1.0 / (l * mu)])), frame)))
+    W0 = jax.jit(jax.vmap(lambda l: off.strain_energy(jnp.diag(jnp.array([l, mu, 1.0 / (l * mu)])), frame)))
+
+    def e_f(l):
+        i1 = l**2 + mu**2 + 1 / (l * mu) ** 2
+        return kap * (i1 - 3) + (1 - 3 * kap) * (l**2 - 1)
+
+    fibre_at_1 = float(W(jnp.array([1.0]))[0] - W0(jnp.array([1.0]))[0])
+    assert fibre_at_1 == pytest.approx(1.0 / 7.2 * np.expm1(3.6 * e_f(1.0) ** 2), rel=1e-9) and fibre_at_1 > 1e-5
+    from scipy.optimize import brentq
+
+    lstar = brentq(e_f, 0.8, 1.0, xtol=1e-15)
+    fib = np.asarray(W(jnp.array([lstar - 1e-3, lstar + 1e-7, lstar + 1e-3]))
+                     - W0(jnp.array([lstar - 1e-3, lstar + 1e-7, lstar + 1e-3])))
+    assert fib[0] == 0.0 and 0.0 <= fib[1] < 1e-12 and fib[2] > 0  # off below, O(d²) just above: C¹
+
+
+def test_parameter_ranges():
+    HOc = materials.HolzapfelOgden
+    assert HOc.parameter_problem("kappa", 0.0) is None and HOc.parameter_problem("kappa", 1 / 3) is None
+    assert "[0, 0.333333]" in HOc.parameter_problem("kappa", 0.34)
+    assert "[0, 0.333333]" in HOc.parameter_problem("kappa", -0.01)
+    assert HOc.parameter_problem("as", 0.0) is None and ">= 0" in HOc.parameter_problem("as", -1.0)
+    assert HOc.parameter_problem("afs", 0.0) is None
+    assert "> 0" in HOc.parameter_problem("bs", 0.0) and "> 0" in HOc.parameter_problem("a", 0.0)
+    assert "finite" in HOc.parameter_problem("bfs", float("nan"))
+
+
+def test_scaled_law_is_exact_for_unit_factors():
+    law = materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "kappa": 0.1})
+    assert law.scaled(np.ones(9)) == law
+    s = law.scale_vector({"a": 2.0, "af": 0.5})
+    assert law.scaled(s).params == {**law.params, "a": 1.2, "af": 0.5}
+    with pytest.raises(ValueError, match="stiffnesses"):
+        law.scale_vector({"b": 2.0})

@@ -1,5 +1,7 @@
 """Bundled data is package data: every loader finds it through importlib.resources, from any working directory."""
 import importlib.resources
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,9 +10,30 @@ from lvcore import resources
 from lvcore.exceptions import DataError
 
 
-def test_assets_are_the_package_data_folder():
-    assert resources.assets_dir() == importlib.resources.files("lvcore") / "assets"
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_checkout_reads_its_top_level_assets_and_pages():
+    assert resources.assets_dir() == ROOT / "assets"
+    assert resources.pages_dir() == ROOT / "pages"
     assert resources.asset_path("shape_model", "SYNTHETIC_shape_model.json").is_file()
+    assert not (ROOT / "lvcore" / "assets").exists() and not (ROOT / "lvcore" / "app" / "views").exists()
+
+
+def test_an_install_without_a_checkout_reads_the_package_data(monkeypatch, tmp_path):
+    """Outside a checkout (a wheel) the folders are package data: lvcore/assets and lvcore/app/views."""
+    monkeypatch.setattr(resources, "_ROOT", tmp_path)  # no pyproject.toml, no assets/ beside the package
+    pkg = importlib.resources.files("lvcore")
+    assert resources.assets_dir() == pkg / "assets"
+    assert resources.pages_dir() == pkg / "app" / "views"
+
+
+def test_pyproject_ships_every_package_and_maps_the_top_level_folders():
+    """pyproject lists the packages by hand (find cannot see mapped folders): the list must match the tree."""
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    tree = {".".join(p.parent.relative_to(ROOT).parts) for p in (ROOT / "lvcore").rglob("__init__.py")}
+    assert set(cfg["packages"]) == tree | {"lvcore.assets", "lvcore.app.views"}
+    assert cfg["package-dir"] == {"lvcore.assets": "assets", "lvcore.app.views": "pages"}
 
 
 def test_loaders_find_bundled_data_from_a_foreign_working_directory(tmp_path, monkeypatch):

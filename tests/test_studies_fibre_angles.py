@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from lvcore.app import APP_DIR
+from lvcore.app import PAGES_DIR
 from lvcore.studies.fibre_angles import angle_case, angle_map, angle_sweep, strain_table
 
 
@@ -49,7 +49,7 @@ def test_failures_are_kept_as_nan():
 def test_page_runs_a_sweep():
     from streamlit.testing.v1 import AppTest
 
-    at = AppTest.from_file(str(APP_DIR / "views" / "3_Fibre_angles.py"), default_timeout=300)
+    at = AppTest.from_file(str(PAGES_DIR / "3_Fibre_angles.py"), default_timeout=300)
     at.run()
     assert not at.exception
     at.multiselect[0].set_value(["(-60°, 90°)"]).run()
@@ -126,7 +126,7 @@ def test_page_draws_the_live_emulator_map(tmp_path, monkeypatch):
     eio.save_emulator(_random_emulator("angles", angles=True), tmp_path / "angles")  # UNTRAINED test double
     monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
     monkeypatch.setattr(eio, "ASSETS_DIR", tmp_path / "no-bundled-emulators")
-    at = AppTest.from_file(str(APP_DIR / "views" / "3_Fibre_angles.py"), default_timeout=300)
+    at = AppTest.from_file(str(PAGES_DIR / "3_Fibre_angles.py"), default_timeout=300)
     at.run()
     assert not at.exception
     radio = at.radio[0]

@@ -5,12 +5,13 @@ import time
 import pytest
 from streamlit.testing.v1 import AppTest
 
-from lvcore.app import APP_DIR, ENTRY, PAGES
+from lvcore.app import PAGES_DIR, ENTRY, PAGES
 from lvcore.core import AnalyticForward
+from lvcore.exceptions import LVCoreError
 from lvcore.studies import bo_fibres, operators, results
 from tests.test_studies_operators import stand_in
 
-PAGE = str(APP_DIR / "views" / "6_Studies.py")
+PAGE = str(PAGES_DIR / "6_Studies.py")
 
 
 @pytest.fixture(scope="module")
@@ -26,19 +27,30 @@ def test_sources_and_loaders(saved):
     src = results.result_sources([saved])
     assert (f"{saved}: bo", saved / "bo") in src["bo-fibres"]
     assert (f"{saved}: ops", saved / "ops") in src["operators"]
-    entries, meta = results.load_bo(saved / "bo")
-    assert len(entries) == 2 and "REDUCED" in meta["budget"]["label"]
-    data = results.load_operators(saved / "ops")
+    bo = bo_fibres.load(saved / "bo")
+    assert len(bo["entries"]) == 2 and "REDUCED" in bo["meta"]["budget"]["label"]
+    data = operators.load(saved / "ops")
     assert len(data["fits"]) == 12 and len(data["surfaces"]) == 12
+
+
+def test_the_bundled_results_folder_has_one_locator():
+    assert results.find_result("operators.json") == results.bundled_studies_dir() / "operators.json"
+    assert results.source_label(results.bundled_studies_dir()) == "bundled"
+
+
+def test_unreadable_results_name_the_file(tmp_path):
+    (tmp_path / "bo_fibres.json").write_text("{not json")
+    with pytest.raises(LVCoreError, match="bo_fibres.json"):
+        bo_fibres.load(tmp_path)
 
 
 def test_bundled_results_exist_and_are_labelled():
     src = results.result_sources()
     assert src["bo-fibres"] and src["operators"], "ship results in the bundled studies/ folder"
-    entries, meta = results.load_bo(src["bo-fibres"][0][1])
-    assert meta["budget"]["label"] and "chapter_budget" in meta["budget"]
-    assert {e["mode"] for e in entries} == {"fixed", "free"}
-    ops = results.load_operators(src["operators"][0][1])
+    bo = bo_fibres.load(src["bo-fibres"][0][1])
+    assert bo["meta"]["budget"]["label"] and "chapter_budget" in bo["meta"]["budget"]
+    assert {e["mode"] for e in bo["entries"]} == {"fixed", "free"}
+    ops = operators.load(src["operators"][0][1])
     assert ops["meta"]["budget"] and ops["fits"]
 
 

@@ -89,3 +89,13 @@ def test_lvcore_app_passes_the_upload_limit_to_streamlit():
     cmd = streamlit_command()
     i = cmd.index("--server.maxUploadSize")
     assert cmd[i + 1] == str(uploads.MAX_UPLOAD_MB)
+
+
+def test_no_usage_statistics_in_config_and_lvcore_app():
+    """Issue 27 item 6: Streamlit's usage statistics are off, so no page reaches an external metrics endpoint."""
+    from lvcore.app.cli import streamlit_command
+
+    cfg = tomllib.loads((ROOT / ".streamlit" / "config.toml").read_text())
+    assert cfg["browser"]["gatherUsageStats"] is False
+    cmd = streamlit_command()
+    assert cmd[cmd.index("--browser.gatherUsageStats") + 1] == "false"

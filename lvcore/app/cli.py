@@ -26,7 +26,9 @@ def streamlit_command(port: int | None = None, extra=()) -> list[str]:
     from lvcore.uploads import MAX_UPLOAD_MB
 
     # the upload limit travels with the command (a .streamlit/config.toml is read only from the working directory)
-    cmd = [sys.executable, "-m", "streamlit", "run", str(ENTRY), "--server.maxUploadSize", str(MAX_UPLOAD_MB)]
+    # no usage statistics: nothing leaves localhost (also in .streamlit/config.toml for `streamlit run app.py`)
+    cmd = [sys.executable, "-m", "streamlit", "run", str(ENTRY), "--server.maxUploadSize", str(MAX_UPLOAD_MB),
+           "--browser.gatherUsageStats", "false"]
     if port is not None:
         cmd += ["--server.port", str(int(port))]
     return cmd + list(extra)

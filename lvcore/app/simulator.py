@@ -1,7 +1,7 @@
 """LV Calibration Lab: the home page, the Simulator.
 
 Started through the app's navigation (``lvcore app`` or ``streamlit run
-app.py``; :mod:`lvcore.app.main`); the other pages live in ``views/``. This
+app.py``; :mod:`lvcore.app.main`); the other pages live in the repository's ``pages/``. This
 page only gathers inputs and shows results: the science is in :mod:`lvcore`
 (simulation, export) and :mod:`lvcore.viz` (figures, 3-D pictures).
 """
@@ -26,7 +26,7 @@ from lvcore.mechanics.case import Case, loads_case  # noqa: E402
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES  # noqa: E402
 from lvcore.resources import example_cases  # noqa: E402
 
-use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (views/5_Calibration.py)
+use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (pages/5_Calibration.py)
 
 from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: E402,F401  (shared log sliders)
 RESOLUTIONS = RESOLUTION_PRESET_NAMES

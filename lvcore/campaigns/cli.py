@@ -40,6 +40,10 @@ def register(subparsers) -> None:
 
     st = sub.add_parser("status", help="counts of converged/failed/pending rows and failure reasons")
     st.add_argument("store", help="HDF5 store")
+    st.add_argument("--check", action="store_true",
+                    help="list every inconsistent row (state not 0/1/2, record_count not 1, NaN outputs in a "
+                         "converged row, inputs outside the space) and exit with 2 if there is one; such rows "
+                         "are always excluded from the counts (default: off, the first 10 are listed)")
     st.set_defaults(func=_status)
 
 
@@ -81,6 +85,11 @@ def _resume(args) -> int:
 
 def _status(args) -> int:
     from lvcore.campaigns.runner import campaign_status
+    from lvcore.exceptions import CampaignError
 
-    print(campaign_status(args.store).format())
+    summary = campaign_status(args.store)
+    print(summary.format(all_problems=args.check))
+    if args.check and summary.inconsistent:
+        raise CampaignError(f"store '{args.store}' has {summary.inconsistent} inconsistent row(s), listed above; "
+                            "they are excluded from every count, from resume and from emulator training")
     return 0

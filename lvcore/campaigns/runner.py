@@ -246,7 +246,10 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
     """
     with CampaignStore.open(store_path, "r+") as store:
         attrs = store.attrs
-        resolution = recorded_resolution(str(attrs["resolution"]), store.summary().versions)
+        before = store.summary()  # the store check: inconsistent rows are reported and never run or counted
+        if before.inconsistent and progress:
+            print("\n".join(before.format().splitlines()[2:]), file=sys.stderr)
+        resolution = recorded_resolution(str(attrs["resolution"]), before.versions)
         fwd = make_forward(str(attrs["forward"]), store.design().space, resolution)
         rows = store.pending_rows(retry_failed=retry_failed)
         _run_with(store, rows, executor, workers, scheduler, fwd, progress, allow_rerecord=retry_failed,

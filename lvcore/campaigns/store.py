@@ -16,7 +16,9 @@ dataset                   dtype          meaning
                                          plus a hash of the simulator sources
 ``worker``                (n,) S64       ``host:pid`` of the worker
 ``finished_at``           (n,) f8        UNIX time the row was recorded
-``record_count``          (n,) i4        times the row was recorded (must be 1)
+``record_count``          (n,) i4        1 once the row is committed (also when a failed row
+                                         is run again); anything else is reported by
+                                         ``StoreContents.check``
 ========================  =============  =======================================
 
 File attributes: ``format`` (``"lvcore-campaign"``), ``format_version``,
@@ -49,6 +51,7 @@ import h5py
 import numpy as np
 
 import lvcore
+from lvcore import limits
 from lvcore.campaigns.designs import Design
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
@@ -115,15 +118,62 @@ class StoreContents:
 
     @property
     def converged(self) -> np.ndarray:
-        return self.state == CONVERGED
+        """Rows committed as converged that pass :meth:`check` (inconsistent rows are never counted)."""
+        return (self.state == CONVERGED) & ~self.inconsistent
 
     @property
     def failed(self) -> np.ndarray:
-        return self.state == FAILED
+        return (self.state == FAILED) & ~self.inconsistent
 
     @property
     def pending(self) -> np.ndarray:
-        return self.state == PENDING
+        return (self.state == PENDING) & ~self.inconsistent
+
+    @property
+    def inconsistent(self) -> np.ndarray:
+        """Rows whose fields contradict each other (see :meth:`check`)."""
+        return self._problem_masks()[0]
+
+    def check(self, limit: int | None = None) -> tuple[str, ...]:
+        """One message per inconsistent row (the first ``limit`` rows), e.g. ``"row 3: state value 7 ..."``.
+
+        A row is inconsistent when its ``state`` is not 0/1/2; when it is
+        committed (converged or failed) but ``record_count`` is not 1; when it
+        is converged with a NaN/inf output; or when its inputs are not finite or
+        lie outside the store's parameter space. Such rows are excluded from
+        :attr:`converged`, :attr:`failed` and :attr:`pending` (so from every
+        count and from emulator training), and are not run by a resume.
+        """
+        bad, reasons = self._problem_masks()
+        rows = np.flatnonzero(bad)
+        if limit is not None:
+            rows = rows[:limit]
+        out = []
+        for i in rows:
+            why = "; ".join(text(int(i)) for mask, text in reasons if mask[i])
+            out.append(f"row {int(i)}: {why}")
+        return tuple(out)
+
+    def _problem_masks(self):
+        state = np.asarray(self.state).astype(np.int64)
+        count = np.asarray(self.record_count).astype(np.int64)
+        bad_state = ~np.isin(state, (PENDING, CONVERGED, FAILED))
+        done = (state == CONVERGED) | (state == FAILED)
+        bad_count = done & (count != 1)
+        nonfinite = (state == CONVERGED) & ~np.all(np.isfinite(self.outputs), axis=1)
+        inputs = np.asarray(self.inputs, dtype=float)
+        finite_in = np.all(np.isfinite(inputs), axis=1)
+        outside = ~finite_in.copy()
+        if finite_in.any():
+            outside[finite_in] = ~self.space.contains(inputs[finite_in])
+        reasons = (
+            (bad_state, lambda i: f"state value {state[i]} is none of 0 pending, 1 converged, 2 failed"),
+            (bad_count, lambda i: f"{STATE_NAMES.get(int(state[i]), '?')} but recorded {count[i]} times "
+                                  "(a committed row is recorded once)"),
+            (nonfinite, lambda i: "converged but its outputs contain NaN or inf"),
+            (outside, lambda i: "its inputs are not finite or lie outside the store's parameter space"),
+        )
+        return bad_state | bad_count | nonfinite | outside, reasons
 
 
 @dataclass(frozen=True)
@@ -141,13 +191,25 @@ class StoreSummary:
     space: str
     resolution: str
     forward: str
+    inconsistent: int = 0
+    problems: tuple[str, ...] = ()
 
-    def format(self) -> str:
+    def format(self, all_problems: bool = False) -> str:
+        """Human-readable summary; the inconsistent rows are listed (the first 10 unless ``all_problems``)."""
+        rows = f"  rows {self.n}: converged {self.converged}, failed {self.failed}, pending {self.pending}"
+        if self.inconsistent:
+            rows += f", inconsistent {self.inconsistent} (excluded from every count and from emulator training)"
         lines = [
             f"campaign store {self.path}",
             f"  space {self.space}, resolution {self.resolution}, forward {self.forward}",
-            f"  rows {self.n}: converged {self.converged}, failed {self.failed}, pending {self.pending}",
+            rows,
         ]
+        if self.inconsistent:
+            shown = self.problems if all_problems else self.problems[:10]
+            lines.append("  inconsistent rows (the store was edited or damaged; rerun them in a new campaign):")
+            lines += [f"    {p}" for p in shown]
+            if len(shown) < self.inconsistent:
+                lines.append(f"    ... and {self.inconsistent - len(shown)} more (lvcore campaign status --check)")
         if np.isfinite(self.mean_seconds):
             lines.append(f"  mean solve time {self.mean_seconds:.3f} s")
         if self.versions:
@@ -312,7 +374,7 @@ class CampaignStore:
         todo = s == PENDING
         if retry_failed:
             todo |= s == FAILED
-        return np.flatnonzero(todo)
+        return np.flatnonzero(todo & ~self.read().inconsistent)
 
     def record(self, result: RowResult, *, allow_rerecord: bool = False) -> None:
         """Write one row and commit it (see *Crash safety*).
@@ -346,7 +408,9 @@ class CampaignStore:
         f["version"][i] = _fixed_bytes(result.version, VERSION_LEN)
         f["worker"][i] = _fixed_bytes(result.worker, WORKER_LEN)
         f["finished_at"][i] = time.time()
-        f["record_count"][i] = int(f["record_count"][i]) + 1
+        # a committed row is recorded exactly once: a row left half-written by a killed run, or a failed
+        # row run again, is committed anew (record_count 1); any other value means the store was edited
+        f["record_count"][i] = 1
         f.flush()
         f["state"][i] = CONVERGED if converged else FAILED  # the commit
         f.flush()
@@ -395,6 +459,8 @@ class CampaignStore:
             space=c.space.name,
             resolution=str(c.attrs.get("resolution", "")),
             forward=str(c.attrs.get("forward", "")),
+            inconsistent=int(c.inconsistent.sum()),
+            problems=c.check(limit=1000),
         )
 
 
@@ -422,6 +488,9 @@ def _layout_problem(h5: h5py.File) -> str | None:
         space = ParameterSpace.from_json(h5.attrs["space"])
     except Exception as err:  # noqa: BLE001
         return f"attribute 'space' is not a parameter space ({type(err).__name__}: {str(err)[:200]})"
+    if len(space.names) > limits.MAX_DESIGN_DIMENSIONS:
+        return (f"its space has {len(space.names)} parameters, more than the limit of "
+                f"{limits.MAX_DESIGN_DIMENSIONS} (lvcore.limits.MAX_DESIGN_DIMENSIONS)")
     n = None
     for name, tail in _DATASETS.items():
         if name not in h5 or not isinstance(h5[name], h5py.Dataset):
@@ -430,6 +499,9 @@ def _layout_problem(h5: h5py.File) -> str | None:
         if not shape:
             return f"dataset '{name}' is a scalar"
         n = shape[0] if n is None else n
+        if n > limits.MAX_DESIGN_POINTS:  # checked before any dataset is read into memory
+            return (f"dataset '{name}' declares {n:,} rows, more than the limit of {limits.MAX_DESIGN_POINTS:,} "
+                    "(lvcore.limits.MAX_DESIGN_POINTS)")
         expect = (n, len(space.names)) if name == "inputs" else (n,) + tail
         if shape != expect:
             return f"dataset '{name}' has shape {shape}, expected {expect}"

@@ -1,7 +1,9 @@
-"""``lvcore emulator train STORE ... --out DIR`` and ``lvcore emulator info NAME``."""
+"""``lvcore emulator train STORE ... --out DIR``, ``lvcore emulator build --geometry FILE --out DIR`` and
+``lvcore emulator info NAME``."""
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,42 @@ def register(subparsers) -> None:
     t.add_argument("--workers", type=int, default=1,
                    help="processes for the architecture search (one architecture each; same result as 1)")
     t.set_defaults(func=_train)
+
+    b = sub.add_parser("build", help="build a subject-specific emulator: FE runs on one exact geometry, trained "
+                                     "and validated on held-out runs",
+                       description="Design over the prior box (scipy.stats.qmc Sobol), FE runs on the subject's "
+                                   "geometry as it is (no PCA projection), training, and validation on held-out FE "
+                                   "runs the network never saw; the held-out LVV and strain RMSE go into "
+                                   "metadata.json. Use the result with `lvcore calibrate --emulator DIR` (no "
+                                   "--geometry: it is bound in).")
+    b.add_argument("--geometry", required=True,
+                   help="the subject's geometry: a template mesh (.vtu, e.g. from `lvcore geometry fit --out`), a "
+                        "volumetric tet/hex mesh (.inp/.msh/.med/.vtu/.vtk/.xdmf, fitted), a contour stack or case "
+                        "file (.json), PC scores (.json/.csv) or 'default'")
+    b.add_argument("--out", required=True, help="output directory (geometry.vtu, network.npz, metadata.json, ...)")
+    b.add_argument("--inputs", default="theta",
+                   help="varied inputs: theta, plus optionally edp and angles, comma-separated (default theta)")
+    b.add_argument("--units", choices=("mm", "cm", "m"), default="mm", help="units of a volumetric mesh")
+    b.add_argument("--n-train", type=int, default=800, help="training FE runs (default 800)")
+    b.add_argument("--n-valid", type=int, default=100, help="validation FE runs: early stopping (default 100)")
+    b.add_argument("--n-test", type=int, default=100,
+                   help="held-out FE runs, never used in training; their RMSE is recorded (default 100)")
+    b.add_argument("--design", choices=("sobol", "lhs"), default="sobol", help="space-filling design (default sobol)")
+    b.add_argument("--resolution", default="default", help="mesh preset of the FE runs (default 'default')")
+    b.add_argument("--base", choices=("sliding", "clamped"), default="sliding",
+                   help="basal boundary condition (default sliding, as the 'chapter' emulator)")
+    b.add_argument("--edp", type=float, default=None, help="EDP (mmHg) when not varied (default 8)")
+    b.add_argument("--alpha-endo", type=float, default=None, help="alpha_endo (deg) when not varied (default -60)")
+    b.add_argument("--alpha-epi", type=float, default=None, help="alpha_epi (deg) when not varied (default 60)")
+    b.add_argument("--bound", action="append", default=[], metavar="NAME=LO,HI",
+                   help="other bounds for a varied input, e.g. --bound a=0.3,3 (repeatable)")
+    b.add_argument("--name", default=None, help="emulator name (default subject-<file stem>)")
+    b.add_argument("--workers", type=int, default=2, help="FE worker processes, one continuation chain each")
+    b.add_argument("--seed", type=int, default=0)
+    from lvcore.emulator.subject import default_training_config
+
+    add_training_arguments(b, default_training_config())
+    b.set_defaults(func=_build, architectures="100x100")
 
     i = sub.add_parser("info", help="show an emulator's inputs, box, architecture and accuracy")
     i.add_argument("name", help="bundled name (e.g. chapter, angles) or directory")
@@ -102,14 +140,58 @@ def _train(args) -> int:
         xt, yt = t.inputs, t.outputs
     config = training_config(args, seed=args.seed)
     name = args.name or Path(args.out).name
-    print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed and {data.n_pending} pending rows excluded), "
-          f"validating on {xv.shape[0]}; inputs {list(data.input_names)}")
+    if data.n_inconsistent:
+        print(f"WARNING: {data.n_inconsistent} inconsistent store row(s) excluded (lvcore campaign status --check):\n  "
+              + "\n  ".join(data.problems), file=sys.stderr)
+    print(f"training '{name}' on {x.shape[0]} rows ({data.n_failed} failed, {data.n_pending} pending and "
+          f"{data.n_inconsistent} inconsistent rows excluded), validating on {xv.shape[0]}; inputs {list(data.input_names)}")
     emu = train_emulator(x, y, xv, yv, input_names=data.input_names, name=name, lower=data.lower, upper=data.upper,
                          fixed=data.fixed, config=config, x_test=xt, y_test=yt,
-                         source={**data.info, "n_failed_excluded": data.n_failed}, log=print,
+                         source={**data.info, "n_failed_excluded": data.n_failed,
+                                 "n_inconsistent_excluded": data.n_inconsistent}, log=print,
                          workers=args.workers)
     pred_x, pred_y = (xt, yt) if xt is not None else (xv, yv)
     save_emulator(emu, args.out, validation={"inputs": pred_x, "outputs": pred_y, "predictions": np.asarray(emu.apply(pred_x))})
+    print(format_info(emu.metadata))
+    return 0
+
+
+def parse_bounds(items) -> dict:
+    """``["a=0.3,3", ...]`` -> ``{"a": (0.3, 3.0)}`` (EmulatorError naming the option)."""
+    out = {}
+    for item in items or ():
+        name, _, rng = str(item).partition("=")
+        try:
+            lo, hi = (float(v) for v in rng.split(","))
+        except ValueError:
+            raise EmulatorError(f"--bound {item}: write NAME=LO,HI, e.g. --bound a=0.3,3") from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise EmulatorError(f"--bound {item}: need finite LO < HI")
+        out[name.strip()] = (lo, hi)
+    return out
+
+
+def _build(args) -> int:
+    from lvcore.core.space import CHAPTER_ANGLES, CHAPTER_EDP
+    from lvcore.emulator.subject import SubjectDesign, build_subject_emulator
+    from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
+
+    if args.resolution not in RESOLUTION_PRESET_NAMES:
+        raise EmulatorError(f"--resolution must be one of {', '.join(RESOLUTION_PRESET_NAMES)}, got {args.resolution!r}")
+    if args.workers < 1:
+        raise EmulatorError(f"--workers must be >= 1, got {args.workers}")
+    for opt, value, lo, hi in (("--edp", args.edp, 2.0, 40.0), ("--alpha-endo", args.alpha_endo, -180.0, 180.0),
+                               ("--alpha-epi", args.alpha_epi, -180.0, 180.0)):
+        if value is not None and not (np.isfinite(value) and lo <= value <= hi):
+            raise EmulatorError(f"{opt} must be in [{lo:g}, {hi:g}], got {value}")
+    design = SubjectDesign(args.n_train, args.n_valid, args.n_test, args.design)
+    emu = build_subject_emulator(
+        args.geometry, args.out, inputs=args.inputs, design=design, resolution=args.resolution, base=args.base,
+        edp=CHAPTER_EDP if args.edp is None else args.edp,
+        alpha_endo=CHAPTER_ANGLES[0] if args.alpha_endo is None else args.alpha_endo,
+        alpha_epi=CHAPTER_ANGLES[1] if args.alpha_epi is None else args.alpha_epi,
+        bounds=parse_bounds(args.bound), units=args.units, workers=args.workers, seed=args.seed,
+        config=training_config(args, seed=args.seed), name=args.name, log=print)
     print(format_info(emu.metadata))
     return 0
 
@@ -128,6 +210,12 @@ def format_info(meta: dict) -> str:
     lines.append(f"  simulations: mesh {', '.join(map(str, source.get('resolution') or ['?']))}, base {base}, "
                  f"simulator {', '.join(map(str, source.get('simulator_versions') or ['?']))}")
     arch = meta.get("architecture", {})
+    sub = meta.get("subject")
+    if sub:
+        runs, secs = sub.get("runs", {}), sub.get("seconds", {})
+        lines.append(f"  SUBJECT-SPECIFIC: geometry fixed ({sub.get('geometry_kind')} from {sub.get('geometry_source')}); "
+                     f"{runs.get('converged')} of {runs.get('total')} FE runs converged; wall {secs.get('total')} s "
+                     f"(simulations {secs.get('simulations')} s, training {secs.get('training')} s)")
     lines.append(f"  network: {meta.get('input_names') and len(meta['input_names'])} -> {arch.get('hidden')} (tanh) -> 25")
     tr = meta.get("training", {})
     if tr:

@@ -27,7 +27,7 @@ An emulator directory holds
 
 :func:`load_emulator` takes a directory or a bare name: ``"chapter"`` is
 looked up in ``$LVCORE_EMULATORS`` (if set) and then in the bundled
-``lvcore/assets/emulators/<name>/`` (package data, see :mod:`lvcore.resources`).
+``assets/emulators/<name>/`` (package data, see :mod:`lvcore.resources`).
 """
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ from lvcore.resources import asset_path
 
 FORMAT = "lvcore-emulator"
 FORMAT_VERSION = 1
-#: Bundled emulators live here (package data, ``lvcore/assets/emulators``).
+#: Bundled emulators live here (package data, ``assets/emulators``).
 ASSETS_DIR = asset_path("emulators")
 #: Demonstration emulators built below the spec, shipped as package data; never loaded by name.
 BELOW_SPEC_DIR = asset_path("emulators-below-spec")
@@ -143,8 +143,14 @@ def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict
         "lvcore_version": meta.get("lvcore_version", lvcore.__version__),
         "created_at": meta.get("created_at", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())),
     })
+    written = dict(meta)
+    sub = meta.get("subject")
+    if isinstance(sub, dict) and isinstance(sub.get("geometry"), dict) and sub["geometry"].get("kind") == "mesh":
+        path = Path(str(sub["geometry"].get("path", "")))
+        if path.is_absolute() and path.parent.resolve() == directory.resolve():  # keep the directory relocatable
+            written["subject"] = {**sub, "geometry": {**sub["geometry"], "path": path.name}}
     np.savez(directory / "network.npz", **to_arrays(emulator.network))
-    (directory / "metadata.json").write_text(json.dumps(meta, indent=2, sort_keys=True))
+    (directory / "metadata.json").write_text(json.dumps(written, indent=2, sort_keys=True))
     emulator.metadata.update(meta)  # the in-memory emulator now shows what was saved
     if validation is not None:
         np.savez(directory / "validation.npz", **{k: np.asarray(v, dtype=float) for k, v in validation.items()})
@@ -166,7 +172,6 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
     from lvcore import limits
 
     meta = limits.read_json_file(meta_path, limits.MAX_EMULATOR_BYTES, "emulator metadata", EmulatorError)
-    limits.check_regular_file(net_path, limits.MAX_EMULATOR_BYTES, "emulator network", EmulatorError)
     if not isinstance(meta, dict):
         raise EmulatorError(f"'{meta_path}' must hold a JSON object")
     missing = [k for k in REQUIRED_KEYS if k not in meta]
@@ -174,12 +179,16 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
         raise EmulatorError(f"'{meta_path}' lacks key(s) {missing}")
     if meta["format"] != FORMAT or int(meta["format_version"]) > FORMAT_VERSION:
         raise EmulatorError(f"'{meta_path}': unsupported format {meta['format']!r} v{meta['format_version']}")
+    from lvcore.headers import load_npz
+
+    # every array header is checked against the limits before numpy allocates (lvcore.headers)
+    arrays = load_npz(net_path, limits.MAX_EMULATOR_BYTES, "emulator network", EmulatorError)
     try:
-        with np.load(net_path, allow_pickle=False) as npz:
-            network = from_arrays({k: npz[k] for k in npz.files})
-    except (ValueError, OSError) as err:
-        raise EmulatorError(f"'{net_path}' is not a valid array archive: {err}") from err
+        network = from_arrays(arrays)
+    except (ValueError, KeyError, TypeError) as err:
+        raise EmulatorError(f"'{net_path}' is not an emulator network: {str(err)[:200]}") from None
     names = tuple(meta["input_names"])
+    _resolve_subject_geometry(meta, directory)
     try:
         return Emulator(
             name=str(meta["name"]),
@@ -199,6 +208,25 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
         )
     except (KeyError, TypeError, ValueError) as err:
         raise EmulatorError(f"'{meta_path}' is malformed: {err!r}") from err
+
+
+def _resolve_subject_geometry(meta: dict, directory: Path) -> None:
+    """A subject emulator's geometry file, named relative to its directory, as an absolute path (in memory)."""
+    sub = meta.get("subject")
+    if not isinstance(sub, dict) or not isinstance(sub.get("geometry"), dict):
+        return
+    geo = dict(sub["geometry"])
+    if geo.get("kind") == "mesh":
+        path = Path(str(geo.get("path", "")))
+        if not path.is_absolute():
+            path = (directory / path).resolve()
+            if directory.resolve() not in path.parents:
+                raise EmulatorError(f"'{directory}/metadata.json': the subject geometry must lie in the emulator "
+                                    f"directory, got {geo.get('path')!r}")
+        if not path.is_file():
+            raise EmulatorError(f"subject emulator '{directory}': its geometry file '{path}' is missing")
+        geo["path"] = str(path)
+    meta["subject"] = {**sub, "geometry": geo}
 
 
 def save_training_data(out_dir: str | Path, sets: dict) -> Path:
@@ -236,8 +264,10 @@ def load_validation(name_or_path: str | Path) -> dict | None:
     path = resolve_emulator_dir(name_or_path) / "validation.npz"
     if not path.is_file():
         return None
-    with np.load(path, allow_pickle=False) as npz:
-        return {k: npz[k] for k in npz.files}
+    from lvcore import limits
+    from lvcore.headers import load_npz
+
+    return load_npz(path, limits.MAX_EMULATOR_BYTES, "emulator validation arrays", EmulatorError)
 
 
 def _floats(a) -> list[float]:

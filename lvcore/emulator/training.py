@@ -491,10 +491,16 @@ class StoreData:
     n_failed: int
     n_pending: int
     info: dict
+    n_inconsistent: int = 0
+    problems: tuple = ()
 
 
 def load_store_data(stores: Sequence[str | Path], inputs: Sequence[str] | None = None) -> StoreData:
     """Read the converged rows of campaign stores (same space) for training.
+
+    Rows that fail the store check (:meth:`~lvcore.campaigns.store.StoreContents.check`:
+    a tampered state, record count, NaN outputs or inputs outside the space)
+    are excluded and counted in ``n_inconsistent``.
 
     Parameters
     ----------
@@ -533,6 +539,9 @@ def load_store_data(stores: Sequence[str | Path], inputs: Sequence[str] | None =
         lower=space.lower[cols], upper=space.upper[cols], fixed=fixed,
         n_failed=int(sum(c.failed.sum() for c in contents)),
         n_pending=int(sum(c.pending.sum() for c in contents)),
+        # the store check (lvcore campaign status --check): inconsistent rows are never training data
+        n_inconsistent=int(sum(c.inconsistent.sum() for c in contents)),
+        problems=tuple(f"{p}: {msg}" for p, c in zip(stores, contents) for msg in c.check(limit=10)),
         info={"stores": [str(p) for p in stores], "space": space.to_dict(),
               "resolution": sorted({str(c.attrs.get("resolution")) for c in contents}),
               "forward": sorted({str(c.attrs.get("forward")) for c in contents}),

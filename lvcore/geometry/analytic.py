@@ -90,3 +90,34 @@ DEFAULT_LV = TruncatedEllipsoidLV(
     epi=EllipsoidSurface(rs=33.5, rl=75.0, ry=31.0),
     base_z=10.0,
 )
+
+
+def ellipsoid_volume_below_plane(rx: float, ry: float, rl: float, point, normal) -> float:
+    """Exact volume of the part of an ellipsoid on the back side of a plane (mm³).
+
+    The ellipsoid is ``x²/rx² + y²/ry² + z²/rl² ≤ 1`` (centre at the origin);
+    the part kept is ``{x : (x − point)·normal ≤ 0}``. The map ``x = D u`` with
+    ``D = diag(rx, ry, rl)`` takes the ellipsoid to the unit ball and planes
+    to planes: the kept part becomes ``u·m ≤ δ`` with ``m = D n / |D n|`` and
+    ``δ = point·n / |D n|``, whose volume is ``4π/3 − π (1 − δ)² (2 + δ) / 3``
+    (the ball minus a spherical cap of height ``1 − δ``), times ``rx ry rl``.
+
+    Parameters
+    ----------
+    rx, ry, rl : float
+        Semi-axes (mm).
+    point : (3,) array
+        A point of the plane, in the ellipsoid's frame (mm).
+    normal : (3,) array
+        The plane's normal (need not be unit); the kept part is behind it.
+
+    Returns
+    -------
+    float
+        Volume (mm³).
+    """
+    n = np.asarray(normal, float)
+    dn = np.array([rx, ry, rl], float) * n
+    delta = float(np.asarray(point, float) @ n) / float(np.linalg.norm(dn))
+    delta = min(1.0, max(-1.0, delta))
+    return float(rx * ry * rl * (4.0 * np.pi / 3.0 - np.pi * (1.0 - delta) ** 2 * (2.0 + delta) / 3.0))

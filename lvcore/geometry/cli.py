@@ -4,6 +4,9 @@
 * ``lvcore geometry fit --endo ENDO.stl --epi EPI.stl [--units mm] --out MESH.vtu [--json]``
 * ``lvcore geometry fit --mesh LV.inp|LV.msh|LV.vtu [--units mm] --out MESH.vtu [--json]``: a volumetric
   tet/hex mesh, split into endo/epi/base automatically (:mod:`lvcore.geometry.volume_mesh`)
+* ``--base-cut MM`` (any input): cut the LV MM below the base ring's centre (contours: drop the slices
+  above); default: :mod:`lvcore.geometry.base_plane`'s rule. Every fit prints the base plane, the cut and
+  the cavity volume removed (``"base"`` in ``--json``)
 * ``lvcore geometry info MESH.vtu [--json]``: cavity volume, wall volume, length
 * ``lvcore geometry compare A.vtu B.vtu [--json]``: node MSE (cm²), max node distance
 * ``lvcore geometry pca SCORES... --out MESH.vtu [--model M.json]``: reconstruct from PC scores
@@ -27,18 +30,22 @@ def _fit(args) -> int:
                             ("--mesh", getattr(args, "mesh", None))) if v]
     if len(given) > 1:
         raise GeometryError(f"give one input to fit, not {' and '.join(given)}")
+    if args.base_cut is not None and not (np.isfinite(args.base_cut) and args.base_cut >= 0):
+        raise GeometryError(f"--base-cut {args.base_cut}: give a distance >= 0 mm below the base ring")
     mesh_fit = None
     if getattr(args, "mesh", None):
         from lvcore.geometry.volume_mesh import fit_volume_mesh
 
-        mesh_fit = fit_volume_mesh(args.mesh, units=args.units, base_z=args.base_z, septum=args.septum)
+        mesh_fit = fit_volume_mesh(args.mesh, units=args.units, base_z=args.base_z, septum=args.septum,
+                                   base_cut_mm=args.base_cut)
         res = mesh_fit.fit
     elif args.contours:
-        res = fit_contours(args.contours, base_z=args.base_z)
+        res = fit_contours(args.contours, base_z=args.base_z, base_cut_mm=args.base_cut)
     elif args.endo and args.epi:
         septum = None if args.septum is None else [v * {"mm": 1.0, "cm": 10.0, "m": 1000.0}[args.units]
                                                     for v in args.septum]
-        res = fit_surfaces(args.endo, args.epi, units=args.units, base_z=args.base_z, septum=septum)
+        res = fit_surfaces(args.endo, args.epi, units=args.units, base_z=args.base_z, septum=septum,
+                           base_cut_mm=args.base_cut)
     else:
         raise GeometryError("nothing to fit: give CONTOURS.json, both --endo and --epi surface files, "
                             "or a volumetric mesh with --mesh")
@@ -55,11 +62,14 @@ def _fit(args) -> int:
               f"(endo {res.residual_endo_mean_mm:.3f}, epi {res.residual_epi_mean_mm:.3f}; {res.n_points} points, "
               f"{res.n_above_base} above the base plane ignored)")
         print(f"  cavity volume {res.cavity_volume_ml:.1f} mL, base-apex length {res.length_mm:.1f} mm")
+        if res.base is not None:
+            print(f"  base: {res.base.describe()}")
         if mesh_fit:
             b = mesh_fit.boundary
             print(f"  volume mesh: {b.n_tets} tetrahedra, {b.n_hexes} hexahedra; boundary triangles endo "
                   f"{b.n_faces['endo']}, epi {b.n_faces['epi']}, base {b.n_faces['base']}; the mesh's own cavity "
-                  f"{b.cavity_volume_ml:.2f} mL ({summary['cavity_volume_change_pct']:+.2f} % after fitting)")
+                  f"{b.cavity_volume_ml:.2f} mL, {mesh_fit.mesh_cavity_ml:.2f} mL below the cut "
+                  f"({summary['cavity_volume_change_pct']:+.2f} % after fitting)")
         for w in summary["warnings"]:
             print(f"  warning: {w}")
         if out:
@@ -134,6 +144,12 @@ def register(subparsers) -> None:
     f.add_argument("--septum", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
                    help="a point on the septum (file coordinates and --units) fixing phi = 0 for --mesh or --endo/--epi "
                         "(default: the file's x axis projected onto the base plane)")
+    f.add_argument("--base-cut", type=float, default=None, metavar="MM",
+                   help="cut the LV this far (mm) below the centre of the base ring, orthogonal to the long axis "
+                        "(contours: below the basal slice). Default: a flat base is kept as it is; an oblique, "
+                        "uneven or notched base is cut below its lowest point; where the endocardium and epicardium "
+                        "meet at the base, where the wall first reaches 80%% of its typical thickness. The fit "
+                        "reports the base plane, the cut and the cavity volume removed")
     f.add_argument("--base-z", type=float, default=0.0, help="height of the base plane in the output (mm, default 0)")
     f.add_argument("--out", help="write the fitted mesh here (.vtu)")
     f.add_argument("--json", action="store_true", help="print the fit summary as JSON")

@@ -302,7 +302,7 @@ def with_motion_error(operator: OperatorStyle, shift_mm: float = 3.5) -> Operato
 
 
 # ----------------------------------------------------------------------------- bundled assets
-#: The bundled SYNTHETIC cohort (package data, ``lvcore/assets/cohort``; written by ``scripts/build_cohort.py``).
+#: The bundled SYNTHETIC cohort (package data, ``assets/cohort``; written by ``scripts/build_cohort.py``).
 COHORT_DIR = asset_path("cohort")
 ROLE_TRAIN, ROLE_OPERATOR, ROLE_VOLUNTEER = "train", "operator-study", "volunteer"
 
@@ -347,8 +347,10 @@ def _load_npz_json(stem: Path):
     if not jpath.exists() or not npath.exists():
         raise GeometryError(f"'{npath}' / '{jpath.name}' not found; build them with `python scripts/build_cohort.py`")
     meta = json.loads(jpath.read_text())
-    with np.load(npath, allow_pickle=False) as z:
-        arrays = {k: z[k] for k in z.files}
+    from lvcore import limits
+    from lvcore.headers import load_npz
+
+    arrays = load_npz(npath, limits.MAX_SHAPE_MODEL_BYTES, "cohort arrays", GeometryError)
     return meta, arrays
 
 

@@ -425,6 +425,7 @@ def validate_contours(stack: ContourStack, declared_units: str = "mm") -> Contou
                             "far larger than an LV; check the units (mm expected) and that the points are contours")
     # per-slice checks
     swapped = []
+    outside = {}  # slice -> fraction of its endocardium outside the epicardium (checked once the base is known)
     for i, s in enumerate(stack.slices):
         for name, pts in (("epi", s.epi), ("endo", s.endo)):
             if pts is None:
@@ -452,8 +453,7 @@ def validate_contours(stack: ContourStack, declared_units: str = "mm") -> Contou
                 continue
             out = ~_inside(xy(s.epi), xy(s.endo))
             if out.mean() > 0.05:
-                raise GeometryError(f"{where}: slice {i}: {100 * out.mean():.0f}% of the endocardial contour lies outside "
-                                    "the epicardial contour; fix the contours of that slice")
+                outside[i] = float(out.mean())
     if swapped:
         if len(swapped) >= n // 2:
             raise GeometryError(f"{where}: endocardial and epicardial contours look swapped (endo encloses the larger "
@@ -476,6 +476,10 @@ def validate_contours(stack: ContourStack, declared_units: str = "mm") -> Contou
             warnings.warn(f"{where}: slice 'position' values span {np.ptp(given):.1f} mm but the contours' planes span "
                           f"{np.ptp(pos):.1f} mm; the positions are ignored (the points are used)", GeometryWarning,
                           stacklevel=3)
+    for i, frac in outside.items():
+        if i != order[0]:  # the basal slice may include the outflow tract: base_of_stack() judges it
+            raise GeometryError(f"{where}: slice {i}: {100 * frac:.0f}% of the endocardial contour lies outside "
+                                "the epicardial contour; fix the contours of that slice")
     slices = tuple(stack.slices[i] for i in order)
     if slices[0].endo is None:
         raise GeometryError(f"{where}: the basal slice has no endocardial contour; the base must show the cavity")
@@ -494,3 +498,166 @@ def slice_normal(stack: ContourStack) -> np.ndarray:
     if (c0 - c1) @ n < 0:
         n = -n
     return n
+
+
+# ----------------------------------------------------------------------------- the base of a stack
+#: A basal slice whose wall is thinner than this fraction of the typical wall over part of its circumference ...
+OUTFLOW_THIN_FRACTION = 0.5
+#: ... over at least this fraction of its endocardial contour includes the outflow tract.
+OUTFLOW_MIN_ARC = 0.05
+#: At most this many basal slices are dropped by default.
+MAX_DROPPED_SLICES = 2
+
+
+@dataclass(frozen=True)
+class ContourBase:
+    """The base of a contour stack and where it was cut (mm, mL; scanner coordinates).
+
+    Attributes
+    ----------
+    plane_origin, plane_normal : (3,) arrays
+        Least-squares plane of the most basal slice as given (normal apex -> base).
+    unevenness_mm : float
+        Peak-to-peak distance of that slice's points from its plane.
+    wall_at_ring_mm, wall_typical_mm : float
+        Thinnest wall of the most basal slice as given, and the median wall of the middle slices.
+    walls_meet : bool
+        The most basal slice as given has no wall over part of its circumference.
+    dropped : tuple of str
+        One line per basal slice dropped, with the reason.
+    cut_depth_mm : float
+        Distance from the given basal slice to the basal slice kept.
+    rule : str
+        "basal slice", "outflow tract" or "base_cut_mm".
+    cavity_removed_ml : float
+        Cavity between the dropped slices and the new basal slice (frustum rule on the endocardial areas).
+    messages : tuple of str
+    """
+
+    plane_origin: np.ndarray
+    plane_normal: np.ndarray
+    unevenness_mm: float
+    wall_at_ring_mm: float
+    wall_typical_mm: float
+    walls_meet: bool
+    dropped: tuple
+    cut_depth_mm: float
+    rule: str
+    cavity_removed_ml: float
+    messages: tuple = ()
+
+    def summary(self) -> dict:
+        r = lambda v, nd=3: [round(float(x), nd) for x in v]  # noqa: E731
+        return {"base_plane": {"origin": r(self.plane_origin), "normal": r(self.plane_normal, 4),
+                               "unevenness_mm": round(self.unevenness_mm, 3)},
+                "wall_at_ring_mm": round(self.wall_at_ring_mm, 3), "wall_typical_mm": round(self.wall_typical_mm, 3),
+                "walls_meet": bool(self.walls_meet),
+                "cut": {"depth_mm": round(self.cut_depth_mm, 3), "rule": self.rule, "dropped_slices": list(self.dropped)},
+                "cavity_removed_ml": round(self.cavity_removed_ml, 3), "messages": list(self.messages)}
+
+    def describe(self) -> str:
+        return (f"basal slice plane through ({', '.join(f'{v:.1f}' for v in self.plane_origin)}) normal "
+                f"({', '.join(f'{v:.3f}' for v in self.plane_normal)}); cut {self.cut_depth_mm:.1f} mm below it "
+                f"({self.rule}; {len(self.dropped)} slice(s) dropped); cavity removed {self.cavity_removed_ml:.2f} mL")
+
+
+def _slice_wall(s: ContourSlice, u, v) -> np.ndarray:
+    """Wall thickness (mm) at each endocardial point of a slice: distance to the epicardial polyline,
+    0 where the point lies outside the epicardium."""
+    e = np.stack([s.endo @ u, s.endo @ v], axis=1)
+    p = np.stack([s.epi @ u, s.epi @ v], axis=1)
+    a, b = p, np.roll(p, -1, axis=0)
+    d = b - a
+    t = np.clip(np.einsum("mkd,kd->mk", e[:, None, :] - a[None], d) / np.maximum((d * d).sum(1), 1e-300), 0, 1)
+    dist = np.linalg.norm(e[:, None, :] - (a[None] + t[..., None] * d[None]), axis=2).min(axis=1)
+    return np.where(_inside(p, e), dist, 0.0)
+
+
+def base_of_stack(stack: ContourStack, base_cut_mm: float | None = None) -> tuple[ContourStack, ContourBase]:
+    """Find the base of a validated stack; drop basal slices that include the outflow tract.
+
+    A basal slice whose wall (distance from the endocardial to the epicardial
+    contour) is thinner than :data:`OUTFLOW_THIN_FRACTION` of the typical
+    wall (median over the middle third of the slices) over at least
+    :data:`OUTFLOW_MIN_ARC` of its circumference cuts through the outflow
+    tract: it is dropped and the next slice becomes the base (at most
+    :data:`MAX_DROPPED_SLICES`). ``base_cut_mm`` instead drops every slice
+    less than that distance (mm, less 0.5 mm) below the given basal slice.
+
+    Returns
+    -------
+    (ContourStack, ContourBase)
+        The stack from the new basal slice down, and the report.
+
+    Raises
+    ------
+    GeometryError
+        Too few slices left, or a ``base_cut_mm`` that keeps a slice through the outflow tract.
+    """
+    where = f"contours {stack.source or stack.label}"
+    if base_cut_mm is not None and not (np.isfinite(base_cut_mm) and base_cut_mm >= 0):
+        raise GeometryError(f"base_cut_mm (--base-cut) = {base_cut_mm}: give a distance >= 0 mm below the basal slice")
+    n = slice_normal(stack)
+    u, v = in_plane_basis(n)
+    c0, n0, _ = plane_fit(np.concatenate([stack.slices[0].epi, stack.slices[0].endo]))
+    n0 = n0 if n0 @ n > 0 else -n0
+    uneven = float(np.ptp((np.concatenate([stack.slices[0].epi, stack.slices[0].endo]) - c0) @ n0))
+    walls = [(_slice_wall(s, u, v) if s.endo is not None else None) for s in stack.slices]
+    k = len(stack.slices)
+    middle = [w for w in walls[k // 3: max(k // 3 + 1, 2 * k // 3)] if w is not None] or [w for w in walls if w is not None]
+    t_typ = float(np.median(np.concatenate(middle)))
+    depth = [float((s.epi.mean(axis=0) - stack.slices[0].epi.mean(axis=0)) @ -n) for s in stack.slices]
+
+    def outflow(i) -> str:
+        w = walls[i]
+        if w is None:
+            return ""
+        thin = w < OUTFLOW_THIN_FRACTION * t_typ
+        if thin.mean() < OUTFLOW_MIN_ARC:
+            return ""
+        return (f"slice {i} (at the base{'' if i == 0 else f', {depth[i]:.1f} mm down'}) has no wall over "
+                f"{360 * thin.mean():.0f}° of its circumference (wall thickness {w.min():.1f} mm there, typical "
+                f"{t_typ:.1f} mm): it includes the outflow tract")
+
+    reasons = []
+    if base_cut_mm is None:
+        first = 0
+        while first < min(MAX_DROPPED_SLICES, k) and outflow(first):
+            reasons.append(outflow(first) + "; dropped")
+            first += 1
+        if first == MAX_DROPPED_SLICES and first < k and outflow(first):
+            raise GeometryError(f"{where}: the {first + 1} most basal slices all include the outflow tract "
+                                f"({outflow(first)}); remove the slices above the mitral valve plane, or give the cut "
+                                "with --base-cut MM (base_cut_mm=)")
+        rule = "outflow tract" if first else "basal slice"
+    else:
+        first = next((i for i in range(k) if depth[i] >= base_cut_mm - 0.5), k)
+        if first < k and outflow(first):
+            raise GeometryError(f"{where}: {outflow(first)}; --base-cut {base_cut_mm:g} keeps it as the basal slice: "
+                                f"use at least {depth[first + 1] if first + 1 < k else depth[first]:.1f} mm or leave "
+                                "--base-cut out")
+        reasons = [f"slice {i} is {depth[i]:.1f} mm below the basal slice, less than --base-cut {base_cut_mm:g}; "
+                   "dropped" for i in range(first)]
+        rule = "base_cut_mm" if first else "basal slice"
+    if k - first < MIN_SLICES:
+        raise GeometryError(f"{where}: dropping {first} basal slice(s) leaves {k - first}; at least {MIN_SLICES} are "
+                            f"needed ({'; '.join(reasons)})")
+    removed = 0.0
+    area = [abs(polygon_area(np.stack([s.endo @ u, s.endo @ v], 1))) if s.endo is not None else 0.0
+            for s in stack.slices]
+    for i in range(first):
+        h = depth[i + 1] - depth[i]
+        removed += h / 3.0 * (area[i] + area[i + 1] + np.sqrt(area[i] * area[i + 1]))
+    msgs = list(reasons)
+    if first:
+        msgs.append(f"the base plane moved to slice {first}, {depth[first]:.1f} mm below the given basal slice; about "
+                    f"{removed / 1000:.1f} mL of cavity removed (frustum rule)")
+    new = ContourStack(slices=stack.slices[first:], long_axis=stack.long_axis, patient=stack.patient,
+                       operator=stack.operator, synthetic=stack.synthetic, septum=stack.septum, source=stack.source,
+                       extra=stack.extra)
+    w0 = walls[0]
+    return new, ContourBase(plane_origin=c0, plane_normal=n0, unevenness_mm=uneven,
+                            wall_at_ring_mm=float(w0.min()) if w0 is not None else float("nan"),
+                            wall_typical_mm=t_typ, walls_meet=bool(outflow(0)), dropped=tuple(reasons),
+                            cut_depth_mm=float(depth[first]), rule=rule, cavity_removed_ml=removed / 1000.0,
+                            messages=tuple(msgs))

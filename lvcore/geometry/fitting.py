@@ -93,6 +93,10 @@ class FitResult:
     label : str
         What was fitted (patient / operator; SYNTHETIC if generated).
     warnings : tuple of str
+    base : BaseCut or None
+        Where the base was found and cut (:mod:`lvcore.geometry.base_plane`; surfaces and volume meshes),
+        or a :class:`~lvcore.geometry.contours.ContourBase` (contour stacks): the base plane, the cut and
+        the cavity volume it removed.
     """
 
     nodes: np.ndarray
@@ -107,9 +111,10 @@ class FitResult:
     frame: LVFrame
     label: str = ""
     warnings: tuple = field(default=())
+    base: object = None
 
     def summary(self) -> dict:
-        """Plain-data summary (JSON-ready)."""
+        """Plain-data summary (JSON-ready); ``"base"`` holds the base plane, the cut and the volume removed."""
         return {
             "label": self.label,
             "residual_mean_mm": self.residual_mean_mm,
@@ -121,6 +126,7 @@ class FitResult:
             "cavity_volume_ml": self.cavity_volume_ml,
             "length_mm": self.length_mm,
             "warnings": list(self.warnings),
+            "base": None if self.base is None else self.base.summary(),
         }
 
 
@@ -300,7 +306,39 @@ def surface_distances(nodes, points, which: str, template: LVTemplate = DEFAULT_
     return np.linalg.norm(points - closest, axis=1)
 
 
-def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label: str, warn: list) -> FitResult:
+def fitted_wall_thickness(nodes, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
+    """Distance (mm) from each endocardial node to the epicardial node of the same (φ, s): (nl - 1, nc) rows."""
+    i, j = np.meshgrid(np.arange(template.nc), np.arange(template.nl - 1), indexing="xy")
+    a = nodes[template.node_index(i, j, 0)]
+    b = nodes[template.node_index(i, j, template.nt - 1)]
+    return np.linalg.norm(b - a, axis=-1)
+
+
+def _inverted_message(nodes, template, label: str, base) -> str:
+    """The last guard's message: where the inverted elements are and the thinnest fitted wall."""
+    from lvcore.geometry.io import element_jacobian_determinants
+
+    bad = np.nonzero(np.any(element_jacobian_determinants(nodes, template) <= 0, axis=1))[0]
+    rows = template.element_grid[bad, 1]
+    where = ", ".join(sorted({("base" if r < template.n_long / 3 else "mid-ventricle" if r < 2 * template.n_long / 3
+                               else "apex") for r in rows}))
+    w = fitted_wall_thickness(nodes, template)
+    i, j = np.meshgrid(np.arange(template.nc), np.arange(template.nl - 1), indexing="xy")
+    r_endo = np.hypot(*nodes[template.node_index(i, j, 0)][..., :2].transpose(2, 0, 1))
+    r_epi = np.hypot(*nodes[template.node_index(i, j, template.nt - 1)][..., :2].transpose(2, 0, 1))
+    n_out = int(np.sum(r_endo[1:] > r_epi[1:]))  # below the base row: endocardium further from the axis
+    msg = (f"{label}: the fitted mesh has {bad.size} inverted elements (near the {where}; thinnest fitted wall "
+           f"{w.min():.1f} mm" + (f"; the fitted endocardium lies outside the epicardium at {n_out} of "
+                                  f"{r_endo[1:].size} node pairs" if n_out else "") + ")")
+    if base is not None and getattr(base, "walls_meet", False):
+        return (msg + f"; {base.messages[0] if base.messages else 'the walls meet at the base'}: cut lower with "
+                "--base-cut MM (base_cut_mm=)")
+    return (msg + "; the segmentation is too irregular for the template there: check that the endocardium lies "
+            "inside the epicardium with a wall of finite thickness all round")
+
+
+def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label: str, warn: list,
+            base=None) -> FitResult:
     from lvcore.geometry.measures import cavity_volume
 
     tol = 0.5
@@ -313,9 +351,8 @@ def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label
     vol = float(cavity_volume(nodes, template, frame.base_z)) / 1000.0
     from lvcore.geometry.io import element_jacobian_determinants
 
-    if np.any(element_jacobian_determinants(nodes, template) <= 0):
-        raise GeometryError(f"{label}: the fitted mesh has inverted elements; the segmentation is too irregular "
-                            "(check for swapped or crossing contours)")
+    if np.any(element_jacobian_determinants(nodes, template) <= 0):  # the last guard
+        raise GeometryError(_inverted_message(nodes, template, label, base))
     return FitResult(
         nodes=nodes,
         residual_mean_mm=float(d.mean()),
@@ -329,6 +366,7 @@ def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label
         frame=frame,
         label=label,
         warnings=tuple(warn),
+        base=base,
     )
 
 
@@ -375,22 +413,38 @@ def frame_from_contours(stack: ContourStack, base_z: float = DEFAULT_BASE_Z) -> 
 
 
 def fit_contours(stack, template: LVTemplate = DEFAULT_TEMPLATE, base_z: float = DEFAULT_BASE_Z,
-                 degree: int = DEFAULT_DEGREE, smoothing: float = DEFAULT_SMOOTHING) -> FitResult:
+                 degree: int = DEFAULT_DEGREE, smoothing: float = DEFAULT_SMOOTHING,
+                 base_cut_mm: float | None = None) -> FitResult:
     """Fit the template to a contour stack (a :class:`ContourStack` or a JSON path).
+
+    Basal slices that include the outflow tract (no wall over part of their
+    circumference) are dropped first, or every slice less than
+    ``base_cut_mm`` below the basal slice
+    (:func:`~lvcore.geometry.contours.base_of_stack`); points more than
+    0.5 mm above the new basal slice are then not fitted.
 
     Returns
     -------
     FitResult
-        Nodes in the template frame (base plane ``z = base_z``, apex on −z, mm)
-        and the fit residual.
+        Nodes in the template frame (base plane ``z = base_z``, apex on −z, mm),
+        the fit residual and ``base`` (a :class:`~lvcore.geometry.contours.ContourBase`).
     """
+    from lvcore.geometry.contours import base_of_stack
+
     if not isinstance(stack, ContourStack):
         stack = read_contours(stack)
+    full = stack
+    stack, base = base_of_stack(stack, base_cut_mm)
     frame, warn = frame_from_contours(stack, base_z)
-    endo_t = frame.to_template(stack.endo_points())
-    epi_t = frame.to_template(stack.epi_points())
-    nodes, _, _, length = fit_point_clouds(endo_t, epi_t, base_z, template, degree, smoothing)
-    res = _finish(nodes, endo_t, epi_t, frame, length, template, stack.label, warn)
+    warn = list(base.messages) + warn
+    endo_t = frame.to_template(full.endo_points())
+    epi_t = frame.to_template(full.epi_points())
+    if len(stack.slices) < len(full.slices):
+        ke, kp = endo_t[:, 2] <= base_z + 0.5, epi_t[:, 2] <= base_z + 0.5
+    else:  # nothing dropped: every point is fitted, as always
+        ke, kp = np.ones(len(endo_t), bool), np.ones(len(epi_t), bool)
+    nodes, _, _, length = fit_point_clouds(endo_t[ke], epi_t[kp], base_z, template, degree, smoothing)
+    res = _finish(nodes, endo_t, epi_t, frame, length, template, stack.label, warn, base=base)
     for w in warn:
         warnings.warn(f"{stack.label}: {w}", GeometryWarning, stacklevel=2)
     return res
@@ -398,38 +452,46 @@ def fit_contours(stack, template: LVTemplate = DEFAULT_TEMPLATE, base_z: float =
 
 def fit_surfaces(endo, epi, template: LVTemplate = DEFAULT_TEMPLATE, base_z: float = DEFAULT_BASE_Z,
                  units: str = "mm", septum=None, degree: int = DEFAULT_DEGREE,
-                 smoothing: float = DEFAULT_SMOOTHING) -> FitResult:
+                 smoothing: float = DEFAULT_SMOOTHING, base_cut_mm: float | None = None) -> FitResult:
     """Fit the template to endocardial and epicardial surface meshes.
+
+    The base is found from the data (:func:`lvcore.geometry.base_plane.analyse_base`):
+    the boundary rings of both surfaces, their least-squares plane, the long
+    axis from the rings to the apex, and a cut plane orthogonal to the axis
+    below every ring point and, where the walls meet at the base, where the
+    wall first reaches a usable thickness. The template's base plane
+    ``z = base_z`` is that cut; input points more than
+    :data:`~lvcore.geometry.base_plane.RING_TOL_MM` above it are not fitted.
 
     Parameters
     ----------
     endo, epi : path, pyvista mesh or :class:`~lvcore.geometry.surfaces.LVSurface`
-        Surfaces open at the base (the endocardial boundary loop defines the base).
+        Surfaces open at the base, in any position and orientation (scanner coordinates).
     units : {"mm", "cm", "m"}
     septum : (3,) array, optional
         A point on the septum (scanner coordinates) fixing phi = 0.
+    base_cut_mm : float, optional
+        Depth of the cut below the endocardial base ring's centre, along the
+        long axis (mm); default the rule above.
+
+    Returns
+    -------
+    FitResult
+        With ``base`` (:class:`~lvcore.geometry.base_plane.BaseCut`): the base
+        plane, the cut and the cavity volume it removed.
     """
+    from lvcore.geometry.base_plane import RING_TOL_MM, analyse_base
     from lvcore.geometry.surfaces import LVSurface, check_surface_pair, read_surface
 
     endo_s = endo if isinstance(endo, LVSurface) else read_surface(endo, "endo", units)
     epi_s = epi if isinstance(epi, LVSurface) else read_surface(epi, "epi", units)
     check_surface_pair(endo_s, epi_s)
-    origin, n, _ = plane_fit(endo_s.boundary)
-    if np.linalg.norm(np.ptp(endo_s.boundary, axis=0)) < 5.0:
-        raise GeometryError(f"the endocardial surface '{endo_s.source}' has only a tiny opening; it must be open at the base")
-    origin = endo_s.boundary.mean(axis=0)
-    epi_pts = epi_s.sample()
-    proj = (epi_pts - origin) @ n
-    if abs(proj.min()) > abs(proj.max()):
-        apex = epi_pts[np.argmin(proj)]
-    else:
-        apex = epi_pts[np.argmax(proj)]
-    ez = origin - apex
-    if np.linalg.norm(ez) < 10.0:
-        raise GeometryError("cannot find the apex: the surfaces extend less than 10 mm from the base opening")
-    frame = _frame(origin, ez, septum, base_z)
+    base = analyse_base(endo_s, epi_s, base_cut_mm)
+    frame = _frame(base.cut_origin, base.axis, septum, base_z)
     endo_t = frame.to_template(endo_s.sample())
-    epi_t = frame.to_template(epi_pts)
-    nodes, _, _, length = fit_point_clouds(endo_t, epi_t, base_z, template, degree, smoothing)
+    epi_t = frame.to_template(epi_s.sample())
+    ke = endo_t[:, 2] <= base_z + RING_TOL_MM
+    kp = epi_t[:, 2] <= base_z + RING_TOL_MM
+    nodes, _, _, length = fit_point_clouds(endo_t[ke], epi_t[kp], base_z, template, degree, smoothing)
     label = f"surfaces {endo_s.source} + {epi_s.source}"
-    return _finish(nodes, endo_t, epi_t, frame, length, template, label, [])
+    return _finish(nodes, endo_t, epi_t, frame, length, template, label, list(base.messages), base=base)

@@ -195,17 +195,33 @@ def read_meshio_file(path, what: str, max_bytes: int, hint: str):
     -------
     meshio.Mesh
     """
-    import meshio
-
     from lvcore import limits
+    from lvcore.headers import check_mesh_header
+    from lvcore.isolation import run_isolated
 
     path = limits.check_regular_file(path, max_bytes, what, GeometryError)
+    check_mesh_header(path, what, GeometryError)
+    # parsed in a memory-limited child: a crafted file cannot crash or exhaust the caller (lvcore.isolation)
+    return run_isolated(_meshio_read, path, what, hint, what=what, path=path, error=GeometryError)
+
+
+def _meshio_read(path: Path, what: str, hint: str):
+    """``meshio.read`` with every failure a :class:`GeometryError` that says what the file should be."""
+    import meshio
+
+    fmt = path.suffix.lower().lstrip(".") or "mesh"
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return meshio.read(path)
-    except (Exception, SystemExit) as err:  # meshio raises many types, and sys.exit()s on some files
-        raise GeometryError(f"cannot read {what} '{path}' ({type(err).__name__}: {err}); {hint}") from None
+    except SystemExit:  # meshio sys.exit()s on some files without a message
+        raise GeometryError(f"cannot read {what} '{path}': it is not a valid .{fmt} file "
+                            f"(the mesh reader gave up on its contents); {hint}") from None
+    except Exception as err:  # noqa: BLE001 - meshio raises many types
+        detail = " ".join(str(err).split())[:200] or "no detail"
+        if isinstance(err, UnicodeDecodeError):
+            detail = f"byte {err.start} is not text; is it a binary file saved with the wrong extension?"
+        raise GeometryError(f"cannot read {what} '{path}': it is not a valid .{fmt} file ({detail}); {hint}") from None
 
 
 def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:

@@ -12,7 +12,7 @@ deviations along a mode. A case ``{"geometry": {"kind": "pca", "scores": [...]}}
 is ``reconstruct(scores)``: missing trailing scores are zero.
 
 Files: ``<stem>.npz`` (plain arrays, no pickle) + ``<stem>.json`` (metadata).
-The bundled model is ``lvcore/assets/shape_model/SYNTHETIC_shape_model.{npz,json}`` (package data),
+The bundled model is ``assets/shape_model/SYNTHETIC_shape_model.{npz,json}`` (package data),
 built by ``scripts/build_cohort.py`` from the SYNTHETIC cohort.
 """
 from __future__ import annotations
@@ -202,12 +202,15 @@ def load_shape_model(path=None) -> ShapeModel:
     from lvcore import limits
 
     meta = limits.read_json_file(jpath, limits.MAX_SHAPE_MODEL_BYTES, "shape model", GeometryError)
-    limits.check_regular_file(npath, limits.MAX_SHAPE_MODEL_BYTES, "shape model", GeometryError)
+    from lvcore.headers import load_npz
+
+    # array headers are checked against the limits before numpy allocates (lvcore.headers)
+    raw = load_npz(npath, limits.MAX_SHAPE_MODEL_BYTES, "shape model", GeometryError,
+                   keys=("mean", "components", "std", "explained_variance_ratio"))
     try:
-        with np.load(npath, allow_pickle=False) as z:
-            arrays = {k: np.asarray(z[k], dtype=float) for k in ("mean", "components", "std", "explained_variance_ratio")}
-    except (ValueError, KeyError, OSError, TypeError, EOFError) as err:
-        raise GeometryError(f"cannot read shape model '{stem}': {err}") from None
+        arrays = {k: np.asarray(v, dtype=float) for k, v in raw.items()}
+    except (ValueError, TypeError) as err:
+        raise GeometryError(f"shape model '{npath}': arrays must be real numbers ({str(err)[:200]})") from None
     if not isinstance(meta, dict) or meta.get("format") != "lvcore.shape_model/1":
         meta = meta if isinstance(meta, dict) else {}
         raise GeometryError(f"'{jpath}' is not an lvcore shape model (format {meta.get('format')!r})")

@@ -53,6 +53,12 @@ class LVSurface:
 def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSurface:
     """Read an LV surface from a file or a PyVista mesh and check it.
 
+    A file is first checked for its size and for the counts its header
+    declares (:func:`lvcore.headers.check_mesh_header`), then parsed by
+    VTK/meshio in a memory-limited child process (:func:`lvcore.isolation.run_isolated`),
+    so a crafted file that crashes the parser raises a :class:`GeometryError`
+    naming it instead of killing the caller (or the app's server).
+
     Parameters
     ----------
     path_or_mesh : str, Path or pyvista.DataSet
@@ -66,6 +72,20 @@ def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSu
     GeometryError
         Missing, empty or unreadable file; no surface cells; wrong units.
     """
+    if isinstance(path_or_mesh, (str, Path)):
+        from lvcore import limits
+        from lvcore.headers import check_mesh_header
+        from lvcore.isolation import run_isolated
+
+        what = f"{name} surface file"
+        path = limits.check_regular_file(path_or_mesh, limits.MAX_SURFACE_BYTES, what, GeometryError)
+        check_mesh_header(path, what, GeometryError)
+        return run_isolated(_read_surface, path, name, units, what=what, path=path, error=GeometryError)
+    return _read_surface(path_or_mesh, name, units)
+
+
+def _read_surface(path_or_mesh, name: str, units: str) -> LVSurface:
+    """:func:`read_surface` in this process (for files: called in the isolated child)."""
     import pyvista as pv
 
     scale = {"mm": 1.0, "cm": 10.0, "m": 1000.0}.get(units)

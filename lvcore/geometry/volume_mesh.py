@@ -19,6 +19,15 @@ Method
    and its faces form the basal cap. Its outward normal is the long axis,
    pointing from the apex to the base; the cap must be roughly orthogonal to
    the mesh's principal (longest) axis, else a warning is given.
+2b. **A base that is not one flat patch** (walls that meet at a shared
+   ring, an oblique-and-uneven or notched cap): when removing the largest
+   planar patch does not leave two pieces, the boundary is split at its
+   sharp edges instead: faces are joined across an edge when their normals
+   differ by less than :data:`FEATURE_DEG`; the two largest smooth pieces
+   are the endocardium (the one enclosing the smaller volume once its
+   openings are closed) and the epicardium, the rest is the base. The base
+   itself is then found and cut by :mod:`lvcore.geometry.base_plane` in the
+   surface fit (step 4).
 3. **Endo vs epi.** Without the cap the boundary falls into exactly two
    connected pieces. Each piece, closed by the base plane, encloses a volume
    ``V = |Σ_f ((c_f − p_0)·n_b)(n_b·N_f) A_f|`` (divergence theorem with the
@@ -51,6 +60,8 @@ PLANE_TOL_FRACTION = 0.01
 N_CANDIDATES = 400
 #: Largest angle (deg) between the base normal and the principal axis before a warning.
 AXIS_WARN_DEG = 30.0
+#: Boundary faces whose normals differ by more than this (deg) are not joined when the base is not flat.
+FEATURE_DEG = 60.0
 
 # Corner faces of a tetrahedron and a hexahedron (VTK/meshio node order).
 _TET_FACES = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
@@ -126,9 +137,17 @@ class VolumeMeshFit:
         s = self.fit.summary()
         s["warnings"] = list(self.boundary.warnings) + list(s.get("warnings", []))
         s["mesh"] = self.boundary.summary()
-        s["cavity_volume_change_pct"] = 100.0 * (self.fit.cavity_volume_ml - self.boundary.cavity_volume_ml) \
-            / self.boundary.cavity_volume_ml
+        s["cavity_volume_change_pct"] = 100.0 * (self.fit.cavity_volume_ml - self.mesh_cavity_ml) / self.mesh_cavity_ml
+        s["mesh_cavity_below_cut_ml"] = self.mesh_cavity_ml
         return s
+
+    @property
+    def mesh_cavity_ml(self) -> float:
+        """The mesh's own cavity (mL) over the part the fit kept: below the base cut when the base was cut."""
+        base = getattr(self.fit, "base", None)
+        if base is not None and base.cut_depth_mm > 0:
+            return float(base.cavity_kept_ml)
+        return float(self.boundary.cavity_volume_ml)
 
 
 # ----------------------------------------------------------------------------- reading
@@ -339,6 +358,26 @@ def extract_lv_boundary(path_or_mesh, units: str = "mm") -> LVBoundary:
     """
     points, tets, hexes, source = read_volume_cells(path_or_mesh, units)
     tri, wall_mm3 = boundary_triangles(points, tets, hexes)
+    try:
+        parts = _split_flat_cap(points, tri, source)
+    except GeometryError as flat_err:
+        try:
+            parts = _split_by_features(points, tri, source)
+        except GeometryError as feat_err:
+            raise GeometryError(f"{flat_err}. Nor does it split at sharp edges into an endocardium and an "
+                                f"epicardium that meet at the base or join a base cap ({feat_err})") from None
+    t_endo, t_epi, n_base, origin, normal, flat, v_endo, warn = parts
+    endo = _surface(points, t_endo, "endo", f"{source} (endocardium)")
+    epi = _surface(points, t_epi, "epi", f"{source} (epicardium)")
+    return LVBoundary(endo=endo, epi=epi, base_origin=origin, base_normal=normal, base_flatness_mm=flat,
+                      n_tets=int(len(tets)), n_hexes=int(len(hexes)),
+                      n_faces={"endo": int(len(t_endo)), "epi": int(len(t_epi)), "base": int(n_base)},
+                      cavity_volume_ml=v_endo / 1000.0, wall_volume_ml=wall_mm3 / 1000.0, source=source,
+                      warnings=tuple(warn))
+
+
+def _split_flat_cap(points, tri, source):
+    """Endo/epi triangles by removing the largest planar patch (module docstring, steps 2-3)."""
     warn = []
     mask, origin, normal, flat = find_base_cap(points, tri)
     cen, _, area = _triangle_geometry(points, tri)
@@ -350,16 +389,15 @@ def extract_lv_boundary(path_or_mesh, units: str = "mm") -> LVBoundary:
         sizes = ", ".join(str(c) for c in sorted(counts, reverse=True)[:5])
         raise GeometryError(
             f"volume mesh '{source}': removing its largest planar patch (the base candidate, {100 * cap_frac:.1f} % of "
-            f"the boundary area) leaves {len(labels)} surface pieces ({sizes} triangles), not 2 (endo and epi). "
-            "The LV must be a single wall truncated by one flat base plane; cut the base flat or give "
-            "--endo/--epi surfaces")
+            f"the boundary area) leaves {len(labels)} surface pieces ({sizes} triangles), not 2 (endo and epi), so "
+            "its base is not one flat cap")
     # outward cap normal: make it point away from the apex (the far side of the mesh)
     used = np.unique(tri)
     h = (points[used] - origin) @ normal
     if h.max() > -h.min():
         # most of the mesh lies on the +normal side: the "cap" normal points into the LV -> not the base
-        raise GeometryError(f"volume mesh '{source}': no flat base found: its largest flat patch is not at an end of the LV (the mesh "
-                            "extends on both sides of it); the base must be one flat cap at the end of the wall")
+        raise GeometryError(f"volume mesh '{source}': no flat base found: its largest flat patch is not at an end of "
+                            "the LV (the mesh extends on both sides of it)")
     # principal axis check
     p = points[used] - points[used].mean(axis=0)
     _, _, vt = np.linalg.svd(p, full_matrices=False)
@@ -373,22 +411,68 @@ def extract_lv_boundary(path_or_mesh, units: str = "mm") -> LVBoundary:
         pieces.append((t, _enclosed_volume(points, t, origin, normal)))
     pieces.sort(key=lambda x: x[1])
     (t_endo, v_endo), (t_epi, _) = pieces
-    endo = _surface(points, t_endo, "endo", f"{source} (endocardium)")
-    epi = _surface(points, t_epi, "epi", f"{source} (epicardium)")
-    if len(endo.boundary) < 3 or len(epi.boundary) < 3:
-        raise GeometryError(f"volume mesh '{source}' has no flat base joining its inner and outer surfaces (one of them "
-                            "is closed); the LV wall must be truncated by a flat base plane")
+    if len(_open_boundary_points(points, t_endo)) < 3 or len(_open_boundary_points(points, t_epi)) < 3:
+        raise GeometryError(f"volume mesh '{source}' has no flat base joining its inner and outer surfaces (one of "
+                            "them is closed)")
     if flat > 0.02 * float(np.ptp(points[used], axis=0).max()):
         warn.append(f"the base cap is not flat (rms {flat:.2f} mm off its plane)")
-    return LVBoundary(endo=endo, epi=epi, base_origin=origin, base_normal=normal, base_flatness_mm=flat,
-                      n_tets=int(len(tets)), n_hexes=int(len(hexes)),
-                      n_faces={"endo": int(len(t_endo)), "epi": int(len(t_epi)), "base": int(mask.sum())},
-                      cavity_volume_ml=v_endo / 1000.0, wall_volume_ml=wall_mm3 / 1000.0, source=source,
-                      warnings=tuple(warn))
+    return t_endo, t_epi, int(mask.sum()), origin, normal, flat, v_endo, warn
+
+
+def _split_by_features(points, tri, source, feature_deg: float = FEATURE_DEG):
+    """Endo/epi triangles of a boundary whose base is not one flat patch (module docstring, step 2b)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from lvcore.geometry.base_plane import closed_volume
+
+    cen, nrm, area = _triangle_geometry(points, tri)
+    ok = area > 1e-12 * area.max()
+    tri, cen, nrm, area = tri[ok], cen[ok], nrm[ok], area[ok]
+    m = len(tri)
+    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(m), 3)
+    _, inv, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    order = np.argsort(inv, kind="stable")
+    shared = cnt[inv[order]] == 2
+    o = order[shared]
+    a, b = owner[o[0::2]], owner[o[1::2]]
+    smooth = np.einsum("ij,ij->i", nrm[a], nrm[b]) > np.cos(np.radians(feature_deg))
+    g = coo_matrix((np.ones(int(smooth.sum())), (a[smooth], b[smooth])), shape=(m, m))
+    n_comp, lab = connected_components(g, directed=False)
+    comp_area = np.bincount(lab, weights=area, minlength=n_comp)
+    big = np.argsort(comp_area)[::-1][:2]
+    if n_comp < 2 or comp_area[big].sum() < 0.75 * area.sum():
+        raise GeometryError(f"its sharp edges (> {feature_deg:g}°) split it into {n_comp} pieces, the two largest only "
+                            f"{100 * comp_area[big].sum() / area.sum():.0f} % of its area")
+    pieces = []
+    for c in big:
+        t = tri[lab == c]
+        if len(_open_boundary_points(points, t)) < 3:
+            raise GeometryError("one of its two largest smooth pieces is closed: the LV is not open at the base")
+        pieces.append((t, closed_volume(points, t)))
+    pieces.sort(key=lambda x: x[1])
+    (t_endo, v_endo), (t_epi, _) = pieces
+    base_mask = ~np.isin(lab, big)
+    ring = _open_boundary_points(points, t_endo)
+    from lvcore.geometry.contours import plane_fit
+
+    if base_mask.any():
+        bp = points[np.unique(tri[base_mask])]
+        origin, normal, flat = plane_fit(bp)
+    else:
+        origin, normal, flat = plane_fit(ring)
+    used = np.unique(tri)
+    if (points[used].mean(axis=0) - origin) @ normal > 0:
+        normal = -normal
+    warn = [f"the base is not one flat cap: the boundary was split at its sharp edges into endocardium, epicardium "
+            f"and {'a base of ' + str(int(base_mask.sum())) + ' triangles' if base_mask.any() else 'no base cap (the walls meet at the base)'}"]
+    return t_endo, t_epi, int(base_mask.sum()), origin, normal, float(flat), v_endo, warn
 
 
 def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None, septum=None,
-                    **fit_kwargs) -> VolumeMeshFit:
+                    base_cut_mm: float | None = None, **fit_kwargs) -> VolumeMeshFit:
     """Fit the LV template to a volumetric mesh (see the module docstring).
 
     Parameters
@@ -400,6 +484,9 @@ def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None
         :func:`~lvcore.geometry.fitting.fit_surfaces`).
     septum : (3,) array, optional
         A point on the septum (file coordinates, in ``units``) fixing phi = 0.
+    base_cut_mm : float, optional
+        Depth of the base cut below the endocardial base ring's centre (mm); default the rule of
+        :mod:`lvcore.geometry.base_plane` (no cut for a flat base).
     **fit_kwargs
         Passed to :func:`~lvcore.geometry.fitting.fit_surfaces` (``template``, ``degree``, ``smoothing``).
 
@@ -417,7 +504,7 @@ def fit_volume_mesh(path_or_mesh, units: str = "mm", base_z: float | None = None
         kw["base_z"] = base_z
     if septum is not None:
         septum = np.asarray(septum, float) * UNIT_SCALE[units]
-    fit = fit_surfaces(b.endo, b.epi, septum=septum, **kw)
+    fit = fit_surfaces(b.endo, b.epi, septum=septum, base_cut_mm=base_cut_mm, **kw)
     return VolumeMeshFit(fit=fit, boundary=b)
 
 

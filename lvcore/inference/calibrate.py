@@ -234,21 +234,65 @@ def _score_list(h, name: str) -> list:
     return h
 
 
-def _project_mesh(path: Path) -> np.ndarray:
+def read_scale(path) -> float:
+    """The uniform scale ``s`` stored with PC scores (JSON key or CSV column ``scale``); 1 when absent.
+
+    ``s`` is the factor of :mod:`lvcore.geometry.scaling`: the geometry is
+    ``s`` times the shape with the stored scores, and the emulated LVV is
+    multiplied by ``s^3``.
+
+    Raises
+    ------
+    GeometryError
+        If the scale is not a number in :data:`lvcore.geometry.scaling.SCALE_BOUNDS`.
+    """
+    from lvcore.geometry.scaling import SCALE_BOUNDS
+
+    path = Path(path)
+    value = None
+    if path.suffix.lower() == ".json":
+        obj = limits.read_json_file(path, limits.MAX_SCORES_BYTES, "geometry file", GeometryError)
+        if isinstance(obj, dict):
+            value = obj.get("scale")
+    elif path.suffix.lower() == ".csv":
+        try:
+            df = pd.read_csv(path)
+        except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError):
+            return 1.0
+        if "scale" in df.columns and len(df):
+            value = df.loc[0, "scale"]
+    if value is None:
+        return 1.0
+    try:
+        s = float(value)
+    except (TypeError, ValueError):
+        raise GeometryError(f"{path.name}: 'scale' must be a number, got {str(value)[:40]!r}") from None
+    if isinstance(value, bool) or not (np.isfinite(s) and SCALE_BOUNDS[0] <= s <= SCALE_BOUNDS[1]):
+        raise GeometryError(f"{path.name}: scale = {value} is outside {SCALE_BOUNDS[0]:g}-{SCALE_BOUNDS[1]:g}; it is "
+                            "the uniform size factor of the geometry (1 = the shape with these scores as it is)")
+    return s
+
+
+def _project_mesh(path: Path, n_pc: int | None = None, with_scale: bool = False):
+    """Scores of a template mesh file: the plain projection, or with ``with_scale``
+    ``(h, scale, projection MSE (cm²), unscaled h)`` of :func:`lvcore.geometry.scaling.size_normalised_scores`."""
     from lvcore.geometry.io import _check_nodes, read_template_mesh
     from lvcore.geometry.template import DEFAULT_TEMPLATE
 
     if path.suffix.lower() in (".npy", ".npz"):
         try:
+            from lvcore import limits
+            from lvcore.headers import load_npy, load_npz
+
+            # array headers are checked against the limits before numpy allocates (lvcore.headers)
             if path.suffix.lower() == ".npy":
-                nodes = np.load(path, allow_pickle=False)
+                nodes = load_npy(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
             else:
-                with np.load(path, allow_pickle=False) as z:
-                    keys = list(z.keys())
-                    if not keys:
-                        raise GeometryError(f"{path.name}: the .npz archive holds no arrays; store the template "
-                                            "node positions as 'nodes'")
-                    nodes = z["nodes" if "nodes" in keys else keys[0]]
+                arrays = load_npz(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
+                if not arrays:
+                    raise GeometryError(f"{path.name}: the .npz archive holds no arrays; store the template "
+                                        "node positions as 'nodes'")
+                nodes = arrays["nodes"] if "nodes" in arrays else next(iter(arrays.values()))
             if not (np.issubdtype(nodes.dtype, np.integer) or np.issubdtype(nodes.dtype, np.floating)):
                 raise GeometryError(f"{path.name}: node positions must be real numbers, got an array of {nodes.dtype}")
             nodes = np.asarray(nodes, dtype=float)
@@ -270,6 +314,11 @@ def _project_mesh(path: Path) -> np.ndarray:
     except (FileNotFoundError, OSError) as err:
         raise GeometryError(f"cannot project {path.name}: no shape model found ({err}); build it with the "
                             "geometry commands or give PC scores as .json/.csv") from err
+    if with_scale:
+        from lvcore.geometry.scaling import size_normalised_scores
+
+        res = size_normalised_scores(np.asarray(nodes, dtype=float), n_pc or 5, model)
+        return res.h, res.scale, res.projection_mse_cm2, res.unscaled_h
     return np.asarray(model.project(np.asarray(nodes, dtype=float)), dtype=float)
 
 
@@ -352,5 +401,6 @@ def result_record(result: CalibrationResult) -> dict:
     return rec
 
 
-__all__ = ["CalibrationResult", "SubjectResult", "calibrate", "calibrate_subjects", "read_pc_scores", "write_result",
+__all__ = ["CalibrationResult", "SubjectResult", "calibrate", "calibrate_subjects", "read_pc_scores", "read_scale",
+           "write_result",
            "result_record", "file_stem", "output_stems"]

@@ -34,7 +34,8 @@ def register(subparsers) -> None:
                    help="lvcore angle (deg, counter-clockwise seen from the base) of the data's septal centre "
                         "(aha) or sector-0 start (lvcore); default 0")
     p.add_argument("--geometry",
-                   help="(required with --data) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
+                   help="(required with --data, unless --emulator is a subject-specific one from `lvcore emulator "
+                        "build`, whose geometry is bound in) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
                         "volumetric mesh (.inp/.msh/.vtu) to fit and project; or 'mean' (warned: biased "
                         "estimates when the subject's shape differs)")
     p.add_argument("--volunteer", default=None, metavar="NAME",
@@ -48,7 +49,9 @@ def register(subparsers) -> None:
                    help="volume | iid | discrepancy, or a comma-separated list (default iid)")
     p.add_argument("--angles", choices=("fixed", "infer"), default="fixed",
                    help="fibre angles fixed at the emulator's values, or inferred (needs the 'angles' emulator)")
-    p.add_argument("--emulator", default=None, help="emulator name (default: chapter, or angles with --angles infer)")
+    p.add_argument("--emulator", default=None,
+                   help="emulator name or directory (default: chapter, or angles with --angles infer); a "
+                        "subject-specific emulator directory (`lvcore emulator build`) needs no --geometry")
     p.add_argument("--alpha-endo", type=float, default=None,
                    help="fixed alpha_endo (deg) for emulators that take angles (default -60); an error with "
                         "emulators trained at fixed angles (e.g. 'chapter', trained at -60/60)")
@@ -97,6 +100,22 @@ def check_options(args) -> None:
             raise DataError(f"{name} must be an angle in [-180, 180] degrees, got {value}")
 
 
+def _volunteer(name: str, volunteer_files):
+    """The bundled volunteer ``name``, in either spelling (``SYNTHETIC_HV1`` or the data files' ``SYNTHETIC-HV1``)."""
+    from lvcore.exceptions import DataError
+
+    try:
+        return volunteer_files(name)
+    except DataError as err:
+        for alt in (name.replace("-", "_"), name.replace("-", "_").upper()):
+            if alt != name:
+                try:
+                    return volunteer_files(alt)
+                except DataError:
+                    pass
+        raise DataError(f"--volunteer {name}: {err}") from None
+
+
 def run_calibrate(args) -> int:
     from lvcore.inference.samplers import use_host_devices
 
@@ -106,6 +125,7 @@ def run_calibrate(args) -> int:
     import numpy as np
 
     from lvcore.core.forward import emulator_forward, load_emulator_forward
+    from lvcore.geometry.scaling import ScaledForward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal
     from lvcore.inference import guards, plausibility
@@ -114,16 +134,29 @@ def run_calibrate(args) -> int:
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.outputs import is_pc_name
 
+    infer = args.angles == "infer"
+    name = args.emulator or ("angles" if infer else "chapter")
+    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
+    subject = bool(getattr(emulator, "is_subject", False))  # geometry bound in (lvcore emulator build)
+    if subject and args.geometry is not None:
+        raise DataError(f"--geometry: the emulator '{name}' is subject-specific, built on the geometry "
+                        f"{emulator.metadata['subject'].get('geometry_source')}, which is bound in; leave --geometry "
+                        "out, or build an emulator for this geometry with `lvcore emulator build --geometry FILE`")
     if args.volunteer is not None:
         from lvcore.resources import volunteer_files
 
         if args.data is not None or args.geometry is not None:
             raise DataError("--volunteer replaces --data and --geometry: give one or the other")
-        vol = volunteer_files(args.volunteer)
-        args.data, args.geometry = str(vol.measured), str(vol.geometry)
-    elif args.data is None or args.geometry is None:
+        vol = _volunteer(args.volunteer, volunteer_files)
+        args.data, args.geometry = str(vol.measured), None if subject else str(vol.geometry)
+        geometry_option = f"--volunteer {args.volunteer} (its bundled geometry)"
+    elif args.data is None or (args.geometry is None and not subject):
         raise DataError("give --data and --geometry (your measurements and the subject's geometry; "
                         "'--geometry mean' to use the mean shape knowingly), or --volunteer NAME (a bundled one)")
+    else:
+        geometry_option = f"--geometry {args.geometry}"
+    if subject:
+        geometry_option = f"--emulator {name} (its own geometry)"
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
     if bad or not model_names:
@@ -137,19 +170,24 @@ def run_calibrate(args) -> int:
         if not rows:
             raise DataError(f"--subject {args.subject}: no such subject in {args.data}")
     cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
-    infer = args.angles == "infer"
-    name = args.emulator or ("angles" if infer else "chapter")
-    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
     cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
-    geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
+    if subject:
+        sub = emulator.metadata["subject"]
+        geo = guards.GeometrySource(np.zeros(0), str(sub.get("geometry_source")), "subject-emulator",
+                                    fit_residual_mm=(sub.get("geometry_record") or {}).get("fit_residual_mm"))
+    else:
+        geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
     box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, cond, emulator, infer), emulator,
-                                             args.allow_extrapolation, what="--geometry scores or conditions")
+                                             args.allow_extrapolation,
+                                             what=f"{geometry_option}: the PC scores (or conditions)")
     warnings = list(geo.warnings) + extrap
     for w in warnings:
         print(f"lvcore: warning: {w}", file=sys.stderr)
-    forward = emulator_forward(emulator, geo.h, name=name, infer_angles=infer, alpha_endo=cond["alpha_endo"],
-                               alpha_epi=cond["alpha_epi"], edp_mmhg=cond["edp_mmhg"])
+    # the subject is geo.scale times the shape with scores geo.h: emulated LVV x scale^3 (lvcore.geometry.scaling)
+    forward = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
+                                             alpha_endo=cond["alpha_endo"], alpha_epi=cond["alpha_epi"],
+                                             edp_mmhg=cond["edp_mmhg"]), geo.scale)
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
     out = Path(args.out)
     y_of = {r.subject: r.y for r in rows}
@@ -190,7 +228,7 @@ def run_calibrate(args) -> int:
         [(r.subject, r.y, forward) for r in rows], model_names, config=config, sampler=args.sampler,
         sigma_v=args.sigma_v, infer_angles=infer, out_dir=args.out,
         attrs={"data_file": str(args.data), "emulator": name, "angles": args.angles, "geometry": geo.source,
-               "pc_scores": json.dumps([float(v) for v in geo.h])},
+               "pc_scores": json.dumps([float(v) for v in geo.h]), "scale": float(geo.scale)},
         progress=None if args.json else (lambda msg, frac: print(msg)), on_result=finish)
     records = [{**item.record(), **extra[(item.subject, item.model)]} for item in results]
     out.mkdir(parents=True, exist_ok=True)

@@ -53,6 +53,12 @@ class GeometrySource:
     fit_residual_mm : float or None
         Mean surface residual of a volume-mesh fit (mm).
     warnings : tuple of str
+    scale : float
+        Uniform scale ``s`` of the reference geometry (:mod:`lvcore.geometry.scaling`):
+        the subject is ``s`` times the shape with scores ``h``; the emulated LVV
+        is multiplied by ``s^3``. 1 for ``mean`` and for scores files without a scale.
+    unscaled_scores : ndarray or None
+        A mesh's plain projection (``s = 1``), for comparison.
     """
 
     h: np.ndarray
@@ -61,19 +67,23 @@ class GeometrySource:
     projection_mse_cm2: float | None = None
     fit_residual_mm: float | None = None
     warnings: tuple = field(default=())
+    scale: float = 1.0
+    unscaled_scores: np.ndarray | None = None
 
     def record(self) -> dict:
         """Plain-data record for the summary."""
-        return {"scores": [float(v) for v in self.h], "source": self.source, "kind": self.kind,
-                "projection_mse_cm2": self.projection_mse_cm2, "fit_residual_mm": self.fit_residual_mm}
+        return {"scores": [float(v) for v in self.h], "scale": float(self.scale), "source": self.source,
+                "kind": self.kind, "projection_mse_cm2": self.projection_mse_cm2,
+                "fit_residual_mm": self.fit_residual_mm,
+                "unscaled_scores": None if self.unscaled_scores is None else [float(v) for v in self.unscaled_scores]}
 
 
 def _project(nodes, n_pc: int):
-    from lvcore.geometry.shape_model import load_shape_model
+    """Size-normalised scores of template nodes: ``(h, scale, projection MSE (cm²), unscaled h)``."""
+    from lvcore.geometry.scaling import size_normalised_scores
 
-    model = load_shape_model()
-    h = np.asarray(model.project(np.asarray(nodes, float), n_pc), dtype=float)
-    return h, float(model.reconstruction_mse_cm2(np.asarray(nodes, float), n_pc))
+    res = size_normalised_scores(np.asarray(nodes, float), n_pc)
+    return res.h, res.scale, res.projection_mse_cm2, res.unscaled_h
 
 
 def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
@@ -96,7 +106,9 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
         raise GeometryError(f"--geometry {spec}: no such file (give a file, or 'mean' for the mean shape)")
     suffix = path.suffix.lower()
     if suffix in (".json", ".csv"):
-        return GeometrySource(read_pc_scores(path, n_pc), str(path), "scores")
+        from lvcore.inference.calibrate import read_scale
+
+        return GeometrySource(read_pc_scores(path, n_pc), str(path), "scores", scale=read_scale(path))
     if suffix in VOLUME_MESH_SUFFIXES:
         return _from_volume_mesh(path, n_pc, units)
     if suffix in (".vtu", ".vtk", ".xdmf"):
@@ -108,10 +120,13 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
             if "27-node hexahedra" in str(err) or "points, the template has" in str(err):
                 return _from_volume_mesh(path, n_pc, units)
             raise
-        h, mse = _project(nodes, n_pc)
-        return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse)
+        h, scale, mse, raw = _project(nodes, n_pc)
+        return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw)
     if suffix in (".npy", ".npz"):
-        return GeometrySource(read_pc_scores(path, n_pc), str(path), "template-mesh")
+        from lvcore.inference.calibrate import _project_mesh
+
+        h, scale, mse, raw = _project_mesh(path, n_pc, with_scale=True)
+        return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw)
     raise GeometryError(f"--geometry {path.name}: unknown format '{suffix}'; give PC scores (.json/.csv), a template "
                         f"mesh (.vtu), a volumetric mesh ({', '.join(VOLUME_MESH_SUFFIXES)}, .vtu) or 'mean'")
 
@@ -120,8 +135,8 @@ def _from_volume_mesh(path: Path, n_pc: int, units: str) -> GeometrySource:
     from lvcore.geometry.volume_mesh import fit_volume_mesh
 
     res = fit_volume_mesh(path, units=units)
-    h, mse = _project(res.fit.nodes, n_pc)
-    return GeometrySource(h, str(path), "volume-mesh", projection_mse_cm2=mse,
+    h, scale, mse, raw = _project(res.fit.nodes, n_pc)
+    return GeometrySource(h, str(path), "volume-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw,
                           fit_residual_mm=float(res.fit.residual_mean_mm),
                           warnings=tuple(res.boundary.warnings) + tuple(res.fit.warnings))
 

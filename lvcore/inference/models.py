@@ -42,6 +42,8 @@ V_SD = 0.05
 #: GP hyperparameter names, in a fixed order.
 HYPER_NAMES = ("lam", "sigma1_sq", "sigma2_sq", "c", "tau")
 MODEL_NAMES = ("volume", "iid", "discrepancy")
+#: How the likelihood models are named wherever a user reads them (app, report, study figures).
+MODEL_LABELS = {"volume": "(i) volume only", "iid": "(ii) iid strains", "discrepancy": "(iii) polar-GP discrepancy"}
 
 
 def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[float, float]]:
@@ -196,8 +198,22 @@ PARAMETER_HELP = {
 }
 
 
+def parameter_meaning(name: str, max_chars: int = 48) -> str:
+    """The short meaning of a parameter for a table cell (:data:`PARAMETER_HELP` up to its first clause).
+
+    ``"a"`` -> ``"isotropic stiffness of the Holzapfel-Ogden law"``. Table cells
+    stay narrow enough to show whole; the full text stays in :data:`PARAMETER_HELP`.
+    """
+    import re
+
+    text = PARAMETER_HELP.get(str(name), "")
+    text = text.split(": ", 1)[-1]
+    text = re.split(r"[;,:]| \(|\. | across ", text)[0].strip().rstrip(".")
+    return text if len(text) <= max_chars else text[: max_chars - 1].rstrip() + "…"
+
+
 __all__ = [
-    "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
+    "parameter_meaning", "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model",
 ]

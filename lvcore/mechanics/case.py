@@ -25,7 +25,7 @@ from lvcore import limits, units
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.outputs import BASE_CONDITIONS
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
-from lvcore.geometry.template import DEFAULT_TEMPLATE
+from lvcore.geometry.template import DEFAULT_TEMPLATE, N_REGIONS
 from lvcore.mechanics.materials import LAWS, MaterialLaw
 from lvcore.mechanics.resolution import (
     BOX_RESOLUTION_PRESET_NAMES,
@@ -42,6 +42,12 @@ LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
 MATERIAL_LAWS = tuple(LAWS)
 BOX_FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
 STRAIN_LAYERS = ("endocardial", "wall")
+#: Directions of the epicardial Robin spring: the displacement along the reference normal, or all of it.
+SPRING_DIRECTIONS = ("normal", "full")
+#: Largest epicardial spring stiffness accepted (kPa/mm); pericardial values are ~0.01-1 kPa/mm.
+MAX_SPRING_KPA_PER_MM = 100.0
+#: Range of a regional stiffness multiplier.
+REGIONAL_FACTOR_RANGE = (0.01, 100.0)
 PRESSURE_UNITS = {"kpa": 1.0, "mmhg": units.KPA_PER_MMHG}
 
 
@@ -139,10 +145,52 @@ class LoadSpec:
 
 @dataclass(frozen=True)
 class BoundarySpec:
-    """Dirichlet conditions: LV base "clamped" or "sliding"; box: clamped faces."""
+    """Boundary conditions.
+
+    Attributes
+    ----------
+    base : LV base "clamped" or "sliding" (Dirichlet); None for a box.
+    clamped_faces : box faces held fixed.
+    epicardial_spring : float
+        Stiffness k (kPa/mm) of a linear Robin spring on the LV epicardium
+        (a pericardium), energy ``k/2 ∫ |u_d|² dA`` over the reference
+        epicardium; 0 (default) is no spring.
+    spring_direction : {"normal", "full"}
+        ``u_d`` is the displacement along the reference outward normal
+        (``"normal"``) or the whole displacement (``"full"``).
+    """
 
     base: str | None = "clamped"
     clamped_faces: tuple[str, ...] = ()
+    epicardial_spring: float = 0.0
+    spring_direction: str = "normal"
+
+
+@dataclass(frozen=True)
+class RegionalStiffness:
+    """Multipliers of the law's stiffnesses per strain region (24 LV regions, numbered as the ``region`` VTU field).
+
+    Attributes
+    ----------
+    factors : mapping
+        Stiffness parameter name (one of the law's ``stress_keys``, e.g. ``a``
+        and ``af``) -> 24 multipliers; parameters not named keep factor 1.
+    """
+
+    factors: Mapping[str, tuple[float, ...]]
+
+    __hash__ = None
+
+    def multipliers(self, law: MaterialLaw) -> np.ndarray:
+        """(24, len(law.keys)) per-region parameter multipliers of ``law`` (1 where not scaled)."""
+        out = np.ones((N_REGIONS, len(law.keys)))
+        for key, f in self.factors.items():
+            out[:, law.keys.index(key)] = f
+        return out
+
+    def is_uniform(self) -> bool:
+        """True when every named parameter has the same factor in every region."""
+        return all(len(set(f)) == 1 for f in self.factors.values())
 
 
 @dataclass(frozen=True)
@@ -168,6 +216,8 @@ class Case:
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
     probes: tuple[tuple[float, float, float], ...] = ()
     outputs: OutputSpec = field(default_factory=OutputSpec)
+    #: Regional stiffness multipliers (``material.regional``); None is a homogeneous material.
+    regional: RegionalStiffness | None = None
 
     __hash__ = None  # holds arrays and dicts
 
@@ -326,13 +376,13 @@ _TOP = ("geometry", "material", "fibres", "load", "boundary", "probes", "outputs
 def _parse_case(d: Mapping, base_dir: Path | None) -> Case:
     _check_keys(d, "", _TOP, required=("geometry", "material", "load"))
     geometry = _parse_geometry(d["geometry"], base_dir)
-    material = _parse_material(d["material"])
+    material, regional = _parse_material(d["material"], geometry)
     fibres = _parse_fibres(d.get("fibres", {}))
     load = _parse_load(d["load"], geometry)
     boundary = _parse_boundary(d.get("boundary", {}), geometry)
     probes = _parse_probes(d.get("probes", []))
     outputs = _parse_outputs(d.get("outputs", {}))
-    return Case(geometry, material, fibres, load, boundary, probes, outputs)
+    return Case(geometry, material, fibres, load, boundary, probes, outputs, regional)
 
 
 def _parse_resolution(value, where: str, kind: str) -> tuple[LVResolution | BoxResolution | None, str | None]:
@@ -467,13 +517,40 @@ def _template_nodes(nodes, where: str) -> np.ndarray:
     return nodes
 
 
-def _parse_material(m) -> MaterialLaw:
+def _parse_material(m, geometry: GeometrySpec) -> tuple[MaterialLaw, RegionalStiffness | None]:
     all_keys = tuple(sorted({k for cls in LAWS.values() for k in cls.keys}))
-    _check_keys(m, "material", ("law",) + all_keys, required=("law",))
+    _check_keys(m, "material", ("law", "regional") + all_keys, required=("law",))
     cls = LAWS[_string(m["law"], "material.law", MATERIAL_LAWS)]
-    _check_keys(m, "material", ("law",) + cls.keys, required=cls.required)
-    params = {k: _number(m[k], f"material.{k}", positive=True) if k in m else cls.optional[k] for k in cls.keys}
-    return cls.from_params(params)
+    _check_keys(m, "material", ("law", "regional") + cls.keys, required=cls.required)
+    params = {}
+    for k in cls.keys:
+        if k not in m:
+            params[k] = cls.optional[k]
+            continue
+        params[k] = _number(m[k], f"material.{k}")
+        problem = cls.parameter_problem(k, params[k])
+        if problem:
+            raise CaseError(f"material.{k}", problem)
+    law = cls.from_params(params)
+    regional = _parse_regional(m["regional"], law, geometry) if "regional" in m else None
+    return law, regional
+
+
+def _parse_regional(r, law: MaterialLaw, geometry: GeometrySpec) -> RegionalStiffness:
+    where = "material.regional"
+    if not geometry.is_lv:
+        raise CaseError(where, "regional stiffness needs an LV geometry (a box has no regions)")
+    _check_keys(r, where, law.stress_keys)
+    if not r:
+        raise CaseError(where, f"give at least one of {', '.join(law.stress_keys)} with {N_REGIONS} multipliers")
+    lo, hi = REGIONAL_FACTOR_RANGE
+    factors = {}
+    for key, v in r.items():
+        if not isinstance(v, (list, tuple)) or len(v) != N_REGIONS:
+            raise CaseError(f"{where}.{key}", f"must be a list of {N_REGIONS} multipliers (one per region 0-23), "
+                                              f"got {_short(v)}")
+        factors[key] = tuple(_number(x, f"{where}.{key}[{i}]", lo=lo, hi=hi) for i, x in enumerate(v))
+    return RegionalStiffness(factors)
 
 
 def _parse_fibres(f) -> FibreSpec:
@@ -509,8 +586,17 @@ def _parse_load(ld, geometry: GeometrySpec) -> LoadSpec:
 
 def _parse_boundary(b, geometry: GeometrySpec) -> BoundarySpec:
     if geometry.is_lv:
-        _check_keys(b, "boundary", ("base",))
-        return BoundarySpec(_string(b.get("base", "clamped"), "boundary.base", BASE_CONDITIONS), ())
+        _check_keys(b, "boundary", ("base", "epicardial_spring"))
+        k, direction = 0.0, "normal"
+        if "epicardial_spring" in b:
+            sp = b["epicardial_spring"]
+            _check_keys(sp, "boundary.epicardial_spring", ("k", "direction"), required=("k",))
+            k = _number(sp["k"], "boundary.epicardial_spring.k", lo=0.0, hi=MAX_SPRING_KPA_PER_MM)
+            direction = _string(sp.get("direction", "normal"), "boundary.epicardial_spring.direction",
+                                SPRING_DIRECTIONS)
+        return BoundarySpec(_string(b.get("base", "clamped"), "boundary.base", BASE_CONDITIONS), (), k, direction)
+    if "epicardial_spring" in b:
+        raise CaseError("boundary.epicardial_spring", "needs an LV geometry (a box has no epicardium)")
     _check_keys(b, "boundary", ("clamped",), required=("clamped",))
     faces = b["clamped"]
     if not isinstance(faces, (list, tuple)) or not faces:
@@ -562,9 +648,14 @@ def _case_to_dict(case: Case) -> dict:
     fd = {"direction": list(f.direction)} if f.direction is not None else {
         "alpha_endo": f.alpha_endo_deg, "alpha_epi": f.alpha_epi_deg}
     bd = {"base": case.boundary.base} if g.is_lv else {"clamped": list(case.boundary.clamped_faces)}
+    if g.is_lv and case.boundary.epicardial_spring > 0:
+        bd["epicardial_spring"] = {"k": case.boundary.epicardial_spring, "direction": case.boundary.spring_direction}
+    md = {"law": case.material.law, **{k: float(v) for k, v in case.material.params.items()}}
+    if case.regional is not None:
+        md["regional"] = {k: list(v) for k, v in case.regional.factors.items()}
     return {
         "geometry": gd,
-        "material": {"law": case.material.law, **dict(case.material.params)},
+        "material": md,
         "fibres": fd,
         "load": {"pressure": case.load.pressure_kpa, "units": "kPa", "surface": case.load.surface},
         "boundary": bd,

@@ -64,7 +64,15 @@ class MaterialLaw:
         Defaults of the parameters a case may leave out.
     stress_keys : tuple of str
         Parameters with units of stress (kPa); the largest scales the
-        compressibility penalty (:meth:`modulus`).
+        compressibility penalty (:meth:`modulus`). These are also the
+        parameters a regional stiffness field may scale
+        (:meth:`scaled`).
+    may_be_zero : tuple of str
+        Parameters that may be 0 (a stiffness of 0 switches its term off);
+        every other parameter must be > 0.
+    ranges : mapping
+        Closed ranges ``[lo, hi]`` of parameters bounded above as well
+        (e.g. the fibre dispersion κ in [0, 1/3]).
     """
 
     law: ClassVar[str]
@@ -72,6 +80,25 @@ class MaterialLaw:
     required: ClassVar[tuple[str, ...]]
     optional: ClassVar[Mapping[str, float]] = {}
     stress_keys: ClassVar[tuple[str, ...]]
+    may_be_zero: ClassVar[tuple[str, ...]] = ()
+    ranges: ClassVar[Mapping[str, tuple[float, float]]] = {}
+
+    @classmethod
+    def parameter_problem(cls, key: str, value: float) -> str | None:
+        """What is wrong with ``value`` for parameter ``key`` (finite, sign, range), or None if it is valid."""
+        x = float(value)
+        if not np.isfinite(x):
+            return f"must be finite, got {x}"
+        if key in cls.ranges:
+            lo, hi = cls.ranges[key]
+            if not lo <= x <= hi:
+                return f"must lie in [{lo:g}, {hi:.6g}], got {x}"
+        elif key in cls.may_be_zero:
+            if x < 0:
+                return f"must be >= 0, got {x}"
+        elif not x > 0:
+            return f"must be > 0, got {x}"
+        return None
 
     @classmethod
     def default_parameters(cls) -> dict[str, float]:
@@ -115,6 +142,28 @@ class MaterialLaw:
         p = self.params
         return float(max(float(p[k]) for k in self.stress_keys))
 
+    def scale_vector(self, factors: Mapping[str, float]) -> np.ndarray:
+        """Per-parameter multipliers (:attr:`keys` order) from ``{stress key: factor}``; the others are 1.
+
+        Raises
+        ------
+        ValueError
+            If a key is not one of :attr:`stress_keys`.
+        """
+        bad = sorted(set(factors) - set(self.stress_keys))
+        if bad:
+            raise ValueError(f"material law {self.law!r} can scale only its stiffnesses {list(self.stress_keys)}, "
+                             f"not {bad}")
+        return np.array([float(factors.get(k, 1.0)) for k in self.keys], dtype=np.float64)
+
+    def scaled(self, s) -> "MaterialLaw":
+        """The law with every parameter multiplied by ``s[i]`` (:attr:`keys` order; entries may be tracers).
+
+        Used for regional stiffness fields: a multiplier of exactly 1 leaves a
+        parameter bit-for-bit unchanged.
+        """
+        return type(self)(*(getattr(self, f.name) * s[i] for i, f in enumerate(dataclasses.fields(self))))
+
     def strain_energy(self, F, frame):
         """Strain-energy density (kPa) at deformation gradient ``F`` in the fibre ``frame``."""
         raise NotImplementedError
@@ -123,12 +172,25 @@ class MaterialLaw:
 @_pytree
 @dataclass(frozen=True)
 class HolzapfelOgden(MaterialLaw):
-    """Holzapfel & Ogden (2009) orthotropic law, 8 parameters.
+    """Holzapfel & Ogden (2009) orthotropic law, 8 parameters, with an optional fibre dispersion κ.
 
-    ``W = a/(2b)(e^{b(Ī1−3)} − 1) + Σ_{i=f,s} a_i/(2b_i)(e^{b_i (I4i−1)²} − 1)·[I4i > 1]
-    + a_fs/(2b_fs)(e^{b_fs I8fs²} − 1)``, with ``I4f = f0·C f0``,
-    ``I4s = s0·C s0``, ``I8fs = f0·C s0``. The fibre and sheet terms act only
-    in tension.
+    ``W = a/(2b)(e^{b(Ī1−3)} − 1) + a_f/(2b_f)(e^{b_f E_f²} − 1)·[E_f > 0]
+    + a_s/(2b_s)(e^{b_s (I4s−1)²} − 1)·[I4s > 1] + a_fs/(2b_fs)(e^{b_fs I8fs²} − 1)``,
+    with ``I4f = f0·C f0``, ``I4s = s0·C s0``, ``I8fs = f0·C s0`` and the
+    fibre term's generalised invariant (Gasser, Ogden & Holzapfel 2006)
+
+        ``E_f = κ (I1 − 3) + (1 − 3κ)(I4f − 1) = H : C − 1``,  ``H = κ I + (1 − 3κ) f0 ⊗ f0``,
+
+    i.e. ``I4f − 1`` averaged over a rotationally symmetric distribution of
+    fibre directions about ``f0`` with dispersion ``κ`` (0: all fibres along
+    ``f0``, today's HO law exactly, since ``0·x + 1·y == y`` in floating
+    point; 1/3: an isotropic distribution). ``I1 = tr C`` is the full
+    invariant, like ``I4f``. The fibre and sheet terms act only in tension.
+    **The tension switch of the dispersed family acts on ``E_f > 0``**, not
+    on ``I4f > 1``: with the switch on ``I4f`` the energy would jump by
+    ``a_f/(2b_f)(e^{b_f κ² (I1−3)²} − 1)`` where the mean fibre crosses
+    ``I4f = 1`` (a discontinuous energy defeats Newton), while with ``E_f``
+    it stays C¹; at κ = 0 both switches are the same.
 
     Attributes
     ----------
@@ -136,6 +198,9 @@ class HolzapfelOgden(MaterialLaw):
         Stiffnesses (kPa): matrix, fibre, sheet, fibre-sheet.
     b, b_f, b_s, b_fs : float
         Exponents (-).
+    kappa_f : float
+        Fibre dispersion κ in [0, 1/3] (-), case key ``kappa`` (not the bulk
+        penalty :attr:`MixedPenalty.kappa`).
     """
 
     a: Any
@@ -146,17 +211,20 @@ class HolzapfelOgden(MaterialLaw):
     b_s: Any = units.HO_FIXED["bs"]
     a_fs: Any = units.HO_FIXED["afs"]
     b_fs: Any = units.HO_FIXED["bfs"]
+    kappa_f: Any = 0.0
 
     law: ClassVar[str] = "holzapfel-ogden"
-    keys: ClassVar[tuple[str, ...]] = ("a", "b", "af", "bf", "as", "bs", "afs", "bfs")
+    keys: ClassVar[tuple[str, ...]] = ("a", "b", "af", "bf", "as", "bs", "afs", "bfs", "kappa")
     required: ClassVar[tuple[str, ...]] = ("a", "b", "af", "bf")
-    optional: ClassVar[Mapping[str, float]] = dict(units.HO_FIXED)
+    optional: ClassVar[Mapping[str, float]] = {**units.HO_FIXED, "kappa": 0.0}
     stress_keys: ClassVar[tuple[str, ...]] = ("a", "af", "as", "afs")
+    may_be_zero: ClassVar[tuple[str, ...]] = ("as", "afs")
+    ranges: ClassVar[Mapping[str, tuple[float, float]]] = {"kappa": (0.0, 1.0 / 3.0)}
 
     @classmethod
     def default_parameters(cls) -> dict[str, float]:
-        """The chapter's reference θ (``units.HO_REFERENCE_THETA``) with the fixed sheet terms (Gao et al. 2017)."""
-        return {**units.HO_REFERENCE_THETA, **units.HO_FIXED}
+        """The chapter's reference θ (``units.HO_REFERENCE_THETA``) with the fixed sheet terms (Gao et al. 2017), κ = 0."""
+        return {**units.HO_REFERENCE_THETA, **units.HO_FIXED, "kappa": 0.0}
 
     def strain_energy(self, F, frame):
         C = right_cauchy_green(F)
@@ -164,7 +232,9 @@ class HolzapfelOgden(MaterialLaw):
         i4f = f0 @ C @ f0
         i4s = s0 @ C @ s0
         i8 = f0 @ C @ s0
-        ef = jnp.where(i4f > 1.0, i4f - 1.0, 0.0)
+        kf = self.kappa_f
+        e_f = kf * (jnp.trace(C) - 3.0) + (1.0 - 3.0 * kf) * (i4f - 1.0)
+        ef = jnp.where(e_f > 0.0, e_f, 0.0)
         es = jnp.where(i4s > 1.0, i4s - 1.0, 0.0)
         return (
             _expm1_over(self.a, self.b, isochoric_i1(F) - 3.0)
@@ -307,6 +377,10 @@ class ConstitutiveModel:
     def psi(self, F, frame, p):
         """Pointwise energy ``W(F) + p J`` (kPa) of the mixed form at pressure ``p``."""
         return self.material.strain_energy(F, frame) + self.compressibility.pressure_energy(F, p)
+
+    def scaled(self, s) -> "ConstitutiveModel":
+        """The model with the law's parameters multiplied by ``s`` (:attr:`MaterialLaw.keys` order); κ unchanged."""
+        return ConstitutiveModel(self.material.scaled(s), self.compressibility)
 
     def with_parameters(self, v) -> "ConstitutiveModel":
         """The same model with the law's parameters replaced by vector ``v`` (:attr:`MaterialLaw.keys` order)."""

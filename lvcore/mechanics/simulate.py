@@ -129,18 +129,44 @@ def build_frames(mesh: FEMesh, fib) -> np.ndarray:
     return frames
 
 
-def constitutive_model(law) -> materials.ConstitutiveModel:
-    """The law composed with the mixed bulk penalty ``KAPPA_FACTOR × law.modulus()`` (kPa)."""
-    return materials.ConstitutiveModel(law, materials.MixedPenalty(KAPPA_FACTOR * law.modulus()))
+def constitutive_model(case, mesh: FEMesh) -> materials.ConstitutiveModel:
+    """The case's law composed with the mixed bulk penalty ``KAPPA_FACTOR ×`` its stiffness scale (kPa).
+
+    The scale is the law's :meth:`~lvcore.mechanics.materials.MaterialLaw.modulus`, or that of the stiffest
+    region of a regional case (:func:`element_scale`).
+    """
+    _, modulus = element_scale(case, mesh)
+    return materials.ConstitutiveModel(case.material, materials.MixedPenalty(KAPPA_FACTOR * modulus))
 
 
 def build_system(case, mesh: FEMesh | None = None) -> DiscreteSystem:
     """The discrete system of ``case`` (mesh, fibres, material, load, boundary conditions)."""
     mesh = mesh or build_mesh(case)
+    scale, _ = element_scale(case, mesh)
+    model = constitutive_model(case, mesh)
     fixed = boundary.fixed_dofs(mesh, case.boundary.base, case.boundary.clamped_faces)
     surface = case.load.surface if mesh.kind == "box" else "endocardium"
-    return DiscreteSystem(mesh, constitutive_model(case.material), build_frames(mesh, case.fibres), surface,
-                          case.load.pressure_kpa, fixed)
+    b = case.boundary
+    spring = ("epicardium", b.epicardial_spring, b.spring_direction) if getattr(b, "epicardial_spring", 0) else None
+    return DiscreteSystem(mesh, model, build_frames(mesh, case.fibres), surface, case.load.pressure_kpa, fixed,
+                          element_scale=scale, spring=spring)
+
+
+def element_scale(case, mesh: FEMesh):
+    """(per-element parameter multipliers or None, stiffness scale (kPa) of the bulk penalty).
+
+    Without ``case.regional`` the law is homogeneous (``None``, its
+    :meth:`~lvcore.mechanics.materials.MaterialLaw.modulus`); with it, each
+    element takes the multipliers of its region, and the bulk penalty follows
+    the stiffest region, so uniform multipliers m give exactly the system of
+    the homogeneous law with its stiffnesses times m.
+    """
+    law, regional = case.material, getattr(case, "regional", None)
+    if regional is None:
+        return None, law.modulus()
+    per_region = regional.multipliers(law)
+    modulus = max(law.scaled(row).modulus() for row in per_region)
+    return per_region[mesh.template.element_regions], modulus
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,12 +194,13 @@ _PREPARED: "OrderedDict[tuple, PreparedCase]" = OrderedDict()
 
 
 def _prepare_key(case) -> tuple:
-    """Everything :class:`PreparedCase` depends on: the case less its material parameters."""
+    """Everything :class:`PreparedCase` depends on: the case less its material parameters (not its law)."""
     g = case.geometry
     nodes = None if g.template_nodes is None else hashlib.sha256(
         np.ascontiguousarray(g.template_nodes, dtype=float).tobytes()).hexdigest()
     return (g.kind, repr(g.resolution), g.preset, repr(g.ellipsoid), g.box_size, nodes, repr(case.fibres),
-            repr(case.load), repr(case.boundary), tuple(case.probes), repr(case.outputs))
+            repr(case.load), repr(case.boundary), tuple(case.probes), repr(case.outputs),
+            repr(getattr(case, "regional", None)), type(case.material).__name__)
 
 
 def prepare_case(case) -> PreparedCase:
@@ -270,7 +297,10 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     case = _as_case(case)
     prep = prepare_case(case)
     mesh, v_ref, elem_p, xi_p = prep.mesh, prep.v_ref, prep.probe_elements, prep.probe_xi
-    system = prep.system.with_model(constitutive_model(case.material))
+    if getattr(case, "regional", None) is None:
+        system = prep.system.with_model(constitutive_model(case, mesh))
+    else:  # per-element multipliers depend on the law: a system of its own
+        system = build_system(case, mesh)
     is_lv = mesh.kind == "lv"
     if case.load.pressure_kpa == 0:
         res = newton.NewtonResult(True, "converged (zero load)", np.zeros(system.n_free), system.zero_pressure(),

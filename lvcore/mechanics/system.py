@@ -10,6 +10,11 @@ topology; parameters, pressure and geometry are traced arguments):
 * :meth:`tangent` -> condensed right-hand side and sparse tangent on free dofs
   (see :mod:`lvcore.mechanics.element`).
 
+Optional, for model-data mismatch studies: per-element multipliers of the
+law's parameters (a regional stiffness field; all ones is the homogeneous
+law, bit-for-bit) and a linear Robin spring on a surface
+(:mod:`lvcore.mechanics.robin`; none by default).
+
 Units: mm, kPa; energies in kPa mm³ (µJ), forces in mN.
 """
 from __future__ import annotations
@@ -21,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore.mechanics import loads
+from lvcore.mechanics import loads, robin
 from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern
 from lvcore.mechanics.element import element_residual, element_tangent
 from lvcore.mechanics.materials import ConstitutiveModel
@@ -37,14 +42,15 @@ ELEMENT_BATCH = 8
 
 
 def _elem_args(data, x, p):
-    return (x[data["elements"]], p, data["dNdX"], data["wdet"], data["frames"], data["Minv"])
+    return (x[data["elements"]], p, data["dNdX"], data["wdet"], data["frames"], data["Minv"], data["scale"])
 
 
 def _map_elements(fn, data, x, p, model):
     P = data["P"]
 
     def one(args):
-        return fn(*args, P, model)
+        *a, s = args
+        return fn(*a, P, model.scaled(s))
 
     return jax.lax.map(one, _elem_args(data, x, p), batch_size=min(data["elements"].shape[0], ELEMENT_BATCH))
 
@@ -73,7 +79,14 @@ def _residual(u, p, pressure, model, data, potential):
     r_u, r_p, mj, w = _map_elements(element_residual, data, x, p, model)
     R = jnp.zeros_like(x).at[data["elements"]].add(r_u)
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
+    R = R.at[data["spring_faces"]].add(_spring_forces(data, u))
     return R.ravel(), r_p, jnp.min(mj), jnp.sum(w)
+
+
+def _spring_forces(data, u):
+    """Nodal forces (m, 9, 3) of the Robin spring faces: ``K_f u_f``."""
+    uf = u.reshape(-1, 3)[data["spring_faces"]].reshape(-1, 27)
+    return jnp.einsum("mij,mj->mi", data["spring_K"], uf).reshape(-1, 9, 3)
 
 
 @partial(jax.jit, static_argnames=("potential", "nnz"))
@@ -82,18 +95,22 @@ def _tangent(u, p, pressure, model, data, potential, nnz):
     rhs, K, D, r_p = _map_elements(element_tangent, data, x, p, model)
     R = jnp.zeros_like(x).at[data["elements"]].add(rhs.reshape(-1, 27, 3))
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
+    R = R.at[data["spring_faces"]].add(_spring_forces(data, u))
     Ks = -_external_stiffness(data, x, pressure, potential)
-    vals = jnp.concatenate([K.reshape(-1), Ks.reshape(-1)])[data["keep"]]
+    vals = jnp.concatenate([K.reshape(-1), Ks.reshape(-1), data["spring_K"].reshape(-1)])[data["keep"]]
     kdata = jax.ops.segment_sum(vals, data["dest"], num_segments=nnz)
     return R.ravel(), kdata, D, r_p
 
 
 @lru_cache(maxsize=16)
-def _pattern_cached(key, n_dofs, fixed_bytes, el_bytes, el_shape, f_bytes, f_shape):
+def _pattern_cached(key, n_dofs, fixed_bytes, el_bytes, el_shape, f_bytes, f_shape, s_bytes=b"", s_shape=(0, 9)):
     fixed = np.frombuffer(fixed_bytes, dtype=np.int64)
     el = np.frombuffer(el_bytes, dtype=np.int64).reshape(el_shape)
     fa = np.frombuffer(f_bytes, dtype=np.int64).reshape(f_shape)
-    return build_pattern(n_dofs, fixed, [block_dofs(el), block_dofs(fa)])
+    blocks = [block_dofs(el), block_dofs(fa)]
+    if s_shape[0]:
+        blocks.append(block_dofs(np.frombuffer(s_bytes, dtype=np.int64).reshape(s_shape)))
+    return build_pattern(n_dofs, fixed, blocks)
 
 
 class DiscreteSystem:
@@ -108,9 +125,16 @@ class DiscreteSystem:
     load_surface : "endocardium" (pressure potential with the base plane) or a box face.
     pressure : full load (kPa).
     fixed_dofs : global dof numbers held at zero displacement.
+    element_scale : (n_el, n_params) array, optional
+        Multipliers of the law's parameters (``keys`` order) per element, e.g.
+        a regional stiffness field; default all ones (the homogeneous law).
+    spring : (surface, k, direction), optional
+        A linear Robin spring of stiffness k (kPa/mm) on the named mesh
+        surface (:mod:`lvcore.mechanics.robin`); ``None`` or k = 0: none.
     """
 
-    def __init__(self, mesh: FEMesh, model: ConstitutiveModel, frames, load_surface, pressure, fixed_dofs):
+    def __init__(self, mesh: FEMesh, model: ConstitutiveModel, frames, load_surface, pressure, fixed_dofs,
+                 element_scale=None, spring=None):
         self.mesh = mesh
         self.model = model.as_arrays()
         self.kappa = self.model.kappa
@@ -125,10 +149,25 @@ class DiscreteSystem:
         M = np.einsum("eq,qm,qn->emn", wdet, P, P)
         elements = np.ascontiguousarray(mesh.elements, dtype=np.int64)
         fixed = np.unique(np.asarray(fixed_dofs, dtype=np.int64))
+        n_par = len(model.material.keys)
+        scale = np.ones((mesh.n_elements, n_par)) if element_scale is None else np.asarray(element_scale, float)
+        if scale.shape != (mesh.n_elements, n_par):
+            raise ValueError(f"element_scale must have shape {(mesh.n_elements, n_par)}, got {scale.shape}")
+        spring_faces, spring_K = np.zeros((0, 9), np.int64), np.zeros((0, 27, 27))
+        self.spring = None
+        if spring is not None and float(spring[1]) > 0:
+            surf, k, direction = spring[0], float(spring[1]), spring[2]
+            if surf not in mesh.surfaces:
+                raise ValueError(f"spring surface {surf!r} not in mesh surfaces {sorted(mesh.surfaces)}")
+            spring_faces = np.ascontiguousarray(mesh.surfaces[surf], dtype=np.int64)
+            spring_K = robin.face_stiffness(mesh.nodes[spring_faces], k, direction)
+            self.spring = (surf, k, direction)
         self.pattern: SparsityPattern = _pattern_cached(
-            (mesh.topology_key(), load_surface), mesh.n_dofs, fixed.tobytes(),
-            elements.tobytes(), elements.shape, faces.tobytes(), faces.shape,
+            (mesh.topology_key(), load_surface, None if self.spring is None else self.spring[0]), mesh.n_dofs,
+            fixed.tobytes(), elements.tobytes(), elements.shape, faces.tobytes(), faces.shape,
+            spring_faces.tobytes(), spring_faces.shape,
         )
+        self.spring_faces, self.spring_K = spring_faces, spring_K
         self.wdet = wdet
         self.dNdX = dNdX
         self.data = {
@@ -141,6 +180,9 @@ class DiscreteSystem:
             "P": jnp.asarray(P),
             "faces": jnp.asarray(faces),
             "base_z": jnp.asarray(float(mesh.base_z) if mesh.base_z is not None else 0.0),
+            "scale": jnp.asarray(scale),
+            "spring_faces": jnp.asarray(spring_faces),
+            "spring_K": jnp.asarray(spring_K),
             "keep": jnp.asarray(self.pattern.keep),
             "dest": jnp.asarray(self.pattern.dest),
         }
@@ -172,6 +214,13 @@ class DiscreteSystem:
         return u
 
     # ----- evaluations --------------------------------------------------------
+    def spring_energy(self, u_free) -> float:
+        """Energy stored in the Robin spring (kPa mm³; 0 without one)."""
+        if self.spring is None:
+            return 0.0
+        u = self.full(u_free).reshape(-1, 3)
+        return robin.spring_energy(u[self.spring_faces], self.spring_K)
+
     def zero_pressure(self) -> np.ndarray:
         return np.zeros((self.mesh.n_elements, 4))
 

@@ -14,13 +14,17 @@ def register(subparsers) -> None:
     p.add_argument("--sweep", choices=("emulator", "simulator"), default="emulator",
                    help="Fig 9.5 by the bundled `angles` emulator (default, seconds) or the FE simulator (fast mesh)")
     p.add_argument("--no-calibration", action="store_true", help="skip the live calibration posterior")
-    p.add_argument("--formats", default="png,svg", help="static formats (comma-separated; '' for HTML only)")
+    p.add_argument("--formats", default="png,svg",
+                   help="static formats, comma-separated (default png,svg; they need kaleido, pip install "
+                        "'lvcore[report]', and a Chromium; without them the HTML report is written and the skipped "
+                        "formats are named); '' for HTML only")
     p.add_argument("--json", action="store_true", help="print the manifest as JSON")
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
     import json
+    import sys
 
     from lvcore.inference.samplers import use_host_devices
 
@@ -39,4 +43,7 @@ def _run(args) -> int:
               f"(index.html, manifest.json)")
         for f in missing:
             print(f"  missing {f['name']}: {f['missing']}")
+    if manifest.get("skipped_formats"):  # the HTML report is complete; say what was not written, on stderr
+        print(f"static formats skipped: {', '.join(manifest['skipped_formats'])} "
+              f"({manifest['static_export_error']})", file=sys.stderr)
     return 0

@@ -16,13 +16,6 @@ import numpy as np
 PNG_TIMEOUT_S = 120.0
 
 
-def bundled_path(*parts: str) -> Path:
-    """Path of a bundled data file (``lvcore/assets/...`` once installed as package data)."""
-    from lvcore.resources import asset_path
-
-    return asset_path(*parts)
-
-
 def write_json_atomic(path, data: Any) -> Path:
     """Write ``data`` as JSON to ``path`` atomically (temporary file, then rename).
 

@@ -45,8 +45,8 @@ from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
 from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
-from lvcore.viz import study_figures
-from lvcore.studies._common import bundled_path, clean, progress_bar, save_figure, write_json_atomic
+from lvcore.resources import asset_path
+from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
 #: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2).
 FIXED_ANGLES = (-60.0, 90.0)
@@ -83,7 +83,7 @@ class Subject:
 
 def available_subjects() -> list[str]:
     """Names of the bundled volunteers (``SYNTHETIC-HV1`` ...)."""
-    d = bundled_path("volunteers")
+    d = asset_path("volunteers")
     stems = sorted(p.name[: -len("_measured.csv")] for p in d.glob("*_measured.csv"))
     return [s.replace("_", "-", 1) for s in sorted(stems, key=lambda s: (len(s), s))]
 
@@ -93,7 +93,7 @@ def load_subject(name: str) -> Subject:
     from lvcore.inference.data import read_measured_csv
 
     stem = name.replace("-", "_")
-    d = bundled_path("volunteers")
+    d = asset_path("volunteers")
     csv, vtu = d / f"{stem}_measured.csv", d / f"{stem}_geometry.vtu"
     if not (csv.is_file() and vtu.is_file()):
         raise LVCoreError(f"--subjects: volunteer '{name}' is not bundled (bundled: {', '.join(available_subjects())})")
@@ -103,7 +103,7 @@ def load_subject(name: str) -> Subject:
 
 def hidden_truth() -> dict:
     """The volunteers' hidden generating parameters (for the findings only, never the fit)."""
-    path = bundled_path("volunteers", "truth", "SYNTHETIC_volunteers_truth.json")
+    path = asset_path("volunteers", "truth", "SYNTHETIC_volunteers_truth.json")
     return {v["subject"]: v for v in json.loads(path.read_text())["volunteers"]}
 
 
@@ -433,23 +433,128 @@ def findings(entries: Sequence[dict], truth: dict | None = None) -> dict:
     return out
 
 
-def tables(entries: Sequence[dict]):
-    """Tables 9.2 (fixed angles) and 9.3 (free angles) side by side, one row per subject (a DataFrame)."""
+#: Result file of :func:`write_outputs`, read by :func:`load`.
+RESULT_FILE = "bo_fibres.json"
+#: The command that makes the results.
+COMMAND = "lvcore study bo-fibres --out RESULTS"
+#: Figures and tables :func:`figures` draws, with their titles.
+TITLES = {"table9_2_bo_fixed_angles": "Table 9.2: BO of θ with the angles fixed at (−60°, 90°)",
+          "table9_3_bo_free_angles": "Table 9.3: BO of θ and the fibre angles",
+          "fig_bo_lvv_error": "Tables 9.2/9.3: LVV and strain errors, fixed vs free angles",
+          "fig_strain_residuals": "Strain residuals at the BO optimum, fixed vs free angles",
+          "fig_convergence": "BO convergence per volunteer and mode"}
+#: Columns of the tables (one row per subject and mode) and their headers in the drawn tables.
+COLUMNS = {"subject": "subject", "a": "a (kPa)", "b": "b", "af": "af (kPa)", "bf": "bf",
+           "alpha_endo": "α_endo (°)", "alpha_epi": "α_epi (°)", "lvv_abs_error_ml": "LVV |error| (mL)",
+           "median_abs_strain_error": "median |strain error|", "evaluations": "evaluations", "failed": "failed"}
+_MODE_TABLES = {"fixed": ("table9_2_bo_fixed_angles", "Table 9.2 — angles fixed at (−60°, 90°)"),
+                "free": ("table9_3_bo_free_angles", "Table 9.3 — θ and the fibre angles optimised")}
+
+
+def _failed_count(v) -> int | None:
+    """``failed_evaluations`` as a count (the study writes ``{"count", "reasons"}``; older files an int)."""
+    if isinstance(v, dict):
+        return int(v.get("count", 0))
+    return None if v is None else int(v)
+
+
+def load(folder) -> dict:
+    """The results of a bo-fibres ``--out`` folder (or the bundled one).
+
+    Returns
+    -------
+    dict
+        ``entries`` (the ``bo_fibres.json`` list), ``meta`` (``bo_fibres_meta.json``,
+        or just the findings when that file is missing) and ``folder``.
+    """
+    from lvcore.studies.results import read_json
+
+    folder = Path(folder)
+    entries = read_json(folder / RESULT_FILE)
+    if isinstance(entries, dict):  # {"results": [...]} wrapping
+        entries = entries.get("results", [])
+    meta_path = folder / "bo_fibres_meta.json"
+    meta = read_json(meta_path) if meta_path.is_file() else {}
+    if not meta:
+        meta = {"findings": findings(entries)}
+    return {"entries": entries, "meta": meta, "folder": str(folder)}
+
+
+def source_line(result: dict) -> str:
+    """Where the numbers come from, as one readable line."""
+    from lvcore.studies.results import source_label
+
+    budget = result["meta"].get("budget", {}).get("label")
+    return f"{RESULT_FILE} ({source_label(result['folder'])})" + (f"; budget {budget}" if budget else "")
+
+
+def table_rows(entries: Sequence[dict]):
+    """One row per subject and mode (``mode`` and :data:`COLUMNS`), in file order."""
     import pandas as pd
 
-    rows = {}
+    rows = []
     for e in entries:
-        r = rows.setdefault(e["subject"], {"subject": e["subject"]})
-        p = e["mode"]
-        for n in THETA_NAMES:
-            r[f"{p}_{n}"] = e["theta"][n]
-        r[f"{p}_alpha_endo"], r[f"{p}_alpha_epi"] = e["alpha_endo"], e["alpha_epi"]
-        r[f"{p}_lvv_abs_error_ml"] = e["lvv_abs_error_ml"]
-        r[f"{p}_median_abs_strain_error"] = e["median_abs_strain_error"]
-        r[f"{p}_evaluations"] = e["evaluations"]
-        r[f"{p}_failed"] = e["failed_evaluations"]["count"]
+        th = e.get("theta", {})
+        th = th if isinstance(th, dict) else dict(zip(THETA_NAMES, th))
+        rows.append({"subject": e["subject"], "mode": e["mode"], **{n: float(th[n]) for n in THETA_NAMES if n in th},
+                     "alpha_endo": e.get("alpha_endo"), "alpha_epi": e.get("alpha_epi"),
+                     "lvv_abs_error_ml": e.get("lvv_abs_error_ml"),
+                     "median_abs_strain_error": e.get("median_abs_strain_error"),
+                     "evaluations": e.get("evaluations"), "failed": _failed_count(e.get("failed_evaluations"))})
+    return pd.DataFrame(rows, columns=["subject", "mode", *list(COLUMNS)[1:]])
+
+
+def side_by_side(entries: Sequence[dict]):
+    """Tables 9.2 (fixed angles) and 9.3 (free angles) side by side, one row per subject (``<mode>_<column>``)."""
+    import pandas as pd
+
+    long = table_rows(entries)
+    rows = {}
+    for _, r in long.iterrows():
+        row = rows.setdefault(r["subject"], {"subject": r["subject"]})
+        row.update({f"{r['mode']}_{c}": r[c] for c in list(COLUMNS)[1:]})
     df = pd.DataFrame(list(rows.values()))
     return df.sort_values("subject", key=lambda c: c.str.len() * 1000 + c.str[-1].map(ord)).reset_index(drop=True)
+
+
+def tables(result: dict) -> dict:
+    """The study's tables (DataFrames) by name: Tables 9.2 and 9.3, both side by side, all rows, the found angles."""
+    import pandas as pd
+
+    entries = result["entries"]
+    long = table_rows(entries)
+    out = {}
+    for mode, (name, _) in _MODE_TABLES.items():
+        sub = long[long["mode"] == mode].drop(columns=["mode"]).reset_index(drop=True)
+        if not sub.empty:
+            out[name] = sub
+    out["tables_9_2_9_3"] = side_by_side(entries)
+    out["fig_bo_lvv_error"] = long
+    hidden = result["meta"].get("findings", {}).get("angles_vs_hidden")
+    if hidden:
+        out["angles_vs_hidden"] = pd.DataFrame(hidden)
+    return out
+
+
+def figures(result: dict) -> dict:
+    """The study's figures by name (see :data:`TITLES`); figures whose data the results lack are left out."""
+    from lvcore.viz import study_figures
+    from lvcore.viz.report_figures import table_figure
+
+    entries = result["entries"]
+    tabs = tables(result)
+    out = {}
+    for mode, (name, label) in _MODE_TABLES.items():
+        if name in tabs:
+            out[name] = table_figure(tabs[name].rename(columns=COLUMNS),
+                                     title=f"{label} (SYNTHETIC volunteers, Bayesian optimisation)")
+    if entries:
+        out["fig_bo_lvv_error"] = study_figures.bo_error_bars(tabs["fig_bo_lvv_error"])
+    if any(e.get("strain_residuals") for e in entries):
+        out["fig_strain_residuals"] = study_figures.residual_figure(entries)
+    if any(e.get("convergence") for e in entries):
+        out["fig_convergence"] = study_figures.convergence_figure(entries)
+    return out
 
 
 def write_outputs(entries: Sequence[dict], out, settings: dict | None = None) -> dict:
@@ -469,10 +574,11 @@ def write_outputs(entries: Sequence[dict], out, settings: dict | None = None) ->
             "objective": "FE simulator on each volunteer's geometry", "settings": settings,
             "findings": findings(entries)}
     paths["meta"] = str(write_json_atomic(out / "bo_fibres_meta.json", clean(meta)))
-    tables(entries).to_csv(out / "tables.csv", index=False)
+    side_by_side(entries).to_csv(out / "tables.csv", index=False)
     paths["tables"] = str(out / "tables.csv")
-    paths["fig_residuals"] = save_figure(study_figures.residual_figure(entries), out / "fig_strain_residuals")
-    paths["fig_convergence"] = save_figure(study_figures.convergence_figure(entries), out / "fig_convergence")
+    figs = figures({"entries": list(entries), "meta": meta, "folder": str(out)})
+    paths["fig_residuals"] = save_figure(figs["fig_strain_residuals"], out / "fig_strain_residuals")
+    paths["fig_convergence"] = save_figure(figs["fig_convergence"], out / "fig_convergence")
     return paths
 
 

@@ -9,6 +9,7 @@ STUDY_MODULES = (
     "lvcore.studies.fibre_discrepancy",    # lvcore study fibre-discrepancy
     "lvcore.studies.bo_fibres",            # lvcore study bo-fibres
     "lvcore.studies.operators",            # lvcore study operators
+    "lvcore.studies.mismatch",             # lvcore study mismatch
 )
 
 

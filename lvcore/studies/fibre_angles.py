@@ -285,3 +285,90 @@ def _emulator_runs(emulator, endo: np.ndarray, epi: np.ndarray, theta, edp_mmhg:
 def strain_table(runs: Sequence[AngleRun]) -> dict[str, np.ndarray]:
     """Label -> (24,) strains of the converged runs (for grouped strain plots)."""
     return {r.label: r.strains for r in runs if r.converged and r.strains is not None and r.strains.size == N_REGIONS}
+
+
+# ----------------------------------------------------------------------------- Fig 9.5: data, tables, figures
+#: Figures :func:`figures` draws, with their titles.
+TITLES = {"fig9_5_angle_sweep": "Fig 9.5: effect of the fibre angles on the strains and LVV",
+          "fig9_5_angle_map": "Fig 9.5 (map): EDV over (α_endo, α_epi) by the `angles` emulator"}
+#: Why a figure can be absent.
+MISSING = {"fig9_5_angle_map": "the `angles` emulator is not installed; build it with "
+                               "python scripts/build_emulators.py --emulators angles"}
+#: The map's grid (degrees).
+MAP_ENDO, MAP_EPI = np.linspace(-90, 0, 31), np.linspace(0, 90, 31)
+
+
+def compute(sweep: str = "emulator") -> dict:
+    """Fig 9.5's data at the reference θ: the chapter's four angle pairs and, with the ``angles`` emulator, the map.
+
+    Parameters
+    ----------
+    sweep : {"emulator", "simulator"}
+        The four pairs by the bundled ``angles`` emulator (milliseconds, the SYNTHETIC
+        shape model's mean LV) or the FE simulator (default analytic LV, fast mesh).
+
+    Returns
+    -------
+    dict
+        ``theta``, ``engine`` (text), ``runs`` (:class:`AngleRun` list) and ``map``
+        (:class:`AngleMap` or None when the ``angles`` emulator is not installed).
+    """
+    from lvcore.emulator.io import available_emulators, load_emulator
+
+    theta = dict(units.HO_REFERENCE_THETA)
+    emulator = load_emulator("angles") if (sweep != "simulator" or "angles" in available_emulators()) else None
+    if sweep == "simulator":
+        runs = angle_sweep(CHAPTER_ANGLE_PAIRS, theta=theta, resolution="fast")
+        engine = "FE simulator, default (analytic) LV, fast mesh"
+    else:
+        runs = emulator_angle_sweep(emulator, CHAPTER_ANGLE_PAIRS, theta=theta)
+        engine = "bundled `angles` emulator, SYNTHETIC shape model's mean LV"
+    amap = None if emulator is None else emulator_angle_map(emulator, MAP_ENDO, MAP_EPI, theta=theta)
+    return {"theta": theta, "engine": engine, "runs": list(runs), "map": amap}
+
+
+def tables(result: dict) -> dict:
+    """The data of each figure by name (DataFrames)."""
+    import pandas as pd
+
+    out = {"fig9_5_angle_sweep": pd.DataFrame([
+        {"alpha_endo_deg": r.alpha_endo, "alpha_epi_deg": r.alpha_epi, "converged": r.converged,
+         "message": r.message, "lvv_ml": r.lvv_ml,
+         **{f"strain_{k + 1:02d}": (None if r.strains is None else float(r.strains[k])) for k in range(N_REGIONS)}}
+        for r in result["runs"]])}
+    m = result.get("map")
+    if m is not None:
+        out["fig9_5_angle_map"] = pd.DataFrame({
+            "alpha_endo_deg": np.tile(m.alpha_endo, m.alpha_epi.size),
+            "alpha_epi_deg": np.repeat(m.alpha_epi, m.alpha_endo.size),
+            "lvv_ml": m.lvv_ml.ravel(), "mean_strain": m.mean_strain.ravel()})
+    return out
+
+
+def captions(result: dict) -> dict:
+    failed = [r.label for r in result["runs"] if not r.converged]
+    return {"fig9_5_angle_sweep": "failed: " + "; ".join(failed)} if failed else {}
+
+
+def figures(result: dict) -> dict:
+    """Fig 9.5 (strain lines at the four pairs) and its map (EDV contour over the angles, when computed)."""
+    from lvcore.viz import figures as vf
+    from lvcore.viz.report_figures import strain_lines
+
+    th = ", ".join(f"{k} {v:g}" for k, v in result["theta"].items())
+    out = {"fig9_5_angle_sweep": strain_lines(
+        strain_table(result["runs"]),
+        title=f"Fig 9.5 — strains and EDV at four fibre-angle pairs ({result['engine']}; θ: {th}; EDP 8 mmHg)")}
+    m = result.get("map")
+    if m is not None:
+        out["fig9_5_angle_map"] = vf.contour(
+            m.alpha_endo, m.alpha_epi, m.lvv_ml,
+            title="Fig 9.5 (map) — EDV (mL) over the fibre angles, `angles` emulator, SYNTHETIC mean "
+                  f"LV (θ: {th}); markers: the chapter's pairs",
+            xaxis_title="α_endo (°)", yaxis_title="α_epi (°)", colorbar_title="mL",
+            points={"chapter pairs": ([e for e, _ in CHAPTER_ANGLE_PAIRS], [p for _, p in CHAPTER_ANGLE_PAIRS])})
+    return out
+
+
+def source_line(result: dict) -> str:
+    return result["engine"] + ("; map: bundled `angles` emulator" if result.get("map") is not None else "")

@@ -216,41 +216,188 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
     return result
 
 
-def write_study(result: dict, out) -> dict:
-    """Write JSON, CSVs behind every figure, and the figures as HTML under ``out``."""
+# ----------------------------------------------------------------------------- saved results: load, tables, figures
+#: Result file of :func:`write_study`, read by :func:`load`.
+RESULT_FILE = "fibre_discrepancy.json"
+#: The command that makes the results (15-30 min of MCMC; the package ships one run).
+COMMAND = "lvcore study fibre-discrepancy --out RESULTS"
+#: Figures and tables :func:`figures` draws, with their titles.
+TITLES = {
+    "fig9_6_strain_predictive": "Fig 9.6: posterior predictive of the strains, iid vs discrepancy model",
+    "fig9_7_sigma_s": "Fig 9.7: posterior of the strain noise sd σ_S vs the truth 0.03",
+    "fig9_7_sigma_s_all_sets": "Fig 9.7 (all sets): σ_S median and 90 % interval per test set",
+    "fig9_8_eta_vs_benchmark": "Fig 9.8: posterior of η(θ, h) vs the benchmark η(θ̃, h), three test sets",
+    "fig9_9_error_violins": "Fig 9.9: |η(θ_post, h) − η(θ̃, h)| over the 12 test sets, per likelihood",
+    "table_fibre_discrepancy_findings": "Fibre-discrepancy findings against the chapter",
+}
+#: Why a figure is absent from older results.
+MISSING = {"fig9_7_sigma_s": "the results hold no σ_S draws (older study output)",
+           "fig9_8_eta_vs_benchmark": "the results hold no η quantiles (older study output)"}
+
+
+def load(folder) -> dict:
+    """``fibre_discrepancy.json`` of a result folder (or the bundled one), with ``folder``."""
+    from lvcore.studies.results import read_json
+
+    data = read_json(Path(folder) / RESULT_FILE)
+    data["folder"] = str(folder)
+    return data
+
+
+def _build_text(build) -> str:
+    if not build:
+        return "build not recorded"
+    parts = [f"built {build['created_at'][:10]}" if build.get("created_at") else None,
+             f"{build['resolution']} mesh" if build.get("resolution") else None,
+             f"{build['base']} base" if build.get("base") else None]
+    return ", ".join(p for p in parts if p)
+
+
+def _sampler_text(sampler) -> str:
+    if not isinstance(sampler, dict) or not sampler:
+        return "sampler not recorded"
+    runs = ""
+    if {"num_chains", "num_warmup", "num_samples"} <= set(sampler):
+        runs = f"{sampler['num_chains']} chains × ({sampler['num_warmup']} warm-up + {sampler['num_samples']} draws)"
+    kinds = "; ".join(f"{v} for {k.replace('_', ' and ')}" for k, v in sampler.items()
+                      if k not in ("num_chains", "num_warmup", "num_samples"))
+    return ", ".join(p for p in (runs, kinds) if p)
+
+
+def source_line(result: dict) -> str:
+    """Where the numbers come from, as one readable line (no Python reprs)."""
+    from lvcore.studies.results import source_label
+
+    return (f"{RESULT_FILE} ({source_label(result['folder'])}); forward model {result.get('forward_model', '?')} "
+            f"emulator ({_build_text(result.get('forward_build'))}); sampler: {_sampler_text(result.get('sampler'))}")
+
+
+def example_set(result: dict) -> dict:
+    """The set shown in Figs 9.6/9.7: angles (0°, 90°) like the chapter, else the last one."""
+    sets = result["sets"]
+    return next((s for s in sets if (s["alpha_endo"], s["alpha_epi"]) == (0.0, 90.0)), sets[-1])
+
+
+def _set_label(s: dict) -> str:
+    return f"set {s['set']} ({s['alpha_endo']:g}°, {s['alpha_epi']:g}°)"
+
+
+def eta_cases(result: dict) -> list[dict]:
+    """Fig 9.8's three sets: the example first, then the same θ at the other angle pairs."""
+    sets, ex = result["sets"], example_set(result)
+    same_theta = [s for s in sets if s["theta"] == ex["theta"] and s is not ex]
+    return [ex] + (same_theta or [s for s in sets if s is not ex])[:2]
+
+
+def tables(result: dict) -> dict:
+    """The data behind each figure (by figure name), and the findings table."""
     import pandas as pd
 
-    from lvcore.viz import inference_figures as figs
+    from lvcore.inference.models import MODEL_LABELS
 
+    sets, ex = result["sets"], example_set(result)
+    pair = ("iid", "discrepancy")
+    out = {"fig9_6_strain_predictive": pd.DataFrame(
+        [{"set": ex["set"], "model": m, "region": r + 1, "data": ex["y"][1 + r],
+          **{q: ex["models"][m]["strain_predictive"][q][r] for q in ("q05", "q50", "q95")}}
+         for m in pair for r in range(24)])}
+    if all("draws" in ex["models"][m]["sigma_s"] for m in pair):
+        out["fig9_7_sigma_s"] = {"set": ex["set"], "truth": SIGMA_S,
+                                 "draws": {MODEL_LABELS[m]: list(ex["models"][m]["sigma_s"]["draws"]) for m in pair}}
+    out["fig9_7_sigma_s_all_sets"] = pd.DataFrame(
+        [{"label": _set_label(s), "series": MODEL_LABELS[m], **{k: s["models"][m]["sigma_s"][k]
+                                                                for k in ("median", "q05", "q95")}}
+         for s in sets for m in pair])
+    cases = eta_cases(result)
+    if all("eta_quantiles" in c["models"][m] for c in cases for m in MODELS):
+        out["fig9_8_eta_vs_benchmark"] = pd.DataFrame(
+            [{"set": c["set"], "model": m, "region": r + 1, "benchmark": c["benchmark"][1 + r],
+              **{q: c["models"][m]["eta_quantiles"][q][1 + r] for q in ("q05", "q50", "q95")}}
+             for c in cases for m in MODELS for r in range(24)])
+    out["fig9_9_error_violins"] = pd.DataFrame([{"model": m, "mean_abs_strain_error": e}
+                                                for m, es in result["error_draws"].items() for e in es])
+    f = result["findings"]
+    med = f["median_abs_error"]
+    out["table_fibre_discrepancy_findings"] = pd.DataFrame([
+        {"finding": "iid inflates σ_S (median / 0.03)", "ours": f["iid_sigma_s_inflation"],
+         "chapter": f["chapter"]["iid_sigma_s_inflation"], "holds": f["iid_inflates_sigma_s_about_2x"]},
+        {"finding": "discrepancy model σ_S median", "ours": f["discrepancy_sigma_s_median"],
+         "chapter": f["chapter"]["discrepancy_sigma_s_median"], "holds": f["discrepancy_sigma_s_near_truth"]},
+        {"finding": "discrepancy beats iid (median |error|)", "ours": f"{med['discrepancy']:.4f} vs {med['iid']:.4f}",
+         "chapter": "yes", "holds": f["discrepancy_beats_iid"]},
+        {"finding": "volume-only beats iid (median |error|)", "ours": f"{med['volume']:.4f} vs {med['iid']:.4f}",
+         "chapter": "yes", "holds": f["volume_beats_iid"]},
+    ])
+    out["sets"] = pd.DataFrame([{"set": s["set"], "alpha_endo": s["alpha_endo"], "alpha_epi": s["alpha_epi"],
+                                 "model": MODEL_LABELS[m], "median |error|": r["abs_error_median"],
+                                 "σ_S median": r.get("sigma_s", {}).get("median")}
+                                for s in sets for m, r in s["models"].items()])
+    return out
+
+
+def captions(result: dict) -> dict:
+    """Notes shown under figures (the thinning of the shipped draws)."""
+    thinned = result.get("error_draws_thinned_to_per_set")
+    return {"fig9_9_error_violins": f"posterior draws thinned to {thinned} per set"} if thinned else {}
+
+
+def figures(result: dict) -> dict:
+    """The study's figures by name (see :data:`TITLES`); those the results lack (:data:`MISSING`) are left out."""
+    from lvcore.inference.models import MODEL_LABELS
+    from lvcore.viz import inference_figures as ifig
+    from lvcore.viz.report_figures import eta_band_grid, interval_figure, table_figure
+
+    tabs = tables(result)
+    ex, tag, n_sets = example_set(result), "SYNTHETIC", len(result["sets"])
+    ex_label = f"set {ex['set']}, angles ({ex['alpha_endo']:g}°, {ex['alpha_epi']:g}°)"
+    out = {}
+    fig = ifig.strain_predictive_figure(
+        {MODEL_LABELS[m]: {k: np.asarray(v) for k, v in ex["models"][m]["strain_predictive"].items()}
+         for m in ("iid", "discrepancy")}, ex["y"])
+    fig.update_layout(title=f"Fig 9.6 — {tag} {ex_label}: posterior predictive of the 24 strains (median, 5–95 %) "
+                            "vs data")
+    out["fig9_6_strain_predictive"] = fig
+    if "fig9_7_sigma_s" in tabs:
+        fig = ifig.sigma_s_figure({k: np.asarray(v) for k, v in tabs["fig9_7_sigma_s"]["draws"].items()},
+                                  truth=SIGMA_S)
+        fig.update_layout(title=f"Fig 9.7 — {tag} {ex_label}: posterior of σ_S; dashed: truth {SIGMA_S}")
+        out["fig9_7_sigma_s"] = fig
+    out["fig9_7_sigma_s_all_sets"] = interval_figure(
+        tabs["fig9_7_sigma_s_all_sets"].to_dict("records"), truth=SIGMA_S, xaxis_title="σ_S (strain)",
+        title=f"Fig 9.7 (all sets) — {tag}: posterior median and 5–95 % of σ_S per test set; dashed: truth {SIGMA_S}")
+    if "fig9_8_eta_vs_benchmark" in tabs:
+        spec = [{"title": _set_label(c), "benchmark": c["benchmark"],
+                 "bands": {MODEL_LABELS[m]: c["models"][m]["eta_quantiles"] for m in MODELS}}
+                for c in eta_cases(result)]
+        out["fig9_8_eta_vs_benchmark"] = eta_band_grid(
+            spec, [MODEL_LABELS[m] for m in MODELS],
+            title=f"Fig 9.8 — {tag}: posterior of η(θ, h) (5–95 %, median) vs the benchmark η(θ̃, h) (dashed)")
+    fig = ifig.error_violin_figure({MODEL_LABELS[m]: np.asarray(v) for m, v in result["error_draws"].items()})
+    fig.update_layout(title=f"Fig 9.9 — {tag}: mean |η(θ_post, h) − η(θ̃, h)| over the 24 strains, all "
+                            f"{n_sets} test sets, per likelihood")
+    out["fig9_9_error_violins"] = fig
+    out["table_fibre_discrepancy_findings"] = table_figure(
+        tabs["table_fibre_discrepancy_findings"], title=f"Fibre-discrepancy study ({tag}): findings vs the chapter")
+    return out
+
+
+def write_study(result: dict, out) -> dict:
+    """Write the JSON, the CSVs behind the figures and the figures as HTML under ``out`` (through :func:`tables`
+    and :func:`figures`, the same as the Studies page and ``lvcore report``)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"json": out / "fibre_discrepancy.json"}
+    paths = {"json": out / RESULT_FILE}
     paths["json"].write_text(json.dumps(result, indent=1))
-    rows = []
-    for s in result["sets"]:
-        for m in ("iid", "discrepancy"):
-            sp = s["models"][m]["strain_predictive"]
-            for r in range(24):
-                rows.append({"set": s["set"], "model": m, "region": r, "data": s["y"][1 + r],
-                             "q05": sp["q05"][r], "q50": sp["q50"][r], "q95": sp["q95"][r]})
-    paths["strain_predictive_csv"] = out / "strain_predictive.csv"
-    pd.DataFrame(rows).to_csv(paths["strain_predictive_csv"], index=False)
-    paths["sigma_s_csv"] = out / "sigma_s.csv"
-    pd.DataFrame([{"set": s["set"], "model": m, **{k: v for k, v in s["models"][m]["sigma_s"].items() if k != "draws"},
-                   "truth": SIGMA_S}
-                  for s in result["sets"] for m in ("iid", "discrepancy")]).to_csv(paths["sigma_s_csv"], index=False)
-    paths["errors_csv"] = out / "errors.csv"
-    pd.DataFrame([{"model": m, "mean_abs_strain_error": e} for m, es in result["error_draws"].items()
-                  for e in es]).to_csv(paths["errors_csv"], index=False)
-    # figures: example set (0, 90) like the chapter, the sigma_S summary and the violins
-    ex = next((s for s in result["sets"] if (s["alpha_endo"], s["alpha_epi"]) == (0.0, 90.0)), result["sets"][-1])
-    fig = figs.strain_predictive_figure({m: {k: np.asarray(v) for k, v in ex["models"][m]["strain_predictive"].items()}
-                                        for m in ("iid", "discrepancy")}, ex["y"])
-    fig.update_layout(title=f"SYNTHETIC set {ex['set']} (angles {ex['alpha_endo']:g}, {ex['alpha_epi']:g}): "
-                            "posterior predictive of the strains vs data")
-    paths["fig_strain_predictive"] = figs.write_html(fig, out / "fig_strain_predictive.html")
-    paths["fig_errors"] = figs.write_html(figs.error_violin_figure(
-        {m: np.asarray(v) for m, v in result["error_draws"].items()}), out / "fig_errors_violin.html")
+    tabs = tables(result)
+    # sigma_s.csv: every set's sigma_S summary (Fig 9.7), errors.csv: the draws of the Fig 9.9 violins
+    for key, name in (("fig9_6_strain_predictive", "strain_predictive"), ("fig9_7_sigma_s_all_sets", "sigma_s"),
+                      ("fig9_9_error_violins", "errors")):
+        paths[f"{name}_csv"] = out / f"{name}.csv"
+        tabs[key].to_csv(paths[f"{name}_csv"], index=False)
+    figs = figures(result)
+    for key, name in (("fig9_6_strain_predictive", "fig_strain_predictive"), ("fig9_9_error_violins", "fig_errors_violin")):
+        paths[name] = out / f"{name}.html"
+        figs[key].write_html(str(paths[name]), include_plotlyjs=True)
     return {k: str(v) for k, v in paths.items()}
 
 

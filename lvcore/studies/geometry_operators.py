@@ -112,6 +112,126 @@ def format_table(table: dict) -> str:
     return "\n".join(lines)
 
 
+# ----------------------------------------------------------------------------- tables and figures
+#: Figures and tables :func:`figures` draws, with their titles.
+TITLES = {"table9_4_operators_pca": "Table 9.4: inter-operator vs k-mode PCA reconstruction error (cm²)",
+          "fig_pca_vs_operators": "PCA reconstruction error vs k, main operator op1",
+          "fig9_10_geometry_effect": "Fig 9.10: effect of the LV geometry on strains and LVV"}
+#: Why a figure can be absent.
+MISSING = {"fig9_10_geometry_effect": "the `chapter` emulator is not installed; build it with python "
+                                      "scripts/build_emulators.py --emulators chapter"}
+
+
+def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chapter",
+                    operator_geometries=None, shape_model=None) -> dict | None:
+    """Fig 9.10's data: the emulator at one θ on each patient's geometry (first operator, 5-PC projection).
+
+    Returns ``{"operator", "theta", "emulator", "rows": [{patient, operator, h1..h5, lvv_ml,
+    strain_01..strain_24}]}``, or None when the emulator is not installed.
+    """
+    from lvcore import units
+    from lvcore.emulator.io import available_emulators
+
+    if emulator not in available_emulators():
+        return None
+    from lvcore.core.forward import load_emulator_forward
+    from lvcore.geometry.cohort import load_operator_geometries
+    from lvcore.geometry.shape_model import load_shape_model
+
+    og = operator_geometries or load_operator_geometries()
+    sm = shape_model or load_shape_model()
+    theta = dict(units.HO_REFERENCE_THETA) if theta is None else dict(theta)
+    op = og.operators[0]
+    rows = []
+    for p, pid in enumerate(og.patients):
+        h = np.asarray(sm.project(og.nodes[p, 0]), dtype=float)[:5]
+        y = np.asarray(load_emulator_forward(emulator, h)(theta), dtype=float)
+        rows.append({"patient": pid, "operator": op, **{f"h{i + 1}": float(v) for i, v in enumerate(h)},
+                     "lvv_ml": float(y[0]), **{f"strain_{k + 1:02d}": float(y[1 + k]) for k in range(24)}})
+    return {"operator": op, "theta": theta, "emulator": emulator, "rows": rows}
+
+
+def compute(emulator: str = "chapter") -> dict:
+    """Everything :func:`figures` draws, computed from the bundled SYNTHETIC cohort (seconds).
+
+    ``{"table": operator_table(...), "geometry_effect": geometry_effect(...) or None}``.
+    """
+    from lvcore.geometry.cohort import load_operator_geometries
+    from lvcore.geometry.shape_model import load_shape_model
+
+    og, sm = load_operator_geometries(), load_shape_model()
+    table = operator_table(og, sm)
+    return {"table": table, "geometry_effect": geometry_effect(table, emulator=emulator, operator_geometries=og,
+                                                               shape_model=sm)}
+
+
+def table94_frame(table: dict):
+    """Table 9.4 as the chapter prints it (one row per main operator and patient, then the share rows) and its bold cells."""
+    import pandas as pd
+
+    ks = table["ks"]
+    rows, bold = [], []
+    for b in table["blocks"]:
+        for r in b["rows"]:
+            row = {"main": b["main"], "patient": r["patient"].replace("SYNTHETIC-", "")}
+            for j, o in enumerate(b["others"]):
+                row[f"test op {j + 1}"] = f"{o}: {r['operator_mse'][o]:.4f}"
+            row.update({f"{k}PC": r["pca_mse"][str(k)] for k in ks})
+            if r["first_k_beating_both"]:
+                bold.append((len(rows), f"{r['first_k_beating_both']}PC"))
+            rows.append(row)
+    rows.append({"main": "share", "patient": "k beats both",
+                 **{f"{k}PC": table["share_beating_both"][str(k)] for k in ks}})
+    rows.append({"main": "chapter", "patient": "(real data)",
+                 **{f"{k}PC": table["chapter_share"].get(str(k), float("nan")) for k in ks}})
+    return pd.DataFrame(rows), bold
+
+
+def tables(result: dict) -> dict:
+    """The data of each figure by name: Table 9.4 (plain data), the first main operator's block, Fig 9.10's rows."""
+    import pandas as pd
+
+    table = result["table"]
+    main = table["operators"][0]
+    out = {"table9_4_operators_pca": table,
+           "fig_pca_vs_operators": next(b for b in table["blocks"] if b["main"] == main)}
+    if result.get("geometry_effect"):
+        out["fig9_10_geometry_effect"] = pd.DataFrame(result["geometry_effect"]["rows"])
+    return out
+
+
+def captions(result: dict) -> dict:
+    lo, hi = result["table"]["operator_mse_range"]
+    return {"table9_4_operators_pca": f"operators differ by {lo:.4f}–{hi:.4f} cm² (chapter: 0.003–0.03 cm²)",
+            "fig9_10_geometry_effect": "the emulator sees the geometry through 5 PC scores only; the FE simulator on "
+                                       "the full geometries would show more spread"}
+
+
+def figures(result: dict) -> dict:
+    """Table 9.4 drawn as a table, the first main operator's error-vs-k plot, and Fig 9.10 (when computed)."""
+    from lvcore.viz.geometry_views import operator_mse_figure
+    from lvcore.viz.report_figures import strain_lines, table_figure
+
+    table = result["table"]
+    df, bold = table94_frame(table)
+    out = {"table9_4_operators_pca": table_figure(
+        df, title="Table 9.4 — SYNTHETIC cohort: mean squared node distance to the main operator's geometry (cm²); "
+                  "bold: first k beating both operators", bold=bold)}
+    main = table["operators"][0]
+    fig = operator_mse_figure(table, main)
+    fig.update_layout(title=f"Reconstruction error vs k, main operator {main} (SYNTHETIC cohort)")
+    out["fig_pca_vs_operators"] = fig
+    ge = result.get("geometry_effect")
+    if ge:
+        series = {f"{r['patient'].replace('SYNTHETIC-', '')} (EDV {r['lvv_ml']:.1f} mL)":
+                  [r[f"strain_{k + 1:02d}"] for k in range(24)] for r in ge["rows"]}
+        th = ", ".join(f"{k} {v:g}" for k, v in ge["theta"].items())
+        out["fig9_10_geometry_effect"] = strain_lines(
+            series, title=f"Fig 9.10 — SYNTHETIC patients ({ge['operator']}'s geometries, 5-PC projections): strains "
+                          f"and EDV at the same θ ({th}), `{ge['emulator']}` emulator")
+    return out
+
+
 def _run(args) -> int:
     from lvcore.geometry.cohort import load_operator_geometries
     from lvcore.geometry.shape_model import load_shape_model
@@ -131,3 +251,9 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--model", default=None, help="shape model (.json/.npz); default the bundled SYNTHETIC one")
     p.add_argument("--cohort", default=None, help="cohort directory; default the bundled lvcore/assets/cohort")
     p.set_defaults(func=_run)
+
+
+def source_line(result: dict) -> str:
+    ge = result.get("geometry_effect")
+    return ("bundled SYNTHETIC cohort and shape model"
+            + (f"; Fig 9.10: `{ge['emulator']}` emulator on the 5-PC projections of the SYNTHETIC patients" if ge else ""))

@@ -46,7 +46,6 @@ import numpy as np
 from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import THETA_NAMES
-from lvcore.viz import study_figures
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
 #: The chapter's ground truth θ̃ (a, af in kPa).
@@ -464,43 +463,188 @@ def fits_frame(fits: Sequence[dict]):
     for f in fits:
         row = {k: f.get(k) for k in ("patient", "main_operator", "test_geometry", "converged", "strain_rmse_forward",
                                       "output_rmse_refit", "mahalanobis", "loss", "sqp_evaluations", "seconds")}
-        for i, n in enumerate(THETA_NAMES):
-            row[f"{n}_hat"] = f["theta_hat"][i] if "theta_hat" in f else None
-            row[f"{n}_abs_error"] = f["theta_abs_error"][i] if "theta_abs_error" in f else None
+        hat = _theta(f["theta_hat"]) if "theta_hat" in f else {}
+        err = _theta(f["theta_abs_error"]) if "theta_abs_error" in f else {}
+        for n in THETA_NAMES:
+            row[f"{n}_hat"] = hat.get(n)
+            row[f"{n}_abs_error"] = err.get(n)
         row["message"] = f.get("message", "")
         rows.append(row)
     return pd.DataFrame(rows)
 
 
+#: Result file of :func:`write_outputs`, read by :func:`load`.
+RESULT_FILE = "operators.json"
+#: The command that makes the results.
+COMMAND = "lvcore study operators --out RESULTS"
+#: Loss-surface files of a result folder, simulator surfaces first (the flat copy in operators.json is the fallback).
+SURFACE_FILES = ("rss_surfaces_simulator.json", "rss_surfaces.json")
+#: Figures :func:`figures` draws, with their titles.
+TITLES = {"fig9_11_forward_strain_error": "Fig 9.11: forward strain error at θ̃ per test geometry",
+          "fig9_12_parameter_error": "Fig 9.12: absolute parameter errors of the SQP refits",
+          "fig9_13_rss_surface": "Fig 9.13: RSS surface over parameter pairs",
+          "fig9_14_output_error": "Fig 9.14: output-space error at θ̂ per test geometry",
+          "fig_mahalanobis": "Beyond the chapter: Mahalanobis distance of θ̂ from θ̃"}
+#: The violin figures: name -> (fit key, y-axis title, title after "Fig N — SYNTHETIC patients: ").
+VIOLINS = {"fig9_11_forward_strain_error": ("strain_rmse_forward", "strain RMSE at θ̃ (-)", "Fig 9.11"),
+           "fig9_14_output_error": ("output_rmse_refit", "strain RMSE at θ̂ (-)", "Fig 9.14"),
+           "fig_mahalanobis": ("mahalanobis", "Mahalanobis distance (-)", "Beyond the chapter")}
+
+
+def load(folder) -> dict:
+    """The results of an operators ``--out`` folder (or the bundled one).
+
+    Returns
+    -------
+    dict
+        ``operators.json`` (``fits``, ``findings``, ``meta``, ``rss_surfaces``) plus
+        ``surfaces``: loss surfaces grouped by fit (each ``patient``, ``main_operator``,
+        ``test_geometry``, ``method``, ``theta_hat``, ``pairs``), from the surface files
+        when present, else regrouped from the flat ``rss_surfaces``; and ``folder``.
+    """
+    from lvcore.studies.results import read_json
+
+    folder = Path(folder)
+    data = read_json(folder / RESULT_FILE)
+    surfaces = []
+    for name in SURFACE_FILES:
+        if (folder / name).is_file():
+            surfaces += read_json(folder / name)
+    data["surfaces"] = surfaces or group_surfaces(data.get("rss_surfaces") or [], data.get("fits", []))
+    data["folder"] = str(folder)
+    return data
+
+
+def group_surfaces(flat: Sequence[dict], fits: Sequence[dict] = ()) -> list[dict]:
+    """The inverse of :func:`flat_surfaces`: one record per fit with its ``pairs``; θ̂ taken from ``fits``."""
+    groups: dict = {}
+    for s in flat:
+        key = (s.get("patient"), s.get("main_operator"), s.get("test_geometry"), s.get("method", ""))
+        g = groups.setdefault(key, {"patient": key[0], "main_operator": key[1], "test_geometry": key[2],
+                                    "method": key[3], "pairs": []})
+        p, q = s["params"]
+        g["pairs"].append({"x": p, "y": q, "x_values": s["x"], "y_values": s["y"], "rss": s["rss"]})
+    for g in groups.values():
+        fit = next((f for f in fits if (f.get("patient"), f.get("main_operator"), f.get("test_geometry"))
+                    == (g["patient"], g["main_operator"], g["test_geometry"]) and "theta_hat" in f), None)
+        if fit is not None:
+            g["theta_hat"] = fit["theta_hat"]
+    return list(groups.values())
+
+
+def source_line(result: dict) -> str:
+    """Where the numbers come from, as one readable line."""
+    from lvcore.studies.results import source_label
+
+    budget = result.get("meta", {}).get("budget")
+    return f"{RESULT_FILE} ({source_label(result['folder'])})" + (f"; {budget}" if budget else "")
+
+
+def _theta(v) -> dict:
+    if isinstance(v, dict):
+        return {n: float(v[n]) for n in THETA_NAMES if n in v}
+    return dict(zip(THETA_NAMES, (float(x) for x in v)))
+
+
+def test_order(fits: Sequence[dict]) -> list[str]:
+    """Test geometries in order of appearance, the PC reconstructions last."""
+    order = list(dict.fromkeys(f["test_geometry"] for f in fits))
+    pcs = [f"pc{k}" for k in PC_TESTS]
+    return [g for g in order if g not in pcs] + [g for g in pcs if g in order]
+
+
+def tables(result: dict) -> dict:
+    """The study's tables (DataFrames) by name: the data of each figure, and ``fits`` (one row per fit)."""
+    import pandas as pd
+
+    fits = result.get("fits", [])
+    frame = pd.DataFrame(fits)
+    out = {}
+    for name, (col, _, _) in VIOLINS.items():
+        if col in frame:
+            out[name] = frame[["patient", "main_operator", "test_geometry", col]]
+    if "theta_abs_error" in frame:
+        out["fig9_12_parameter_error"] = pd.DataFrame(
+            [{"patient": f["patient"], "main_operator": f["main_operator"], "test_geometry": f["test_geometry"],
+              "parameter": n, "abs_error": v} for f in fits if "theta_abs_error" in f
+             for n, v in _theta(f["theta_abs_error"]).items()])
+    if result.get("surfaces"):
+        out["fig9_13_rss_surface"] = result["surfaces"][0]
+    if fits:
+        out["fits"] = fits_frame(fits)
+    return out
+
+
+def surface_title(surface: dict) -> str:
+    """Fig 9.13's title for one fit's surfaces: the patient, the main and test geometries."""
+    who = surface.get("patient") or "patient not recorded"
+    return (f"Fig 9.13 — SYNTHETIC {who}: loss (9.11) over parameter pairs, data from main operator "
+            f"{surface.get('main_operator') or '?'}'s geometry, θ refitted on test geometry "
+            f"{surface.get('test_geometry') or '?'}")
+
+
+def figures(result: dict) -> dict:
+    """The study's figures by name (see :data:`TITLES`); figures whose data the results lack are left out."""
+    from lvcore.viz.report_figures import error_strips, grouped_violins
+
+    tabs = tables(result)
+    fits = result.get("fits", [])
+    order = test_order(fits) if fits else None
+    out = {}
+    for name, (col, ytitle, fig_no) in VIOLINS.items():
+        if name in tabs:
+            what = TITLES[name].split(": ", 1)[1]
+            out[name] = grouped_violins(tabs[name], panel="main_operator", panel_label="main operator",
+                                        x="test_geometry", y=col, order=order, yaxis_title=ytitle, nonnegative=True,
+                                        title=f"{fig_no} — SYNTHETIC patients: {what}")
+    if "fig9_12_parameter_error" in tabs:
+        out["fig9_12_parameter_error"] = error_strips(
+            tabs["fig9_12_parameter_error"], panel="main_operator", panel_label="main operator", param="parameter",
+            x="test_geometry", y="abs_error", yaxis_title="|θ̂ − θ̃|",
+            title="Fig 9.12 — SYNTHETIC patients: absolute parameter errors of the SQP refits (ticks: patients; "
+                  "wide: median)")
+    if result.get("surfaces"):
+        out["fig9_13_rss_surface"] = surface_figure(result, 0)
+    # in chapter order
+    return {n: out[n] for n in TITLES if n in out}
+
+
+def surface_figure(result: dict, index: int = 0):
+    """Fig 9.13 for the ``index``-th fit with loss surfaces: every parameter pair, θ̂ and the truth θ̃ marked."""
+    from lvcore.viz import study_figures
+
+    s = result["surfaces"][index]
+    return study_figures.surface_figure(s, THETA_TRUE, title=surface_title(s))
+
+
 def write_outputs(result: dict, out) -> dict:
     """``operators.json`` (fits without the surfaces), ``rss_surfaces.json``, CSVs and figures."""
+    from lvcore.studies.results import read_json
+
     out = Path(out)
     fits = result["fits"]
     slim = [{k: v for k, v in f.items() if k != "rss_surface"} for f in fits]
     surfaces = [{"patient": f["patient"], "main_operator": f["main_operator"], "test_geometry": f["test_geometry"],
                  **f["rss_surface"]} for f in fits if "rss_surface" in f]
     sim = out / "rss_surfaces_simulator.json"
-    examples = (json.loads(sim.read_text()) if sim.is_file() else []) + surfaces[:1]
+    examples = (read_json(sim) if sim.is_file() else []) + surfaces[:1]
     paths = {"json": str(write_json_atomic(out / "operators.json", clean(
-        {**{k: v for k, v in result.items() if k != "surfaces"}, "fits": slim,
+        {**{k: v for k, v in result.items() if k not in ("surfaces", "folder")}, "fits": slim,
          "rss_surfaces": flat_surfaces(examples)})))}
     paths["surfaces"] = str(write_json_atomic(out / "rss_surfaces.json", clean([_rounded(r) for r in surfaces])))
     fits_frame(fits).to_csv(out / "operators_fits.csv", index=False)
     paths["csv"] = str(out / "operators_fits.csv")
     ok = [f for f in fits if "strain_rmse_forward" in f]
     if ok:
-        paths["fig_9_11"] = save_figure(study_figures.violin_figure(ok, "strain_errors_forward",
-                                                      "Fig 9.11 (SYNTHETIC): |forward strain error| at θ̃, test vs main geometry",
-                                                      "|ζ(θ̃, ĝ) − y*| per region", per_region=True),
-                                        out / "fig_9_11_forward_strain_errors")
-        paths["fig_9_14"] = save_figure(study_figures.violin_figure(ok, "output_rmse_refit",
-                                                      "Fig 9.14 (SYNTHETIC): output-space error of θ̂ on the main geometry",
-                                                      "RMS strain error ζ(θ̂, g) − y*"), out / "fig_9_14_output_errors")
-        paths["fig_mahalanobis"] = save_figure(study_figures.violin_figure(ok, "mahalanobis",
-                                                             "Beyond the chapter: Mahalanobis distance of θ̂ from θ̃",
-                                                             "Mahalanobis distance"), out / "fig_mahalanobis")
         ex = next((f for f in ok if f["test_geometry"] == "pc5"), ok[0])
-        paths["fig_9_13"] = save_figure(study_figures.surface_figure(ex, THETA_TRUE), out / "fig_9_13_loss_surface")
+        figs = figures({**result, "fits": ok, "surfaces": [{**{k: ex[k] for k in ("patient", "main_operator",
+                                                                                  "test_geometry")},
+                                                             **ex["rss_surface"]}]})
+        for key, stem in (("fig9_11_forward_strain_error", "fig_9_11_forward_strain_errors"),
+                          ("fig9_14_output_error", "fig_9_14_output_errors"), ("fig_mahalanobis", "fig_mahalanobis"),
+                          ("fig9_13_rss_surface", "fig_9_13_loss_surface")):
+            if key in figs:
+                paths[key] = save_figure(figs[key], out / stem)
     return paths
 
 

@@ -1,12 +1,14 @@
-"""Saved study results: find and load them (``--out`` folders and the bundled ``studies/`` folder), and start small runs.
+"""Saved study results: the one locator of the bundled results, the shared JSON reader, and small background runs.
 
-The app's Studies page reads everything through this module:
+Each study module owns its results (``load(folder)``, ``tables(result)``,
+``figures(result)``); this module only finds them:
 
+* :func:`bundled_studies_dir` is the bundled results of the shipped runs
+  (``studies/`` under the bundled assets), the only place that folder is located;
+* :func:`find_result` looks a result file up in a given folder, then in the bundled one;
 * :func:`result_sources` lists folders holding ``bo_fibres.json``,
-  ``operators.json`` or ``fibre_discrepancy.json``: the bundled results of a
-  shipped run (``studies/`` under the bundled assets) and any folder given;
-* :func:`load_bo`, :func:`load_operators`, :func:`load_fibre_discrepancy`
-  read one folder;
+  ``operators.json`` or ``fibre_discrepancy.json`` (the app's Studies page);
+* :func:`read_json` is the reader the study modules' ``load`` use;
 * :class:`BackgroundRun` starts ``lvcore study ...`` in a subprocess and
   reports its progress from the files it writes, so a page is never blocked.
 """
@@ -21,7 +23,6 @@ from pathlib import Path
 from typing import Sequence
 
 from lvcore.exceptions import LVCoreError
-from lvcore.studies._common import bundled_path
 
 #: The result file of each study.
 RESULT_FILES = {"bo-fibres": "bo_fibres.json", "operators": "operators.json",
@@ -30,7 +31,27 @@ RESULT_FILES = {"bo-fibres": "bo_fibres.json", "operators": "operators.json",
 
 def bundled_studies_dir() -> Path:
     """The bundled results of the shipped runs (``studies/`` under the bundled assets)."""
-    return bundled_path("studies")
+    from lvcore.resources import asset_path
+
+    return asset_path("studies")
+
+
+def find_result(filename: str, folder=None) -> Path | None:
+    """``folder/filename`` if it exists, else the bundled ``studies/filename``, else None."""
+    for d in ([Path(folder)] if folder else []) + [bundled_studies_dir()]:
+        if (d / filename).is_file():
+            return d / filename
+    return None
+
+
+def source_label(folder) -> str:
+    """``bundled`` for the bundled results folder, else the folder's path (for source lines)."""
+    folder = Path(folder)
+    try:
+        bundled = folder.resolve() == bundled_studies_dir().resolve()
+    except OSError:
+        bundled = False
+    return "bundled" if bundled else str(folder)
 
 
 def result_sources(extra: Sequence = ()) -> dict[str, list[tuple[str, Path]]]:
@@ -52,41 +73,12 @@ def result_sources(extra: Sequence = ()) -> dict[str, list[tuple[str, Path]]]:
     return found
 
 
-def _read(path: Path):
+def read_json(path):
+    """A study's JSON file; a clear :class:`LVCoreError` naming the file when it is missing or unreadable."""
     try:
         return json.loads(Path(path).read_text())
     except (OSError, json.JSONDecodeError) as err:
         raise LVCoreError(f"cannot read study results '{path}': {err}") from None
-
-
-def load_bo(folder) -> tuple[list[dict], dict]:
-    """``(entries, meta)`` of a bo-fibres result folder (meta empty if ``bo_fibres_meta.json`` is missing)."""
-    folder = Path(folder)
-    entries = _read(folder / "bo_fibres.json")
-    meta_path = folder / "bo_fibres_meta.json"
-    meta = _read(meta_path) if meta_path.is_file() else {}
-    if not meta:
-        from lvcore.studies.bo_fibres import findings
-
-        meta = {"findings": findings(entries)}
-    return entries, meta
-
-
-def load_operators(folder) -> dict:
-    """``operators.json`` of a result folder, with ``surfaces`` from ``rss_surfaces.json`` when present."""
-    folder = Path(folder)
-    data = _read(folder / "operators.json")
-    data["surfaces"] = []
-    for name in ("rss_surfaces_simulator.json", "rss_surfaces.json"):  # simulator surfaces first
-        if (folder / name).is_file():
-            data["surfaces"] += _read(folder / name)
-    data.pop("rss_surfaces", None)  # the flat copy for reports; the page uses the grouped files
-    return data
-
-
-def load_fibre_discrepancy(folder) -> dict:
-    """``fibre_discrepancy.json`` of a result folder."""
-    return _read(Path(folder) / "fibre_discrepancy.json")
 
 
 # ----------------------------------------------------------------------------- background runs
@@ -168,5 +160,5 @@ def small_run(study: str, out, *, subject: str = "SYNTHETIC-HV1", patient: str =
     return BackgroundRun(study, Path(out), args, total).start()
 
 
-__all__ = ["RESULT_FILES", "bundled_studies_dir", "result_sources", "load_bo", "load_operators",
-           "load_fibre_discrepancy", "BackgroundRun", "small_run"]
+__all__ = ["RESULT_FILES", "bundled_studies_dir", "find_result", "source_label", "result_sources", "read_json",
+           "BackgroundRun", "small_run"]

@@ -117,7 +117,8 @@ def strain_bullseye(strains, *, title: str = "Circumferential strain (bull's eye
 
 
 def violin(samples: Mapping[str, Sequence[float]], *, reference: Mapping[str, float] | None = None,
-           title: str = "", yaxis_title: str = "", log_y: bool = False, height: int = 420) -> go.Figure:
+           title: str = "", yaxis_title: str = "", xaxis_title: str = "", log_y: bool = False, height: int = 420,
+           nonnegative: bool = False) -> go.Figure:
     """Violins of several sample sets side by side, with optional reference markers.
 
     Parameters
@@ -126,12 +127,16 @@ def violin(samples: Mapping[str, Sequence[float]], *, reference: Mapping[str, fl
         E.g. posterior draws per parameter or per likelihood model.
     reference : dict label -> value, optional
         Shown as a red dashed horizontal segment over the matching violin (e.g. the truth).
+    nonnegative : bool
+        The quantity cannot be negative (an absolute error, an RMSE, a distance): the
+        violins end at the data (``spanmode="hard"``) instead of running past it below 0.
     """
     fig = go.Figure()
     labels = list(samples)
     for n, label in enumerate(labels):
         fig.add_violin(y=np.asarray(samples[label], dtype=float).ravel(), name=label, box_visible=True,
-                       meanline_visible=True, points=False, line_color=SERIES_COLOURS[n % len(SERIES_COLOURS)])
+                       meanline_visible=True, points=False, line_color=SERIES_COLOURS[n % len(SERIES_COLOURS)],
+                       spanmode="hard" if nonnegative else "soft")
     for label, value in (reference or {}).items():
         if label in samples:
             k = labels.index(label)
@@ -139,11 +144,32 @@ def violin(samples: Mapping[str, Sequence[float]], *, reference: Mapping[str, fl
                           line=dict(color="red", dash="dash", width=2))
     if reference:
         fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="reference")
-    fig.update_layout(title=title, yaxis_title=yaxis_title, height=height, showlegend=bool(reference),
+    fig.update_layout(title=title, yaxis_title=yaxis_title, xaxis_title=xaxis_title, height=height,
+                      showlegend=bool(reference),
                       margin=dict(l=10, r=10, t=50, b=10))
     if log_y:
         fig.update_yaxes(type="log")
+    elif nonnegative:
+        fig.update_yaxes(rangemode="nonnegative")
     return fig
+
+
+def decade_log_axis(values, min_decades: int = 2) -> dict:
+    """Settings of a log axis over ``values`` with a labelled tick at every decade, at least ``min_decades`` of them.
+
+    A log axis over data spanning less than a decade gets one tick label or none;
+    this widens the range to whole decades (at least ``min_decades`` + 1 labels).
+    Pass the result to ``fig.update_xaxes``/``update_yaxes``.
+    """
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v) & (v > 0)]
+    if v.size == 0:
+        return dict(type="log")
+    lo, hi = np.floor(np.log10(v.min())), np.ceil(np.log10(v.max()))
+    while hi - lo < min_decades:
+        lo, hi = (lo - 1, hi) if (np.log10(v.min()) - lo) < (hi - np.log10(v.max())) else (lo, hi + 1)
+    return dict(type="log", range=[float(lo), float(hi)], dtick=1, tickformat="~g",
+                minor=dict(showgrid=True, ticks="", dtick="D1"))
 
 
 def density_overlay(samples: Mapping[str, Sequence[float]], *, reference: float | Mapping[str, float] | None = None,

@@ -147,6 +147,9 @@ def operator_mse_figure(table: Mapping, main: str, log_y: bool = True):
     fig.update_layout(title=f"Reconstruction error vs k; main operator {main} (SYNTHETIC)",
                       xaxis_title="number of PCA modes k", yaxis_title="mean squared node distance (cm²)",
                       height=460, margin=dict(l=50, r=20, t=50, b=40))
-    if log_y:  # ticks at decades only (0.001, 0.01, 0.1), minor grid between: no "0.01, 2, 3, 4"
-        fig.update_yaxes(type="log", dtick=1, tickformat="~g", minor=dict(showgrid=True, ticks=""))
+    if log_y:  # a labelled tick at every decade (0.001, 0.01, 0.1), at least two of them, minor grid between
+        from lvcore.viz.figures import decade_log_axis
+
+        values = [v for row in block["rows"] for v in [*row["pca_mse"].values(), *row["operator_mse"].values()]]
+        fig.update_yaxes(**decade_log_axis(values))
     return fig

@@ -31,18 +31,41 @@ def _strains24(values) -> np.ndarray:
     return y
 
 
+#: Title font size (px) and line height of wrapped titles; subplot titles take this much room above a plot.
+TITLE_LINE_PX, SUBPLOT_TITLE_PX = 24, 26
+
+
+def _visible_len(line: str) -> int:
+    import re
+
+    return len(re.sub(r"<[^>]+>", "", line))
+
+
 def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
-    """Break a long title into lines of at most ``width`` characters (static exports do not wrap) and make room."""
+    """Break a long title into lines of at most ``width`` characters and anchor it at the top of the figure.
+
+    Static exports do not wrap titles. Each ``<br>``-separated part is wrapped
+    on its own; the title is pinned to the top of the figure (``yanchor="top"``)
+    and the top margin grows to hold every line plus, when the figure has subplot
+    titles, their row, so the title never overlaps them.
+    """
     import textwrap
 
     text = fig.layout.title.text or ""
-    if "<br>" in text or len(text) <= width:
+    if not text:
         return fig
-    lines = textwrap.wrap(text, width)
-    top = max(fig.layout.margin.t or 60, 30 + 24 * len(lines))
-    fig.update_layout(title_text="<br>".join(lines), margin=dict(t=top))
-    if fig.layout.height:
-        fig.update_layout(height=fig.layout.height + 24 * (len(lines) - 1))
+    lines = []
+    for part in text.split("<br>"):
+        lines += [part] if _visible_len(part) <= width or "<" in part else textwrap.wrap(part, width)
+    subplot_titles = any(getattr(a, "yref", None) == "paper" and (a.y or 0) >= 0.99 and a.yanchor == "bottom"
+                         for a in fig.layout.annotations)
+    need = 16 + TITLE_LINE_PX * len(lines) + (SUBPLOT_TITLE_PX if subplot_titles else 6)
+    top = max(fig.layout.margin.t or 0, need)
+    grow = top - (fig.layout.margin.t if fig.layout.margin.t is not None else 100)
+    fig.update_layout(title=dict(text="<br>".join(lines), y=1, yref="container", yanchor="top", pad=dict(t=12)),
+                      margin=dict(t=top))
+    if fig.layout.height and grow > 0:
+        fig.update_layout(height=fig.layout.height + grow)
     return fig
 
 
@@ -102,9 +125,17 @@ def eta_band_grid(cases: Sequence[Mapping], models: Sequence[str], *, title: str
     return fig
 
 
+#: Pixels per character and padding of table columns (plotly's default 12 px table font).
+TABLE_CHAR_PX, TABLE_PAD_PX = 7.5, 16
+
+
 def table_figure(df: pd.DataFrame, *, title: str, float_format: str = ".4g", height: int | None = None,
                  bold: Sequence[tuple[int, str]] = ()) -> go.Figure:
     """A DataFrame drawn as a plotly table (for PNG/SVG export of the chapter's tables).
+
+    Each column is as wide as its longest cell or header (``columnwidth`` in
+    pixels) and ``layout.width`` is the sum, so nothing is clipped on the right:
+    the static export uses that width, and the HTML figure scrolls sideways.
 
     Parameters
     ----------
@@ -117,18 +148,25 @@ def table_figure(df: pd.DataFrame, *, title: str, float_format: str = ".4g", hei
         return "" if v is None else str(v)
 
     bold = set(bold)
-    cells = []
+    cells, widths = [], []
     for col in df.columns:
-        cells.append([f"<b>{fmt(v)}</b>" if (r, col) in bold else fmt(v) for r, v in enumerate(df[col].tolist())])
-    fig = go.Figure(go.Table(header=dict(values=[f"<b>{c}</b>" for c in df.columns], fill_color="#e8ecf4",
-                                         align="center"),
-                             cells=dict(values=cells, align="center", height=26)))
-    fig.update_layout(title=title, height=height or 110 + 32 * (len(df) + 1), margin=dict(l=10, r=10, t=60, b=10))
+        texts = [fmt(v) for v in df[col].tolist()]
+        cells.append([f"<b>{t}</b>" if (r, col) in bold else t for r, t in enumerate(texts)])
+        longest = max([len(str(col)) + 1] + [len(t) + (1 if (r, col) in bold else 0) for r, t in enumerate(texts)])
+        widths.append(int(np.ceil(TABLE_PAD_PX + TABLE_CHAR_PX * longest)))
+    fig = go.Figure(go.Table(columnwidth=widths,
+                             header=dict(values=[f"<b>{c}</b>" for c in df.columns], fill_color="#e8ecf4",
+                                         font=dict(color="#2a3f5f"), align="center", line_color="#c8d0e0"),
+                             cells=dict(values=cells, align="center", height=26, fill_color="white",
+                                        font=dict(color="#2a3f5f"), line_color="#d8dee9")))
+    fig.update_layout(title=title, height=height or 110 + 32 * (len(df) + 1),
+                      width=max(700, sum(widths) + 40), margin=dict(l=10, r=10, t=60, b=10))
     return fig
 
 
 def grouped_violins(df: pd.DataFrame, *, panel: str, x: str, y: str, title: str, yaxis_title: str,
-                    order: Sequence[str] | None = None, height_per_panel: int = 300) -> go.Figure:
+                    order: Sequence[str] | None = None, height_per_panel: int = 300, panel_label: str | None = None,
+                    nonnegative: bool = False) -> go.Figure:
     """Violins of ``df[y]`` by ``df[x]``, one panel per value of ``df[panel]`` (chapter Figs 9.11 and 9.14).
 
     Parameters
@@ -138,11 +176,17 @@ def grouped_violins(df: pd.DataFrame, *, panel: str, x: str, y: str, title: str,
         Column names: the panel (e.g. main operator), the violin category (e.g. test geometry) and the value.
     order : sequence of str, optional
         Order of the x categories (default: first appearance).
+    panel_label : str, optional
+        Subplot titles read "<panel_label>: <value>" (default: the column name with spaces).
+    nonnegative : bool
+        The quantity cannot be negative (an error's size, an RMSE, a distance): the
+        violins end at the data (``spanmode="hard"``) and the axis starts at 0.
     """
     panels = list(dict.fromkeys(df[panel]))
     cats = list(order) if order is not None else list(dict.fromkeys(df[x]))
-    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"main {panel.replace('_', ' ')}: {p}"
-                                                                  for p in panels], vertical_spacing=0.12)
+    label = panel_label or panel.replace("_", " ")
+    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"{label}: {p}" for p in panels],
+                        vertical_spacing=0.12)
     for i, p in enumerate(panels):
         sub = df[df[panel] == p]
         for k, c in enumerate(cats):
@@ -150,15 +194,18 @@ def grouped_violins(df: pd.DataFrame, *, panel: str, x: str, y: str, title: str,
             if vals.size == 0:
                 continue
             fig.add_violin(y=vals, name=str(c), box_visible=True, meanline_visible=True, points="all",
+                           spanmode="hard" if nonnegative else "soft",
                            line_color=SERIES_COLOURS[k % len(SERIES_COLOURS)], showlegend=False, row=i + 1, col=1)
-        fig.update_yaxes(title_text=yaxis_title, row=i + 1, col=1)
+        fig.update_yaxes(title_text=yaxis_title, rangemode="nonnegative" if nonnegative else "normal", row=i + 1,
+                         col=1)
+        fig.update_xaxes(title_text=x.replace("_", " "), row=i + 1, col=1)
     fig.update_layout(title=title, height=max(360, height_per_panel * len(panels)),
                       margin=dict(l=50, r=20, t=70, b=30))
     return fig
 
 
 def error_strips(df: pd.DataFrame, *, panel: str, param: str, x: str, y: str, title: str, yaxis_title: str,
-                 height_per_panel: int = 300) -> go.Figure:
+                 height_per_panel: int = 300, panel_label: str | None = None) -> go.Figure:
     """Per-case markers and median ticks of errors by parameter and test geometry (chapter Fig 9.12).
 
     One panel per ``df[panel]``; within a panel the x axis is ``param`` × ``x``
@@ -168,8 +215,9 @@ def error_strips(df: pd.DataFrame, *, panel: str, param: str, x: str, y: str, ti
     panels = list(dict.fromkeys(df[panel]))
     params = list(dict.fromkeys(df[param]))
     cats = list(dict.fromkeys(df[x]))
-    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"main {panel.replace('_', ' ')}: {p}"
-                                                                  for p in panels], vertical_spacing=0.12)
+    label = panel_label or panel.replace("_", " ")
+    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"{label}: {p}" for p in panels],
+                        vertical_spacing=0.12)
     for i, p in enumerate(panels):
         sub = df[df[panel] == p]
         for k, c in enumerate(cats):
@@ -190,7 +238,8 @@ def error_strips(df: pd.DataFrame, *, panel: str, param: str, x: str, y: str, ti
             fig.add_scatter(x=[list(mx[0]), list(mx[1])], y=my, mode="markers",
                             marker=dict(symbol="line-ew-open", size=26, color=colour, line=dict(width=3)),
                             name=f"{c} median", legendgroup=str(c), showlegend=False, row=i + 1, col=1)
-        fig.update_yaxes(title_text=yaxis_title, row=i + 1, col=1)
+        fig.update_yaxes(title_text=yaxis_title, rangemode="nonnegative", row=i + 1, col=1)
+        fig.update_xaxes(title_text=f"{param} / {x.replace('_', ' ')}", row=i + 1, col=1)
     fig.update_layout(title=title, height=max(360, height_per_panel * len(panels)),
                       margin=dict(l=50, r=20, t=70, b=30))
     return fig
@@ -223,7 +272,7 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
                         showlegend=j == 0, row=1, col=j + 1)
         if truth and n in truth:
             fig.add_vline(x=float(truth[n]), line=dict(color="red", dash="dash", width=2), row=1, col=j + 1)
-        fig.update_xaxes(range=[lo, hi], row=1, col=j + 1)
+        fig.update_xaxes(range=[lo, hi], title_text=f"{n} ({units.get(n, '-')})", row=1, col=j + 1)
     if truth:
         fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="truth (SYNTHETIC)")
     fig.update_yaxes(title_text="density", col=1)
@@ -233,7 +282,7 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
 
 
 def interval_figure(rows: Sequence[Mapping], *, truth: float | None, title: str, xaxis_title: str,
-                    height: int = 420) -> go.Figure:
+                    yaxis_title: str = "test set", height: int = 420) -> go.Figure:
     """Median and 5–95 % interval per (label, series) row, e.g. σ_S per test set and model (Fig 9.7 summary).
 
     ``rows``: dicts with ``label``, ``series``, ``median``, ``q05``, ``q95``.
@@ -249,7 +298,8 @@ def interval_figure(rows: Sequence[Mapping], *, truth: float | None, title: str,
                                      arrayminus=med - np.array([r["q05"] for r in rs])))
     if truth is not None:
         fig.add_vline(x=truth, line=dict(color="black", dash="dash"), annotation_text="truth")
-    fig.update_layout(title=title, xaxis_title=xaxis_title, height=height, margin=dict(l=10, r=20, t=60, b=40))
+    fig.update_layout(title=title, xaxis_title=xaxis_title, yaxis_title=yaxis_title, height=height,
+                      margin=dict(l=10, r=20, t=60, b=40))
     return fig
 
 

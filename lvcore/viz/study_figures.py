@@ -2,8 +2,9 @@
 
 Every function takes the plain data the studies write (``bo_fibres.json``
 entries, ``operators.json`` fits, ``rss_surfaces.json`` records) and returns
-a :class:`plotly.graph_objects.Figure`; the study commands and the app's
-Studies page draw the same figures.
+a :class:`plotly.graph_objects.Figure`. The study modules' ``figures(result)``
+call them; the study commands, the app's Studies page and ``lvcore report``
+all draw through those.
 """
 from __future__ import annotations
 
@@ -12,11 +13,15 @@ from typing import Sequence
 import numpy as np
 
 from lvcore.outputs import THETA_NAMES
+from lvcore.viz.figures import SERIES_COLOURS
 
 #: Modes of the BO study, in table order.
 BO_MODES = ("fixed", "free")
-#: The operator study's truth (a, b, af, bf), marked on the loss surfaces.
-THETA_TRUE = (0.60, 1.30, 1.00, 3.60)
+_MODE_COLOURS = {"fixed": "#d62728", "free": "#1f77b4"}
+
+
+def _short(subject: str) -> str:
+    return subject.replace("SYNTHETIC-", "")
 
 
 def residual_figure(entries: Sequence[dict]):
@@ -24,88 +29,119 @@ def residual_figure(entries: Sequence[dict]):
     import plotly.graph_objects as go
 
     fig = go.Figure()
-    colours = {"fixed": "#d62728", "free": "#1f77b4"}
     for m in BO_MODES:
         xs, ys = [], []
         for e in entries:
-            if e["mode"] == m:
-                xs += [e["subject"].replace("SYNTHETIC-", "")] * len(e["strain_residuals"])
+            if e["mode"] == m and e.get("strain_residuals"):
+                xs += [_short(e["subject"])] * len(e["strain_residuals"])
                 ys += e["strain_residuals"]
         if ys:
             label = "before: angles fixed (−60°, 90°)" if m == "fixed" else "after: angles optimised"
-            fig.add_trace(go.Box(x=xs, y=ys, name=label, marker_color=colours[m], boxpoints="all", jitter=0.4,
+            fig.add_trace(go.Box(x=xs, y=ys, name=label, marker_color=_MODE_COLOURS[m], boxpoints="all", jitter=0.4,
                                  pointpos=0))
     fig.add_hline(y=0, line_dash="dot")
-    fig.update_layout(boxmode="group", title="SYNTHETIC volunteers: strain residuals at the BO optimum",
-                      xaxis_title="volunteer", yaxis_title="model − measured circumferential strain")
+    fig.update_layout(boxmode="group", title="SYNTHETIC volunteers:<br>strain residuals at the BO optimum",
+                      xaxis_title="volunteer", yaxis_title="model − measured E_cc (-)", height=480,
+                      legend=dict(orientation="h", y=-0.2, yanchor="top"), margin=dict(l=60, r=20, t=80, b=40))
     return fig
 
 
 def convergence_figure(entries: Sequence[dict]):
-    """Best objective so far against evaluations, one line per subject and mode."""
+    """Best objective so far against evaluations: one colour per subject, dotted fixed angles, solid free.
+
+    The legend holds one entry per subject and one per line style (not one per
+    line), laid out under the plot, so it fits whatever the number of subjects.
+    """
     import plotly.graph_objects as go
+
+    from lvcore.viz.figures import decade_log_axis
 
     fig = go.Figure()
+    subjects = list(dict.fromkeys(e["subject"] for e in entries))
+    values = []
     for e in entries:
         c = e.get("convergence") or []
-        fig.add_trace(go.Scatter(y=c, mode="lines", name=f"{e['subject'].replace('SYNTHETIC-', '')} {e['mode']}",
-                                 line={"dash": "solid" if e["mode"] == "free" else "dot"}))
-        if e.get("n_initial"):
-            pass
-    if entries:
-        fig.add_vline(x=entries[0].get("n_initial", 0) - 0.5, line_dash="dash",
-                      annotation_text="end of initial design")
-    fig.update_layout(title="SYNTHETIC volunteers: BO convergence (best standardised RSS so far)",
-                      xaxis_title="evaluation", yaxis_title="best objective", yaxis_type="log")
+        values += [v for v in c if v and v > 0]
+        k = subjects.index(e["subject"])
+        first = next(x for x in entries if x["subject"] == e["subject"]) is e
+        fig.add_trace(go.Scatter(y=c, mode="lines", name=_short(e["subject"]), legendgroup=e["subject"],
+                                 showlegend=first,
+                                 line={"dash": "solid" if e["mode"] == "free" else "dot",
+                                       "color": SERIES_COLOURS[k % len(SERIES_COLOURS)]},
+                                 hovertemplate=f"{_short(e['subject'])} {e['mode']}: %{{y:.4g}}<extra></extra>"))
+    for m, dash in (("fixed angles", "dot"), ("free angles", "solid")):
+        fig.add_trace(go.Scatter(x=[None], y=[None], mode="lines", name=m, line={"dash": dash, "color": "grey"}))
+    if entries and entries[0].get("n_initial"):
+        fig.add_vline(x=entries[0]["n_initial"] - 0.5, line_dash="dash", annotation_text="end of initial design")
+    fig.update_layout(title="SYNTHETIC volunteers: BO convergence<br>(best standardised RSS so far)",
+                      xaxis_title="evaluation", yaxis_title="best objective (-)", height=520,
+                      legend=dict(orientation="h", y=-0.18, yanchor="top"), margin=dict(l=60, r=20, t=80, b=40))
+    if values:
+        fig.update_yaxes(**decade_log_axis(values))
     return fig
 
 
-def violin_figure(fits: Sequence[dict], metric: str, title: str, yaxis: str, per_region: bool = False):
-    """Violins of ``metric`` per test geometry, one panel per main operator (Figs 9.11 and 9.14)."""
-    import plotly.graph_objects as go
+def bo_error_bars(rows):
+    """Bars of the LVV and median strain errors at the BO optimum per subject, fixed vs free angles.
+
+    ``rows``: a DataFrame with ``subject``, ``mode``, ``lvv_abs_error_ml``, ``median_abs_strain_error``.
+    """
     from plotly.subplots import make_subplots
 
-    mains = sorted({f["main_operator"] for f in fits})
-    fig = make_subplots(rows=1, cols=max(1, len(mains)), subplot_titles=[f"main operator {m}" for m in mains],
-                        shared_yaxes=True)
-    for c, m in enumerate(mains, start=1):
-        tests = [t for t in dict.fromkeys(f["test_geometry"] for f in fits if f["main_operator"] == m)]
-        for t in tests:
-            vals = []
-            for f in fits:
-                if f["main_operator"] == m and f["test_geometry"] == t and metric in f:
-                    vals += list(np.abs(f[metric])) if per_region else [f[metric]]
-            fig.add_trace(go.Violin(x=[t] * len(vals), y=vals, name=t, box_visible=True, points="all",
-                                    showlegend=False, line_color="#1f77b4" if t.startswith("pc") else "#d62728"),
-                          row=1, col=c)
-    fig.update_layout(title=title, height=450)
-    fig.update_yaxes(title_text=yaxis, col=1)
+    cols = (("lvv_abs_error_ml", "LVV |error| (mL)"), ("median_abs_strain_error", "median |strain error| (-)"))
+    fig = make_subplots(rows=1, cols=2, subplot_titles=[t for _, t in cols])
+    for k, mode in enumerate(BO_MODES):
+        sub = rows[rows["mode"] == mode]
+        for j, (col, title) in enumerate(cols):
+            fig.add_bar(x=sub["subject"], y=sub[col], name=f"{mode} angles", legendgroup=mode, showlegend=j == 0,
+                        marker_color=SERIES_COLOURS[k], row=1, col=j + 1)
+            fig.update_yaxes(title_text=title, rangemode="nonnegative", row=1, col=j + 1)
+            fig.update_xaxes(title_text="volunteer", row=1, col=j + 1)
+    fig.update_layout(title="Tables 9.2/9.3 — SYNTHETIC volunteers: errors at the BO optimum, fixed vs free angles",
+                      barmode="group", height=440, margin=dict(l=60, r=20, t=90, b=40))
     return fig
 
 
-def surface_figure(fit: dict, theta_true=THETA_TRUE):
-    """Contours of the loss over the parameter pairs of one fit (Fig 9.13), θ̃ marked."""
+def surface_figure(surface: dict, theta_true: Sequence[float], *, title: str):
+    """Contours of the loss over the parameter pairs of one fit (Fig 9.13), θ̂ and the truth θ̃ marked.
+
+    Parameters
+    ----------
+    surface : dict
+        ``pairs`` (each ``x``, ``y`` parameter names, ``x_values``, ``y_values``,
+        ``rss`` (len(y), len(x))), ``method`` and ``theta_hat`` (optional).
+    theta_true : (4,) sequence
+        The truth θ̃ (a, b, af, bf).
+    """
     import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
-    pairs = fit["rss_surface"]["pairs"]
-    fig = make_subplots(rows=2, cols=3, subplot_titles=[f"{p['x']}–{p['y']}" for p in pairs])
+    pairs = surface["pairs"]
+    n_cols = 3 if len(pairs) > 1 else 1
+    n_rows = -(-len(pairs) // n_cols)
+    fig = make_subplots(rows=n_rows, cols=n_cols, subplot_titles=[f"{p['x']}–{p['y']}" for p in pairs],
+                        horizontal_spacing=0.09, vertical_spacing=0.16)
+    th = surface.get("theta_hat")
     for i, p in enumerate(pairs):
-        r, c = divmod(i, 3)
+        r, c = divmod(i, n_cols)
         z = np.log10(np.maximum(np.asarray(p["rss"], float), 1e-12))
         fig.add_trace(go.Contour(x=p["x_values"], y=p["y_values"], z=z, showscale=i == 0, colorscale="Viridis",
-                                 colorbar={"title": "log10 loss"}), row=r + 1, col=c + 1)
+                                 colorbar={"title": "log10 loss", "x": 1.02}), row=r + 1, col=c + 1)
         ti, tj = THETA_NAMES.index(p["x"]), THETA_NAMES.index(p["y"])
-        fig.add_trace(go.Scatter(x=[theta_true[ti]], y=[theta_true[tj]], mode="markers", showlegend=False,
+        fig.add_trace(go.Scatter(x=[theta_true[ti]], y=[theta_true[tj]], mode="markers", name="truth θ̃",
+                                 legendgroup="truth", showlegend=i == 0,
                                  marker={"symbol": "x", "color": "red", "size": 11}), row=r + 1, col=c + 1)
-        th = fit.get("theta_hat") or fit["rss_surface"].get("theta_hat")
         if th is not None:
-            fig.add_trace(go.Scatter(x=[th[ti]], y=[th[tj]], mode="markers", showlegend=False,
-                                     marker={"symbol": "circle-open", "color": "white", "size": 11,
+            fig.add_trace(go.Scatter(x=[th[ti]], y=[th[tj]], mode="markers", name="refit θ̂", legendgroup="hat",
+                                     showlegend=i == 0,
+                                     marker={"symbol": "circle-open", "color": "white", "size": 12,
                                              "line": {"width": 2}}), row=r + 1, col=c + 1)
         fig.update_xaxes(type="log", title_text=p["x"], row=r + 1, col=c + 1)
         fig.update_yaxes(type="log", title_text=p["y"], row=r + 1, col=c + 1)
-    fig.update_layout(title=f"Loss (9.11) around θ̂: {fit['patient']}, main {fit['main_operator']}, test "
-                            f"{fit['test_geometry']}<br><sup>{fit['rss_surface']['method']}; red X: θ̃, white circle: θ̂</sup>",
-                      height=680)
+    method = surface.get("method") or "method not recorded"
+    fig.update_layout(title=f"{title}<br><sup>{method}</sup>", height=330 * n_rows + 170,
+                      legend=dict(orientation="h", y=-0.1, yanchor="top"), margin=dict(l=60, r=20, t=120, b=60))
     return fig
+
+
+__all__ = ["residual_figure", "convergence_figure", "bo_error_bars", "surface_figure"]

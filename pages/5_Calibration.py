@@ -24,7 +24,7 @@ from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.core.forward import emulator_forward
 from lvcore.inference.diagnostics import banner_status
-from lvcore.inference.models import PARAMETER_HELP, prior_bounds
+from lvcore.inference.models import PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.samplers import SamplerConfig, use_host_devices
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
@@ -77,7 +77,7 @@ with left:
     if source == "bundled volunteer":
         names = bundled_volunteers()
         if not names:
-            st.warning("No bundled volunteers in lvcore/assets/volunteers; upload data instead.")
+            st.warning("No bundled volunteers in assets/volunteers; upload data instead.")
         else:
             name = st.selectbox("Volunteer", names, index=names.index(shared_subject) if shared_subject in names else 0,
                                 help="Defaults to the shared sidebar's subject.")
@@ -232,7 +232,8 @@ if job is not None and job["done"]:
             for tab, (m, res) in zip(tabs, results.items()):
                 with tab:
                     table = res.summary.copy()
-                    table.insert(0, "meaning", [PARAMETER_HELP.get(str(n), "") for n in table.index])
+                    # a short meaning fits its column (the full text is in the list above the run button)
+                    table.insert(0, "meaning", [parameter_meaning(n) for n in table.index])
                     if truth:
                         table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
                     st.dataframe(table, width="stretch",

@@ -1,0 +1,101 @@
+"""A short live calibration of one bundled SYNTHETIC volunteer (the report's calibration posterior).
+
+The iid likelihood and the ``chapter`` emulator, on the volunteer's measured
+CSV with ``h`` the 5-PC projection of its geometry; the uniform prior and the
+volunteer's hidden truth are kept beside the posterior so that the figure can
+show both (the truth scores the fit, it never enters it). The default subject
+is SYNTHETIC-HV3, whose PC scores lie inside the emulator box (HV1 and HV5 do not).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from lvcore.outputs import THETA_NAMES
+
+#: The subject of the report's calibration.
+DEFAULT_SUBJECT = "SYNTHETIC-HV3"
+#: Seconds the calibration adds to ``lvcore report`` (JAX compilation included): the range measured on the
+#: 2-core development machine, ``timings_s["calibration posterior"]`` of the manifest (BENCHMARKS.md).
+TYPICAL_SECONDS = (20, 45)
+#: Figures and tables :func:`figures` draws (for the default subject), with their titles.
+TITLES = {"fig_calibration_posterior": f"Calibration posterior of θ, {DEFAULT_SUBJECT} (prior and truth shown)",
+          "table_calibration_summary": f"Calibration summary, {DEFAULT_SUBJECT}"}
+#: Why the figures can be absent.
+MISSING = dict.fromkeys(TITLES, "the `chapter` emulator is not installed; build it with python "
+                                "scripts/build_emulators.py --emulators chapter")
+
+
+def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_samples: int = 500,
+            num_chains: int = 4, seed: int = 0) -> dict | None:
+    """Run the calibration; None when the ``chapter`` emulator is not installed.
+
+    Returns
+    -------
+    dict
+        ``subject``, ``draws`` {θ name: (n,) array}, ``bounds`` {name: (lo, hi)} of the
+        uniform prior, ``truth`` {name: value} or None, ``summary`` (DataFrame with
+        ``parameter`` and ``truth``), ``status`` (convergence text), ``wall_s`` and ``config``.
+    """
+    from lvcore.emulator.io import available_emulators
+
+    if "chapter" not in available_emulators():
+        return None
+    from lvcore.core.forward import load_emulator_forward
+    from lvcore.inference import models
+    from lvcore.inference.calibrate import calibrate, read_pc_scores
+    from lvcore.inference.data import read_measured_csv
+    from lvcore.inference.samplers import SamplerConfig
+    from lvcore.resources import volunteer_files, volunteer_truth
+
+    files = volunteer_files(subject.replace("-", "_"))
+    row = read_measured_csv(files.measured)[0]
+    forward = load_emulator_forward("chapter", read_pc_scores(files.geometry))
+    config = SamplerConfig(num_warmup=num_warmup, num_samples=num_samples, num_chains=num_chains, seed=seed)
+    res = calibrate(row.y, forward, "iid", config=config, max_rounds=1)
+    truth = volunteer_truth(row.subject)  # the hidden truth scores the fit; it never enters it
+    truth = {n: truth[n] for n in THETA_NAMES if n in truth} if truth else None
+    stats = res.idata.sample_stats
+    n_div = int(np.asarray(stats["diverging"]).sum()) if "diverging" in stats else 0
+    summary = res.summary.reset_index().rename(columns={"index": "parameter"})
+    if truth:
+        summary["truth"] = summary["parameter"].map(truth)
+    return {"subject": row.subject, "draws": {n: np.asarray(res.idata.posterior[n]).reshape(-1) for n in THETA_NAMES},
+            "bounds": models.prior_bounds(forward=forward), "truth": truth, "summary": summary,
+            "status": f"{res.convergence.message()}; {n_div} divergent transitions", "wall_s": res.wall_s,
+            "config": {"num_warmup": num_warmup, "num_samples": num_samples, "num_chains": num_chains}}
+
+
+def source_line(result: dict) -> str:
+    return (f"live NUTS run ({result['wall_s']:.1f} s) on {result['subject']}'s measured CSV, h = 5-PC projection "
+            "of its geometry")
+
+
+def tables(result: dict) -> dict:
+    """The posterior draws (thinned to about 1000) behind the figure, and the summary table."""
+    import pandas as pd
+
+    draws = result["draws"]
+    return {"fig_calibration_posterior": pd.DataFrame({n: d[:: max(1, d.size // 1000)] for n, d in draws.items()}),
+            "table_calibration_summary": result["summary"]}
+
+
+def captions(result: dict) -> dict:
+    return {k: result["status"] for k in TITLES}
+
+
+def figures(result: dict) -> dict:
+    """The posterior of θ with the uniform prior and the hidden truth, and the summary as a table."""
+    from lvcore.viz.inference_figures import UNITS
+    from lvcore.viz.report_figures import posterior_prior_figure, table_figure
+
+    c = result["config"]
+    subject = result["subject"]
+    return {
+        "fig_calibration_posterior": posterior_prior_figure(
+            result["draws"], result["bounds"], truth=result["truth"], units=UNITS,
+            title=f"Calibration — {subject} (SYNTHETIC volunteer), iid model, `chapter` emulator, "
+                  f"{c['num_chains']}×({c['num_warmup']}+{c['num_samples']}) NUTS: posterior, uniform prior "
+                  "(dotted), hidden truth (red)"),
+        "table_calibration_summary": table_figure(
+            result["summary"], title=f"Calibration summary — {subject} (SYNTHETIC), iid model: {result['status']}"),
+    }

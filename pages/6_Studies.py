@@ -1,0 +1,145 @@
+"""Studies: the chapter's optimisation and discrepancy studies from saved results, and small background runs.
+
+Every tab draws through its study module (``load``, ``tables``, ``figures``), the same calls as
+``lvcore report``; this page only lays them out.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import streamlit as st
+
+from lvcore.exceptions import LVCoreError
+from lvcore.studies import bo_fibres, fibre_discrepancy, geometry_operators, operators, results
+
+st.title("Studies")
+st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
+           "of `lvcore study ...`. Everything here is SYNTHETIC (generated volunteers, imitation operators).")
+
+with st.sidebar:
+    st.header("Results")
+    extra = st.text_input("More result folders (comma-separated)", "",
+                          help="--out folders of `lvcore study bo-fibres/operators/fibre-discrepancy`, or their parent")
+    folders = [Path(p.strip()).expanduser() for p in extra.split(",") if p.strip()]
+    if "studies_runs" in st.session_state:
+        folders += [r.out for r in st.session_state["studies_runs"].values()]
+sources = results.result_sources(folders)
+
+
+def load(study: str, module, key: str):
+    """The chosen result set of ``study`` loaded by its module, or None (with a message saying why)."""
+    opts = sources[study]
+    if not opts:
+        st.info(f"No saved results of `{study}` found (bundled folder: {results.bundled_studies_dir()}). "
+                f"Run `lvcore study {study} --out DIR` and add DIR in the sidebar.")
+        return None
+    label = st.selectbox("Result set", [o[0] for o in opts], key=key)
+    try:
+        return module.load(dict(opts)[label])
+    except (LVCoreError, KeyError, TypeError, ValueError) as err:
+        st.error(f"cannot read the {study} results in {dict(opts)[label]}: {err}")
+        return None
+
+
+def show(module, result, figures=None, tables=()) -> None:
+    """The module's figures (all, or those named) with their titles, then the named tables as data frames."""
+    figs = module.figures(result)
+    tabs = module.tables(result)
+    for name in figures or figs:
+        if name in figs:
+            st.plotly_chart(figs[name], width="stretch", key=f"{module.__name__}.{name}")
+    for name in tables:
+        if name in tabs:
+            st.caption(module.TITLES.get(name, name.replace("_", " ")))
+            st.dataframe(tabs[name].round(4), hide_index=True, width="stretch")
+
+
+tab_bo, tab_ops, tab_fd, tab_geo, tab_run = st.tabs(
+    ["Fibre-angle BO (Tables 9.2/9.3)", "Operators (Figs 9.11–9.14)", "Fibre discrepancy (Figs 9.6–9.9)",
+     "Operators, geometry (Table 9.4)", "Run a small study"])
+
+with tab_bo:
+    res = load("bo-fibres", bo_fibres, "bo_src")
+    if res is not None and res["entries"]:
+        meta = res["meta"]
+        budget = meta.get("budget", {})
+        runs = f"{len(meta.get('runs', res['entries']))} of 16 volunteer × mode runs"
+        if budget and (not budget.get("chapter_budget") or not meta.get("complete_study", True)):
+            st.warning(f"Budget: {budget.get('label')}; {runs}. This is not the chapter's full run.")
+        elif budget:
+            st.success(f"Budget: {budget.get('label')}")
+        st.markdown("**Findings**\n\n" + bo_fibres.format_findings(meta.get("findings", {})).replace("\n", "\n\n"))
+        st.subheader("Tables 9.2 (angles fixed at −60°, 90°) and 9.3 (angles optimised)")
+        show(bo_fibres, res, figures=["fig_bo_lvv_error", "fig_strain_residuals", "fig_convergence"],
+             tables=["table9_2_bo_fixed_angles", "table9_3_bo_free_angles", "angles_vs_hidden"])
+
+with tab_ops:
+    res = load("operators", operators, "ops_src")
+    if res is not None:
+        m = res.get("meta")
+        if m:
+            (st.warning if not m.get("complete_study") else st.info)(
+                f"{m.get('budget')}; {m.get('n_fits')} fits, resolution {m.get('settings', {}).get('resolution')}")
+        if res.get("findings"):
+            st.markdown("**Findings**\n\n" + operators.format_findings(res["findings"]).replace("\n", "\n\n"))
+        show(operators, res, figures=["fig9_11_forward_strain_error", "fig9_14_output_error", "fig_mahalanobis",
+                                      "fig9_12_parameter_error"], tables=["fits"])
+        if res.get("surfaces"):
+            labels = [f"{s['patient']} main {s['main_operator']} test {s['test_geometry']}" for s in res["surfaces"]]
+            i = st.selectbox("Loss surface (Fig 9.13) of fit", range(len(labels)), format_func=labels.__getitem__)
+            st.plotly_chart(operators.surface_figure(res, i), width="stretch")
+
+with tab_fd:
+    res = load("fibre-discrepancy", fibre_discrepancy, "fd_src")
+    if res is not None:
+        st.caption(fibre_discrepancy.source_line(res))
+        show(fibre_discrepancy, res, tables=["sets"])
+
+with tab_geo:
+    @st.cache_data(show_spinner=False)
+    def _table94():
+        return {"table": geometry_operators.operator_table(), "geometry_effect": None}
+
+    try:
+        show(geometry_operators, _table94())
+    except LVCoreError as err:
+        st.error(str(err))
+
+with tab_run:
+    st.write("Start a small run (fast mesh) in the background; the page stays usable while it runs and its "
+             "results appear in the tabs above when it is done.")
+    runs = st.session_state.setdefault("studies_runs", {})
+    c1, c2, c3 = st.columns(3)
+    study = c1.selectbox("Study", ["bo-fibres", "operators"])
+    if study == "bo-fibres":
+        subject = c2.selectbox("Volunteer", bo_fibres.available_subjects())
+        n0 = c3.number_input("initial design", 3, 300, 6)
+        n1 = c3.number_input("iterations", 0, 300, 4)
+    else:
+        subject = c2.selectbox("Patient", [f"SYNTHETIC-P0{i}" for i in range(1, 7)])
+    if st.button("Start", type="primary"):
+        out = Path(tempfile.mkdtemp(prefix=f"lvcore_{study}_"))
+        try:
+            if study == "bo-fibres":
+                run = results.small_run(study, out, subject=subject, n_initial=int(n0), n_iterations=int(n1))
+            else:
+                run = results.small_run(study, out, patient=subject)
+            runs[str(out)] = run
+        except LVCoreError as err:
+            st.error(str(err))
+
+    @st.fragment(run_every=2.0)
+    def _progress():
+        for key, run in list(runs.items()):
+            state = "running" if run.running else ("done" if run.returncode == 0 else f"failed ({run.returncode})")
+            st.progress(run.fraction, text=f"{run.study} → {run.out} — {state}")
+            if not run.running and run.returncode not in (0, None):
+                st.code(run.log_tail())
+
+    _progress()
