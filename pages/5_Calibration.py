@@ -22,7 +22,7 @@ from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
-from lvcore.core.forward import emulator_forward
+from lvcore.emulator.forward import emulator_forward
 from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.samplers import SamplerConfig, use_host_devices

@@ -80,11 +80,9 @@ class DoubleForward:
 
     input_names: tuple = ("a", "b", "af", "bf")
     label: str = "campaign TEST DOUBLE"
-    provides_jacobian = False
-    traceable = False
     input_bounds = {}
 
-    def evaluate(self, inputs, *, jacobian=False):
+    def evaluate(self, inputs):
         from lvcore.core.forward import ForwardBatch, as_columns
 
         cols, n = as_columns(inputs, self.input_names, self.label)

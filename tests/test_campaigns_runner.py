@@ -7,7 +7,7 @@ import lvcore
 import campaign_double
 from campaign_double import closed_form
 from lvcore.campaigns.designs import make_design
-from lvcore.campaigns.executors import DaskExecutor, default_workers
+from lvcore.parallel import DaskExecutor, default_workers
 from lvcore.campaigns.runner import execute_row, resume_campaign, run_campaign
 from lvcore.campaigns.space import get_space
 from lvcore.campaigns.store import CampaignStore, read_store
@@ -54,7 +54,7 @@ def test_bad_forward_and_scheduler_are_clear_errors(tmp_path):
 class _Raises:
     input_names = ("a",)
 
-    def evaluate(self, inputs, jacobian=False):
+    def evaluate(self, inputs):
         raise ImportError("cannot import the model's data")
 
 

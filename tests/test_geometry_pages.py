@@ -90,4 +90,4 @@ def test_geometry_page_upload_surfaces_whose_walls_meet_at_the_base(tmp_path):
     assert any("meet at the base" in w.value for w in at.warning)
     assert any("cavity removed" in w.value for w in at.warning)
     df = at.dataframe[0].value
-    assert df["base cut (mm below the base)"].iloc[0] > 0 and df["cavity removed by the cut (mL)"].iloc[0] > 2
+    assert df.loc["base cut (mm below the base)"].iloc[0] > 0 and df.loc["cavity removed by the cut (mL)"].iloc[0] > 2

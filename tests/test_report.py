@@ -261,7 +261,7 @@ def _lines(text):
 
 def test_exported_titles_never_overlap_subplot_titles(report_items):
     """After the report's wrap_title: the title's last line ends above the row of subplot titles."""
-    from lvcore.viz.report_figures import SUBPLOT_TITLE_PX, TITLE_LINE_PX, wrap_title
+    from lvcore.viz.report_figures import SUBPLOT_TITLE_PX, TITLE_CHAR_PX, TITLE_LINE_PX, _visible_len, wrap_title
 
     for name, it in report_items.items():
         fig = wrap_title(it.fig)
@@ -275,6 +275,8 @@ def test_exported_titles_never_overlap_subplot_titles(report_items):
             bottom = top_margin / 2 + TITLE_LINE_PX * n / 2
         has_subplot_titles = any(a.yref == "paper" and (a.y or 0) >= 0.99 for a in fig.layout.annotations)
         assert bottom <= top_margin - (SUBPLOT_TITLE_PX if has_subplot_titles else 0), name
+        # and no line runs past the right edge of the exported image
+        assert max(_visible_len(x) for x in _lines(t.text)) * TITLE_CHAR_PX <= (fig.layout.width or 1100), name
 
 
 def test_tables_fit_their_columns(report_items):

@@ -6,7 +6,7 @@ import pytest
 from streamlit.testing.v1 import AppTest
 
 from lvcore.app import PAGES_DIR, ENTRY, PAGES
-from lvcore.core import AnalyticForward
+from lvcore.testing.analytic import AnalyticForward
 from lvcore.exceptions import LVCoreError
 from lvcore.studies import bo_fibres, operators, results
 from tests.test_studies_operators import stand_in

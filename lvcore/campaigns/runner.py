@@ -14,9 +14,9 @@ exception raised by the forward model) or a point that did not converge is
 recorded as a failed row with its reason; rows are never dropped or filled in.
 
 Rows run as warm-started continuation chains by default
-(:mod:`lvcore.campaigns.chains`): nearby rows in the design's unit cube are
+(:mod:`lvcore.chains`): nearby rows in the design's unit cube are
 solved one after another, each starting Newton from a neighbour's solution,
-in chunks of :data:`~lvcore.campaigns.chains.DEFAULT_CHUNK` rows, with at
+in chunks of :data:`~lvcore.chains.DEFAULT_CHUNK` rows, with at
 least two chains per worker; ``chained=False`` (``--cold``) runs one cold
 task per row.
 
@@ -33,14 +33,15 @@ from pathlib import Path
 import numpy as np
 
 import lvcore
-from lvcore.campaigns.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
+from lvcore.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
 from lvcore.campaigns.designs import Design, load_design
-from lvcore.campaigns.executors import make_executor
 from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
+from lvcore.mechanics import forward as _simulator_forward  # noqa: F401 - registers the default forward "simulator"
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, recorded_resolution
+from lvcore.parallel import make_executor
 
 #: The real simulator.
 DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
@@ -115,12 +116,12 @@ def execute_warm_row(forward, index: int, inputs: dict, initial) -> tuple[RowRes
 
 
 def execute_chunk(forward, positions: list[int], indices: list[int], inputs: list[dict], units, seeds) -> list:
-    """Run one chunk of a continuation chain in a worker (see :mod:`lvcore.campaigns.chains`).
+    """Run one chunk of a continuation chain in a worker (see :mod:`lvcore.chains`).
 
     Rows are solved in the given order, each warm-started from the nearest
     converged state among ``seeds`` and the chunk's earlier rows, when the
     forward model can (``evaluate_warm``); otherwise cold, as :func:`execute_row`.
-    Returns :class:`~lvcore.campaigns.chains.ChainRow` objects keyed by ``positions``
+    Returns :class:`~lvcore.chains.ChainRow` objects keyed by ``positions``
     whose results are :class:`RowResult` for store rows ``indices``.
     """
     by_pos = {p: (i, x) for p, i, x in zip(positions, indices, inputs)}
@@ -145,9 +146,9 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
     """Submit ``rows`` to ``forward`` (a Forward) and record their results as they complete.
 
     ``chained``: the rows run as warm-started continuation chains split across
-    the executor's workers (:func:`lvcore.campaigns.chains.run_chains`), in
+    the executor's workers (:func:`lvcore.chains.run_chains`), in
     chunks of ``chunk`` rows; otherwise one cold task per row. Returns the
-    :class:`~lvcore.campaigns.chains.ChainStats` of a chained run, else None.
+    :class:`~lvcore.chains.ChainStats` of a chained run, else None.
     """
     if rows.size == 0:
         return None
@@ -215,11 +216,11 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         Name of a registered forward model (default ``"simulator"``, the FE
         simulator; see :func:`lvcore.core.register_forward`). The store records the name.
     executor : optional
-        An executor object (see :mod:`lvcore.campaigns.executors`) to use
+        An executor object (see :mod:`lvcore.parallel`) to use
         instead of creating one; it is not closed.
     chained : bool
         Run the rows as warm-started continuation chains of nearby rows split
-        across the workers (:mod:`lvcore.campaigns.chains`; the default), or
+        across the workers (:mod:`lvcore.chains`; the default), or
         each row cold in its own task. Both give the same results within the
         solver tolerance.
     """

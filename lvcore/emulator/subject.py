@@ -142,7 +142,7 @@ def resolve_subject_geometry(spec, *, units: str = "mm") -> SubjectGeometry:
         if isinstance(obj, dict) and "geometry" in obj:
             return _case_geometry(obj["geometry"], path)
     if suffix in (".json", ".csv"):
-        from lvcore.inference.calibrate import read_pc_scores
+        from lvcore.geometry.scores import read_pc_scores
 
         read_pc_scores(path, n_pc=1)  # a clear error for a file that holds no scores
         h = _all_scores(path)
@@ -155,7 +155,7 @@ def resolve_subject_geometry(spec, *, units: str = "mm") -> SubjectGeometry:
 def _all_scores(path: Path) -> list[float]:
     """Every PC score of a scores file, up to the shape model's number of modes (a case uses them all)."""
     from lvcore.geometry.shape_model import load_shape_model
-    from lvcore.inference.calibrate import read_pc_scores
+    from lvcore.geometry.scores import read_pc_scores
 
     for n in range(int(load_shape_model().n_modes), 1, -1):
         try:
@@ -289,7 +289,7 @@ def continuation_order(u: np.ndarray, start: int | None = None) -> np.ndarray:
 
 def _run_chain(forward_kwargs: dict, names: tuple[str, ...], x: np.ndarray) -> tuple:
     """Simulate the rows of ``x`` in order, each warm-started from the previous converged one (worker side)."""
-    from lvcore.core.forward import SimulatorForward
+    from lvcore.mechanics.forward import SimulatorForward
 
     fwd = SimulatorForward(input_names=names, warm_start=True, **forward_kwargs)
     t0 = time.perf_counter()
@@ -351,7 +351,7 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     if len(chains) == 1:
         results = [_run_chain(kwargs, space.names, x[chains[0]])]
     else:
-        from lvcore.campaigns.executors import LocalExecutor
+        from lvcore.parallel import LocalExecutor
 
         with LocalExecutor(len(chains)) as pool:
             futures = [pool.submit(_run_chain, kwargs, space.names, x[c]) for c in chains]

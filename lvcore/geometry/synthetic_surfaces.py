@@ -22,7 +22,11 @@ what atlas meshes and surface-based segmentation tools produce, placed in
     width :data:`NOTCH_WIDTH_DEG` (cosine flanks) where the outflow tract
     leaves the LV;
 ``deep_notch``
-    the same notch reaching :data:`DEEP_NOTCH_DEPTH_MM` down the wall.
+    the same notch reaching :data:`DEEP_NOTCH_DEPTH_MM` down the wall;
+``outflow_hole``
+    a flat base plus a separate opening through both walls just below it
+    (:data:`HOLE_DEG` wide, from 3 to :data:`HOLE_DEPTH_MM` below the base):
+    an outflow tract segmented as its own opening, a second boundary loop.
 
 Every surface is a (φ, ψ) grid (``ψ`` the polar angle from the apex) that
 ends exactly on its base curve, with one apex vertex. The exact cavity of the
@@ -52,8 +56,11 @@ UNEVEN_MM = 3.0
 NOTCH_DEPTH_MM = 8.0
 NOTCH_WIDTH_DEG = 60.0
 DEEP_NOTCH_DEPTH_MM = 35.0
+#: Width (deg) and lowest depth below the base (mm) of the separate outflow opening.
+HOLE_DEG = 30.0
+HOLE_DEPTH_MM = 10.0
 #: The cases :func:`synthetic_surface_pair` makes.
-CASES = ("flat", "joined", "oblique", "uneven", "notch", "deep_notch")
+CASES = ("flat", "joined", "oblique", "uneven", "notch", "deep_notch", "outflow_hole")
 
 
 @dataclass(frozen=True)
@@ -289,9 +296,17 @@ def synthetic_surface_pair(case: str, seed: int = 0, n_phi: int = 96, n_psi: int
         "uneven": f"uneven base, ±{UNEVEN_MM:g} mm about its plane",
         "notch": f"outflow notch {NOTCH_DEPTH_MM:g} mm deep, {NOTCH_WIDTH_DEG:g}° wide",
         "deep_notch": f"outflow notch {DEEP_NOTCH_DEPTH_MM:g} mm deep, {NOTCH_WIDTH_DEG:g}° wide",
+        "outflow_hole": f"flat base and a separate outflow opening {HOLE_DEG:g}° wide, 3-{HOLE_DEPTH_MM:g} mm below it",
     }[case]
     rings = {k: 1 + np.arange(n_phi) * ((len(p) - 1) // n_phi) + (len(p) - 1) // n_phi - 1
              for k, p in (("endo", pe), ("epi", pp))}
+    if case == "outflow_hole":
+        def punch(p, t):
+            c = p[t].mean(axis=1)
+            dphi = np.abs(np.angle(np.exp(1j * (np.arctan2(c[:, 1], c[:, 0]) - np.pi / 3))))
+            cut = (dphi < np.radians(HOLE_DEG) / 2) & (c[:, 2] < zb - 3.0) & (c[:, 2] > zb - HOLE_DEPTH_MM)
+            return t[~cut]
+        te, tp = punch(pe, te), punch(pp, tp)
     return SyntheticSurfacePair(case=case, endo_points=pe @ rotation.T + shift, endo_triangles=te,
                                 epi_points=pp @ rotation.T + shift, epi_triangles=tp, lv=lv, rotation=rotation,
                                 shift=shift, endo_ring=rings["endo"], epi_ring=rings["epi"],

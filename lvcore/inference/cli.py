@@ -124,7 +124,7 @@ def run_calibrate(args) -> int:
 
     import numpy as np
 
-    from lvcore.core.forward import emulator_forward, load_emulator_forward
+    from lvcore.emulator.forward import emulator_forward, load_emulator_forward
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal

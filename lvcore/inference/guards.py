@@ -94,7 +94,7 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
     GeometryError
         If ``spec`` is empty or the file cannot be used.
     """
-    from lvcore.inference.calibrate import read_pc_scores
+    from lvcore.geometry.scores import read_pc_scores
 
     if spec is None or str(spec).strip() == "":
         raise GeometryError("--geometry is required: give the subject's PC scores (.json/.csv), mesh "
@@ -106,7 +106,7 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
         raise GeometryError(f"--geometry {spec}: no such file (give a file, or 'mean' for the mean shape)")
     suffix = path.suffix.lower()
     if suffix in (".json", ".csv"):
-        from lvcore.inference.calibrate import read_scale
+        from lvcore.geometry.scores import read_scale
 
         return GeometrySource(read_pc_scores(path, n_pc), str(path), "scores", scale=read_scale(path))
     if suffix in VOLUME_MESH_SUFFIXES:
@@ -123,9 +123,9 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
         h, scale, mse, raw = _project(nodes, n_pc)
         return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw)
     if suffix in (".npy", ".npz"):
-        from lvcore.inference.calibrate import _project_mesh
+        from lvcore.geometry.scores import project_mesh
 
-        h, scale, mse, raw = _project_mesh(path, n_pc, with_scale=True)
+        h, scale, mse, raw = project_mesh(path, n_pc, with_scale=True)
         return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw)
     raise GeometryError(f"--geometry {path.name}: unknown format '{suffix}'; give PC scores (.json/.csv), a template "
                         f"mesh (.vtu), a volumetric mesh ({', '.join(VOLUME_MESH_SUFFIXES)}, .vtu) or 'mean'")

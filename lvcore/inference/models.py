@@ -2,8 +2,8 @@ r"""numpyro models for calibrating theta = (a, b, af, bf) from LVV and 24 strain
 
 Each model is a plain function of the measured data ``y`` (25 values: LVV in
 mL then 24 circumferential strains, :mod:`lvcore.outputs` order) and a
-JAX-traceable forward model (:class:`lvcore.core.Forward` with ``traceable``
-True, e.g. :class:`lvcore.core.EmulatorForward`). Priors follow
+JAX-traceable forward model (a :class:`lvcore.core.TraceableForward`, e.g.
+:class:`lvcore.emulator.EmulatorForward`). Priors follow
 the chapter's Table 9.1 and live in :data:`PRIORS` so that the blocked
 HMC-within-Gibbs sampler uses the very same densities.
 
@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
+from lvcore.core.forward import TraceableForward
 from lvcore.core.space import ANGLE_BOUNDS, SIGMA_V_ML, THETA_BOUNDS  # Table 9.1 and the angle ranges
 from lvcore.exceptions import ForwardError
 from lvcore.inference import kernels
@@ -57,7 +58,7 @@ def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[fl
     forward : Forward, optional
         Each prior is cut to its intersection with the forward model's
         ``input_bounds`` (an emulator's training box, see
-        :class:`lvcore.core.EmulatorForward`): the ``angles`` emulator, for
+        :class:`lvcore.emulator.EmulatorForward`): the ``angles`` emulator, for
         one, is trained on b, bf >= 0.5 only.
 
     Raises
@@ -110,9 +111,9 @@ def _check_y(y):
 
 def check_traceable(forward, infer_angles: bool = False) -> None:
     """Raise :class:`ForwardError` unless ``forward`` can be traced by JAX and reads the sampled parameters."""
-    if not getattr(forward, "traceable", False):
+    if not isinstance(forward, TraceableForward):
         raise ForwardError(f"forward model '{getattr(forward, 'label', type(forward).__name__)}' is not JAX-traceable; "
-                           "NUTS needs gradients through it: calibrate with an emulator (lvcore.core.EmulatorForward)")
+                           "NUTS needs gradients through it: calibrate with an emulator (lvcore.emulator.EmulatorForward)")
     want = THETA_NAMES + (ANGLE_NAMES if infer_angles else ())
     if tuple(forward.input_names) != want:
         raise ForwardError(f"calibration samples {list(want)}; the forward model reads {list(forward.input_names)}"

@@ -152,7 +152,7 @@ def _outputs(forward: Forward, space: ParameterSpace, X: np.ndarray, chain: bool
     """``(n, 25)`` outputs at the rows of ``X`` (columns ``space.names``); NaN rows where a point failed.
 
     ``chain``: evaluate the rows in continuation order (near neighbours in the
-    space's unit cube one after another, :func:`lvcore.campaigns.chains.continuation_order`)
+    space's unit cube one after another, :func:`lvcore.chains.continuation_order`)
     and return them in the order of ``X``. A warm-starting forward model
     (``SimulatorForward(warm_start=True)``) then starts each solve from a
     neighbour's solution, also when a caller splits the batch into chunks; for
@@ -161,7 +161,7 @@ def _outputs(forward: Forward, space: ParameterSpace, X: np.ndarray, chain: bool
     X = np.atleast_2d(X)
     if not chain or X.shape[0] < 3:
         return forward.evaluate(dict(zip(space.names, X.T))).outputs
-    from lvcore.campaigns.chains import continuation_order
+    from lvcore.chains import continuation_order
 
     order = continuation_order(space.to_unit(X))
     Y = np.empty((X.shape[0], N_OUTPUTS))
@@ -200,7 +200,7 @@ def bayesian_optimise(
     forward : Forward
         Reads ``space.names`` (its ``input_names``, in any order); evaluated in
         batches (the initial design in one batch, in continuation order: a
-        :class:`~lvcore.core.SimulatorForward` with ``workers`` runs it on a
+        :class:`~lvcore.mechanics.SimulatorForward` with ``workers`` runs it on a
         process pool, and with ``warm_start=True`` as warm-started chains, each
         solve starting from a neighbour's solution; BO iterations then start
         from the nearest earlier point). A point that fails gets the worst

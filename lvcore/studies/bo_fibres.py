@@ -11,7 +11,7 @@ exp-warped Latin hypercube, then 300 GP-LCB iterations) in two modes:
     θ plus α_endo ∈ [−90°, 0°] and α_epi ∈ [0°, 90°].
 
 The objective is evaluated by the FE simulator on the volunteer's own
-geometry (:class:`lvcore.core.SimulatorForward`), never an emulator: the
+geometry (:class:`lvcore.mechanics.SimulatorForward`), never an emulator: the
 point of the study is the mismatch between the model with fixed angles and
 the data. Batches run on the campaign executors (a local process pool or a
 Dask cluster). Every evaluation is written to a state file
@@ -41,7 +41,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
+from lvcore.core.forward import ForwardBatch, as_columns
+from lvcore.mechanics.forward import SimulatorForward
 from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
@@ -192,9 +193,6 @@ class RecordingForward:
     ``chunk`` points, the log being saved after each chunk.
     """
 
-    traceable = False
-    provides_jacobian = False
-
     def __init__(self, inner, log: EvaluationLog, *, executor=None, chunk: int = 1, bar=None,
                  on_evaluation: Callable[[int], None] | None = None):
         self.inner, self.log, self.executor, self.chunk, self.bar = inner, log, executor, max(1, int(chunk)), bar
@@ -213,9 +211,7 @@ class RecordingForward:
             return self.inner.evaluate(cols, executor=self.executor)
         return self.inner.evaluate(cols)
 
-    def evaluate(self, inputs, *, jacobian: bool = False) -> ForwardBatch:
-        if jacobian:
-            raise LVCoreError("the BO study's recorded forward does not provide Jacobians")
+    def evaluate(self, inputs) -> ForwardBatch:
         cols, n = as_columns(inputs, self.input_names, self.label)
         X = np.column_stack([cols[k] for k in self.input_names])
         rows: list[tuple] = []
@@ -277,7 +273,7 @@ def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_
     workers : int
         Points per chunk of the initial design (state saved after each chunk).
     forward : Forward, optional
-        Replaces the simulator (tests: :class:`lvcore.core.AnalyticForward`).
+        Replaces the simulator (tests: :class:`lvcore.testing.AnalyticForward`).
     progress : bool
         Show a tqdm bar on stderr.
     on_evaluation : callable, optional
@@ -360,7 +356,7 @@ def run_study(subjects: Sequence[str] | None = None, *, modes: Sequence[str] = M
     state_dir = None if out is None else Path(out) / "state"
     executor = None
     if forward_factory is None and (scheduler or workers > 1):
-        from lvcore.campaigns.executors import make_executor
+        from lvcore.parallel import make_executor
 
         executor = make_executor(workers=workers, scheduler=scheduler)
     entries = []

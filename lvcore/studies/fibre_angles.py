@@ -21,7 +21,9 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from lvcore import units
-from lvcore.core.forward import EmulatorForward, Forward, ForwardBatch, SimulatorForward
+from lvcore.core.forward import Forward, ForwardBatch
+from lvcore.emulator.forward import EmulatorForward
+from lvcore.mechanics.forward import SimulatorForward
 from lvcore.exceptions import ForwardError
 from lvcore.geometry.template import N_REGIONS
 from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name, pc_names
@@ -94,7 +96,7 @@ def angle_forward(
     resolution, base : str
         Mesh preset and basal boundary condition.
     workers : int, optional
-        Local processes for batches (see :class:`~lvcore.core.forward.SimulatorForward`).
+        Local processes for batches (see :class:`~lvcore.mechanics.forward.SimulatorForward`).
     """
     theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
     return SimulatorForward(input_names=ANGLE_NAMES, conditions={**theta, EDP_NAME: float(edp_mmhg)},

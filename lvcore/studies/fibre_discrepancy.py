@@ -33,7 +33,9 @@ import arviz as az
 import jax
 import numpy as np
 
-from lvcore.core.forward import Forward, SimulatorForward, load_emulator_forward
+from lvcore.core.forward import Forward
+from lvcore.emulator.forward import load_emulator_forward
+from lvcore.mechanics.forward import SimulatorForward
 from lvcore.core.space import CHAPTER_EDP, SIGMA_V_ML
 from lvcore.inference import coverage, diagnostics, samplers
 from lvcore.outputs import ANGLE_NAMES, THETA_NAMES, pc_names
@@ -134,7 +136,7 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
     forward : Forward, optional
         JAX-traceable, reads theta. Default: emulator ``emulator`` (name or
         directory; ``chapter``) with ``h`` bound in
-        (:func:`lvcore.core.load_emulator_forward`); raises EmulatorError if absent.
+        (:func:`lvcore.emulator.load_emulator_forward`); raises EmulatorError if absent.
     simulator : Forward, optional
         Reads theta and the fibre angles and makes the test data; default
         the FE simulator (:func:`data_simulator`).

@@ -134,7 +134,7 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
 
     if emulator not in available_emulators():
         return None
-    from lvcore.core.forward import load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
     from lvcore.geometry.cohort import load_operator_geometries
     from lvcore.geometry.shape_model import load_shape_model
 

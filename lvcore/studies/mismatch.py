@@ -196,7 +196,7 @@ def simulate_all(volunteers, plan, out: Path, *, resolution="default", workers=1
                 if progress:
                     progress(f"simulated {k} ({i + 1}/{len(jobs)})")
         else:
-            from lvcore.campaigns.executors import make_executor
+            from lvcore.parallel import make_executor
 
             with make_executor(workers=workers, scheduler=scheduler) as ex:
                 futures = [ex.submit(_simulate_job, k, c) for k, c in jobs.items()]
@@ -290,7 +290,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
               workers: int = 1, scheduler: str | None = None, out: str | Path = "study_mismatch",
               progress: Callable | None = None) -> dict:
     """Run (or resume) the study under ``out``; returns the result (also written to ``out/mismatch.json``)."""
-    from lvcore.core.forward import load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
     from lvcore.inference import samplers
 
     t0 = time.perf_counter()

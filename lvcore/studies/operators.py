@@ -7,7 +7,7 @@ truth θ̃ = (0.60, 1.30, 1.00, 3.60) on the main operator's geometry g:
 the two other operators' geometries and the 5- and 10-PC reconstructions of
 g — by SLSQP on the chapter's loss (9.11)
 (:func:`lvcore.optimise.sqp.refit_theta`) with the simulator's adjoint
-gradients (:class:`lvcore.core.SimulatorForward`). 6 patients × 3 mains × 4
+gradients (:class:`lvcore.mechanics.AdjointSimulatorForward`). 6 patients × 3 mains × 4
 tests = 72 fits.
 
 Each fit records:
@@ -43,7 +43,8 @@ from typing import Sequence
 
 import numpy as np
 
-from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
+from lvcore.core.forward import ForwardBatch, as_columns
+from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
@@ -123,15 +124,13 @@ def test_geometry_name(main: str, test: str, geoms: dict) -> str:
 
 # ----------------------------------------------------------------------------- forward with a cache
 class CachedForward:
-    """One-point cache around a Forward (the SQP asks for the same θ more than once; the Jacobian is reused)."""
-
-    traceable = False
+    """One-point cache around a :class:`~lvcore.core.forward.JacobianForward` (the SQP asks for the same θ more
+    than once; the Jacobian is reused)."""
 
     def __init__(self, inner):
         self.inner = inner
         self.input_names = tuple(inner.input_names)
         self.label = inner.label
-        self.provides_jacobian = inner.provides_jacobian
         self.cache: dict = {}
         self.simulations = 0
 
@@ -139,15 +138,21 @@ class CachedForward:
     def input_bounds(self):
         return self.inner.input_bounds
 
-    def evaluate(self, inputs, *, jacobian: bool = False) -> ForwardBatch:
+    def evaluate(self, inputs) -> ForwardBatch:
+        return self._cached(inputs, False)
+
+    def jacobian(self, inputs) -> ForwardBatch:
+        return self._cached(inputs, True)
+
+    def _cached(self, inputs, jacobian: bool) -> ForwardBatch:
         cols, n = as_columns(inputs, self.input_names, self.label)
         if n != 1:
             self.simulations += n
-            return self.inner.evaluate(cols, jacobian=jacobian)
+            return self.inner.jacobian(cols) if jacobian else self.inner.evaluate(cols)
         key = tuple(float(cols[k][0]) for k in self.input_names)
         hit = self.cache.get(key)
-        if hit is None or (jacobian and hit.jacobian is None):
-            hit = self.inner.evaluate(cols, jacobian=jacobian or self.provides_jacobian)
+        if hit is None:  # one point: always with its Jacobian, which the SQP asks for next
+            hit = self.inner.jacobian(cols)
             self.simulations += 1
             self.cache[key] = hit
         return hit
@@ -257,9 +262,9 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
         if forward_factory is not None:
             return CachedForward(forward_factory(geom_name))
         # warm start: each SQP step starts Newton from the previous converged state (same mesh, nearby θ)
-        return CachedForward(SimulatorForward(geometry={"kind": "mesh", "path": geoms[geom_name]["path"]},
-                                              resolution=resolution, label=f"FE simulator on {patient} {geom_name}",
-                                              warm_start=True))
+        return CachedForward(AdjointSimulatorForward(geometry={"kind": "mesh", "path": geoms[geom_name]["path"]},
+                                                     resolution=resolution,
+                                                     label=f"FE simulator on {patient} {geom_name}", warm_start=True))
 
     y_star = np.asarray(y_star, float)
     truth = np.array(THETA_TRUE)
@@ -268,10 +273,10 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
     try:
         fwd = make(name)
         loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
-        y_fwd = fwd.evaluate(dict(zip(THETA_NAMES, truth)), jacobian=True).raise_on_failure().outputs[0]
+        y_fwd = fwd.jacobian(dict(zip(THETA_NAMES, truth))).raise_on_failure().outputs[0]
         err_fwd = y_fwd[1:] - y_star[1:]
         res = refit_theta(fwd, loss, truth)
-        b_hat = fwd.evaluate(dict(zip(THETA_NAMES, res.theta)), jacobian=True).raise_on_failure()
+        b_hat = fwd.jacobian(dict(zip(THETA_NAMES, res.theta))).raise_on_failure()
         r, J = residual_jacobian(loss, b_hat.outputs[0], b_hat.jacobian[0])
         cov = laplace_covariance(J)
         main_fwd = fwd if name == main else make(main)
@@ -344,7 +349,7 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
                 "surface_grid": surface_grid}
     executor = None
     if not collect_only and (scheduler or workers > 1):
-        from lvcore.campaigns.executors import make_executor
+        from lvcore.parallel import make_executor
 
         executor = make_executor(workers=workers, scheduler=scheduler)
 

@@ -40,7 +40,7 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
 
     if "chapter" not in available_emulators():
         return None
-    from lvcore.core.forward import load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
     from lvcore.inference import models
     from lvcore.inference.calibrate import calibrate, read_pc_scores
     from lvcore.inference.data import read_measured_csv

@@ -31,8 +31,10 @@ def _strains24(values) -> np.ndarray:
     return y
 
 
-#: Title font size (px) and line height of wrapped titles; subplot titles take this much room above a plot.
-TITLE_LINE_PX, SUBPLOT_TITLE_PX = 24, 26
+#: Title line height (px), room of subplot titles above a plot (px), width of a title character (px, 17 px font).
+TITLE_LINE_PX, SUBPLOT_TITLE_PX, TITLE_CHAR_PX = 24, 26, 9.0
+#: Width (px) of a static export whose figure sets none (tables set their own, to fit their columns).
+EXPORT_WIDTH_PX = 1100
 
 
 def _visible_len(line: str) -> int:
@@ -54,6 +56,8 @@ def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
     text = fig.layout.title.text or ""
     if not text:
         return fig
+    # never wider than the figure itself (tables set their own, narrower width)
+    width = min(width, int(((fig.layout.width or EXPORT_WIDTH_PX) - 40) / TITLE_CHAR_PX))
     lines = []
     for part in text.split("<br>"):
         lines += [part] if _visible_len(part) <= width or "<" in part else textwrap.wrap(part, width)

@@ -1,4 +1,4 @@
-"""Continuation chains (lvcore.campaigns.chains): order, scheduling, and warm-chained results equal cold ones."""
+"""Continuation chains (lvcore.chains): order, scheduling, and warm-chained results equal cold ones."""
 from concurrent.futures import Future
 
 import numpy as np
@@ -6,12 +6,12 @@ import pytest
 
 import campaign_double
 from campaign_double import closed_form
-from lvcore.campaigns import chains
+from lvcore import chains
 from lvcore.campaigns.designs import Design, make_design
 from lvcore.campaigns.runner import _drive, execute_chunk, run_campaign
 from lvcore.campaigns.space import get_space
 from lvcore.campaigns.store import CampaignStore, read_store
-from lvcore.core.forward import SimulatorForward
+from lvcore.mechanics.forward import SimulatorForward
 from lvcore.outputs import THETA_NAMES
 
 
