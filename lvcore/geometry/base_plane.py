@@ -212,6 +212,14 @@ def _fmt(v, nd: int = 1) -> str:
 
 
 # ----------------------------------------------------------------------------- loops
+def _edge_once(e: np.ndarray) -> np.ndarray:
+    """Mask of the (directed) edges whose undirected edge occurs exactly once."""
+    lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+    code = lo.astype(np.int64) * (int(hi.max()) + 1) + hi
+    _, inv, cnt = np.unique(code, return_inverse=True, return_counts=True)
+    return cnt[inv] == 1
+
+
 def boundary_loops(triangles) -> list[np.ndarray]:
     """Ordered vertex loops of the open boundary of a triangle mesh.
 
@@ -223,9 +231,7 @@ def boundary_loops(triangles) -> list[np.ndarray]:
     if len(tri) == 0:
         return []
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    b = e[cnt[inv.ravel()] == 1]
+    b = e[_edge_once(e)]
     nxt: dict[int, list[int]] = {}
     for a, c in b:
         nxt.setdefault(int(a), []).append(int(c))
@@ -290,9 +296,7 @@ def closed_volume(points, triangles) -> float:
     pts = np.asarray(points, float)
     tri = _oriented(pts, np.asarray(triangles, np.int64))
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = e[cnt[inv.ravel()] == 1]
+    bnd = e[_edge_once(e)]
     origin = pts.mean(axis=0)
     loop_of = np.full(len(pts), -1)
     centres = []

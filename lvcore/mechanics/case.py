@@ -37,6 +37,10 @@ from lvcore.mechanics.resolution import (
 )
 
 GEOMETRY_KINDS = ("ellipsoid", "default", "mesh", "pca", "box")
+#: Largest magnitude of a standardised PC score (sd units) in a case; real shapes are within +-3.
+MAX_ABS_PC_SCORE = 10.0
+#: Most PC scores in a case.
+MAX_PC_SCORES = 100
 LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
 #: Law names of ``material.law``; parameters, required ones and defaults come from :data:`materials.LAWS`.
 MATERIAL_LAWS = tuple(LAWS)
@@ -278,7 +282,14 @@ def load_case(path: str | Path) -> Case:
     """Read and validate a case JSON file; relative paths inside resolve against its folder."""
     path = Path(path)
     d = limits.read_json_file(path, limits.MAX_CASE_BYTES, "case file", _file_error)
-    return Case.from_dict(d, base_dir=path.parent)
+    if not isinstance(d, Mapping):
+        raise CaseError("<file>", f"case file '{limits.echo(path)}' must hold a JSON object ({{\"geometry\": ..., "
+                                  f"\"material\": ...}}), not {'null' if d is None else type(d).__name__} "
+                                  f"{_short(d, 40)}")
+    try:
+        return Case.from_dict(d, base_dir=path.parent)
+    except CaseError as err:  # name the file as well as the field
+        raise CaseError(err.field, f"{err.problem} (case file '{limits.echo(path)}')") from None
 
 
 def loads_case(text: str, base_dir: str | Path | None = None, source: str = "case JSON") -> Case:
@@ -307,7 +318,7 @@ def _check_keys(d: Any, where: str, allowed, required=()) -> None:
         if key not in allowed:
             close = difflib.get_close_matches(str(key), list(allowed), n=1, cutoff=0.5)
             hint = f"; did you mean '{close[0]}'?" if close else f"; valid keys: {', '.join(allowed)}"
-            raise CaseError(_join(where, key), f"unknown key{hint}")
+            raise CaseError(_join(where, limits.echo(key, 60)), f"unknown key{hint}")
     for key in required:
         if key not in d:
             raise CaseError(_join(where, key), "missing (required)")
@@ -484,7 +495,11 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
         scores = g["scores"]
         if not isinstance(scores, (list, tuple)) or len(scores) == 0:
             raise CaseError("geometry.scores", f"must be a non-empty list of numbers, got {_short(scores)}")
-        scores = [_number(v, f"geometry.scores[{i}]") for i, v in enumerate(scores)]
+        if len(scores) > MAX_PC_SCORES:
+            raise CaseError("geometry.scores", f"{len(scores)} scores; a shape model has at most {MAX_PC_SCORES} modes")
+        # standardised scores (units of each mode's sd): beyond +-10 sd the shape is no LV at all
+        scores = [_number(v, f"geometry.scores[{i}]", lo=-MAX_ABS_PC_SCORE, hi=MAX_ABS_PC_SCORE)
+                  for i, v in enumerate(scores)]
         model = _resolve(g["model"], "geometry.model", base_dir, suffixes=(".json",)) if "model" in g else None
         from lvcore.geometry.shape_model import load_shape_model  # lazy
 
@@ -558,11 +573,12 @@ def _parse_fibres(f) -> FibreSpec:
     if "direction" in f:
         if "alpha_endo" in f or "alpha_epi" in f:
             raise CaseError("fibres.direction", "give either a direction or the angles alpha_endo/alpha_epi, not both")
-        v = np.asarray(_vector(f["direction"], "fibres.direction"))
-        norm = float(np.linalg.norm(v))
-        if norm == 0.0:
+        v = np.asarray(_vector(f["direction"], "fibres.direction"), dtype=float)
+        scale = float(np.max(np.abs(v)))  # scaled first: the norm of (1e308, 1e308, 1e308) overflows to inf
+        if not scale > 0.0:
             raise CaseError("fibres.direction", "must be a non-zero vector")
-        return FibreSpec(direction=tuple(float(x) for x in v / norm))
+        v = v / scale
+        return FibreSpec(direction=tuple(float(x) for x in v / float(np.linalg.norm(v))))
     endo = _number(f.get("alpha_endo", units.DEFAULT_ALPHA_ENDO_DEG), "fibres.alpha_endo", lo=-180, hi=180)
     epi = _number(f.get("alpha_epi", units.DEFAULT_ALPHA_EPI_DEG), "fibres.alpha_epi", lo=-180, hi=180)
     return FibreSpec(endo, epi)

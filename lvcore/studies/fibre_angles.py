@@ -30,6 +30,37 @@ from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name, pc_names
 
 #: Angle pairs (α_endo, α_epi) in degrees used by the chapter (§9.3.2, Fig 9.5).
 CHAPTER_ANGLE_PAIRS = ((-60.0, 90.0), (-60.0, 60.0), (-30.0, 60.0), (0.0, 90.0))
+#: Most angle pairs typed into the app's sweep (each is one simulator solve, seconds to a minute).
+MAX_TYPED_ANGLE_PAIRS = 20
+
+
+def parse_angle_pairs(text: str, max_pairs: int = MAX_TYPED_ANGLE_PAIRS) -> list[tuple[float, float]]:
+    """Angle pairs typed as ``"-45 75; -90 0"`` (α_endo α_epi in degrees, pairs separated by ``;``).
+
+    Raises
+    ------
+    ForwardError
+        A pair that is not two numbers, an angle outside [-180, 180] degrees, or more than
+        ``max_pairs`` pairs; the message repeats at most 60 characters of the text.
+    """
+    from lvcore.limits import echo
+
+    items = [s.strip() for s in str(text).split(";") if s.strip()]
+    if len(items) > max_pairs:
+        raise ForwardError(f"{len(items):,} angle pairs typed; at most {max_pairs} can be run at once "
+                           "(each is one simulator solve)")
+    pairs = []
+    for item in items:
+        parts = item.split()
+        try:
+            endo, epi = (float(v) for v in parts)
+        except ValueError:
+            raise ForwardError(f"could not read '{echo(item, 60)}': write pairs as 'α_endo α_epi' in degrees, "
+                               "separated by ';'") from None
+        if not all(np.isfinite(v) and -180.0 <= v <= 180.0 for v in (endo, epi)):
+            raise ForwardError(f"angle pair '{echo(item, 60)}': angles must be in [-180, 180] degrees")
+        pairs.append((endo, epi))
+    return pairs
 
 
 @dataclass(frozen=True)

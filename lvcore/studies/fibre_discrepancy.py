@@ -33,6 +33,7 @@ import arviz as az
 import jax
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.core.forward import Forward
 from lvcore.emulator.forward import load_emulator_forward
 from lvcore.mechanics.forward import SimulatorForward
@@ -407,13 +408,17 @@ def add_study_parser(study_subparsers) -> None:
     """``lvcore study fibre-discrepancy [--json] [--out DIR]``."""
     p = study_subparsers.add_parser("fibre-discrepancy",
                                     help="chapter 9.3.2: iid vs polar-GP discrepancy vs volume-only under wrong fibre angles")
-    p.add_argument("--out", default="study_fibre_discrepancy", help="output folder")
+    p.add_argument("--out", type=cli_args.output_dir, default="study_fibre_discrepancy",
+                   help="output folder, created if missing (default study_fibre_discrepancy)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
-    p.add_argument("--warmup", type=int, default=1000)
-    p.add_argument("--samples", type=int, default=1000)
-    p.add_argument("--chains", type=int, default=4)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--resolution", default="default", help="simulator mesh preset for the test data")
+    p.add_argument("--warmup", type=cli_args.int_in(1, 1_000_000), default=1000,
+                   help="warm-up iterations per chain (default 1000)")
+    p.add_argument("--samples", type=cli_args.int_in(1, 1_000_000), default=1000,
+                   help="draws kept per chain (default 1000)")
+    p.add_argument("--chains", type=cli_args.int_in(1, 64), default=4, help="MCMC chains, 1 to 64 (default 4)")
+    p.add_argument("--seed", type=cli_args.seed, default=0, help="random seed, 0 to 2^32 - 1 (default 0)")
+    p.add_argument("--resolution", default="default",
+                   help="simulator mesh preset for the test data (default 'default')")
     p.add_argument("--emulator", default="chapter",
                    help="emulator name or directory trained at angles (-60, 60) (default: chapter)")
     p.set_defaults(func=_cli)

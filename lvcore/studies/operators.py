@@ -43,6 +43,7 @@ from typing import Sequence
 
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
 from lvcore.exceptions import LVCoreError
@@ -710,8 +711,9 @@ def add_study_parser(study_subparsers) -> None:
     p = study_subparsers.add_parser("operators", help="§9.3.3: SQP refits of theta on other operators' and PCA "
                                                       "geometries (adjoint gradients; Figs 9.11-9.14, SYNTHETIC)")
     p.add_argument("--patients", default=None, help="comma-separated, e.g. SYNTHETIC-P01,SYNTHETIC-P02 (default: all 6)")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes (fits run in parallel)")
-    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler")
+    p.add_argument("--workers", type=cli_args.workers, default=1,
+                   help="local worker processes (fits run in parallel), up to 4 per core (default 1)")
+    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler (default: none, local workers)")
     p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
     p.add_argument("--surface-grid", type=int, default=0,
                    help="N > 0: simulator loss surfaces on N x N grids per parameter pair (6 N^2 runs per fit); "
