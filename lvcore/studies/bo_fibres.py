@@ -127,7 +127,8 @@ def simulator_forward(subject: Subject, mode: str, resolution: str = "default") 
     space = bo_space(mode)
     return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(),
                             geometry={"kind": "mesh", "path": str(subject.geometry)}, resolution=resolution,
-                            label=f"FE simulator on {subject.name} ({resolution})")
+                            label=f"FE simulator on {subject.name} ({resolution})",
+                            warm_start=True)  # warm-started chains (issue 25): same results within tolerance
 
 
 # ----------------------------------------------------------------------------- state + recording forward

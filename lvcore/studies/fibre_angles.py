@@ -132,7 +132,8 @@ def angle_forward(
     theta = dict(conditions.THETA_TILDE if theta is None else theta)
     return SimulatorForward(input_names=ANGLE_NAMES, conditions={**theta, EDP_NAME: float(edp_mmhg)},
                             geometry=dict(geometry or {"kind": "default"}), resolution=resolution, base=base,
-                            workers=workers, label="FE simulator (fibre-angle sweep)")
+                            workers=workers, label="FE simulator (fibre-angle sweep)",
+                            warm_start=True)  # the sweep as warm-started continuation chains (issue 25)
 
 
 def _check_angle_forward(forward) -> None:
