@@ -500,7 +500,8 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
         what = ("base ring" if deepest.is_base else f"extra opening (perimeter {deepest.perimeter_mm:.0f} mm)")
         raise GeometryError(
             f"the {kind}'s {what} reaches {ring_depth:.1f} mm below the base ring's centre (an opening for the "
-            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness {deepest.unevenness_mm:.1f} mm): "
+            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness "
+            f"{deepest.unevenness_mm:.1f} mm): "
             f"cutting below it would remove {removed:.1f} mL ({100 * removed / full:.0f} %) of the cavity. "
             f"Close the opening in the segmentation (cap the outflow tract at the valve plane), or accept the cut "
             f"with --base-cut {np.ceil(ring_depth * 10) / 10:g} (base_cut_mm=)")

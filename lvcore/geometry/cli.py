@@ -156,7 +156,8 @@ def register(subparsers) -> None:
                                   "give --endo and --epi, or --mesh, or a contour stack)")
     f.add_argument("--epi", help="epicardial surface, open at the base (default: none; needed with --endo)")
     f.add_argument("--mesh", help="volumetric LV mesh (tetrahedra/hexahedra; .inp, .msh, .vtu, .vtk, .xdmf, ... - "
-                                  "anything meshio reads), truncated by a flat base (default: none)")
+                                  "anything meshio reads), open at the base: a flat cap, an uneven or notched base, "
+                                  "or walls that meet at the base (default: none)")
     f.add_argument("--units", default="mm", choices=("mm", "cm", "m"),
                    help="units of surface or volume-mesh files (default mm)")
     f.add_argument("--septum", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
