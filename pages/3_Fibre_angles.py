@@ -1,14 +1,9 @@
 """Fibre angles: how LVV and the regional strains move with the rule-based helix angles."""
 from __future__ import annotations
 
-import os
 import threading
 import time
 import warnings
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import numpy as np
 import pandas as pd

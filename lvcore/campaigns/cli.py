@@ -61,6 +61,9 @@ def _add_executor_args(p) -> None:
                         "default: one per core)")
     g.add_argument("--scheduler", default=None,
                    help="Dask scheduler address tcp://HOST:PORT instead of local workers (default: none)")
+    p.add_argument("--cold", action="store_true",
+                   help="solve every row cold, one task per row (default: warm-started continuation chains of "
+                        "nearby rows, split across the workers; same results within the solver tolerance)")
 
 
 def _design(args) -> int:
@@ -76,7 +79,7 @@ def _run(args) -> int:
 
     summary = run_campaign(args.design, args.out, workers=args.workers, scheduler=args.scheduler,
                            resolution=args.resolution, forward=args.forward or DEFAULT_FORWARD,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, chained=not args.cold)
     print(summary.format())
     return 0
 
@@ -85,7 +88,7 @@ def _resume(args) -> int:
     from lvcore.campaigns.runner import resume_campaign
 
     summary = resume_campaign(args.store, workers=args.workers, scheduler=args.scheduler,
-                              retry_failed=args.retry_failed, progress=not args.no_progress)
+                              retry_failed=args.retry_failed, progress=not args.no_progress, chained=not args.cold)
     print(summary.format())
     return 0
 

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from lvcore import cli_args
-from lvcore.core.space import SIGMA_V_ML
+from lvcore.conditions import SIGMA_V_ML
 
 #: Range of ``--sigma-v`` (LVV noise sd, mL): echocardiographic/MRI volume errors are 2-15 mL; outside
 #: this range the likelihood either ignores the volume (the posterior is the prior) or is degenerate.

@@ -21,7 +21,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lvcore import limits, units
+from lvcore import conditions, limits, units
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.outputs import BASE_CONDITIONS
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
@@ -134,8 +134,8 @@ class GeometrySpec:
 class FibreSpec:
     """Rule-based fibre helix angles (deg, endo to epi) or one constant direction."""
 
-    alpha_endo_deg: float = units.DEFAULT_ALPHA_ENDO_DEG
-    alpha_epi_deg: float = units.DEFAULT_ALPHA_EPI_DEG
+    alpha_endo_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[0]
+    alpha_epi_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[1]
     direction: tuple[float, float, float] | None = None
 
 
@@ -216,7 +216,7 @@ class Case:
     geometry: GeometrySpec
     material: MaterialLaw
     fibres: FibreSpec = field(default_factory=FibreSpec)
-    load: LoadSpec = field(default_factory=lambda: LoadSpec(units.mmhg_to_kpa(units.DEFAULT_EDP_MMHG)))
+    load: LoadSpec = field(default_factory=lambda: LoadSpec(units.mmhg_to_kpa(conditions.SIMULATOR_DEFAULT_EDP_MMHG)))
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
     probes: tuple[tuple[float, float, float], ...] = ()
     outputs: OutputSpec = field(default_factory=OutputSpec)
@@ -261,13 +261,13 @@ class Case:
     def default_lv(
         cls,
         theta: Mapping[str, float] | None = None,
-        alpha_endo_deg: float = units.DEFAULT_ALPHA_ENDO_DEG,
-        alpha_epi_deg: float = units.DEFAULT_ALPHA_EPI_DEG,
-        edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+        alpha_endo_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[0],
+        alpha_epi_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[1],
+        edp_mmhg: float = conditions.SIMULATOR_DEFAULT_EDP_MMHG,
         resolution: str | Mapping[str, int] = "default",
     ) -> "Case":
-        """The default LV with the HO law at ``theta`` (default ``HO_REFERENCE_THETA``)."""
-        theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
+        """The default LV with the HO law at ``theta`` (default ``THETA_TILDE``)."""
+        theta = dict(conditions.THETA_TILDE if theta is None else theta)
         return cls.from_dict(
             {
                 "geometry": {"kind": "default", "resolution": resolution},
@@ -579,8 +579,8 @@ def _parse_fibres(f) -> FibreSpec:
             raise CaseError("fibres.direction", "must be a non-zero vector")
         v = v / scale
         return FibreSpec(direction=tuple(float(x) for x in v / float(np.linalg.norm(v))))
-    endo = _number(f.get("alpha_endo", units.DEFAULT_ALPHA_ENDO_DEG), "fibres.alpha_endo", lo=-180, hi=180)
-    epi = _number(f.get("alpha_epi", units.DEFAULT_ALPHA_EPI_DEG), "fibres.alpha_epi", lo=-180, hi=180)
+    endo = _number(f.get("alpha_endo", conditions.SIMULATOR_DEFAULT_ANGLES[0]), "fibres.alpha_endo", lo=-180, hi=180)
+    epi = _number(f.get("alpha_epi", conditions.SIMULATOR_DEFAULT_ANGLES[1]), "fibres.alpha_epi", lo=-180, hi=180)
     return FibreSpec(endo, epi)
 
 

@@ -44,14 +44,15 @@ import numpy as np
 from lvcore import cli_args
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.mechanics.forward import SimulatorForward
+from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES
 from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 from lvcore.resources import asset_path
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
-#: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2).
-FIXED_ANGLES = (-60.0, 90.0)
+#: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2): the simulator's default rule-based angles.
+FIXED_ANGLES = SIMULATOR_DEFAULT_ANGLES
 MODES = ("fixed", "free")
 #: GP hyperparameters are re-estimated every this many BO iterations (warm started).
 REFIT_EVERY = 20
@@ -126,7 +127,8 @@ def simulator_forward(subject: Subject, mode: str, resolution: str = "default") 
     space = bo_space(mode)
     return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(),
                             geometry={"kind": "mesh", "path": str(subject.geometry)}, resolution=resolution,
-                            label=f"FE simulator on {subject.name} ({resolution})")
+                            label=f"FE simulator on {subject.name} ({resolution})",
+                            warm_start=True)  # warm-started chains (issue 25): same results within tolerance
 
 
 # ----------------------------------------------------------------------------- state + recording forward

@@ -58,14 +58,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.core.space import CHAPTER_EDP, SIGMA_V_ML, build_case
+from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
+from lvcore.core.space import build_case
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies._common import clean, write_json_atomic
 
-SIGMA_S = 0.03
 MODELS = ("volume", "iid", "discrepancy")
 #: The calibration model's fixed conditions (the ``chapter`` emulator).
-MODEL_ANGLES = (-60.0, 60.0)
+MODEL_ANGLES = CHAPTER_ANGLES
 MODEL_BASE = "sliding"
 #: Doses per source for the full study (chosen to span strain RMS mismatch ~0.005-0.06; to be confirmed by
 #: the full run: the RMS each dose gives is measured and reported, not assumed).

@@ -46,16 +46,17 @@ import numpy as np
 from lvcore import cli_args
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
+from lvcore.conditions import SIGMA_S, THETA_TILDE
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
 #: The chapter's ground truth θ̃ (a, af in kPa).
-THETA_TRUE = (0.60, 1.30, 1.00, 3.60)
+THETA_TRUE = tuple(THETA_TILDE[n] for n in THETA_NAMES)
 #: Numbers of PCA modes of the reconstructed test geometries.
 PC_TESTS = (5, 10)
 #: Standard deviation (strain units) of the residuals of loss (9.11) in the Laplace approximation.
-SIGMA_RESIDUAL = 0.03
+SIGMA_RESIDUAL = SIGMA_S
 #: Parameter pairs of the loss surfaces (Fig 9.13).
 PAIRS = tuple(combinations(THETA_NAMES, 2))
 #: Gauss–Newton surface: grid points per axis and the span (factor around θ̂, log scale).
@@ -584,7 +585,8 @@ def tables(result: dict) -> dict:
 def surface_title(surface: dict) -> str:
     """Fig 9.13's title for one fit's surfaces: the patient, the main and test geometries."""
     who = surface.get("patient") or "patient not recorded"
-    return (f"Fig 9.13 — SYNTHETIC {who}: loss (9.11) over parameter pairs, data from main operator "
+    who = who if "SYNTHETIC" in who else f"SYNTHETIC {who}"
+    return (f"Fig 9.13 — {who}: loss (9.11) over parameter pairs, data from main operator "
             f"{surface.get('main_operator') or '?'}'s geometry, θ refitted on test geometry "
             f"{surface.get('test_geometry') or '?'}")
 
