@@ -312,7 +312,7 @@ class SimulatedRows:
     wall_s : float
         Wall time of all rows (s).
     chains : int
-        Continuation chains (= worker processes) used.
+        Continuation chains used.
     """
 
     outputs: np.ndarray
@@ -324,12 +324,15 @@ class SimulatedRows:
 
 
 def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, resolution: str = "default",
-                  workers: int = 2, log: Callable[[str], None] | None = None) -> SimulatedRows:
+                  workers: int = 2, chain_length: int = 64,
+                  log: Callable[[str], None] | None = None) -> SimulatedRows:
     """Simulate every row of ``x`` (physical units, columns ``space.names``) on ``geometry``.
 
     The rows are ordered into one nearest-neighbour path in the unit cube of
-    ``space`` (:func:`continuation_order`), cut into ``workers`` contiguous
-    chains, and each chain runs in its own process with
+    ``space`` (:func:`continuation_order`) and cut into contiguous chains of
+    about ``chain_length`` rows, which ``workers`` processes take as they
+    become free (soft corners of the box cost several times the stiff ones,
+    so a fixed split per worker leaves one idle). Each chain runs with
     :class:`~lvcore.core.forward.SimulatorForward` ``(warm_start=True)``:
     each solve starts Newton from the previous converged solution of its
     chain and falls back to a cold solve when that fails, so results satisfy
@@ -341,27 +344,30 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     kwargs = {"conditions": space.fixed_dict(), "geometry": dict(geometry), "resolution": resolution,
               "base": space.base}
     order = continuation_order(space.to_unit(x))
-    n_chains = max(1, min(int(workers), n))
-    chains = [c for c in np.array_split(order, n_chains) if c.size]
+    n_chains = 1 if int(workers) <= 1 else max(int(workers), -(-n // int(chain_length)))
+    chains = [c for c in np.array_split(order, min(n_chains, n)) if c.size]
     t0 = time.perf_counter()
     out = np.full((n, 25), np.nan)
     conv = np.zeros(n, dtype=bool)
     msgs = [""] * n
     secs = np.zeros(n)
-    if len(chains) == 1:
-        results = [_run_chain(kwargs, space.names, x[chains[0]])]
-    else:
-        from lvcore.campaigns.executors import LocalExecutor
-
-        with LocalExecutor(len(chains)) as pool:
-            futures = [pool.submit(_run_chain, kwargs, space.names, x[c]) for c in chains]
-            results = [f.result() for f in futures]
-    for c, (y, ok, m, s, wall) in zip(chains, results):
+    def record(c, result):
+        y, ok, m, s, wall = result
         out[c], conv[c], secs[c] = y, ok, s
         for i, msg in zip(c, m):
             msgs[i] = msg
         if log:
             log(f"  chain of {c.size} rows: {int(np.sum(ok))} converged, {wall:.1f} s")
+
+    if len(chains) == 1:
+        record(chains[0], _run_chain(kwargs, space.names, x[chains[0]]))
+    else:
+        from lvcore.campaigns.executors import LocalExecutor
+
+        with LocalExecutor(min(int(workers), len(chains))) as pool:
+            futures = {pool.submit(_run_chain, kwargs, space.names, x[c]): k for k, c in enumerate(chains)}
+            for fut in pool.as_completed(futures):
+                record(chains[futures[fut]], fut.result())
     return SimulatedRows(out, conv, tuple(msgs), secs, time.perf_counter() - t0, len(chains))
 
 
