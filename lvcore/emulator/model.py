@@ -183,7 +183,7 @@ class Emulator:
 
         Returns
         -------
-        lvcore.core.forward.SimulatorForward
+        lvcore.mechanics.forward.SimulatorForward
             Over the training space's inputs and fixed conditions, at the
             training resolution and base condition.
 
@@ -192,7 +192,7 @@ class Emulator:
         EmulatorError
             If the emulator does not record its training space.
         """
-        from lvcore.core.forward import SimulatorForward
+        from lvcore.mechanics.forward import SimulatorForward
 
         space = self.training_space
         if space is None:
