@@ -77,3 +77,28 @@ def test_flow_end_to_end_gives_a_complete_bundle(uploads):
         page = z.read("summary.html").decode()
         assert "SYNTHETIC" in page and "EDP 8.00 mmHg" in page
         assert json.loads(z.read("summary.json"))["models"]["iid"]["posterior"]["a"]["mean"] > 0
+
+
+def test_my_subject_page_runs_the_flow_and_offers_the_zip():
+    """AppTest: pick the bundled SYNTHETIC example, calibrate (small sampler), get the download."""
+    from streamlit.testing.v1 import AppTest
+
+    from lvcore.app import PAGES_DIR
+
+    at = AppTest.from_file(str(PAGES_DIR / "8_My_subject.py"), default_timeout=180).run()
+    assert not at.exception
+    at.selectbox(key="my_example").select(SUBJECT)
+    at.selectbox(key="my_emulator").select("chapter").run()
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    assert any("cavity" in m.value for m in at.markdown)
+    at.number_input(key="my_chains").set_value(1)
+    at.number_input(key="my_warmup").set_value(100)
+    at.number_input(key="my_draws").set_value(100).run()
+    at.button(key="my_run").click().run(timeout=300)
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    assert "my_subject_run" in at.session_state
+    assert at.session_state["my_subject_run"].result["zip"][:2] == b"PK"
+    # a wrong EDP for the fixed-EDP chapter emulator is refused with a message naming the EDP
+    at.selectbox(key="my_emulator").select("chapter")
+    at.number_input(key="my_edp").set_value(12.0).run()
+    assert any("EDP" in e.value or "edp" in e.value for e in at.error)

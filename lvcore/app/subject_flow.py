@@ -84,6 +84,32 @@ def geometry_nodes(geometry) -> np.ndarray:
     return scale_nodes(model.reconstruct(h), float(geometry.scale))
 
 
+#: Relative difference between the entered reference volume and the model geometry's cavity that is flagged.
+REFERENCE_VOLUME_TOLERANCE = 0.10
+
+
+def geometry_measures(geometry, reference_volume_ml: float | None = None) -> tuple[dict, list]:
+    """Cavity and wall volume (mL) and length (mm) of the geometry the emulator sees, and warnings.
+
+    When the user entered the subject's early-diastolic cavity volume (``reference_volume_ml``),
+    a difference above :data:`REFERENCE_VOLUME_TOLERANCE` is a warning: the emulated volumes, and so the
+    stiffness, would be biased by the geometry.
+    """
+    from lvcore.geometry.measures import geometry_info
+
+    info = geometry_info(geometry_nodes(geometry))
+    warnings = []
+    if reference_volume_ml is not None and reference_volume_ml > 0:
+        rel = info["cavity_volume_ml"] / float(reference_volume_ml) - 1.0
+        info["reference_volume_ml"] = float(reference_volume_ml)
+        info["reference_volume_difference"] = rel
+        if abs(rel) > REFERENCE_VOLUME_TOLERANCE:
+            warnings.append(f"the model geometry's cavity is {info['cavity_volume_ml']:.1f} mL, {100 * rel:+.0f} % "
+                            f"from the {reference_volume_ml:.1f} mL you entered: check the mesh's units and that "
+                            "it is the early-diastolic (reference) frame; the stiffness would be biased")
+    return info, warnings
+
+
 def read_data(session, name: str, data: bytes, segments: str | None = None) -> list:
     """Measured rows of an uploaded CSV/JSON/``.mat`` (24 lvcore regions or AHA-16), as ``lvcore calibrate --data``.
 
@@ -141,6 +167,11 @@ def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = 
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.inference import guards
 
+    from lvcore.outputs import EDP_NAME
+
+    fixed_edp = dict(getattr(emulator, "fixed", None) or {}).get(EDP_NAME)
+    if edp_mmhg is not None and fixed_edp is not None and abs(float(edp_mmhg) - float(fixed_edp)) <= 1e-6:
+        edp_mmhg = None  # the EDP the emulator was trained at: nothing to honour (another EDP is refused)
     cond = guards.check_conditions(emulator, edp_mmhg, None, None, infer_angles=False)
     box, extrapolation = guards.check_inputs_in_box(guards.fixed_inputs(geometry.h, cond, emulator, False), emulator,
                                                     allow_extrapolation=True, what="the subject's PC scores")
