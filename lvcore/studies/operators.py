@@ -723,7 +723,7 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--collect-only", action="store_true",
                    help="run nothing: summarise the fits already saved in OUT/fits (an interrupted run)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
-    p.add_argument("--out", required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
     p.set_defaults(func=_cli)
 
 
