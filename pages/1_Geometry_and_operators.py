@@ -1,13 +1,6 @@
 """Geometry & operators: segmentations of one LV by up to three operators, fitted to the template."""
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-
 import numpy as np
 import pandas as pd
 import streamlit as st

@@ -162,7 +162,9 @@ def _fake_calibration():
     summary = pd.DataFrame({"parameter": list(bounds), "mean": [d.mean() for d in draws.values()],
                             "truth": [0.6, 1.3, 1.0, 3.6]})
     return {"subject": "SYNTHETIC-HV3", "draws": draws, "bounds": bounds, "truth": dict(zip(bounds, [0.6, 1.3, 1, 3.6])),
-            "summary": summary, "status": "fake run for a figure test", "wall_s": 0.0,
+            "summary": summary, "wall_s": 0.0,
+            "status": "converged: max R-hat 1.007 (<= 1.05), min bulk ESS 826 (>= 100), 0 divergent, 1 round(s); "
+                      "0 divergent transitions (fake run for a figure test)",
             "config": {"num_warmup": 5, "num_samples": 100, "num_chains": 4}}
 
 

@@ -26,8 +26,7 @@ _EXPORTS = {
     "register_forward": "registry", "make_forward": "registry", "forward_names": "registry",
     "registered_name": "registry",
     "Parameter": "space", "ParameterSpace": "space", "build_case": "space", "THETA_BOUNDS": "space",
-    "ANGLES_THETA_BOUNDS": "space", "ANGLE_BOUNDS": "space", "EDP_BOUNDS": "space", "CHAPTER_ANGLES": "space",
-    "CHAPTER_EDP": "space", "SIGMA_V_ML": "space",
+    "ANGLES_THETA_BOUNDS": "space", "ANGLE_BOUNDS": "space", "EDP_BOUNDS": "space",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.exceptions import EmulatorError
 
 
@@ -17,17 +18,21 @@ def register(subparsers) -> None:
 
     t = sub.add_parser("train", help="train an emulator on campaign store(s)")
     t.add_argument("stores", nargs="+", help="training campaign store(s) (HDF5, same space)")
-    t.add_argument("--out", required=True, help="output directory (network.npz + metadata.json)")
+    t.add_argument("--out", type=cli_args.output_dir, required=True,
+                   help="output directory (network.npz + metadata.json), created if missing")
     t.add_argument("--inputs", nargs="+", default=None,
                    help="emulator inputs, e.g. a b af bf h1 h2 h3 h4 h5 (default: every varied input of the space)")
     t.add_argument("--valid", nargs="+", default=None, help="validation store(s); default: a random split of the training rows")
-    t.add_argument("--valid-fraction", type=float, default=0.1, help="fraction held out for validation without --valid")
-    t.add_argument("--test", nargs="+", default=None, help="held-out test store(s), never used for training or selection")
+    t.add_argument("--valid-fraction", type=cli_args.float_in(0.0, 0.9, open_lo=True), default=0.1,
+                   help="fraction held out for validation without --valid, in (0, 0.9] (default 0.1)")
+    t.add_argument("--test", nargs="+", default=None,
+                   help="held-out test store(s), never used for training or selection (default: none)")
     t.add_argument("--name", default=None, help="emulator name (default: the output directory's name)")
     add_training_arguments(t)
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--workers", type=int, default=1,
-                   help="processes for the architecture search (one architecture each; same result as 1)")
+    t.add_argument("--seed", type=cli_args.seed, default=0,
+                   help="seed of the split, initialisation and batches, 0 to 2^32 - 1 (default 0)")
+    t.add_argument("--workers", type=cli_args.workers, default=1,
+                   help="processes for the architecture search (one architecture each; same result as 1; default 1)")
     t.set_defaults(func=_train)
 
     b = sub.add_parser("build", help="build a subject-specific emulator: FE runs on one exact geometry, trained "
@@ -41,7 +46,7 @@ def register(subparsers) -> None:
                    help="the subject's geometry: a template mesh (.vtu, e.g. from `lvcore geometry fit --out`), a "
                         "volumetric tet/hex mesh (.inp/.msh/.med/.vtu/.vtk/.xdmf, fitted), a contour stack or case "
                         "file (.json), PC scores (.json/.csv) or 'default'")
-    b.add_argument("--out", required=True, help="output directory (geometry.vtu, network.npz, metadata.json, ...)")
+    b.add_argument("--out", type=cli_args.output_dir, required=True, help="output directory (geometry.vtu, network.npz, metadata.json, ...)")
     b.add_argument("--inputs", default="theta",
                    help="varied inputs: theta, plus optionally edp and angles, comma-separated (default theta)")
     b.add_argument("--units", choices=("mm", "cm", "m"), default="mm", help="units of a volumetric mesh")
@@ -60,7 +65,7 @@ def register(subparsers) -> None:
                    help="other bounds for a varied input, e.g. --bound a=0.3,3 (repeatable)")
     b.add_argument("--name", default=None, help="emulator name (default subject-<file stem>)")
     b.add_argument("--workers", type=int, default=2, help="FE worker processes, one continuation chain each")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the design and training, 0 to 2^32 - 1 (default 0)")
     from lvcore.emulator.subject import default_training_config
 
     add_training_arguments(b, default_training_config())
@@ -81,15 +86,21 @@ def add_training_arguments(parser, defaults=None) -> None:
 
     d = defaults or TrainingConfig()
     parser.add_argument("--architectures", default="all",
-                        help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200'")
-    parser.add_argument("--max-epochs", type=int, default=d.max_epochs)
-    parser.add_argument("--patience", type=int, default=d.patience)
-    parser.add_argument("--decay-epochs", type=int, default=d.decay_epochs,
-                        help="the Adam learning rate (from 0.01) halves every this many epochs")
-    parser.add_argument("--batch-size", type=int, default=d.batch_size)
-    parser.add_argument("--lbfgs-iterations", type=int, default=d.lbfgs_iterations,
-                        help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
-    parser.add_argument("--lvv-weight", type=float, default=d.lvv_weight, help="loss weight of the LVV (each strain has 1)")
+                        help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200' "
+                             "(default all)")
+    parser.add_argument("--max-epochs", type=cli_args.int_in(1, 1_000_000), default=d.max_epochs,
+                        help=f"most Adam epochs per architecture (default {d.max_epochs})")
+    parser.add_argument("--patience", type=cli_args.int_in(1, 1_000_000), default=d.patience,
+                        help=f"epochs without a better validation loss before stopping (default {d.patience})")
+    parser.add_argument("--decay-epochs", type=cli_args.int_in(1, 1_000_000), default=d.decay_epochs,
+                        help=f"the Adam learning rate (from 0.01) halves every this many epochs (default {d.decay_epochs})")
+    parser.add_argument("--batch-size", type=cli_args.int_in(1, 1_000_000), default=d.batch_size,
+                        help=f"minibatch size of Adam (default {d.batch_size})")
+    parser.add_argument("--lbfgs-iterations", type=cli_args.int_in(0, 1_000_000), default=d.lbfgs_iterations,
+                        help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe "
+                             f"alone; default {d.lbfgs_iterations})")
+    parser.add_argument("--lvv-weight", type=float, default=d.lvv_weight,
+                        help=f"loss weight of the LVV (each strain has 1; default {d.lvv_weight:g})")
     parser.add_argument("--lbfgs-lvv-weight", type=float, default=d.lbfgs_lvv_weight,
                         help="LVV loss weight of the L-BFGS stage (default: --lvv-weight)")
 
@@ -172,7 +183,7 @@ def parse_bounds(items) -> dict:
 
 
 def _build(args) -> int:
-    from lvcore.core.space import CHAPTER_ANGLES, CHAPTER_EDP
+    from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
     from lvcore.emulator.subject import SubjectDesign, build_subject_emulator
     from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
 

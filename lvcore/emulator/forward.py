@@ -19,7 +19,7 @@ from lvcore.core.forward import JaxForward
 from lvcore.emulator.io import load_emulator
 from lvcore.exceptions import EmulatorError
 from lvcore.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES, is_pc_name, pc_names
-from lvcore.units import DEFAULT_ALPHA_ENDO_DEG, DEFAULT_ALPHA_EPI_DEG, DEFAULT_EDP_MMHG
+from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,9 +97,9 @@ def emulator_forward(
     h,
     *,
     infer_angles: bool = False,
-    alpha_endo: float = DEFAULT_ALPHA_ENDO_DEG,
-    alpha_epi: float = DEFAULT_ALPHA_EPI_DEG,
-    edp_mmhg: float = DEFAULT_EDP_MMHG,
+    alpha_endo: float = SIMULATOR_DEFAULT_ANGLES[0],
+    alpha_epi: float = SIMULATOR_DEFAULT_ANGLES[1],
+    edp_mmhg: float = SIMULATOR_DEFAULT_EDP_MMHG,
     name: str | None = None,
 ) -> EmulatorForward:
     """Bind a geometry (PC scores) and conditions into an emulator for calibration.

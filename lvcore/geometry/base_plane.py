@@ -27,7 +27,8 @@ Method (all lengths mm, scanner coordinates)
 4. **Wall thickness.** Distance of every endocardial vertex to the
    epicardial surface. ``T`` is its median between 20 % and 60 % of the
    base-apex length below the base level; the thickness *at the ring* is the
-   median over the endocardial ring points. When it is below
+   10th percentile over the endocardial ring points (so a wall that vanishes
+   over a tenth of the ring, as at an outflow tract, counts). When it is below
    :data:`MEET_FRACTION` ``× T`` the walls meet (or thin to zero) at the base.
 5. **The cut**, a plane orthogonal to the axis at depth ``d`` below the base
    level (``d`` = ``base_cut_mm`` when given). By default ``d`` is the largest of
@@ -132,7 +133,8 @@ class BaseCut:
     ring_depth_mm : float
         Depth of the lowest ring point (any loop, either surface) below the base level.
     wall_at_ring_mm, wall_typical_mm : float
-        Wall thickness at the endocardial ring (median) and typical (median, 20-60 % of the length).
+        Wall thickness at the endocardial ring (10th percentile over its points) and typical (median, 20-60 %
+        of the length).
     walls_meet : bool
         The ring's wall is thinner than ``MEET_FRACTION × wall_typical_mm``.
     cut_depth_mm : float
@@ -212,6 +214,14 @@ def _fmt(v, nd: int = 1) -> str:
 
 
 # ----------------------------------------------------------------------------- loops
+def _edge_once(e: np.ndarray) -> np.ndarray:
+    """Mask of the (directed) edges whose undirected edge occurs exactly once."""
+    lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+    code = lo.astype(np.int64) * (int(hi.max()) + 1) + hi
+    _, inv, cnt = np.unique(code, return_inverse=True, return_counts=True)
+    return cnt[inv] == 1
+
+
 def boundary_loops(triangles) -> list[np.ndarray]:
     """Ordered vertex loops of the open boundary of a triangle mesh.
 
@@ -223,9 +233,7 @@ def boundary_loops(triangles) -> list[np.ndarray]:
     if len(tri) == 0:
         return []
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    b = e[cnt[inv.ravel()] == 1]
+    b = e[_edge_once(e)]
     nxt: dict[int, list[int]] = {}
     for a, c in b:
         nxt.setdefault(int(a), []).append(int(c))
@@ -290,9 +298,7 @@ def closed_volume(points, triangles) -> float:
     pts = np.asarray(points, float)
     tri = _oriented(pts, np.asarray(triangles, np.int64))
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = e[cnt[inv.ravel()] == 1]
+    bnd = e[_edge_once(e)]
     origin = pts.mean(axis=0)
     loop_of = np.full(len(pts), -1)
     centres = []
@@ -438,7 +444,7 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     thick = wall_thickness(ev, epi)
     mid = (h > 0.2 * length) & (h < 0.6 * length)
     t_typ = float(np.median(thick[mid])) if mid.sum() >= 10 else float(np.median(thick))
-    t_ring = float(np.median(wall_thickness(base.points, epi)))
+    t_ring = float(np.percentile(wall_thickness(base.points, epi), 10))
     meet = t_ring < MEET_FRACTION * t_typ
     band = max(2.0, 2.0 * _median_edge(endo))
 
@@ -496,7 +502,8 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
         what = ("base ring" if deepest.is_base else f"extra opening (perimeter {deepest.perimeter_mm:.0f} mm)")
         raise GeometryError(
             f"the {kind}'s {what} reaches {ring_depth:.1f} mm below the base ring's centre (an opening for the "
-            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness {deepest.unevenness_mm:.1f} mm): "
+            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness "
+            f"{deepest.unevenness_mm:.1f} mm): "
             f"cutting below it would remove {removed:.1f} mL ({100 * removed / full:.0f} %) of the cavity. "
             f"Close the opening in the segmentation (cap the outflow tract at the valve plane), or accept the cut "
             f"with --base-cut {np.ceil(ring_depth * 10) / 10:g} (base_cut_mm=)")

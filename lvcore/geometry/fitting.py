@@ -370,12 +370,23 @@ def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label
     )
 
 
+#: Closest a septum landmark may lie to the long axis (mm); nearer, phi = 0 is undefined.
+MIN_SEPTUM_AXIS_DISTANCE_MM = 1.0
+
+
 def _x_axis(ez: np.ndarray, origin: np.ndarray, septum) -> np.ndarray:
     if septum is not None:
-        v = np.asarray(septum, float) - origin
+        s = np.asarray(septum, float).reshape(-1)
+        if s.shape != (3,) or not np.all(np.isfinite(s)):
+            raise GeometryError(f"septum landmark {np.array2string(s[:6], precision=3)} must be 3 finite "
+                                "coordinates (a point on the septal wall)")
+        v = s - origin
         v = v - ez * (v @ ez)
-        if np.linalg.norm(v) > 1e-6:
-            return v / np.linalg.norm(v)
+        if not np.linalg.norm(v) >= MIN_SEPTUM_AXIS_DISTANCE_MM:
+            raise GeometryError(f"septum landmark {np.array2string(s, precision=2)} lies "
+                                f"{np.linalg.norm(v):.2g} mm from the LV's long axis, so it cannot fix the "
+                                "circumferential direction (phi = 0); give a point on the septal wall")
+        return v / np.linalg.norm(v)
     for ref in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
         v = ref - ez * (ref @ ez)
         if np.linalg.norm(v) > 0.3:

@@ -23,7 +23,14 @@ import json
 import sys
 from pathlib import Path
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore import cli_args
+from lvcore.conditions import SIGMA_V_ML
+
+#: Range of ``--sigma-v`` (LVV noise sd, mL): echocardiographic/MRI volume errors are 2-15 mL; outside
+#: this range the likelihood either ignores the volume (the posterior is the prior) or is degenerate.
+SIGMA_V_RANGE_ML = (0.1, 50.0)
+#: Range of ``--strain-noise`` (strain sd): measured strain errors are 0.01-0.1.
+STRAIN_NOISE_RANGE = (0.001, 0.5)
 
 #: The emulator ``lvcore calibrate`` and the app use unless told otherwise: the chapter's, trained with the
 #: sliding base (docs/simulator.md's decision) at fixed fibre angles (-60/60 deg) and EDP (8 mmHg).
@@ -42,7 +49,7 @@ def register(subparsers) -> None:
     )
     p.add_argument("--data",
                    help="measured data: CSV (lvv_ml, strain_01..strain_24 or aha_01..aha_16; optional subject "
-                        "column), JSON or MATLAB .mat (see docs/calibration.md)")
+                        "column), JSON or MATLAB .mat (see docs/calibration.md); default: none, give it or --volunteer")
     p.add_argument("--segments", choices=("lvcore", "aha"), default=None,
                    help="segment convention of the strains (default: what the file says, else lvcore)")
     p.add_argument("--segment-offset", type=float, default=None, metavar="DEG",
@@ -54,7 +61,7 @@ def register(subparsers) -> None:
                         "optional 'scale'), a template mesh (.vtu/.npy/.npz) or a volumetric mesh (.inp/.msh/.vtu) "
                         "to fit and project (size-normalised: scores plus a scale); 'infer' (no mesh: PC scores and "
                         "scale sampled with theta, give --reference-volume); or 'mean' (warned: biased estimates "
-                        "when the subject's shape or size differs)")
+                        "when the subject's shape or size differs); default: none, give it or --volunteer")
     p.add_argument("--reference-volume", type=float, default=None, metavar="ML",
                    help="with --geometry infer: the subject's early-diastolic (reference) cavity volume in mL; "
                         "also a data column reference_volume_ml (default: none, size and stiffness trade off)")
@@ -65,7 +72,8 @@ def register(subparsers) -> None:
                    help="with --geometry infer: base plane to epicardial apex in mm; also a data column long_axis_mm "
                         "(default: none)")
     p.add_argument("--volunteer", default=None, metavar="NAME",
-                   help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry")
+                   help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry "
+                        "(default: none)")
     p.add_argument("--geometry-units", choices=("mm", "cm", "m"), default="mm",
                    help="units of a volumetric --geometry mesh (default mm)")
     p.add_argument("--allow-extrapolation", action="store_true",
@@ -90,17 +98,25 @@ def register(subparsers) -> None:
                    help="end-diastolic pressure (mmHg, 2-40) for emulators that take it (default: the data's "
                         "edp_mmhg column, else 8); an error with emulators trained at a fixed EDP (e.g. 'chapter', "
                         "8 mmHg)")
-    p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML, help=f"LVV noise sd (mL), fixed (default {SIGMA_V_ML:g})")
+    p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML,
+                   help=f"LVV noise sd (mL), fixed, in [{SIGMA_V_RANGE_ML[0]:g}, {SIGMA_V_RANGE_ML[1]:g}] "
+                        f"(default {SIGMA_V_ML:g})")
     p.add_argument("--strain-noise", type=float, default=None,
-                   help="reference strain noise sd of the plausibility check (default 0.035)")
+                   help=f"reference strain noise sd of the plausibility check, in [{STRAIN_NOISE_RANGE[0]:g}, "
+                        f"{STRAIN_NOISE_RANGE[1]:g}] (default 0.035)")
     p.add_argument("--sampler", choices=("auto", "nuts", "hmc_gibbs"), default="auto",
                    help="auto: NUTS for volume/iid, HMC-within-Gibbs for discrepancy")
-    p.add_argument("--chains", type=int, default=4, help="MCMC chains (default 4)")
-    p.add_argument("--warmup", type=int, default=1000, help="warm-up iterations per chain (default 1000)")
-    p.add_argument("--samples", type=int, default=1000, help="draws kept per chain after convergence (default 1000)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the sampler (default 0)")
+    p.add_argument("--chains", type=int, default=4,
+                   help="MCMC chains, 1 to 64, run in parallel on up to 4 host devices (default 4)")
+    p.add_argument("--warmup", type=int, default=1000,
+                   help="warm-up (adaptation) iterations per chain, 1 to 1,000,000 (default 1000)")
+    p.add_argument("--samples", type=int, default=1000,
+                   help="draws kept per chain after convergence, 1 to 1,000,000 (default 1000)")
+    p.add_argument("--seed", type=cli_args.seed, default=0,
+                   help="random seed of the sampler, an integer from 0 to 2^32 - 1 (default 0)")
     p.add_argument("--subject", default=None, help="row to use (subject id); default: every row")
-    p.add_argument("--out", default="calibration_out", help="output folder")
+    p.add_argument("--out", type=cli_args.output_dir, default="calibration_out",
+                   help="output folder, created if missing (default calibration_out)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run_calibrate)
 
@@ -124,6 +140,15 @@ def check_options(args) -> None:
         raise DataError("--warmup and --samples must be <= 1,000,000")
     if not (math.isfinite(args.sigma_v) and args.sigma_v > 0):
         raise DataError(f"--sigma-v must be a positive number of mL, got {args.sigma_v}")
+    lo, hi = SIGMA_V_RANGE_ML
+    if not lo <= args.sigma_v <= hi:
+        raise DataError(f"--sigma-v {args.sigma_v:g} mL is outside [{lo:g}, {hi:g}] mL (docs/calibration.md): "
+                        "larger, the volume carries no information and the posterior is the prior; smaller, "
+                        "the likelihood is degenerate")
+    if args.strain_noise is not None:
+        lo, hi = STRAIN_NOISE_RANGE
+        if not (math.isfinite(args.strain_noise) and lo <= args.strain_noise <= hi):
+            raise DataError(f"--strain-noise {args.strain_noise:g} is outside [{lo:g}, {hi:g}] (a strain sd)")
     for name, value in (("--alpha-endo", args.alpha_endo), ("--alpha-epi", args.alpha_epi)):
         if value is not None and not (math.isfinite(value) and -180 <= value <= 180):
             raise DataError(f"{name} must be an angle in [-180, 180] degrees, got {value}")

@@ -34,7 +34,7 @@ from typing import Any, Mapping
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore.conditions import SIGMA_V_ML
 from lvcore.exceptions import DataError, EmulatorError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES, is_pc_name
 

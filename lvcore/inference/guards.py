@@ -207,7 +207,7 @@ def check_conditions(emulator, edp_mmhg=None, alpha_endo=None, alpha_epi=None, i
     EmulatorError
         EDP or angles given to an emulator trained at fixed values.
     """
-    from lvcore.units import DEFAULT_ALPHA_ENDO_DEG, DEFAULT_ALPHA_EPI_DEG, DEFAULT_EDP_MMHG
+    from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 
     names = set(getattr(emulator, "input_names", ()))
     fixed = dict(getattr(emulator, "fixed", None) or {})
@@ -233,9 +233,9 @@ def check_conditions(emulator, edp_mmhg=None, alpha_endo=None, alpha_epi=None, i
                                 f"emulator was trained at fixed fibre angles{at} and cannot honour others; drop "
                                 "them or use an emulator with angle inputs (e.g. 'angles')")
     return {
-        "edp_mmhg": float(fixed.get(EDP_NAME, DEFAULT_EDP_MMHG) if edp_mmhg is None else edp_mmhg),
-        "alpha_endo": float(fixed.get(ANGLE_NAMES[0], DEFAULT_ALPHA_ENDO_DEG) if alpha_endo is None else alpha_endo),
-        "alpha_epi": float(fixed.get(ANGLE_NAMES[1], DEFAULT_ALPHA_EPI_DEG) if alpha_epi is None else alpha_epi),
+        "edp_mmhg": float(fixed.get(EDP_NAME, SIMULATOR_DEFAULT_EDP_MMHG) if edp_mmhg is None else edp_mmhg),
+        "alpha_endo": float(fixed.get(ANGLE_NAMES[0], SIMULATOR_DEFAULT_ANGLES[0]) if alpha_endo is None else alpha_endo),
+        "alpha_epi": float(fixed.get(ANGLE_NAMES[1], SIMULATOR_DEFAULT_ANGLES[1]) if alpha_epi is None else alpha_epi),
         "fixed": sorted(fixed),
     }
 

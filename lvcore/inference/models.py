@@ -32,7 +32,8 @@ import numpyro
 import numpyro.distributions as dist
 
 from lvcore.core.forward import TraceableForward
-from lvcore.core.space import ANGLE_BOUNDS, SIGMA_V_ML, THETA_BOUNDS  # Table 9.1 and the angle ranges
+from lvcore.conditions import SIGMA_V_ML
+from lvcore.core.space import ANGLE_BOUNDS, THETA_BOUNDS  # Table 9.1 and the angle ranges
 from lvcore.exceptions import ForwardError
 from lvcore.inference import kernels
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES

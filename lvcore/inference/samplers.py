@@ -38,7 +38,7 @@ from numpyro.infer import MCMC, NUTS
 from numpyro.infer.hmc import hmc
 from numpyro.infer.mcmc import MCMCKernel
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore.conditions import SIGMA_V_ML
 from lvcore.inference import kernels, models
 from lvcore.outputs import N_OUTPUTS
 

@@ -39,7 +39,7 @@ def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, wa
     try:
         r = simulate(case, with_sensitivities=jacobian, initial=None if warm is None else warm.get("state"))
         if warm is not None and r.converged:
-            warm["state"] = r.solver_state
+            warm["state"] = r.warm_state
         seconds = float(getattr(r, "seconds", time.perf_counter() - t0))
         if not r.converged:
             return np.full(N_OUTPUTS, np.nan), False, str(r.message or "did not converge"), nan_jac, seconds
@@ -51,6 +51,28 @@ def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, wa
         return y, True, str(r.message or ""), jac, seconds
     except Exception as err:  # noqa: BLE001 - recorded as a failed point, never swallowed silently
         return np.full(N_OUTPUTS, np.nan), False, failure_reason(err), nan_jac, time.perf_counter() - t0
+
+
+def _simulate_chunk(input_names, cases, keys, units, seeds, jacobian):
+    """Worker task: ``cases`` in order, each warm-started from the nearest converged state (a chain chunk).
+
+    Returns :class:`lvcore.chains.ChainRow` objects whose results are
+    :func:`_simulate_point` tuples.
+    """
+    from lvcore.chains import solve_in_order
+
+    by_key = dict(zip(keys, cases))
+
+    def solve(key, initial):
+        warm = {"state": initial}
+        res = _simulate_point(by_key[key], input_names, jacobian, warm)
+        return res, (warm["state"] if res[1] else None)
+
+    return solve_in_order(keys, units, seeds, solve)
+
+
+#: Converged states a warm-starting SimulatorForward keeps between batches.
+WARM_KEPT_STATES = 64
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,12 +104,15 @@ class SimulatorForward:
         ``tcp://HOST:PORT`` of a Dask scheduler for batches (overrides ``workers``).
     label : str
     warm_start : bool
-        Points run in this process start Newton from the last converged
-        state of this forward (:func:`lvcore.mechanics.newton.solve`), which
-        saves most of the load stepping in a sequence of nearby points (an SQP
-        or line search). A failed warm start falls back to a cold solve, and
-        the result satisfies the same tolerances; points sent to a pool are
-        always solved cold.
+        Every point starts Newton at full load from the nearest converged
+        state (:func:`lvcore.mechanics.newton.solve`), which saves most of the
+        load stepping: a batch is ordered into continuation chains
+        (:mod:`lvcore.chains`), in this process or split across the executor's
+        workers, and the forward keeps its last converged states to start
+        later batches (a sequence of nearby points: an SQP, a line search, BO
+        iterations). A failed warm start falls back to a cold solve, and the
+        result satisfies the same tolerances. Without it every point is solved
+        cold.
 
     Notes
     -----
@@ -117,6 +142,14 @@ class SimulatorForward:
         probe.update({n: 1.0 for n in THETA_NAMES if n in self.input_names})
         build_case(probe, geometry=self.geometry, resolution=self.resolution, base=self.base)
 
+    def __getstate__(self):
+        # the kept warm-start states stay in this process (a pickled copy, e.g. sent to a worker, starts empty)
+        return {k: v for k, v in self.__dict__.items() if k != "_warm"}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        object.__setattr__(self, "_warm", {})
+
     @property
     def input_bounds(self) -> dict:
         return {}
@@ -137,23 +170,73 @@ class SimulatorForward:
     def _batch(self, inputs: Mapping[str, Any], jacobian: bool, executor) -> ForwardBatch:
         cols, n = as_columns(inputs, self.input_names, self.label)
         cases = [self.case({k: cols[k][i] for k in self.input_names}) for i in range(n)]
+        X = np.column_stack([cols[k] for k in self.input_names]) if self.input_names else np.zeros((n, 0))
         if executor is None and n > 1 and (self.scheduler or self.workers != 1):
             from lvcore.parallel import make_executor
 
             with make_executor(workers=self.workers, scheduler=self.scheduler) as ex:
-                results = self._run(cases, jacobian, ex)
+                results = self._run(cases, jacobian, ex, X)
         else:
-            results = self._run(cases, jacobian, executor)
+            results = self._run(cases, jacobian, executor, X)
         y, conv, msgs, jacs, secs = zip(*results)
         return ForwardBatch(np.stack(y), np.array(conv), tuple(msgs), np.stack(jacs) if jacobian else None,
                             np.array(secs))
 
-    def _run(self, cases, jacobian, executor):
+    def _run(self, cases, jacobian, executor, X=None):
+        if self.warm_start:
+            return self._run_chained(cases, jacobian, executor, X)
         if executor is None:
-            warm = self._warm if self.warm_start else None
-            return [_simulate_point(c, self.input_names, jacobian, warm) for c in cases]
+            return [_simulate_point(c, self.input_names, jacobian) for c in cases]
         futures = [executor.submit(_simulate_point, c, self.input_names, jacobian) for c in cases]
         return [f.result() for f in futures]
+
+    def _run_chained(self, cases, jacobian, executor, X):
+        """Warm-started continuation chains over the batch (see ``warm_start``)."""
+        from lvcore import chains
+
+        U = chains.scaled_coordinates(self.input_names, X)
+        seeds = self._warm.setdefault("seeds", [])
+        results: list = [None] * len(cases)
+
+        def collect(rows):
+            for r in rows:
+                results[r.key] = r.result
+                if r.state is not None:
+                    seeds.append(chains.Seed(r.unit, r.state))
+
+        if executor is None:
+            order = chains.continuation_order(U)
+            collect(_simulate_chunk(self.input_names, [cases[i] for i in order], list(map(int, order)), U[order],
+                                    list(seeds[-chains.SEEDS_PER_CHUNK * 4:]), jacobian))
+        else:
+            def submit(positions, chunk_seeds):
+                return executor.submit(_simulate_chunk, self.input_names, [cases[i] for i in positions], positions,
+                                       U[positions], chunk_seeds, jacobian)
+
+            try:
+                chains.run_chains(executor, submit, U, workers=getattr(executor, "workers", 1), on_rows=collect,
+                                  seeds=seeds[-chains.DEFAULT_KEPT_STATES:])
+            except chains.ChainTaskError as err:
+                raise err.__cause__ or err from None
+        del seeds[:-WARM_KEPT_STATES]
+        for i in range(max(0, len(seeds) - 1)):  # keep one factorised tangent in memory
+            seeds[i] = chains.Seed(seeds[i].unit, chains.light_state(seeds[i].state))
+        return results
+
+    def evaluate_warm(self, point: Mapping[str, float], initial=None):
+        """One point started from ``initial`` (a converged state of this forward, or None: cold).
+
+        Returns ``(ForwardBatch of one point, state)``; ``state`` is None when the
+        point did not converge. Used by campaign chains (:mod:`lvcore.chains`).
+        """
+        cols, n = as_columns({k: point[k] for k in self.input_names}, self.input_names, self.label)
+        if n != 1:
+            raise ForwardError("evaluate_warm takes one point")
+        warm = {"state": initial}
+        y, ok, msg, _, sec = _simulate_point(self.case({k: cols[k][0] for k in self.input_names}),
+                                             self.input_names, False, warm)
+        batch = ForwardBatch(y[None], np.array([ok]), (msg,), None, np.array([sec]))
+        return batch, (warm["state"] if ok else None)
 
     def __call__(self, params: Mapping[str, Any]) -> np.ndarray:
         """Outputs ``(25,)`` of one point; raises :class:`SolverError` if it fails. Not JAX-traceable."""

@@ -41,16 +41,18 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.mechanics.forward import SimulatorForward
+from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES
 from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 from lvcore.resources import asset_path
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
-#: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2).
-FIXED_ANGLES = (-60.0, 90.0)
+#: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2): the simulator's default rule-based angles.
+FIXED_ANGLES = SIMULATOR_DEFAULT_ANGLES
 MODES = ("fixed", "free")
 #: GP hyperparameters are re-estimated every this many BO iterations (warm started).
 REFIT_EVERY = 20
@@ -125,7 +127,8 @@ def simulator_forward(subject: Subject, mode: str, resolution: str = "default") 
     space = bo_space(mode)
     return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(),
                             geometry={"kind": "mesh", "path": str(subject.geometry)}, resolution=resolution,
-                            label=f"FE simulator on {subject.name} ({resolution})")
+                            label=f"FE simulator on {subject.name} ({resolution})",
+                            warm_start=True)  # warm-started chains (issue 25): same results within tolerance
 
 
 # ----------------------------------------------------------------------------- state + recording forward
@@ -604,16 +607,20 @@ def add_study_parser(study_subparsers) -> None:
                                                       "(FE simulator, SYNTHETIC volunteers; Tables 9.2/9.3)")
     p.add_argument("--subjects", default=None, help="comma-separated, e.g. SYNTHETIC-HV1,SYNTHETIC-HV2 (default: all 8)")
     p.add_argument("--modes", default="fixed,free", help="fixed, free or both (default)")
-    p.add_argument("--initial", type=int, default=CHAPTER_INITIAL, help="size of the exp design (chapter 300)")
-    p.add_argument("--iterations", type=int, default=CHAPTER_ITERATIONS, help="LCB iterations (chapter 300)")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes for simulator batches")
-    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler (instead of local workers)")
+    p.add_argument("--initial", type=cli_args.int_in(1, 100_000), default=CHAPTER_INITIAL,
+                   help=f"size of the exp design (default {CHAPTER_INITIAL}, the chapter's)")
+    p.add_argument("--iterations", type=cli_args.int_in(0, 100_000), default=CHAPTER_ITERATIONS,
+                   help=f"LCB iterations (default {CHAPTER_ITERATIONS}, the chapter's)")
+    p.add_argument("--workers", type=cli_args.workers, default=1,
+                   help="local worker processes for simulator batches, up to 4 per core (default 1)")
+    p.add_argument("--scheduler", default=None,
+                   help="tcp://HOST:PORT of a Dask scheduler instead of local workers (default: none)")
     p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=cli_args.seed, default=0, help="random seed, 0 to 2^32 - 1 (default 0)")
     p.add_argument("--refit-every", type=int, default=REFIT_EVERY,
                    help=f"re-estimate the GP hyperparameters every N iterations (default {REFIT_EVERY})")
     p.add_argument("--json", action="store_true", help="print the entries and findings as JSON")
-    p.add_argument("--out", required=True, help="output folder (state files for resuming go to OUT/state)")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder (state files for resuming go to OUT/state)")
     p.set_defaults(func=_cli)
 
 

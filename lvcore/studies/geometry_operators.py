@@ -129,7 +129,7 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
     Returns ``{"operator", "theta", "emulator", "rows": [{patient, operator, h1..h5, lvv_ml,
     strain_01..strain_24}]}``, or None when the emulator is not installed.
     """
-    from lvcore import units
+    from lvcore import conditions, units
     from lvcore.emulator.io import available_emulators
 
     if emulator not in available_emulators():
@@ -140,7 +140,7 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
 
     og = operator_geometries or load_operator_geometries()
     sm = shape_model or load_shape_model()
-    theta = dict(units.HO_REFERENCE_THETA) if theta is None else dict(theta)
+    theta = dict(conditions.THETA_TILDE) if theta is None else dict(theta)
     op = og.operators[0]
     rows = []
     for p, pid in enumerate(og.patients):

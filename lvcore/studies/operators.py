@@ -43,18 +43,20 @@ from typing import Sequence
 
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
+from lvcore.conditions import SIGMA_S, THETA_TILDE
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
 #: The chapter's ground truth θ̃ (a, af in kPa).
-THETA_TRUE = (0.60, 1.30, 1.00, 3.60)
+THETA_TRUE = tuple(THETA_TILDE[n] for n in THETA_NAMES)
 #: Numbers of PCA modes of the reconstructed test geometries.
 PC_TESTS = (5, 10)
 #: Standard deviation (strain units) of the residuals of loss (9.11) in the Laplace approximation.
-SIGMA_RESIDUAL = 0.03
+SIGMA_RESIDUAL = SIGMA_S
 #: Parameter pairs of the loss surfaces (Fig 9.13).
 PAIRS = tuple(combinations(THETA_NAMES, 2))
 #: Gauss–Newton surface: grid points per axis and the span (factor around θ̂, log scale).
@@ -583,7 +585,8 @@ def tables(result: dict) -> dict:
 def surface_title(surface: dict) -> str:
     """Fig 9.13's title for one fit's surfaces: the patient, the main and test geometries."""
     who = surface.get("patient") or "patient not recorded"
-    return (f"Fig 9.13 — SYNTHETIC {who}: loss (9.11) over parameter pairs, data from main operator "
+    who = who if "SYNTHETIC" in who else f"SYNTHETIC {who}"
+    return (f"Fig 9.13 — {who}: loss (9.11) over parameter pairs, data from main operator "
             f"{surface.get('main_operator') or '?'}'s geometry, θ refitted on test geometry "
             f"{surface.get('test_geometry') or '?'}")
 
@@ -710,8 +713,9 @@ def add_study_parser(study_subparsers) -> None:
     p = study_subparsers.add_parser("operators", help="§9.3.3: SQP refits of theta on other operators' and PCA "
                                                       "geometries (adjoint gradients; Figs 9.11-9.14, SYNTHETIC)")
     p.add_argument("--patients", default=None, help="comma-separated, e.g. SYNTHETIC-P01,SYNTHETIC-P02 (default: all 6)")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes (fits run in parallel)")
-    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler")
+    p.add_argument("--workers", type=cli_args.workers, default=1,
+                   help="local worker processes (fits run in parallel), up to 4 per core (default 1)")
+    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler (default: none, local workers)")
     p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
     p.add_argument("--surface-grid", type=int, default=0,
                    help="N > 0: simulator loss surfaces on N x N grids per parameter pair (6 N^2 runs per fit); "
@@ -719,7 +723,7 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--collect-only", action="store_true",
                    help="run nothing: summarise the fits already saved in OUT/fits (an interrupted run)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
-    p.add_argument("--out", required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
     p.set_defaults(func=_cli)
 
 

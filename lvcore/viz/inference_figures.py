@@ -15,6 +15,7 @@ import pandas as pd
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
+from lvcore.conditions import SIGMA_S
 from lvcore.outputs import OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
 from lvcore.viz.figures import SERIES_COLOURS, strain_heatmap, violin
 
@@ -160,7 +161,7 @@ def discrepancy_figure(idata, *, include_v: bool = True) -> go.Figure:
     return strain_heatmap(med, title=title)
 
 
-def sigma_s_figure(samples: Mapping[str, np.ndarray], truth: float | None = 0.03) -> go.Figure:
+def sigma_s_figure(samples: Mapping[str, np.ndarray], truth: float | None = SIGMA_S) -> go.Figure:
     """Posterior densities of sigma_S per model with the true value dashed (Fig. 9.7)."""
     from lvcore.viz.figures import density_overlay
 
