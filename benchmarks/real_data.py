@@ -3,6 +3,7 @@
     python benchmarks/real_data.py --workdir build/real_data              # simulate, calibrate, print the table
     python benchmarks/real_data.py --workdir build/real_data --steps simulate
     python benchmarks/real_data.py --workdir build/real_data --steps calibrate --chains 2 --warmup 500 --samples 500
+    python benchmarks/real_data.py --workdir build/real_data --steps table     # from results*.json
 
 Subjects (all SYNTHETIC, made by lvcore's FE simulator): one truncated
 ellipsoid (endo rs 25 / ry 22.5 / rl 60 mm, wall 9.5 mm, 10 mm thicker at
@@ -142,13 +143,16 @@ def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, e
 
 def table(results: list[dict]) -> str:
     """The Markdown table of BENCHMARKS.md and the criterion line."""
-    lines = ["| V0 (mL) | noise | theta | covered | a q05-q95 (true) | exit | flags |", "|---|---|---|---|---|---|---|"]
+    lines = ["| V0 (mL) | noise | true theta (a, b, af, bf) | all four in 90 % | a q05-q95 (kPa) | a q95/q05 | covered "
+             "| exit | flags |", "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         a = r["a"] or {}
+        out = [n for n, ok in (r.get("inside") or {}).items() if not ok]
+        short = [f.split(";")[0].split(" (")[0][:80] for f in r["flags"]]
         lines.append(f"| {r['volume_ml']:g} | {'5 mL / 0.03' if r['noisy'] else 'none'} | "
-                     f"{', '.join(f'{v:g}' for v in r['theta'])} | {'yes' if r['covered'] else 'no'} | "
-                     f"{a.get('q05', float('nan')):.3g}-{a.get('q95', float('nan')):.3g} ({r['theta'][0]:g}) | "
-                     f"{r['exit']} | {'; '.join(f[:60] for f in r['flags']) or '-'} |")
+                     f"{', '.join(f'{v:g}' for v in r['theta'])} | {'yes' if not out else 'no (' + ', '.join(out) + ')'} "
+                     f"| {a.get('q05', float('nan')):.3g}-{a.get('q95', float('nan')):.3g} | {r['a_ratio']:.0f} | "
+                     f"{'yes' if r['covered'] else 'no'} | {r['exit']} | {'; '.join(short) or '-'} |")
     n = len(results)
     cov = sum(r["covered"] for r in results)
     missed_unflagged = [r["subject"] for r in results if not r["covered"] and r["exit"] != 4]
@@ -174,7 +178,12 @@ def main(argv=None) -> int:
         from lvcore.inference.samplers import use_host_devices
 
         use_host_devices(args.chains)
-    sims = simulate_all(work) if "simulate" in steps else json.loads((work / "simulations.json").read_text())
+    sims = (simulate_all(work) if "simulate" in steps
+            else json.loads((work / "simulations.json").read_text()) if "calibrate" in steps else [])
+    if steps == ["table"]:   # the table of every results*.json in the work folder
+        results = [r for f in sorted(work.glob("results*.json")) for r in json.loads(f.read_text())]
+        print(table(results))
+        return 0
     if "calibrate" in steps:
         rows = subject_rows(sims)
         if args.only:
