@@ -25,7 +25,7 @@ c1, c2 = st.columns(2)
 calibration = c1.checkbox(f"Include the live calibration of {DEFAULT_SUBJECT} (adds about {TYPICAL_SECONDS[0]}–"
                           f"{TYPICAL_SECONDS[1]} s)", value=True,
                           help="iid model, `chapter` emulator, 4 chains × (500 + 500) NUTS draws; the time includes "
-                               "JAX's compilation (BENCHMARKS.md)")
+                               "JAX's compilation (docs/report.md, Timing)")
 static = c2.checkbox("Static PNG + SVG (kaleido, needs Chromium)", value=True,
                      help="Off: interactive HTML figures only, faster and no Chromium needed.")
 inputs = {"calibration": calibration, "static PNG/SVG": static}

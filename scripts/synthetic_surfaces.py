@@ -5,10 +5,12 @@ nominal base 10 mm above the centre, each in a random scanner pose drawn from ``
 
 * ``flat``       both walls cut by one flat plane (the classic input)
 * ``joined``     walls joined by a 4 mm lip at one shared base ring (wall thickness 0 at the ring, as in atlases)
+* ``partial_join`` walls meeting over 90° of the ring only (elsewhere they rise 4 mm straight up)
 * ``oblique``    base plane tilted 20°
 * ``uneven``     base ±3 mm about its plane (seeded Fourier orders 2-4)
 * ``notch``      an outflow notch 8 mm deep, 60° wide
 * ``deep_notch`` the same notch 35 mm deep (refused by default, with what to do)
+* ``outflow_hole`` a flat base and a separate opening through both walls 3-10 mm below it (a second loop)
 
 Usage::
 

@@ -83,3 +83,15 @@ def test_the_apps_report_tables_are_the_clis(tmp_path):
         cli = _figure_spec((cli_out / f["html"]).read_text())
         assert "#000038" not in json.dumps(app) and "#000037" not in json.dumps(app), f["name"]
         assert app == cli, f["name"]
+
+
+def test_the_calibration_checkbox_names_the_subject_and_time_the_report_runs():
+    """It said HV1 and ~10-40 s while the report calibrated HV3; both now come from the study module."""
+    import inspect
+
+    from lvcore.studies import volunteer_calibration as vc
+
+    at = AppTest.from_file(PAGE, default_timeout=60).run()
+    label = at.checkbox[0].label
+    assert vc.DEFAULT_SUBJECT in label and f"{vc.TYPICAL_SECONDS[0]}–{vc.TYPICAL_SECONDS[1]} s" in label
+    assert inspect.signature(vc.compute).parameters["subject"].default == vc.DEFAULT_SUBJECT

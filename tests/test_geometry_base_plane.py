@@ -224,3 +224,12 @@ def test_small_holes_are_bridged_not_cut_below():
     assert any(not r.is_base for r in b.rings)
     exact = pair.exact_cavity_below_ml(b.cut_origin, b.cut_normal)
     assert abs(res.cavity_volume_ml / exact - 1) < 0.02
+
+
+def test_walls_that_meet_over_part_of_the_ring():
+    """The wall vanishes over a quarter of the ring only (next to an outflow tract): still found (10th percentile
+    of the ring's wall), cut where the wall is usable, closed form below the cut."""
+    pair, res, exact = _fit("partial_join", seed=3)
+    b = res.base
+    assert b.walls_meet and b.rule == "wall thickness" and b.cut_depth_mm > 2.0
+    assert abs(res.cavity_volume_ml / exact - 1) < 0.02, (res.cavity_volume_ml, exact)

@@ -46,7 +46,7 @@ def register(subparsers) -> None:
                    help="the subject's geometry: a template mesh (.vtu, e.g. from `lvcore geometry fit --out`), a "
                         "volumetric tet/hex mesh (.inp/.msh/.med/.vtu/.vtk/.xdmf, fitted), a contour stack or case "
                         "file (.json), PC scores (.json/.csv) or 'default'")
-    b.add_argument("--out", required=True, help="output directory (geometry.vtu, network.npz, metadata.json, ...)")
+    b.add_argument("--out", type=cli_args.output_dir, required=True, help="output directory (geometry.vtu, network.npz, metadata.json, ...)")
     b.add_argument("--inputs", default="theta",
                    help="varied inputs: theta, plus optionally edp and angles, comma-separated (default theta)")
     b.add_argument("--units", choices=("mm", "cm", "m"), default="mm", help="units of a volumetric mesh")

@@ -27,7 +27,8 @@ Method (all lengths mm, scanner coordinates)
 4. **Wall thickness.** Distance of every endocardial vertex to the
    epicardial surface. ``T`` is its median between 20 % and 60 % of the
    base-apex length below the base level; the thickness *at the ring* is the
-   median over the endocardial ring points. When it is below
+   10th percentile over the endocardial ring points (so a wall that vanishes
+   over a tenth of the ring, as at an outflow tract, counts). When it is below
    :data:`MEET_FRACTION` ``× T`` the walls meet (or thin to zero) at the base.
 5. **The cut**, a plane orthogonal to the axis at depth ``d`` below the base
    level (``d`` = ``base_cut_mm`` when given). By default ``d`` is the largest of
@@ -132,7 +133,8 @@ class BaseCut:
     ring_depth_mm : float
         Depth of the lowest ring point (any loop, either surface) below the base level.
     wall_at_ring_mm, wall_typical_mm : float
-        Wall thickness at the endocardial ring (median) and typical (median, 20-60 % of the length).
+        Wall thickness at the endocardial ring (10th percentile over its points) and typical (median, 20-60 %
+        of the length).
     walls_meet : bool
         The ring's wall is thinner than ``MEET_FRACTION × wall_typical_mm``.
     cut_depth_mm : float
@@ -442,7 +444,7 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     thick = wall_thickness(ev, epi)
     mid = (h > 0.2 * length) & (h < 0.6 * length)
     t_typ = float(np.median(thick[mid])) if mid.sum() >= 10 else float(np.median(thick))
-    t_ring = float(np.median(wall_thickness(base.points, epi)))
+    t_ring = float(np.percentile(wall_thickness(base.points, epi), 10))
     meet = t_ring < MEET_FRACTION * t_typ
     band = max(2.0, 2.0 * _median_edge(endo))
 

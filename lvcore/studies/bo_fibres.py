@@ -620,7 +620,7 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--refit-every", type=int, default=REFIT_EVERY,
                    help=f"re-estimate the GP hyperparameters every N iterations (default {REFIT_EVERY})")
     p.add_argument("--json", action="store_true", help="print the entries and findings as JSON")
-    p.add_argument("--out", required=True, help="output folder (state files for resuming go to OUT/state)")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder (state files for resuming go to OUT/state)")
     p.set_defaults(func=_cli)
 
 

@@ -585,7 +585,8 @@ def tables(result: dict) -> dict:
 def surface_title(surface: dict) -> str:
     """Fig 9.13's title for one fit's surfaces: the patient, the main and test geometries."""
     who = surface.get("patient") or "patient not recorded"
-    return (f"Fig 9.13 — SYNTHETIC {who}: loss (9.11) over parameter pairs, data from main operator "
+    who = who if "SYNTHETIC" in who else f"SYNTHETIC {who}"
+    return (f"Fig 9.13 — {who}: loss (9.11) over parameter pairs, data from main operator "
             f"{surface.get('main_operator') or '?'}'s geometry, θ refitted on test geometry "
             f"{surface.get('test_geometry') or '?'}")
 
@@ -722,7 +723,7 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--collect-only", action="store_true",
                    help="run nothing: summarise the fits already saved in OUT/fits (an interrupted run)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
-    p.add_argument("--out", required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
     p.set_defaults(func=_cli)
 
 

@@ -37,10 +37,14 @@ TITLE_LINE_PX, SUBPLOT_TITLE_PX, TITLE_CHAR_PX = 24, 26, 9.0
 EXPORT_WIDTH_PX = 1100
 
 
+#: A plotly text tag (``<br>``, ``<sup>``, ``</b>``...), not a "<=" in the text.
+_TAG = r"</?[a-zA-Z][^<>]*>"
+
+
 def _visible_len(line: str) -> int:
     import re
 
-    return len(re.sub(r"<[^>]+>", "", line))
+    return len(re.sub(_TAG, "", line))
 
 
 def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
@@ -51,6 +55,7 @@ def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
     and the top margin grows to hold every line plus, when the figure has subplot
     titles, their row, so the title never overlaps them.
     """
+    import re
     import textwrap
 
     text = fig.layout.title.text or ""
@@ -60,13 +65,17 @@ def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
     width = min(width, int(((fig.layout.width or EXPORT_WIDTH_PX) - 40) / TITLE_CHAR_PX))
     lines = []
     for part in text.split("<br>"):
-        lines += [part] if _visible_len(part) <= width or "<" in part else textwrap.wrap(part, width)
+        tagged = re.search(_TAG, part) is not None  # a <sup> subtitle stays one line
+        lines += [part] if _visible_len(part) <= width or tagged else textwrap.wrap(part, width)
     subplot_titles = any(getattr(a, "yref", None) == "paper" and (a.y or 0) >= 0.99 and a.yanchor == "bottom"
                          for a in fig.layout.annotations)
-    need = 16 + TITLE_LINE_PX * len(lines) + (SUBPLOT_TITLE_PX if subplot_titles else 6)
+    # plotly places a multi-line title anchored at the top a little higher per extra line (the first line was
+    # cut off at the image's top edge in PNG exports): the pad grows with the lines (measured on kaleido's output)
+    pad = 12 + 6 * (len(lines) - 1)
+    need = pad + TITLE_LINE_PX * len(lines) + (SUBPLOT_TITLE_PX if subplot_titles else 6)
     top = max(fig.layout.margin.t or 0, need)
     grow = top - (fig.layout.margin.t if fig.layout.margin.t is not None else 100)
-    fig.update_layout(title=dict(text="<br>".join(lines), y=1, yref="container", yanchor="top", pad=dict(t=12)),
+    fig.update_layout(title=dict(text="<br>".join(lines), y=1, yref="container", yanchor="top", pad=dict(t=pad)),
                       margin=dict(t=top))
     if fig.layout.height and grow > 0:
         fig.update_layout(height=fig.layout.height + grow)
