@@ -325,3 +325,12 @@ def test_without_a_static_exporter_the_html_report_is_written_and_says_so(tmp_pa
     assert all(f["png"] is None and f["svg"] is None for f in m["figures"])
     assert all((out / f["html"]).is_file() for f in m["figures"] if f["status"] == "ok")
     assert "Static formats skipped" in (out / "index.html").read_text()
+
+
+def test_importing_the_report_loads_no_plotting_code():
+    """`lvcore --help` imports lvcore.report.cli: plotly and pandas load only when a report is built."""
+    import subprocess
+    import sys
+
+    code = "import sys, lvcore.report; print(sorted(m for m in sys.modules if m.startswith(('plotly', 'pandas'))))"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"
