@@ -132,18 +132,34 @@ def test_base_plane_just_above_the_apex_is_refused():
         simulate(case)
 
 
-def test_ordinary_result_has_no_warnings(fast_result):
-    assert fast_result.warnings == ()
-    assert fast_result.to_dict()["warnings"] == []
+def test_default_lv_result_notes_its_unusual_edv_ratio(fast_result):
+    # the default LV at 8 mmHg inflates to ~2.1 times its reference cavity, above the typical range
+    (w,) = fast_result.warnings
+    assert w.startswith("unusual result: EDV/V₀ = ") and "Klotz" in w
+    assert fast_result.to_dict()["warnings"] == [w]
 
 
 def test_plausibility_warnings():
     from lvcore.mechanics.simulate import plausibility_warnings
 
-    assert plausibility_warnings((85e3, 120e3), 120 / 85) == ()
-    assert len(plausibility_warnings((85e3, 1751e3), 1751 / 85)) == 2
-    assert "times its reference" in plausibility_warnings((1e3, 3.5e3), 3.5)[0]
+    assert plausibility_warnings((85e3, 155e3), 155 / 85, 8.0) == ()  # 1.82: typical at 8 mmHg
+    assert len(plausibility_warnings((85e3, 1751e3), 1751 / 85, 8.0)) == 2
+    assert "times its reference" in plausibility_warnings((1e3, 3.5e3), 3.5, 20.0)[0]
+    assert "below the typical" in plausibility_warnings((85e3, 100e3), 100 / 85, 8.0)[0]
     assert plausibility_warnings(None, None) == ()
+    # not an LV at a physiological pressure (or unknown): EDV/V0 is not judged
+    assert plausibility_warnings((1e3, 3.5e3), 3.5, None) == ()
+    assert plausibility_warnings((2492.0, 10734.0), 10734 / 2492, 75.0) == ()
+
+
+def test_land_problem2_benchmark_is_not_flagged():
+    """Land et al. (2015) problem 2 (10 kPa = 75 mmHg, EDV/V0 ~ 4.3) is a benchmark, not a physiological LV."""
+    from lvcore.mechanics.verification import problem2_case
+
+    r = simulate(problem2_case("fast"))
+    assert r.converged, r.message
+    assert r.lvv_standardised > 3.0  # the inflation that used to print "implausible ... times"
+    assert r.warnings == ()
 
 
 @pytest.mark.slow
