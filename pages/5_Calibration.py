@@ -10,7 +10,7 @@ import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
-from lvcore.app import freshness
+from lvcore.app import freshness, physiology_panel
 from lvcore.app.controls import shared_inputs
 from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.forward import emulator_forward
@@ -165,7 +165,9 @@ if run_clicked:
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
            "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward),
-           "inputs": dict(cal_inputs), "extrapolation": extrapolation}
+           "inputs": dict(cal_inputs), "extrapolation": extrapolation, "h": [float(v) for v in h],
+           "edp_mmhg": DEFAULT_CONDITIONS["edp_mmhg"],
+           "angles": (DEFAULT_CONDITIONS["alpha_endo"], DEFAULT_CONDITIONS["alpha_epi"])}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
@@ -258,6 +260,9 @@ if job is not None and job["done"]:
                         res.idata.to_netcdf(str(nc))
                         st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
                                            key=f"nc_{m}")
+            if job.get("h") is not None:
+                physiology_panel.show(idatas, h=job["h"], edp_mmhg=job["edp_mmhg"], angles=job["angles"],
+                                      measured_lvv_ml=float(job["y"][0]), subject=job["subject"], key="cal_edpvr")
             st.subheader("Export figures")
             for name, fig in downloads.items():
                 st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",
