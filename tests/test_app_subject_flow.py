@@ -98,6 +98,10 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     assert not at.exception and not at.error, [e.value for e in at.error]
     assert "my_subject_run" in at.session_state
     assert at.session_state["my_subject_run"].result["zip"][:2] == b"PK"
+    # physiology: the posterior EDV/V0 with its typical range and the assumed EDP (issue 27, item 2)
+    assert any("EDP assumed: 8 mmHg" in c.value and "typical EDV/V₀" in c.value for c in at.caption)
+    assert any("EDV/V₀ median" in d.value.columns for d in at.dataframe)
+    assert any(b.label.startswith("Simulate the EDPVR") for b in at.button)
     # a wrong EDP for the fixed-EDP chapter emulator is refused with a message naming the EDP
     at.selectbox(key="my_emulator").select("chapter")
     at.number_input(key="my_edp").set_value(12.0).run()
