@@ -2,7 +2,7 @@
 
 EDV/V₀: the posterior of the emulated end-diastolic volume (``eta[..., 0]``) over the model geometry's
 reference cavity V₀, with the measured LVV's ratio and the typical range (:mod:`lvcore.physiology`).
-EDPVR: the FE simulator (:func:`lvcore.physiology.simulate_edpvr`, fast mesh, one warm-started solve per
+EDPVR: the FE simulator (:func:`lvcore.mechanics.edpvr.simulate_edpvr`, fast mesh, one warm-started solve per
 pressure) for :data:`N_EDPVR_DRAWS` posterior draws, run when the user presses the button (the emulators
 are trained at 6–14 mmHg at most, so they cannot give 0–30 mmHg).
 """
@@ -16,6 +16,7 @@ from typing import Mapping
 import numpy as np
 
 from lvcore import physiology
+from lvcore.mechanics import edpvr
 
 #: Posterior draws simulated for the EDPVR band.
 N_EDPVR_DRAWS = 8
@@ -56,7 +57,7 @@ def posterior_thetas(idata, n: int = N_EDPVR_DRAWS) -> tuple[list[dict], list[tu
     return thetas, angles
 
 
-def run_edpvr(idata, h, scale: float, angles: tuple[float, float], progress=None) -> physiology.EDPVR:
+def run_edpvr(idata, h, scale: float, angles: tuple[float, float], progress=None) -> edpvr.EDPVR:
     """The FE EDPVR of :data:`N_EDPVR_DRAWS` posterior draws on the emulator's geometry (``h``, ``scale``)."""
     from lvcore.app.subject_flow import geometry_nodes
 
@@ -69,11 +70,11 @@ def run_edpvr(idata, h, scale: float, angles: tuple[float, float], progress=None
             np.save(path, geometry_nodes(SimpleNamespace(h=np.asarray(h, float), scale=float(scale))))
             geometry = {"kind": "mesh", "path": str(path)}
         if draw_angles is None:
-            return physiology.simulate_edpvr(thetas, geometry, angles=angles, resolution=EDPVR_RESOLUTION,
+            return edpvr.simulate_edpvr(thetas, geometry, angles=angles, resolution=EDPVR_RESOLUTION,
                                              progress=progress)
-        curves = [physiology.simulate_edpvr([t], geometry, angles=a, resolution=EDPVR_RESOLUTION)
+        curves = [edpvr.simulate_edpvr([t], geometry, angles=a, resolution=EDPVR_RESOLUTION)
                   for t, a in zip(thetas, draw_angles)]
-    return physiology.EDPVR(curves[0].pressures_mmhg, np.vstack([c.volumes_ml for c in curves]), curves[0].v0_ml,
+    return edpvr.EDPVR(curves[0].pressures_mmhg, np.vstack([c.volumes_ml for c in curves]), curves[0].v0_ml,
                             sum(c.n_failed for c in curves), EDPVR_RESOLUTION)
 
 
