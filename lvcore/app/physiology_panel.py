@@ -16,7 +16,6 @@ from typing import Mapping
 import numpy as np
 
 from lvcore import physiology
-from lvcore.mechanics import edpvr
 
 #: Posterior draws simulated for the EDPVR band.
 N_EDPVR_DRAWS = 8
@@ -57,9 +56,10 @@ def posterior_thetas(idata, n: int = N_EDPVR_DRAWS) -> tuple[list[dict], list[tu
     return thetas, angles
 
 
-def run_edpvr(idata, h, scale: float, angles: tuple[float, float], progress=None) -> edpvr.EDPVR:
+def run_edpvr(idata, h, scale: float, angles: tuple[float, float], progress=None) -> "lvcore.mechanics.edpvr.EDPVR":
     """The FE EDPVR of :data:`N_EDPVR_DRAWS` posterior draws on the emulator's geometry (``h``, ``scale``)."""
     from lvcore.app.subject_flow import geometry_nodes
+    from lvcore.mechanics import edpvr
 
     thetas, draw_angles = posterior_thetas(idata)
     with tempfile.TemporaryDirectory() as d:
