@@ -13,15 +13,16 @@ Typical EDV/V₀: ``1 / (0.6 − 0.006 · EDP)`` from that estimate (1.81 at 8 m
 :data:`V0_FRACTION_TOLERANCE` on V₀/EDV around it. The band's width is this package's choice
 (the paper gives the relation, not a population range), so it is a screening range, not a
 diagnosis. All volumes in mL, pressures in mmHg.
+
+Pure functions only: the simulated EDPVR of θ draws and a shape's reference volume are in
+:mod:`lvcore.mechanics.edpvr` (they run the simulator, a layer above this module).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import numpy as np
 
-from lvcore import conditions
 
 #: Klotz et al. (2006) normal EDPVR: EDP = KLOTZ_AN_MMHG * EDVn ** KLOTZ_BN.
 KLOTZ_AN_MMHG = 27.78
@@ -144,87 +145,6 @@ def posterior_edv_ratio(lvv_draws_ml, v0_ml: float, edp_mmhg: float,
     return PosteriorRatio(float(v0_ml), float(q05), float(q50), float(q95), meas, typical_edv_ratio(edp_mmhg))
 
 
-def pca_reference_volume_ml(scores: Sequence[float], resolution: str = "default") -> float:
-    """Reference (stress-free) cavity volume V₀ (mL) of the bundled shape model's LV with PC ``scores``,
-    as the simulator meshes it at ``resolution``."""
-    from lvcore import units
-    from lvcore.mechanics.case import Case
-    from lvcore.mechanics.simulate import prepare_case
-
-    case = Case.from_dict({"geometry": {"kind": "pca", "scores": [float(s) for s in scores], "resolution": resolution},
-                           "material": {"law": "holzapfel-ogden", **conditions.THETA_TILDE},
-                           "load": {"pressure": 8, "units": "mmHg"}})
-    return float(prepare_case(case).v_ref) / units.MM3_PER_ML
-
-
-@dataclass(frozen=True)
-class EDPVR:
-    """Simulated pressure–volume curves: ``volumes_ml[k, j]`` of draw k at ``pressures_mmhg[j]``; NaN where the
-    solve failed (counted in ``n_failed``). ``v0_ml`` is the reference cavity (the curve's 0 mmHg point)."""
-
-    pressures_mmhg: np.ndarray
-    volumes_ml: np.ndarray
-    v0_ml: float
-    n_failed: int
-    resolution: str
-
-    def band(self, q=(0.05, 0.5, 0.95)) -> np.ndarray:
-        """Quantiles over the draws at each pressure, shape ``(len(q), n_pressures)`` (mL, NaN-aware)."""
-        return np.nanquantile(self.volumes_ml, q, axis=0)
-
-
-def simulate_edpvr(thetas: Sequence[Mapping[str, float]], geometry: Mapping, *,
-                   angles: tuple[float, float] = conditions.SIMULATOR_DEFAULT_ANGLES,
-                   pressures_mmhg: Sequence[float] = EDPVR_PRESSURES_MMHG, resolution: str = "fast",
-                   progress=None) -> EDPVR:
-    """EDPVR of each θ draw by the FE simulator: one solve per pressure, each warm-started from the previous.
-
-    Parameters
-    ----------
-    thetas : θ draws, each ``{"a", "b", "af", "bf"}`` (kPa, –, kPa, –).
-    geometry : the case's geometry section without ``resolution`` (e.g. ``{"kind": "pca", "scores": h}``).
-    angles : fibre angles (α_endo, α_epi) in degrees.
-    pressures_mmhg : increasing pressures (mmHg), > 0 and <= 30.
-    resolution : mesh preset.
-    progress : optional ``callable(done, total)``.
-    """
-    from lvcore import units
-    from lvcore.exceptions import LVCoreError
-    from lvcore.mechanics.case import Case
-    from lvcore.mechanics.simulate import simulate
-
-    p = np.asarray(pressures_mmhg, dtype=float)
-    if p.ndim != 1 or p.size == 0 or np.any(np.diff(p) <= 0) or p[0] <= 0 or p[-1] > 30.0:
-        raise ValueError("pressures_mmhg must increase, within (0, 30] mmHg")
-    vols = np.full((len(thetas), p.size), np.nan)
-    v0 = None
-    failed = 0
-    for k, theta in enumerate(thetas):
-        warm = None
-        for j, pj in enumerate(p):
-            case = Case.from_dict({"geometry": {**dict(geometry), "resolution": resolution},
-                                   "material": {"law": "holzapfel-ogden", **{n: float(theta[n]) for n in
-                                                                            ("a", "b", "af", "bf")}},
-                                   "fibres": {"alpha_endo": float(angles[0]), "alpha_epi": float(angles[1])},
-                                   "load": {"pressure": float(pj), "units": "mmHg"}})
-            try:
-                res = simulate(case, initial=warm)
-            except LVCoreError:
-                res = None
-            if res is None or not res.converged:
-                failed += p.size - j  # the rest of this curve is not attempted
-                break
-            warm = res.warm_state
-            v0 = res.cavity_volume_mm3[0] / units.MM3_PER_ML
-            vols[k, j] = res.cavity_volume_mm3[1] / units.MM3_PER_ML
-            if progress is not None:
-                progress(k * p.size + j + 1, len(thetas) * p.size)
-    if v0 is None:
-        raise ValueError("no EDPVR solve converged")
-    return EDPVR(p, vols, float(v0), failed, resolution)
-
-
 __all__ = ["KLOTZ_AN_MMHG", "KLOTZ_BN", "V0_FRACTION_TOLERANCE", "PHYSIOLOGICAL_EDP_RANGE_MMHG", "EDPVR_PRESSURES_MMHG",
            "klotz_edvn", "klotz_edp", "klotz_volume", "klotz_v30", "TypicalRange", "typical_edv_ratio", "edv_ratio",
-           "is_physiological_pressure", "edv_ratio_note", "PosteriorRatio", "posterior_edv_ratio",
-           "pca_reference_volume_ml", "EDPVR", "simulate_edpvr"]
+           "is_physiological_pressure", "edv_ratio_note", "PosteriorRatio", "posterior_edv_ratio"]

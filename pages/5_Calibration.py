@@ -10,7 +10,7 @@ import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
-from lvcore.app import freshness
+from lvcore.app import freshness, physiology_panel
 from lvcore.app.controls import shared_inputs
 from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.forward import emulator_forward
@@ -180,7 +180,8 @@ if run_clicked:
            "inputs": dict(cal_inputs), "extrapolation": extrapolation, "verdicts": None, "forward": forward,
            "infer": angles == "infer",
            "edp_mmhg": conditions["edp_mmhg"], "edp_source": guards.edp_source(data, None, emulator),
-           "base": str(getattr(emulator, "base", "clamped"))}
+           "base": str(getattr(emulator, "base", "clamped")), "h": [float(v) for v in h],
+           "angles": (conditions["alpha_endo"], conditions["alpha_epi"])}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
@@ -292,6 +293,9 @@ if job is not None and job["done"]:
                         res.idata.to_netcdf(str(nc))
                         st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
                                            key=f"nc_{m}")
+            if job.get("h") is not None:
+                physiology_panel.show(idatas, h=job["h"], edp_mmhg=job["edp_mmhg"], angles=job["angles"],
+                                      measured_lvv_ml=float(job["y"][0]), subject=job["subject"], key="cal_edpvr")
             st.subheader("Export figures")
             for name, fig in downloads.items():
                 st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",

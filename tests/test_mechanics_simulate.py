@@ -216,3 +216,24 @@ def test_dispersion_and_sheet_terms_change_the_solution(fast_case, fast_result):
         r = simulate(_with_material(fast_case, **extra))
         assert r.converged, (extra, r.message)
         assert np.sqrt(np.mean((r.strains - fast_result.strains) ** 2)) > 1e-3, extra
+
+
+def test_prepared_case_cache_gives_the_results_of_a_fresh_build():
+    """simulate() reuses the material-independent part of a case (issue 25): same numbers as building it anew."""
+    from lvcore.mechanics import simulate as sim
+
+    base = Case.default_lv(resolution="fast")
+    stiff = Case.default_lv({"a": 1.2, "b": 2.0, "af": 1.5, "bf": 4.0}, resolution="fast")
+    sim.simulate(base)  # fills the cache with the reference material's system
+    cached = sim.simulate(stiff)
+    sim._PREPARED.clear()
+    fresh = sim.simulate(stiff)
+    np.testing.assert_array_equal(cached.outputs(), fresh.outputs())
+    assert cached.newton_iterations == fresh.newton_iterations
+    # another law on a geometry of the same mesh is a different prepared case (parameters per element differ)
+    gucc = Case.from_dict({**base.to_dict(), "material": {"law": "guccione", "C": 2.0, "bf": 8.0, "bt": 2.0,
+                                                          "bfs": 4.0}})
+    g_cached = sim.simulate(gucc)
+    sim._PREPARED.clear()
+    np.testing.assert_array_equal(g_cached.outputs(), sim.simulate(gucc).outputs())
+    assert len(sim._PREPARED) == 1
