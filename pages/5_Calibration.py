@@ -12,18 +12,18 @@ import streamlit as st
 import lvcore  # noqa: F401  (float64)
 from lvcore.app import freshness
 from lvcore.app.controls import shared_inputs
+from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
+from lvcore.emulator.forward import emulator_forward
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
-from lvcore.emulator.forward import emulator_forward
 from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.samplers import SamplerConfig
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
-from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 
 #: The conditions emulator_forward binds by default (checked against the emulator's training box).
 DEFAULT_CONDITIONS = {"edp_mmhg": SIMULATOR_DEFAULT_EDP_MMHG, "alpha_endo": SIMULATOR_DEFAULT_ANGLES[0],

@@ -184,10 +184,21 @@ def test_geometry_page_malformed_uploads_show_errors_and_keep_the_controls():
 
 
 # --------------------------------------------------------------------------- the case box of the entry page
-def test_case_box_applies_the_case_file_limits():
+def test_case_box_applies_the_case_file_limits(tmp_path):
+    import json
+
+    import hostile_files as hf
+    from lvcore.geometry.shape_model import BUNDLED_MODEL
+
+    # a shape model whose .npz declares a 37 GB array (a traceback in the box before issue 28); refused by its header
+    (tmp_path / "m.json").write_text(BUNDLED_MODEL.with_suffix(".json").read_text())
+    (tmp_path / "m.npz").write_bytes(hf.npz_of({"mean": hf.npy_header(hf.HUGE_SHAPE)}))
+    pca_case = json.dumps({"geometry": {"kind": "pca", "scores": [0.0], "model": str(tmp_path / "m.npz")},
+                           "material": {"law": "neo-hookean", "mu": 1}, "load": {"pressure": 1, "units": "kPa"}})
     at = AppTest.from_file(str(ROOT / "app.py"), default_timeout=180).run()  # the entry; its home page has the box
     runner_key = "FormSubmitter:case_runner-Run case"
     for text, fragment in (
+        (pca_case, "MAX_ARRAY_BYTES"),
         ('{"geometry": {"kind": "default", "resolution": {"circumferential": 100, "longitudinal": 100, '
          '"transmural": 10}}, "material": {"law": "neo-hookean", "mu": 1}, "load": {"pressure": 1, "units": "kPa"}}',
          "limit"),

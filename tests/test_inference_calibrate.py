@@ -5,12 +5,12 @@ import jax
 import numpy as np
 import pytest
 
+from lvcore.emulator.forward import emulator_forward
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import coverage, models, samplers
-from lvcore.emulator.forward import emulator_forward
-from lvcore.testing.analytic import AnalyticForward
 from lvcore.outputs import THETA_NAMES, pc_names
+from lvcore.testing.analytic import AnalyticForward
 
 
 def _random_emulator(name="chapter", angles=False):

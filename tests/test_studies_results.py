@@ -6,9 +6,9 @@ import pytest
 from streamlit.testing.v1 import AppTest
 
 from lvcore.app import PAGES_DIR, ENTRY, PAGES
-from lvcore.testing.analytic import AnalyticForward
 from lvcore.exceptions import LVCoreError
 from lvcore.studies import bo_fibres, operators, results
+from lvcore.testing.analytic import AnalyticForward
 from tests.test_studies_operators import stand_in
 
 PAGE = str(PAGES_DIR / "6_Studies.py")

@@ -14,10 +14,10 @@ import streamlit as st
 
 from lvcore import conditions, units
 from lvcore.app import PAGES
+from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: F401 (shared log sliders)
 from lvcore.exceptions import LVCoreError
 from lvcore.mechanics.case import Case, loads_case
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
-from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: F401 (shared log sliders)
 from lvcore.resources import example_cases
 
 RESOLUTIONS = RESOLUTION_PRESET_NAMES

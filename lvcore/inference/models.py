@@ -31,8 +31,8 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
-from lvcore.core.forward import TraceableForward
 from lvcore.conditions import SIGMA_V_ML
+from lvcore.core.forward import TraceableForward
 from lvcore.core.space import ANGLE_BOUNDS, THETA_BOUNDS  # Table 9.1 and the angle ranges
 from lvcore.exceptions import ForwardError
 from lvcore.inference import kernels
