@@ -21,7 +21,7 @@ from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
-from lvcore.inference.samplers import SamplerConfig
+from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
 
@@ -119,9 +119,9 @@ with right:
     angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
                       help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
     c1, c2, c3 = st.columns(3)
-    chains = c1.number_input("chains", 1, 8, 4)
-    warmup = c2.number_input("warm-up", 50, 5000, 1000, step=100)
-    samples = c3.number_input("draws kept", 50, 5000, 1000, step=100)
+    chains = c1.number_input("chains", 1, 8, INTERACTIVE.num_chains)  # defaults chosen by ESS per second
+    warmup = c2.number_input("warm-up", 50, 5000, INTERACTIVE.num_warmup, step=50)
+    samples = c3.number_input("draws kept", 50, 5000, INTERACTIVE.num_samples, step=100)
 
 # ----------------------------------------------------------------------------- background run
 job = st.session_state.get("calibration_job")
