@@ -108,6 +108,15 @@ def shared_sidebar() -> dict:
     return values
 
 
+def shared_start(name: str, shared: dict) -> float | None:
+    """The shared sidebar's value of emulator input ``name`` (θ component or EDP), or ``None`` if it sets none."""
+    if name in shared.get("theta", {}):
+        return float(shared["theta"][name])
+    if name.lower() in ("edp", "edp_mmhg") and shared.get("edp_mmhg") is not None:
+        return float(shared["edp_mmhg"])
+    return None
+
+
 def render_shared_sidebar() -> dict:
     """The entry script's call: render the shared sidebar and mark that the pages need not."""
     import streamlit as st
@@ -127,4 +136,4 @@ def shared_inputs() -> dict:
 
 
 __all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label", "SHARED",
-           "shared_sidebar", "render_shared_sidebar", "shared_inputs"]
+           "shared_sidebar", "render_shared_sidebar", "shared_inputs", "shared_start"]
