@@ -24,7 +24,7 @@ def _emulator(name: str):
 
 
 uploads = session_uploads()
-shared = shared_inputs()
+shared = shared_inputs(theta=False)
 
 # ----------------------------------------------------------------------------- 1. geometry
 st.header("1 · Geometry")
