@@ -44,7 +44,8 @@ def main(argv=None) -> int:
     from lvcore.exceptions import EmulatorError
     from lvcore.inference import diagnostics, kernels, samplers
     from lvcore.inference.coverage import simulate_data
-    from lvcore.core.forward import AnalyticForward, load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
+    from lvcore.testing.analytic import AnalyticForward
 
     h = [float(v) for v in args.h.split(",")]
     if args.forward == "analytic":

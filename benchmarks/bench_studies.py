@@ -17,7 +17,7 @@ seconds of the process and its workers do not depend on the load:
 ``cpu_s / workers`` estimates the wall time on idle cores (it ignores the
 serial GP/acquisition part of BO, which runs while the workers wait).
 ``gp``: that serial part alone. The BO loop of the ``free`` mode (6 inputs)
-runs on :class:`lvcore.core.AnalyticForward` (microseconds per point), so
+runs on :class:`lvcore.testing.AnalyticForward` (microseconds per point), so
 its CPU time is the GP fits and the acquisition search of one run of the
 study at the given budget, once per ``--refit-every`` value. Sixteen runs
 (8 volunteers x 2 modes) make the chapter's study; the 4-input mode costs
@@ -103,7 +103,7 @@ def _bench_sqp_warm(args) -> int:
     """One operator-study refit with and without the Newton warm start (same process, same data)."""
     import numpy as np
 
-    from lvcore.core import SimulatorForward
+    from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
     from lvcore.core.space import THETA_NAMES
     from lvcore.mechanics.linear import available_backends
     from lvcore.optimise.sqp import OperatorLoss, refit_theta
@@ -121,7 +121,7 @@ def _bench_sqp_warm(args) -> int:
         loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
         rows = {}
         for warm in (True, False):
-            fwd = CachedForward(SimulatorForward(geometry={"kind": "mesh", "path": geoms[name]["path"]},
+            fwd = CachedForward(AdjointSimulatorForward(geometry={"kind": "mesh", "path": geoms[name]["path"]},
                                                  resolution=args.resolution, warm_start=warm))
             load0 = os.getloadavg()[0]
             c0, t0 = time.process_time(), time.perf_counter()
@@ -148,7 +148,7 @@ def _bench_gp(args) -> int:
     import numpy as np
     from sklearn.exceptions import ConvergenceWarning
 
-    from lvcore.core import AnalyticForward
+    from lvcore.testing.analytic import AnalyticForward
     from lvcore.optimise.bayesopt import bayesian_optimise
     from lvcore.studies import bo_fibres
 

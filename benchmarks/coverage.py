@@ -35,7 +35,8 @@ def main(argv=None) -> int:
     import lvcore  # noqa: F401
     from lvcore.exceptions import EmulatorError
     from lvcore.inference import coverage, samplers
-    from lvcore.core.forward import AnalyticForward, load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
+    from lvcore.testing.analytic import AnalyticForward
 
     if args.forward == "analytic":
         forward = AnalyticForward()

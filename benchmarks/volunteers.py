@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     use_host_devices(args.chains)
     import numpy as np
 
-    from lvcore.core.forward import load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
     from lvcore.exceptions import EmulatorError
     from lvcore.inference import calibrate as cal
     from lvcore.inference.guards import check_inputs_in_box

@@ -30,7 +30,30 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
+    for p in _all_parsers(parser):
+        p.formatter_class = HelpFormatter
     return parser
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Help that states every option's default: ``(default: X)`` is appended where the text does not say it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if (action.option_strings and "default" not in text.lower() and action.default not in (None, False)
+                and action.default is not argparse.SUPPRESS and not isinstance(action, argparse._HelpAction)):
+            text += " (default: %(default)s)"
+        return text
+
+
+def _all_parsers(parser):
+    """``parser`` and every sub-command parser under it."""
+    out = [parser]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in dict.fromkeys(action.choices.values()):
+                out += _all_parsers(child)
+    return out
 
 
 #: Exit codes of ``lvcore`` (docs/reliability.md).
@@ -56,17 +79,33 @@ def main(argv=None) -> int:
         print(f"lvcore: did not converge: {err}", file=sys.stderr)
         return EXIT_NOT_CONVERGED
     except LVCoreError as err:
-        print(f"lvcore: error: {err}", file=sys.stderr)
+        text = str(err)
+        print(f"lvcore: error: {text if len(text) <= 4000 else text[:4000] + '...'}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as err:
+        if err.filename is None:
+            return _internal(err, debug)
+        # a path the user named cannot be read or written (read-only folder, a file where a folder is needed,
+        # a full disk): bad input, exit 2, naming the path
+        from lvcore.cli_args import echo
+
+        where = f"'{echo(err.filename)}'" + (f" -> '{echo(err.filename2)}'" if err.filename2 else "")
+        print(f"lvcore: error: cannot use {where}: {err.strerror or type(err).__name__}; check the path given "
+              "on the command line (--out, --from, ...) and its permissions", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("lvcore: interrupted", file=sys.stderr)
         return 130
     except Exception as err:  # noqa: BLE001 - the last line of defence: one line, exit 3
-        if debug:
-            traceback.print_exc()
-        print(f"lvcore: internal error: {type(err).__name__}: {_one_line(err)}"
-              + ("" if debug else " (rerun with --debug for the traceback)"), file=sys.stderr)
-        return EXIT_INTERNAL
+        return _internal(err, debug)
+
+
+def _internal(err: BaseException, debug: bool) -> int:
+    if debug:
+        traceback.print_exception(err)
+    print(f"lvcore: internal error: {type(err).__name__}: {_one_line(err)}"
+          + ("" if debug else " (rerun with --debug for the traceback)"), file=sys.stderr)
+    return EXIT_INTERNAL
 
 
 def _one_line(err: BaseException, limit: int = 2000) -> str:

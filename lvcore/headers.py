@@ -178,7 +178,7 @@ def _obj(path, head, size, what, error):
             if idx == 0:
                 _fail(error, f"{what} '{path}': face index 0 (OBJ indices start at 1)")
             if idx > 0 and idx > n_v:
-                _fail(error, f"{what} '{path}': a face refers to vertex {idx:,} but the file has {n_v:,} vertices")
+                _fail(error, f"{what} '{path}': a face refers to vertex {idx:,} but the file has {n_v:,} vertices; the file is damaged: export the surface again")
             if idx < 0:
                 if before is None:
                     before = int(np.searchsorted(v_pos, m.start()))
@@ -267,8 +267,11 @@ def _stl(path, head, size, what, error):
     if len(head) < 84 or (head[:5].lower() == b"solid" and b"\x00" not in head[:512]):
         return  # ASCII STL: no declared count
     (n,) = struct.unpack("<I", head[80:84])
-    _check_cap(n, limits.MAX_DECLARED_CELLS, "triangles", what, path, error, "MAX_DECLARED_CELLS")
-    _check_fits(84 + 50 * n, size, f"{n:,} triangles (binary STL)", what, path, error)
+    if n > limits.MAX_DECLARED_CELLS or 84 + 50 * n > size:
+        _fail(error, f"{what} '{path}' is not a valid STL file: an ASCII STL starts with 'solid', and read as a binary "
+                     f"STL it declares {n:,} triangles ({84 + 50 * n:,} bytes) in {size:,} bytes (limit "
+                     f"{limits.MAX_DECLARED_CELLS:,} triangles, lvcore.limits.MAX_DECLARED_CELLS); export the "
+                     "surface again as STL, VTK, PLY or OBJ")
 
 
 def _off(path, head, size, what, error):

@@ -47,6 +47,8 @@ MAX_SURFACE_BYTES = 64 * MiB
 MAX_SHAPE_MODEL_BYTES = 64 * MiB
 #: Emulator files (``metadata.json``, ``network.npz``; the bundled network is 0.4 MB).
 MAX_EMULATOR_BYTES = 64 * MiB
+#: Study result JSON files (``lvcore study ... --out``, read by ``lvcore report --from``); the bundled ones are < 0.3 MB.
+MAX_STUDY_RESULT_BYTES = 64 * MiB
 #: Design CSV files (``lvcore design``): 100,000 points of 9 parameters are about 20 MB.
 MAX_DESIGN_BYTES = 64 * MiB
 
@@ -86,6 +88,11 @@ MIN_WALL_ML = 0.1
 PLAUSIBLE_MAX_STANDARDISED_LVV = 3.0
 #: A loaded cavity above this volume (mL) is flagged in the result's ``warnings``.
 PLAUSIBLE_MAX_LVV_ML = 1000.0
+#: A fitted (unloaded) LV cavity above this volume (mL) gets a warning naming ``--units``
+#: (a dilated adult LV is below 400 mL; a mm mesh read with ``--units cm`` gives 1000x too much).
+PLAUSIBLE_MAX_FITTED_CAVITY_ML = 500.0
+#: A fitted base-apex length above this (mm) gets the same warning (adult LVs are 70-110 mm).
+PLAUSIBLE_MAX_FITTED_LENGTH_MM = 160.0
 
 # ----------------------------------------------------------------------------- contours
 #: Most points in one contour (a 1-mm spaced 60-mm radius epicardium has about 380).
@@ -123,6 +130,16 @@ MAX_READER_SECONDS = 120.0
 # ----------------------------------------------------------------------------- measured data
 #: Most rows (subjects) in a measured-data CSV.
 MAX_MEASURED_ROWS = 10_000
+
+
+#: Most characters of a user's value (a key, a path, an option) repeated in a message.
+MAX_ECHO_CHARS = 200
+
+
+def echo(value, limit: int = MAX_ECHO_CHARS) -> str:
+    """``str(value)`` cut to ``limit`` characters (noting the full length), for messages that repeat user input."""
+    text = str(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text):,} characters)"
 
 
 def _human(n: float) -> str:
@@ -175,25 +192,25 @@ def check_regular_file(path, max_bytes: int, what: str, error: Callable[[str], E
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        _raise(error, f"{what} '{path}' does not exist")
+        _raise(error, f"{what} '{echo(path)}' does not exist")
     except NotADirectoryError:
-        _raise(error, f"{what} '{path}' does not exist (a parent is not a directory)")
+        _raise(error, f"{what} '{echo(path)}' does not exist (a parent is not a directory)")
     except PermissionError:
-        _raise(error, f"{what} '{path}' cannot be read (permission denied)")
+        _raise(error, f"{what} '{echo(path)}' cannot be read (permission denied)")
     except (OSError, ValueError) as err:
-        _raise(error, f"{what} '{path}' cannot be opened ({err})")
+        _raise(error, f"{what} '{echo(path)}' cannot be opened ({getattr(err, 'strerror', None) or err})")
     _check_stat(st, path, max_bytes, what, error)
     return path
 
 
 def _check_stat(st, path, max_bytes, what, error) -> None:
     if not stat.S_ISREG(st.st_mode):
-        _raise(error, f"{what} '{path}' is not a regular file ({_kind(st.st_mode)}); give a file")
+        _raise(error, f"{what} '{echo(path)}' is not a regular file ({_kind(st.st_mode)}); give a file")
     if st.st_size > max_bytes:
-        _raise(error, f"{what} '{path}' is {_human(st.st_size)}, larger than the limit of {_human(max_bytes)} "
+        _raise(error, f"{what} '{echo(path)}' is {_human(st.st_size)}, larger than the limit of {_human(max_bytes)} "
                       "(lvcore.limits); check that it is the right file")
     if st.st_size == 0:
-        _raise(error, f"{what} '{path}' is an empty file")
+        _raise(error, f"{what} '{echo(path)}' is an empty file")
 
 
 def read_regular_file(path, max_bytes: int, what: str, error: Callable[[str], Exception] | None = None) -> bytes:
@@ -215,8 +232,8 @@ def read_regular_file(path, max_bytes: int, what: str, error: Callable[[str], Ex
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as err:
         if err.errno == errno.ENOENT:
-            _raise(error, f"{what} '{path}' does not exist")
-        _raise(error, f"{what} '{path}' cannot be opened ({err.strerror})")
+            _raise(error, f"{what} '{echo(path)}' does not exist")
+        _raise(error, f"{what} '{echo(path)}' cannot be opened ({err.strerror})")
     try:
         _check_stat(os.fstat(fd), path, max_bytes, what, error)
         chunks, total = [], 0
@@ -227,9 +244,9 @@ def read_regular_file(path, max_bytes: int, what: str, error: Callable[[str], Ex
             chunks.append(chunk)
             total += len(chunk)
             if total > max_bytes:
-                _raise(error, f"{what} '{path}' grew past the limit of {_human(max_bytes)} while being read")
+                _raise(error, f"{what} '{echo(path)}' grew past the limit of {_human(max_bytes)} while being read")
     except OSError as err:
-        _raise(error, f"{what} '{path}' cannot be read ({err.strerror})")
+        _raise(error, f"{what} '{echo(path)}' cannot be read ({err.strerror})")
     finally:
         os.close(fd)
     return b"".join(chunks)
@@ -241,10 +258,10 @@ def read_text_file(path, max_bytes: int, what: str, error: Callable[[str], Excep
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as err:
-        _raise(error, f"{what} '{path}' is not UTF-8 text (byte {err.start} is 0x{data[err.start]:02x}); "
+        _raise(error, f"{what} '{echo(path)}' is not UTF-8 text (byte {err.start} is 0x{data[err.start]:02x}); "
                       "is it a binary file?")
     if "\x00" in text:
-        _raise(error, f"{what} '{path}' contains NUL bytes; is it a binary file?")
+        _raise(error, f"{what} '{echo(path)}' contains NUL bytes; is it a binary file?")
     return text
 
 
@@ -316,7 +333,7 @@ def loads_json(text: str, what: str, error: Callable[[str], Exception] | None = 
 def read_json_file(path, max_bytes: int, what: str, error: Callable[[str], Exception] | None = None) -> Any:
     """Read a regular file of at most ``max_bytes`` and parse it with :func:`loads_json`."""
     text = read_text_file(path, max_bytes, what, error)
-    return loads_json(text, f"{what} '{path}'", error)
+    return loads_json(text, f"{what} '{echo(path)}'", error)
 
 
 # ----------------------------------------------------------------------------- mesh sizes
@@ -337,13 +354,39 @@ def estimate_memory_bytes(n_elements: int, gauss_points_per_element: int = 27) -
     return float(n_elements) * BYTES_PER_ELEMENT * max(1.0, gauss_points_per_element / 27.0)
 
 
+def available_memory_bytes() -> float:
+    """Memory this process can still get (bytes): the kernel's ``MemAvailable``, and the room left under
+    an address-space limit (``ulimit -v``, ``RLIMIT_AS``) if one is set; ``inf`` where neither is known."""
+    room = float("inf")
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    room = float(line.split()[1]) * 1024.0
+                    break
+    except (OSError, ValueError, IndexError):  # pragma: no cover - non-Linux
+        pass
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            with open("/proc/self/statm") as f:
+                used = int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+            room = min(room, float(max(soft - used, 0)))
+    except (ImportError, OSError, ValueError, IndexError):  # pragma: no cover - non-POSIX
+        pass
+    return room
+
+
 def memory_budget_bytes() -> float:
-    """Memory a solve may use: :data:`MAX_SOLVE_MEMORY_BYTES` or half the physical memory, whichever is less."""
+    """Memory a solve may use: the least of :data:`MAX_SOLVE_MEMORY_BYTES`, half the physical memory and
+    the memory available now (:func:`available_memory_bytes`: free memory, and an address-space limit)."""
     try:
         phys = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
         phys = 2 * MAX_SOLVE_MEMORY_BYTES
-    return float(min(MAX_SOLVE_MEMORY_BYTES, 0.5 * phys))
+    return float(min(MAX_SOLVE_MEMORY_BYTES, 0.5 * phys, available_memory_bytes()))
 
 
 def check_mesh_size(counts, kind: str = "lv", gauss_points_per_element: int = 27,
@@ -378,7 +421,9 @@ def check_mesh_size(counts, kind: str = "lv", gauss_points_per_element: int = 27
     need, budget = estimate_memory_bytes(n_el, gauss_points_per_element), memory_budget_bytes()
     if need > budget:
         _raise(error, f"{where}: {shape} = {n_el:,} elements would need about {need / 1024 ** 3:.1f} GB of memory, "
-                      f"more than the {budget / 1024 ** 3:.1f} GB allowed (lvcore.limits); use a coarser resolution")
+                      f"more than the {budget / 1024 ** 3:.1f} GB available (the least of lvcore.limits."
+                      "MAX_SOLVE_MEMORY_BYTES, half the machine's memory, its free memory and any ulimit -v); "
+                      "use a coarser resolution")
 
 
 __all__ = [name for name in dir() if name.isupper()] + [

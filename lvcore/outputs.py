@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from lvcore.geometry.template import N_LEVELS, N_REGIONS, N_SECTORS
-
+#: Circumferential sectors per short-axis level, short-axis levels, and regions (the template's region map,
+#: :mod:`lvcore.geometry.template`, is built to these numbers).
+N_SECTORS = 6
+N_LEVELS = 4
+N_REGIONS = N_SECTORS * N_LEVELS
 N_OUTPUTS = 1 + N_REGIONS
 LEVEL_NAMES = ("basal", "mid-basal", "mid-apical", "apical")
 STRAIN_NAMES = tuple(f"E_cc L{level + 1} S{sector + 1}" for level in range(N_LEVELS) for sector in range(N_SECTORS))

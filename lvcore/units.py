@@ -1,4 +1,4 @@
-"""Units and physiological defaults.
+"""Units and unit conversions (the conditions of simulations and studies are in :mod:`lvcore.conditions`).
 
 Conventions used throughout :mod:`lvcore`:
 
@@ -15,16 +15,8 @@ from __future__ import annotations
 KPA_PER_MMHG = 0.1333223684
 MM3_PER_ML = 1000.0
 
-#: Default end-diastolic pressure (mmHg).
-DEFAULT_EDP_MMHG = 8.0
-#: Default rule-based fibre helix angles (degrees), endocardium and epicardium.
-DEFAULT_ALPHA_ENDO_DEG = -60.0
-DEFAULT_ALPHA_EPI_DEG = 90.0
-
 #: Fixed Holzapfel–Ogden population values (Gao et al. 2017): a_s, a_fs in kPa.
 HO_FIXED = {"as": 0.69, "bs": 1.11, "afs": 0.31, "bfs": 2.58}
-#: Reference material point used in the issues' plausibility checks (kPa, -).
-HO_REFERENCE_THETA = {"a": 0.60, "b": 1.30, "af": 1.00, "bf": 3.60}
 
 
 def mmhg_to_kpa(p_mmhg: float) -> float:

@@ -98,9 +98,14 @@ class UploadSession:
             return reader(path)
         except LVCoreError as err:
             raise UploadError(self.message(str(err))) from None
-        except Exception as err:  # noqa: BLE001 - shown to the user as a message, never as a traceback
-            raise UploadError(f"cannot read '{_display(name)}': {type(err).__name__}: "
-                              f"{self.message(str(err))[:300]}") from None
+        except UnicodeDecodeError as err:
+            raise UploadError(f"'{_display(name)}' is not a text file (byte {err.start} cannot be read as UTF-8 text); "
+                              "save it as UTF-8 text (CSV or JSON), or check that it is the right file") from None
+        except (Exception, SystemExit) as err:  # noqa: BLE001 - shown as a message, never as a traceback or an exit
+            detail = "the reader gave up on its contents" if isinstance(err, SystemExit) else \
+                f"{type(err).__name__}: {self.message(str(err))[:300]}"
+            raise UploadError(f"cannot read '{_display(name)}' ({detail}); check that it is the right file in a "
+                              "format this upload takes") from None
 
     def cleanup(self) -> None:
         """Remove the folder now (it is also removed when this object is garbage-collected)."""

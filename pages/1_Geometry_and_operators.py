@@ -1,13 +1,6 @@
 """Geometry & operators: segmentations of one LV by up to three operators, fitted to the template."""
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-
 import numpy as np
 import pandas as pd
 import streamlit as st
@@ -100,6 +93,8 @@ else:
                     geoms[name] = out["nodes"]
                     summaries[name] = out["summary"]
                     st.success(f"fitted: residual {out['summary']['residual_mean_mm']:.2f} mm")
+                    for w in out["summary"].get("warnings", []):
+                        st.warning(w)
     if not geoms:
         st.info("Upload at least one segmentation to see its fitted geometry.")
         st.stop()
@@ -115,7 +110,9 @@ for n in names:
     rows.append({"operator": n, "cavity volume (mL)": round(info["cavity_volume_ml"], 1),
                  "wall volume (mL)": round(info["wall_volume_ml"], 1), "length (mm)": round(info["length_mm"], 1),
                  "fit residual mean (mm)": round(s["residual_mean_mm"], 3),
-                 "fit residual max (mm)": round(s["residual_max_mm"], 3)})
+                 "fit residual max (mm)": round(s["residual_max_mm"], 3),
+                 "base cut (mm below the base)": (s.get("base") or {}).get("cut", {}).get("depth_mm"),
+                 "cavity removed by the cut (mL)": (s.get("base") or {}).get("cavity_removed_ml")})
 left, right = st.columns([3, 2])
 with left:
     st.subheader("Fitted geometries, overlaid")
@@ -123,7 +120,8 @@ with left:
                       "SYNTHETIC " + patient.replace("SYNTHETIC-", "") if source.startswith("Bundled") else "uploaded"))
 with right:
     st.subheader("Volumes and fit residuals")
-    st.dataframe(pd.DataFrame(rows).set_index("operator"), width="stretch")
+    # one column per operator: the narrow column holds the table whole, without clipping the right-hand columns
+    st.dataframe(pd.DataFrame(rows).set_index("operator").T, width="stretch")
     if len(names) > 1:
         mse = pd.DataFrame([[node_mse_cm2(geoms[a], geoms[b]) for b in names] for a in names], index=names,
                            columns=names).round(4)

@@ -1,13 +1,6 @@
 """Shape model: PCA of the SYNTHETIC cohort, its modes, and PCA against operators (Table 9.4)."""
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-
 import numpy as np
 import pandas as pd
 import streamlit as st

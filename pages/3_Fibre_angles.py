@@ -1,14 +1,9 @@
 """Fibre angles: how LVV and the regional strains move with the rule-based helix angles."""
 from __future__ import annotations
 
-import os
 import threading
 import time
 import warnings
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import numpy as np
 import pandas as pd
@@ -20,7 +15,7 @@ from lvcore.app.live_chart import live_plotly_chart
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
-                                         emulator_angle_sweep, strain_table)
+                                         emulator_angle_sweep, parse_angle_pairs, strain_table)
 from lvcore.viz import figures
 
 st.set_page_config(page_title="Fibre angles", layout="wide")
@@ -69,11 +64,9 @@ with tab_sweep:
     extra = st.text_input("More pairs, e.g. `-45 75; -90 0`", "")
     pairs = [CHAPTER_ANGLE_PAIRS[labels.index(c)] for c in chosen]
     try:
-        for item in filter(None, (s.strip() for s in extra.split(";"))):
-            endo, epi = (float(v) for v in item.split())
-            pairs.append((endo, epi))
-    except ValueError:
-        st.error(f"Could not read '{extra}': write pairs as 'α_endo α_epi' in degrees, separated by ';'.")
+        pairs += parse_angle_pairs(extra)
+    except LVCoreError as err:
+        st.error(str(err))
         pairs = []
     sweep_inputs = {**conditions, "pairs (α_endo, α_epi)": [tuple(p) for p in pairs]}
     if pairs and st.button("Run sweep", type="primary"):

@@ -1,12 +1,6 @@
 """Emulator: accuracy on held-out simulations, and a live check against the simulator."""
 from __future__ import annotations
 
-import os
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
-
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go

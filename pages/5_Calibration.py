@@ -1,15 +1,10 @@
 """Calibration: posterior of theta = (a, b, af, bf) from LVV + 24 strains, with honest uncertainty."""
 from __future__ import annotations
 
-import os
 import tempfile
 import threading
 import time
 from pathlib import Path
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import numpy as np
 import streamlit as st
@@ -22,21 +17,17 @@ from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
-from lvcore.core.forward import emulator_forward
+from lvcore.emulator.forward import emulator_forward
 from lvcore.inference.diagnostics import banner_status
-from lvcore.inference.models import PARAMETER_HELP, prior_bounds
-from lvcore.inference.samplers import SamplerConfig, use_host_devices
+from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
+from lvcore.inference.samplers import SamplerConfig
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
-from lvcore.units import DEFAULT_ALPHA_ENDO_DEG, DEFAULT_ALPHA_EPI_DEG, DEFAULT_EDP_MMHG
+from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 
 #: The conditions emulator_forward binds by default (checked against the emulator's training box).
-DEFAULT_CONDITIONS = {"edp_mmhg": DEFAULT_EDP_MMHG, "alpha_endo": DEFAULT_ALPHA_ENDO_DEG,
-                      "alpha_epi": DEFAULT_ALPHA_EPI_DEG}
-
-use_host_devices(4)  # one XLA host device per chain, when this page is the first to start JAX
-
-MODEL_LABELS = {"volume": "(i) volume only", "iid": "(ii) iid strains", "discrepancy": "(iii) polar-GP discrepancy"}
+DEFAULT_CONDITIONS = {"edp_mmhg": SIMULATOR_DEFAULT_EDP_MMHG, "alpha_endo": SIMULATOR_DEFAULT_ANGLES[0],
+                      "alpha_epi": SIMULATOR_DEFAULT_ANGLES[1]}
 
 st.set_page_config(page_title="Calibration", layout="wide")
 st.title("Bayesian calibration")
@@ -216,7 +207,7 @@ if job is not None and job["done"]:
             if job["synthetic"]:
                 st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
                                                   "never enters the fit)." if truth else ""))
-            from lvcore.core.space import SIGMA_V_ML
+            from lvcore.conditions import SIGMA_V_ML
             from lvcore.inference.plausibility import check_result
 
             for m, res in results.items():
@@ -232,7 +223,8 @@ if job is not None and job["done"]:
             for tab, (m, res) in zip(tabs, results.items()):
                 with tab:
                     table = res.summary.copy()
-                    table.insert(0, "meaning", [PARAMETER_HELP.get(str(n), "") for n in table.index])
+                    # a short meaning fits its column (the full text is in the list above the run button)
+                    table.insert(0, "meaning", [parameter_meaning(n) for n in table.index])
                     if truth:
                         table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
                     st.dataframe(table, width="stretch",

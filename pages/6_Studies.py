@@ -5,13 +5,8 @@ Every tab draws through its study module (``load``, ``tables``, ``figures``), th
 """
 from __future__ import annotations
 
-import os
 import tempfile
 from pathlib import Path
-
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import streamlit as st
 

@@ -11,6 +11,7 @@ import streamlit as st
 
 from lvcore.app import freshness
 from lvcore.exceptions import LVCoreError
+from lvcore.studies.volunteer_calibration import DEFAULT_SUBJECT, TYPICAL_SECONDS
 
 st.set_page_config(page_title="Report", layout="wide")
 st.title("Report")
@@ -21,7 +22,10 @@ st.caption(
     "PNG/SVG figures, the CSV/JSON each was drawn from, index.html and manifest.json. All data SYNTHETIC."
 )
 c1, c2 = st.columns(2)
-calibration = c1.checkbox("Include the live calibration of SYNTHETIC-HV1 (adds ~10–40 s)", value=True)
+calibration = c1.checkbox(f"Include the live calibration of {DEFAULT_SUBJECT} (adds about {TYPICAL_SECONDS[0]}–"
+                          f"{TYPICAL_SECONDS[1]} s)", value=True,
+                          help="iid model, `chapter` emulator, 4 chains × (500 + 500) NUTS draws; the time includes "
+                               "JAX's compilation (docs/report.md, Timing)")
 static = c2.checkbox("Static PNG + SVG (kaleido, needs Chromium)", value=True,
                      help="Off: interactive HTML figures only, faster and no Chromium needed.")
 inputs = {"calibration": calibration, "static PNG/SVG": static}
@@ -43,13 +47,16 @@ if st.button("Build report", type="primary"):
             manifest = build_report(out, calibration=calibration, formats=("png", "svg") if static else (),
                                     progress=progress)
         except LVCoreError as err:
+            bar.progress(1.0, text=f"failed after {time.perf_counter() - t0:.0f} s")
             st.error(f"Report failed: {err}")
         else:
             archive = shutil.make_archive(str(Path(tmp) / "lvcore-report"), "zip", root_dir=out.parent,
                                           base_dir=out.name)
             freshness.remember("report", {"zip": Path(archive).read_bytes(), "manifest": manifest,
                                           "wall_s": time.perf_counter() - t0}, inputs)
-    bar.progress(1.0, text=f"done in {time.perf_counter() - t0:.0f} s")
+            skipped = manifest.get("skipped_formats")
+            bar.progress(1.0, text=f"done in {time.perf_counter() - t0:.0f} s"
+                                   + (f", without {' and '.join(skipped).upper()}" if skipped else ""))
 
 stored = freshness.recall("report")
 if stored is not None:
@@ -59,6 +66,10 @@ if stored is not None:
         st.download_button("Download the report (zip)", rep["zip"], file_name="lvcore-report.zip",
                            mime="application/zip", type="primary")
         st.write(f"{len(figs)} figures and tables in {rep['wall_s']:.0f} s.")
+        if rep["manifest"].get("skipped_formats"):
+            st.warning(f"Static formats skipped ({', '.join(rep['manifest']['skipped_formats'])}): "
+                       f"{rep['manifest'].get('static_export_error')}. The zip holds the interactive HTML figures, "
+                       "their data, index.html and manifest.json.")
         st.dataframe(pd.DataFrame([{"name": f.get("name"), "title": f.get("title"),
                                     "status": f.get("status") or ("missing" if f.get("missing") else "ok"),
                                     "note": f.get("missing") or f.get("notes") or ""} for f in figs]),

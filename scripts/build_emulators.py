@@ -134,7 +134,7 @@ def below_spec(args) -> str:
 
 def build_one(name: str, args) -> Path | None:
     from lvcore.campaigns.designs import load_design, make_design, save_design
-    from lvcore.campaigns.executors import default_workers
+    from lvcore.parallel import default_workers
     from lvcore.campaigns.runner import resume_campaign, run_campaign
     from lvcore.campaigns.space import get_space
     from lvcore.emulator.cli import format_info, training_config
@@ -187,8 +187,9 @@ def build_one(name: str, args) -> Path | None:
         train.inputs, train.outputs, valid.inputs, valid.outputs,
         input_names=train.input_names, name=name, lower=train.lower, upper=train.upper, fixed=train.fixed,
         config=config, x_test=None if test is None else test.inputs, y_test=None if test is None else test.outputs,
-        source={**train.info, "n_failed_excluded": train.n_failed,
-                "build_command": " ".join([Path(sys.argv[0]).name] + sys.argv[1:]),
+        source={**train.info, "stores": [build_relative(p, args.workdir) for p in train.info["stores"]],
+                "paths_relative_to": "the build folder (--workdir of build_command)", "n_failed_excluded": train.n_failed,
+                "build_command": portable_command([Path(sys.argv[0]).name] + sys.argv[1:], args.workdir),
                 "design_seeds": {k: v[2] for k, v in sets.items()}},
         log=print,
         workers=args.workers or default_workers(),
@@ -208,6 +209,27 @@ def build_one(name: str, args) -> Path | None:
     print(format_info(emu.metadata))
     print(f"[{name}] saved to {out}")
     return out
+
+
+def build_relative(path, workdir: Path) -> str:
+    """``path`` relative to the build folder ``workdir`` (metadata never records a path of the build machine)."""
+    try:
+        return Path(path).resolve().relative_to(Path(workdir).resolve()).as_posix()
+    except ValueError:
+        return Path(path).name
+
+
+def portable_command(argv: list[str], workdir: Path) -> str:
+    """The command line with the build folder written ``WORKDIR``, paths inside it as ``WORKDIR/...`` and other
+    absolute paths by their names only."""
+    out = []
+    for tok in argv:
+        key, eq, value = tok.partition("=") if tok.startswith("--") and "=" in tok else ("", "", tok)
+        if value and Path(value).is_absolute():
+            p, w = Path(value).resolve(), Path(workdir).resolve()
+            value = "WORKDIR" if p == w else ("WORKDIR/" + p.relative_to(w).as_posix() if w in p.parents else p.name)
+        out.append(f"{key}{eq}{value}" if eq else value)
+    return " ".join(out)
 
 
 def main(argv=None) -> int:

@@ -80,11 +80,9 @@ class DoubleForward:
 
     input_names: tuple = ("a", "b", "af", "bf")
     label: str = "campaign TEST DOUBLE"
-    provides_jacobian = False
-    traceable = False
     input_bounds = {}
 
-    def evaluate(self, inputs, *, jacobian=False):
+    def evaluate(self, inputs):
         from lvcore.core.forward import ForwardBatch, as_columns
 
         cols, n = as_columns(inputs, self.input_names, self.label)
@@ -92,6 +90,18 @@ class DoubleForward:
         return ForwardBatch(np.stack([np.where(r.converged, r.y, np.nan) for r in rows]),
                             np.array([r.converged for r in rows]), tuple(r.message for r in rows),
                             seconds=np.array([r.seconds for r in rows]))
+
+    def evaluate_warm(self, point, initial=None):
+        """As the simulator's: one point "started" from ``initial``; the state is the point itself.
+
+        The outputs never depend on ``initial`` (so results equal the cold ones exactly);
+        ``LVCORE_TEST_EXEC_LOG`` gets a ``warm <a> <a of the start>`` line when a state was given.
+        """
+        if initial is not None:
+            _log("warm", f"{float(point['a'])!r}->{float(initial[0])!r}")
+        b = self.evaluate({k: [float(point[k])] for k in self.input_names})
+        state = np.array([float(point[k]) for k in self.input_names]) if b.converged[0] else None
+        return b, state
 
     def __call__(self, params):
         return self.evaluate({k: params[k] for k in self.input_names}).outputs[0]

@@ -30,7 +30,7 @@ def test_lvcore_app_runs_streamlit_on_the_packaged_entry(monkeypatch):
     main(["app", "--port", "8765", "--server.headless", "true"])
     assert seen["exe"] == sys.executable
     assert seen["cmd"] == [sys.executable, "-m", "streamlit", "run", str(ENTRY), "--server.maxUploadSize", "10",
-                           "--server.port", "8765", "--server.headless", "true"]
+                           "--browser.gatherUsageStats", "false", "--server.port", "8765", "--server.headless", "true"]
     with pytest.raises(SystemExit):  # other commands still reject unknown options
         main(["simulate", "case.json", "--server.headless", "true"])
 

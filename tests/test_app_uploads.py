@@ -234,3 +234,28 @@ def test_pc_scores_outside_the_emulator_box_are_flagged_on_the_page(calibration_
         jobs[h1] = at.session_state["calibration_job"]
     assert jobs[0.0]["extrapolation"] == []
     assert len(jobs[2.5]["extrapolation"]) == 1 and "h1 = 2.5" in jobs[2.5]["extrapolation"][0]
+
+
+# --------------------------------------------------------------------------- files that crashed VTK (issue 28)
+def test_uploads_that_crashed_the_server_show_an_error_and_the_server_lives():
+    """A 169-byte PLY declaring 10^9 vertices (SIGABRT) and a 33-byte OBJ with face index 10^9 (SIGSEGV) killed
+    the Streamlit server process for every user. AppTest runs the page in this process: it must survive, show
+    st.error naming each file, and keep serving the page."""
+    import os
+
+    import hostile_files as hf
+
+    pid = os.getpid()
+    at = AppTest.from_file(_page("Geometry"), default_timeout=120).run()
+    at.radio[0].set_value("Upload my own").run()
+    at.file_uploader(key="e0").upload("crash.ply", hf.huge_ply(), "application/octet-stream")
+    at.file_uploader(key="p0").upload("epi.ply", hf.huge_ply(), "application/octet-stream")
+    at.file_uploader(key="e1").upload("crash.obj", hf.far_face_obj(), "application/octet-stream")
+    at.file_uploader(key="p1").upload("epi.obj", hf.far_face_obj(), "application/octet-stream")
+    at.run()
+    assert os.getpid() == pid and not at.exception, at.exception
+    messages = [e.value for e in at.error]
+    assert any("crash.ply" in m and "1,000,000,000 vertices" in m for m in messages), messages
+    assert any("crash.obj" in m and "vertex 1,000,000,000" in m for m in messages), messages
+    at.run()  # the page still runs
+    assert not at.exception and at.file_uploader(key="e2") is not None

@@ -6,8 +6,9 @@ import lvcore
 
 import campaign_double
 from campaign_double import closed_form
+from executor_double import InlineExecutor
 from lvcore.campaigns.designs import make_design
-from lvcore.campaigns.executors import DaskExecutor, default_workers
+from lvcore.parallel import DaskExecutor, default_workers
 from lvcore.campaigns.runner import execute_row, resume_campaign, run_campaign
 from lvcore.campaigns.space import get_space
 from lvcore.campaigns.store import CampaignStore, read_store
@@ -43,7 +44,7 @@ def test_bad_forward_and_scheduler_are_clear_errors(tmp_path):
     with pytest.raises(CampaignError, match="no longer imported.*register_forward"):
         registered_name("lvcore:no_such_function")
     with pytest.raises(CampaignError, match="unknown forward model"):
-        run_campaign(make_design(get_space("material"), "lhs", 2, seed=0), tmp_path / "x.h5", executor=_Inline(),
+        run_campaign(make_design(get_space("material"), "lhs", 2, seed=0), tmp_path / "x.h5", executor=InlineExecutor(),
                      forward="campaign_double:forward", progress=False)
     assert not (tmp_path / "x.h5").exists()
     with pytest.raises(CampaignError, match="tcp://"):
@@ -54,7 +55,7 @@ def test_bad_forward_and_scheduler_are_clear_errors(tmp_path):
 class _Raises:
     input_names = ("a",)
 
-    def evaluate(self, inputs, jacobian=False):
+    def evaluate(self, inputs):
         raise ImportError("cannot import the model's data")
 
 
@@ -74,7 +75,7 @@ def test_a_store_naming_code_is_refused_and_nothing_runs(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setattr(builtins, "print", lambda *a, **k: calls.append(a))
     with pytest.raises(CampaignError, match="unknown forward model 'builtins:print'"):
-        resume_campaign(path, executor=_Inline(), progress=True)
+        resume_campaign(path, executor=InlineExecutor(), progress=True)
     monkeypatch.undo()
     assert calls == []
     assert read_store(path).state.tolist() == [0, 0, 0] and read_store(path).record_count.sum() == 0
@@ -86,7 +87,7 @@ def test_real_simulator_rows_at_fast_resolution(tmp_path):
     # the reference material and the same with every stiffness doubled
     ref = np.array([0.6, 1.3, 1.0, 3.6])
     design = Design(get_space("material"), np.array([ref, ref * [2, 1, 2, 1]]), "custom", None)
-    summary = run_campaign(design, tmp_path / "s.h5", executor=_Inline(), resolution="fast", progress=False)
+    summary = run_campaign(design, tmp_path / "s.h5", executor=InlineExecutor(), resolution="fast", progress=False)
     c = read_store(tmp_path / "s.h5")
     assert summary.pending == 0 and summary.n == 2
     assert summary.converged == 2, summary.format()
@@ -96,19 +97,3 @@ def test_real_simulator_rows_at_fast_resolution(tmp_path):
     assert np.all(np.abs(c.outputs[1, 1:]) < np.abs(c.outputs[0, 1:]))    # ... and smaller strains
     assert np.all(c.seconds > 0) and len(set(c.versions)) == 1 and c.versions[0].startswith(lvcore.__version__ + "+src.")
 
-
-class _Inline:
-    workers = 1
-
-    def describe(self):
-        return "inline"
-
-    def submit(self, fn, *args):
-        from concurrent.futures import Future
-
-        f = Future()
-        f.set_result(fn(*args))
-        return f
-
-    def as_completed(self, futures):
-        return iter(futures)

@@ -17,6 +17,7 @@ import pytest
 
 import campaign_double
 from campaign_double import closed_form
+from executor_double import InlineExecutor
 from lvcore.campaigns.designs import make_design, save_design
 from lvcore.campaigns.runner import campaign_status, resume_campaign, run_campaign
 from lvcore.campaigns.space import get_space
@@ -108,7 +109,7 @@ def test_failed_rows_are_kept_and_reported(tmp_path, monkeypatch):
     n_nonconv = int(np.sum((design.points[:, 0] > 3.0) & (design.points[:, 1] <= 20.0)))
     n_raise = int(np.sum(design.points[:, 1] > 20.0))
     assert n_nonconv > 0 and n_raise > 0
-    summary = run_campaign(design, tmp_path / "s.h5", executor=_InlineExecutor(), forward=DOUBLE, progress=False)
+    summary = run_campaign(design, tmp_path / "s.h5", executor=InlineExecutor(), forward=DOUBLE, progress=False)
     assert summary.n == 32 and summary.pending == 0
     assert summary.failed == n_nonconv + n_raise and summary.converged == 32 - summary.failed
     reasons = dict(summary.reasons)
@@ -127,7 +128,7 @@ def test_failed_rows_are_kept_and_reported(tmp_path, monkeypatch):
     # --retry-failed reruns only the failed rows
     monkeypatch.setattr(campaign_double, "FAIL_ABOVE_A", float("inf"))
     monkeypatch.setattr(campaign_double, "RAISE_ABOVE_B", float("inf"))
-    s2 = resume_campaign(tmp_path / "s.h5", retry_failed=True, executor=_InlineExecutor(), progress=False)
+    s2 = resume_campaign(tmp_path / "s.h5", retry_failed=True, executor=InlineExecutor(), progress=False)
     assert s2.converged == 32
 
 
@@ -152,25 +153,6 @@ def test_store_refuses_duplicates_and_concurrent_writers(tmp_path):
     (tmp_path / "junk.h5").write_bytes(b"not hdf5")
     with pytest.raises(CampaignError, match="not a readable HDF5"):
         read_store(tmp_path / "junk.h5")
-
-
-class _InlineExecutor:
-    """Runs submitted rows immediately in this process (keeps monkeypatches visible)."""
-
-    workers = 1
-
-    def describe(self):
-        return "inline"
-
-    def submit(self, fn, *args):
-        from concurrent.futures import Future
-
-        fut = Future()
-        fut.set_result(fn(*args))
-        return fut
-
-    def as_completed(self, futures):
-        return iter(futures)
 
 
 # ----------------------------------------------------------------------------- hostile stores (issue 15)
@@ -292,7 +274,7 @@ def test_resume_reports_inconsistent_rows_and_never_runs_them(tmp_path, capsys):
     def edit(f):
         f["state"][1] = 7
     path = _tampered_store(tmp_path, edit)
-    s = resume_campaign(path, executor=_InlineExecutor(), progress=True)
+    s = resume_campaign(path, executor=InlineExecutor(), progress=True)
     assert "row 1: state value 7" in capsys.readouterr().err
     c = read_store(path)
     assert c.state.tolist() == [CONVERGED, 7, CONVERGED, CONVERGED] and s.inconsistent == 1 and s.converged == 3

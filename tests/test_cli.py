@@ -232,7 +232,7 @@ def _fake_calibration(monkeypatch):
     import pandas as pd
 
     from lvcore.inference import calibrate as cal
-    from lvcore.core import forward
+    from lvcore.emulator import forward
 
     class Conv:
         converged = True

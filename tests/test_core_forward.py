@@ -1,31 +1,24 @@
-"""lvcore.core.forward and the forward registry: one interface for the simulator, the emulator and stand-ins."""
+"""lvcore.core.forward (the protocols) and the forward registry, on every implementation: the simulator
+(lvcore.mechanics.forward), the emulator (lvcore.emulator.forward) and the SYNTHETIC stand-in (lvcore.testing)."""
 import jax
 import numpy as np
 import pytest
 
 import lvcore
-from lvcore.core import (
-    AnalyticForward,
-    EmulatorForward,
-    Forward,
-    ForwardBatch,
-    SimulatorForward,
-    build_case,
-    emulator_forward,
-    forward_names,
-    make_forward,
-    register_forward,
-    registered_name,
-)
+from lvcore.core import (Forward, ForwardBatch, JacobianForward, TraceableForward, build_case, forward_names,
+                         make_forward, register_forward, registered_name)
+from lvcore.emulator.forward import EmulatorForward, emulator_forward
 from lvcore.exceptions import CampaignError, ForwardError
+from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
 from lvcore.outputs import THETA_NAMES
+from lvcore.testing.analytic import AnalyticForward
 
 THETA = np.array([0.6, 1.3, 1.0, 3.6])
 
 
 @pytest.fixture(scope="module")
 def sim():
-    return SimulatorForward(resolution="fast")
+    return AdjointSimulatorForward(resolution="fast")
 
 
 def test_every_implementation_satisfies_the_protocol(sim):
@@ -35,9 +28,16 @@ def test_every_implementation_satisfies_the_protocol(sim):
     for f in (sim, emu, AnalyticForward()):
         assert isinstance(f, Forward)
         assert f.input_names == THETA_NAMES
-    assert sim.provides_jacobian and not sim.traceable
-    assert emu.traceable and AnalyticForward().traceable
-    assert not SimulatorForward(input_names=THETA_NAMES + ("alpha_endo",)).provides_jacobian
+    # capabilities are types, not flags
+    assert isinstance(sim, JacobianForward) and not isinstance(sim, TraceableForward)
+    assert isinstance(emu, TraceableForward) and isinstance(AnalyticForward(), TraceableForward)
+    plain = SimulatorForward(input_names=THETA_NAMES + ("alpha_endo",))
+    assert isinstance(plain, Forward) and not isinstance(plain, JacobianForward)
+    with pytest.raises(ForwardError, match="adjoint Jacobian covers"):
+        AdjointSimulatorForward(input_names=THETA_NAMES + ("alpha_endo",))
+    x = np.array([[0.6, 1.3, 1.0, 3.6], [1.0, 2.0, 1.5, 4.0]])
+    np.testing.assert_allclose(np.asarray(emu.apply(x)), emu.evaluate(dict(zip(THETA_NAMES, x.T))).outputs,
+                               rtol=1e-12)
 
 
 def test_simulator_batch_matches_direct_simulate(sim):
@@ -53,7 +53,7 @@ def test_simulator_batch_matches_direct_simulate(sim):
 
 
 def test_simulator_adjoint_jacobian_matches_central_differences(sim):
-    jac = sim.evaluate(dict(zip(THETA_NAMES, THETA)), jacobian=True).jacobian[0]
+    jac = sim.jacobian(dict(zip(THETA_NAMES, THETA))).jacobian[0]
     assert jac.shape == (25, 4)
     steps = 1e-4 * THETA
     plus, minus = THETA + np.diag(steps), THETA - np.diag(steps)
@@ -84,7 +84,7 @@ def test_emulator_forward_on_the_bundled_chapter_emulator():
     h = np.array([0.5, -0.4, 0.3, -0.2, 0.1])
     fwd = emulator_forward(emu, h)
     pts = np.array([THETA, [1.0, 5.0, 2.0, 6.0], [0.3, 10.0, 0.5, 2.0]])
-    batch = fwd.evaluate(dict(zip(THETA_NAMES, pts.T)), jacobian=True)
+    batch = fwd.jacobian(dict(zip(THETA_NAMES, pts.T)))
     direct = np.asarray(emu.predict(a=pts[:, 0], b=pts[:, 1], af=pts[:, 2], bf=pts[:, 3],
                                     **{f"h{i + 1}": h[i] for i in range(5)}))
     np.testing.assert_allclose(batch.outputs, direct, rtol=1e-12)
@@ -105,7 +105,7 @@ def test_emulator_forward_refuses_objects_that_are_not_emulators():
 def test_analytic_forward_batch_equals_pointwise_calls():
     f = AnalyticForward(input_names=THETA_NAMES + ("alpha_endo", "alpha_epi"))
     pts = {"a": [0.5, 1.0], "b": 4.0, "af": [1.0, 2.0], "bf": 6.0, "alpha_endo": -50.0, "alpha_epi": [70.0, 40.0]}
-    b = f.evaluate(pts, jacobian=True)
+    b = f.jacobian(pts)
     for i in range(2):
         p = {k: np.broadcast_to(v, (2,))[i] for k, v in pts.items()}
         np.testing.assert_allclose(b.outputs[i], np.asarray(f(p)), rtol=1e-13)
@@ -124,7 +124,7 @@ def test_registry_allows_names_only():
 
     space = get_space("material")
     f = make_forward("simulator", space, "fast")
-    assert isinstance(f, SimulatorForward) and f.input_names == space.names and f.resolution == "fast"
+    assert type(f) is SimulatorForward and f.input_names == space.names and f.resolution == "fast"
     assert f.conditions == space.fixed_dict()
     register_forward("test-analytic", lambda space, resolution: AnalyticForward(), overwrite=True)
     assert isinstance(make_forward("test-analytic", space), AnalyticForward)
@@ -136,10 +136,10 @@ def test_registry_allows_names_only():
 
 @pytest.mark.slow
 def test_simulator_batch_on_a_process_pool_equals_serial(sim):
-    """workers=2 runs the batch on lvcore.campaigns.executors.LocalExecutor: same numbers as in-process."""
+    """workers=2 runs the batch on lvcore.parallel.LocalExecutor: same numbers as in-process."""
     pts = {"a": [0.6, 1.2], "b": 1.3, "af": 1.0, "bf": 3.6}
-    pooled = SimulatorForward(resolution="fast", workers=2).evaluate(pts, jacobian=True)
-    serial = sim.evaluate(pts, jacobian=True)
+    pooled = AdjointSimulatorForward(resolution="fast", workers=2).jacobian(pts)
+    serial = sim.jacobian(pts)
     assert pooled.converged.all()
     np.testing.assert_array_equal(pooled.outputs, serial.outputs)
     np.testing.assert_array_equal(pooled.jacobian, serial.jacobian)
@@ -147,12 +147,12 @@ def test_simulator_batch_on_a_process_pool_equals_serial(sim):
 
 def test_simulator_warm_start_reproduces_cold_solves(sim):
     """warm_start=True (SQP refits): Newton starts from the last converged state; same outputs and Jacobian."""
-    warm = SimulatorForward(resolution="fast", warm_start=True)
+    warm = AdjointSimulatorForward(resolution="fast", warm_start=True)
     near = THETA * np.array([1.05, 0.97, 1.02, 1.04])
     first = warm.evaluate(dict(zip(THETA_NAMES, THETA)))
     assert first.messages[0] == "converged"  # nothing to start from yet
-    b = warm.evaluate(dict(zip(THETA_NAMES, near)), jacobian=True)
+    b = warm.jacobian(dict(zip(THETA_NAMES, near)))
     assert b.messages[0] == "converged (warm start)"
-    cold = sim.evaluate(dict(zip(THETA_NAMES, near)), jacobian=True)
+    cold = sim.jacobian(dict(zip(THETA_NAMES, near)))
     np.testing.assert_allclose(b.outputs, cold.outputs, rtol=1e-7, atol=1e-9)
     np.testing.assert_allclose(b.jacobian, cold.jacobian, rtol=1e-5, atol=1e-8)

@@ -2,16 +2,8 @@
 import numpy as np
 import pytest
 
-from lvcore.core.space import (
-    ANGLE_BOUNDS,
-    ANGLES_THETA_BOUNDS,
-    CHAPTER_ANGLES,
-    CHAPTER_EDP,
-    THETA_BOUNDS,
-    Parameter,
-    ParameterSpace,
-    build_case,
-)
+from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+from lvcore.core.space import ANGLE_BOUNDS, ANGLES_THETA_BOUNDS, THETA_BOUNDS, Parameter, ParameterSpace, build_case
 from lvcore.exceptions import CampaignError, CaseError
 from lvcore.mechanics.case import Case
 

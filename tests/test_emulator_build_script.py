@@ -62,3 +62,25 @@ def test_each_bundled_emulator_gets_its_shipped_schedule_unless_told_otherwise()
         assert {k: getattr(filled, k) for k in mod.SCHEDULE_OPTIONS} == {k: shipped[k] for k in mod.SCHEDULE_OPTIONS}
     told = mod.schedule_args("angles", mod.parse_args(["--lbfgs-iterations", "5"]))
     assert told.lbfgs_iterations == 5 and told.max_epochs == 1000
+
+
+def test_recorded_paths_are_relative_to_the_build_folder(tmp_path):
+    """The metadata never records a path of the build machine: stores and the command are relative to --workdir."""
+    mod = _script()
+    work = tmp_path / "build"
+    cmd = mod.portable_command(["build_emulators.py", "--emulators", "chapter", "--workdir", str(work),
+                                f"--out={work / 'x' / 'y'}", "--below-spec-out", str(tmp_path / "other" / "bs")], work)
+    assert cmd == "build_emulators.py --emulators chapter --workdir WORKDIR --out=WORKDIR/x/y --below-spec-out bs"
+    assert mod.build_relative(work / "chapter" / "train_default.h5", work) == "chapter/train_default.h5"
+    assert mod.build_relative(tmp_path / "elsewhere.h5", work) == "elsewhere.h5"
+
+
+def test_shipped_files_record_no_machine_paths():
+    """Nothing under assets/ (metadata, READMEs, study results) names a folder of the machine that built it."""
+    from lvcore.resources import assets_dir
+
+    machine = ("/work/", "/tmp/", "/root/", "/home/", "/Users/")
+    offenders = [f"{p.relative_to(assets_dir())}: {m}" for p in sorted(assets_dir().rglob("*"))
+                 if p.suffix in (".json", ".md", ".csv") and p.is_file()
+                 for m in machine if m in p.read_text(errors="replace")]
+    assert not offenders, offenders

@@ -91,7 +91,7 @@ def test_emulator_reports_the_base_condition_it_was_trained_with(tmp_path):
     import copy
     import dataclasses
 
-    from lvcore.core import EmulatorForward
+    from lvcore.emulator.forward import EmulatorForward
 
     emu = _bundled("chapter")
     meta = copy.deepcopy(emu.metadata)

@@ -6,6 +6,7 @@ import pytest
 
 import campaign_double
 from campaign_double import closed_form
+from executor_double import InlineExecutor
 from lvcore.campaigns.designs import make_design
 from lvcore.campaigns.runner import run_campaign
 from lvcore.campaigns.space import get_space
@@ -15,27 +16,10 @@ from lvcore.emulator.io import load_emulator
 from lvcore.exceptions import EmulatorError
 
 
-class _Inline:
-    workers = 1
-
-    def describe(self):
-        return "inline"
-
-    def submit(self, fn, *args):
-        from concurrent.futures import Future
-
-        f = Future()
-        f.set_result(fn(*args))
-        return f
-
-    def as_completed(self, futures):
-        return iter(futures)
-
-
 def test_train_from_store_and_info(tmp_path, capsys):
     space = get_space("material")
     for name, n, seed in (("train", 256, 1), ("test", 64, 2)):
-        run_campaign(make_design(space, "sobol", n, seed), tmp_path / f"{name}.h5", executor=_Inline(),
+        run_campaign(make_design(space, "sobol", n, seed), tmp_path / f"{name}.h5", executor=InlineExecutor(),
                      forward=campaign_double.NAME, progress=False)
     out = tmp_path / "emu"
     rc = main(["emulator", "train", str(tmp_path / "train.h5"), "--out", str(out), "--inputs", "a", "b", "af", "bf",

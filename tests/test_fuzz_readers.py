@@ -287,3 +287,128 @@ def test_fuzz_store_layout(good_store, edit, key, value):
         except LVCoreError:
             pass
     assert os.path.exists(tempfile.gettempdir())
+
+
+# --------------------------------------------------------------------------- binary formats with declared sizes (issue 28)
+# Generated headers declare counts from 0 to 10^12; the bodies hold a few items at most. Every reader
+# must parse or raise an LVCoreError; the header checks (lvcore.headers) refuse before allocating, and the
+# mesh parsers run in a child capped at 1 GB here (lvcore.isolation), so memory stays bounded whatever
+# the example declares.
+counts = st.one_of(st.integers(0, 8), st.integers(9, 10 ** 6), st.sampled_from([10 ** 9, 2 ** 31 - 1, 2 ** 32 + 3,
+                                                                                 10 ** 12]))
+small_floats = st.lists(st.sampled_from(["0", "1", "-1", "2.5", "30", "nan", "1e400", "x"]), min_size=0, max_size=12)
+
+
+@pytest.fixture
+def capped_reader(monkeypatch):
+    from lvcore import limits
+
+    monkeypatch.setattr(limits, "MAX_READER_MEMORY_BYTES", 1024 ** 3)
+
+
+def _ply(n_vertex, n_face, binary, body):
+    fmt = "binary_little_endian" if binary else "ascii"
+    head = (f"ply\nformat {fmt} 1.0\nelement vertex {n_vertex}\nproperty float x\nproperty float y\n"
+            f"property float z\nelement face {n_face}\nproperty list uchar int vertex_indices\nend_header\n")
+    return head.encode() + (body if isinstance(body, bytes) else " ".join(body).encode())
+
+
+@FEW
+@given(counts, counts, st.booleans(), small_floats | st.binary(max_size=64))
+def test_fuzz_ply_declared_counts(capped_reader, n_vertex, n_face, binary, body):
+    _check(_read_surface, _ply(n_vertex, n_face, binary, body), ".ply")
+
+
+@FEW
+@given(st.lists(st.tuples(st.sampled_from(["v", "f", "vn", "l", "#"]),
+                          st.lists(st.one_of(st.integers(-10 ** 10, 10 ** 10).map(str),
+                                             st.sampled_from(["1/1", "2//3", "-1", "0", "x", "1e3"])),
+                                   min_size=0, max_size=4)), min_size=0, max_size=8))
+def test_fuzz_obj_face_indices(capped_reader, lines):
+    text = "v 0 0 0\nv 30 0 0\nv 0 30 0\nv 0 0 30\n" + "".join(f"{k} {' '.join(t)}\n" for k, t in lines)
+    _check(_read_surface, text, ".obj")
+
+
+@FEW
+@given(counts, counts, st.sampled_from(["ASCII", "BINARY"]), st.sampled_from(["float", "double", "int"]),
+       small_floats)
+def test_fuzz_vtk_declared_counts(capped_reader, n_points, n_cells, mode, dtype, body):
+    text = (f"# vtk DataFile Version 3.0\nfuzz\n{mode}\nDATASET POLYDATA\nPOINTS {n_points} {dtype}\n"
+            f"{' '.join(body)}\nPOLYGONS {n_cells} {4 * n_cells}\n3 0 1 2\n")
+    _check(_read_surface, text, ".vtk")
+
+
+def _read_volume(p):
+    from lvcore.geometry.volume_mesh import read_volume_cells
+
+    read_volume_cells(p)
+
+
+@FEW
+@given(counts, counts, counts, st.sampled_from(["2.2", "4.1"]), small_floats)
+def test_fuzz_msh_declared_counts(capped_reader, n_nodes, n_elements, max_tag, version, body):
+    if version == "2.2":
+        nodes = f"$Nodes\n{n_nodes}\n1 {' '.join(body[:3])}\n$EndNodes\n"
+        elements = f"$Elements\n{n_elements}\n1 4 2 0 1 1 1 1 1\n$EndElements\n"
+    else:
+        nodes = f"$Nodes\n1 {n_nodes} 1 {max_tag}\n3 1 0 1\n1\n{' '.join(body[:3])}\n$EndNodes\n"
+        elements = f"$Elements\n1 {n_elements} 1 {max_tag}\n3 1 4 1\n1 1 1 1 1\n$EndElements\n"
+    text = f"$MeshFormat\n{version} 0 8\n$EndMeshFormat\n{nodes}{elements}"
+    _check(_read_volume, text, ".msh")
+
+
+@FEW
+@given(st.lists(st.one_of(st.integers(0, 8), st.sampled_from([10 ** 5, 10 ** 9, 2 ** 40])), min_size=0, max_size=3),
+       st.sampled_from(["<f8", "<f4", "<i8", "|u1", "<c16", "|O", "<U5"]), st.integers(0, 64), st.booleans())
+def test_fuzz_npy_npz_declared_shapes(shape, dtype, n_data, npz):
+    import hostile_files as hf
+
+    header = hf.npy_header(shape, dtype)[:-16] + b"\x00" * n_data
+    content = hf.npz_of({"nodes": header}) if npz else header
+    _check(_read_scores, content, ".npz" if npz else ".npy")
+
+
+def _load_shape_model_npz(p):
+    from lvcore.geometry.shape_model import BUNDLED_MODEL, load_shape_model
+
+    p.with_suffix(".json").write_text(BUNDLED_MODEL.with_suffix(".json").read_text())
+    load_shape_model(p)
+
+
+@FEW
+@given(st.dictionaries(st.sampled_from(["mean", "components", "std", "explained_variance_ratio", "x"]),
+                       st.lists(st.sampled_from([0, 3, 10 ** 6, 10 ** 9]), min_size=0, max_size=2),
+                       min_size=0, max_size=5))
+def test_fuzz_shape_model_npz_shapes(members):
+    import hostile_files as hf
+
+    content = hf.npz_of({k: hf.npy_header(v) for k, v in members.items()})
+    _check(_load_shape_model_npz, content, ".npz")
+
+
+@FEW
+@given(st.sampled_from(["inputs", "outputs", "state", "record_count", "seconds"]),
+       st.sampled_from([0, 1, 5, 10 ** 6, 10 ** 9]), st.integers(-3, 9), st.floats(allow_nan=True))
+def test_fuzz_store_declared_rows_and_values(good_store, name, rows, state, value):
+    """HDF5 stores whose datasets declare many rows (chunked, nothing written) or hold odd values."""
+    import h5py
+
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "s.h5"
+        p.write_bytes(good_store.read_bytes())
+        with h5py.File(p, "r+") as f:
+            f["state"][0] = state
+            f["outputs"][1, 0] = value
+            if rows != 3:
+                tail, dtype = f[name].shape[1:], f[name].dtype
+                del f[name]
+                f.create_dataset(name, shape=(rows,) + tail, dtype=dtype, chunks=(1,) + tail if rows else None)
+        try:
+            s = None
+            from lvcore.campaigns.runner import campaign_status
+
+            s = campaign_status(p)
+        except LVCoreError:
+            pass
+        if s is not None:  # the counts always add up; an inconsistent row is never converged
+            assert s.converged + s.failed + s.pending + s.inconsistent == s.n

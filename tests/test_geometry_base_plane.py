@@ -192,3 +192,44 @@ def test_analyse_base_reports_rings_and_axis():
     assert b.axis @ axis > np.cos(np.radians(3.0))
     apex = pair.rotation @ np.array([0.0, 0.0, -pair.lv.epi.rl]) + pair.shift
     assert np.linalg.norm(b.apex - apex) < 2.0
+
+
+def test_separate_outflow_opening_is_closed_by_the_cut():
+    """A second boundary loop (an outflow opening through both walls just below a flat base): the cut goes below
+    it, the opening is reported, and the cavity is the closed form below the cut."""
+    from lvcore.geometry.synthetic_surfaces import HOLE_DEPTH_MM
+
+    pair, res, exact = _fit("outflow_hole", seed=3)
+    b = res.base
+    extra = [r for r in b.rings if not r.is_base]
+    assert {r.surface for r in extra} == {"endo", "epi"}
+    assert b.cut_depth_mm >= max(r.depth_mm for r in extra) >= HOLE_DEPTH_MM - 1.0
+    assert abs(res.cavity_volume_ml / exact - 1) < 0.02, (res.cavity_volume_ml, exact)
+    assert any("extra opening" in w for w in res.warnings)
+
+
+def test_small_holes_are_bridged_not_cut_below():
+    """A mesh defect (two missing triangles half-way down the endocardium) neither moves the cut nor the volume."""
+    import pyvista as pv
+
+    pair = synthetic_surface_pair("flat", seed=5)
+    tri = pair.endo_triangles
+    z = pair.to_local(pair.endo_points[tri].mean(axis=1))[:, 2]
+    drop = np.argsort(np.abs(z + 30.0))[:2]
+    keep = np.setdiff1d(np.arange(len(tri)), drop)
+    endo = pv.PolyData(pair.endo_points, np.hstack([np.full((len(keep), 1), 3), tri[keep]]).ravel())
+    res = fit_surfaces(read_surface(endo, "endo"), read_surface(pair.polydata("epi"), "epi"))
+    b = res.base
+    assert b.cut_depth_mm == 0.0 and any("small hole" in w for w in res.warnings)
+    assert any(not r.is_base for r in b.rings)
+    exact = pair.exact_cavity_below_ml(b.cut_origin, b.cut_normal)
+    assert abs(res.cavity_volume_ml / exact - 1) < 0.02
+
+
+def test_walls_that_meet_over_part_of_the_ring():
+    """The wall vanishes over a quarter of the ring only (next to an outflow tract): still found (10th percentile
+    of the ring's wall), cut where the wall is usable, closed form below the cut."""
+    pair, res, exact = _fit("partial_join", seed=3)
+    b = res.base
+    assert b.walls_meet and b.rule == "wall thickness" and b.cut_depth_mm > 2.0
+    assert abs(res.cavity_volume_ml / exact - 1) < 0.02, (res.cavity_volume_ml, exact)

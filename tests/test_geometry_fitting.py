@@ -118,3 +118,24 @@ def test_spherical_harmonics_match_scipy():
             for ref in refs:
                 assert np.allclose(np.abs(B[:, col]), np.abs(ref), atol=1e-12) and ls[col] == l
                 col += 1
+
+
+def test_inverted_elements_are_the_last_guard_and_name_where():
+    """An endocardium bulging through the epicardium: refused by the inverted-element guard, which says where
+    and what, without blaming swapped or crossing contours."""
+    import pyvista as pv
+
+    from lvcore.exceptions import GeometryError
+    from lvcore.geometry.surfaces import read_surface
+    from lvcore.geometry.synthetic_surfaces import synthetic_surface_pair
+
+    p = synthetic_surface_pair("flat", pose=False)
+    pts = p.endo_points.copy()
+    ph, z = np.arctan2(pts[:, 1], pts[:, 0]), pts[:, 2]
+    w = np.exp(-((z + 20) / 8) ** 2) * np.exp(-(np.angle(np.exp(1j * ph)) / 0.4) ** 2)
+    pts[:, :2] *= (1 + 0.6 * w)[:, None]
+    endo = pv.PolyData(pts, np.hstack([np.full((len(p.endo_triangles), 1), 3), p.endo_triangles]).ravel())
+    with pytest.raises(GeometryError, match="inverted elements") as err:
+        fit_surfaces(read_surface(endo, "endo"), read_surface(p.polydata("epi"), "epi"))
+    msg = str(err.value)
+    assert "outside the epicardium" in msg and "swapped" not in msg and "crossing" not in msg

@@ -17,6 +17,9 @@ def test_geometry_page_bundled_patient():
     assert any("SYNTHETIC" in c.value for c in at.caption)
     assert len(at.get("image")) >= 2  # overlay + distance map
     assert len(at.dataframe) == 2  # volumes/residuals and the MSE matrix
+    # the volumes table sits in the narrow right-hand column: one column per operator, so none is clipped
+    volumes = at.dataframe[0].value
+    assert list(volumes.columns) == ["op1", "op2", "op3"] and "cavity volume (mL)" in volumes.index
     at.selectbox[0].set_value("SYNTHETIC-P02").run()
     assert not at.exception, at.exception
     assert any("node MSE" in m.label for m in at.metric)
@@ -70,3 +73,21 @@ def test_geometry_page_upload_volume_mesh(tmp_path):
     assert not at.exception, at.exception
     assert not at.error, [e.value for e in at.error]
     assert any("fitted: residual" in s.value for s in at.success)
+
+
+def test_geometry_page_upload_surfaces_whose_walls_meet_at_the_base(tmp_path):
+    """SYNTHETIC endo/epi surfaces joined at one base ring: fitted, the cut and the volume removed shown."""
+    from lvcore.geometry.synthetic_surfaces import synthetic_surface_pair
+
+    endo, epi = synthetic_surface_pair("joined", seed=2, n_phi=48, n_psi=24).save(tmp_path, "stl")
+    at = AppTest.from_file(PAGE1, default_timeout=180).run()
+    at.radio[0].set_value("Upload my own").run()
+    at.file_uploader(key="e0").upload("endo.stl", endo.read_bytes(), "application/octet-stream")
+    at.file_uploader(key="p0").upload("epi.stl", epi.read_bytes(), "application/octet-stream")
+    at.run()
+    assert not at.exception, at.exception
+    assert not at.error, [e.value for e in at.error]
+    assert any("meet at the base" in w.value for w in at.warning)
+    assert any("cavity removed" in w.value for w in at.warning)
+    df = at.dataframe[0].value
+    assert df.loc["base cut (mm below the base)"].iloc[0] > 0 and df.loc["cavity removed by the cut (mL)"].iloc[0] > 2

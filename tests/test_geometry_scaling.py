@@ -86,17 +86,23 @@ def test_size_normalised_scores_are_size_free():
 
 
 def test_scaled_forward_wraps_any_forward():
-    from lvcore.core.forward import AnalyticForward
+    from lvcore.testing.analytic import AnalyticForward
 
     f = AnalyticForward()
     p = {"a": 0.6, "b": 5.0, "af": 1.5, "bf": 5.0}
     sf = ScaledForward(f, 0.8)
     np.testing.assert_allclose(np.asarray(sf(p)), scale_outputs(np.asarray(f(p)), 0.8))
-    batch = sf.evaluate({k: [v] for k, v in p.items()}, jacobian=True)
-    ref = f.evaluate({k: [v] for k, v in p.items()}, jacobian=True)
+    batch = sf.jacobian({k: [v] for k, v in p.items()})
+    ref = f.jacobian({k: [v] for k, v in p.items()})
     np.testing.assert_allclose(batch.outputs[0, 0], ref.outputs[0, 0] * 0.512)
     np.testing.assert_allclose(batch.jacobian[0, 0], ref.jacobian[0, 0] * 0.512)
     np.testing.assert_allclose(batch.jacobian[0, 1:], ref.jacobian[0, 1:])
-    assert sf.input_names == f.input_names and sf.traceable
+    from lvcore.core import JacobianForward, TraceableForward
+    from lvcore.mechanics.forward import SimulatorForward
+
+    assert sf.input_names == f.input_names and isinstance(sf, TraceableForward)  # the wrapped model's capabilities
+    np.testing.assert_allclose(np.asarray(sf.apply(np.array([list(p.values())]))), batch.outputs, rtol=1e-12)
+    plain = ScaledForward(SimulatorForward(resolution="fast"), 0.8)
+    assert not isinstance(plain, JacobianForward) and not hasattr(plain, "apply")
     with pytest.raises(ValueError, match="scale"):
         ScaledForward(f, 0.0)

@@ -8,7 +8,8 @@ import pytest
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import coverage, models, samplers
-from lvcore.core import AnalyticForward, emulator_forward
+from lvcore.emulator.forward import emulator_forward
+from lvcore.testing.analytic import AnalyticForward
 from lvcore.outputs import THETA_NAMES, pc_names
 
 

@@ -39,6 +39,37 @@ def test_figures_build(idata, tmp_path):
     assert pp.shape == (2, 50, 25) and np.std(pp[..., 1:]) > 0.02  # noise sigma_S added
 
 
+def _row_gaps_px(fig):
+    """Pixels between consecutive stacked subplots, and whether the upper one shows x tick labels."""
+    h = fig.layout.height
+    plot = h - fig.layout.margin.t - fig.layout.margin.b
+    axes = sorted((k for k in fig.layout if k.startswith("yaxis")), key=lambda k: -fig.layout[k].domain[1])
+    out = []
+    for upper, lower in zip(axes, axes[1:]):
+        gap = (fig.layout[upper].domain[0] - fig.layout[lower].domain[1]) * plot
+        xa = fig.layout["xaxis" + upper[5:]]
+        ticks = xa.showticklabels is not False and not xa.matches
+        out.append((gap, ticks))
+    return out
+
+
+@pytest.mark.parametrize("builder", [figs.trace_figure, figs.rank_figure])
+def test_stacked_subplot_titles_clear_the_ticks_above(idata, builder):
+    """Each subplot title (about 20 px) fits between its plot and the one above (and that one's tick labels)."""
+    idata, _ = idata
+    fig = builder(idata, ["a", "b", "af", "bf", "sigma_s2", "v"])
+    for gap, ticks in _row_gaps_px(fig):
+        assert gap >= 24 + (18 if ticks else 0), (builder.__name__, gap, ticks)
+    assert fig.layout["xaxis" + str(6)].title.text  # the shared x axis is titled under the last row
+
+
+def test_parameter_meanings_fit_a_table_cell():
+    from lvcore.inference.models import PARAMETER_HELP, parameter_meaning
+
+    assert parameter_meaning("a") == "isotropic stiffness of the Holzapfel-Ogden law"
+    assert all(0 < len(parameter_meaning(n)) <= 48 for n in PARAMETER_HELP)
+
+
 def test_page_without_emulator_says_how_to_build(tmp_path, monkeypatch):
     from streamlit.testing.v1 import AppTest
 
@@ -97,6 +128,7 @@ def test_page_runs_a_short_calibration_and_reports_honestly(tmp_path, monkeypatc
     assert any("divergences" in b and "R-hat" in b and "ESS" in b for b in banners), banners
     assert any("ESS" in w.value for w in at.warning)  # 2 x 50 draws: amber, never green
     assert any("hidden generating value" in c.value for c in at.caption)
-    assert any("meaning" in df.value.columns for df in at.dataframe)
+    tables = [df.value for df in at.dataframe if "meaning" in df.value.columns]
+    assert tables and all(tables[0]["meaning"].str.len() <= 48)  # short meanings: the column is not clipped
     at.number_input[1].set_value(100).run()  # warm-up 50 -> 100: the shown result is stale
     assert any("Inputs changed, re-run" in w.value and "warm-up" in w.value for w in at.warning)

@@ -22,15 +22,19 @@ def smooth_forward(theta):
 
 
 class SmoothForward:
-    """``smooth_forward`` as a Forward over (a, b, af, bf), with a central-difference Jacobian."""
+    """``smooth_forward`` as a JacobianForward over (a, b, af, bf), with a central-difference Jacobian."""
 
     input_names = THETA_NAMES
     label = "closed-form test function"
-    provides_jacobian = True
-    traceable = False
     input_bounds = {}
 
-    def evaluate(self, inputs, *, jacobian=False):
+    def evaluate(self, inputs):
+        return self._batch(inputs, False)
+
+    def jacobian(self, inputs):
+        return self._batch(inputs, True)
+
+    def _batch(self, inputs, jacobian):
         cols, n = as_columns(inputs, self.input_names)
         theta = np.column_stack([cols[k] for k in self.input_names])
         jac = None
@@ -90,9 +94,9 @@ def test_operator_loss_gradient_matches_finite_differences():
 @pytest.mark.slow
 def test_sqp_on_the_simulator_uses_its_adjoint_jacobian():
     """The refit on the FE simulator itself (same geometry): the adjoint Jacobian drives SLSQP back to the truth."""
-    from lvcore.core import SimulatorForward
+    from lvcore.mechanics.forward import AdjointSimulatorForward
 
-    sim = SimulatorForward(resolution="fast")
+    sim = AdjointSimulatorForward(resolution="fast")
     truth = np.array([0.6, 1.3, 1.0, 3.6])
     y_star = sim(dict(zip(THETA_NAMES, truth)))
     loss = OperatorLoss(y_star, v_early_main=80.0, v_early_test=80.0)

@@ -149,3 +149,177 @@ def test_calibration_posterior_shows_prior_and_truth():
     summary = vc.tables(res)["table_calibration_summary"]
     theta_rows = summary[summary["parameter"].isin(["a", "b", "af", "bf"])]
     assert len(theta_rows) == 4 and theta_rows["truth"].notna().all()
+
+
+# ----------------------------------------------------------------------------- figure content (issues 23 and 27)
+def _fake_calibration():
+    """A calibration result as plain data (what volunteer_calibration.compute returns), without running NUTS."""
+    import pandas as pd
+
+    rng = np.random.default_rng(1)
+    bounds = {"a": (0.05, 5.0), "b": (0.5, 10.0), "af": (0.05, 5.0), "bf": (0.5, 10.0)}
+    draws = {n: rng.uniform(lo, hi, 400) for n, (lo, hi) in bounds.items()}
+    summary = pd.DataFrame({"parameter": list(bounds), "mean": [d.mean() for d in draws.values()],
+                            "truth": [0.6, 1.3, 1.0, 3.6]})
+    return {"subject": "SYNTHETIC-HV3", "draws": draws, "bounds": bounds, "truth": dict(zip(bounds, [0.6, 1.3, 1, 3.6])),
+            "summary": summary, "status": "fake run for a figure test", "wall_s": 0.0,
+            "config": {"num_warmup": 5, "num_samples": 100, "num_chains": 4}}
+
+
+@pytest.fixture(scope="module")
+def report_items():
+    """Every report item as the report draws it: bundled results, and a calibration result given as plain data."""
+    from lvcore.report.export import plotly_template
+    from lvcore.studies import volunteer_calibration as vc
+
+    items = []
+    with plotly_template():
+        for s in rb.SECTIONS:
+            if s.study == "volunteer_calibration":
+                res = _fake_calibration()
+                figs = vc.figures(res)
+                items += [rb.ReportItem(n, vc.TITLES[n], figs[n], vc.tables(res)[n], vc.source_line(res))
+                          for n in s.names]
+            else:
+                items += rb.section_items(s)
+    return {it.name: it for it in items}
+
+
+def test_every_report_item_renders(report_items):
+    assert list(report_items) == list(rb.FIGURE_NAMES)
+    for name, it in report_items.items():
+        assert it.fig is not None and it.missing is None, (name, it.missing)
+        it.fig.to_json()  # a valid plotly figure
+        assert it.fig.layout.title.text, name
+
+
+def _axes_used(fig):
+    xs, ys = set(), set()
+    for t in fig.data:
+        if t.type in ("table", "splom", "barpolar"):
+            continue
+        xs.add("xaxis" + (t.xaxis or "x")[1:])
+        ys.add("yaxis" + (t.yaxis or "y")[1:])
+    return xs, ys
+
+
+def test_axis_titles_present(report_items):
+    """Every axis that carries data is titled, or shares its column (x) or row (y) with a titled one."""
+    for name, it in report_items.items():
+        fig = it.fig
+        xs, ys = _axes_used(fig)
+        for used, other in ((xs, "domain"), (ys, "domain")):
+            for ax in used:
+                a = fig.layout[ax]
+                titled = [fig.layout[b] for b in used if fig.layout[b].title.text]
+                same_line = [b for b in titled if tuple(b[other] or (0, 1)) == tuple(a[other] or (0, 1))]
+                assert a.title.text or same_line, f"{name}: {ax} has no title"
+
+
+def test_violins_of_nonnegative_quantities_stay_above_zero(report_items):
+    """|errors|, RMSEs and distances: the violin ends at the data (hard span), never below 0."""
+    violins = [(n, t) for n, it in report_items.items() for t in it.fig.data if t.type == "violin"]
+    assert {n for n, _ in violins} >= {"fig9_9_error_violins", "fig9_11_forward_strain_error", "fig9_14_output_error"}
+    for name, t in violins:
+        assert np.min(t.y) >= 0, name
+        assert t.spanmode == "hard", f"{name}: a soft span draws the density below 0"
+
+
+def test_panel_and_model_labels_read_properly(report_items):
+    texts = [a.text for it in report_items.values() for a in it.fig.layout.annotations if a.text]
+    names = [t.name for it in report_items.values() for t in it.fig.data if t.name]
+    assert not [t for t in texts if "main main" in t]
+    assert any(t == "main operator: op1" for t in texts)
+    assert not [n for n in names if "None" in n]
+    from lvcore.inference.models import MODEL_LABELS
+
+    fig99 = report_items["fig9_9_error_violins"].fig
+    assert [t.name for t in fig99.data if t.type == "violin"] == [MODEL_LABELS[m] for m in ("volume", "iid",
+                                                                                            "discrepancy")]
+
+
+def test_fig_9_13_names_the_fit_and_marks_theta_hat_and_the_truth(report_items):
+    from lvcore.studies import operators
+
+    res = operators.load(results.bundled_studies_dir())
+    s = res["surfaces"][0]
+    fig = report_items["fig9_13_rss_surface"].fig
+    title = fig.layout.title.text
+    assert s["patient"] in title and f"test geometry {s['test_geometry']}" in title.replace("<br>", " ")
+    hats = [t for t in fig.data if t.name == "refit θ̂"]
+    truths = [t for t in fig.data if t.name == "truth θ̃"]
+    assert len(hats) == len(truths) == len(s["pairs"]) == 6
+    first = s["pairs"][0]
+    i, j = ("a", "b", "af", "bf").index(first["x"]), ("a", "b", "af", "bf").index(first["y"])
+    assert (hats[0].x[0], hats[0].y[0]) == (s["theta_hat"][i], s["theta_hat"][j])
+    assert (truths[0].x[0], truths[0].y[0]) == (operators.THETA_TRUE[i], operators.THETA_TRUE[j])
+
+
+def _lines(text):
+    return (text or "").split("<br>")
+
+
+def test_exported_titles_never_overlap_subplot_titles(report_items):
+    """After the report's wrap_title: the title's last line ends above the row of subplot titles."""
+    from lvcore.viz.report_figures import SUBPLOT_TITLE_PX, TITLE_CHAR_PX, TITLE_LINE_PX, _visible_len, wrap_title
+
+    for name, it in report_items.items():
+        fig = wrap_title(it.fig)
+        t = fig.layout.title
+        top_margin = fig.layout.margin.t
+        n = len(_lines(t.text))
+        if t.yanchor == "top" and t.yref == "container":
+            bottom = (1 - t.y) * fig.layout.height if fig.layout.height else 0
+            bottom += (t.pad.t or 0) + TITLE_LINE_PX * n
+        else:  # plotly's "auto": the title is centred in the top margin
+            bottom = top_margin / 2 + TITLE_LINE_PX * n / 2
+        has_subplot_titles = any(a.yref == "paper" and (a.y or 0) >= 0.99 for a in fig.layout.annotations)
+        assert bottom <= top_margin - (SUBPLOT_TITLE_PX if has_subplot_titles else 0), name
+        # and no line runs past the right edge of the exported image
+        assert max(_visible_len(x) for x in _lines(t.text)) * TITLE_CHAR_PX <= (fig.layout.width or 1100), name
+
+
+def test_tables_fit_their_columns(report_items):
+    """Each column is as wide as its longest cell, and the figure as wide as its columns: nothing clipped."""
+    from lvcore.viz.report_figures import TABLE_CHAR_PX
+
+    tables = {n: it.fig for n, it in report_items.items() if it.fig.data and it.fig.data[0].type == "table"}
+    assert {"table9_2_bo_fixed_angles", "table_calibration_summary", "table9_4_operators_pca"} <= set(tables)
+    for name, fig in tables.items():
+        t = fig.data[0]
+        widths = t.columnwidth
+        assert widths is not None and len(widths) == len(t.header.values), name
+        for k, w in enumerate(widths):
+            import re
+
+            texts = [re.sub(r"<[^>]+>", "", str(v)) for v in [t.header.values[k], *t.cells.values[k]]]
+            assert w >= TABLE_CHAR_PX * max(len(x) for x in texts), (name, texts[0])
+        assert fig.layout.width >= sum(widths), name
+
+
+def test_source_lines_are_readable_text(tmp_path):
+    m = rb.build_report(tmp_path / "r", calibration=False, formats=())
+    for f in m["figures"]:
+        assert "{'" not in f["source"] and "':" not in f["source"], f["source"]
+    fd = next(f for f in m["figures"] if f["name"] == "fig9_6_strain_predictive")
+    assert "4 chains × (500 warm-up + 1000 draws)" in fd["source"]
+
+
+def test_without_a_static_exporter_the_html_report_is_written_and_says_so(tmp_path, monkeypatch, capsys):
+    import plotly.io as pio
+
+    from lvcore.cli import main
+
+    def no_kaleido(*a, **k):
+        raise ValueError("Image export using the \"kaleido\" engine requires the kaleido package")
+
+    monkeypatch.setattr(pio, "write_images", no_kaleido)
+    out = tmp_path / "r"
+    assert main(["report", "--out", str(out), "--no-calibration"]) == 0
+    err = capsys.readouterr().err
+    assert "static formats skipped: png, svg" in err and "kaleido" in err
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["skipped_formats"] == ["png", "svg"]
+    assert all(f["png"] is None and f["svg"] is None for f in m["figures"])
+    assert all((out / f["html"]).is_file() for f in m["figures"] if f["status"] == "ok")
+    assert "Static formats skipped" in (out / "index.html").read_text()

@@ -4,7 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from lvcore.core import AnalyticForward, SimulatorForward
+from lvcore.mechanics.forward import SimulatorForward
+from lvcore.testing.analytic import AnalyticForward
 from lvcore.studies import bo_fibres as bf
 
 
@@ -16,12 +17,12 @@ class CountingForward(AnalyticForward):
         object.__setattr__(self, "_count", [0])
         object.__setattr__(self, "_stop", stop_after)
 
-    def evaluate(self, inputs, *, jacobian=False):
+    def evaluate(self, inputs):
         n = np.size(next(iter(inputs.values())))
         if self._stop is not None and self._count[0] + n > self._stop:
             raise KeyboardInterrupt("killed")
         self._count[0] += n
-        return super().evaluate(inputs, jacobian=jacobian)
+        return super().evaluate(inputs)
 
 
 @pytest.fixture(scope="module")

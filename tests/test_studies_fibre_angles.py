@@ -38,7 +38,7 @@ def test_failures_are_kept_as_nan():
     class Failed:  # a forward model of the angles whose every point fails (test double)
         input_names = ("alpha_endo", "alpha_epi")
 
-        def evaluate(self, inputs, jacobian=False):
+        def evaluate(self, inputs):
             return ForwardBatch(np.full((1, 25), np.nan), [False], ("diverged (test double)",))
 
     m = angle_map([-60, 0], [60], forward=Failed())

@@ -6,7 +6,8 @@ import pytest
 
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import samplers
-from lvcore.core import AnalyticForward, ForwardBatch
+from lvcore.core import ForwardBatch
+from lvcore.testing.analytic import AnalyticForward
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies import fibre_discrepancy as fd
 
@@ -14,7 +15,7 @@ from lvcore.studies import fibre_discrepancy as fd
 class _NeverCalled:
     input_names = ("a", "b", "af", "bf", "alpha_endo", "alpha_epi")
 
-    def evaluate(self, inputs, jacobian=False):
+    def evaluate(self, inputs):
         pytest.fail("must not simulate without an emulator")
 
 
@@ -30,7 +31,7 @@ def test_missing_chapter_emulator_is_a_clear_error(tmp_path, monkeypatch):
 # The chapter's design (DESIGN.md, fibre-discrepancy study): simulator angles x true theta, noise sigma_V, sigma_S.
 CHAPTER_ANGLES = ((-60.0, 90.0), (-30.0, 60.0), (0.0, 90.0))
 CHAPTER_THETAS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), (1.0, 5.0, 1.0, 5.0))
-SIGMA_V_ML, SIGMA_S = 5.0, 0.03
+SIGMA_V_ML, SIGMA_S = 5.0, 0.03  # the chapter's values, independent of lvcore.conditions
 #: SYNTHETIC stand-ins: the "simulator" shifts the strains with the fibre angles; the "emulator" has none.
 TRUTH = AnalyticForward(input_names=("a", "b", "af", "bf", "alpha_endo", "alpha_epi"))
 EMULATOR = AnalyticForward()
@@ -53,7 +54,7 @@ class _FunctionSimulator:
     def __init__(self, fn):
         self.fn = fn
 
-    def evaluate(self, inputs, jacobian=False):
+    def evaluate(self, inputs):
         n = len(np.atleast_1d(inputs["a"]))
         col = {k: np.atleast_1d(np.asarray(inputs[k], dtype=float)) for k in self.input_names}
         ys = [self.fn({k: float(col[k][i]) for k in THETA_NAMES}, float(col["alpha_endo"][i]),
@@ -93,8 +94,8 @@ def test_test_sets_are_simulated_at_the_chapters_angles_and_theta_with_the_state
 
 
 def test_default_test_data_come_from_the_fe_simulator_at_the_set_angles(monkeypatch):
-    import lvcore
     from lvcore.geometry.shape_model import load_shape_model
+    from lvcore.mechanics import forward as simulator_forward
     from lvcore.mechanics.case import Case
 
     cases = []
@@ -109,7 +110,7 @@ def test_default_test_data_come_from_the_fe_simulator_at_the_set_angles(monkeypa
         cases.append(case)
         return _Result()
 
-    monkeypatch.setattr(lvcore, "simulate", fake_simulate)
+    monkeypatch.setattr(simulator_forward, "simulate", fake_simulate)  # what SimulatorForward runs per point
     h = (0.3, -0.2, 0.1, 0.0, 0.4)
     sets = fd.make_test_sets(EMULATOR, h, set_indices=(2, 9), resolution="fast")
     assert len(cases) == 2

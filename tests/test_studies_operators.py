@@ -20,14 +20,18 @@ class StandIn:
 
     input_names = THETA_NAMES
     label = "numpy stand-in (tests)"
-    provides_jacobian = True
-    traceable = False
     input_bounds = {}
 
     def __init__(self, shift):
         self.ref = np.array([0.6, 5.0, 1.5, 5.0]) * (1.0 + shift * np.array([1, -1, 2, 1]))
 
-    def evaluate(self, inputs, *, jacobian=False):
+    def evaluate(self, inputs):
+        return self._batch(inputs, False)
+
+    def jacobian(self, inputs):
+        return self._batch(inputs, True)
+
+    def _batch(self, inputs, jacobian):
         cols, n = as_columns(inputs, self.input_names)
         th = np.column_stack([cols[k] for k in THETA_NAMES])
         u = np.log(th / self.ref)
@@ -58,7 +62,7 @@ def loss_value(forward, loss, theta):
 def test_stand_in_jacobian_is_right():
     f = StandIn(0.02)
     th = TRUTH * 1.2
-    b = f.evaluate(dict(zip(THETA_NAMES, th)), jacobian=True)
+    b = f.jacobian(dict(zip(THETA_NAMES, th)))
     fd = np.column_stack([(f(dict(zip(THETA_NAMES, th + e))) - f(dict(zip(THETA_NAMES, th - e)))) / 2e-6
                           for e in np.eye(4) * 1e-6])
     np.testing.assert_allclose(b.jacobian[0], fd, rtol=1e-5, atol=1e-8)
@@ -68,12 +72,12 @@ def test_laplace_covariance_matches_finite_difference_hessian():
     f = StandIn(0.0)
     y_star = np.asarray(f(dict(zip(THETA_NAMES, TRUTH))))
     loss = OperatorLoss(y_star, 80.0, 80.0)              # own geometry: zero residual at the truth
-    b = f.evaluate(dict(zip(THETA_NAMES, TRUTH)), jacobian=True)
+    b = f.jacobian(dict(zip(THETA_NAMES, TRUTH)))
     r, J = ops.residual_jacobian(loss, b.outputs[0], b.jacobian[0])
     assert np.max(np.abs(r)) < 1e-12
     # the residual Jacobian's J^T r equals the loss gradient / 2 away from the optimum
     th = TRUTH * 1.1
-    b2 = f.evaluate(dict(zip(THETA_NAMES, th)), jacobian=True)
+    b2 = f.jacobian(dict(zip(THETA_NAMES, th)))
     r2, J2 = ops.residual_jacobian(loss, b2.outputs[0], b2.jacobian[0])
     g = b2.jacobian[0].T @ loss.value_and_output_gradient(b2.outputs[0])[1]
     np.testing.assert_allclose(2 * J2.T @ r2, g, rtol=1e-10)

@@ -6,7 +6,7 @@ import pytest
 from streamlit.testing.v1 import AppTest
 
 from lvcore.app import PAGES_DIR, ENTRY, PAGES
-from lvcore.core import AnalyticForward
+from lvcore.testing.analytic import AnalyticForward
 from lvcore.exceptions import LVCoreError
 from lvcore.studies import bo_fibres, operators, results
 from tests.test_studies_operators import stand_in
@@ -87,3 +87,42 @@ def test_background_run_finishes_with_progress(tmp_path):
     assert run.returncode == 0, run.log_tail()
     assert run.fraction == 1.0
     assert len(json.loads((tmp_path / "bo_fibres.json").read_text())) == 2
+
+
+def test_study_modules_import_viz_only_to_draw():
+    """Layering: studies -> viz only inside figures(); importing a study loads no plotting code."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import lvcore.studies.bo_fibres, lvcore.studies.operators, lvcore.studies.fibre_discrepancy, "
+            "lvcore.studies.geometry_operators, lvcore.studies.fibre_angles, lvcore.studies.volunteer_calibration, "
+            "lvcore.studies.results; print(sorted(m for m in sys.modules if m.startswith('lvcore.viz')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", out
+
+
+def test_each_study_draws_its_bundled_results_through_one_interface():
+    """load(folder) -> tables(result) -> figures(result): every title names a figure the study can draw."""
+    from lvcore.studies import fibre_discrepancy
+
+    folder = results.bundled_studies_dir()
+    for mod in (bo_fibres, operators, fibre_discrepancy):
+        res = mod.load(folder)
+        figs, tabs = mod.figures(res), mod.tables(res)
+        assert set(figs) <= set(mod.TITLES) and figs, mod.__name__
+        assert "bundled" in mod.source_line(res)
+        for name in figs:
+            if name in tabs and hasattr(tabs[name], "columns"):
+                assert len(tabs[name]) > 0, name
+
+
+def test_fibre_discrepancy_writes_its_csvs_and_figures_from_one_result(tmp_path):
+    from lvcore.studies import fibre_discrepancy
+
+    res = fibre_discrepancy.load(results.bundled_studies_dir())
+    res.pop("folder")
+    paths = fibre_discrepancy.write_study(res, tmp_path)
+    for name in ("strain_predictive.csv", "sigma_s.csv", "errors.csv", "fig_strain_predictive.html",
+                 "fig_errors_violin.html"):
+        assert (tmp_path / name).is_file(), name
+    assert set(paths) >= {"json", "strain_predictive_csv", "sigma_s_csv", "errors_csv"}

@@ -66,7 +66,7 @@ def test_unexpected_reader_errors_become_upload_errors():
     def broken(path):
         raise KeyError(f"internal trouble at {path}")
 
-    with UploadSession() as s, pytest.raises(UploadError, match="cannot read 'x.json': KeyError") as info:
+    with UploadSession() as s, pytest.raises(UploadError, match=r"cannot read 'x.json' \(KeyError") as info:
         s.read("x.json", b"{}", broken)
     assert "/tmp" not in str(info.value)
 
@@ -99,3 +99,32 @@ def test_no_usage_statistics_in_config_and_lvcore_app():
     assert cfg["browser"]["gatherUsageStats"] is False
     cmd = streamlit_command()
     assert cmd[cmd.index("--browser.gatherUsageStats") + 1] == "false"
+
+
+# --------------------------------------------------------------------------- messages (issue 27 item 6)
+def test_upload_errors_name_the_file_and_say_what_to_do():
+    """Garbage .vtu said '(SystemExit: 1)'; garbage .stl was told to use '.stl'; binary text gave codec jargon."""
+    out = fit_segmentation("mesh", (("my_lv.vtu", bytes(range(256)) * 3),))["error"]
+    assert "my_lv.vtu" in out and "SystemExit" not in out and "not a valid .vtu file" in out
+    out = fit_segmentation("surfaces", (("endo.stl", b"solid x\nfacet garbage\n"), ("epi.stl", b"solid x\n")))["error"]
+    assert "endo.stl" in out and "not a valid STL file" in out and "export" in out
+    assert ".stl," not in out  # not told to use the format it already has
+    out = fit_segmentation("surfaces", (("endo.vtk", bytes(range(256)) * 3), ("epi.vtk", b"x")))["error"]
+    assert "endo.vtk" in out and "SystemExit" not in out and ": 1)" not in out and "not a valid VTK file" in out
+    with uploads.UploadSession() as s:
+        with pytest.raises(uploads.UploadError) as info:
+            s.read("notes.csv", b"\xff\xfe\x00x", lambda p: p.read_text())
+        text = str(info.value)
+        assert "notes.csv" in text and "codec" not in text and "UTF-8" in text
+        with pytest.raises(uploads.UploadError, match="gave up") as info:
+            s.read("x.vtu", b"x", lambda p: (_ for _ in ()).throw(SystemExit(1)))
+        assert "x.vtu" in str(info.value)
+
+
+def test_surface_uploads_that_crashed_vtk_are_errors_naming_the_file():
+    import hostile_files as hf
+
+    for name, data, words in (("big.ply", hf.huge_ply(), "1,000,000,000 vertices"),
+                              ("face.obj", hf.far_face_obj(), "vertex 1,000,000,000")):
+        out = fit_segmentation("surfaces", ((name, data), ("epi" + name[-4:], data)))
+        assert name in out["error"] and words in out["error"] and "/tmp" not in out["error"]

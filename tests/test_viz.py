@@ -166,3 +166,69 @@ def test_map_pair_draws_both_maps_in_one_figure():
     assert fig.data[0].colorbar.x != fig.data[1].colorbar.x
     with pytest.raises(ValueError, match="shape"):
         figures.map_pair(xs, ys, left, right.T)
+
+
+# ----------------------------------------------------------------------------- content checks (issue 27)
+def _decade_labels(axis):
+    lo, hi = axis.range
+    return [10.0 ** k for k in range(int(np.ceil(lo)), int(np.floor(hi)) + 1)]
+
+
+def test_shape_model_error_axis_has_a_label_at_every_decade():
+    """Data within one decade used to get a single tick label on the log axis (dtick=1 without a range)."""
+    from lvcore.studies.geometry_operators import operator_table
+    from lvcore.viz.geometry_views import operator_mse_figure
+
+    table = operator_table()
+    fig = operator_mse_figure(table, table["operators"][0])
+    ax = fig.layout.yaxis
+    assert ax.type == "log" and ax.dtick == 1 and ax.range is not None
+    labels = _decade_labels(ax)
+    assert len(labels) >= 3
+    ys = [v for t in fig.data if t.y is not None for v in t.y if v is not None]
+    assert 10 ** ax.range[0] <= min(ys) and max(ys) <= 10 ** ax.range[1]
+
+
+def test_decade_log_axis_widens_a_narrow_range():
+    ax = figures.decade_log_axis([0.002, 0.008])
+    assert ax["range"][1] - ax["range"][0] >= 2 and ax["dtick"] == 1
+
+
+def _bo_entries(n=8):
+    rng = np.random.default_rng(0)
+    return [{"subject": f"SYNTHETIC-HV{i}", "mode": m, "n_initial": 30,
+             "convergence": np.minimum.accumulate(rng.uniform(0.1, 10, 60)).tolist(),
+             "strain_residuals": rng.normal(0, 0.02, 24).tolist()}
+            for i in range(1, n + 1) for m in ("fixed", "free")]
+
+
+def test_bo_convergence_legend_holds_every_subject_and_the_title_fits():
+    from lvcore.viz import study_figures
+
+    fig = study_figures.convergence_figure(_bo_entries())
+    shown = [t.name for t in fig.data if t.showlegend is not False]
+    assert {f"HV{i}" for i in range(1, 9)} <= set(shown)
+    # a vertical legend of ~20 px per entry must fit the plot area, or the legend is laid out horizontally
+    plot_h = (fig.layout.height or 450) - (fig.layout.margin.t or 100) - (fig.layout.margin.b or 80)
+    assert fig.layout.legend.orientation == "h" or 20 * len(shown) <= plot_h
+    # the Studies page shows it in half the width: no title line longer than ~60 characters
+    assert max(len(line) for line in fig.layout.title.text.split("<br>")) <= 60
+    assert fig.layout.yaxis.type == "log" and fig.layout.yaxis.dtick == 1
+
+
+def test_violin_of_a_nonnegative_quantity_ends_at_the_data():
+    fig = figures.violin({"|error|": [0.0, 0.001, 0.002, 0.01]}, nonnegative=True)
+    assert fig.data[0].spanmode == "hard" and fig.layout.yaxis.rangemode == "nonnegative"
+
+
+def test_table_figure_is_as_wide_as_its_columns():
+    import pandas as pd
+
+    from lvcore.viz.report_figures import TABLE_CHAR_PX, table_figure
+
+    df = pd.DataFrame({"meaning": ["a very long explanation of what this parameter means in the model"],
+                       **{f"column {k}": [1.23456] for k in range(12)}})
+    fig = table_figure(df, title="t")
+    w = fig.data[0].columnwidth
+    assert w[0] >= TABLE_CHAR_PX * len(df["meaning"][0]) and fig.layout.width >= sum(w)
+    assert fig.data[0].cells.fill.color == "white" and fig.data[0].cells.font.color  # explicit: no theme leak

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lvcore import units
+from lvcore import conditions, units
 from lvcore.core.space import THETA_BOUNDS
 
 #: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-).
@@ -33,7 +33,7 @@ def theta_slider(name: str, value: float | None = None, *, key: str | None = Non
     import streamlit as st
 
     lo, hi = THETA_RANGES[name]
-    value = float(units.HO_REFERENCE_THETA[name] if value is None else value)
+    value = float(conditions.THETA_TILDE[name] if value is None else value)
     where = container if container is not None else st
     return where.select_slider(THETA_LABELS[name], options=log_options(lo, hi, value), value=value, key=key,
                                help=THETA_HELP[name])
@@ -61,7 +61,7 @@ _BY_MAIN = "_shared_sidebar_by_main"
 
 
 def _shared_defaults() -> dict:
-    return {"theta": dict(units.HO_REFERENCE_THETA), "edp_mmhg": float(units.DEFAULT_EDP_MMHG),
+    return {"theta": dict(conditions.THETA_TILDE), "edp_mmhg": float(conditions.SIMULATOR_DEFAULT_EDP_MMHG),
             "subject": None, "emulator": None}
 
 
@@ -90,7 +90,7 @@ def shared_sidebar() -> dict:
                                               help="Default emulator of the Emulator and Calibration pages.")
         for name in ("a", "b", "af", "bf"):
             values["theta"][name] = theta_slider(name, key=f"shared_{name}")
-        values["edp_mmhg"] = float(st.slider("EDP (mmHg)", 2.0, 30.0, float(units.DEFAULT_EDP_MMHG), 0.5,
+        values["edp_mmhg"] = float(st.slider("EDP (mmHg)", 2.0, 30.0, float(conditions.SIMULATOR_DEFAULT_EDP_MMHG), 0.5,
                                              key="shared_edp"))
     st.session_state[SHARED] = values
     return values

@@ -7,11 +7,9 @@ the process and the navigation; the pages are listed in
 """
 from __future__ import annotations
 
-import os
+from lvcore.app.process import setup_process
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+setup_process()  # once, before numpy, VTK and JAX start: threads, EGL, one XLA host device per chain
 
 import streamlit as st  # noqa: E402
 
@@ -20,9 +18,6 @@ from lvcore.app import PAGES  # noqa: E402
 
 def main() -> None:
     """Build the navigation and run the page the user is on."""
-    from lvcore.inference.samplers import use_host_devices
-
-    use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain
     st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
     pages = [st.Page(p.path, title=p.title, icon=p.icon, url_path=p.url_path, default=(k == 0))
              for k, p in enumerate(PAGES)]

@@ -7,28 +7,19 @@ page only gathers inputs and shows results: the science is in :mod:`lvcore`
 """
 from __future__ import annotations
 
-import os
+import json
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+import numpy as np
+import streamlit as st
 
-import json  # noqa: E402
+from lvcore import conditions, units
+from lvcore.app import PAGES
+from lvcore.exceptions import LVCoreError
+from lvcore.mechanics.case import Case, loads_case
+from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
+from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: F401 (shared log sliders)
+from lvcore.resources import example_cases
 
-import numpy as np  # noqa: E402
-import streamlit as st  # noqa: E402
-
-from lvcore import units  # noqa: E402
-from lvcore.app import PAGES  # noqa: E402
-from lvcore.exceptions import LVCoreError  # noqa: E402
-from lvcore.inference.samplers import use_host_devices  # noqa: E402
-from lvcore.mechanics.case import Case, loads_case  # noqa: E402
-from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES  # noqa: E402
-from lvcore.resources import example_cases  # noqa: E402
-
-use_host_devices(4)  # before JAX starts: one XLA host device per calibration chain (pages/5_Calibration.py)
-
-from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: E402,F401  (shared log sliders)
 RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
 st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
@@ -123,9 +114,9 @@ with st.form("simulator"):
         st.caption("Fixed: a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58 (Gao et al. 2017).")
     with c3:
         st.markdown("**Conditions**")
-        alpha_endo = st.slider("α_endo (deg)", -90, 90, int(units.DEFAULT_ALPHA_ENDO_DEG), key="alpha_endo")
-        alpha_epi = st.slider("α_epi (deg)", -90, 90, int(units.DEFAULT_ALPHA_EPI_DEG), key="alpha_epi")
-        edp = st.slider("EDP (mmHg)", 2.0, 30.0, float(units.DEFAULT_EDP_MMHG), step=0.5, key="edp")
+        alpha_endo = st.slider("α_endo (deg)", -90, 90, int(conditions.SIMULATOR_DEFAULT_ANGLES[0]), key="alpha_endo")
+        alpha_epi = st.slider("α_epi (deg)", -90, 90, int(conditions.SIMULATOR_DEFAULT_ANGLES[1]), key="alpha_epi")
+        edp = st.slider("EDP (mmHg)", 2.0, 30.0, float(conditions.SIMULATOR_DEFAULT_EDP_MMHG), step=0.5, key="edp")
         resolution = st.radio("Resolution", RESOLUTIONS, index=0, horizontal=True, key="resolution",
                               help="fast: seconds, for exploring; coarse (lvcore 0.1's default)/default/accurate: finer meshes (slower; the first "
                                    "solve at a new resolution also compiles the FE kernels).")

@@ -1,6 +1,7 @@
 """``lvcore design ...`` and ``lvcore campaign run|status|resume``."""
 from __future__ import annotations
 
+from lvcore import cli_args, limits
 from lvcore.campaigns.designs import METHODS, make_design, save_design
 from lvcore.campaigns.space import SPACE_NAMES, get_space
 from lvcore.campaigns.runner import RESOLUTIONS
@@ -11,10 +12,14 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("design", help="write a space-filling design (CSV) over a named parameter space")
     p.add_argument("method", choices=METHODS, help="sobol (scrambled), lhs, random, or exp (the chapter's exp-warped LHS)")
     p.add_argument("--space", required=True, choices=SPACE_NAMES, help="named parameter space (see lvcore.campaigns.space)")
-    p.add_argument("--n", type=int, required=True, help="number of design points")
-    p.add_argument("--seed", type=int, required=True, help="random seed")
-    p.add_argument("--pcs", type=int, default=None, help="number of PC scores (overrides the space's default)")
-    p.add_argument("--out", required=True, help="output CSV path")
+    p.add_argument("--n", type=cli_args.int_in(1, limits.MAX_DESIGN_POINTS), required=True,
+                   help=f"number of design points, 1 to {limits.MAX_DESIGN_POINTS:,} (lvcore.limits.MAX_DESIGN_POINTS; "
+                        "also the most rows `lvcore campaign run` accepts)")
+    p.add_argument("--seed", type=cli_args.seed, required=True, help="random seed, an integer from 0 to 2^32 - 1")
+    p.add_argument("--pcs", type=cli_args.int_in(0, 20), default=None,
+                   help="number of PC scores, 0 to 20 (default: the space's own, 5 for chapter and angles, else 0)")
+    p.add_argument("--out", type=cli_args.output_file, required=True,
+                   help="output CSV file (its folders are created; an existing file is replaced)")
     p.set_defaults(func=_design)
 
     c = subparsers.add_parser("campaign", help="run, resume or inspect a simulation campaign")
@@ -22,9 +27,11 @@ def register(subparsers) -> None:
 
     run = sub.add_parser("run", help="run every row of a design; results go to an HDF5 store as they arrive")
     run.add_argument("design", help="design CSV written by `lvcore design`")
-    run.add_argument("--out", required=True, help="HDF5 store to create")
+    run.add_argument("--out", type=cli_args.output_file, required=True,
+                     help="HDF5 store to create (refused if it exists: use `lvcore campaign resume`)")
     _add_executor_args(run)
-    run.add_argument("--resolution", choices=RESOLUTIONS, default="default", help="simulator mesh resolution")
+    run.add_argument("--resolution", choices=RESOLUTIONS, default="default",
+                     help="simulator mesh resolution (default: default)")
     run.add_argument("--forward", default=None, metavar="NAME",
                      help="registered forward model (default 'simulator', the FE simulator); others are registered "
                           "in code with lvcore.core.register_forward")
@@ -49,8 +56,14 @@ def register(subparsers) -> None:
 
 def _add_executor_args(p) -> None:
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int, default=None, help="local worker processes (default: one per core)")
-    g.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT")
+    g.add_argument("--workers", type=cli_args.workers, default=None,
+                   help=f"local worker processes, 1 to 4 per core ({cli_args.max_local_workers()} here; "
+                        "default: one per core)")
+    g.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address tcp://HOST:PORT instead of local workers (default: none)")
+    p.add_argument("--cold", action="store_true",
+                   help="solve every row cold, one task per row (default: warm-started continuation chains of "
+                        "nearby rows, split across the workers; same results within the solver tolerance)")
 
 
 def _design(args) -> int:
@@ -66,7 +79,7 @@ def _run(args) -> int:
 
     summary = run_campaign(args.design, args.out, workers=args.workers, scheduler=args.scheduler,
                            resolution=args.resolution, forward=args.forward or DEFAULT_FORWARD,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, chained=not args.cold)
     print(summary.format())
     return 0
 
@@ -75,7 +88,7 @@ def _resume(args) -> int:
     from lvcore.campaigns.runner import resume_campaign
 
     summary = resume_campaign(args.store, workers=args.workers, scheduler=args.scheduler,
-                              retry_failed=args.retry_failed, progress=not args.no_progress)
+                              retry_failed=args.retry_failed, progress=not args.no_progress, chained=not args.cold)
     print(summary.format())
     return 0
 

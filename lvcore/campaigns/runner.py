@@ -13,8 +13,16 @@ Failures are data: a :class:`~lvcore.exceptions.SolverError` (or any other
 exception raised by the forward model) or a point that did not converge is
 recorded as a failed row with its reason; rows are never dropped or filled in.
 
-Killing a campaign (even with SIGKILL) loses only the rows in flight;
-:func:`resume_campaign` runs exactly the rows not yet committed.
+Rows run as warm-started continuation chains by default
+(:mod:`lvcore.chains`): nearby rows in the design's unit cube are
+solved one after another, each starting Newton from a neighbour's solution,
+in chunks of :data:`~lvcore.chains.DEFAULT_CHUNK` rows, with at
+least two chains per worker; ``chained=False`` (``--cold``) runs one cold
+task per row.
+
+Killing a campaign (even with SIGKILL) loses only the rows in flight (the
+chunks being solved); :func:`resume_campaign` runs exactly the rows not yet
+committed, chaining them afresh.
 """
 from __future__ import annotations
 
@@ -25,13 +33,15 @@ from pathlib import Path
 import numpy as np
 
 import lvcore
+from lvcore.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
 from lvcore.campaigns.designs import Design, load_design
-from lvcore.campaigns.executors import make_executor
 from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
+from lvcore.mechanics import forward as _simulator_forward  # noqa: F401 - registers the default forward "simulator"
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, recorded_resolution
+from lvcore.parallel import make_executor
 
 #: The real simulator.
 DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
@@ -85,42 +95,109 @@ def execute_row(forward, index: int, inputs: dict) -> RowResult:
     return RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, simulator_version(), tag)
 
 
+def execute_warm_row(forward, index: int, inputs: dict, initial) -> tuple[RowResult, object]:
+    """:func:`execute_row` started from ``initial`` (a converged state, or None) with ``forward.evaluate_warm``.
+
+    Returns ``(RowResult, state)``; ``state`` is None unless the row converged.
+    """
+    t0 = time.perf_counter()
+    tag = worker_tag()
+    try:
+        batch, state = forward.evaluate_warm({n: float(v) for n, v in inputs.items()}, initial)
+        seconds = float(batch.seconds[0]) if batch.seconds is not None else time.perf_counter() - t0
+        if not bool(batch.converged[0]):
+            reason = batch.messages[0] or "did not converge"
+            return RowResult(index, np.full(25, np.nan), False, reason, seconds, simulator_version(), tag), None
+        return RowResult(index, batch.outputs[0], True, "", seconds, simulator_version(), tag), state
+    except Exception as err:  # noqa: BLE001 - recorded, never swallowed silently
+        reason = failure_reason(err)
+    return (RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, simulator_version(), tag),
+            None)
+
+
+def execute_chunk(forward, positions: list[int], indices: list[int], inputs: list[dict], units, seeds) -> list:
+    """Run one chunk of a continuation chain in a worker (see :mod:`lvcore.chains`).
+
+    Rows are solved in the given order, each warm-started from the nearest
+    converged state among ``seeds`` and the chunk's earlier rows, when the
+    forward model can (``evaluate_warm``); otherwise cold, as :func:`execute_row`.
+    Returns :class:`~lvcore.chains.ChainRow` objects keyed by ``positions``
+    whose results are :class:`RowResult` for store rows ``indices``.
+    """
+    by_pos = {p: (i, x) for p, i, x in zip(positions, indices, inputs)}
+    warm = callable(getattr(forward, "evaluate_warm", None))
+
+    def solve(pos, initial):
+        i, x = by_pos[pos]
+        if warm:
+            return execute_warm_row(forward, i, x, initial)
+        return execute_row(forward, i, x), None
+
+    return solve_in_order(positions, units, seeds, solve)
+
+
 def row_inputs(design: Design, i: int) -> dict:
     """The named inputs of design row ``i`` (the space's varied inputs; the fixed ones are bound into the forward)."""
     return {n: float(v) for n, v in zip(design.space.names, design.points[i])}
 
 
 def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progress: bool,
-           allow_rerecord: bool = False) -> None:
-    """Submit ``rows`` to ``forward`` (a Forward) and record their results as they complete."""
+           allow_rerecord: bool = False, chained: bool = True, chunk: int = DEFAULT_CHUNK):
+    """Submit ``rows`` to ``forward`` (a Forward) and record their results as they complete.
+
+    ``chained``: the rows run as warm-started continuation chains split across
+    the executor's workers (:func:`lvcore.chains.run_chains`), in
+    chunks of ``chunk`` rows; otherwise one cold task per row. Returns the
+    :class:`~lvcore.chains.ChainStats` of a chained run, else None.
+    """
     if rows.size == 0:
-        return
+        return None
     from tqdm import tqdm
 
     design = store.design()
-    futures = [executor.submit(execute_row, forward, int(i), row_inputs(design, int(i))) for i in rows]
     bar = tqdm(total=rows.size, disable=not progress, file=sys.stderr, unit="run", desc="campaign")
     failed = 0
+
+    def record(result: RowResult) -> None:
+        nonlocal failed
+        store.record(result, allow_rerecord=allow_rerecord)
+        failed += not result.converged
+        bar.update(1)
+        bar.set_postfix(failed=failed)
+
+    def died(err):  # infrastructure failure: the rows in flight stay pending
+        return CampaignError(f"a worker died or could not run a row ({type(err).__name__}: {err}); "
+                             f"finished rows are safe, run `lvcore campaign resume {store.path}`")
+
     try:
+        if chained:
+            U = design.space.to_unit(design.points[rows])
+
+            def submit(positions, seeds):
+                idx = [int(rows[p]) for p in positions]
+                return executor.submit(execute_chunk, forward, positions, idx, [row_inputs(design, i) for i in idx],
+                                       U[positions], seeds)
+
+            try:
+                return run_chains(executor, submit, U, workers=getattr(executor, "workers", 1), chunk=chunk,
+                                  on_rows=lambda out: [record(r.result) for r in out])
+            except ChainTaskError as err:
+                raise died(err.__cause__ or err) from err
+        futures = [executor.submit(execute_row, forward, int(i), row_inputs(design, int(i))) for i in rows]
         for fut in executor.as_completed(futures):
             try:
                 result = fut.result()
-            except Exception as err:  # infrastructure failure: the row stays pending
-                raise CampaignError(
-                    f"a worker died or could not run a row ({type(err).__name__}: {err}); "
-                    f"finished rows are safe, run `lvcore campaign resume {store.path}`"
-                ) from err
-            store.record(result, allow_rerecord=allow_rerecord)
-            failed += not result.converged
-            bar.update(1)
-            bar.set_postfix(failed=failed)
+            except Exception as err:
+                raise died(err) from err
+            record(result)
     finally:
         bar.close()
+    return None
 
 
 def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int | None = None,
                  scheduler: str | None = None, resolution: str = "default", forward: str = DEFAULT_FORWARD,
-                 progress: bool = True, executor=None, overwrite: bool = False) -> StoreSummary:
+                 progress: bool = True, executor=None, overwrite: bool = False, chained: bool = True) -> StoreSummary:
     """Run every row of ``design`` and record the results in a new store ``out``.
 
     Parameters
@@ -139,8 +216,13 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         Name of a registered forward model (default ``"simulator"``, the FE
         simulator; see :func:`lvcore.core.register_forward`). The store records the name.
     executor : optional
-        An executor object (see :mod:`lvcore.campaigns.executors`) to use
+        An executor object (see :mod:`lvcore.parallel`) to use
         instead of creating one; it is not closed.
+    chained : bool
+        Run the rows as warm-started continuation chains of nearby rows split
+        across the workers (:mod:`lvcore.chains`; the default), or
+        each row cold in its own task. Both give the same results within the
+        solver tolerance.
     """
     if resolution not in RESOLUTIONS:
         raise CampaignError(f"--resolution must be one of {RESOLUTIONS}, got {resolution!r}")
@@ -149,12 +231,13 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
     name = registered_name(forward)  # fail early on an unknown forward model
     fwd = make_forward(name, design.space, resolution)
     with CampaignStore.create(out, design, forward=name, resolution=resolution, overwrite=overwrite) as store:
-        _run_with(store, store.pending_rows(), executor, workers, scheduler, fwd, progress)
+        _run_with(store, store.pending_rows(), executor, workers, scheduler, fwd, progress, chained=chained)
         return store.summary()
 
 
 def resume_campaign(store_path: str | Path, *, workers: int | None = None, scheduler: str | None = None,
-                    retry_failed: bool = False, progress: bool = True, executor=None) -> StoreSummary:
+                    retry_failed: bool = False, progress: bool = True, executor=None,
+                    chained: bool = True) -> StoreSummary:
     """Run the rows of an existing store that are not committed yet.
 
     With ``retry_failed`` the failed rows are run again too (their previous
@@ -170,20 +253,23 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
         resolution = recorded_resolution(str(attrs["resolution"]), before.versions)
         fwd = make_forward(str(attrs["forward"]), store.design().space, resolution)
         rows = store.pending_rows(retry_failed=retry_failed)
-        _run_with(store, rows, executor, workers, scheduler, fwd, progress, allow_rerecord=retry_failed)
+        _run_with(store, rows, executor, workers, scheduler, fwd, progress, allow_rerecord=retry_failed,
+                  chained=chained)
         return store.summary()
 
 
-def _run_with(store, rows, executor, workers, scheduler, forward, progress, allow_rerecord=False):
+def _run_with(store, rows, executor, workers, scheduler, forward, progress, allow_rerecord=False, chained=True):
     if rows.size == 0:
         return
     if executor is not None:
-        _drive(store, rows, executor, forward=forward, progress=progress, allow_rerecord=allow_rerecord)
+        _drive(store, rows, executor, forward=forward, progress=progress, allow_rerecord=allow_rerecord,
+               chained=chained)
         return
     with make_executor(workers=workers, scheduler=scheduler) as ex:
         if progress:
-            print(f"lvcore campaign: {rows.size} row(s) on {ex.describe()}", file=sys.stderr)
-        _drive(store, rows, ex, forward=forward, progress=progress, allow_rerecord=allow_rerecord)
+            how = "warm-started continuation chains" if chained else "cold, one task per row"
+            print(f"lvcore campaign: {rows.size} row(s) on {ex.describe()}, {how}", file=sys.stderr)
+        _drive(store, rows, ex, forward=forward, progress=progress, allow_rerecord=allow_rerecord, chained=chained)
 
 
 def campaign_status(store_path: str | Path) -> StoreSummary:

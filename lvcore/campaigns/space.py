@@ -33,16 +33,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from lvcore.core.space import (
-    ANGLE_BOUNDS,
-    ANGLES_THETA_BOUNDS,
-    CHAPTER_ANGLES,
-    CHAPTER_EDP,
-    EDP_BOUNDS,
-    THETA_BOUNDS,
-    Parameter,
-    ParameterSpace,
-)
+from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+from lvcore.core.space import ANGLE_BOUNDS, ANGLES_THETA_BOUNDS, EDP_BOUNDS, THETA_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import CampaignError
 from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, pc_names
 

@@ -484,6 +484,9 @@ def _layout_problem(h5: h5py.File) -> str | None:
     for key in ("space", "design_seed", "design_method"):
         if key not in h5.attrs:
             return f"attribute '{key}' is missing"
+    seed = h5.attrs["design_seed"]
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        return f"attribute 'design_seed' is {str(seed)[:60]!r}, not an integer"
     try:
         space = ParameterSpace.from_json(h5.attrs["space"])
     except Exception as err:  # noqa: BLE001

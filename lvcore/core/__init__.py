@@ -1,4 +1,4 @@
-"""The core layer: one interface between models and everything that uses them.
+"""The core layer: the one interface between models and everything that uses them (no implementation).
 
 :mod:`lvcore.core.space`
     :class:`Parameter`, :class:`ParameterSpace`, the chapter's prior box
@@ -6,9 +6,10 @@
     :func:`build_case` (named inputs -> simulator case).
 :mod:`lvcore.core.forward`
     The :class:`Forward` protocol (named physical inputs -> the 25 outputs,
-    batched, optional Jacobian) and its implementations
-    :class:`SimulatorForward`, :class:`EmulatorForward` and the SYNTHETIC
-    :class:`AnalyticForward`.
+    batched) and its capabilities :class:`JacobianForward` and
+    :class:`TraceableForward`; :class:`ForwardBatch`. The implementations
+    live next to what they wrap: :mod:`lvcore.mechanics.forward` (the
+    simulator), :mod:`lvcore.emulator.forward`, :mod:`lvcore.testing.analytic`.
 :mod:`lvcore.core.registry`
     The allow-list of named forwards that campaign stores may refer to.
 
@@ -20,13 +21,12 @@ from __future__ import annotations
 from lvcore._exports import lazy_exports
 
 _EXPORTS = {
-    "Forward": "forward", "ForwardBatch": "forward", "SimulatorForward": "forward", "EmulatorForward": "forward",
-    "AnalyticForward": "forward", "emulator_forward": "forward", "load_emulator_forward": "forward",
+    "Forward": "forward", "JacobianForward": "forward", "TraceableForward": "forward", "ForwardBatch": "forward",
+    "JaxForward": "forward",
     "register_forward": "registry", "make_forward": "registry", "forward_names": "registry",
     "registered_name": "registry",
     "Parameter": "space", "ParameterSpace": "space", "build_case": "space", "THETA_BOUNDS": "space",
-    "ANGLES_THETA_BOUNDS": "space", "ANGLE_BOUNDS": "space", "EDP_BOUNDS": "space", "CHAPTER_ANGLES": "space",
-    "CHAPTER_EDP": "space", "SIGMA_V_ML": "space",
+    "ANGLES_THETA_BOUNDS": "space", "ANGLE_BOUNDS": "space", "EDP_BOUNDS": "space",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -9,43 +9,46 @@ the EDP) are bound into the forward model when it is built, so its users
 (campaigns, optimisers, samplers, studies, the app) see only the inputs in
 :attr:`Forward.input_names`.
 
-Two ways to call a forward model:
+What a model can do is its type (small protocols, after emukit's
+``core/interfaces/models.py``), never a flag checked at run time:
 
-``forward.evaluate(inputs, jacobian=False) -> ForwardBatch``
-    batched and numeric: ``inputs`` maps every name of ``input_names`` to an
-    array of shape ``(n,)`` (scalars broadcast). Failures are data: a point
-    that does not converge is a NaN row with ``converged`` False and a
-    message; ``evaluate`` raises only for malformed inputs. With
-    ``jacobian=True`` (needs ``provides_jacobian``) the batch carries
+:class:`Forward` (outputs)
+    ``forward.evaluate(inputs) -> ForwardBatch``, batched and numeric:
+    ``inputs`` maps every name of ``input_names`` to an array of shape
+    ``(n,)`` (scalars broadcast). Failures are data: a point that does not
+    converge is a NaN row with ``converged`` False and a message; ``evaluate``
+    raises only for malformed inputs. ``forward(params) -> (25,)`` is one
+    point, raising for a failure.
+:class:`JacobianForward` (with Jacobian)
+    adds ``forward.jacobian(inputs) -> ForwardBatch`` whose ``jacobian`` is
     ``d outputs / d inputs`` of shape ``(n, 25, len(input_names))``.
-``forward(params) -> (25,)``
-    one point; for JAX-traceable forwards (``traceable`` True: the emulator,
-    the analytic stand-in) this is a pure JAX function that ``jax.grad``,
-    ``jax.vmap`` and numpyro can trace. The simulator solves sparse systems
-    on the host and is *not* traceable: calling it with traced values raises
-    :class:`~lvcore.exceptions.ForwardError` saying so.
+:class:`TraceableForward` (batched in JAX)
+    ``forward(params)`` is a pure JAX function that ``jax.grad``, ``jax.vmap``
+    and numpyro can trace, and ``forward.apply(x)`` is the same function on
+    arrays of points ``(..., p) -> (..., 25)``.
 
-Implementations: :class:`SimulatorForward` (the FE simulator, adjoint
-Jacobian, batches over a process pool or Dask), :class:`EmulatorForward`
-(a trained emulator with conditions bound in) and :class:`AnalyticForward`
-(a SYNTHETIC closed-form stand-in for tests and benchmarks only).
+This module holds the interface only. Implementations live next to what they
+wrap: :class:`lvcore.mechanics.forward.SimulatorForward` and
+:class:`~lvcore.mechanics.forward.AdjointSimulatorForward` (the FE simulator;
+the latter with the adjoint Jacobian), :class:`lvcore.emulator.forward.EmulatorForward`
+(a trained emulator with conditions bound in) and
+:class:`lvcore.testing.analytic.AnalyticForward` (a SYNTHETIC closed-form
+stand-in for tests and benchmarks only). :class:`JaxForward` is the shared
+base of the JAX ones.
 """
 from __future__ import annotations
 
-import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Mapping, Protocol, runtime_checkable
+from typing import Any, Mapping, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore.core.space import CHAPTER_ANGLES, CHAPTER_EDP, build_case
-from lvcore.exceptions import EmulatorError, ForwardError, SolverError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES, is_pc_name, pc_names
-from lvcore.units import DEFAULT_ALPHA_ENDO_DEG, DEFAULT_ALPHA_EPI_DEG, DEFAULT_EDP_MMHG
+from lvcore.exceptions import ForwardError, SolverError
+from lvcore.outputs import N_OUTPUTS
 
 
 # --------------------------------------------------------------------------- the interface
@@ -111,16 +114,16 @@ class ForwardBatch:
 class Forward(Protocol):
     """A forward model: named physical inputs -> the 25 outputs (see the module docstring).
 
+    The base capability: outputs, one point (``__call__``) or a batch (``evaluate``). What a model can do
+    beyond that is its type, not a flag: :class:`JacobianForward` (derivatives of the outputs) and
+    :class:`TraceableForward` (a pure JAX function), as in emukit's ``IModel`` / ``IDifferentiable``.
+
     Attributes
     ----------
     input_names : tuple of str
         Inputs read at call time, in Jacobian-column order.
     label : str
         Human-readable description (summaries, stores); says SYNTHETIC for stand-ins.
-    provides_jacobian : bool
-        ``evaluate(..., jacobian=True)`` is available.
-    traceable : bool
-        ``__call__`` is a pure JAX function (usable inside ``jax.grad`` and numpyro).
     input_bounds : mapping
         Box in which the forward model is valid (an emulator's training box),
         name -> (lower, upper); empty where unrestricted.
@@ -128,17 +131,38 @@ class Forward(Protocol):
 
     input_names: tuple[str, ...]
     label: str
-    provides_jacobian: bool
-    traceable: bool
 
     @property
     def input_bounds(self) -> Mapping[str, tuple[float, float]]:  # pragma: no cover - protocol
         ...
 
-    def evaluate(self, inputs: Mapping[str, Any], *, jacobian: bool = False) -> ForwardBatch:  # pragma: no cover
+    def evaluate(self, inputs: Mapping[str, Any]) -> ForwardBatch:  # pragma: no cover - protocol
+        """Outputs of a batch: ``inputs`` maps every input name to a number or an ``(n,)`` array."""
         ...
 
     def __call__(self, params: Mapping[str, Any]) -> Any:  # pragma: no cover - protocol
+        """Outputs ``(25,)`` of one point; raises :class:`SolverError` if it fails."""
+        ...
+
+
+@runtime_checkable
+class JacobianForward(Forward, Protocol):
+    """A :class:`Forward` that also gives ``d outputs / d inputs``."""
+
+    def jacobian(self, inputs: Mapping[str, Any]) -> ForwardBatch:  # pragma: no cover - protocol
+        """Like :meth:`Forward.evaluate`, with the batch's ``jacobian`` (n, 25, len(input_names)) filled."""
+        ...
+
+
+@runtime_checkable
+class TraceableForward(JacobianForward, Protocol):
+    """A :class:`Forward` whose outputs are a pure JAX function (usable inside ``jax.grad``, ``jax.vmap``, numpyro).
+
+    ``__call__(params)`` traces; :meth:`apply` is the same function on arrays of points.
+    """
+
+    def apply(self, x: Any) -> Any:  # pragma: no cover - protocol
+        """Outputs ``(..., 25)`` of points ``x`` of shape ``(..., len(input_names))`` (input_names order)."""
         ...
 
 
@@ -175,7 +199,8 @@ def as_columns(inputs: Mapping[str, Any], names: tuple[str, ...], who: str = "fo
     return out, n
 
 
-def _is_traced(params: Mapping[str, Any]) -> bool:
+def is_traced(params: Mapping[str, Any]) -> bool:
+    """True when any value of ``params`` is a JAX tracer (the caller is inside jit, grad or vmap)."""
     return any(isinstance(v, jax.core.Tracer) for v in params.values())
 
 
@@ -188,16 +213,29 @@ def failure_reason(err: BaseException) -> str:
     return f"{type(err).__name__}: {err}{where}"
 
 
-class _JaxForward:
-    """Shared ``evaluate`` for forward models whose ``__call__`` is a pure JAX function of one point."""
+class JaxForward:
+    """Base of the forward models whose ``__call__`` is a pure JAX function of one point.
 
-    traceable: ClassVar[bool] = True
-    provides_jacobian: ClassVar[bool] = True
+    Gives them :meth:`evaluate`, :meth:`jacobian` (``jax.jacfwd``) and :meth:`apply` (``jax.vmap``), so every
+    subclass is a :class:`TraceableForward`. A subclass defines ``input_names``, ``label``, ``input_bounds``
+    and ``__call__(params)``.
+    """
 
     def _point(self, x):
         return self(dict(zip(self.input_names, x)))
 
-    def evaluate(self, inputs: Mapping[str, Any], *, jacobian: bool = False) -> ForwardBatch:
+    def apply(self, x):
+        x = jnp.asarray(x)
+        flat = jnp.reshape(x, (-1, len(self.input_names)))
+        return jnp.reshape(jax.vmap(self._point)(flat), x.shape[:-1] + (N_OUTPUTS,))
+
+    def evaluate(self, inputs: Mapping[str, Any]) -> ForwardBatch:
+        return self._batch(inputs, False)
+
+    def jacobian(self, inputs: Mapping[str, Any]) -> ForwardBatch:
+        return self._batch(inputs, True)
+
+    def _batch(self, inputs: Mapping[str, Any], jacobian: bool) -> ForwardBatch:
         cols, n = as_columns(inputs, self.input_names, self.label)
         x = jnp.stack([jnp.asarray(cols[k]) for k in self.input_names], axis=-1) if self.input_names \
             else jnp.zeros((n, 0))
@@ -215,354 +253,5 @@ class _JaxForward:
         """Hook: warn or raise for points outside the valid box (the emulator does)."""
 
 
-# --------------------------------------------------------------------------- the simulator
-def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, warm: dict | None = None):
-    """One simulator run -> ``(outputs (25,), converged, message, jacobian (25, p) or None, seconds)``.
-
-    Runs in worker processes; never raises for a failing simulation. ``warm``
-    (in-process only): a dict whose ``"state"`` warm-starts the solve and is
-    replaced by this solve's state when it converges.
-    """
-    t0 = time.perf_counter()
-    nan_jac = np.full((N_OUTPUTS, len(input_names)), np.nan) if jacobian else None
-    try:
-        from lvcore import simulate
-
-        r = simulate(case, with_sensitivities=jacobian, initial=None if warm is None else warm.get("state"))
-        if warm is not None and r.converged:
-            warm["state"] = r.solver_state
-        seconds = float(getattr(r, "seconds", time.perf_counter() - t0))
-        if not r.converged:
-            return np.full(N_OUTPUTS, np.nan), False, str(r.message or "did not converge"), nan_jac, seconds
-        y = np.asarray(r.outputs(), dtype=float)
-        jac = None
-        if jacobian:
-            sens = r.sensitivities or {}
-            jac = np.column_stack([np.asarray(sens[n], dtype=float) for n in input_names])
-        return y, True, str(r.message or ""), jac, seconds
-    except Exception as err:  # noqa: BLE001 - recorded as a failed point, never swallowed silently
-        return np.full(N_OUTPUTS, np.nan), False, failure_reason(err), nan_jac, time.perf_counter() - t0
-
-
-@dataclass(frozen=True, eq=False)
-class SimulatorForward:
-    """The FE simulator (:func:`lvcore.simulate`) as a :class:`Forward`.
-
-    Each point's named inputs, merged with ``conditions``, go through
-    :func:`lvcore.core.space.build_case` on ``geometry`` at ``resolution``.
-
-    Parameters
-    ----------
-    input_names : tuple of str
-        Inputs read at call time (default ``a, b, af, bf``).
-    conditions : mapping
-        Fixed inputs by name (fibre angles in deg, ``edp`` in mmHg, PC scores
-        ``h1..hk`` of a ``pca`` geometry). Unset angles and EDP are the
-        chapter's (-60°, 60°) and 8 mmHg (:func:`build_case`).
-    geometry : mapping, optional
-        The case's geometry section (default: the PC scores among the inputs,
-        else the default LV).
-    resolution : str
-        Mesh preset (``"fast"``, ``"coarse"``, ``"default"``, ``"accurate"``).
-    base : {"clamped", "sliding"}
-    workers : int, optional
-        Batches of more than one point run on a local process pool of this
-        many workers (:class:`lvcore.campaigns.executors.LocalExecutor`;
-        ``None``: one per core). ``1`` (default) runs them in this process.
-    scheduler : str, optional
-        ``tcp://HOST:PORT`` of a Dask scheduler for batches (overrides ``workers``).
-    label : str
-    warm_start : bool
-        Points run in this process start Newton from the last converged
-        state of this forward (:func:`lvcore.mechanics.newton.solve`), which
-        saves most of the load stepping in a sequence of nearby points (an SQP
-        or line search). A failed warm start falls back to a cold solve, and
-        the result satisfies the same tolerances; points sent to a pool are
-        always solved cold.
-
-    Notes
-    -----
-    The Jacobian comes from the simulator's adjoint sensitivities
-    (:mod:`lvcore.mechanics.sensitivities`), which exist for the material
-    parameters only: ``provides_jacobian`` is True when every input is one
-    of ``a, b, af, bf``. The simulator is not JAX-traceable.
-    """
-
-    input_names: tuple[str, ...] = THETA_NAMES
-    conditions: Mapping[str, float] = field(default_factory=dict)
-    geometry: Mapping | None = None
-    resolution: str = "default"
-    base: str = "clamped"
-    workers: int | None = 1
-    scheduler: str | None = None
-    label: str = "FE simulator"
-    warm_start: bool = False
-    _warm: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-
-    traceable: ClassVar[bool] = False
-
-    def __post_init__(self):
-        object.__setattr__(self, "input_names", tuple(str(n) for n in self.input_names))
-        object.__setattr__(self, "conditions", {str(k): float(v) for k, v in dict(self.conditions).items()})
-        both = sorted(set(self.input_names) & set(self.conditions))
-        if both:
-            raise ForwardError(f"simulator forward: {both} are both inputs and fixed conditions")
-        # fail now, not per point, on names the case builder does not know
-        probe = {**{n: 1.0 for n in THETA_NAMES}, **self.conditions, **{n: 0.0 for n in self.input_names}}
-        probe.update({n: 1.0 for n in THETA_NAMES if n in self.input_names})
-        build_case(probe, geometry=self.geometry, resolution=self.resolution, base=self.base)
-
-    @property
-    def provides_jacobian(self) -> bool:
-        return bool(self.input_names) and set(self.input_names) <= set(THETA_NAMES)
-
-    @property
-    def input_bounds(self) -> dict:
-        return {}
-
-    def case(self, point: Mapping[str, float]) -> dict:
-        """The simulator case of one point (``input_names`` -> values)."""
-        return build_case({**self.conditions, **{n: float(point[n]) for n in self.input_names}},
-                          geometry=self.geometry, resolution=self.resolution, base=self.base)
-
-    def evaluate(self, inputs: Mapping[str, Any], *, jacobian: bool = False, executor=None) -> ForwardBatch:
-        """Simulate every point (see :class:`Forward`); ``executor`` reuses a running pool.
-
-        ``executor`` is any object of :mod:`lvcore.campaigns.executors`
-        (``submit``/``as_completed``); it is not closed.
-        """
-        if jacobian and not self.provides_jacobian:
-            raise ForwardError(f"the simulator's adjoint Jacobian covers {list(THETA_NAMES)} only; "
-                               f"this forward reads {list(self.input_names)}")
-        cols, n = as_columns(inputs, self.input_names, self.label)
-        cases = [self.case({k: cols[k][i] for k in self.input_names}) for i in range(n)]
-        if executor is None and n > 1 and (self.scheduler or self.workers != 1):
-            from lvcore.campaigns.executors import make_executor
-
-            with make_executor(workers=self.workers, scheduler=self.scheduler) as ex:
-                results = self._run(cases, jacobian, ex)
-        else:
-            results = self._run(cases, jacobian, executor)
-        y, conv, msgs, jacs, secs = zip(*results)
-        return ForwardBatch(np.stack(y), np.array(conv), tuple(msgs), np.stack(jacs) if jacobian else None,
-                            np.array(secs))
-
-    def _run(self, cases, jacobian, executor):
-        if executor is None:
-            warm = self._warm if self.warm_start else None
-            return [_simulate_point(c, self.input_names, jacobian, warm) for c in cases]
-        futures = [executor.submit(_simulate_point, c, self.input_names, jacobian) for c in cases]
-        return [f.result() for f in futures]
-
-    def __call__(self, params: Mapping[str, Any]) -> np.ndarray:
-        """Outputs ``(25,)`` of one point; raises :class:`SolverError` if it fails. Not JAX-traceable."""
-        if _is_traced(params):
-            raise ForwardError("the FE simulator is not JAX-traceable (its sparse solves run on the host): "
-                               "use an EmulatorForward for jax.grad/NUTS, or SimulatorForward.evaluate "
-                               "(with jacobian=True for the adjoint gradient)")
-        batch = self.evaluate({n: params[n] for n in self.input_names}).raise_on_failure()
-        return batch.outputs[0]
-
-
-# --------------------------------------------------------------------------- the emulator
-@dataclass(frozen=True, eq=False)
-class EmulatorForward(_JaxForward):
-    """A trained emulator with fixed conditions bound in, as a :class:`Forward`.
-
-    Parameters
-    ----------
-    emulator : lvcore.emulator.model.Emulator
-        From :func:`lvcore.emulator.load_emulator`. Its one calling convention
-        is used: ``emulator.apply(x)`` with ``x`` of shape ``(..., d)`` in the
-        order of ``emulator.input_names`` (physical units), a pure, jittable
-        JAX function returning ``(..., 25)``.
-    conditions : mapping
-        Fixed inputs by name (``h1..hk``; ``edp`` in mmHg and fibre angles in
-        degrees for emulators that take them).
-    input_names : tuple of str
-        Inputs read at call time.
-    label : str
-    """
-
-    emulator: Any
-    conditions: Mapping[str, float]
-    input_names: tuple[str, ...] = THETA_NAMES
-    label: str = "emulator"
-
-    def __post_init__(self):
-        names = tuple(getattr(self.emulator, "input_names", ()) or ())
-        if not names or not callable(getattr(self.emulator, "apply", None)):
-            raise EmulatorError(f"{type(self.emulator).__name__} is not an emulator (needs input_names and apply); "
-                                "load one with lvcore.emulator.load_emulator(name)")
-        object.__setattr__(self, "input_names", tuple(self.input_names))
-        object.__setattr__(self, "conditions", {str(k): float(v) for k, v in dict(self.conditions).items()})
-        missing = [n for n in names if n not in self.input_names and n not in self.conditions]
-        if missing:
-            raise EmulatorError(f"emulator '{self.label}' needs inputs {missing} that are neither read nor fixed")
-        extra = [n for n in self.input_names if n not in names]
-        if extra:
-            raise EmulatorError(f"emulator '{self.label}' has no input(s) {extra}; its inputs: {list(names)}")
-
-    @property
-    def base(self) -> str:
-        """Basal boundary condition of the simulations the emulator was trained on."""
-        return str(getattr(self.emulator, "base", "clamped"))
-
-    @property
-    def input_bounds(self) -> dict[str, tuple[float, float]]:
-        """The emulator's training box over ``input_names`` (physical units).
-
-        Calibration narrows its uniform priors to this box
-        (:func:`lvcore.inference.models.prior_bounds`), so NUTS never asks
-        the emulator to extrapolate.
-        """
-        names = tuple(self.emulator.input_names)
-        return {n: (float(self.emulator.lower[names.index(n)]), float(self.emulator.upper[names.index(n)]))
-                for n in self.input_names}
-
-    def _vector(self, params):
-        return jnp.stack([jnp.asarray(params[n] if n in self.input_names else self.conditions[n], dtype=jnp.float64)
-                          for n in self.emulator.input_names], axis=-1)
-
-    def __call__(self, params):
-        return jnp.reshape(self.emulator.apply(self._vector(params)), (N_OUTPUTS,))
-
-    def _check_box(self, x: np.ndarray) -> None:
-        full = np.stack([x[:, self.input_names.index(n)] if n in self.input_names
-                         else np.full(x.shape[0], self.conditions[n]) for n in self.emulator.input_names], axis=-1)
-        check = getattr(self.emulator, "check_inputs", None)
-        if check is not None:
-            check(full)
-
-
-def emulator_forward(
-    emulator,
-    h,
-    *,
-    infer_angles: bool = False,
-    alpha_endo: float = DEFAULT_ALPHA_ENDO_DEG,
-    alpha_epi: float = DEFAULT_ALPHA_EPI_DEG,
-    edp_mmhg: float = DEFAULT_EDP_MMHG,
-    name: str | None = None,
-) -> EmulatorForward:
-    """Bind a geometry (PC scores) and conditions into an emulator for calibration.
-
-    Parameters
-    ----------
-    emulator : lvcore.emulator.model.Emulator
-    h : array_like
-        PC scores of the geometry; at least as many as the emulator uses.
-    infer_angles : bool
-        If True the fibre angles are inputs (read at call time); the emulator
-        must take ``alpha_endo`` and ``alpha_epi``.
-    alpha_endo, alpha_epi : float
-        Fixed fibre angles (deg), used when the emulator takes them and
-        ``infer_angles`` is False. Ignored by emulators trained at fixed angles.
-    edp_mmhg : float
-        End-diastolic pressure (mmHg), used when the emulator takes ``edp``.
-
-    Raises
-    ------
-    EmulatorError
-        If angles are to be inferred but the emulator was trained at fixed
-        angles, if ``h`` is too short, or if the emulator lacks an input.
-    """
-    names = tuple(getattr(emulator, "input_names", ()))
-    if not names:
-        raise EmulatorError("emulator has no input_names; cannot bind conditions")
-    label = name or getattr(emulator, "name", "emulator")
-    if infer_angles and not set(ANGLE_NAMES) <= set(names):
-        raise EmulatorError(
-            f"emulator '{label}' was trained at fixed fibre angles (inputs {names}); "
-            "use --angles fixed or an emulator with alpha_endo/alpha_epi inputs (e.g. 'angles')"
-        )
-    h = np.atleast_1d(np.asarray(h, dtype=float))
-    n_pc = sum(1 for n in names if is_pc_name(n))
-    if h.size < n_pc:
-        raise EmulatorError(f"emulator '{label}' needs {n_pc} PC scores, got {h.size}")
-    cond = {n: float(v) for n, v in zip(pc_names(n_pc), h[:n_pc])}
-    cond.update({ANGLE_NAMES[0]: float(alpha_endo), ANGLE_NAMES[1]: float(alpha_epi), EDP_NAME: float(edp_mmhg)})
-    input_names = THETA_NAMES + (ANGLE_NAMES if infer_angles else ())
-    missing = [n for n in names if n not in input_names and n not in cond]
-    if missing:
-        raise EmulatorError(f"emulator '{label}' needs inputs {missing} that calibration cannot supply")
-    cond = {k: v for k, v in cond.items() if k in names and k not in input_names}
-    return EmulatorForward(emulator, cond, input_names, label)
-
-
-def load_emulator_forward(name: str, h, **kwargs) -> EmulatorForward:
-    """Load emulator ``name`` (:func:`lvcore.emulator.load_emulator`) and bind ``h`` and conditions.
-
-    Never substitutes a stand-in: a missing emulator is an :class:`EmulatorError`
-    telling how to build it. ``kwargs`` go to :func:`emulator_forward`.
-    """
-    from lvcore.emulator import load_emulator
-
-    try:
-        emulator = load_emulator(name)
-    except EmulatorError:
-        raise
-    except (FileNotFoundError, OSError, KeyError) as err:
-        raise EmulatorError(
-            f"emulator '{name}' not found; build it with python scripts/build_emulators.py ({err})"
-        ) from err
-    return emulator_forward(emulator, h, name=name, **kwargs)
-
-
-# --------------------------------------------------------------------------- closed-form stand-in
-def _analytic_matrix() -> np.ndarray:
-    """Fixed smooth loading of the 4 log-parameters onto the 24 regions (deterministic)."""
-    r = np.arange(24)
-    gamma = (r % 6) * np.pi / 3
-    z = (r // 6) / 3.0
-    return np.stack([
-        1.0 + 0.3 * z,
-        0.6 + 0.4 * np.cos(gamma),
-        0.8 * np.sin(gamma + 0.5) + 0.3 * z,
-        0.5 - 0.6 * z + 0.3 * np.cos(2 * gamma),
-    ], axis=1)
-
-
-@dataclass(frozen=True)
-class AnalyticForward(_JaxForward):
-    """SYNTHETIC closed-form stand-in forward model, for tests and benchmarks only.
-
-    Smooth, differentiable and identifiable from 25 noisy outputs; it is not a
-    model of the heart. With ``u = log(theta / theta_ref)``:
-    ``LVV = 140 - 25 tanh(0.5 u_a + 0.3 u_b + 0.3 u_af + 0.2 u_bf)`` (mL) and
-    ``strain_r = -0.15 + 0.04 sum_j M_rj u_j + 0.004 |u|^2`` with ``M`` a fixed
-    smooth map over (sector, level). If ``alpha_endo``/``alpha_epi`` are in
-    ``input_names`` they shift the strains linearly, by 0.02 per 30 degrees
-    times fixed sector (alpha_endo) and level (alpha_epi) patterns that no
-    change of theta can mimic.
-    """
-
-    theta_ref: tuple[float, float, float, float] = (0.6, 5.0, 1.5, 5.0)
-    input_names: tuple[str, ...] = THETA_NAMES
-    label: str = "analytic stand-in (SYNTHETIC, tests only)"
-
-    @property
-    def input_bounds(self) -> dict:
-        return {}
-
-    def __call__(self, params):
-        u = jnp.stack([jnp.log(jnp.asarray(params[n]) / r) for n, r in zip(THETA_NAMES, self.theta_ref)])
-        lvv = 140.0 - 25.0 * jnp.tanh(0.5 * u[0] + 0.3 * u[1] + 0.3 * u[2] + 0.2 * u[3])
-        m = jnp.asarray(_analytic_matrix())
-        strains = -0.15 + 0.04 * (m @ u) + 0.004 * jnp.sum(u**2)
-        if ANGLE_NAMES[0] in self.input_names:
-            r = jnp.arange(24)
-            zz = (r // 6) / 3.0
-            gg = (r % 6) * jnp.pi / 3
-            # patterns orthogonal to every column of M and to a constant, so the angles are identifiable
-            endo_pattern = jnp.sin(2.0 * gg)                 # sectors
-            epi_pattern = 9.0 * (zz - 0.5) ** 2 - 1.25       # levels: +1, -1, -1, +1
-            strains = strains + 0.02 * (params["alpha_endo"] + 60.0) / 30.0 * endo_pattern \
-                + 0.02 * (params["alpha_epi"] - 60.0) / 30.0 * epi_pattern
-        return jnp.concatenate([lvv[None], strains])
-
-
-__all__ = [
-    "Forward", "ForwardBatch", "SimulatorForward", "EmulatorForward", "AnalyticForward", "emulator_forward",
-    "load_emulator_forward", "as_columns", "failure_reason", "CHAPTER_ANGLES", "CHAPTER_EDP",
-]
+__all__ = ["Forward", "JacobianForward", "TraceableForward", "ForwardBatch", "JaxForward", "as_columns",
+           "failure_reason", "is_traced"]

@@ -35,14 +35,9 @@ LEGACY_FORWARD_NAMES = {"lvcore:simulate": DEFAULT_FORWARD_NAME}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
 
-def _simulator_factory(space, resolution: str):
-    from lvcore.core.forward import SimulatorForward
-
-    return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=resolution,
-                            base=space.base)
-
-
-_REGISTRY: dict[str, ForwardFactory] = {DEFAULT_FORWARD_NAME: _simulator_factory}
+#: Name -> factory. The default, ``"simulator"``, is registered by the simulator adapter
+#: (:mod:`lvcore.mechanics.forward`, imported by the campaign runner): this layer knows no implementation.
+_REGISTRY: dict[str, ForwardFactory] = {}
 
 
 def register_forward(name: str, factory: ForwardFactory, *, overwrite: bool = False) -> None:

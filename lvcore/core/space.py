@@ -10,8 +10,8 @@ design spaces), optimisation (boxes), inference (prior bounds) and the app
   inputs (bounds, linear or log scale) plus inputs held fixed; maps the unit
   cube of a design to physical values.
 * :data:`THETA_BOUNDS` (the chapter's Table 9.1 prior box),
-  :data:`ANGLES_THETA_BOUNDS`, :data:`ANGLE_BOUNDS`, :data:`EDP_BOUNDS`,
-  :data:`CHAPTER_ANGLES`, :data:`CHAPTER_EDP`, :data:`SIGMA_V_ML`.
+  :data:`ANGLES_THETA_BOUNDS`, :data:`ANGLE_BOUNDS`, :data:`EDP_BOUNDS`
+  (the angles and EDP themselves are in :mod:`lvcore.conditions`).
 * :func:`build_case`: named physical inputs -> the simulator's case
   dictionary. It is the only place in lvcore that writes such a dictionary
   from named inputs.
@@ -24,13 +24,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
 from lvcore.exceptions import CampaignError, CaseError
 from lvcore.outputs import ANGLE_NAMES, BASE_CONDITIONS, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
 
-#: Fibre angles (deg) at which the chapter's emulator was trained.
-CHAPTER_ANGLES = (-60.0, 60.0)
-#: EDP (mmHg) used for the chapter's emulator.
-CHAPTER_EDP = 8.0
 #: Material bounds of the calibration prior (Table 9.1): kPa for a, af.
 THETA_BOUNDS = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
 #: Material bounds of the ``angles`` emulator: Table 9.1's, except b, bf >= 0.5. Below 0.5 the
@@ -42,8 +39,6 @@ ANGLES_THETA_BOUNDS = {**THETA_BOUNDS, "b": (0.5, 30.0), "bf": (0.5, 30.0)}
 ANGLE_BOUNDS = {"alpha_endo": (-90.0, 0.0), "alpha_epi": (0.0, 90.0)}
 #: Range of the end-diastolic pressure (mmHg) of the ``angles`` emulator.
 EDP_BOUNDS = (6.0, 14.0)
-#: Fixed LVV noise standard deviation (mL) of every calibration likelihood (chapter Table E.1).
-SIGMA_V_ML = 5.0
 
 SCALES = ("linear", "log")
 #: Case sections :func:`build_case` writes (material law: Holzapfel-Ogden).
@@ -58,8 +53,8 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
     ----------
     inputs : mapping
         ``a, b, af, bf`` (kPa, -, kPa, -; required), and optionally
-        ``alpha_endo, alpha_epi`` (deg; default :data:`CHAPTER_ANGLES`),
-        ``edp`` (mmHg; default :data:`CHAPTER_EDP`) and PC scores
+        ``alpha_endo, alpha_epi`` (deg; default :data:`lvcore.conditions.CHAPTER_ANGLES`),
+        ``edp`` (mmHg; default :data:`lvcore.conditions.CHAPTER_EDP`) and PC scores
         ``h1..hk`` (consecutive from h1). Other names are an error.
     geometry : mapping, optional
         The case's ``geometry`` section (e.g. ``{"kind": "default"}`` or
@@ -287,5 +282,5 @@ class ParameterSpace:
 
 __all__ = [
     "Parameter", "ParameterSpace", "build_case", "THETA_BOUNDS", "ANGLES_THETA_BOUNDS", "ANGLE_BOUNDS",
-    "EDP_BOUNDS", "CHAPTER_ANGLES", "CHAPTER_EDP", "SIGMA_V_ML", "SCALES",
+    "EDP_BOUNDS", "SCALES",
 ]

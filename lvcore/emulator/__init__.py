@@ -10,6 +10,7 @@ _EXPORTS = {
     "Emulator": "model", "ExtrapolationWarning": "model",
     "load_emulator": "io", "save_emulator": "io", "available_emulators": "io", "below_spec_emulators": "io",
     "TrainingConfig": "training", "train_emulator": "training",
+    "EmulatorForward": "forward", "emulator_forward": "forward", "load_emulator_forward": "forward",
 }
 
 __all__ = sorted(_EXPORTS)

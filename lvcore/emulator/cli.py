@@ -1,4 +1,5 @@
-"""``lvcore emulator train STORE ... --out DIR`` and ``lvcore emulator info NAME``."""
+"""``lvcore emulator train STORE ... --out DIR``, ``lvcore emulator build --geometry FILE --out DIR`` and
+``lvcore emulator info NAME``."""
 from __future__ import annotations
 
 import json
@@ -7,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.exceptions import EmulatorError
 
 
@@ -16,18 +18,58 @@ def register(subparsers) -> None:
 
     t = sub.add_parser("train", help="train an emulator on campaign store(s)")
     t.add_argument("stores", nargs="+", help="training campaign store(s) (HDF5, same space)")
-    t.add_argument("--out", required=True, help="output directory (network.npz + metadata.json)")
+    t.add_argument("--out", type=cli_args.output_dir, required=True,
+                   help="output directory (network.npz + metadata.json), created if missing")
     t.add_argument("--inputs", nargs="+", default=None,
                    help="emulator inputs, e.g. a b af bf h1 h2 h3 h4 h5 (default: every varied input of the space)")
     t.add_argument("--valid", nargs="+", default=None, help="validation store(s); default: a random split of the training rows")
-    t.add_argument("--valid-fraction", type=float, default=0.1, help="fraction held out for validation without --valid")
-    t.add_argument("--test", nargs="+", default=None, help="held-out test store(s), never used for training or selection")
+    t.add_argument("--valid-fraction", type=cli_args.float_in(0.0, 0.9, open_lo=True), default=0.1,
+                   help="fraction held out for validation without --valid, in (0, 0.9] (default 0.1)")
+    t.add_argument("--test", nargs="+", default=None,
+                   help="held-out test store(s), never used for training or selection (default: none)")
     t.add_argument("--name", default=None, help="emulator name (default: the output directory's name)")
     add_training_arguments(t)
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--workers", type=int, default=1,
-                   help="processes for the architecture search (one architecture each; same result as 1)")
+    t.add_argument("--seed", type=cli_args.seed, default=0,
+                   help="seed of the split, initialisation and batches, 0 to 2^32 - 1 (default 0)")
+    t.add_argument("--workers", type=cli_args.workers, default=1,
+                   help="processes for the architecture search (one architecture each; same result as 1; default 1)")
     t.set_defaults(func=_train)
+
+    b = sub.add_parser("build", help="build a subject-specific emulator: FE runs on one exact geometry, trained "
+                                     "and validated on held-out runs",
+                       description="Design over the prior box (scipy.stats.qmc Sobol), FE runs on the subject's "
+                                   "geometry as it is (no PCA projection), training, and validation on held-out FE "
+                                   "runs the network never saw; the held-out LVV and strain RMSE go into "
+                                   "metadata.json. Use the result with `lvcore calibrate --emulator DIR` (no "
+                                   "--geometry: it is bound in).")
+    b.add_argument("--geometry", required=True,
+                   help="the subject's geometry: a template mesh (.vtu, e.g. from `lvcore geometry fit --out`), a "
+                        "volumetric tet/hex mesh (.inp/.msh/.med/.vtu/.vtk/.xdmf, fitted), a contour stack or case "
+                        "file (.json), PC scores (.json/.csv) or 'default'")
+    b.add_argument("--out", type=cli_args.output_dir, required=True, help="output directory (geometry.vtu, network.npz, metadata.json, ...)")
+    b.add_argument("--inputs", default="theta",
+                   help="varied inputs: theta, plus optionally edp and angles, comma-separated (default theta)")
+    b.add_argument("--units", choices=("mm", "cm", "m"), default="mm", help="units of a volumetric mesh")
+    b.add_argument("--n-train", type=int, default=800, help="training FE runs (default 800)")
+    b.add_argument("--n-valid", type=int, default=100, help="validation FE runs: early stopping (default 100)")
+    b.add_argument("--n-test", type=int, default=100,
+                   help="held-out FE runs, never used in training; their RMSE is recorded (default 100)")
+    b.add_argument("--design", choices=("sobol", "lhs"), default="sobol", help="space-filling design (default sobol)")
+    b.add_argument("--resolution", default="default", help="mesh preset of the FE runs (default 'default')")
+    b.add_argument("--base", choices=("sliding", "clamped"), default="sliding",
+                   help="basal boundary condition (default sliding, as the 'chapter' emulator)")
+    b.add_argument("--edp", type=float, default=None, help="EDP (mmHg) when not varied (default 8)")
+    b.add_argument("--alpha-endo", type=float, default=None, help="alpha_endo (deg) when not varied (default -60)")
+    b.add_argument("--alpha-epi", type=float, default=None, help="alpha_epi (deg) when not varied (default 60)")
+    b.add_argument("--bound", action="append", default=[], metavar="NAME=LO,HI",
+                   help="other bounds for a varied input, e.g. --bound a=0.3,3 (repeatable)")
+    b.add_argument("--name", default=None, help="emulator name (default subject-<file stem>)")
+    b.add_argument("--workers", type=int, default=2, help="FE worker processes, one continuation chain each")
+    b.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the design and training, 0 to 2^32 - 1 (default 0)")
+    from lvcore.emulator.subject import default_training_config
+
+    add_training_arguments(b, default_training_config())
+    b.set_defaults(func=_build, architectures="100x100")
 
     i = sub.add_parser("info", help="show an emulator's inputs, box, architecture and accuracy")
     i.add_argument("name", help="bundled name (e.g. chapter, angles) or directory")
@@ -44,15 +86,21 @@ def add_training_arguments(parser, defaults=None) -> None:
 
     d = defaults or TrainingConfig()
     parser.add_argument("--architectures", default="all",
-                        help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200'")
-    parser.add_argument("--max-epochs", type=int, default=d.max_epochs)
-    parser.add_argument("--patience", type=int, default=d.patience)
-    parser.add_argument("--decay-epochs", type=int, default=d.decay_epochs,
-                        help="the Adam learning rate (from 0.01) halves every this many epochs")
-    parser.add_argument("--batch-size", type=int, default=d.batch_size)
-    parser.add_argument("--lbfgs-iterations", type=int, default=d.lbfgs_iterations,
-                        help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe alone)")
-    parser.add_argument("--lvv-weight", type=float, default=d.lvv_weight, help="loss weight of the LVV (each strain has 1)")
+                        help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200' "
+                             "(default all)")
+    parser.add_argument("--max-epochs", type=cli_args.int_in(1, 1_000_000), default=d.max_epochs,
+                        help=f"most Adam epochs per architecture (default {d.max_epochs})")
+    parser.add_argument("--patience", type=cli_args.int_in(1, 1_000_000), default=d.patience,
+                        help=f"epochs without a better validation loss before stopping (default {d.patience})")
+    parser.add_argument("--decay-epochs", type=cli_args.int_in(1, 1_000_000), default=d.decay_epochs,
+                        help=f"the Adam learning rate (from 0.01) halves every this many epochs (default {d.decay_epochs})")
+    parser.add_argument("--batch-size", type=cli_args.int_in(1, 1_000_000), default=d.batch_size,
+                        help=f"minibatch size of Adam (default {d.batch_size})")
+    parser.add_argument("--lbfgs-iterations", type=cli_args.int_in(0, 1_000_000), default=d.lbfgs_iterations,
+                        help="full-batch L-BFGS refinement of the selected network (0: the chapter's Adam recipe "
+                             f"alone; default {d.lbfgs_iterations})")
+    parser.add_argument("--lvv-weight", type=float, default=d.lvv_weight,
+                        help=f"loss weight of the LVV (each strain has 1; default {d.lvv_weight:g})")
     parser.add_argument("--lbfgs-lvv-weight", type=float, default=d.lbfgs_lvv_weight,
                         help="LVV loss weight of the L-BFGS stage (default: --lvv-weight)")
 
@@ -119,6 +167,46 @@ def _train(args) -> int:
     return 0
 
 
+def parse_bounds(items) -> dict:
+    """``["a=0.3,3", ...]`` -> ``{"a": (0.3, 3.0)}`` (EmulatorError naming the option)."""
+    out = {}
+    for item in items or ():
+        name, _, rng = str(item).partition("=")
+        try:
+            lo, hi = (float(v) for v in rng.split(","))
+        except ValueError:
+            raise EmulatorError(f"--bound {item}: write NAME=LO,HI, e.g. --bound a=0.3,3") from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+            raise EmulatorError(f"--bound {item}: need finite LO < HI")
+        out[name.strip()] = (lo, hi)
+    return out
+
+
+def _build(args) -> int:
+    from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+    from lvcore.emulator.subject import SubjectDesign, build_subject_emulator
+    from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
+
+    if args.resolution not in RESOLUTION_PRESET_NAMES:
+        raise EmulatorError(f"--resolution must be one of {', '.join(RESOLUTION_PRESET_NAMES)}, got {args.resolution!r}")
+    if args.workers < 1:
+        raise EmulatorError(f"--workers must be >= 1, got {args.workers}")
+    for opt, value, lo, hi in (("--edp", args.edp, 2.0, 40.0), ("--alpha-endo", args.alpha_endo, -180.0, 180.0),
+                               ("--alpha-epi", args.alpha_epi, -180.0, 180.0)):
+        if value is not None and not (np.isfinite(value) and lo <= value <= hi):
+            raise EmulatorError(f"{opt} must be in [{lo:g}, {hi:g}], got {value}")
+    design = SubjectDesign(args.n_train, args.n_valid, args.n_test, args.design)
+    emu = build_subject_emulator(
+        args.geometry, args.out, inputs=args.inputs, design=design, resolution=args.resolution, base=args.base,
+        edp=CHAPTER_EDP if args.edp is None else args.edp,
+        alpha_endo=CHAPTER_ANGLES[0] if args.alpha_endo is None else args.alpha_endo,
+        alpha_epi=CHAPTER_ANGLES[1] if args.alpha_epi is None else args.alpha_epi,
+        bounds=parse_bounds(args.bound), units=args.units, workers=args.workers, seed=args.seed,
+        config=training_config(args, seed=args.seed), name=args.name, log=print)
+    print(format_info(emu.metadata))
+    return 0
+
+
 def format_info(meta: dict) -> str:
     lines = [f"emulator '{meta.get('name')}'  (lvcore {meta.get('lvcore_version')}, {meta.get('created_at', '')})"]
     lo, hi = meta.get("bounds", {}).get("lower", []), meta.get("bounds", {}).get("upper", [])
@@ -133,6 +221,12 @@ def format_info(meta: dict) -> str:
     lines.append(f"  simulations: mesh {', '.join(map(str, source.get('resolution') or ['?']))}, base {base}, "
                  f"simulator {', '.join(map(str, source.get('simulator_versions') or ['?']))}")
     arch = meta.get("architecture", {})
+    sub = meta.get("subject")
+    if sub:
+        runs, secs = sub.get("runs", {}), sub.get("seconds", {})
+        lines.append(f"  SUBJECT-SPECIFIC: geometry fixed ({sub.get('geometry_kind')} from {sub.get('geometry_source')}); "
+                     f"{runs.get('converged')} of {runs.get('total')} FE runs converged; wall {secs.get('total')} s "
+                     f"(simulations {secs.get('simulations')} s, training {secs.get('training')} s)")
     lines.append(f"  network: {meta.get('input_names') and len(meta['input_names'])} -> {arch.get('hidden')} (tanh) -> 25")
     tr = meta.get("training", {})
     if tr:

@@ -143,8 +143,14 @@ def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict
         "lvcore_version": meta.get("lvcore_version", lvcore.__version__),
         "created_at": meta.get("created_at", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())),
     })
+    written = dict(meta)
+    sub = meta.get("subject")
+    if isinstance(sub, dict) and isinstance(sub.get("geometry"), dict) and sub["geometry"].get("kind") == "mesh":
+        path = Path(str(sub["geometry"].get("path", "")))
+        if path.is_absolute() and path.parent.resolve() == directory.resolve():  # keep the directory relocatable
+            written["subject"] = {**sub, "geometry": {**sub["geometry"], "path": path.name}}
     np.savez(directory / "network.npz", **to_arrays(emulator.network))
-    (directory / "metadata.json").write_text(json.dumps(meta, indent=2, sort_keys=True))
+    (directory / "metadata.json").write_text(json.dumps(written, indent=2, sort_keys=True))
     emulator.metadata.update(meta)  # the in-memory emulator now shows what was saved
     if validation is not None:
         np.savez(directory / "validation.npz", **{k: np.asarray(v, dtype=float) for k, v in validation.items()})
@@ -182,6 +188,7 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
     except (ValueError, KeyError, TypeError) as err:
         raise EmulatorError(f"'{net_path}' is not an emulator network: {str(err)[:200]}") from None
     names = tuple(meta["input_names"])
+    _resolve_subject_geometry(meta, directory)
     try:
         return Emulator(
             name=str(meta["name"]),
@@ -201,6 +208,25 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
         )
     except (KeyError, TypeError, ValueError) as err:
         raise EmulatorError(f"'{meta_path}' is malformed: {err!r}") from err
+
+
+def _resolve_subject_geometry(meta: dict, directory: Path) -> None:
+    """A subject emulator's geometry file, named relative to its directory, as an absolute path (in memory)."""
+    sub = meta.get("subject")
+    if not isinstance(sub, dict) or not isinstance(sub.get("geometry"), dict):
+        return
+    geo = dict(sub["geometry"])
+    if geo.get("kind") == "mesh":
+        path = Path(str(geo.get("path", "")))
+        if not path.is_absolute():
+            path = (directory / path).resolve()
+            if directory.resolve() not in path.parents:
+                raise EmulatorError(f"'{directory}/metadata.json': the subject geometry must lie in the emulator "
+                                    f"directory, got {geo.get('path')!r}")
+        if not path.is_file():
+            raise EmulatorError(f"subject emulator '{directory}': its geometry file '{path}' is missing")
+        geo["path"] = str(path)
+    meta["subject"] = {**sub, "geometry": geo}
 
 
 def save_training_data(out_dir: str | Path, sets: dict) -> Path:

@@ -157,6 +157,20 @@ class Emulator:
         source = self.metadata.get("source") or {}
         return recorded_resolution(str((source.get("resolution") or ["default"])[0]), source.get("simulator_versions"))
 
+    @property
+    def is_subject(self) -> bool:
+        """True for a subject-specific emulator (:mod:`lvcore.emulator.subject`): its
+        geometry is fixed and bound in, so it takes no PC scores."""
+        return bool((self.metadata.get("subject") or {}).get("geometry"))
+
+    @property
+    def subject_geometry(self) -> dict | None:
+        """The case ``geometry`` section a subject emulator was trained on (a ``mesh``
+        path resolved against the emulator directory by :func:`~lvcore.emulator.io.load_emulator`),
+        or None for emulators over PC scores."""
+        g = (self.metadata.get("subject") or {}).get("geometry")
+        return None if not g else dict(g)
+
     def simulator(self, geometry=None):
         """The FE forward model this emulator emulates, for checking it against a live solve.
 
@@ -164,11 +178,12 @@ class Emulator:
         ----------
         geometry : mapping, optional
             Geometry description for :func:`lvcore.core.space.build_case`;
-            default: the PC-score geometry of the training space.
+            default: the subject geometry of a subject emulator, else the
+            PC-score geometry of the training space.
 
         Returns
         -------
-        lvcore.core.forward.SimulatorForward
+        lvcore.mechanics.forward.SimulatorForward
             Over the training space's inputs and fixed conditions, at the
             training resolution and base condition.
 
@@ -177,11 +192,12 @@ class Emulator:
         EmulatorError
             If the emulator does not record its training space.
         """
-        from lvcore.core.forward import SimulatorForward
+        from lvcore.mechanics.forward import SimulatorForward
 
         space = self.training_space
         if space is None:
             raise EmulatorError(f"emulator '{self.name}' does not record the parameter space it was trained on")
+        geometry = self.subject_geometry if geometry is None else geometry
         kwargs = {} if geometry is None else {"geometry": dict(geometry)}
         return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=self.resolution,
                                 base=space.base, **kwargs)

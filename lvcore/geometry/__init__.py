@@ -16,6 +16,7 @@ _EXPORTS = {
     "read_contours": "contours", "ContourStack": "contours",
     "read_surface": "surfaces",
     "fit_contours": "fitting", "fit_surfaces": "fitting", "FitResult": "fitting",
+    "analyse_base": "base_plane", "BaseCut": "base_plane", "synthetic_surface_pair": "synthetic_surfaces",
     "fit_volume_mesh": "volume_mesh", "extract_lv_boundary": "volume_mesh", "VolumeMeshFit": "volume_mesh",
     "ellipsoid_tet_mesh": "meshing",
     "ShapeModel": "shape_model", "load_shape_model": "shape_model", "fit_shape_model": "shape_model",

@@ -11,7 +11,9 @@ Method (all lengths mm, scanner coordinates)
 --------------------------------------------
 1. **Rings.** The boundary loops of each surface (edges of exactly one
    triangle, chained in order). The longest loop of a surface is its base
-   ring; any other loop is an extra opening (an outflow tract, a hole).
+   ring; any other loop is an extra opening (an outflow tract), or a hole
+   when shorter than :data:`HOLE_FRACTION` of the base ring (a mesh defect:
+   bridged by the fit, it does not move the cut).
 2. **Base plane.** Least-squares plane of the endocardial base ring
    (:func:`~lvcore.geometry.contours.plane_fit`); its *unevenness* is the
    peak-to-peak distance of the ring from that plane.
@@ -25,7 +27,8 @@ Method (all lengths mm, scanner coordinates)
 4. **Wall thickness.** Distance of every endocardial vertex to the
    epicardial surface. ``T`` is its median between 20 % and 60 % of the
    base-apex length below the base level; the thickness *at the ring* is the
-   median over the endocardial ring points. When it is below
+   10th percentile over the endocardial ring points (so a wall that vanishes
+   over a tenth of the ring, as at an outflow tract, counts). When it is below
    :data:`MEET_FRACTION` ``× T`` the walls meet (or thin to zero) at the base.
 5. **The cut**, a plane orthogonal to the axis at depth ``d`` below the base
    level (``d`` = ``base_cut_mm`` when given). By default ``d`` is the largest of
@@ -64,6 +67,8 @@ MEET_FRACTION = 0.5
 USABLE_FRACTION = 0.8
 #: A default cut deeper than this fraction of the base-apex length is refused.
 MAX_CUT_FRACTION = 0.25
+#: Extra boundary loops shorter than this fraction of the base ring's perimeter are holes: bridged, not cut below.
+HOLE_FRACTION = 0.1
 #: Convergence of the apex/axis iteration (deg).
 AXIS_TOL_DEG = 0.5
 
@@ -128,7 +133,8 @@ class BaseCut:
     ring_depth_mm : float
         Depth of the lowest ring point (any loop, either surface) below the base level.
     wall_at_ring_mm, wall_typical_mm : float
-        Wall thickness at the endocardial ring (median) and typical (median, 20-60 % of the length).
+        Wall thickness at the endocardial ring (10th percentile over its points) and typical (median, 20-60 %
+        of the length).
     walls_meet : bool
         The ring's wall is thinner than ``MEET_FRACTION × wall_typical_mm``.
     cut_depth_mm : float
@@ -208,6 +214,14 @@ def _fmt(v, nd: int = 1) -> str:
 
 
 # ----------------------------------------------------------------------------- loops
+def _edge_once(e: np.ndarray) -> np.ndarray:
+    """Mask of the (directed) edges whose undirected edge occurs exactly once."""
+    lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+    code = lo.astype(np.int64) * (int(hi.max()) + 1) + hi
+    _, inv, cnt = np.unique(code, return_inverse=True, return_counts=True)
+    return cnt[inv] == 1
+
+
 def boundary_loops(triangles) -> list[np.ndarray]:
     """Ordered vertex loops of the open boundary of a triangle mesh.
 
@@ -219,9 +233,7 @@ def boundary_loops(triangles) -> list[np.ndarray]:
     if len(tri) == 0:
         return []
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    b = e[cnt[inv.ravel()] == 1]
+    b = e[_edge_once(e)]
     nxt: dict[int, list[int]] = {}
     for a, c in b:
         nxt.setdefault(int(a), []).append(int(c))
@@ -286,21 +298,19 @@ def closed_volume(points, triangles) -> float:
     pts = np.asarray(points, float)
     tri = _oriented(pts, np.asarray(triangles, np.int64))
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = e[cnt[inv.ravel()] == 1]
-    caps = []
+    bnd = e[_edge_once(e)]
     origin = pts.mean(axis=0)
-    for lp in boundary_loops(tri):
-        c = pts[lp].mean(axis=0)
-        members = set(lp.tolist())
-        for a, b in bnd:
-            if a in members and b in members:
-                caps.append((c, pts[b], pts[a]))
+    loop_of = np.full(len(pts), -1)
+    centres = []
+    for k, lp in enumerate(boundary_loops(tri)):
+        loop_of[lp] = k
+        centres.append(pts[lp].mean(axis=0))
     x = pts[tri] - origin
     v = np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum()
-    if caps:
-        cx = np.asarray(caps) - origin
+    if centres and len(bnd):
+        k = loop_of[bnd[:, 0]]
+        ok = k >= 0
+        cx = np.stack([np.asarray(centres)[k[ok]], pts[bnd[ok, 1]], pts[bnd[ok, 0]]], axis=1) - origin
         v += np.einsum("ij,ij->i", cx[:, 0], np.cross(cx[:, 1], cx[:, 2])).sum()
     return float(abs(v) / 6.0)
 
@@ -422,7 +432,11 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     length = float((c - apex) @ a)
     rings = [_replace(r, depth_mm=float(np.max(-(r.points - c) @ a)), normal=r.normal * np.sign(r.normal @ a or 1.0))
              for r in endo_rings + epi_rings]
-    ring_depth = max(0.0, max(r.depth_mm for r in rings))
+    # small holes (defects of the mesh) are bridged by the fit and do not move the cut
+    hole_max = HOLE_FRACTION * base.perimeter_mm
+    holes = [r for r in rings if not r.is_base and r.perimeter_mm < hole_max]
+    rings_cut = [r for r in rings if r.is_base or r.perimeter_mm >= hole_max]
+    ring_depth = max(0.0, max(r.depth_mm for r in rings_cut))
 
     # wall thickness
     ev = endo.points
@@ -430,7 +444,7 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     thick = wall_thickness(ev, epi)
     mid = (h > 0.2 * length) & (h < 0.6 * length)
     t_typ = float(np.median(thick[mid])) if mid.sum() >= 10 else float(np.median(thick))
-    t_ring = float(np.median(wall_thickness(base.points, epi)))
+    t_ring = float(np.percentile(wall_thickness(base.points, epi), 10))
     meet = t_ring < MEET_FRACTION * t_typ
     band = max(2.0, 2.0 * _median_edge(endo))
 
@@ -439,7 +453,7 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
         return float(np.percentile(thick[sel], 10)) if sel.sum() >= 8 else float("nan")
 
     msgs = []
-    deepest = max(rings, key=lambda r: r.depth_mm)
+    deepest = max(rings_cut, key=lambda r: (round(r.depth_mm, 1), r.surface == "endo", r.is_base))
     kind = "endocardium" if deepest.surface == "endo" else "epicardium"
     max_cut = MAX_CUT_FRACTION * length
     meet_text = (f"the endocardium and epicardium meet at the base (wall thickness {t_ring:.1f} mm at the ring)"
@@ -488,7 +502,8 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
         what = ("base ring" if deepest.is_base else f"extra opening (perimeter {deepest.perimeter_mm:.0f} mm)")
         raise GeometryError(
             f"the {kind}'s {what} reaches {ring_depth:.1f} mm below the base ring's centre (an opening for the "
-            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness {deepest.unevenness_mm:.1f} mm): "
+            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness "
+            f"{deepest.unevenness_mm:.1f} mm): "
             f"cutting below it would remove {removed:.1f} mL ({100 * removed / full:.0f} %) of the cavity. "
             f"Close the opening in the segmentation (cap the outflow tract at the valve plane), or accept the cut "
             f"with --base-cut {np.ceil(ring_depth * 10) / 10:g} (base_cut_mm=)")
@@ -498,7 +513,10 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
         msgs.append(f"the base plane is oblique ({obliq:.1f}° to the long axis)")
     if base.unevenness_mm > 2 * RING_TOL_MM:
         msgs.append(f"the endocardial base ring is uneven ({base.unevenness_mm:.1f} mm peak to peak about its plane)")
-    extra = [r for r in rings if not r.is_base]
+    extra = [r for r in rings_cut if not r.is_base]
+    if holes:
+        msgs.append(f"{len(holes)} small hole(s) in the surfaces (perimeter up to "
+                    f"{max(r.perimeter_mm for r in holes):.1f} mm) bridged by the fit; fill them for a clean surface")
     if extra:
         msgs.append(f"{len(extra)} extra opening(s) besides the base rings (outflow tract or holes), the deepest "
                     f"{max(r.depth_mm for r in extra):.1f} mm below the ring centre")
@@ -515,4 +533,4 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
 
 __all__ = ["BaseRing", "BaseCut", "boundary_loops", "surface_rings", "closed_volume", "volume_below_plane",
            "wall_thickness", "find_axis", "analyse_base", "RING_TOL_MM", "MEET_FRACTION", "USABLE_FRACTION",
-           "MAX_CUT_FRACTION"]
+           "MAX_CUT_FRACTION", "HOLE_FRACTION"]

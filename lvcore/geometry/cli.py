@@ -4,6 +4,9 @@
 * ``lvcore geometry fit --endo ENDO.stl --epi EPI.stl [--units mm] --out MESH.vtu [--json]``
 * ``lvcore geometry fit --mesh LV.inp|LV.msh|LV.vtu [--units mm] --out MESH.vtu [--json]``: a volumetric
   tet/hex mesh, split into endo/epi/base automatically (:mod:`lvcore.geometry.volume_mesh`)
+* ``--base-cut MM`` (any input): cut the LV MM below the base ring's centre (contours: drop the slices
+  above); default: :mod:`lvcore.geometry.base_plane`'s rule. Every fit prints the base plane, the cut and
+  the cavity volume removed (``"base"`` in ``--json``)
 * ``lvcore geometry info MESH.vtu [--json]``: cavity volume, wall volume, length
 * ``lvcore geometry compare A.vtu B.vtu [--json]``: node MSE (cm²), max node distance
 * ``lvcore geometry pca SCORES... --out MESH.vtu [--model M.json]``: reconstruct from PC scores
@@ -15,6 +18,7 @@ import json
 
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.exceptions import GeometryError
 from lvcore.geometry.measures import geometry_info
 
@@ -51,6 +55,7 @@ def _fit(args) -> int:
         meta = {"label": res.label, "residual_mean_mm": f"{res.residual_mean_mm:.4f}"}
         out = write_template_mesh(args.out, res.nodes, metadata=meta)
     summary = {**(mesh_fit.summary() if mesh_fit else res.summary()), "out": str(out) if out else None}
+    summary["warnings"] = list(summary.get("warnings", [])) + units_warnings(res, args.units)
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
@@ -72,6 +77,19 @@ def _fit(args) -> int:
         if out:
             print(f"  wrote {out}  (use it as {{\"geometry\": {{\"kind\": \"mesh\", \"path\": \"{out}\"}}}})")
     return 0
+
+
+def units_warnings(res, units: str) -> list[str]:
+    """Warnings naming ``--units`` when a fitted LV is larger than any real one (wrong units)."""
+    from lvcore import limits
+
+    out = []
+    if res.cavity_volume_ml > limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML or res.length_mm > limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM:
+        out.append(f"the fitted LV has a {res.cavity_volume_ml:,.0f} mL cavity and is {res.length_mm:.0f} mm long, "
+                   f"more than a real LV (> {limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML:.0f} mL or "
+                   f"> {limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM:.0f} mm): check --units (read as {units}; a mm file "
+                   "read with --units cm is 1,000 times too large)")
+    return out
 
 
 def _info(args) -> int:
@@ -116,6 +134,8 @@ def _project(args) -> int:
     from lvcore.geometry.shape_model import load_shape_model
 
     sm = load_shape_model(args.model)
+    if args.modes > sm.n_modes:
+        raise GeometryError(f"--modes {args.modes}: the shape model {sm.label} has {sm.n_modes} modes")
     nodes = read_template_mesh(args.mesh)
     h = sm.project(nodes, args.modes)
     out = {"scores": [float(v) for v in h], "reconstruction_mse_cm2": sm.reconstruction_mse_cm2(nodes, args.modes),
@@ -132,10 +152,12 @@ def register(subparsers) -> None:
 
     f = sub.add_parser("fit", help="fit the template to a contour stack (JSON), endo/epi surfaces or a volume mesh")
     f.add_argument("contours", nargs="?", help="contour stack JSON (schema lvcore.contours/1)")
-    f.add_argument("--endo", help="endocardial surface (VTK/VTP/STL/PLY/OBJ), open at the base")
-    f.add_argument("--epi", help="epicardial surface, open at the base")
+    f.add_argument("--endo", help="endocardial surface (VTK/VTP/STL/PLY/OBJ), open at the base (default: none; "
+                                  "give --endo and --epi, or --mesh, or a contour stack)")
+    f.add_argument("--epi", help="epicardial surface, open at the base (default: none; needed with --endo)")
     f.add_argument("--mesh", help="volumetric LV mesh (tetrahedra/hexahedra; .inp, .msh, .vtu, .vtk, .xdmf, ... - "
-                                  "anything meshio reads), truncated by a flat base")
+                                  "anything meshio reads), open at the base: a flat cap, an uneven or notched base, "
+                                  "or walls that meet at the base (default: none)")
     f.add_argument("--units", default="mm", choices=("mm", "cm", "m"),
                    help="units of surface or volume-mesh files (default mm)")
     f.add_argument("--septum", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
@@ -148,30 +170,34 @@ def register(subparsers) -> None:
                         "meet at the base, where the wall first reaches 80%% of its typical thickness. The fit "
                         "reports the base plane, the cut and the cavity volume removed")
     f.add_argument("--base-z", type=float, default=0.0, help="height of the base plane in the output (mm, default 0)")
-    f.add_argument("--out", help="write the fitted mesh here (.vtu)")
+    f.add_argument("--out", type=cli_args.output_file,
+                   help="write the fitted mesh here (.vtu; default: not written, the summary is printed)")
     f.add_argument("--json", action="store_true", help="print the fit summary as JSON")
     f.set_defaults(func=_fit)
 
     i = sub.add_parser("info", help="cavity and wall volume of a template mesh")
-    i.add_argument("mesh")
-    i.add_argument("--json", action="store_true")
+    i.add_argument("mesh", help="template mesh (.vtu written by `lvcore geometry fit --out` or `geometry pca`)")
+    i.add_argument("--json", action="store_true", help="print the volumes as JSON (default: a text line)")
     i.set_defaults(func=_info)
 
     c = sub.add_parser("compare", help="node MSE (cm²) between two template meshes")
-    c.add_argument("a")
-    c.add_argument("b")
-    c.add_argument("--json", action="store_true")
+    c.add_argument("a", help="first template mesh (.vtu)")
+    c.add_argument("b", help="second template mesh (.vtu) on the same template")
+    c.add_argument("--json", action="store_true", help="print the comparison as JSON (default: a text line)")
     c.set_defaults(func=_compare)
 
     r = sub.add_parser("pca", help="reconstruct a mesh from standardised PCA scores")
-    r.add_argument("scores", nargs="+", type=float)
-    r.add_argument("--out", required=True)
+    r.add_argument("scores", nargs="+", type=cli_args.float_in(-10.0, 10.0),
+                   help="standardised PC scores h1 h2 ... (units of each mode's sd, each in [-10, 10]; modes "
+                        "not given are 0)")
+    r.add_argument("--out", type=cli_args.output_file, required=True, help="output template mesh (.vtu)")
     r.add_argument("--model", default=None, help="shape model .json (default: bundled SYNTHETIC model)")
     r.set_defaults(func=_pca)
 
     q = sub.add_parser("project", help="standardised PCA scores of a template mesh")
-    q.add_argument("mesh")
-    q.add_argument("--modes", type=int, default=5)
-    q.add_argument("--model", default=None)
-    q.add_argument("--json", action="store_true")
+    q.add_argument("mesh", help="template mesh (.vtu) to project onto the shape model")
+    q.add_argument("--modes", type=cli_args.int_in(1, 100), default=5,
+                   help="number of PC modes to project onto, 1 to the model's number of modes (default 5)")
+    q.add_argument("--model", default=None, help="shape model .json (default: the bundled SYNTHETIC model)")
+    q.add_argument("--json", action="store_true", help="print the scores as JSON (default: a text line)")
     q.set_defaults(func=_project)

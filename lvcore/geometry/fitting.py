@@ -323,8 +323,13 @@ def _inverted_message(nodes, template, label: str, base) -> str:
     where = ", ".join(sorted({("base" if r < template.n_long / 3 else "mid-ventricle" if r < 2 * template.n_long / 3
                                else "apex") for r in rows}))
     w = fitted_wall_thickness(nodes, template)
+    i, j = np.meshgrid(np.arange(template.nc), np.arange(template.nl - 1), indexing="xy")
+    r_endo = np.hypot(*nodes[template.node_index(i, j, 0)][..., :2].transpose(2, 0, 1))
+    r_epi = np.hypot(*nodes[template.node_index(i, j, template.nt - 1)][..., :2].transpose(2, 0, 1))
+    n_out = int(np.sum(r_endo[1:] > r_epi[1:]))  # below the base row: endocardium further from the axis
     msg = (f"{label}: the fitted mesh has {bad.size} inverted elements (near the {where}; thinnest fitted wall "
-           f"{w.min():.1f} mm)")
+           f"{w.min():.1f} mm" + (f"; the fitted endocardium lies outside the epicardium at {n_out} of "
+                                  f"{r_endo[1:].size} node pairs" if n_out else "") + ")")
     if base is not None and getattr(base, "walls_meet", False):
         return (msg + f"; {base.messages[0] if base.messages else 'the walls meet at the base'}: cut lower with "
                 "--base-cut MM (base_cut_mm=)")
@@ -365,12 +370,23 @@ def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label
     )
 
 
+#: Closest a septum landmark may lie to the long axis (mm); nearer, phi = 0 is undefined.
+MIN_SEPTUM_AXIS_DISTANCE_MM = 1.0
+
+
 def _x_axis(ez: np.ndarray, origin: np.ndarray, septum) -> np.ndarray:
     if septum is not None:
-        v = np.asarray(septum, float) - origin
+        s = np.asarray(septum, float).reshape(-1)
+        if s.shape != (3,) or not np.all(np.isfinite(s)):
+            raise GeometryError(f"septum landmark {np.array2string(s[:6], precision=3)} must be 3 finite "
+                                "coordinates (a point on the septal wall)")
+        v = s - origin
         v = v - ez * (v @ ez)
-        if np.linalg.norm(v) > 1e-6:
-            return v / np.linalg.norm(v)
+        if not np.linalg.norm(v) >= MIN_SEPTUM_AXIS_DISTANCE_MM:
+            raise GeometryError(f"septum landmark {np.array2string(s, precision=2)} lies "
+                                f"{np.linalg.norm(v):.2g} mm from the LV's long axis, so it cannot fix the "
+                                "circumferential direction (phi = 0); give a point on the septal wall")
+        return v / np.linalg.norm(v)
     for ref in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
         v = ref - ez * (ref @ ez)
         if np.linalg.norm(v) > 0.3:

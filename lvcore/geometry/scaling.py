@@ -144,7 +144,8 @@ class ScaledForward:
     """A forward model of the reference geometry scaled by ``scale``: LVV times ``scale^3``.
 
     Wraps any :class:`lvcore.core.Forward` (emulator, simulator, stand-in);
-    inputs, bounds and traceability are the wrapped model's. With ``scale = 1``
+    inputs, bounds and capabilities (:class:`~lvcore.core.JacobianForward`,
+    :class:`~lvcore.core.TraceableForward`) are the wrapped model's. With ``scale = 1``
     it returns the wrapped model's outputs unchanged.
 
     Parameters
@@ -172,29 +173,31 @@ class ScaledForward:
         return self.forward.input_bounds
 
     @property
-    def traceable(self) -> bool:
-        return bool(getattr(self.forward, "traceable", False))
-
-    @property
-    def provides_jacobian(self) -> bool:
-        return bool(getattr(self.forward, "provides_jacobian", False))
-
-    @property
     def label(self) -> str:
         base = getattr(self.forward, "label", type(self.forward).__name__)
         return base if self.scale == 1.0 else f"{base} x scale {self.scale:.4g}"
 
     def __getattr__(self, name):
-        # everything else (emulator, conditions, base, ...) is the wrapped model's
+        # Capabilities are the wrapped model's (lvcore.core.forward's protocols test for these attributes):
+        # `jacobian` and `apply` exist exactly when the wrapped model has them, and scale its outputs.
         if name in ("forward", "scale"):
             raise AttributeError(name)
+        if name == "jacobian":
+            inner = self.forward.jacobian
+            return lambda inputs, **kwargs: self._scaled(inner(inputs, **kwargs))
+        if name == "apply":
+            inner_apply = self.forward.apply
+            return lambda x: scale_outputs(inner_apply(x), self.scale)
+        # everything else (emulator, conditions, base, ...) is the wrapped model's
         return getattr(self.forward, name)
 
     def __call__(self, params):
         return scale_outputs(self.forward(params), self.scale)
 
-    def evaluate(self, inputs, *, jacobian: bool = False, **kwargs):
-        batch = self.forward.evaluate(inputs, jacobian=jacobian, **kwargs)
+    def evaluate(self, inputs, **kwargs):
+        return self._scaled(self.forward.evaluate(inputs, **kwargs))
+
+    def _scaled(self, batch):
         f = self.scale ** 3
         y = np.array(batch.outputs, dtype=float, copy=True)
         y[:, 0] *= f

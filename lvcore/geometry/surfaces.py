@@ -104,7 +104,7 @@ def _read_surface(path_or_mesh, name: str, units: str) -> LVSurface:
                 warnings.simplefilter("ignore")
                 mesh = pv.read(path)
         except (Exception, SystemExit) as err:
-            errors.append(f"PyVista: {err}")
+            errors.append(_reader_problem("VTK", err))
         if mesh is None or mesh.n_points == 0:
             try:
                 import meshio
@@ -114,11 +114,17 @@ def _read_surface(path_or_mesh, name: str, units: str) -> LVSurface:
                     m = meshio.read(path)
                 mesh = pv.from_meshio(m)
             except (Exception, SystemExit) as err:
-                errors.append(f"meshio: {err}")
+                errors.append(_reader_problem("meshio", err))
         if mesh is None or mesh.n_points == 0:
             errors = errors or ["no points found"]
-            raise GeometryError(f"cannot read {name} surface '{path}' ({'; '.join(errors)}); "
-                                f"use a surface mesh format such as {', '.join(SURFACE_EXTENSIONS)}")
+            suffix = path.suffix.lower()
+            if suffix in SURFACE_EXTENSIONS:
+                what_to_do = (f"it is not a valid {suffix[1:].upper()} file: export the {name} surface again from "
+                              "your segmentation tool (STL, VTK, PLY or OBJ, open at the base)")
+            else:
+                what_to_do = (f"'{suffix or '(no extension)'}' is not a surface format: save it as one of "
+                              f"{', '.join(SURFACE_EXTENSIONS)}")
+            raise GeometryError(f"cannot read {name} surface '{path}': {what_to_do} ({'; '.join(errors)})")
     else:
         mesh = path_or_mesh
     try:
@@ -142,6 +148,18 @@ def _read_surface(path_or_mesh, name: str, units: str) -> LVSurface:
                                        non_manifold_edges=False)
     boundary = np.asarray(edges.points, dtype=float) * scale if edges.n_points else np.zeros((0, 3))
     return LVSurface(name=name, points=pts, triangles=faces[:, 1:].astype(np.int64), boundary=boundary, source=source)
+
+
+def _reader_problem(reader: str, err: BaseException) -> str:
+    """What a reader's exception says, in words a user can act on (never a bare exit status or codec text)."""
+    if isinstance(err, SystemExit):
+        return f"{reader} gave up on its contents"
+    if isinstance(err, UnicodeDecodeError):
+        return f"{reader} found binary data where text was expected"
+    text = " ".join(str(err).split())
+    if not text or "produced no output" in text:
+        return f"{reader} found no mesh in it"
+    return f"{reader}: {text[:120]}"
 
 
 def check_surface_pair(endo: LVSurface, epi: LVSurface) -> None:

@@ -11,6 +11,10 @@ what atlas meshes and surface-based segmentation tools produce, placed in
     both ellipsoids cut at ``z = base_z``, then continued by a conical *lip*
     of height :data:`LIP_HEIGHT_MM` that joins them at one shared base ring:
     the wall thins to zero at the ring, as in a population atlas;
+``partial_join``
+    both walls continued :data:`LIP_HEIGHT_MM` straight up, except over
+    :data:`PARTIAL_JOIN_DEG` (90°) where they lean together and meet (the
+    wall vanishes over a quarter of the ring, as next to an outflow tract);
 ``oblique``
     both cut by a plane tilted by :data:`OBLIQUE_DEG` (20°) about the y axis
     through ``(0, 0, base_z)``;
@@ -22,7 +26,11 @@ what atlas meshes and surface-based segmentation tools produce, placed in
     width :data:`NOTCH_WIDTH_DEG` (cosine flanks) where the outflow tract
     leaves the LV;
 ``deep_notch``
-    the same notch reaching :data:`DEEP_NOTCH_DEPTH_MM` down the wall.
+    the same notch reaching :data:`DEEP_NOTCH_DEPTH_MM` down the wall;
+``outflow_hole``
+    a flat base plus a separate opening through both walls just below it
+    (:data:`HOLE_DEG` wide, from 3 to :data:`HOLE_DEPTH_MM` below the base):
+    an outflow tract segmented as its own opening, a second boundary loop.
 
 Every surface is a (φ, ψ) grid (``ψ`` the polar angle from the apex) that
 ends exactly on its base curve, with one apex vertex. The exact cavity of the
@@ -52,8 +60,13 @@ UNEVEN_MM = 3.0
 NOTCH_DEPTH_MM = 8.0
 NOTCH_WIDTH_DEG = 60.0
 DEEP_NOTCH_DEPTH_MM = 35.0
+#: Width (deg) and lowest depth below the base (mm) of the separate outflow opening.
+HOLE_DEG = 30.0
+HOLE_DEPTH_MM = 10.0
+#: Arc (deg) over which the walls meet in the ``partial_join`` case.
+PARTIAL_JOIN_DEG = 90.0
 #: The cases :func:`synthetic_surface_pair` makes.
-CASES = ("flat", "joined", "oblique", "uneven", "notch", "deep_notch")
+CASES = ("flat", "joined", "partial_join", "oblique", "uneven", "notch", "deep_notch", "outflow_hole")
 
 
 @dataclass(frozen=True)
@@ -273,13 +286,23 @@ def synthetic_surface_pair(case: str, seed: int = 0, n_phi: int = 96, n_psi: int
 
     tops = {"endo": top(lv.endo), "epi": top(lv.epi)}
     extra = {"endo": (), "epi": ()}
-    if case == "joined":
+    if case in ("joined", "partial_join"):
         x_endo = lv.endo.point(phi, tops["endo"])
         x_epi = lv.epi.point(phi, tops["epi"])
-        shared = 0.5 * (x_endo + x_epi) + np.array([0.0, 0.0, LIP_HEIGHT_MM])
+        up = np.array([0.0, 0.0, LIP_HEIGHT_MM])
+        shared = 0.5 * (x_endo + x_epi) + up
+        # joined: everywhere; partial_join: over PARTIAL_JOIN_DEG (cosine flanks), elsewhere straight up
+        if case == "joined":
+            w = np.ones(n_phi)
+        else:
+            d = np.abs(np.angle(np.exp(1j * (phi - np.pi / 3))))
+            half, ramp = np.radians(PARTIAL_JOIN_DEG) / 2, np.radians(15.0)
+            w = np.where(d < half - ramp, 1.0, np.where(d < half, 0.5 * (1 + np.cos(np.pi * (d - half + ramp) / ramp)),
+                                                          0.0))
         n_lip = 6
         for name, x0 in (("endo", x_endo), ("epi", x_epi)):
-            extra[name] = tuple(x0 + (shared - x0) * (i / n_lip) for i in range(1, n_lip + 1))
+            top_ring = w[:, None] * shared + (1 - w[:, None]) * (x0 + up)
+            extra[name] = tuple(x0 + (top_ring - x0) * (i / n_lip) for i in range(1, n_lip + 1))
     pe, te = _grid_surface(lv.endo, phi, tops["endo"], n_psi, extra["endo"])
     pp, tp = _grid_surface(lv.epi, phi, tops["epi"], n_psi, extra["epi"])
     desc = {
@@ -289,9 +312,19 @@ def synthetic_surface_pair(case: str, seed: int = 0, n_phi: int = 96, n_psi: int
         "uneven": f"uneven base, ±{UNEVEN_MM:g} mm about its plane",
         "notch": f"outflow notch {NOTCH_DEPTH_MM:g} mm deep, {NOTCH_WIDTH_DEG:g}° wide",
         "deep_notch": f"outflow notch {DEEP_NOTCH_DEPTH_MM:g} mm deep, {NOTCH_WIDTH_DEG:g}° wide",
+        "partial_join": f"walls rising {LIP_HEIGHT_MM:g} mm above the base, joined at the ring over "
+                        f"{PARTIAL_JOIN_DEG:g}° (wall thickness 0 there)",
+        "outflow_hole": f"flat base and a separate outflow opening {HOLE_DEG:g}° wide, 3-{HOLE_DEPTH_MM:g} mm below it",
     }[case]
     rings = {k: 1 + np.arange(n_phi) * ((len(p) - 1) // n_phi) + (len(p) - 1) // n_phi - 1
              for k, p in (("endo", pe), ("epi", pp))}
+    if case == "outflow_hole":
+        def punch(p, t):
+            c = p[t].mean(axis=1)
+            dphi = np.abs(np.angle(np.exp(1j * (np.arctan2(c[:, 1], c[:, 0]) - np.pi / 3))))
+            cut = (dphi < np.radians(HOLE_DEG) / 2) & (c[:, 2] < zb - 3.0) & (c[:, 2] > zb - HOLE_DEPTH_MM)
+            return t[~cut]
+        te, tp = punch(pe, te), punch(pp, tp)
     return SyntheticSurfacePair(case=case, endo_points=pe @ rotation.T + shift, endo_triangles=te,
                                 epi_points=pp @ rotation.T + shift, epi_triangles=tp, lv=lv, rotation=rotation,
                                 shift=shift, endo_ring=rings["endo"], epi_ring=rings["epi"],

@@ -61,9 +61,7 @@ from functools import cached_property
 
 import numpy as np
 
-N_SECTORS = 6
-N_LEVELS = 4
-N_REGIONS = N_SECTORS * N_LEVELS
+from lvcore.outputs import N_LEVELS, N_REGIONS, N_SECTORS  # the region map's size is part of the outputs' definition
 
 
 def checked_level_elements(level_elements, n_long: int) -> tuple[int, ...]:

@@ -466,8 +466,10 @@ def _split_by_features(points, tri, source, feature_deg: float = FEATURE_DEG):
     used = np.unique(tri)
     if (points[used].mean(axis=0) - origin) @ normal > 0:
         normal = -normal
+    rest = (f"a base of {int(base_mask.sum())} triangles" if base_mask.any()
+            else "no base cap (the walls meet at the base)")
     warn = [f"the base is not one flat cap: the boundary was split at its sharp edges into endocardium, epicardium "
-            f"and {'a base of ' + str(int(base_mask.sum())) + ' triangles' if base_mask.any() else 'no base cap (the walls meet at the base)'}"]
+            f"and {rest}"]
     return t_endo, t_epi, int(base_mask.sum()), origin, normal, float(flat), v_endo, warn
 
 

@@ -13,7 +13,7 @@ end, and every subject x model), :mod:`~lvcore.inference.coverage`
 (posterior-predictive check of the data). One calibration is
 ``lvcore.inference.calibrate.calibrate`` (the name ``calibrate`` here is the
 module). Names are imported on first use. The forward model is any JAX-traceable
-:class:`lvcore.core.Forward` (the emulator, :class:`lvcore.core.EmulatorForward`).
+:class:`lvcore.core.Forward` (the emulator, :class:`lvcore.emulator.EmulatorForward`).
 """
 from __future__ import annotations
 

@@ -14,7 +14,14 @@ import json
 import sys
 from pathlib import Path
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore import cli_args
+from lvcore.conditions import SIGMA_V_ML
+
+#: Range of ``--sigma-v`` (LVV noise sd, mL): echocardiographic/MRI volume errors are 2-15 mL; outside
+#: this range the likelihood either ignores the volume (the posterior is the prior) or is degenerate.
+SIGMA_V_RANGE_ML = (0.1, 50.0)
+#: Range of ``--strain-noise`` (strain sd): measured strain errors are 0.01-0.1.
+STRAIN_NOISE_RANGE = (0.001, 0.5)
 
 
 def register(subparsers) -> None:
@@ -27,18 +34,20 @@ def register(subparsers) -> None:
     )
     p.add_argument("--data",
                    help="measured data: CSV (lvv_ml, strain_01..strain_24 or aha_01..aha_16; optional subject "
-                        "column), JSON or MATLAB .mat (see docs/calibration.md)")
+                        "column), JSON or MATLAB .mat (see docs/calibration.md); default: none, give it or --volunteer")
     p.add_argument("--segments", choices=("lvcore", "aha"), default=None,
                    help="segment convention of the strains (default: what the file says, else lvcore)")
     p.add_argument("--segment-offset", type=float, default=None, metavar="DEG",
                    help="lvcore angle (deg, counter-clockwise seen from the base) of the data's septal centre "
                         "(aha) or sector-0 start (lvcore); default 0")
     p.add_argument("--geometry",
-                   help="(required with --data) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
+                   help="(required with --data, unless --emulator is a subject-specific one from `lvcore emulator "
+                        "build`, whose geometry is bound in) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
                         "volumetric mesh (.inp/.msh/.vtu) to fit and project; or 'mean' (warned: biased "
-                        "estimates when the subject's shape differs)")
+                        "estimates when the subject's shape differs); default: none, give it or --volunteer")
     p.add_argument("--volunteer", default=None, metavar="NAME",
-                   help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry")
+                   help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry "
+                        "(default: none)")
     p.add_argument("--geometry-units", choices=("mm", "cm", "m"), default="mm",
                    help="units of a volumetric --geometry mesh (default mm)")
     p.add_argument("--allow-extrapolation", action="store_true",
@@ -48,7 +57,9 @@ def register(subparsers) -> None:
                    help="volume | iid | discrepancy, or a comma-separated list (default iid)")
     p.add_argument("--angles", choices=("fixed", "infer"), default="fixed",
                    help="fibre angles fixed at the emulator's values, or inferred (needs the 'angles' emulator)")
-    p.add_argument("--emulator", default=None, help="emulator name (default: chapter, or angles with --angles infer)")
+    p.add_argument("--emulator", default=None,
+                   help="emulator name or directory (default: chapter, or angles with --angles infer); a "
+                        "subject-specific emulator directory (`lvcore emulator build`) needs no --geometry")
     p.add_argument("--alpha-endo", type=float, default=None,
                    help="fixed alpha_endo (deg) for emulators that take angles (default -60); an error with "
                         "emulators trained at fixed angles (e.g. 'chapter', trained at -60/60)")
@@ -58,17 +69,25 @@ def register(subparsers) -> None:
     p.add_argument("--edp", type=float, default=None,
                    help="end-diastolic pressure (mmHg, 2-40) for emulators that take it (default 8); an error "
                         "with emulators trained at a fixed EDP (e.g. 'chapter', 8 mmHg)")
-    p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML, help=f"LVV noise sd (mL), fixed (default {SIGMA_V_ML:g})")
+    p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML,
+                   help=f"LVV noise sd (mL), fixed, in [{SIGMA_V_RANGE_ML[0]:g}, {SIGMA_V_RANGE_ML[1]:g}] "
+                        f"(default {SIGMA_V_ML:g})")
     p.add_argument("--strain-noise", type=float, default=None,
-                   help="reference strain noise sd of the plausibility check (default 0.035)")
+                   help=f"reference strain noise sd of the plausibility check, in [{STRAIN_NOISE_RANGE[0]:g}, "
+                        f"{STRAIN_NOISE_RANGE[1]:g}] (default 0.035)")
     p.add_argument("--sampler", choices=("auto", "nuts", "hmc_gibbs"), default="auto",
                    help="auto: NUTS for volume/iid, HMC-within-Gibbs for discrepancy")
-    p.add_argument("--chains", type=int, default=4)
-    p.add_argument("--warmup", type=int, default=1000)
-    p.add_argument("--samples", type=int, default=1000, help="draws kept per chain after convergence")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--chains", type=int, default=4,
+                   help="MCMC chains, 1 to 64, run in parallel on up to 4 host devices (default 4)")
+    p.add_argument("--warmup", type=int, default=1000,
+                   help="warm-up (adaptation) iterations per chain, 1 to 1,000,000 (default 1000)")
+    p.add_argument("--samples", type=int, default=1000,
+                   help="draws kept per chain after convergence, 1 to 1,000,000 (default 1000)")
+    p.add_argument("--seed", type=cli_args.seed, default=0,
+                   help="random seed of the sampler, an integer from 0 to 2^32 - 1 (default 0)")
     p.add_argument("--subject", default=None, help="row to use (subject id); default: every row")
-    p.add_argument("--out", default="calibration_out", help="output folder")
+    p.add_argument("--out", type=cli_args.output_dir, default="calibration_out",
+                   help="output folder, created if missing (default calibration_out)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run_calibrate)
 
@@ -92,6 +111,15 @@ def check_options(args) -> None:
         raise DataError("--warmup and --samples must be <= 1,000,000")
     if not (math.isfinite(args.sigma_v) and args.sigma_v > 0):
         raise DataError(f"--sigma-v must be a positive number of mL, got {args.sigma_v}")
+    lo, hi = SIGMA_V_RANGE_ML
+    if not lo <= args.sigma_v <= hi:
+        raise DataError(f"--sigma-v {args.sigma_v:g} mL is outside [{lo:g}, {hi:g}] mL (docs/calibration.md): "
+                        "larger, the volume carries no information and the posterior is the prior; smaller, "
+                        "the likelihood is degenerate")
+    if args.strain_noise is not None:
+        lo, hi = STRAIN_NOISE_RANGE
+        if not (math.isfinite(args.strain_noise) and lo <= args.strain_noise <= hi):
+            raise DataError(f"--strain-noise {args.strain_noise:g} is outside [{lo:g}, {hi:g}] (a strain sd)")
     for name, value in (("--alpha-endo", args.alpha_endo), ("--alpha-epi", args.alpha_epi)):
         if value is not None and not (math.isfinite(value) and -180 <= value <= 180):
             raise DataError(f"{name} must be an angle in [-180, 180] degrees, got {value}")
@@ -121,7 +149,7 @@ def run_calibrate(args) -> int:
 
     import numpy as np
 
-    from lvcore.core.forward import emulator_forward, load_emulator_forward
+    from lvcore.emulator.forward import emulator_forward, load_emulator_forward
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal
@@ -131,19 +159,29 @@ def run_calibrate(args) -> int:
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.outputs import is_pc_name
 
+    infer = args.angles == "infer"
+    name = args.emulator or ("angles" if infer else "chapter")
+    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
+    subject = bool(getattr(emulator, "is_subject", False))  # geometry bound in (lvcore emulator build)
+    if subject and args.geometry is not None:
+        raise DataError(f"--geometry: the emulator '{name}' is subject-specific, built on the geometry "
+                        f"{emulator.metadata['subject'].get('geometry_source')}, which is bound in; leave --geometry "
+                        "out, or build an emulator for this geometry with `lvcore emulator build --geometry FILE`")
     if args.volunteer is not None:
         from lvcore.resources import volunteer_files
 
         if args.data is not None or args.geometry is not None:
             raise DataError("--volunteer replaces --data and --geometry: give one or the other")
         vol = _volunteer(args.volunteer, volunteer_files)
-        args.data, args.geometry = str(vol.measured), str(vol.geometry)
+        args.data, args.geometry = str(vol.measured), None if subject else str(vol.geometry)
         geometry_option = f"--volunteer {args.volunteer} (its bundled geometry)"
-    elif args.data is None or args.geometry is None:
+    elif args.data is None or (args.geometry is None and not subject):
         raise DataError("give --data and --geometry (your measurements and the subject's geometry; "
                         "'--geometry mean' to use the mean shape knowingly), or --volunteer NAME (a bundled one)")
     else:
         geometry_option = f"--geometry {args.geometry}"
+    if subject:
+        geometry_option = f"--emulator {name} (its own geometry)"
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
     if bad or not model_names:
@@ -157,12 +195,14 @@ def run_calibrate(args) -> int:
         if not rows:
             raise DataError(f"--subject {args.subject}: no such subject in {args.data}")
     cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
-    infer = args.angles == "infer"
-    name = args.emulator or ("angles" if infer else "chapter")
-    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
     cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
-    geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
+    if subject:
+        sub = emulator.metadata["subject"]
+        geo = guards.GeometrySource(np.zeros(0), str(sub.get("geometry_source")), "subject-emulator",
+                                    fit_residual_mm=(sub.get("geometry_record") or {}).get("fit_residual_mm"))
+    else:
+        geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
     box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, cond, emulator, infer), emulator,
                                              args.allow_extrapolation,
                                              what=f"{geometry_option}: the PC scores (or conditions)")

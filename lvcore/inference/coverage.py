@@ -22,7 +22,7 @@ import numpy as np
 from numpyro.infer.hmc import hmc
 from numpyro.infer.util import initialize_model
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.inference import models, samplers
 from lvcore.outputs import THETA_NAMES
 
@@ -61,7 +61,7 @@ class CoverageResult:
 
 
 def simulate_data(forward, theta: dict, rng: np.random.Generator, sigma_v: float = SIGMA_V_ML,
-                  sigma_s: float = 0.03, discrepancy=None) -> np.ndarray:
+                  sigma_s: float = SIGMA_S, discrepancy=None) -> np.ndarray:
     """SYNTHETIC data: ``forward(theta)`` plus Gaussian noise (and an optional strain discrepancy)."""
     y = np.asarray(forward(theta), dtype=float).copy()
     if discrepancy is not None:
@@ -152,7 +152,7 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
 def coverage_study(forward, model_name: str = "iid", n_datasets: int = 50, *, level: float = 0.9,
                    config: samplers.SamplerConfig = samplers.SamplerConfig(num_warmup=500, num_samples=500,
                                                                            num_chains=2),
-                   seed: int = 0, sigma_v: float = SIGMA_V_ML, sigma_s: float = 0.03) -> CoverageResult:
+                   seed: int = 0, sigma_v: float = SIGMA_V_ML, sigma_s: float = SIGMA_S) -> CoverageResult:
     """Coverage of central ``level`` credible intervals over ``n_datasets`` prior-drawn truths."""
     rng = np.random.default_rng(seed)
     truths = [prior_draw(rng) for _ in range(n_datasets)]

@@ -18,7 +18,7 @@ import arviz as az
 import numpy as np
 import pandas as pd
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore.conditions import SIGMA_V_ML
 from lvcore.inference import models, samplers
 from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
 

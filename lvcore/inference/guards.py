@@ -94,7 +94,7 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
     GeometryError
         If ``spec`` is empty or the file cannot be used.
     """
-    from lvcore.inference.calibrate import read_pc_scores
+    from lvcore.geometry.scores import read_pc_scores
 
     if spec is None or str(spec).strip() == "":
         raise GeometryError("--geometry is required: give the subject's PC scores (.json/.csv), mesh "
@@ -106,7 +106,7 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
         raise GeometryError(f"--geometry {spec}: no such file (give a file, or 'mean' for the mean shape)")
     suffix = path.suffix.lower()
     if suffix in (".json", ".csv"):
-        from lvcore.inference.calibrate import read_scale
+        from lvcore.geometry.scores import read_scale
 
         return GeometrySource(read_pc_scores(path, n_pc), str(path), "scores", scale=read_scale(path))
     if suffix in VOLUME_MESH_SUFFIXES:
@@ -123,9 +123,9 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
         h, scale, mse, raw = _project(nodes, n_pc)
         return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw)
     if suffix in (".npy", ".npz"):
-        from lvcore.inference.calibrate import _project_mesh
+        from lvcore.geometry.scores import project_mesh
 
-        h, scale, mse, raw = _project_mesh(path, n_pc, with_scale=True)
+        h, scale, mse, raw = project_mesh(path, n_pc, with_scale=True)
         return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw)
     raise GeometryError(f"--geometry {path.name}: unknown format '{suffix}'; give PC scores (.json/.csv), a template "
                         f"mesh (.vtu), a volumetric mesh ({', '.join(VOLUME_MESH_SUFFIXES)}, .vtu) or 'mean'")
@@ -207,7 +207,7 @@ def check_conditions(emulator, edp_mmhg=None, alpha_endo=None, alpha_epi=None, i
     EmulatorError
         EDP or angles given to an emulator trained at fixed values.
     """
-    from lvcore.units import DEFAULT_ALPHA_ENDO_DEG, DEFAULT_ALPHA_EPI_DEG, DEFAULT_EDP_MMHG
+    from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 
     names = set(getattr(emulator, "input_names", ()))
     fixed = dict(getattr(emulator, "fixed", None) or {})
@@ -233,9 +233,9 @@ def check_conditions(emulator, edp_mmhg=None, alpha_endo=None, alpha_epi=None, i
                                 f"emulator was trained at fixed fibre angles{at} and cannot honour others; drop "
                                 "them or use an emulator with angle inputs (e.g. 'angles')")
     return {
-        "edp_mmhg": float(fixed.get(EDP_NAME, DEFAULT_EDP_MMHG) if edp_mmhg is None else edp_mmhg),
-        "alpha_endo": float(fixed.get(ANGLE_NAMES[0], DEFAULT_ALPHA_ENDO_DEG) if alpha_endo is None else alpha_endo),
-        "alpha_epi": float(fixed.get(ANGLE_NAMES[1], DEFAULT_ALPHA_EPI_DEG) if alpha_epi is None else alpha_epi),
+        "edp_mmhg": float(fixed.get(EDP_NAME, SIMULATOR_DEFAULT_EDP_MMHG) if edp_mmhg is None else edp_mmhg),
+        "alpha_endo": float(fixed.get(ANGLE_NAMES[0], SIMULATOR_DEFAULT_ANGLES[0]) if alpha_endo is None else alpha_endo),
+        "alpha_epi": float(fixed.get(ANGLE_NAMES[1], SIMULATOR_DEFAULT_ANGLES[1]) if alpha_epi is None else alpha_epi),
         "fixed": sorted(fixed),
     }
 

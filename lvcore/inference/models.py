@@ -2,8 +2,8 @@ r"""numpyro models for calibrating theta = (a, b, af, bf) from LVV and 24 strain
 
 Each model is a plain function of the measured data ``y`` (25 values: LVV in
 mL then 24 circumferential strains, :mod:`lvcore.outputs` order) and a
-JAX-traceable forward model (:class:`lvcore.core.Forward` with ``traceable``
-True, e.g. :class:`lvcore.core.EmulatorForward`). Priors follow
+JAX-traceable forward model (a :class:`lvcore.core.TraceableForward`, e.g.
+:class:`lvcore.emulator.EmulatorForward`). Priors follow
 the chapter's Table 9.1 and live in :data:`PRIORS` so that the blocked
 HMC-within-Gibbs sampler uses the very same densities.
 
@@ -31,7 +31,9 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
-from lvcore.core.space import ANGLE_BOUNDS, SIGMA_V_ML, THETA_BOUNDS  # Table 9.1 and the angle ranges
+from lvcore.core.forward import TraceableForward
+from lvcore.conditions import SIGMA_V_ML
+from lvcore.core.space import ANGLE_BOUNDS, THETA_BOUNDS  # Table 9.1 and the angle ranges
 from lvcore.exceptions import ForwardError
 from lvcore.inference import kernels
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
@@ -57,7 +59,7 @@ def prior_bounds(infer_angles: bool = False, forward=None) -> dict[str, tuple[fl
     forward : Forward, optional
         Each prior is cut to its intersection with the forward model's
         ``input_bounds`` (an emulator's training box, see
-        :class:`lvcore.core.EmulatorForward`): the ``angles`` emulator, for
+        :class:`lvcore.emulator.EmulatorForward`): the ``angles`` emulator, for
         one, is trained on b, bf >= 0.5 only.
 
     Raises
@@ -110,9 +112,9 @@ def _check_y(y):
 
 def check_traceable(forward, infer_angles: bool = False) -> None:
     """Raise :class:`ForwardError` unless ``forward`` can be traced by JAX and reads the sampled parameters."""
-    if not getattr(forward, "traceable", False):
+    if not isinstance(forward, TraceableForward):
         raise ForwardError(f"forward model '{getattr(forward, 'label', type(forward).__name__)}' is not JAX-traceable; "
-                           "NUTS needs gradients through it: calibrate with an emulator (lvcore.core.EmulatorForward)")
+                           "NUTS needs gradients through it: calibrate with an emulator (lvcore.emulator.EmulatorForward)")
     want = THETA_NAMES + (ANGLE_NAMES if infer_angles else ())
     if tuple(forward.input_names) != want:
         raise ForwardError(f"calibration samples {list(want)}; the forward model reads {list(forward.input_names)}"
@@ -198,8 +200,22 @@ PARAMETER_HELP = {
 }
 
 
+def parameter_meaning(name: str, max_chars: int = 48) -> str:
+    """The short meaning of a parameter for a table cell (:data:`PARAMETER_HELP` up to its first clause).
+
+    ``"a"`` -> ``"isotropic stiffness of the Holzapfel-Ogden law"``. Table cells
+    stay narrow enough to show whole; the full text stays in :data:`PARAMETER_HELP`.
+    """
+    import re
+
+    text = PARAMETER_HELP.get(str(name), "")
+    text = text.split(": ", 1)[-1]
+    text = re.split(r"[;,:]| \(|\. | across ", text)[0].strip().rstrip(".")
+    return text if len(text) <= max_chars else text[: max_chars - 1].rstrip() + "…"
+
+
 __all__ = [
-    "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
+    "parameter_meaning", "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model",
 ]

@@ -38,7 +38,7 @@ from numpyro.infer import MCMC, NUTS
 from numpyro.infer.hmc import hmc
 from numpyro.infer.mcmc import MCMCKernel
 
-from lvcore.core.space import SIGMA_V_ML
+from lvcore.conditions import SIGMA_V_ML
 from lvcore.inference import kernels, models
 from lvcore.outputs import N_OUTPUTS
 
@@ -222,7 +222,7 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
     y : array_like, shape (25,)
         Measured LVV (mL) and 24 strains.
     forward : lvcore.core.Forward
-        JAX-traceable (``traceable`` True).
+        JAX-traceable (a :class:`lvcore.core.TraceableForward`).
         Forward model (emulator adapter or stand-in).
     config : SamplerConfig
     **model_kwargs
@@ -273,7 +273,7 @@ class PolarGPGibbs(MCMCKernel):
     Parameters
     ----------
     forward : lvcore.core.Forward
-        JAX-traceable (``traceable`` True).
+        JAX-traceable (a :class:`lvcore.core.TraceableForward`).
         Forward model returning the 25 outputs.
     y : array_like, shape (25,)
         Measured data [LVV (mL), 24 strains].

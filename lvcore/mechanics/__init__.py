@@ -25,6 +25,8 @@ _EXPORTS = {
     # constitutive models
     "MaterialLaw": "materials", "HolzapfelOgden": "materials", "Guccione": "materials", "NeoHookean": "materials",
     "LAWS": "materials", "MixedPenalty": "materials", "ConstitutiveModel": "materials",
+    # the simulator as a forward model (lvcore.core.forward)
+    "SimulatorForward": "forward", "AdjointSimulatorForward": "forward",
     # solver, meshes, export, reports
     "NewtonOptions": "newton", "FEMesh": "mesh", "lv_mesh": "mesh", "box_mesh": "mesh",
     "DiscreteSystem": "system", "export_result": "export", "result_vtu_bytes": "export",

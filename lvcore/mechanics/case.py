@@ -21,7 +21,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lvcore import limits, units
+from lvcore import conditions, limits, units
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.outputs import BASE_CONDITIONS
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
@@ -37,6 +37,10 @@ from lvcore.mechanics.resolution import (
 )
 
 GEOMETRY_KINDS = ("ellipsoid", "default", "mesh", "pca", "box")
+#: Largest magnitude of a standardised PC score (sd units) in a case; real shapes are within +-3.
+MAX_ABS_PC_SCORE = 10.0
+#: Most PC scores in a case.
+MAX_PC_SCORES = 100
 LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
 #: Law names of ``material.law``; parameters, required ones and defaults come from :data:`materials.LAWS`.
 MATERIAL_LAWS = tuple(LAWS)
@@ -130,8 +134,8 @@ class GeometrySpec:
 class FibreSpec:
     """Rule-based fibre helix angles (deg, endo to epi) or one constant direction."""
 
-    alpha_endo_deg: float = units.DEFAULT_ALPHA_ENDO_DEG
-    alpha_epi_deg: float = units.DEFAULT_ALPHA_EPI_DEG
+    alpha_endo_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[0]
+    alpha_epi_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[1]
     direction: tuple[float, float, float] | None = None
 
 
@@ -212,7 +216,7 @@ class Case:
     geometry: GeometrySpec
     material: MaterialLaw
     fibres: FibreSpec = field(default_factory=FibreSpec)
-    load: LoadSpec = field(default_factory=lambda: LoadSpec(units.mmhg_to_kpa(units.DEFAULT_EDP_MMHG)))
+    load: LoadSpec = field(default_factory=lambda: LoadSpec(units.mmhg_to_kpa(conditions.SIMULATOR_DEFAULT_EDP_MMHG)))
     boundary: BoundarySpec = field(default_factory=BoundarySpec)
     probes: tuple[tuple[float, float, float], ...] = ()
     outputs: OutputSpec = field(default_factory=OutputSpec)
@@ -257,13 +261,13 @@ class Case:
     def default_lv(
         cls,
         theta: Mapping[str, float] | None = None,
-        alpha_endo_deg: float = units.DEFAULT_ALPHA_ENDO_DEG,
-        alpha_epi_deg: float = units.DEFAULT_ALPHA_EPI_DEG,
-        edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+        alpha_endo_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[0],
+        alpha_epi_deg: float = conditions.SIMULATOR_DEFAULT_ANGLES[1],
+        edp_mmhg: float = conditions.SIMULATOR_DEFAULT_EDP_MMHG,
         resolution: str | Mapping[str, int] = "default",
     ) -> "Case":
-        """The default LV with the HO law at ``theta`` (default ``HO_REFERENCE_THETA``)."""
-        theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
+        """The default LV with the HO law at ``theta`` (default ``THETA_TILDE``)."""
+        theta = dict(conditions.THETA_TILDE if theta is None else theta)
         return cls.from_dict(
             {
                 "geometry": {"kind": "default", "resolution": resolution},
@@ -278,7 +282,14 @@ def load_case(path: str | Path) -> Case:
     """Read and validate a case JSON file; relative paths inside resolve against its folder."""
     path = Path(path)
     d = limits.read_json_file(path, limits.MAX_CASE_BYTES, "case file", _file_error)
-    return Case.from_dict(d, base_dir=path.parent)
+    if not isinstance(d, Mapping):
+        raise CaseError("<file>", f"case file '{limits.echo(path)}' must hold a JSON object ({{\"geometry\": ..., "
+                                  f"\"material\": ...}}), not {'null' if d is None else type(d).__name__} "
+                                  f"{_short(d, 40)}")
+    try:
+        return Case.from_dict(d, base_dir=path.parent)
+    except CaseError as err:  # name the file as well as the field
+        raise CaseError(err.field, f"{err.problem} (case file '{limits.echo(path)}')") from None
 
 
 def loads_case(text: str, base_dir: str | Path | None = None, source: str = "case JSON") -> Case:
@@ -307,7 +318,7 @@ def _check_keys(d: Any, where: str, allowed, required=()) -> None:
         if key not in allowed:
             close = difflib.get_close_matches(str(key), list(allowed), n=1, cutoff=0.5)
             hint = f"; did you mean '{close[0]}'?" if close else f"; valid keys: {', '.join(allowed)}"
-            raise CaseError(_join(where, key), f"unknown key{hint}")
+            raise CaseError(_join(where, limits.echo(key, 60)), f"unknown key{hint}")
     for key in required:
         if key not in d:
             raise CaseError(_join(where, key), "missing (required)")
@@ -484,7 +495,11 @@ def _parse_geometry(g, base_dir: Path | None) -> GeometrySpec:
         scores = g["scores"]
         if not isinstance(scores, (list, tuple)) or len(scores) == 0:
             raise CaseError("geometry.scores", f"must be a non-empty list of numbers, got {_short(scores)}")
-        scores = [_number(v, f"geometry.scores[{i}]") for i, v in enumerate(scores)]
+        if len(scores) > MAX_PC_SCORES:
+            raise CaseError("geometry.scores", f"{len(scores)} scores; a shape model has at most {MAX_PC_SCORES} modes")
+        # standardised scores (units of each mode's sd): beyond +-10 sd the shape is no LV at all
+        scores = [_number(v, f"geometry.scores[{i}]", lo=-MAX_ABS_PC_SCORE, hi=MAX_ABS_PC_SCORE)
+                  for i, v in enumerate(scores)]
         model = _resolve(g["model"], "geometry.model", base_dir, suffixes=(".json",)) if "model" in g else None
         from lvcore.geometry.shape_model import load_shape_model  # lazy
 
@@ -558,13 +573,14 @@ def _parse_fibres(f) -> FibreSpec:
     if "direction" in f:
         if "alpha_endo" in f or "alpha_epi" in f:
             raise CaseError("fibres.direction", "give either a direction or the angles alpha_endo/alpha_epi, not both")
-        v = np.asarray(_vector(f["direction"], "fibres.direction"))
-        norm = float(np.linalg.norm(v))
-        if norm == 0.0:
+        v = np.asarray(_vector(f["direction"], "fibres.direction"), dtype=float)
+        scale = float(np.max(np.abs(v)))  # scaled first: the norm of (1e308, 1e308, 1e308) overflows to inf
+        if not scale > 0.0:
             raise CaseError("fibres.direction", "must be a non-zero vector")
-        return FibreSpec(direction=tuple(float(x) for x in v / norm))
-    endo = _number(f.get("alpha_endo", units.DEFAULT_ALPHA_ENDO_DEG), "fibres.alpha_endo", lo=-180, hi=180)
-    epi = _number(f.get("alpha_epi", units.DEFAULT_ALPHA_EPI_DEG), "fibres.alpha_epi", lo=-180, hi=180)
+        v = v / scale
+        return FibreSpec(direction=tuple(float(x) for x in v / float(np.linalg.norm(v))))
+    endo = _number(f.get("alpha_endo", conditions.SIMULATOR_DEFAULT_ANGLES[0]), "fibres.alpha_endo", lo=-180, hi=180)
+    epi = _number(f.get("alpha_epi", conditions.SIMULATOR_DEFAULT_ANGLES[1]), "fibres.alpha_epi", lo=-180, hi=180)
     return FibreSpec(endo, epi)
 
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from lvcore import cli_args
 from lvcore.mechanics.summary import format_summary
 
 
@@ -23,7 +24,8 @@ def register(subparsers) -> None:
     )
     p.add_argument("case", help="case JSON file (docs/case_schema.md)")
     p.add_argument("--json", action="store_true", help="print the full result as JSON instead of a summary")
-    p.add_argument("--vtu", metavar="OUT.vtu", help="also write the reference mesh and displacement to a VTU file")
+    p.add_argument("--vtu", metavar="OUT.vtu", type=cli_args.output_file,
+                   help="also write the reference mesh and displacement to a VTU file (default: not written)")
     p.add_argument("--sensitivities", action="store_true",
                    help="also compute the derivatives of the outputs with respect to the material parameters")
     p.set_defaults(func=run)

@@ -16,6 +16,8 @@ Install CHOLMOD with ``apt-get install -y libsuitesparse-dev`` and
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -30,9 +32,30 @@ except Exception:  # pragma: no cover - depends on the environment
 BACKWARD_ERROR_TOL = 1e-10
 
 
+#: Environment variable naming the backend to use (``cholmod`` or ``superlu``), e.g. to compare them.
+BACKEND_ENV = "LVCORE_SPARSE_SOLVER"
+
+
 def available_backends() -> tuple[str, ...]:
     """Names of the usable backends, fastest first."""
     return (("cholmod",) if _cholmod_analyze is not None else ()) + ("superlu",)
+
+
+def default_backend() -> str:
+    """The backend used when none is named: ``$LVCORE_SPARSE_SOLVER`` if set, else the fastest available.
+
+    Raises
+    ------
+    ValueError
+        If the variable names a backend that is not available here.
+    """
+    want = os.environ.get(BACKEND_ENV, "").strip().lower()
+    if not want:
+        return available_backends()[0]
+    if want not in available_backends():
+        raise ValueError(f"{BACKEND_ENV}={want!r}: available sparse solvers here are {list(available_backends())}"
+                         + (" (CHOLMOD needs scikit-sparse: pip install 'lvcore[fast]')" if want == "cholmod" else ""))
+    return want
 
 
 def _as_csc(K, symmetric):
@@ -55,11 +78,12 @@ class Factorization:
     """
 
     def __init__(self, K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None):
-        self.backend = backend or available_backends()[0]
+        self.backend = backend or default_backend()
         self._lu = None
         self._chol = None
         self._symmetric = symmetric
         self._A = A = _as_csc(K, symmetric)
+        self.shape = A.shape
         if self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
             try:
                 f = cache.get("cholmod_ldl") if cache is not None else None

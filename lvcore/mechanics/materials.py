@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore import units
+from lvcore import conditions, units
 from lvcore.mechanics.kinematics import det3, green_strain, isochoric_i1, right_cauchy_green
 
 
@@ -223,8 +223,8 @@ class HolzapfelOgden(MaterialLaw):
 
     @classmethod
     def default_parameters(cls) -> dict[str, float]:
-        """The chapter's reference θ (``units.HO_REFERENCE_THETA``) with the fixed sheet terms (Gao et al. 2017), κ = 0."""
-        return {**units.HO_REFERENCE_THETA, **units.HO_FIXED, "kappa": 0.0}
+        """The chapter's reference θ (``conditions.THETA_TILDE``) with the fixed sheet terms (Gao et al. 2017), κ = 0."""
+        return {**conditions.THETA_TILDE, **units.HO_FIXED, "kappa": 0.0}
 
     def strain_energy(self, F, frame):
         C = right_cauchy_green(F)

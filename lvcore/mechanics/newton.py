@@ -68,6 +68,30 @@ class NewtonOptions:
     cut_on_predictor: bool = False
 
 
+class Tangent:
+    """A factorised tangent and its condensation matrices ``D`` (n_el, 4, 81) from a converged solve.
+
+    Passed with a warm start (``solve(initial=(u, p, tangent))``), it gives
+    the first Newton iterations at a nearby point as chord iterations, so a
+    chain of nearby solves needs a fresh tangent only when the reused one
+    stops contracting. A factorisation lives in its process: pickling a
+    :class:`Tangent` drops it (it unpickles empty, and a solve then takes a
+    fresh tangent).
+    """
+
+    __slots__ = ("factorization", "D")
+
+    def __init__(self, factorization=None, D=None):
+        self.factorization = factorization
+        self.D = D
+
+    def __bool__(self) -> bool:
+        return self.factorization is not None and self.D is not None
+
+    def __reduce__(self):
+        return (Tangent, ())
+
+
 @dataclass
 class NewtonResult:
     converged: bool
@@ -79,6 +103,8 @@ class NewtonResult:
     load_steps: int
     cuts: int
     timings: dict = field(default_factory=dict)
+    #: The last factorised tangent used (a :class:`Tangent`; empty if none was taken).
+    tangent: Tangent = field(default_factory=Tangent)
 
 
 def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
@@ -150,6 +176,9 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
             if not chord:
                 fac = factorize(K, symmetric=system.potential, cache=system.pattern.cache)
                 last = (fac, D)
+                t1 = time.perf_counter()
+                stats["t_factor"] += t1 - t0
+                t0 = t1
             du = -fac.solve(rhs)
         except RuntimeError as exc:  # singular factor
             return False, u, p, f"linear solve failed: {exc}", last
@@ -193,16 +222,20 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
     Convergence: ``||r_u|| <= rtol ||f_ext||`` (the external load vector at full
     load) and ``max |r_p| <= rtol_volume * (element volume)`` on every element.
 
-    ``initial``: optional ``(u, p)`` (free displacements and element pressures
-    of a converged solve of the same mesh and boundary conditions, e.g. at
-    nearby material parameters). Newton then starts at full load from that
-    state (a warm start); if it does not converge there, the solve restarts
-    from zero with the usual load stepping, so a poor guess costs time, never
-    the result. The converged state satisfies the same tolerances either way.
+    ``initial``: optional ``(u, p)`` or ``(u, p, tangent)`` (free
+    displacements and element pressures of a converged solve of the same mesh
+    and boundary conditions, e.g. at nearby material parameters, and
+    optionally its last factorised :class:`Tangent`). Newton then starts at
+    full load from that state (a warm start), with chord iterations on the
+    given tangent for as long as they contract; if it does not converge there,
+    the solve restarts from zero with the usual load stepping, so a poor guess
+    costs time, never the result. The converged state satisfies the same
+    tolerances either way.
     """
     opts = opts or NewtonOptions()
     t_start = time.perf_counter()
-    stats = {"iterations": 0, "tangents": 0, "residuals": 0, "t_tangent": 0.0, "t_solve": 0.0, "t_line": 0.0}
+    stats = {"iterations": 0, "tangents": 0, "residuals": 0, "t_tangent": 0.0, "t_factor": 0.0, "t_solve": 0.0,
+             "t_line": 0.0}
     u = np.zeros(system.n_free)
     p = system.zero_pressure()
     r1, _, _, _ = system.residual(u, p, 1.0)
@@ -213,13 +246,19 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
         return rtol * scale, rtol * 1e-2 * vol
 
     if initial is not None:
-        u0, p0 = (np.asarray(v, dtype=float) for v in initial)
+        u0, p0 = (np.asarray(v, dtype=float) for v in tuple(initial)[:2])
+        given = initial[2] if len(initial) > 2 else None
         if u0.shape == u.shape and p0.shape == np.shape(p) and np.all(np.isfinite(u0)) and np.all(np.isfinite(p0)):
-            ok, u_w, p_w, _, _ = _newton_at(system, u0, p0, 1.0, *tolerances(opts.rtol), opts, stats)
+            reuse = None
+            if given and given.factorization.shape == (u.size, u.size) and given.D.shape[0] == p.shape[0]:
+                reuse = (given.factorization, given.D)
+            stats["reused_tangent"] = reuse is not None
+            ok, u_w, p_w, _, last = _newton_at(system, u0, p0, 1.0, *tolerances(opts.rtol), opts, stats, reuse=reuse)
             stats["warm_start"] = bool(ok)
             if ok:
                 stats["seconds"] = time.perf_counter() - t_start
-                return NewtonResult(True, "converged (warm start)", u_w, p_w, 1.0, stats["iterations"], 1, 0, stats)
+                return NewtonResult(True, "converged (warm start)", u_w, p_w, 1.0, stats["iterations"], 1, 0, stats,
+                                    Tangent(*last) if last else Tangent())
     lam, step, steps, cuts = 0.0, opts.first_step, 0, 0
     carry = None  # (factorisation, D) of the last tangent of the last converged step
     predict = opts.chord_predictor
@@ -257,4 +296,5 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
                 return NewtonResult(False, f"stopped at load factor {lam:.4g}: {last_reason}", u, p, lam,
                                     stats["iterations"], steps, cuts, stats)
     stats["seconds"] = time.perf_counter() - t_start
-    return NewtonResult(True, "converged", u, p, 1.0, stats["iterations"], steps, cuts, stats)
+    return NewtonResult(True, "converged", u, p, 1.0, stats["iterations"], steps, cuts, stats,
+                        Tangent(*carry) if carry else Tangent())

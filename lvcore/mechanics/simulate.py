@@ -8,7 +8,9 @@ hexahedra (see :mod:`lvcore.mechanics.element`), load-stepping Newton
 """
 from __future__ import annotations
 
+import hashlib
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -59,6 +61,16 @@ class SimulationResult:
     #: ``(free displacements, element pressures)`` of the converged solve: pass as ``simulate(..., initial=)``
     #: to warm-start a solve of the same mesh at nearby parameters.
     solver_state: tuple | None = field(default=None, repr=False)
+    #: The last factorised tangent of the solve (:class:`lvcore.mechanics.newton.Tangent`, in-process only:
+    #: it pickles empty); :attr:`warm_state` passes it on with the state.
+    solver_tangent: newton.Tangent | None = field(default=None, repr=False)
+
+    @property
+    def warm_state(self) -> tuple | None:
+        """``(u, p, tangent)`` for ``simulate(..., initial=)``: the state and the factorised tangent to reuse."""
+        if self.solver_state is None:
+            return None
+        return tuple(self.solver_state) + (self.solver_tangent or newton.Tangent(),)
 
     def outputs(self) -> np.ndarray:
         """The 25 outputs [LVV (mL), 24 circumferential strains]; raises if unavailable."""
@@ -117,12 +129,21 @@ def build_frames(mesh: FEMesh, fib) -> np.ndarray:
     return frames
 
 
+def constitutive_model(case, mesh: FEMesh) -> materials.ConstitutiveModel:
+    """The case's law composed with the mixed bulk penalty ``KAPPA_FACTOR ×`` its stiffness scale (kPa).
+
+    The scale is the law's :meth:`~lvcore.mechanics.materials.MaterialLaw.modulus`, or that of the stiffest
+    region of a regional case (:func:`element_scale`).
+    """
+    _, modulus = element_scale(case, mesh)
+    return materials.ConstitutiveModel(case.material, materials.MixedPenalty(KAPPA_FACTOR * modulus))
+
+
 def build_system(case, mesh: FEMesh | None = None) -> DiscreteSystem:
     """The discrete system of ``case`` (mesh, fibres, material, load, boundary conditions)."""
     mesh = mesh or build_mesh(case)
-    law = case.material
-    scale, modulus = element_scale(case, mesh)
-    model = materials.ConstitutiveModel(law, materials.MixedPenalty(KAPPA_FACTOR * modulus))
+    scale, _ = element_scale(case, mesh)
+    model = constitutive_model(case, mesh)
     fixed = boundary.fixed_dofs(mesh, case.boundary.base, case.boundary.clamped_faces)
     surface = case.load.surface if mesh.kind == "box" else "endocardium"
     b = case.boundary
@@ -146,6 +167,75 @@ def element_scale(case, mesh: FEMesh):
     per_region = regional.multipliers(law)
     modulus = max(law.scaled(row).modulus() for row in per_region)
     return per_region[mesh.template.element_regions], modulus
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedCase:
+    """Everything of a case that does not depend on its material parameters.
+
+    Built once per geometry, resolution, fibres, load, boundary conditions,
+    probes and strain layer by :func:`prepare_case` and reused by every solve
+    that shares them (a campaign or a sweep solves hundreds of material points
+    on one geometry: mesh, fibre frames, reference gradients and the strain
+    operator cost ~20 % of a warm-started solve).
+    """
+
+    mesh: FEMesh
+    system: DiscreteSystem  # with the material of the first case; see DiscreteSystem.with_model
+    v_ref: float | None
+    probe_elements: np.ndarray
+    probe_xi: np.ndarray
+    output_args: tuple | None
+
+
+#: Prepared cases kept per process (least recently used dropped first).
+PREPARED_CACHE_SIZE = 4
+_PREPARED: "OrderedDict[tuple, PreparedCase]" = OrderedDict()
+
+
+def _prepare_key(case) -> tuple:
+    """Everything :class:`PreparedCase` depends on: the case less its material parameters (not its law)."""
+    g = case.geometry
+    nodes = None if g.template_nodes is None else hashlib.sha256(
+        np.ascontiguousarray(g.template_nodes, dtype=float).tobytes()).hexdigest()
+    return (g.kind, repr(g.resolution), g.preset, repr(g.ellipsoid), g.box_size, nodes, repr(case.fibres),
+            repr(case.load), repr(case.boundary), tuple(case.probes), repr(case.outputs),
+            repr(getattr(case, "regional", None)), type(case.material).__name__)
+
+
+def prepare_case(case) -> PreparedCase:
+    """The material-independent part of ``case`` (cached per process, see :class:`PreparedCase`).
+
+    Raises
+    ------
+    CaseError, GeometryError
+        Probes outside the mesh, a degenerate geometry (never cached).
+    """
+    key = _prepare_key(case)
+    hit = _PREPARED.get(key)
+    if hit is not None:
+        _PREPARED.move_to_end(key)
+        return hit
+    mesh = build_mesh(case)
+    system = build_system(case, mesh)
+    elem_p, xi_p = (np.zeros(0, int), np.zeros((0, 3)))
+    if case.probes:
+        try:
+            elem_p, xi_p = observables.locate_points(mesh, case.probes)
+        except ValueError as exc:
+            raise CaseError("probes", str(exc)) from None
+    v_ref = out_args = None
+    if mesh.kind == "lv":
+        v_ref = float(_cavity_volume(jnp.asarray(mesh.nodes), *_volume_args(mesh)))
+        check_reference_volumes(mesh, v_ref)
+        op = observables.strain_operator(mesh, case.outputs.strain_layer)
+        out_args = (jnp.asarray(mesh.nodes),) + _volume_args(mesh) + (
+            jnp.asarray(op.connectivity), jnp.asarray(op.dNdX), jnp.asarray(op.e_c), jnp.asarray(op.weights))
+    prep = PreparedCase(mesh, system, v_ref, elem_p, xi_p, out_args)
+    _PREPARED[key] = prep
+    while len(_PREPARED) > PREPARED_CACHE_SIZE:
+        _PREPARED.popitem(last=False)
+    return prep
 
 
 def _volume_args(mesh: FEMesh):
@@ -192,10 +282,12 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     options : Newton settings.
     raise_on_failure : raise :class:`SolverError` instead of returning
         ``converged=False``.
-    initial : optional ``solver_state`` of an earlier converged result on the
-        same mesh and boundary conditions (a Newton warm start at full load,
-        see :func:`lvcore.mechanics.newton.solve`; ignored if its shapes do
-        not match, and a cold solve follows if it does not converge).
+    initial : optional ``solver_state`` (or ``warm_state``, which adds the
+        factorised tangent, reused in this process) of an earlier converged
+        result on the same mesh and boundary conditions (a Newton warm start
+        at full load, see :func:`lvcore.mechanics.newton.solve`; ignored if
+        its shapes do not match, and a cold solve follows if it does not
+        converge).
 
     Returns
     -------
@@ -203,18 +295,13 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     """
     t0 = time.perf_counter()
     case = _as_case(case)
-    mesh = build_mesh(case)
-    system = build_system(case, mesh)
+    prep = prepare_case(case)
+    mesh, v_ref, elem_p, xi_p = prep.mesh, prep.v_ref, prep.probe_elements, prep.probe_xi
+    if getattr(case, "regional", None) is None:
+        system = prep.system.with_model(constitutive_model(case, mesh))
+    else:  # per-element multipliers depend on the law: a system of its own
+        system = build_system(case, mesh)
     is_lv = mesh.kind == "lv"
-    elem_p, xi_p = (np.zeros(0, int), np.zeros((0, 3)))
-    if case.probes:
-        try:
-            elem_p, xi_p = observables.locate_points(mesh, case.probes)
-        except ValueError as exc:
-            raise CaseError("probes", str(exc)) from None
-    v_ref = float(_cavity_volume(jnp.asarray(mesh.nodes), *_volume_args(mesh))) if is_lv else None
-    if is_lv:
-        check_reference_volumes(mesh, v_ref)
     if case.load.pressure_kpa == 0:
         res = newton.NewtonResult(True, "converged (zero load)", np.zeros(system.n_free), system.zero_pressure(),
                                   1.0, 0, 0, 0, {})
@@ -233,9 +320,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     vol = strains = apex_endo = apex_epi = standardised = None
     sens = None
     if is_lv:
-        op = observables.strain_operator(mesh, case.outputs.strain_layer)
-        out_args = (jnp.asarray(mesh.nodes),) + _volume_args(mesh) + (
-            jnp.asarray(op.connectivity), jnp.asarray(op.dNdX), jnp.asarray(op.e_c), jnp.asarray(op.weights))
+        out_args = prep.output_args
 
         def output_fn(u_full):
             return _outputs(u_full, *out_args)
@@ -265,6 +350,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         seconds=time.perf_counter() - t0, reference_nodes=mesh.nodes, displacement=u.reshape(-1, 3),
         elements=mesh.elements, sensitivities=sens, timings=res.timings,
         warnings=plausibility_warnings(vol, standardised), solver_state=(res.u, res.p),
+        solver_tangent=res.tangent,
     )
 
 

@@ -19,6 +19,7 @@ Units: mm, kPa; energies in kPa mm³ (µJ), forces in mN.
 """
 from __future__ import annotations
 
+import copy
 from functools import lru_cache, partial
 
 import jax
@@ -188,6 +189,18 @@ class DiscreteSystem:
         self.free = self.pattern.free
         self.Minv = np.linalg.inv(M)
         self.edofs = block_dofs(elements)
+
+    def with_model(self, model: ConstitutiveModel) -> "DiscreteSystem":
+        """The same mesh, frames, load and boundary conditions with another constitutive model.
+
+        Shares every array (and the sparsity pattern with its cached symbolic
+        factorisation) with ``self``; only the law's parameters and the bulk
+        penalty change, so a batch of solves on one geometry builds its system once.
+        """
+        out = copy.copy(self)
+        out.model = model.as_arrays()
+        out.kappa = out.model.kappa
+        return out
 
     # ----- vectors ----------------------------------------------------------
     @property

@@ -148,9 +148,25 @@ def _next_point(gp, dim: int, rng: np.random.Generator, U_best: np.ndarray, kapp
     return min(results, key=lambda r: r.fun).x
 
 
-def _outputs(forward: Forward, space: ParameterSpace, X: np.ndarray) -> np.ndarray:
-    """``(n, 25)`` outputs at the rows of ``X`` (columns ``space.names``); NaN rows where a point failed."""
-    return forward.evaluate(dict(zip(space.names, np.atleast_2d(X).T))).outputs
+def _outputs(forward: Forward, space: ParameterSpace, X: np.ndarray, chain: bool = False) -> np.ndarray:
+    """``(n, 25)`` outputs at the rows of ``X`` (columns ``space.names``); NaN rows where a point failed.
+
+    ``chain``: evaluate the rows in continuation order (near neighbours in the
+    space's unit cube one after another, :func:`lvcore.chains.continuation_order`)
+    and return them in the order of ``X``. A warm-starting forward model
+    (``SimulatorForward(warm_start=True)``) then starts each solve from a
+    neighbour's solution, also when a caller splits the batch into chunks; for
+    any other forward model only the order of the calls changes.
+    """
+    X = np.atleast_2d(X)
+    if not chain or X.shape[0] < 3:
+        return forward.evaluate(dict(zip(space.names, X.T))).outputs
+    from lvcore.chains import continuation_order
+
+    order = continuation_order(space.to_unit(X))
+    Y = np.empty((X.shape[0], N_OUTPUTS))
+    Y[order] = forward.evaluate(dict(zip(space.names, X[order].T))).outputs
+    return Y
 
 
 def _objective(objective, Y: np.ndarray, f_seen: np.ndarray) -> np.ndarray:
@@ -183,9 +199,12 @@ def bayesian_optimise(
     ----------
     forward : Forward
         Reads ``space.names`` (its ``input_names``, in any order); evaluated in
-        batches (the initial design in one batch: a
-        :class:`~lvcore.core.SimulatorForward` with ``workers`` runs it on a
-        process pool). A point that fails gets the worst objective seen so far.
+        batches (the initial design in one batch, in continuation order: a
+        :class:`~lvcore.mechanics.SimulatorForward` with ``workers`` runs it on a
+        process pool, and with ``warm_start=True`` as warm-started chains, each
+        solve starting from a neighbour's solution; BO iterations then start
+        from the nearest earlier point). A point that fails gets the worst
+        objective seen so far.
     measured : (25,) array
         Measured LVV (mL) and 24 strains.
     space : ParameterSpace
@@ -222,7 +241,7 @@ def bayesian_optimise(
                            f"{list(forward.input_names)}")
     design = make_design(space, "exp", n_initial, seed)
     X = np.array(design.points)
-    Y = _outputs(forward, space, X)
+    Y = _outputs(forward, space, X, chain=True)
     scale = np.nanstd(Y, axis=0)
     scale[~(scale > 0)] = 1.0
     objective = StandardisedRSS(measured, scale, lvv_weight)

@@ -11,8 +11,8 @@ by minimising the chapter's loss (9.11)::
 starting at θ̃, with scipy's SLSQP inside the prior box. The volume term
 compares the relative volume change, so the early volume of a reconstruction
 does not dominate. Gradients come from the forward model's Jacobian (the
-simulator's adjoint, :class:`lvcore.core.SimulatorForward`) when it provides
-one (``provides_jacobian``), else from scipy's finite differences.
+simulator's adjoint, :class:`lvcore.mechanics.AdjointSimulatorForward`) when it provides
+one (a :class:`~lvcore.core.forward.JacobianForward`), else from scipy's finite differences.
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
-from lvcore.core.forward import Forward
+from lvcore.core.forward import Forward, JacobianForward
 from lvcore.core.space import THETA_BOUNDS
 from lvcore.exceptions import ForwardError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
@@ -81,7 +81,7 @@ def refit_theta(
     forward : Forward
         Reads ``a, b, af, bf`` (``input_names`` in that order), e.g.
         ``SimulatorForward(geometry=..., resolution=...)`` on the test
-        geometry. With ``provides_jacobian`` its Jacobian gives the gradient,
+        geometry. As a :class:`~lvcore.core.forward.JacobianForward` its Jacobian gives the gradient,
         else scipy's finite differences do. A point that fails to converge
         raises :class:`~lvcore.exceptions.SolverError`.
     loss : OperatorLoss
@@ -95,15 +95,15 @@ def refit_theta(
                            f"{list(forward.input_names)} (bind the other inputs into it)")
     bounds = THETA_BOUNDS if bounds is None else bounds
     box = [bounds[n] for n in THETA_NAMES]
-    has_jac = bool(forward.provides_jacobian)
+    has_jac = isinstance(forward, JacobianForward)
     cache: dict = {}
     n_eval = [0]
 
     def evaluate(theta):
         key = tuple(np.round(theta, 14))
         if key not in cache:
-            batch = forward.evaluate(dict(zip(THETA_NAMES, np.asarray(theta, dtype=float))),
-                                     jacobian=has_jac).raise_on_failure()
+            point = dict(zip(THETA_NAMES, np.asarray(theta, dtype=float)))
+            batch = (forward.jacobian(point) if has_jac else forward.evaluate(point)).raise_on_failure()
             n_eval[0] += 1
             y = batch.outputs[0]
             value, g_y = loss.value_and_output_gradient(y)

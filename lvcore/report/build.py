@@ -88,7 +88,11 @@ def section_items(section: Section, results_dir=None, *, sweep: str = "emulator"
             return [ReportItem(n, t, source=mod.RESULT_FILE,
                                missing=f"missing: {rerun} ({mod.RESULT_FILE} not found in {where})")
                     for n, t in titles.items()]
-        result = mod.load(path.parent)
+        try:
+            result = mod.load(path.parent)
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError) as err:
+            raise ReportError(f"study results '{path}' are not the output of {mod.COMMAND} "
+                              f"({type(err).__name__}: {str(err)[:200]}); give the --out folder of that command") from None
     else:
         result = section.compute({"sweep": sweep})
         rerun = ""

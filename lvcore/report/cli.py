@@ -1,6 +1,8 @@
 """``lvcore report --out DIR [--from RESULTS]``."""
 from __future__ import annotations
 
+from lvcore import cli_args
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -8,18 +10,34 @@ def register(subparsers) -> None:
         description="Regenerate every figure and table of the chapter that the project reproduces. Study results "
                     "come from --from RESULTS (the --out folders of `lvcore study ...`) or else the package's "
                     "bundled lvcore/assets/studies; figures without results are listed as missing in manifest.json.")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder, created if missing")
     p.add_argument("--from", dest="results", default=None,
-                   help="folder with study results (fibre_discrepancy.json, bo_fibres.json, operators.json)")
+                   help="folder with study results (fibre_discrepancy.json, bo_fibres.json, operators.json; "
+                        "default: the bundled results in assets/studies)")
     p.add_argument("--sweep", choices=("emulator", "simulator"), default="emulator",
                    help="Fig 9.5 by the bundled `angles` emulator (default, seconds) or the FE simulator (fast mesh)")
     p.add_argument("--no-calibration", action="store_true", help="skip the live calibration posterior")
-    p.add_argument("--formats", default="png,svg",
+    p.add_argument("--formats", default="png,svg", type=_formats,
                    help="static formats, comma-separated (default png,svg; they need kaleido, pip install "
                         "'lvcore[report]', and a Chromium; without them the HTML report is written and the skipped "
                         "formats are named); '' for HTML only")
     p.add_argument("--json", action="store_true", help="print the manifest as JSON")
     p.set_defaults(func=_run)
+
+
+#: Static figure formats ``--formats`` accepts (those plotly's kaleido writes).
+STATIC_FORMATS = ("png", "svg", "pdf", "jpeg", "webp")
+
+
+def _formats(text: str) -> str:
+    """``type=`` of ``--formats``: a comma-separated subset of :data:`STATIC_FORMATS` (or '')."""
+    import argparse
+
+    bad = [f.strip() for f in str(text).split(",") if f.strip() and f.strip().lower() not in STATIC_FORMATS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown format {cli_args.echo(bad[0])!r}; choose from "
+                                         f"{', '.join(STATIC_FORMATS)}, comma-separated, or '' for HTML only")
+    return ",".join(f.strip().lower() for f in str(text).split(",") if f.strip())
 
 
 def _run(args) -> int:

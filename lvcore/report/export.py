@@ -13,8 +13,7 @@ from pathlib import Path
 
 from lvcore.exceptions import LVCoreError
 
-#: Width (px) of a static export whose figure sets none (tables set their own, to fit their columns).
-EXPORT_WIDTH_PX = 1100
+from lvcore.viz.report_figures import EXPORT_WIDTH_PX  # noqa: E402  (one home for the export width)
 
 
 class ReportError(LVCoreError):

@@ -11,7 +11,7 @@ exp-warped Latin hypercube, then 300 GP-LCB iterations) in two modes:
     θ plus α_endo ∈ [−90°, 0°] and α_epi ∈ [0°, 90°].
 
 The objective is evaluated by the FE simulator on the volunteer's own
-geometry (:class:`lvcore.core.SimulatorForward`), never an emulator: the
+geometry (:class:`lvcore.mechanics.SimulatorForward`), never an emulator: the
 point of the study is the mismatch between the model with fixed angles and
 the data. Batches run on the campaign executors (a local process pool or a
 Dask cluster). Every evaluation is written to a state file
@@ -41,15 +41,18 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
+from lvcore import cli_args
+from lvcore.core.forward import ForwardBatch, as_columns
+from lvcore.mechanics.forward import SimulatorForward
+from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES
 from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 from lvcore.resources import asset_path
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
-#: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2).
-FIXED_ANGLES = (-60.0, 90.0)
+#: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2): the simulator's default rule-based angles.
+FIXED_ANGLES = SIMULATOR_DEFAULT_ANGLES
 MODES = ("fixed", "free")
 #: GP hyperparameters are re-estimated every this many BO iterations (warm started).
 REFIT_EVERY = 20
@@ -124,7 +127,8 @@ def simulator_forward(subject: Subject, mode: str, resolution: str = "default") 
     space = bo_space(mode)
     return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(),
                             geometry={"kind": "mesh", "path": str(subject.geometry)}, resolution=resolution,
-                            label=f"FE simulator on {subject.name} ({resolution})")
+                            label=f"FE simulator on {subject.name} ({resolution})",
+                            warm_start=True)  # warm-started chains (issue 25): same results within tolerance
 
 
 # ----------------------------------------------------------------------------- state + recording forward
@@ -191,9 +195,6 @@ class RecordingForward:
     ``chunk`` points, the log being saved after each chunk.
     """
 
-    traceable = False
-    provides_jacobian = False
-
     def __init__(self, inner, log: EvaluationLog, *, executor=None, chunk: int = 1, bar=None,
                  on_evaluation: Callable[[int], None] | None = None):
         self.inner, self.log, self.executor, self.chunk, self.bar = inner, log, executor, max(1, int(chunk)), bar
@@ -212,9 +213,7 @@ class RecordingForward:
             return self.inner.evaluate(cols, executor=self.executor)
         return self.inner.evaluate(cols)
 
-    def evaluate(self, inputs, *, jacobian: bool = False) -> ForwardBatch:
-        if jacobian:
-            raise LVCoreError("the BO study's recorded forward does not provide Jacobians")
+    def evaluate(self, inputs) -> ForwardBatch:
         cols, n = as_columns(inputs, self.input_names, self.label)
         X = np.column_stack([cols[k] for k in self.input_names])
         rows: list[tuple] = []
@@ -276,7 +275,7 @@ def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_
     workers : int
         Points per chunk of the initial design (state saved after each chunk).
     forward : Forward, optional
-        Replaces the simulator (tests: :class:`lvcore.core.AnalyticForward`).
+        Replaces the simulator (tests: :class:`lvcore.testing.AnalyticForward`).
     progress : bool
         Show a tqdm bar on stderr.
     on_evaluation : callable, optional
@@ -359,7 +358,7 @@ def run_study(subjects: Sequence[str] | None = None, *, modes: Sequence[str] = M
     state_dir = None if out is None else Path(out) / "state"
     executor = None
     if forward_factory is None and (scheduler or workers > 1):
-        from lvcore.campaigns.executors import make_executor
+        from lvcore.parallel import make_executor
 
         executor = make_executor(workers=workers, scheduler=scheduler)
     entries = []
@@ -608,16 +607,20 @@ def add_study_parser(study_subparsers) -> None:
                                                       "(FE simulator, SYNTHETIC volunteers; Tables 9.2/9.3)")
     p.add_argument("--subjects", default=None, help="comma-separated, e.g. SYNTHETIC-HV1,SYNTHETIC-HV2 (default: all 8)")
     p.add_argument("--modes", default="fixed,free", help="fixed, free or both (default)")
-    p.add_argument("--initial", type=int, default=CHAPTER_INITIAL, help="size of the exp design (chapter 300)")
-    p.add_argument("--iterations", type=int, default=CHAPTER_ITERATIONS, help="LCB iterations (chapter 300)")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes for simulator batches")
-    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler (instead of local workers)")
+    p.add_argument("--initial", type=cli_args.int_in(1, 100_000), default=CHAPTER_INITIAL,
+                   help=f"size of the exp design (default {CHAPTER_INITIAL}, the chapter's)")
+    p.add_argument("--iterations", type=cli_args.int_in(0, 100_000), default=CHAPTER_ITERATIONS,
+                   help=f"LCB iterations (default {CHAPTER_ITERATIONS}, the chapter's)")
+    p.add_argument("--workers", type=cli_args.workers, default=1,
+                   help="local worker processes for simulator batches, up to 4 per core (default 1)")
+    p.add_argument("--scheduler", default=None,
+                   help="tcp://HOST:PORT of a Dask scheduler instead of local workers (default: none)")
     p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=cli_args.seed, default=0, help="random seed, 0 to 2^32 - 1 (default 0)")
     p.add_argument("--refit-every", type=int, default=REFIT_EVERY,
                    help=f"re-estimate the GP hyperparameters every N iterations (default {REFIT_EVERY})")
     p.add_argument("--json", action="store_true", help="print the entries and findings as JSON")
-    p.add_argument("--out", required=True, help="output folder (state files for resuming go to OUT/state)")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder (state files for resuming go to OUT/state)")
     p.set_defaults(func=_cli)
 
 

@@ -20,14 +20,47 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from lvcore import units
-from lvcore.core.forward import EmulatorForward, Forward, ForwardBatch, SimulatorForward
+from lvcore import conditions, units
+from lvcore.core.forward import Forward, ForwardBatch
+from lvcore.emulator.forward import EmulatorForward
+from lvcore.mechanics.forward import SimulatorForward
 from lvcore.exceptions import ForwardError
 from lvcore.geometry.template import N_REGIONS
 from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name, pc_names
 
 #: Angle pairs (α_endo, α_epi) in degrees used by the chapter (§9.3.2, Fig 9.5).
 CHAPTER_ANGLE_PAIRS = ((-60.0, 90.0), (-60.0, 60.0), (-30.0, 60.0), (0.0, 90.0))
+#: Most angle pairs typed into the app's sweep (each is one simulator solve, seconds to a minute).
+MAX_TYPED_ANGLE_PAIRS = 20
+
+
+def parse_angle_pairs(text: str, max_pairs: int = MAX_TYPED_ANGLE_PAIRS) -> list[tuple[float, float]]:
+    """Angle pairs typed as ``"-45 75; -90 0"`` (α_endo α_epi in degrees, pairs separated by ``;``).
+
+    Raises
+    ------
+    ForwardError
+        A pair that is not two numbers, an angle outside [-180, 180] degrees, or more than
+        ``max_pairs`` pairs; the message repeats at most 60 characters of the text.
+    """
+    from lvcore.limits import echo
+
+    items = [s.strip() for s in str(text).split(";") if s.strip()]
+    if len(items) > max_pairs:
+        raise ForwardError(f"{len(items):,} angle pairs typed; at most {max_pairs} can be run at once "
+                           "(each is one simulator solve)")
+    pairs = []
+    for item in items:
+        parts = item.split()
+        try:
+            endo, epi = (float(v) for v in parts)
+        except ValueError:
+            raise ForwardError(f"could not read '{echo(item, 60)}': write pairs as 'α_endo α_epi' in degrees, "
+                               "separated by ';'") from None
+        if not all(np.isfinite(v) and -180.0 <= v <= 180.0 for v in (endo, epi)):
+            raise ForwardError(f"angle pair '{echo(item, 60)}': angles must be in [-180, 180] degrees")
+        pairs.append((endo, epi))
+    return pairs
 
 
 @dataclass(frozen=True)
@@ -64,7 +97,7 @@ def angle_case(
     alpha_endo: float,
     alpha_epi: float,
     theta: Mapping[str, float] | None = None,
-    edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+    edp_mmhg: float = conditions.SIMULATOR_DEFAULT_EDP_MMHG,
     geometry: Mapping | None = None,
     resolution: str = "fast",
     base: str = "clamped",
@@ -76,7 +109,7 @@ def angle_case(
 
 def angle_forward(
     theta: Mapping[str, float] | None = None,
-    edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+    edp_mmhg: float = conditions.SIMULATOR_DEFAULT_EDP_MMHG,
     geometry: Mapping | None = None,
     resolution: str = "fast",
     base: str = "clamped",
@@ -94,12 +127,13 @@ def angle_forward(
     resolution, base : str
         Mesh preset and basal boundary condition.
     workers : int, optional
-        Local processes for batches (see :class:`~lvcore.core.forward.SimulatorForward`).
+        Local processes for batches (see :class:`~lvcore.mechanics.forward.SimulatorForward`).
     """
-    theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
+    theta = dict(conditions.THETA_TILDE if theta is None else theta)
     return SimulatorForward(input_names=ANGLE_NAMES, conditions={**theta, EDP_NAME: float(edp_mmhg)},
                             geometry=dict(geometry or {"kind": "default"}), resolution=resolution, base=base,
-                            workers=workers, label="FE simulator (fibre-angle sweep)")
+                            workers=workers, label="FE simulator (fibre-angle sweep)",
+                            warm_start=True)  # the sweep as warm-started continuation chains (issue 25)
 
 
 def _check_angle_forward(forward) -> None:
@@ -204,7 +238,7 @@ def emulator_angle_map(
     alpha_endo: Sequence[float],
     alpha_epi: Sequence[float],
     theta: Mapping[str, float] | None = None,
-    edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+    edp_mmhg: float = conditions.SIMULATOR_DEFAULT_EDP_MMHG,
     h: Sequence[float] | None = None,
 ) -> AngleMap:
     """The map of :func:`angle_map` predicted by an emulator with angle inputs.
@@ -249,7 +283,7 @@ def emulator_angle_sweep(
     emulator,
     angle_pairs: Sequence[tuple[float, float]] = CHAPTER_ANGLE_PAIRS,
     theta: Mapping[str, float] | None = None,
-    edp_mmhg: float = units.DEFAULT_EDP_MMHG,
+    edp_mmhg: float = conditions.SIMULATOR_DEFAULT_EDP_MMHG,
     h: Sequence[float] | None = None,
 ) -> list[AngleRun]:
     """The runs of :func:`angle_sweep` predicted by an emulator with angle inputs.
@@ -273,7 +307,7 @@ def _emulator_runs(emulator, endo: np.ndarray, epi: np.ndarray, theta, edp_mmhg:
     h = np.zeros(len(pcs)) if h is None else np.atleast_1d(np.asarray(h, dtype=float))
     if h.size < len(pcs):
         raise EmulatorError(f"emulator '{emulator.name}' needs {len(pcs)} PC scores, got {h.size}")
-    theta = dict(units.HO_REFERENCE_THETA if theta is None else theta)
+    theta = dict(conditions.THETA_TILDE if theta is None else theta)
     conditions = {**theta, EDP_NAME: float(edp_mmhg), **dict(zip(pcs, h[:len(pcs)].tolist()))}
     fwd = EmulatorForward(emulator, conditions, ANGLE_NAMES, f"emulator '{emulator.name}'")
     batch = fwd.evaluate({ANGLE_NAMES[0]: endo, ANGLE_NAMES[1]: epi})
@@ -314,7 +348,7 @@ def compute(sweep: str = "emulator") -> dict:
     """
     from lvcore.emulator.io import available_emulators, load_emulator
 
-    theta = dict(units.HO_REFERENCE_THETA)
+    theta = dict(conditions.THETA_TILDE)
     emulator = load_emulator("angles") if (sweep != "simulator" or "angles" in available_emulators()) else None
     if sweep == "simulator":
         runs = angle_sweep(CHAPTER_ANGLE_PAIRS, theta=theta, resolution="fast")

@@ -33,8 +33,11 @@ import arviz as az
 import jax
 import numpy as np
 
-from lvcore.core.forward import Forward, SimulatorForward, load_emulator_forward
-from lvcore.core.space import CHAPTER_EDP, SIGMA_V_ML
+from lvcore import cli_args
+from lvcore.core.forward import Forward
+from lvcore.emulator.forward import load_emulator_forward
+from lvcore.mechanics.forward import SimulatorForward
+from lvcore.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.inference import coverage, diagnostics, samplers
 from lvcore.outputs import ANGLE_NAMES, THETA_NAMES, pc_names
 
@@ -42,7 +45,6 @@ ANGLE_SETS = ((-60.0, 90.0), (-30.0, 60.0), (0.0, 90.0))
 THETA_SETS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), (1.0, 5.0, 1.0, 5.0))
 #: The synthetic geometry: a point in the shape model's standardised 5-PC space.
 DEFAULT_H = (0.5, -0.4, 0.3, -0.2, 0.1)
-SIGMA_S = 0.03
 MODELS = ("volume", "iid", "discrepancy")
 CHAPTER_SIGMA_S_DISCREPANCY = 0.024
 
@@ -134,7 +136,7 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
     forward : Forward, optional
         JAX-traceable, reads theta. Default: emulator ``emulator`` (name or
         directory; ``chapter``) with ``h`` bound in
-        (:func:`lvcore.core.load_emulator_forward`); raises EmulatorError if absent.
+        (:func:`lvcore.emulator.load_emulator_forward`); raises EmulatorError if absent.
     simulator : Forward, optional
         Reads theta and the fibre angles and makes the test data; default
         the FE simulator (:func:`data_simulator`).
@@ -224,7 +226,7 @@ COMMAND = "lvcore study fibre-discrepancy --out RESULTS"
 #: Figures and tables :func:`figures` draws, with their titles.
 TITLES = {
     "fig9_6_strain_predictive": "Fig 9.6: posterior predictive of the strains, iid vs discrepancy model",
-    "fig9_7_sigma_s": "Fig 9.7: posterior of the strain noise sd σ_S vs the truth 0.03",
+    "fig9_7_sigma_s": f"Fig 9.7: posterior of the strain noise sd σ_S vs the truth {SIGMA_S:g}",
     "fig9_7_sigma_s_all_sets": "Fig 9.7 (all sets): σ_S median and 90 % interval per test set",
     "fig9_8_eta_vs_benchmark": "Fig 9.8: posterior of η(θ, h) vs the benchmark η(θ̃, h), three test sets",
     "fig9_9_error_violins": "Fig 9.9: |η(θ_post, h) − η(θ̃, h)| over the 12 test sets, per likelihood",
@@ -319,7 +321,7 @@ def tables(result: dict) -> dict:
     f = result["findings"]
     med = f["median_abs_error"]
     out["table_fibre_discrepancy_findings"] = pd.DataFrame([
-        {"finding": "iid inflates σ_S (median / 0.03)", "ours": f["iid_sigma_s_inflation"],
+        {"finding": f"iid inflates σ_S (median / {SIGMA_S:g})", "ours": f["iid_sigma_s_inflation"],
          "chapter": f["chapter"]["iid_sigma_s_inflation"], "holds": f["iid_inflates_sigma_s_about_2x"]},
         {"finding": "discrepancy model σ_S median", "ours": f["discrepancy_sigma_s_median"],
          "chapter": f["chapter"]["discrepancy_sigma_s_median"], "holds": f["discrepancy_sigma_s_near_truth"]},
@@ -455,13 +457,17 @@ def add_study_parser(study_subparsers) -> None:
     """``lvcore study fibre-discrepancy [--json] [--out DIR]``."""
     p = study_subparsers.add_parser("fibre-discrepancy",
                                     help="chapter 9.3.2: iid vs polar-GP discrepancy vs volume-only under wrong fibre angles")
-    p.add_argument("--out", default="study_fibre_discrepancy", help="output folder")
+    p.add_argument("--out", type=cli_args.output_dir, default="study_fibre_discrepancy",
+                   help="output folder, created if missing (default study_fibre_discrepancy)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
-    p.add_argument("--warmup", type=int, default=1000)
-    p.add_argument("--samples", type=int, default=1000)
-    p.add_argument("--chains", type=int, default=4)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--resolution", default="default", help="simulator mesh preset for the test data")
+    p.add_argument("--warmup", type=cli_args.int_in(1, 1_000_000), default=1000,
+                   help="warm-up iterations per chain (default 1000)")
+    p.add_argument("--samples", type=cli_args.int_in(1, 1_000_000), default=1000,
+                   help="draws kept per chain (default 1000)")
+    p.add_argument("--chains", type=cli_args.int_in(1, 64), default=4, help="MCMC chains, 1 to 64 (default 4)")
+    p.add_argument("--seed", type=cli_args.seed, default=0, help="random seed, 0 to 2^32 - 1 (default 0)")
+    p.add_argument("--resolution", default="default",
+                   help="simulator mesh preset for the test data (default 'default')")
     p.add_argument("--emulator", default="chapter",
                    help="emulator name or directory trained at angles (-60, 60) (default: chapter)")
     p.set_defaults(func=_cli)

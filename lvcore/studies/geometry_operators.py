@@ -129,18 +129,18 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
     Returns ``{"operator", "theta", "emulator", "rows": [{patient, operator, h1..h5, lvv_ml,
     strain_01..strain_24}]}``, or None when the emulator is not installed.
     """
-    from lvcore import units
+    from lvcore import conditions, units
     from lvcore.emulator.io import available_emulators
 
     if emulator not in available_emulators():
         return None
-    from lvcore.core.forward import load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
     from lvcore.geometry.cohort import load_operator_geometries
     from lvcore.geometry.shape_model import load_shape_model
 
     og = operator_geometries or load_operator_geometries()
     sm = shape_model or load_shape_model()
-    theta = dict(units.HO_REFERENCE_THETA) if theta is None else dict(theta)
+    theta = dict(conditions.THETA_TILDE) if theta is None else dict(theta)
     op = og.operators[0]
     rows = []
     for p, pid in enumerate(og.patients):

@@ -58,14 +58,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.core.space import CHAPTER_EDP, SIGMA_V_ML, build_case
+from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
+from lvcore.core.space import build_case
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies._common import clean, write_json_atomic
 
-SIGMA_S = 0.03
 MODELS = ("volume", "iid", "discrepancy")
 #: The calibration model's fixed conditions (the ``chapter`` emulator).
-MODEL_ANGLES = (-60.0, 60.0)
+MODEL_ANGLES = CHAPTER_ANGLES
 MODEL_BASE = "sliding"
 #: Doses per source for the full study (chosen to span strain RMS mismatch ~0.005-0.06; to be confirmed by
 #: the full run: the RMS each dose gives is measured and reported, not assumed).
@@ -198,7 +198,7 @@ def simulate_all(volunteers, plan, out: Path, *, resolution="default", workers=1
                 if progress:
                     progress(f"simulated {k} ({i + 1}/{len(jobs)})")
         else:
-            from lvcore.campaigns.executors import make_executor
+            from lvcore.parallel import make_executor
 
             with make_executor(workers=workers, scheduler=scheduler) as ex:
                 futures = [ex.submit(_simulate_job, k, c) for k, c in jobs.items()]
@@ -304,7 +304,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
               workers: int = 1, scheduler: str | None = None, out: str | Path = "study_mismatch",
               progress: Callable | None = None, retry_failed: bool = False) -> dict:
     """Run (or resume) the study under ``out``; returns the result (also written to ``out/mismatch.json``)."""
-    from lvcore.core.forward import load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
     from lvcore.inference import samplers
 
     t0 = time.perf_counter()
@@ -387,16 +387,17 @@ def add_study_parser(study_subparsers) -> None:
                    help="doses of one source (repeatable); default DEFAULT_DOSES")
     p.add_argument("--volunteers", default=None, help="e.g. HV1,HV2 (default all bundled)")
     p.add_argument("--seeds", type=int, default=20, help="noise seeds per dose and volunteer")
-    p.add_argument("--warmup", type=int, default=500)
-    p.add_argument("--samples", type=int, default=500)
-    p.add_argument("--chains", type=int, default=2)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--resolution", default="default")
-    p.add_argument("--emulator", default="chapter")
+    p.add_argument("--warmup", type=int, default=500, help="warm-up iterations per chain (default 500)")
+    p.add_argument("--samples", type=int, default=500, help="draws kept per chain (default 500)")
+    p.add_argument("--chains", type=int, default=2, help="MCMC chains (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
+    p.add_argument("--emulator", default="chapter", help="emulator of the calibrations (default chapter)")
     p.add_argument("--workers", type=int, default=1, help="local simulation workers")
-    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler for the simulations")
+    p.add_argument("--scheduler", default=None,
+                   help="tcp://HOST:PORT of a Dask scheduler for the simulations (default: none, local workers)")
     p.add_argument("--retry-failed", action="store_true", help="run recorded failed simulations again")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print the findings as JSON")
     p.set_defaults(func=_cli)
 
 

@@ -7,7 +7,7 @@ truth θ̃ = (0.60, 1.30, 1.00, 3.60) on the main operator's geometry g:
 the two other operators' geometries and the 5- and 10-PC reconstructions of
 g — by SLSQP on the chapter's loss (9.11)
 (:func:`lvcore.optimise.sqp.refit_theta`) with the simulator's adjoint
-gradients (:class:`lvcore.core.SimulatorForward`). 6 patients × 3 mains × 4
+gradients (:class:`lvcore.mechanics.AdjointSimulatorForward`). 6 patients × 3 mains × 4
 tests = 72 fits.
 
 Each fit records:
@@ -43,17 +43,20 @@ from typing import Sequence
 
 import numpy as np
 
-from lvcore.core.forward import ForwardBatch, SimulatorForward, as_columns
+from lvcore import cli_args
+from lvcore.core.forward import ForwardBatch, as_columns
+from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
+from lvcore.conditions import SIGMA_S, THETA_TILDE
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
 #: The chapter's ground truth θ̃ (a, af in kPa).
-THETA_TRUE = (0.60, 1.30, 1.00, 3.60)
+THETA_TRUE = tuple(THETA_TILDE[n] for n in THETA_NAMES)
 #: Numbers of PCA modes of the reconstructed test geometries.
 PC_TESTS = (5, 10)
 #: Standard deviation (strain units) of the residuals of loss (9.11) in the Laplace approximation.
-SIGMA_RESIDUAL = 0.03
+SIGMA_RESIDUAL = SIGMA_S
 #: Parameter pairs of the loss surfaces (Fig 9.13).
 PAIRS = tuple(combinations(THETA_NAMES, 2))
 #: Gauss–Newton surface: grid points per axis and the span (factor around θ̂, log scale).
@@ -123,15 +126,13 @@ def test_geometry_name(main: str, test: str, geoms: dict) -> str:
 
 # ----------------------------------------------------------------------------- forward with a cache
 class CachedForward:
-    """One-point cache around a Forward (the SQP asks for the same θ more than once; the Jacobian is reused)."""
-
-    traceable = False
+    """One-point cache around a :class:`~lvcore.core.forward.JacobianForward` (the SQP asks for the same θ more
+    than once; the Jacobian is reused)."""
 
     def __init__(self, inner):
         self.inner = inner
         self.input_names = tuple(inner.input_names)
         self.label = inner.label
-        self.provides_jacobian = inner.provides_jacobian
         self.cache: dict = {}
         self.simulations = 0
 
@@ -139,15 +140,21 @@ class CachedForward:
     def input_bounds(self):
         return self.inner.input_bounds
 
-    def evaluate(self, inputs, *, jacobian: bool = False) -> ForwardBatch:
+    def evaluate(self, inputs) -> ForwardBatch:
+        return self._cached(inputs, False)
+
+    def jacobian(self, inputs) -> ForwardBatch:
+        return self._cached(inputs, True)
+
+    def _cached(self, inputs, jacobian: bool) -> ForwardBatch:
         cols, n = as_columns(inputs, self.input_names, self.label)
         if n != 1:
             self.simulations += n
-            return self.inner.evaluate(cols, jacobian=jacobian)
+            return self.inner.jacobian(cols) if jacobian else self.inner.evaluate(cols)
         key = tuple(float(cols[k][0]) for k in self.input_names)
         hit = self.cache.get(key)
-        if hit is None or (jacobian and hit.jacobian is None):
-            hit = self.inner.evaluate(cols, jacobian=jacobian or self.provides_jacobian)
+        if hit is None:  # one point: always with its Jacobian, which the SQP asks for next
+            hit = self.inner.jacobian(cols)
             self.simulations += 1
             self.cache[key] = hit
         return hit
@@ -257,9 +264,9 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
         if forward_factory is not None:
             return CachedForward(forward_factory(geom_name))
         # warm start: each SQP step starts Newton from the previous converged state (same mesh, nearby θ)
-        return CachedForward(SimulatorForward(geometry={"kind": "mesh", "path": geoms[geom_name]["path"]},
-                                              resolution=resolution, label=f"FE simulator on {patient} {geom_name}",
-                                              warm_start=True))
+        return CachedForward(AdjointSimulatorForward(geometry={"kind": "mesh", "path": geoms[geom_name]["path"]},
+                                                     resolution=resolution,
+                                                     label=f"FE simulator on {patient} {geom_name}", warm_start=True))
 
     y_star = np.asarray(y_star, float)
     truth = np.array(THETA_TRUE)
@@ -268,10 +275,10 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
     try:
         fwd = make(name)
         loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
-        y_fwd = fwd.evaluate(dict(zip(THETA_NAMES, truth)), jacobian=True).raise_on_failure().outputs[0]
+        y_fwd = fwd.jacobian(dict(zip(THETA_NAMES, truth))).raise_on_failure().outputs[0]
         err_fwd = y_fwd[1:] - y_star[1:]
         res = refit_theta(fwd, loss, truth)
-        b_hat = fwd.evaluate(dict(zip(THETA_NAMES, res.theta)), jacobian=True).raise_on_failure()
+        b_hat = fwd.jacobian(dict(zip(THETA_NAMES, res.theta))).raise_on_failure()
         r, J = residual_jacobian(loss, b_hat.outputs[0], b_hat.jacobian[0])
         cov = laplace_covariance(J)
         main_fwd = fwd if name == main else make(main)
@@ -344,7 +351,7 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
                 "surface_grid": surface_grid}
     executor = None
     if not collect_only and (scheduler or workers > 1):
-        from lvcore.campaigns.executors import make_executor
+        from lvcore.parallel import make_executor
 
         executor = make_executor(workers=workers, scheduler=scheduler)
 
@@ -578,7 +585,8 @@ def tables(result: dict) -> dict:
 def surface_title(surface: dict) -> str:
     """Fig 9.13's title for one fit's surfaces: the patient, the main and test geometries."""
     who = surface.get("patient") or "patient not recorded"
-    return (f"Fig 9.13 — SYNTHETIC {who}: loss (9.11) over parameter pairs, data from main operator "
+    who = who if "SYNTHETIC" in who else f"SYNTHETIC {who}"
+    return (f"Fig 9.13 — {who}: loss (9.11) over parameter pairs, data from main operator "
             f"{surface.get('main_operator') or '?'}'s geometry, θ refitted on test geometry "
             f"{surface.get('test_geometry') or '?'}")
 
@@ -705,8 +713,9 @@ def add_study_parser(study_subparsers) -> None:
     p = study_subparsers.add_parser("operators", help="§9.3.3: SQP refits of theta on other operators' and PCA "
                                                       "geometries (adjoint gradients; Figs 9.11-9.14, SYNTHETIC)")
     p.add_argument("--patients", default=None, help="comma-separated, e.g. SYNTHETIC-P01,SYNTHETIC-P02 (default: all 6)")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes (fits run in parallel)")
-    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler")
+    p.add_argument("--workers", type=cli_args.workers, default=1,
+                   help="local worker processes (fits run in parallel), up to 4 per core (default 1)")
+    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler (default: none, local workers)")
     p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
     p.add_argument("--surface-grid", type=int, default=0,
                    help="N > 0: simulator loss surfaces on N x N grids per parameter pair (6 N^2 runs per fit); "
@@ -714,7 +723,7 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--collect-only", action="store_true",
                    help="run nothing: summarise the fits already saved in OUT/fits (an interrupted run)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
-    p.add_argument("--out", required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
+    p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder (finished fits are kept in OUT/fits for resuming)")
     p.set_defaults(func=_cli)
 
 

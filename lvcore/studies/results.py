@@ -74,11 +74,16 @@ def result_sources(extra: Sequence = ()) -> dict[str, list[tuple[str, Path]]]:
 
 
 def read_json(path):
-    """A study's JSON file; a clear :class:`LVCoreError` naming the file when it is missing or unreadable."""
+    """A study's JSON file; a clear :class:`LVCoreError` naming the file when it is missing, not a regular
+    file, over :data:`lvcore.limits.MAX_STUDY_RESULT_BYTES`, not UTF-8 text or not JSON."""
+    from lvcore import limits
+
+    text = limits.read_text_file(path, limits.MAX_STUDY_RESULT_BYTES, "study results", LVCoreError)
     try:
-        return json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise LVCoreError(f"cannot read study results '{path}': {err}") from None
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError, ValueError) as err:
+        raise LVCoreError(f"cannot read study results '{path}': not valid JSON ({str(err)[:200]})") from None
+    return data
 
 
 # ----------------------------------------------------------------------------- background runs

@@ -14,6 +14,9 @@ from lvcore.outputs import THETA_NAMES
 
 #: The subject of the report's calibration.
 DEFAULT_SUBJECT = "SYNTHETIC-HV3"
+#: Seconds the calibration adds to ``lvcore report`` (JAX compilation included): the range measured on the
+#: 2-core development machine, ``timings_s["calibration posterior"]`` of the manifest (docs/report.md, Timing).
+TYPICAL_SECONDS = (20, 45)
 #: Figures and tables :func:`figures` draws (for the default subject), with their titles.
 TITLES = {"fig_calibration_posterior": f"Calibration posterior of θ, {DEFAULT_SUBJECT} (prior and truth shown)",
           "table_calibration_summary": f"Calibration summary, {DEFAULT_SUBJECT}"}
@@ -37,7 +40,7 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
 
     if "chapter" not in available_emulators():
         return None
-    from lvcore.core.forward import load_emulator_forward
+    from lvcore.emulator.forward import load_emulator_forward
     from lvcore.inference import models
     from lvcore.inference.calibrate import calibrate, read_pc_scores
     from lvcore.inference.data import read_measured_csv

@@ -117,7 +117,7 @@ def strain_bullseye(strains, *, title: str = "Circumferential strain (bull's eye
 
 
 def violin(samples: Mapping[str, Sequence[float]], *, reference: Mapping[str, float] | None = None,
-           title: str = "", yaxis_title: str = "", log_y: bool = False, height: int = 420,
+           title: str = "", yaxis_title: str = "", xaxis_title: str = "", log_y: bool = False, height: int = 420,
            nonnegative: bool = False) -> go.Figure:
     """Violins of several sample sets side by side, with optional reference markers.
 
@@ -144,7 +144,8 @@ def violin(samples: Mapping[str, Sequence[float]], *, reference: Mapping[str, fl
                           line=dict(color="red", dash="dash", width=2))
     if reference:
         fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="reference")
-    fig.update_layout(title=title, yaxis_title=yaxis_title, height=height, showlegend=bool(reference),
+    fig.update_layout(title=title, yaxis_title=yaxis_title, xaxis_title=xaxis_title, height=height,
+                      showlegend=bool(reference),
                       margin=dict(l=10, r=10, t=50, b=10))
     if log_y:
         fig.update_yaxes(type="log")

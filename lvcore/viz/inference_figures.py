@@ -15,6 +15,7 @@ import pandas as pd
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
+from lvcore.conditions import SIGMA_S
 from lvcore.outputs import OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
 from lvcore.viz.figures import SERIES_COLOURS, strain_heatmap, violin
 
@@ -34,18 +35,31 @@ def _scalar_vars(idata, var_names=None) -> list[str]:
     return [v for v in idata.posterior.data_vars if idata.posterior[v].ndim == 2]
 
 
+#: Pixels between stacked subplots: room for a subplot title above each (tick labels only under the last).
+STACK_GAP_PX = 34
+_STACK_MARGIN = dict(l=60, r=10, t=70, b=50)
+
+
+def _stack_spacing(n_rows: int, height: int) -> float:
+    """``vertical_spacing`` of ``make_subplots`` giving :data:`STACK_GAP_PX` between rows of a figure ``height`` tall."""
+    plot = height - _STACK_MARGIN["t"] - _STACK_MARGIN["b"]
+    return min(0.3, STACK_GAP_PX / plot) if n_rows > 1 else 0.0
+
+
 def trace_figure(idata, var_names=None, *, height_per_var: int = 160) -> go.Figure:
-    """Trace plots: one row per parameter, one line per chain."""
+    """Trace plots: one row per parameter, one line per chain (x axis shared, labelled under the last row)."""
     names = _scalar_vars(idata, var_names)
-    fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True, vertical_spacing=0.02,
+    height = max(300, height_per_var * len(names))
+    fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True,
+                        vertical_spacing=_stack_spacing(len(names), height),
                         subplot_titles=[f"{n} ({UNITS.get(n, '')})" for n in names])
     for i, n in enumerate(names):
         d = _draws(idata, n)
         for c in range(d.shape[0]):
             fig.add_scatter(y=d[c], mode="lines", line=dict(width=0.8, color=SERIES_COLOURS[c % 8]),
                             name=f"chain {c}", legendgroup=f"chain {c}", showlegend=i == 0, row=i + 1, col=1)
-    fig.update_layout(height=max(300, height_per_var * len(names)), title="Trace plots",
-                      margin=dict(l=10, r=10, t=60, b=10))
+        fig.update_yaxes(title_text=UNITS.get(n, "") or "value", row=i + 1, col=1)
+    fig.update_layout(height=height, title="Trace plots", margin=_STACK_MARGIN)
     fig.update_xaxes(title_text="draw", row=len(names), col=1)
     return fig
 
@@ -55,7 +69,9 @@ def rank_figure(idata, var_names=None, *, bins: int = 20, height_per_var: int = 
     from scipy.stats import rankdata
 
     names = _scalar_vars(idata, var_names)
-    fig = make_subplots(rows=len(names), cols=1, vertical_spacing=0.03, subplot_titles=list(names))
+    height = max(300, height_per_var * len(names))
+    fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True, vertical_spacing=_stack_spacing(len(names), height),
+                        subplot_titles=list(names))
     for i, n in enumerate(names):
         d = _draws(idata, n)
         ranks = rankdata(d.reshape(-1)).reshape(d.shape)
@@ -66,8 +82,9 @@ def rank_figure(idata, var_names=None, *, bins: int = 20, height_per_var: int = 
                             line=dict(color=SERIES_COLOURS[c % 8]), name=f"chain {c}",
                             legendgroup=f"chain {c}", showlegend=i == 0, row=i + 1, col=1)
         fig.add_hline(y=d.shape[1] / bins, line=dict(color="grey", dash="dot"), row=i + 1, col=1)
-    fig.update_layout(height=max(300, height_per_var * len(names)), title="Rank plots (uniform if chains agree)",
-                      margin=dict(l=10, r=10, t=60, b=10))
+        fig.update_yaxes(title_text="count", row=i + 1, col=1)
+    fig.update_layout(height=height, title="Rank plots (uniform if chains agree)", margin=_STACK_MARGIN)
+    fig.update_xaxes(title_text="rank in the pooled draws", row=len(names), col=1)
     return fig
 
 
@@ -144,7 +161,7 @@ def discrepancy_figure(idata, *, include_v: bool = True) -> go.Figure:
     return strain_heatmap(med, title=title)
 
 
-def sigma_s_figure(samples: Mapping[str, np.ndarray], truth: float | None = 0.03) -> go.Figure:
+def sigma_s_figure(samples: Mapping[str, np.ndarray], truth: float | None = SIGMA_S) -> go.Figure:
     """Posterior densities of sigma_S per model with the true value dashed (Fig. 9.7)."""
     from lvcore.viz.figures import density_overlay
 
@@ -176,7 +193,7 @@ def strain_predictive_figure(bands: Mapping[str, Mapping[str, np.ndarray]], y_me
 def error_violin_figure(errors: Mapping[str, np.ndarray]) -> go.Figure:
     """Violins of |eta(theta_post, h) - eta(theta_true, h)| per model over all test sets (Fig. 9.9)."""
     return violin(errors, title="|η(θ_post, h) − η(θ̃, h)| over the 24 strains and all test sets",
-                  yaxis_title="absolute strain error (-)", nonnegative=True)
+                  yaxis_title="absolute strain error (-)", xaxis_title="likelihood model", nonnegative=True)
 
 
 def write_html(fig: go.Figure, path) -> Path:

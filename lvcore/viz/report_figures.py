@@ -31,8 +31,10 @@ def _strains24(values) -> np.ndarray:
     return y
 
 
-#: Title font size (px) and line height of wrapped titles; subplot titles take this much room above a plot.
-TITLE_LINE_PX, SUBPLOT_TITLE_PX = 24, 26
+#: Title line height (px), room of subplot titles above a plot (px), width of a title character (px, 17 px font).
+TITLE_LINE_PX, SUBPLOT_TITLE_PX, TITLE_CHAR_PX = 24, 26, 9.0
+#: Width (px) of a static export whose figure sets none (tables set their own, to fit their columns).
+EXPORT_WIDTH_PX = 1100
 
 
 def _visible_len(line: str) -> int:
@@ -54,15 +56,20 @@ def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
     text = fig.layout.title.text or ""
     if not text:
         return fig
+    # never wider than the figure itself (tables set their own, narrower width)
+    width = min(width, int(((fig.layout.width or EXPORT_WIDTH_PX) - 40) / TITLE_CHAR_PX))
     lines = []
     for part in text.split("<br>"):
         lines += [part] if _visible_len(part) <= width or "<" in part else textwrap.wrap(part, width)
     subplot_titles = any(getattr(a, "yref", None) == "paper" and (a.y or 0) >= 0.99 and a.yanchor == "bottom"
                          for a in fig.layout.annotations)
-    need = 16 + TITLE_LINE_PX * len(lines) + (SUBPLOT_TITLE_PX if subplot_titles else 6)
+    # plotly places a multi-line title anchored at the top a little higher per extra line (the first line was
+    # cut off at the image's top edge in PNG exports): the pad grows with the lines (measured on kaleido's output)
+    pad = 12 + 6 * (len(lines) - 1)
+    need = pad + TITLE_LINE_PX * len(lines) + (SUBPLOT_TITLE_PX if subplot_titles else 6)
     top = max(fig.layout.margin.t or 0, need)
     grow = top - (fig.layout.margin.t if fig.layout.margin.t is not None else 100)
-    fig.update_layout(title=dict(text="<br>".join(lines), y=1, yref="container", yanchor="top", pad=dict(t=12)),
+    fig.update_layout(title=dict(text="<br>".join(lines), y=1, yref="container", yanchor="top", pad=dict(t=pad)),
                       margin=dict(t=top))
     if fig.layout.height and grow > 0:
         fig.update_layout(height=fig.layout.height + grow)
@@ -272,7 +279,7 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
                         showlegend=j == 0, row=1, col=j + 1)
         if truth and n in truth:
             fig.add_vline(x=float(truth[n]), line=dict(color="red", dash="dash", width=2), row=1, col=j + 1)
-        fig.update_xaxes(range=[lo, hi], row=1, col=j + 1)
+        fig.update_xaxes(range=[lo, hi], title_text=f"{n} ({units.get(n, '-')})", row=1, col=j + 1)
     if truth:
         fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="truth (SYNTHETIC)")
     fig.update_yaxes(title_text="density", col=1)
@@ -282,7 +289,7 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
 
 
 def interval_figure(rows: Sequence[Mapping], *, truth: float | None, title: str, xaxis_title: str,
-                    height: int = 420) -> go.Figure:
+                    yaxis_title: str = "test set", height: int = 420) -> go.Figure:
     """Median and 5–95 % interval per (label, series) row, e.g. σ_S per test set and model (Fig 9.7 summary).
 
     ``rows``: dicts with ``label``, ``series``, ``median``, ``q05``, ``q95``.
@@ -298,7 +305,8 @@ def interval_figure(rows: Sequence[Mapping], *, truth: float | None, title: str,
                                      arrayminus=med - np.array([r["q05"] for r in rs])))
     if truth is not None:
         fig.add_vline(x=truth, line=dict(color="black", dash="dash"), annotation_text="truth")
-    fig.update_layout(title=title, xaxis_title=xaxis_title, height=height, margin=dict(l=10, r=20, t=60, b=40))
+    fig.update_layout(title=title, xaxis_title=xaxis_title, yaxis_title=yaxis_title, height=height,
+                      margin=dict(l=10, r=20, t=60, b=40))
     return fig
 
 

@@ -1,7 +1,9 @@
-"""Where campaign rows run: a local process pool or a Dask cluster.
+"""Process pools: where batches of forward evaluations run, a local process pool or a Dask cluster.
 
-Both executors expose the same small interface used by
-:mod:`lvcore.campaigns.runner`:
+The one home of parallel execution, low in the layers so that every user
+shares it: the simulator adapter (:class:`lvcore.mechanics.forward.SimulatorForward`),
+campaigns (:mod:`lvcore.campaigns.runner`), emulator training and the studies.
+Both executors expose the same small interface:
 
 * ``submit(fn, *args) -> future``;
 * ``as_completed(futures)`` yielding futures as they finish;
@@ -74,7 +76,7 @@ def _worker_init(parent_pid: int | None = None) -> None:
         watch_parent(parent_pid)
     for k, v in WORKER_ENV.items():
         os.environ.setdefault(k, v)
-    import lvcore  # noqa: F401 - float64 and the persistent compilation cache (lvcore.jax_cache)
+    import lvcore.jax_cache  # noqa: F401 - imports lvcore: float64 and the persistent compilation cache
 
 
 class LocalExecutor:

@@ -12,7 +12,7 @@ import pytest
 
 DRIVER = r"""
 import os, sys, time
-from lvcore.campaigns.executors import LocalExecutor
+from lvcore.parallel import LocalExecutor
 
 def work(i):
     time.sleep(600)
@@ -80,7 +80,7 @@ def test_workers_and_resource_tracker_die_with_a_sigkilled_driver(tmp_path):
 
 
 def test_watch_parent_exits_when_the_parent_changes():
-    code = ("import os, time\nfrom lvcore.campaigns.executors import watch_parent\n"
+    code = ("import os, time\nfrom lvcore.parallel import watch_parent\n"
             "watch_parent(os.getppid() + 999999, poll_s=0.05)\ntime.sleep(30)\n")
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
     t0 = time.time()

@@ -1,0 +1,32 @@
+"""The app's process set-up: one call, once, before numpy, VTK or JAX start.
+
+:func:`setup_process` is called by the entry script (:mod:`lvcore.app.main`)
+before anything else is imported; the pages do no set-up of their own. The
+test suite does the same in ``tests/conftest.py``.
+"""
+from __future__ import annotations
+
+import os
+
+#: Chains a calibration from the app runs; each gets its own XLA host device.
+APP_CHAINS = 4
+#: One BLAS/OpenMP thread: numpy's BLAS must not fight XLA's threads on a small machine.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def setup_process(num_chains: int = APP_CHAINS) -> None:
+    """Pin BLAS/OpenMP to one thread, render VTK off-screen with EGL, and give each calibration chain an XLA
+    host device (:func:`lvcore.inference.samplers.use_host_devices`).
+
+    Values already set in the environment are kept. Has an effect only before numpy and JAX start, so the
+    entry script calls it first.
+    """
+    for var in THREAD_VARIABLES:
+        os.environ.setdefault(var, "1")
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    from lvcore.inference.samplers import use_host_devices
+
+    use_host_devices(num_chains)
+
+
+__all__ = ["APP_CHAINS", "THREAD_VARIABLES", "setup_process"]

@@ -1,0 +1,325 @@
+"""Continuation chains: a batch of solves ordered so that each one warm-starts from a neighbour's solution.
+
+A campaign, a Bayesian-optimisation design or a sweep solves hundreds of
+nearby points on one geometry. A cold solve climbs the load in steps with a
+fresh tangent on most Newton iterations; a solve started at full load from the
+converged state of a nearby point (``simulate(initial=...)``, see
+:func:`lvcore.mechanics.newton.solve`) needs a few chord iterations. This
+module turns a batch into such warm-started work:
+
+* :func:`continuation_order` orders the points (in scaled, unit-cube-like
+  coordinates) along a depth-first walk of their Euclidean minimum spanning
+  tree, so consecutive points are near neighbours;
+* :func:`solve_in_order` runs one task's points in that order, each starting
+  from the nearest converged state among the task's earlier points and the
+  *seeds* it was given (a point whose warm start fails is solved cold by the
+  solver itself, so a poor neighbour costs time, never the result);
+* :func:`run_chains` splits the order into contiguous chains, at least two per
+  worker so no core waits on the driver, and feeds each chain to the executor
+  in chunks of ``chunk`` points. The next chunk of a chain is submitted as soon
+  as the previous one returns, seeded with the nearest converged states the
+  driver holds. When a chain runs dry, the longest remaining one is split in
+  two so both cores stay busy until the end.
+
+Results reach the caller chunk by chunk (a campaign records each row as it
+arrives), so killing a run loses only the chunks in flight, and a resumed run
+chains whatever is still pending.
+
+Forward models opt in by providing ``evaluate_warm(point, initial)``
+returning ``(ForwardBatch of one point, state or None)`` (the FE simulator
+does); others are evaluated point by point, cold, in the same order.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+#: Points per task: large enough that the driver's round trip is small against the solves, small enough
+#: that a killed run loses little and the chains rebalance at the end.
+DEFAULT_CHUNK = 12
+#: Converged states the driver keeps to seed new chunks (the most recent ones).
+DEFAULT_KEPT_STATES = 256
+#: Seeds sent with each chunk (nearest to its points).
+SEEDS_PER_CHUNK = 4
+#: Chains per worker: two, so a worker always has a queued chunk while the driver handles the other's result.
+CHAINS_PER_WORKER = 2
+
+
+class ChainTaskError(RuntimeError):
+    """A chunk's task failed in the executor (not a failed solve: those are results)."""
+
+
+@dataclass(frozen=True)
+class Seed:
+    """A converged state offered as a warm start: its scaled coordinates and the solver state."""
+
+    unit: np.ndarray
+    state: Any
+
+
+@dataclass(frozen=True)
+class ChainRow:
+    """One solved point of a task: its key (row index), scaled coordinates, result and state (None if failed)."""
+
+    key: int
+    unit: np.ndarray
+    result: Any
+    state: Any = None
+    warm: bool = False
+
+
+def continuation_order(U: np.ndarray, k: int = 10) -> np.ndarray:
+    """A permutation of the rows of ``U`` (n, d) that walks between near neighbours.
+
+    Depth-first (preorder) walk of the Euclidean minimum spanning tree of a
+    ``k``-nearest-neighbour graph, children visited nearest first; components
+    of that graph (rare) are walked one after another, each from its point
+    nearest the end of the previous walk.
+
+    Parameters
+    ----------
+    U : (n, d) array
+        Points in scaled coordinates (comparable units per column, e.g. the unit cube of a design space).
+    k : int
+        Neighbours per point in the graph whose spanning tree is walked.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+    from scipy.spatial import cKDTree
+
+    U = np.asarray(U, dtype=float)
+    n = U.shape[0]
+    if n <= 2:
+        return np.arange(n)
+    kk = min(k, n - 1)
+    tree = cKDTree(U)
+    dist, nb = tree.query(U, kk + 1)
+    rows = np.repeat(np.arange(n), kk)
+    d = dist[:, 1:].ravel()
+    # zero distances (duplicate points) would vanish from a sparse graph: keep them as tiny edges
+    d = np.where(d > 0, d, 1e-300)
+    g = coo_matrix((d, (rows, nb[:, 1:].ravel())), shape=(n, n)).tocsr()
+    g = g.maximum(g.T)
+    mst = minimum_spanning_tree(g)
+    mst = (mst + mst.T).tocsr()
+    n_comp, labels = connected_components(mst, directed=False)
+    seen = np.zeros(n, bool)
+    order: list[int] = []
+    start = 0
+    for _ in range(n_comp):
+        stack = [start]
+        while stack:
+            v = stack.pop()
+            if seen[v]:
+                continue
+            seen[v] = True
+            order.append(v)
+            lo, hi = mst.indptr[v], mst.indptr[v + 1]
+            nbrs, w = mst.indices[lo:hi], mst.data[lo:hi]
+            for j in nbrs[np.argsort(-w)]:  # pushed farthest first: the nearest is walked next
+                if not seen[j]:
+                    stack.append(int(j))
+        rest = np.flatnonzero(~seen)
+        if rest.size:
+            start = int(rest[np.argmin(np.linalg.norm(U[rest] - U[order[-1]], axis=1))])
+    return np.asarray(order, dtype=np.int64)
+
+
+def nearest_state(unit: np.ndarray, candidates: Sequence[Seed]):
+    """The state of the candidate nearest ``unit``, or None when there is none."""
+    if not candidates:
+        return None
+    d = [float(np.sum((c.unit - unit) ** 2)) for c in candidates]
+    return candidates[int(np.argmin(d))].state
+
+
+def solve_in_order(keys: Sequence[int], units: np.ndarray, seeds: Sequence[Seed],
+                   solve: Callable[[int, Any], tuple[Any, Any]]) -> list[ChainRow]:
+    """Solve ``keys`` in the given order, each warm-started from the nearest converged state so far.
+
+    Parameters
+    ----------
+    keys : sequence of int
+        Row keys, in continuation order.
+    units : (len(keys), d) array
+        Their scaled coordinates.
+    seeds : sequence of Seed
+        States available before the first point (e.g. the end of the chain's previous chunk).
+    solve : callable
+        ``solve(key, initial) -> (result, state)``; ``initial`` is None (cold) or a
+        state; ``state`` is None when the point did not converge (it is then
+        never used as a start).
+    """
+    pool = list(seeds)
+    out = []
+    for key, u in zip(keys, np.asarray(units, dtype=float)):
+        initial = nearest_state(u, pool)
+        result, state = solve(int(key), initial)
+        if state is not None:
+            if pool:  # only the newest state keeps its factorised tangent (they are large)
+                pool[-1] = Seed(pool[-1].unit, light_state(pool[-1].state))
+            pool.append(Seed(u, state))
+        out.append(ChainRow(int(key), u, result, state, initial is not None))
+    # the caller keeps these states: only the last one keeps its tangent
+    return [r if i == len(out) - 1 else ChainRow(r.key, r.unit, r.result, light_state(r.state), r.warm)
+            for i, r in enumerate(out)]
+
+
+def light_state(state):
+    """A solver state without its factorised tangent (``(u, p, tangent)`` -> ``(u, p)``); others unchanged."""
+    if isinstance(state, tuple) and len(state) > 2:
+        return state[:2]
+    return state
+
+
+@dataclass
+class _Chain:
+    rows: list[int]                 # positions (into the batch) still to submit, in order
+
+    def take(self, n: int) -> list[int]:
+        head, self.rows = self.rows[:n], self.rows[n:]
+        return head
+
+
+@dataclass
+class ChainStats:
+    """What :func:`run_chains` did: chunks, chains (after splits), points solved warm and cold."""
+
+    chunks: int = 0
+    chains: int = 0
+    splits: int = 0
+    warm: int = 0
+    cold: int = 0
+    seconds: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+
+def plan_chains(U: np.ndarray, workers: int) -> list[list[int]]:
+    """Split the continuation order of ``U`` into ``CHAINS_PER_WORKER × workers`` contiguous chains (positions)."""
+    order = continuation_order(U)
+    n_chains = max(1, min(len(order), CHAINS_PER_WORKER * max(1, int(workers))))
+    return [list(map(int, part)) for part in np.array_split(order, n_chains) if part.size]
+
+
+def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U: np.ndarray, *,
+               workers: int, on_rows: Callable[[list[ChainRow]], None], chunk: int = DEFAULT_CHUNK,
+               seeds: Sequence[Seed] = (), kept_states: int = DEFAULT_KEPT_STATES) -> ChainStats:
+    """Run the points of ``U`` as continuation chains on ``executor``.
+
+    Parameters
+    ----------
+    executor : object with ``as_completed(futures)`` (see :mod:`lvcore.campaigns.executors`)
+    submit_chunk : callable
+        ``submit_chunk(positions, seeds) -> future`` whose result is a list of
+        :class:`ChainRow` keyed by those positions (rows of ``U``); it is
+        expected to call :func:`solve_in_order` in a worker.
+    U : (n, d) array
+        Scaled coordinates of the points.
+    workers : int
+        Worker processes of the executor (chains are ``2 × workers``).
+    on_rows : callable
+        Receives every returned chunk's rows, after the chain's next chunk
+        has been submitted (so recording never idles a worker).
+    chunk : int
+        Points per task.
+    seeds : sequence of Seed
+        States known before the run (e.g. from earlier batches).
+    kept_states : int
+        Converged states the driver keeps to seed chunks.
+
+    Raises
+    ------
+    ChainTaskError
+        When a task raises (a dead worker): finished chunks were already passed to ``on_rows``.
+    """
+    t0 = time.perf_counter()
+    U = np.asarray(U, dtype=float)
+    stats = ChainStats()
+    if U.shape[0] == 0:
+        return stats
+    chains = [_Chain(c) for c in plan_chains(U, workers)]
+    stats.chains = len(chains)
+    kept: list[Seed] = list(seeds)[-kept_states:]
+    chunk = max(1, int(chunk))
+
+    def seeds_for(positions: list[int]) -> list[Seed]:
+        if not kept:
+            return []
+        cu = np.stack([s.unit for s in kept])
+        d = np.min(np.linalg.norm(cu[:, None, :] - U[positions][None, :, :], axis=2), axis=1)
+        return [kept[i] for i in np.argsort(d)[:SEEDS_PER_CHUNK]]
+
+    inflight: dict[Any, _Chain] = {}
+
+    def launch(ch: _Chain) -> None:
+        positions = ch.take(chunk)
+        inflight[submit_chunk(positions, seeds_for(positions))] = ch
+        stats.chunks += 1
+
+    for ch in chains:
+        launch(ch)
+    while inflight:
+        fut = next(iter(executor.as_completed(list(inflight))))
+        ch = inflight.pop(fut)
+        try:
+            rows = fut.result()
+        except Exception as err:  # a dead worker or a broken pool: the chunks in flight are lost
+            raise ChainTaskError(f"{type(err).__name__}: {err}") from err
+        for r in rows:
+            if r.state is not None:
+                kept.append(Seed(U[r.key], r.state))
+            stats.warm += bool(r.warm)
+            stats.cold += not r.warm
+        del kept[:-kept_states]
+        for i in range(max(0, len(kept) - len(rows) - 8), max(0, len(kept) - 8)):  # few tangents kept in memory
+            kept[i] = Seed(kept[i].unit, light_state(kept[i].state))
+        if ch.rows:
+            launch(ch)
+        else:
+            # a chain ran dry: split the longest unsubmitted remainder so every worker stays busy
+            longest = max(chains, key=lambda c: len(c.rows))
+            if len(longest.rows) >= 2 * chunk:
+                half = len(longest.rows) // 2
+                new = _Chain(longest.rows[half:])
+                longest.rows = longest.rows[:half]
+                chains.append(new)
+                stats.splits += 1
+                stats.chains += 1
+                launch(new)
+        on_rows(rows)
+    stats.seconds = time.perf_counter() - t0
+    return stats
+
+
+def scaled_coordinates(names: Sequence[str], X: np.ndarray) -> np.ndarray:
+    """Scaled coordinates of named physical inputs, comparable across batches (no design space needed).
+
+    Material parameters (``a, b, af, bf``, positive) on a log scale; fibre
+    angles in units of 90°; EDP in units of 8 mmHg; PC scores in units of 4
+    (their ±2 box); anything else as given.
+    """
+    from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name
+
+    X = np.atleast_2d(np.asarray(X, dtype=float))
+    cols = []
+    for j, n in enumerate(names):
+        x = X[:, j]
+        if n in THETA_NAMES:
+            cols.append(np.log(np.maximum(x, 1e-300)) / math.log(100.0))
+        elif n in ANGLE_NAMES:
+            cols.append(x / 90.0)
+        elif n == EDP_NAME:
+            cols.append(x / 8.0)
+        elif is_pc_name(n):
+            cols.append(x / 4.0)
+        else:
+            cols.append(x)
+    return np.column_stack(cols) if cols else np.zeros((X.shape[0], 0))
+
+
+__all__ = ["continuation_order", "solve_in_order", "light_state", "run_chains", "plan_chains", "nearest_state",
+           "scaled_coordinates", "Seed", "ChainRow", "ChainStats", "ChainTaskError", "DEFAULT_CHUNK"]

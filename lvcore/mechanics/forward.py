@@ -1,0 +1,280 @@
+"""The simulator adapter: the FE simulator as a forward model of :mod:`lvcore.core.forward`.
+
+:class:`SimulatorForward` runs :func:`lvcore.mechanics.simulate.simulate` on
+the case :func:`lvcore.core.space.build_case` writes for each point (outputs
+only, a :class:`~lvcore.core.forward.Forward`); batches run in this process or
+on the process pools of :mod:`lvcore.parallel`. :class:`AdjointSimulatorForward`
+reads material parameters only and adds their Jacobian from the adjoint
+sensitivities (:mod:`lvcore.mechanics.sensitivities`): a
+:class:`~lvcore.core.forward.JacobianForward`.
+
+Importing this module registers the default campaign forward model
+``"simulator"`` (:mod:`lvcore.core.registry`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from lvcore.core.forward import ForwardBatch, as_columns, failure_reason, is_traced
+from lvcore.core.registry import DEFAULT_FORWARD_NAME, register_forward
+from lvcore.core.space import build_case
+from lvcore.exceptions import ForwardError
+from lvcore.mechanics.simulate import simulate
+from lvcore.outputs import N_OUTPUTS, THETA_NAMES
+
+
+def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, warm: dict | None = None):
+    """One simulator run -> ``(outputs (25,), converged, message, jacobian (25, p) or None, seconds)``.
+
+    Runs in worker processes; never raises for a failing simulation. ``warm``
+    (in-process only): a dict whose ``"state"`` warm-starts the solve and is
+    replaced by this solve's state when it converges.
+    """
+    t0 = time.perf_counter()
+    nan_jac = np.full((N_OUTPUTS, len(input_names)), np.nan) if jacobian else None
+    try:
+        r = simulate(case, with_sensitivities=jacobian, initial=None if warm is None else warm.get("state"))
+        if warm is not None and r.converged:
+            warm["state"] = r.warm_state
+        seconds = float(getattr(r, "seconds", time.perf_counter() - t0))
+        if not r.converged:
+            return np.full(N_OUTPUTS, np.nan), False, str(r.message or "did not converge"), nan_jac, seconds
+        y = np.asarray(r.outputs(), dtype=float)
+        jac = None
+        if jacobian:
+            sens = r.sensitivities or {}
+            jac = np.column_stack([np.asarray(sens[n], dtype=float) for n in input_names])
+        return y, True, str(r.message or ""), jac, seconds
+    except Exception as err:  # noqa: BLE001 - recorded as a failed point, never swallowed silently
+        return np.full(N_OUTPUTS, np.nan), False, failure_reason(err), nan_jac, time.perf_counter() - t0
+
+
+def _simulate_chunk(input_names, cases, keys, units, seeds, jacobian):
+    """Worker task: ``cases`` in order, each warm-started from the nearest converged state (a chain chunk).
+
+    Returns :class:`lvcore.chains.ChainRow` objects whose results are
+    :func:`_simulate_point` tuples.
+    """
+    from lvcore.chains import solve_in_order
+
+    by_key = dict(zip(keys, cases))
+
+    def solve(key, initial):
+        warm = {"state": initial}
+        res = _simulate_point(by_key[key], input_names, jacobian, warm)
+        return res, (warm["state"] if res[1] else None)
+
+    return solve_in_order(keys, units, seeds, solve)
+
+
+#: Converged states a warm-starting SimulatorForward keeps between batches.
+WARM_KEPT_STATES = 64
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatorForward:
+    """The FE simulator (:func:`lvcore.simulate`) as a :class:`~lvcore.core.forward.Forward` (outputs only).
+
+    Each point's named inputs, merged with ``conditions``, go through
+    :func:`lvcore.core.space.build_case` on ``geometry`` at ``resolution``.
+
+    Parameters
+    ----------
+    input_names : tuple of str
+        Inputs read at call time (default ``a, b, af, bf``).
+    conditions : mapping
+        Fixed inputs by name (fibre angles in deg, ``edp`` in mmHg, PC scores
+        ``h1..hk`` of a ``pca`` geometry). Unset angles and EDP are the
+        chapter's (-60°, 60°) and 8 mmHg (:func:`build_case`).
+    geometry : mapping, optional
+        The case's geometry section (default: the PC scores among the inputs,
+        else the default LV).
+    resolution : str
+        Mesh preset (``"fast"``, ``"coarse"``, ``"default"``, ``"accurate"``).
+    base : {"clamped", "sliding"}
+    workers : int, optional
+        Batches of more than one point run on a local process pool of this
+        many workers (:class:`lvcore.parallel.LocalExecutor`;
+        ``None``: one per core). ``1`` (default) runs them in this process.
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a Dask scheduler for batches (overrides ``workers``).
+    label : str
+    warm_start : bool
+        Every point starts Newton at full load from the nearest converged
+        state (:func:`lvcore.mechanics.newton.solve`), which saves most of the
+        load stepping: a batch is ordered into continuation chains
+        (:mod:`lvcore.chains`), in this process or split across the executor's
+        workers, and the forward keeps its last converged states to start
+        later batches (a sequence of nearby points: an SQP, a line search, BO
+        iterations). A failed warm start falls back to a cold solve, and the
+        result satisfies the same tolerances. Without it every point is solved
+        cold.
+
+    Notes
+    -----
+    The simulator is not JAX-traceable. Its Jacobian (adjoint sensitivities,
+    material parameters only) is :class:`AdjointSimulatorForward`'s.
+    """
+
+    input_names: tuple[str, ...] = THETA_NAMES
+    conditions: Mapping[str, float] = field(default_factory=dict)
+    geometry: Mapping | None = None
+    resolution: str = "default"
+    base: str = "clamped"
+    workers: int | None = 1
+    scheduler: str | None = None
+    label: str = "FE simulator"
+    warm_start: bool = False
+    _warm: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "input_names", tuple(str(n) for n in self.input_names))
+        object.__setattr__(self, "conditions", {str(k): float(v) for k, v in dict(self.conditions).items()})
+        both = sorted(set(self.input_names) & set(self.conditions))
+        if both:
+            raise ForwardError(f"simulator forward: {both} are both inputs and fixed conditions")
+        # fail now, not per point, on names the case builder does not know
+        probe = {**{n: 1.0 for n in THETA_NAMES}, **self.conditions, **{n: 0.0 for n in self.input_names}}
+        probe.update({n: 1.0 for n in THETA_NAMES if n in self.input_names})
+        build_case(probe, geometry=self.geometry, resolution=self.resolution, base=self.base)
+
+    def __getstate__(self):
+        # the kept warm-start states stay in this process (a pickled copy, e.g. sent to a worker, starts empty)
+        return {k: v for k, v in self.__dict__.items() if k != "_warm"}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        object.__setattr__(self, "_warm", {})
+
+    @property
+    def input_bounds(self) -> dict:
+        return {}
+
+    def case(self, point: Mapping[str, float]) -> dict:
+        """The simulator case of one point (``input_names`` -> values)."""
+        return build_case({**self.conditions, **{n: float(point[n]) for n in self.input_names}},
+                          geometry=self.geometry, resolution=self.resolution, base=self.base)
+
+    def evaluate(self, inputs: Mapping[str, Any], *, executor=None) -> ForwardBatch:
+        """Simulate every point (see :class:`~lvcore.core.forward.Forward`); ``executor`` reuses a running pool.
+
+        ``executor`` is any object of :mod:`lvcore.parallel`
+        (``submit``/``as_completed``); it is not closed.
+        """
+        return self._batch(inputs, False, executor)
+
+    def _batch(self, inputs: Mapping[str, Any], jacobian: bool, executor) -> ForwardBatch:
+        cols, n = as_columns(inputs, self.input_names, self.label)
+        cases = [self.case({k: cols[k][i] for k in self.input_names}) for i in range(n)]
+        X = np.column_stack([cols[k] for k in self.input_names]) if self.input_names else np.zeros((n, 0))
+        if executor is None and n > 1 and (self.scheduler or self.workers != 1):
+            from lvcore.parallel import make_executor
+
+            with make_executor(workers=self.workers, scheduler=self.scheduler) as ex:
+                results = self._run(cases, jacobian, ex, X)
+        else:
+            results = self._run(cases, jacobian, executor, X)
+        y, conv, msgs, jacs, secs = zip(*results)
+        return ForwardBatch(np.stack(y), np.array(conv), tuple(msgs), np.stack(jacs) if jacobian else None,
+                            np.array(secs))
+
+    def _run(self, cases, jacobian, executor, X=None):
+        if self.warm_start:
+            return self._run_chained(cases, jacobian, executor, X)
+        if executor is None:
+            return [_simulate_point(c, self.input_names, jacobian) for c in cases]
+        futures = [executor.submit(_simulate_point, c, self.input_names, jacobian) for c in cases]
+        return [f.result() for f in futures]
+
+    def _run_chained(self, cases, jacobian, executor, X):
+        """Warm-started continuation chains over the batch (see ``warm_start``)."""
+        from lvcore import chains
+
+        U = chains.scaled_coordinates(self.input_names, X)
+        seeds = self._warm.setdefault("seeds", [])
+        results: list = [None] * len(cases)
+
+        def collect(rows):
+            for r in rows:
+                results[r.key] = r.result
+                if r.state is not None:
+                    seeds.append(chains.Seed(r.unit, r.state))
+
+        if executor is None:
+            order = chains.continuation_order(U)
+            collect(_simulate_chunk(self.input_names, [cases[i] for i in order], list(map(int, order)), U[order],
+                                    list(seeds[-chains.SEEDS_PER_CHUNK * 4:]), jacobian))
+        else:
+            def submit(positions, chunk_seeds):
+                return executor.submit(_simulate_chunk, self.input_names, [cases[i] for i in positions], positions,
+                                       U[positions], chunk_seeds, jacobian)
+
+            try:
+                chains.run_chains(executor, submit, U, workers=getattr(executor, "workers", 1), on_rows=collect,
+                                  seeds=seeds[-chains.DEFAULT_KEPT_STATES:])
+            except chains.ChainTaskError as err:
+                raise err.__cause__ or err from None
+        del seeds[:-WARM_KEPT_STATES]
+        for i in range(max(0, len(seeds) - 1)):  # keep one factorised tangent in memory
+            seeds[i] = chains.Seed(seeds[i].unit, chains.light_state(seeds[i].state))
+        return results
+
+    def evaluate_warm(self, point: Mapping[str, float], initial=None):
+        """One point started from ``initial`` (a converged state of this forward, or None: cold).
+
+        Returns ``(ForwardBatch of one point, state)``; ``state`` is None when the
+        point did not converge. Used by campaign chains (:mod:`lvcore.chains`).
+        """
+        cols, n = as_columns({k: point[k] for k in self.input_names}, self.input_names, self.label)
+        if n != 1:
+            raise ForwardError("evaluate_warm takes one point")
+        warm = {"state": initial}
+        y, ok, msg, _, sec = _simulate_point(self.case({k: cols[k][0] for k in self.input_names}),
+                                             self.input_names, False, warm)
+        batch = ForwardBatch(y[None], np.array([ok]), (msg,), None, np.array([sec]))
+        return batch, (warm["state"] if ok else None)
+
+    def __call__(self, params: Mapping[str, Any]) -> np.ndarray:
+        """Outputs ``(25,)`` of one point; raises :class:`SolverError` if it fails. Not JAX-traceable."""
+        if is_traced(params):
+            raise ForwardError("the FE simulator is not JAX-traceable (its sparse solves run on the host): "
+                               "use an EmulatorForward for jax.grad/NUTS, or SimulatorForward.evaluate "
+                               "(AdjointSimulatorForward.jacobian for the adjoint gradient)")
+        batch = self.evaluate({n: params[n] for n in self.input_names}).raise_on_failure()
+        return batch.outputs[0]
+
+
+@dataclass(frozen=True, eq=False)
+class AdjointSimulatorForward(SimulatorForward):
+    """The FE simulator with its adjoint Jacobian: a :class:`~lvcore.core.forward.JacobianForward`.
+
+    As :class:`SimulatorForward`, but every input must be a material parameter (``a, b, af, bf``): the adjoint
+    sensitivities (:mod:`lvcore.mechanics.sensitivities`) exist for those only.
+    """
+
+    label: str = "FE simulator (adjoint Jacobian)"
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.input_names or not set(self.input_names) <= set(THETA_NAMES):
+            raise ForwardError(f"the simulator's adjoint Jacobian covers {list(THETA_NAMES)} only; "
+                               f"this forward reads {list(self.input_names)} (use SimulatorForward)")
+
+    def jacobian(self, inputs: Mapping[str, Any], *, executor=None) -> ForwardBatch:
+        """Outputs and ``d outputs / d inputs`` (adjoint) of every point; ``executor`` as in :meth:`evaluate`."""
+        return self._batch(inputs, True, executor)
+
+
+def simulator_factory(space, resolution: str) -> SimulatorForward:
+    """The default campaign forward model: the simulator over ``space`` at ``resolution`` (fixed inputs bound in)."""
+    return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=resolution,
+                            base=space.base)
+
+
+register_forward(DEFAULT_FORWARD_NAME, simulator_factory)
+
+__all__ = ["SimulatorForward", "AdjointSimulatorForward", "simulator_factory"]

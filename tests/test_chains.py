@@ -1,0 +1,165 @@
+"""Continuation chains (lvcore.chains): order, scheduling, and warm-chained results equal cold ones."""
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+
+import campaign_double
+from campaign_double import closed_form
+from lvcore import chains
+from lvcore.campaigns.designs import Design, make_design
+from lvcore.campaigns.runner import _drive, execute_chunk, run_campaign
+from lvcore.campaigns.space import get_space
+from lvcore.campaigns.store import CampaignStore, read_store
+from lvcore.mechanics.forward import SimulatorForward
+from lvcore.outputs import THETA_NAMES
+
+
+class _Inline:
+    """Runs each task at submission (an executor with the campaign interface)."""
+
+    def __init__(self, workers=1):
+        self.workers = workers
+        self.submitted = []
+
+    def describe(self):
+        return "inline"
+
+    def submit(self, fn, *args):
+        self.submitted.append(args)
+        f = Future()
+        f.set_result(fn(*args))
+        return f
+
+    def as_completed(self, futures):
+        return iter(futures)
+
+
+def test_continuation_order_is_a_permutation_that_walks_between_neighbours():
+    rng = np.random.default_rng(0)
+    U = rng.random((400, 4))
+    order = chains.continuation_order(U)
+    assert sorted(order.tolist()) == list(range(400))
+    walk = np.linalg.norm(np.diff(U[order], axis=0), axis=1)
+    random_walk = np.linalg.norm(np.diff(U, axis=0), axis=1)
+    # the walk's steps are a few nearest-neighbour distances, several times shorter than a random order's
+    assert np.median(walk) < 0.35 * np.median(random_walk)
+    # duplicates, two clusters (a disconnected k-NN graph) and tiny batches
+    twin = np.vstack([U[:5], U[:5], U[:5] + 100.0])
+    assert sorted(chains.continuation_order(twin, k=3).tolist()) == list(range(15))
+    assert chains.continuation_order(U[:2]).tolist() == [0, 1] and chains.continuation_order(U[:0]).size == 0
+
+
+def test_solve_in_order_starts_each_point_from_the_nearest_converged_state():
+    U = np.array([[0.0], [1.0], [0.1], [5.0], [1.2]])
+    starts = {}
+
+    def solve(key, initial):
+        starts[key] = initial
+        return key, (None if key == 2 else ("state", key))  # point 2 "fails": never a start
+
+    rows = chains.solve_in_order([0, 1, 2, 3, 4], U, [chains.Seed(np.array([4.9]), ("state", "seed"))], solve)
+    assert [r.key for r in rows] == [0, 1, 2, 3, 4]
+    assert starts == {0: ("state", "seed"), 1: ("state", 0), 2: ("state", 0), 3: ("state", "seed"),
+                      4: ("state", 1)}
+    assert rows[2].state is None and all(r.warm for r in rows)
+
+
+def test_run_chains_solves_every_point_once_on_at_least_two_chains_per_worker():
+    rng = np.random.default_rng(1)
+    U = rng.random((100, 3))
+    ex = _Inline(workers=2)
+    seen = []
+
+    def task(positions, units, seeds):
+        return chains.solve_in_order(positions, units, seeds, lambda k, init: (k, ("s", k)))
+
+    def submit(positions, seeds):
+        return ex.submit(task, positions, U[positions], seeds)
+
+    stats = chains.run_chains(ex, submit, U, workers=2, chunk=7, on_rows=lambda rows: seen.extend(r.key for r in rows))
+    assert sorted(seen) == list(range(100))
+    assert stats.chains >= 4 and stats.chunks >= 100 // 7
+    # only the first chunk of each initial chain starts cold; later chunks get seeds from the driver
+    assert stats.cold == 4 and stats.warm == 96
+    assert all(len(args[0]) <= 7 for args in ex.submitted)
+
+
+def test_chained_campaign_of_the_double_records_every_row_once_with_warm_starts(tmp_path, monkeypatch):
+    log = tmp_path / "exec.log"
+    monkeypatch.setenv("LVCORE_TEST_EXEC_LOG", str(log))
+    design = make_design(get_space("material"), "sobol", 40, seed=3)
+    s = run_campaign(design, tmp_path / "s.h5", executor=_Inline(workers=2), forward=campaign_double.NAME,
+                     progress=False)
+    assert s.converged == 40
+    c = read_store(tmp_path / "s.h5")
+    np.testing.assert_allclose(c.outputs, [closed_form(*r) for r in design.points], rtol=1e-12)
+    np.testing.assert_array_equal(c.record_count, 1)
+    warm = [line.split()[1] for line in log.read_text().splitlines() if line.startswith("warm ")]
+    assert len(warm) == 40 - 4  # all but the first row of each of the 2 x 2 chains
+    # ... and each start is a near neighbour: closer than the median distance between design points
+    U = design.space.to_unit(design.points)
+    a = {repr(float(x)): i for i, x in enumerate(design.points[:, 0])}
+    d = [np.linalg.norm(U[a[k.split("->")[0]]] - U[a[k.split("->")[1]]]) for k in warm]
+    allpairs = np.linalg.norm(U[:, None] - U[None], axis=2)[np.triu_indices(40, 1)]
+    assert np.median(d) < 0.5 * np.median(allpairs)
+
+
+@pytest.fixture(scope="module")
+def theta_design():
+    """Ten nearby stiffnesses around the reference (a cluster, as a fine design has)."""
+    rng = np.random.default_rng(5)
+    X = np.array([0.6, 1.3, 1.0, 3.6]) * np.exp(0.15 * rng.standard_normal((10, 4)))
+    return Design(get_space("material"), X, "custom", None)
+
+
+def test_warm_chained_simulator_rows_equal_cold_ones(tmp_path, theta_design):
+    """The real simulator (``fast`` mesh): a chained campaign gives the cold campaign's numbers within tolerance."""
+    ex = _Inline(workers=1)
+    out = {}
+    for chained in (True, False):
+        path = tmp_path / f"{chained}.h5"
+        run_campaign(theta_design, path, executor=ex, resolution="fast", progress=False, chained=chained)
+        out[chained] = read_store(path)
+    assert out[True].converged.all() and out[False].converged.all()
+    # solver tolerance: ||r|| <= 1e-9 ||f_ext||; volumes and strains agree to ~1e-8 relative
+    np.testing.assert_allclose(out[True].outputs, out[False].outputs, rtol=1e-7, atol=1e-9)
+    # the chained rows really were warm-started: the same chunk solved again reports its starts
+    fwd = SimulatorForward(resolution="fast")
+    U = theta_design.space.to_unit(theta_design.points)
+    order = chains.continuation_order(U).tolist()
+    rows = execute_chunk(fwd, order, order, [dict(zip(THETA_NAMES, theta_design.points[i])) for i in order],
+                         U[order], [])
+    assert [r.warm for r in rows] == [False] + [True] * 9 and all(r.result.converged for r in rows)
+    np.testing.assert_allclose([r.result.outputs for r in sorted(rows, key=lambda r: r.key)], out[False].outputs,
+                               rtol=1e-7, atol=1e-9)
+
+
+def test_warm_started_simulator_forward_batch_equals_cold_and_keeps_states(theta_design):
+    X = theta_design.points[:6]
+    cols = dict(zip(THETA_NAMES, X.T))
+    cold = SimulatorForward(resolution="fast").evaluate(cols)
+    warm_fwd = SimulatorForward(resolution="fast", warm_start=True)
+    warm = warm_fwd.evaluate(cols)
+    assert warm.converged.all()
+    assert sum(m == "converged (warm start)" for m in warm.messages) == 5  # all but the first point of the chain
+    np.testing.assert_allclose(warm.outputs, cold.outputs, rtol=1e-7, atol=1e-9)
+    again = warm_fwd.evaluate({k: v[:1] for k, v in cols.items()})  # a later batch starts from the kept states
+    assert again.messages == ("converged (warm start)",)
+    # on an executor: chunks of chains, same numbers
+    ex = _Inline(workers=2)
+    pooled = SimulatorForward(resolution="fast", warm_start=True).evaluate(cols, executor=ex)
+    np.testing.assert_allclose(pooled.outputs, cold.outputs, rtol=1e-7, atol=1e-9)
+    assert len(ex.submitted) >= 2  # split across chains for the two workers
+    import pickle
+
+    assert pickle.loads(pickle.dumps(warm_fwd))._warm == {}  # kept states never travel to workers
+
+
+def test_drive_reports_chain_statistics(tmp_path):
+    design = make_design(get_space("material"), "sobol", 30, seed=1)
+    with CampaignStore.create(tmp_path / "s.h5", design, forward=campaign_double.NAME, resolution="fast") as store:
+        stats = _drive(store, store.pending_rows(), _Inline(workers=3),
+                       forward=campaign_double.DoubleForward(tuple(design.space.names)), progress=False, chunk=4)
+        assert store.summary().converged == 30
+    assert stats.chains >= 6 and stats.warm + stats.cold == 30 and stats.cold == 6
