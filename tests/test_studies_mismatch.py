@@ -80,7 +80,7 @@ def test_fit_doses_sees_a_strain_mismatch_on_the_analytic_stand_in():
     """fit_doses on the SYNTHETIC closed-form stand-in: without mismatch iid σ_S ≈ 0.03 and θ is mostly
     covered; a strain offset of RMS 0.06 that θ cannot absorb (alternating by sector, orthogonal to the
     stand-in's loadings 1, cos γ, sin γ, cos 2γ) inflates iid σ_S."""
-    from lvcore.core import AnalyticForward
+    from lvcore.testing.analytic import AnalyticForward
     from lvcore.inference import samplers
 
     fwd = AnalyticForward()
