@@ -32,6 +32,14 @@ def main(argv=None) -> int:
     p.add_argument("--chain-method", default="auto")
     p.add_argument("--runs", default="volume,iid,discrepancy,discrepancy-nuts")
     p.add_argument("--dense-mass", action="store_true", help="dense NUTS mass matrix (default: diagonal)")
+    p.add_argument("--profile", action="store_true",
+                   help="split each run into its fixed cost (trace, lower, compile or cache load, init: a 5 + 5 run, "
+                        "twice) and its sampling (the full run minus the fixed cost), wall and process CPU seconds")
+    p.add_argument("--sweep", default=None, metavar="W:S1/S2,...",
+                   help="warm-up lengths and draws to compare by ESS per CPU second (2 and 4 chains), "
+                        "e.g. 300:250/500/1000,500:250/500/1000")
+    p.add_argument("--datasets", type=int, default=1,
+                   help="SYNTHETIC data sets per setting (seeds 0..n-1; --sweep reports the worst minimum ESS)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     from lvcore.inference.samplers import use_host_devices
@@ -62,6 +70,10 @@ def main(argv=None) -> int:
     y = simulate_data(forward, theta, np.random.default_rng(0), discrepancy=disc)
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
                                  chain_method=args.chain_method, dense_mass=args.dense_mass)
+    if args.profile:
+        return profile(args, forward, y, cfg, samplers, diagnostics)
+    if args.sweep:
+        return sweep(args, forward, theta, disc, cfg, samplers, diagnostics, simulate_data)
     rows = []
     for name in args.runs.split(","):
         model, sampler = (name, "auto") if name != "discrepancy-nuts" else ("discrepancy", "nuts")
@@ -84,6 +96,97 @@ def main(argv=None) -> int:
         print(json.dumps({"meta": meta, "rows": rows}, indent=2))
     else:
         print(json.dumps(meta))
+    return 0
+
+
+def _timed(fn):
+    """``(result, wall s, process CPU s)`` of ``fn()`` (CPU over all threads of this process)."""
+    w, c = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - w, time.process_time() - c
+
+
+def _runs(text):
+    return [(name, "auto") if name != "discrepancy-nuts" else ("discrepancy", "nuts") for name in text.split(",")]
+
+
+def profile(args, forward, y, cfg, samplers, diagnostics) -> int:
+    """Fixed cost (tracing, lowering, XLA compile or persistent-cache load, init) against sampling, per run."""
+    import dataclasses
+
+    tiny = dataclasses.replace(cfg, num_warmup=5, num_samples=5)
+    print(f"{'run':18s} {'stage':34s} {'wall s':>8s} {'CPU s':>8s}  min ESS(theta)", flush=True)
+    rows = []
+    for (model, sampler), name in zip(_runs(args.runs), args.runs.split(",")):
+        for stage, c in (("first 5 + 5 (compile or cache load)", tiny), ("second 5 + 5 (fixed cost)", tiny),
+                         (f"{cfg.num_chains} x ({cfg.num_warmup} + {cfg.num_samples})", cfg)):
+            run, wall, cpu = _timed(lambda c=c: samplers.run_model(model, y, forward, c, sampler=sampler))
+            ess = round(diagnostics.ess_per_second(run)["min"] * run.wall_s) if c is cfg else None
+            rows.append({"run": name, "stage": stage, "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
+                         "min_ess_theta": ess})
+            print(f"{name:18s} {stage:34s} {wall:8.2f} {cpu:8.2f}  {'' if ess is None else ess}", flush=True)
+        fixed, full = rows[-2], rows[-1]
+        print(f"{name:18s} {'=> sampling (full - fixed)':34s} {full['wall_s'] - fixed['wall_s']:8.2f} "
+              f"{full['cpu_s'] - fixed['cpu_s']:8.2f}", flush=True)
+    print(json.dumps({"load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
+                      "forward": getattr(forward, "label", "")}))
+    return 0
+
+
+def sweep(args, forward, theta, disc, cfg, samplers, diagnostics, simulate_data) -> int:
+    """ESS per CPU second of chain counts, warm-up lengths and draws, from prefixes of long runs.
+
+    For each warm-up length W of ``--sweep`` (``W:S1/S2/...``), 4 chains run W + max(S) iterations on
+    each of ``--datasets`` SYNTHETIC data sets (the first run compiles, the others are timed); a
+    setting (C chains, W, S) is scored on the first C chains' first S draws: the worst bulk ESS of
+    theta and of every monitored parameter (theta, sigma_S^2, v, GP hyperparameters), the worst R-hat,
+    and its CPU cost, estimated as the fixed cost (a 5 + 5 run) plus C (W + S) iterations at the
+    measured per-iteration CPU time. Wall on 2 idle cores is about CPU / min(C, 2).
+    """
+    import dataclasses
+
+    import numpy as np
+
+    datasets = [simulate_data(forward, theta, np.random.default_rng(k), discrepancy=disc)
+                for k in range(max(2, args.datasets))]
+    print(f"{'run':12s} {'setting':16s} {'est. CPU s':>10s} {'ESS theta':>9s} {'ESS all':>8s} {'R-hat':>6s} "
+          f"{'ESS(theta)/CPU-s':>16s}", flush=True)
+    out = []
+    for (model, sampler), name in zip(_runs(args.runs), args.runs.split(",")):
+        tiny = dataclasses.replace(cfg, num_chains=4, num_warmup=5, num_samples=5)
+        samplers.run_model(model, datasets[0], forward, tiny, sampler=sampler)
+        _, _, fixed = _timed(lambda: samplers.run_model(model, datasets[1], forward, tiny, sampler=sampler))
+        for item in args.sweep.split(","):
+            w, draws = item.split(":")
+            w, draws = int(w), sorted(int(v) for v in draws.split("/"))
+            config = dataclasses.replace(cfg, num_chains=4, num_warmup=w, num_samples=draws[-1])
+            runs, per_iter = [], []
+            for k, y in enumerate(datasets):
+                run, wall, cpu = _timed(lambda: samplers.run_model(model, y, forward, dataclasses.replace(config, seed=k),
+                                                                   sampler=sampler))
+                runs.append(run)
+                if k:  # the first run compiled this setting's program
+                    per_iter.append((cpu - fixed) / (4 * (w + draws[-1])))
+            it = float(np.median(per_iter))
+            for c in (2, 4):
+                for n in draws:
+                    ess_t, ess_all, rhat = [], [], []
+                    for run in runs:
+                        sub = {k: v[:c, :n] for k, v in run.samples.items()}
+                        table = diagnostics.summary_table(sub)
+                        ess_t.append(float(table.loc[[v for v in ("a", "b", "af", "bf") if v in table.index],
+                                                     "ess_bulk"].min()))
+                        ess_all.append(float(table["ess_bulk"].min()))
+                        rhat.append(float(table["r_hat"].max()))
+                    cost = fixed + c * (w + n) * it
+                    row = {"run": name, "chains": c, "warmup": w, "draws": n, "cpu_s": round(cost, 2),
+                           "ess_theta": round(min(ess_t)), "ess_all": round(min(ess_all)), "rhat": round(max(rhat), 3)}
+                    out.append(row)
+                    print(f"{name:12s} {f'{c} x ({w} + {n})':16s} {cost:10.1f} {row['ess_theta']:9d} "
+                          f"{row['ess_all']:8d} {row['rhat']:6.3f} {row['ess_theta'] / cost:16.1f}", flush=True)
+        print(f"{name}: fixed cost {fixed:.2f} CPU-s, {it * 1e3:.2f} CPU-ms per chain iteration", flush=True)
+    print(json.dumps({"load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
+                      "forward": getattr(forward, "label", ""), "datasets": max(2, args.datasets)}))
     return 0
 
 

@@ -36,11 +36,11 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 from lvcore.campaigns.designs import Design  # noqa: E402
-from lvcore.parallel import LocalExecutor  # noqa: E402
 from lvcore.campaigns.runner import DEFAULT_FORWARD, _drive, execute_row, row_inputs  # noqa: E402
 from lvcore.campaigns.space import get_space  # noqa: E402
 from lvcore.campaigns.store import CampaignStore, read_store  # noqa: E402
 from lvcore.core.registry import make_forward, registered_name  # noqa: E402
+from lvcore.parallel import LocalExecutor  # noqa: E402
 
 
 def _load() -> str:

@@ -67,12 +67,18 @@ def test_simulator_page_runs_and_responds_to_sliders():
     assert at.title[0].value == "LV Calibration Lab"
     assert at.radio(key="resolution").value == "fast"
     lvv0 = _lvv(at)
-    v_early = float([m for m in at.metric if m.label.startswith("V_early")][0].value.split()[0])
+    v_early = float([m for m in at.metric if m.label.startswith("V₀")][0].value.split()[0])
     assert 60 < v_early < 110 and lvv0 > v_early
+    # EDV/V0 with its typical range (Klotz et al. 2006); the default's ~2.1 at 8 mmHg is noted as unusual
+    (ratio,) = [m for m in at.metric if m.label.startswith("EDV / V₀")]
+    assert float(ratio.value) == pytest.approx(lvv0 / v_early, rel=2e-3)
+    assert any("typical EDV/V₀ at 8 mmHg: 1.66–1.99" in c.value for c in at.caption)
     assert len(at.get("plotly_chart")) >= 1 and len(at.get("image")) == 1
     assert {b.label for b in at.get("download_button")} >= {"Download mesh + displacement (VTU)",
                                                              "Download result (JSON)"}
-    assert not at.error and not at.warning
+    assert not at.error
+    assert [w.value for w in at.warning] == [w.value for w in at.warning if w.value.startswith("unusual result: EDV/V₀")]
+    assert len(at.warning) == 1
     # a stiffer isotropic matrix fills less
     slider = at.select_slider(key="a")
     slider.set_value(slider.options[-10])  # about 3 kPa (log-spaced stops)

@@ -144,3 +144,66 @@ def test_five_concurrent_sessions(app, chromium):
     sessions[-1][1].screenshot(path=str(SHOTS / "concurrent_session.png"))
     for ctx, _ in sessions:
         ctx.close()
+
+
+def _number_input(page, label: str, value: int) -> None:
+    box = page.get_by_label(label, exact=True)
+    box.fill(str(value))
+    box.press("Enter")
+    drv.wait_rerun(page)
+
+
+def test_my_subject_end_to_end_stays_on_localhost(app, chromium, tmp_path):
+    """Upload a bundled SYNTHETIC volume mesh and its measurements on "My subject", calibrate, download the zip,
+    and check its contents; no request of any page leaves localhost."""
+    import json
+    import zipfile
+    from urllib.parse import urlparse
+
+    from lvcore.resources import volunteer_files
+
+    files = volunteer_files("SYNTHETIC_HV3")
+    js_errors: list = []
+    ctx, page = _new_page(chromium, js_errors)
+    hosts: set = set()
+    ctx.on("request", lambda req: hosts.add(urlparse(req.url).hostname or urlparse(req.url).scheme))
+    page.goto(app.url)
+    drv.wait_idle(page)
+    links = dict(drv.page_links(page))
+    assert "My subject" in links, f"no 'My subject' page in the sidebar: {list(links)}"
+    for href in links.values():  # every page, for the localhost check
+        page.goto(href)
+        drv.wait_idle(page)
+    page.goto(links["My subject"])
+    drv.wait_idle(page)
+    uploads = page.locator("[data-testid=stFileUploader] input[type=file]")
+    uploads.nth(0).set_input_files(str(files.geometry))
+    drv.wait_rerun(page)
+    uploads.nth(1).set_input_files(str(files.measured))
+    drv.wait_rerun(page)
+    assert not drv.exceptions(page)
+    assert page.get_by_text("cavity", exact=False).count() >= 1, "the fitted geometry's volumes are not shown"
+    _number_input(page, "chains", 1)
+    _number_input(page, "warm-up", 150)
+    _number_input(page, "draws kept", 100)
+    page.get_by_role("button", name="Run calibration").click()
+    download_button = page.get_by_role("button", name=re.compile("Download everything"))
+    download_button.wait_for(timeout=600_000)
+    drv.wait_idle(page)
+    page.screenshot(path=str(SHOTS / "my_subject_results.png"), full_page=True)
+    assert not drv.exceptions(page), drv.exceptions(page)
+    with page.expect_download() as info:
+        download_button.click()
+    target = tmp_path / "subject.zip"
+    info.value.save_as(target)
+    with zipfile.ZipFile(target) as z:
+        names = set(z.namelist())
+        assert {"settings.json", "summary.json", "summary.html"} <= names, names
+        assert any(n.endswith(".nc") for n in names) and any(n.startswith("figures/") for n in names), names
+        summary = json.loads(z.read("summary.json"))
+        assert summary["subject"] == "SYNTHETIC-HV3" and summary["synthetic"]
+        assert summary["conditions"]["edp_mmhg"] > 0
+    assert not js_errors, js_errors[:3]
+    outside = {h for h in hosts if h not in ("127.0.0.1", "localhost", "::1", "data", "blob", "about")}
+    assert not outside, f"requests left localhost: {sorted(outside)}"
+    ctx.close()

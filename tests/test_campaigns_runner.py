@@ -8,12 +8,12 @@ import campaign_double
 from campaign_double import closed_form
 from executor_double import InlineExecutor
 from lvcore.campaigns.designs import make_design
-from lvcore.parallel import DaskExecutor, default_workers
 from lvcore.campaigns.runner import execute_row, resume_campaign, run_campaign
 from lvcore.campaigns.space import get_space
 from lvcore.campaigns.store import CampaignStore, read_store
 from lvcore.core.registry import registered_name
 from lvcore.exceptions import CampaignError
+from lvcore.parallel import DaskExecutor, default_workers
 
 
 def test_dask_localcluster_campaign_of_20_rows(tmp_path):

@@ -22,3 +22,18 @@ def test_docs_name_no_folder_of_a_build_machine():
     offenders = [f"{p.relative_to(ROOT)}:{i}" for p in [ROOT / "README.md", ROOT / "BENCHMARKS.md", *DOCS.glob("*.md")]
                  for i, line in enumerate(p.read_text().splitlines(), 1) if machine.search(line)]
     assert not offenders, offenders
+
+
+def test_benchmarks_summary_is_one_short_line_per_row_with_details():
+    text = (ROOT / "BENCHMARKS.md").read_text()
+    summary = text[text.index("## Summary against the targets"):]
+    summary = summary[: summary.index("\n## ")]
+    rows = [line for line in summary.splitlines() if re.match(r"\| \d+ \|", line)]
+    assert rows, "no summary rows"
+    long_cells = [(r.split(" | ")[0], c.strip()) for r in rows for c in r.strip("|").split(" | ") if len(c.strip()) > 120]
+    assert not long_cells, f"summary cells over 120 characters (details go below): {long_cells}"
+    details = text[text.index("## Details of the summary rows"):]
+    numbers = [int(r.split("|")[1]) for r in rows]
+    assert numbers == list(range(1, len(rows) + 1))
+    missing = [n for n in numbers if f"\n### {n}. " not in details]
+    assert not missing, f"summary rows without a details subsection: {missing}"

@@ -11,8 +11,8 @@ import pytest
 
 from lvcore.cli import main
 from lvcore.emulator.io import load_emulator, load_validation
-from lvcore.emulator.subject import (SubjectDesign, build_subject_emulator, continuation_order, parse_inputs,
-                                     resolve_subject_geometry, subject_space)
+from lvcore.emulator.subject import (SubjectDesign, build_subject_emulator, parse_inputs, resolve_subject_geometry,
+                                     subject_space)
 from lvcore.emulator.training import TrainingConfig
 from lvcore.exceptions import EmulatorError, GeometryError
 from lvcore.resources import volunteer_files
@@ -125,7 +125,7 @@ def test_geometry_kinds(tmp_path):
         resolve_subject_geometry(bad)
 
 
-def test_design_space_and_order():
+def test_design_space():
     space = subject_space(parse_inputs("angles,theta,edp"))
     assert space.names == ("a", "b", "af", "bf", "edp", "alpha_endo", "alpha_epi") and space.fixed == ()
     assert space.parameters[1].lower == 0.5  # the angles emulator's b >= 0.5 with free angles
@@ -133,8 +133,3 @@ def test_design_space_and_order():
     assert dict(space.fixed) == {"edp": 10.0, "alpha_endo": -60.0, "alpha_epi": 60.0} and space.base == "sliding"
     with pytest.raises(EmulatorError):
         parse_inputs("edp")
-    u = np.random.default_rng(0).random((50, 4))
-    order = continuation_order(u)
-    assert sorted(order) == list(range(50)) and order[0] == int(np.argmax(u.sum(1)))
-    steps = np.linalg.norm(np.diff(u[order], axis=0), axis=1)
-    assert np.median(steps) < np.median(np.linalg.norm(np.diff(u, axis=0), axis=1))

@@ -294,6 +294,8 @@ def test_fuzz_store_layout(good_store, edit, key, value):
 # must parse or raise an LVCoreError; the header checks (lvcore.headers) refuse before allocating, and the
 # mesh parsers run in a child capped at 1 GB here (lvcore.isolation), so memory stays bounded whatever
 # the example declares.
+#: The binary-format fuzzers below: 10 examples each in CI (each surface example forks a VTK reader).
+BINARY = settings(max_examples=int(10 * SCALE), deadline=None, suppress_health_check=list(HealthCheck), database=None)
 counts = st.one_of(st.integers(0, 8), st.integers(9, 10 ** 6), st.sampled_from([10 ** 9, 2 ** 31 - 1, 2 ** 32 + 3,
                                                                                  10 ** 12]))
 small_floats = st.lists(st.sampled_from(["0", "1", "-1", "2.5", "30", "nan", "1e400", "x"]), min_size=0, max_size=12)
@@ -313,13 +315,13 @@ def _ply(n_vertex, n_face, binary, body):
     return head.encode() + (body if isinstance(body, bytes) else " ".join(body).encode())
 
 
-@FEW
+@BINARY
 @given(counts, counts, st.booleans(), small_floats | st.binary(max_size=64))
 def test_fuzz_ply_declared_counts(capped_reader, n_vertex, n_face, binary, body):
     _check(_read_surface, _ply(n_vertex, n_face, binary, body), ".ply")
 
 
-@FEW
+@BINARY
 @given(st.lists(st.tuples(st.sampled_from(["v", "f", "vn", "l", "#"]),
                           st.lists(st.one_of(st.integers(-10 ** 10, 10 ** 10).map(str),
                                              st.sampled_from(["1/1", "2//3", "-1", "0", "x", "1e3"])),
@@ -329,7 +331,7 @@ def test_fuzz_obj_face_indices(capped_reader, lines):
     _check(_read_surface, text, ".obj")
 
 
-@FEW
+@BINARY
 @given(counts, counts, st.sampled_from(["ASCII", "BINARY"]), st.sampled_from(["float", "double", "int"]),
        small_floats)
 def test_fuzz_vtk_declared_counts(capped_reader, n_points, n_cells, mode, dtype, body):
@@ -344,7 +346,7 @@ def _read_volume(p):
     read_volume_cells(p)
 
 
-@FEW
+@BINARY
 @given(counts, counts, counts, st.sampled_from(["2.2", "4.1"]), small_floats)
 def test_fuzz_msh_declared_counts(capped_reader, n_nodes, n_elements, max_tag, version, body):
     if version == "2.2":
@@ -357,7 +359,7 @@ def test_fuzz_msh_declared_counts(capped_reader, n_nodes, n_elements, max_tag, v
     _check(_read_volume, text, ".msh")
 
 
-@FEW
+@BINARY
 @given(st.lists(st.one_of(st.integers(0, 8), st.sampled_from([10 ** 5, 10 ** 9, 2 ** 40])), min_size=0, max_size=3),
        st.sampled_from(["<f8", "<f4", "<i8", "|u1", "<c16", "|O", "<U5"]), st.integers(0, 64), st.booleans())
 def test_fuzz_npy_npz_declared_shapes(shape, dtype, n_data, npz):
@@ -375,7 +377,7 @@ def _load_shape_model_npz(p):
     load_shape_model(p)
 
 
-@FEW
+@BINARY
 @given(st.dictionaries(st.sampled_from(["mean", "components", "std", "explained_variance_ratio", "x"]),
                        st.lists(st.sampled_from([0, 3, 10 ** 6, 10 ** 9]), min_size=0, max_size=2),
                        min_size=0, max_size=5))
@@ -386,7 +388,7 @@ def test_fuzz_shape_model_npz_shapes(members):
     _check(_load_shape_model_npz, content, ".npz")
 
 
-@FEW
+@BINARY
 @given(st.sampled_from(["inputs", "outputs", "state", "record_count", "seconds"]),
        st.sampled_from([0, 1, 5, 10 ** 6, 10 ** 9]), st.integers(-3, 9), st.floats(allow_nan=True))
 def test_fuzz_store_declared_rows_and_values(good_store, name, rows, state, value):

@@ -301,3 +301,13 @@ def test_complete_basal_slice_is_kept(good):
     assert res.base.cavity_removed_ml == 0.0
     res2 = fit_contours(contours_from_dict(good), base_cut_mm=5.0)  # drops the basal slice (8 mm spacing)
     assert len(res2.base.dropped) == 1 and res2.base.rule == "base_cut_mm"
+
+
+def test_basal_slice_where_the_walls_meet_all_round_is_dropped_with_that_cause(good):
+    from lvcore.geometry.fitting import fit_contours
+
+    d = copy.deepcopy(good)
+    d["slices"][0]["epi"] = (np.asarray(d["slices"][0]["endo"]) * [1.02, 1.02, 1.0]).tolist()
+    with pytest.warns(GeometryWarning, match="the endocardium and epicardium meet there"):
+        res = fit_contours(contours_from_dict(d))
+    assert len(res.base.dropped) == 1 and res.base.cut_depth_mm == pytest.approx(8.0, abs=1e-6)

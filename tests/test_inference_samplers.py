@@ -7,8 +7,8 @@ from scipy import stats
 from numpyro.infer.util import potential_energy
 
 from lvcore.inference import coverage, kernels, models, samplers
-from lvcore.testing.analytic import AnalyticForward
 from lvcore.outputs import THETA_NAMES
+from lvcore.testing.analytic import AnalyticForward
 
 FWD = AnalyticForward()
 TRUTH = {"a": 0.8, "b": 4.0, "af": 2.0, "bf": 3.0}

@@ -162,7 +162,9 @@ def _fake_calibration():
     summary = pd.DataFrame({"parameter": list(bounds), "mean": [d.mean() for d in draws.values()],
                             "truth": [0.6, 1.3, 1.0, 3.6]})
     return {"subject": "SYNTHETIC-HV3", "draws": draws, "bounds": bounds, "truth": dict(zip(bounds, [0.6, 1.3, 1, 3.6])),
-            "summary": summary, "status": "fake run for a figure test", "wall_s": 0.0,
+            "summary": summary, "wall_s": 0.0,
+            "status": "converged: max R-hat 1.007 (<= 1.05), min bulk ESS 826 (>= 100), 0 divergent, 1 round(s); "
+                      "0 divergent transitions (fake run for a figure test)",
             "config": {"num_warmup": 5, "num_samples": 100, "num_chains": 4}}
 
 
@@ -323,3 +325,12 @@ def test_without_a_static_exporter_the_html_report_is_written_and_says_so(tmp_pa
     assert all(f["png"] is None and f["svg"] is None for f in m["figures"])
     assert all((out / f["html"]).is_file() for f in m["figures"] if f["status"] == "ok")
     assert "Static formats skipped" in (out / "index.html").read_text()
+
+
+def test_importing_the_report_loads_no_plotting_code():
+    """`lvcore --help` imports lvcore.report.cli: plotly and pandas load only when a report is built."""
+    import subprocess
+    import sys
+
+    code = "import sys, lvcore.report; print(sorted(m for m in sys.modules if m.startswith(('plotly', 'pandas'))))"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from lvcore.mechanics.forward import SimulatorForward
-from lvcore.testing.analytic import AnalyticForward
 from lvcore.studies import bo_fibres as bf
+from lvcore.testing.analytic import AnalyticForward
 
 
 class CountingForward(AnalyticForward):

@@ -4,12 +4,12 @@ import json
 import numpy as np
 import pytest
 
+from lvcore.core import ForwardBatch
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import samplers
-from lvcore.core import ForwardBatch
-from lvcore.testing.analytic import AnalyticForward
 from lvcore.outputs import THETA_NAMES
 from lvcore.studies import fibre_discrepancy as fd
+from lvcore.testing.analytic import AnalyticForward
 
 
 class _NeverCalled:

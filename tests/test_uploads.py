@@ -116,6 +116,11 @@ def test_upload_errors_name_the_file_and_say_what_to_do():
             s.read("notes.csv", b"\xff\xfe\x00x", lambda p: p.read_text())
         text = str(info.value)
         assert "notes.csv" in text and "codec" not in text and "UTF-8" in text
+        from lvcore.inference.calibrate import read_pc_scores
+
+        with pytest.raises(uploads.UploadError) as info:  # the Calibration page's geometry upload
+            s.read("subject.vtu", bytes(range(256)) * 3, read_pc_scores, slot="geometry")
+        assert "subject.vtu" in str(info.value) and "SystemExit" not in str(info.value)
         with pytest.raises(uploads.UploadError, match="gave up") as info:
             s.read("x.vtu", b"x", lambda p: (_ for _ in ()).throw(SystemExit(1)))
         assert "x.vtu" in str(info.value)

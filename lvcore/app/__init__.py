@@ -49,6 +49,7 @@ PAGES = (
     AppPage("pages/4_Emulator.py", "Emulator", ":material/speed:", "emulator"),
     AppPage("pages/5_Calibration.py", "Calibration", ":material/query_stats:", "calibration"),
     AppPage("pages/6_Studies.py", "Studies", ":material/science:", "studies"),
+    AppPage("pages/8_My_subject.py", "My subject", ":material/person:", "my-subject"),
     AppPage("pages/7_Report.py", "Report", ":material/summarize:", "report"),
 )
 

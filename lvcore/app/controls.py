@@ -9,6 +9,12 @@ import numpy as np
 
 from lvcore import conditions, units
 from lvcore.core.space import THETA_BOUNDS
+from lvcore.inference.cli import DEFAULT_EMULATOR
+
+#: The shared sidebar's default subject: a bundled SYNTHETIC volunteer whose PC scores lie inside the
+#: default emulator's box both as projected and size-normalised (HV1, the first in the list, has h1 = 2.40
+#: unscaled, outside [-2, 2]; tests/test_inference_cli.py checks this one).
+DEFAULT_SUBJECT = "SYNTHETIC_HV2"
 
 #: Slider ranges: the chapter's prior box for a, a_f (kPa) and b, b_f (-).
 THETA_RANGES = dict(THETA_BOUNDS)
@@ -83,11 +89,17 @@ def shared_sidebar() -> dict:
         subjects = bundled_volunteers()
         if subjects:
             values["subject"] = st.selectbox("Subject (SYNTHETIC volunteer)", subjects, key="shared_subject",
-                                             help="Used by Calibration; bundled SYNTHETIC volunteers.")
+                                             index=subjects.index(DEFAULT_SUBJECT) if DEFAULT_SUBJECT in subjects
+                                             else 0,
+                                             help="Used by Calibration; bundled SYNTHETIC volunteers "
+                                                  f"(default {DEFAULT_SUBJECT}, inside the emulator's box).")
         emulators = available_emulators()
         if emulators:
             values["emulator"] = st.selectbox("Emulator", emulators, key="shared_emulator",
-                                              help="Default emulator of the Emulator and Calibration pages.")
+                                              index=emulators.index(DEFAULT_EMULATOR) if DEFAULT_EMULATOR in emulators
+                                              else 0,
+                                              help="Default emulator of the Emulator and Calibration pages "
+                                                   f"(default {DEFAULT_EMULATOR}, as for lvcore calibrate).")
         for name in ("a", "b", "af", "bf"):
             values["theta"][name] = theta_slider(name, key=f"shared_{name}")
         values["edp_mmhg"] = float(st.slider("EDP (mmHg)", 2.0, 30.0, float(conditions.SIMULATOR_DEFAULT_EDP_MMHG), 0.5,

@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 
 import lvcore
-from lvcore.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
 from lvcore.campaigns.designs import Design, load_design
 from lvcore.campaigns.store import CampaignStore, RowResult, StoreSummary, worker_tag
+from lvcore.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError

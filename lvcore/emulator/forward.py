@@ -15,11 +15,11 @@ from typing import Any, Mapping
 import jax.numpy as jnp
 import numpy as np
 
+from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.core.forward import JaxForward
 from lvcore.emulator.io import load_emulator
 from lvcore.exceptions import EmulatorError
 from lvcore.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES, is_pc_name, pc_names
-from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,8 +15,8 @@ geometry as it is, with no projection:
    optionally the EDP and the fibre angles: :data:`INPUT_GROUPS`) is split at
    random into training, validation and held-out test rows.
 3. Every row is simulated on the exact geometry (:func:`simulate_rows`:
-   nearest-neighbour continuation chains, each solve starting Newton from its
-   neighbour's solution, one chain per worker process).
+   continuation chains of :mod:`lvcore.chains`, each solve starting Newton
+   from a neighbour's solution, shared out to the worker processes).
 4. The network is trained with :func:`lvcore.emulator.training.train_emulator`
    (validation rows: early stopping and selection); the test rows, which the
    training never sees, give the held-out LVV and strain RMSE recorded in the
@@ -31,9 +31,8 @@ the geometry is bound in (no PC scores to give).
 """
 from __future__ import annotations
 
-import json
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -263,40 +262,6 @@ def subject_space(groups: Sequence[str] = ("theta",), *, base: str = "sliding", 
 
 
 # --------------------------------------------------------------------------- the FE runs
-def continuation_order(u: np.ndarray, start: int | None = None) -> np.ndarray:
-    """A greedy nearest-neighbour path through the rows of ``u`` (unit-cube points).
-
-    Starts from the stiffest row (largest coordinate sum: on the θ scales,
-    the smallest deformation) unless ``start`` is given; each next row is the
-    nearest unvisited one. Returns the permutation.
-    """
-    u = np.asarray(u, dtype=float)
-    n = u.shape[0]
-    if n == 0:
-        return np.zeros(0, dtype=int)
-    cur = int(np.argmax(u.sum(axis=1))) if start is None else int(start)
-    left = np.ones(n, dtype=bool)
-    order = np.empty(n, dtype=int)
-    for k in range(n):
-        order[k] = cur
-        left[cur] = False
-        if k + 1 < n:
-            d = np.sum((u - u[cur]) ** 2, axis=1)
-            d[~left] = np.inf
-            cur = int(np.argmin(d))
-    return order
-
-
-def _run_chain(forward_kwargs: dict, names: tuple[str, ...], x: np.ndarray) -> tuple:
-    """Simulate the rows of ``x`` in order, each warm-started from the previous converged one (worker side)."""
-    from lvcore.mechanics.forward import SimulatorForward
-
-    fwd = SimulatorForward(input_names=names, warm_start=True, **forward_kwargs)
-    t0 = time.perf_counter()
-    batch = fwd.evaluate({n: x[:, i] for i, n in enumerate(names)})
-    return batch.outputs, batch.converged, batch.messages, batch.seconds, time.perf_counter() - t0
-
-
 @dataclass(frozen=True)
 class SimulatedRows:
     """FE outputs of design rows (input order kept).
@@ -311,8 +276,8 @@ class SimulatedRows:
         Solver time per row (s).
     wall_s : float
         Wall time of all rows (s).
-    chains : int
-        Continuation chains (= worker processes) used.
+    workers : int
+        Worker processes used (1: this process).
     """
 
     outputs: np.ndarray
@@ -320,49 +285,30 @@ class SimulatedRows:
     messages: tuple[str, ...]
     seconds: np.ndarray
     wall_s: float
-    chains: int
+    workers: int
 
 
 def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, resolution: str = "default",
-                  workers: int = 2, log: Callable[[str], None] | None = None) -> SimulatedRows:
+                  workers: int = 2) -> SimulatedRows:
     """Simulate every row of ``x`` (physical units, columns ``space.names``) on ``geometry``.
 
-    The rows are ordered into one nearest-neighbour path in the unit cube of
-    ``space`` (:func:`continuation_order`), cut into ``workers`` contiguous
-    chains, and each chain runs in its own process with
-    :class:`~lvcore.core.forward.SimulatorForward` ``(warm_start=True)``:
-    each solve starts Newton from the previous converged solution of its
-    chain and falls back to a cold solve when that fails, so results satisfy
-    the same tolerances as cold solves. ``workers=1`` runs in this process.
-    Failures are data (NaN rows, ``converged`` False).
+    The FE simulator with warm starts (:class:`~lvcore.mechanics.forward.SimulatorForward`
+    ``(warm_start=True)``): the rows are ordered into continuation chains
+    (:mod:`lvcore.chains`), each solve starting Newton from a neighbour's
+    converged solution and falling back to a cold solve when that fails, so
+    the results satisfy the same tolerances as cold solves; the chains are
+    shared out to ``workers`` processes (``1``: this process). Failures are
+    data (NaN rows, ``converged`` False).
     """
-    x = np.atleast_2d(np.asarray(x, dtype=float))
-    n = x.shape[0]
-    kwargs = {"conditions": space.fixed_dict(), "geometry": dict(geometry), "resolution": resolution,
-              "base": space.base}
-    order = continuation_order(space.to_unit(x))
-    n_chains = max(1, min(int(workers), n))
-    chains = [c for c in np.array_split(order, n_chains) if c.size]
-    t0 = time.perf_counter()
-    out = np.full((n, 25), np.nan)
-    conv = np.zeros(n, dtype=bool)
-    msgs = [""] * n
-    secs = np.zeros(n)
-    if len(chains) == 1:
-        results = [_run_chain(kwargs, space.names, x[chains[0]])]
-    else:
-        from lvcore.parallel import LocalExecutor
+    from lvcore.mechanics.forward import SimulatorForward
 
-        with LocalExecutor(len(chains)) as pool:
-            futures = [pool.submit(_run_chain, kwargs, space.names, x[c]) for c in chains]
-            results = [f.result() for f in futures]
-    for c, (y, ok, m, s, wall) in zip(chains, results):
-        out[c], conv[c], secs[c] = y, ok, s
-        for i, msg in zip(c, m):
-            msgs[i] = msg
-        if log:
-            log(f"  chain of {c.size} rows: {int(np.sum(ok))} converged, {wall:.1f} s")
-    return SimulatedRows(out, conv, tuple(msgs), secs, time.perf_counter() - t0, len(chains))
+    x = np.atleast_2d(np.asarray(x, dtype=float))
+    fwd = SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), geometry=dict(geometry),
+                           resolution=resolution, base=space.base, workers=int(workers), warm_start=True)
+    t0 = time.perf_counter()
+    batch = fwd.evaluate({n: x[:, i] for i, n in enumerate(space.names)})
+    return SimulatedRows(batch.outputs, batch.converged, batch.messages, batch.seconds, time.perf_counter() - t0,
+                         int(workers))
 
 
 # --------------------------------------------------------------------------- the build
@@ -484,10 +430,10 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     say(f"design: {design.total} {design.method} points over {list(space.names)} "
         f"({design.n_train} train / {design.n_valid} validation / {design.n_test} held-out test), "
         f"{resolution} mesh, {base} base, {workers} worker(s)")
-    runs = simulate_rows(space, d.points, section, resolution=resolution, workers=workers, log=log)
+    runs = simulate_rows(space, d.points, section, resolution=resolution, workers=workers)
     n_failed = int(np.sum(~runs.converged))
     say(f"FE runs: {runs.converged.sum()} of {design.total} converged in {runs.wall_s:.1f} s "
-        f"({design.total / max(runs.wall_s, 1e-9):.1f} solves/s on {runs.chains} chain(s))")
+        f"({design.total / max(runs.wall_s, 1e-9):.1f} solves/s, warm-started chains on {runs.workers} worker(s))")
     sets = {}
     for key, idx in parts.items():
         ok = idx[runs.converged[idx]]
@@ -534,5 +480,5 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
 
 
 __all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", "build_subject_emulator",
-           "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows", "continuation_order",
+           "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
            "default_training_config"]

@@ -528,7 +528,7 @@ class ContourBase:
     cut_depth_mm : float
         Distance from the given basal slice to the basal slice kept.
     rule : str
-        "basal slice", "outflow tract" or "base_cut_mm".
+        "basal slice" (nothing dropped), "outflow tract", "wall thickness" (walls meet) or "base_cut_mm".
     cavity_removed_ml : float
         Cavity between the dropped slices and the new basal slice (frustum rule on the endocardial areas).
     messages : tuple of str
@@ -615,9 +615,12 @@ def base_of_stack(stack: ContourStack, base_cut_mm: float | None = None) -> tupl
         thin = w < OUTFLOW_THIN_FRACTION * t_typ
         if thin.mean() < OUTFLOW_MIN_ARC:
             return ""
-        return (f"slice {i} (at the base{'' if i == 0 else f', {depth[i]:.1f} mm down'}) has no wall over "
-                f"{360 * thin.mean():.0f}° of its circumference (wall thickness {w.min():.1f} mm there, typical "
-                f"{t_typ:.1f} mm): it includes the outflow tract")
+        where_ = f"slice {i} (at the base{'' if i == 0 else f', {depth[i]:.1f} mm down'})"
+        if thin.mean() > 0.5:
+            return (f"{where_}: the endocardium and epicardium meet there (wall thickness {np.median(w):.1f} mm over "
+                    f"{360 * thin.mean():.0f}° of it, typical {t_typ:.1f} mm)")
+        return (f"{where_} has no wall over {360 * thin.mean():.0f}° of its circumference (wall thickness "
+                f"{w.min():.1f} mm there, typical {t_typ:.1f} mm): it includes the outflow tract")
 
     reasons = []
     if base_cut_mm is None:
@@ -629,7 +632,8 @@ def base_of_stack(stack: ContourStack, base_cut_mm: float | None = None) -> tupl
             raise GeometryError(f"{where}: the {first + 1} most basal slices all include the outflow tract "
                                 f"({outflow(first)}); remove the slices above the mitral valve plane, or give the cut "
                                 "with --base-cut MM (base_cut_mm=)")
-        rule = "outflow tract" if first else "basal slice"
+        rule = ("basal slice" if not first else "outflow tract" if all("outflow" in r for r in reasons)
+                else "wall thickness")
     else:
         first = next((i for i in range(k) if depth[i] >= base_cut_mm - 0.5), k)
         if first < k and outflow(first):

@@ -77,7 +77,7 @@ def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSu
         from lvcore.headers import check_mesh_header
         from lvcore.isolation import run_isolated
 
-        what = f"{name} surface file"
+        what = "surface file" if name == "surface" else f"{name} surface file"
         path = limits.check_regular_file(path_or_mesh, limits.MAX_SURFACE_BYTES, what, GeometryError)
         check_mesh_header(path, what, GeometryError)
         return run_isolated(_read_surface, path, name, units, what=what, path=path, error=GeometryError)

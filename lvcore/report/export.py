@@ -13,7 +13,6 @@ from pathlib import Path
 
 from lvcore.exceptions import LVCoreError
 
-from lvcore.viz.report_figures import EXPORT_WIDTH_PX  # noqa: E402  (one home for the export width)
 
 
 class ReportError(LVCoreError):
@@ -93,6 +92,8 @@ def export_static(figs: list, paths: list[Path]) -> None:
     if not figs:
         return
     import plotly.io as pio
+
+    from lvcore.viz.report_figures import EXPORT_WIDTH_PX
 
     widths = [int(f.layout.width or EXPORT_WIDTH_PX) for f in figs]
     heights = [int(f.layout.height or 500) for f in figs]  # kaleido would use 500 px whatever the layout says

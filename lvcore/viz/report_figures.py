@@ -37,10 +37,14 @@ TITLE_LINE_PX, SUBPLOT_TITLE_PX, TITLE_CHAR_PX = 24, 26, 9.0
 EXPORT_WIDTH_PX = 1100
 
 
+#: A plotly text tag (``<br>``, ``<sup>``, ``</b>``...), not a "<=" in the text.
+_TAG = r"</?[a-zA-Z][^<>]*>"
+
+
 def _visible_len(line: str) -> int:
     import re
 
-    return len(re.sub(r"<[^>]+>", "", line))
+    return len(re.sub(_TAG, "", line))
 
 
 def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
@@ -51,6 +55,7 @@ def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
     and the top margin grows to hold every line plus, when the figure has subplot
     titles, their row, so the title never overlaps them.
     """
+    import re
     import textwrap
 
     text = fig.layout.title.text or ""
@@ -60,7 +65,8 @@ def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
     width = min(width, int(((fig.layout.width or EXPORT_WIDTH_PX) - 40) / TITLE_CHAR_PX))
     lines = []
     for part in text.split("<br>"):
-        lines += [part] if _visible_len(part) <= width or "<" in part else textwrap.wrap(part, width)
+        tagged = re.search(_TAG, part) is not None  # a <sup> subtitle stays one line
+        lines += [part] if _visible_len(part) <= width or tagged else textwrap.wrap(part, width)
     subplot_titles = any(getattr(a, "yref", None) == "paper" and (a.y or 0) >= 0.99 and a.yanchor == "bottom"
                          for a in fig.layout.annotations)
     # plotly places a multi-line title anchored at the top a little higher per extra line (the first line was
