@@ -106,3 +106,23 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     at.selectbox(key="my_emulator").select("chapter")
     at.number_input(key="my_edp").set_value(12.0).run()
     assert any("EDP" in e.value or "edp" in e.value for e in at.error)
+
+
+def test_bound_flags_name_a_posterior_piled_on_the_prior_bound():
+    """My subject's banner (and summary) carries the verdict's bound flags: a, af at 0.05 were green (issue 27)."""
+    from types import SimpleNamespace
+
+    import arviz as az
+
+    prepared = flow.prepare(load_emulator("chapter"), "chapter",
+                            SimpleNamespace(h=np.zeros(5), scale=1.0, warnings=[]))
+    rng = np.random.default_rng(0)
+
+    def run(a):
+        post = {"a": a * np.exp(0.05 * rng.standard_normal((1, 200))), "b": np.full((1, 200), 1.3) + 0.1 * rng.random((1, 200)),
+                "af": np.full((1, 200), 1.0) + 0.1 * rng.random((1, 200)), "bf": np.full((1, 200), 3.6) + 0.1 * rng.random((1, 200))}
+        return SimpleNamespace(model="iid", result=SimpleNamespace(idata=az.from_dict(posterior=post)))
+
+    flags = flow.bound_flags(run(0.0507), prepared)
+    assert any(f.startswith("a: posterior piled on the prior's lower bound 0.05") for f in flags), flags
+    assert not any("bound" in f for f in flow.bound_flags(run(0.6), prepared))
