@@ -212,7 +212,7 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
 
     Parameters
     ----------
-    executor : object with ``as_completed(futures)`` (see :mod:`lvcore.campaigns.executors`)
+    executor : object with ``as_completed(futures)`` (see :mod:`lvcore.parallel`)
     submit_chunk : callable
         ``submit_chunk(positions, seeds) -> future`` whose result is a list of
         :class:`ChainRow` keyed by those positions (rows of ``U``); it is

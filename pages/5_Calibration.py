@@ -10,7 +10,7 @@ import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
-from lvcore.app import freshness
+from lvcore.app import freshness, physiology_panel
 from lvcore.app.controls import shared_inputs
 from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.forward import emulator_forward
@@ -19,6 +19,7 @@ from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
+from lvcore.geometry.scaling import ScaledForward
 from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
@@ -55,7 +56,7 @@ def _emulator(path: str):
     return load_emulator(path)
 
 
-shared = shared_inputs()  # the shared sidebar's subject and emulator are this page's defaults
+shared = shared_inputs(theta=False)  # subject and emulator are this page's defaults; it reads no θ
 shared_subject, shared_emu = shared.get("subject"), shared.get("emulator")
 
 # ----------------------------------------------------------------------------- data
@@ -65,6 +66,7 @@ with left:
     source = st.radio("Source", ["bundled volunteer", "upload"], horizontal=True)
     data: MeasuredData | None = None
     h = None
+    geo = None
     if source == "bundled volunteer":
         names = bundled_volunteers()
         if not names:
@@ -75,7 +77,8 @@ with left:
             try:
                 vol = volunteer_files(name)
                 data = read_measured_csv(vol.measured)[0]
-                h = cal.read_pc_scores(vol.geometry)
+                geo = guards.resolve_geometry(str(vol.geometry))  # size-normalised: scores h and scale s
+                h = geo.h
             except LVCoreError as err:
                 st.error(str(err))
             if name.startswith("SYNTHETIC"):
@@ -83,7 +86,7 @@ with left:
     else:  # uploads go to this browser session's own folder; errors name the user's file, the controls stay
         uploads = session_uploads()
         up_data = st.file_uploader("Measured CSV (lvv_ml, strain_01..strain_24)", type=["csv"], key="up_measured")
-        up_geom = st.file_uploader("Geometry: PC scores (.json/.csv) or template mesh (.vtu)",
+        up_geom = st.file_uploader("Geometry: PC scores (.json/.csv, optional 'scale') or template mesh (.vtu)",
                                    type=["json", "csv", "vtu"], key="up_geometry")
         if up_data is not None:
             try:
@@ -95,13 +98,17 @@ with left:
                 data = next(r for r in rows if r.subject == subj)
         if up_geom is not None:
             try:
-                h = uploads.read(up_geom.name, up_geom.getvalue(), cal.read_pc_scores, slot="geometry")
+                geo = uploads.read(up_geom.name, up_geom.getvalue(), lambda p: guards.resolve_geometry(str(p)),
+                                   slot="geometry")
+                h = geo.h
             except LVCoreError as err:
                 st.error(f"Geometry: {err}")
     if data is not None:
         st.write(f"LVV = {data.lvv_ml:.1f} mL; strains from {data.strains.min():.3f} to {data.strains.max():.3f}")
     if h is not None:
-        st.write("PC scores h = " + ", ".join(f"{v:.2f}" for v in h))
+        st.write("PC scores h = " + ", ".join(f"{v:.2f}" for v in h)
+                 + (f"; scale s = {geo.scale:.3f} (the subject is s × this shape: emulated LVV × s³)"
+                    if geo is not None else ""))
 
 with right:
     st.subheader("Model")
@@ -153,10 +160,15 @@ run_clicked = st.button("Run calibration", type="primary",
 if run_clicked:
     try:
         emulator = _emulator(choices[emu_label])
-        forward = emulator_forward(emulator, h, infer_angles=angles == "infer", name=emu_label)
+        # the EDP: the data's edp_mmhg column if it has one (refused by a fixed-EDP emulator when it differs)
+        conditions = {**DEFAULT_CONDITIONS, **guards.check_conditions(emulator)}
+        conditions["edp_mmhg"] = guards.subject_edp(data, conditions, emulator, emu_label, None)
+        forward = ScaledForward(emulator_forward(emulator, h, infer_angles=angles == "infer", name=emu_label,
+                                                 edp_mmhg=conditions["edp_mmhg"]),
+                                geo.scale if geo is not None else 1.0)
         # the CLI refuses scores outside the training box without --allow-extrapolation; here it runs, flagged
         _, extrapolation = guards.check_inputs_in_box(
-            guards.fixed_inputs(h, DEFAULT_CONDITIONS, emulator, angles == "infer"), emulator,
+            guards.fixed_inputs(h, conditions, emulator, angles == "infer"), emulator,
             allow_extrapolation=True, what="PC scores")
     except LVCoreError as err:
         st.error(str(err))
@@ -165,7 +177,11 @@ if run_clicked:
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
            "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward),
-           "inputs": dict(cal_inputs), "extrapolation": extrapolation}
+           "inputs": dict(cal_inputs), "extrapolation": extrapolation, "verdicts": None, "forward": forward,
+           "infer": angles == "infer",
+           "edp_mmhg": conditions["edp_mmhg"], "edp_source": guards.edp_source(data, None, emulator),
+           "base": str(getattr(emulator, "base", "clamped")), "h": [float(v) for v in h],
+           "angles": (conditions["alpha_endo"], conditions["alpha_epi"])}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
@@ -189,6 +205,26 @@ if _job is not None and not _job["done"]:  # the 1 Hz timer exists only while sa
     st.fragment(run_every=1.0)(_progress)()
 
 # ----------------------------------------------------------------------------- results
+def _verdicts(job: dict, results: dict) -> dict:
+    """One verdict per subject (lvcore.inference.verdict), computed once per job; {} if it cannot be computed."""
+    if job.get("verdicts") is None:
+        from lvcore.conditions import SIGMA_V_ML
+        from lvcore.inference import verdict
+
+        out = {}
+        try:
+            with st.spinner("Verdict: best fit of volume and strains"):
+                forward, infer = job["forward"], job.get("infer", False)
+                consistency = verdict.consistency_check(job["y"], forward, SIGMA_V_ML, infer_angles=infer)
+                for m, res in results.items():
+                    out[m] = verdict.run_verdict(res, consistency, verdict.checked_bounds(forward, infer))
+        except Exception as err:  # noqa: BLE001 - shown, never hides the results
+            st.warning(f"The verdict could not be computed ({type(err).__name__}: {err}); judge the results "
+                       "by the convergence numbers below.")
+        job["verdicts"] = out
+    return job["verdicts"]
+
+
 job = st.session_state.get("calibration_job")
 if job is not None and job["done"]:
     from lvcore.viz import inference_figures as figs
@@ -207,14 +243,13 @@ if job is not None and job["done"]:
             if job["synthetic"]:
                 st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
                                                   "never enters the fit)." if truth else ""))
-            from lvcore.conditions import SIGMA_V_ML
-            from lvcore.inference.plausibility import check_result
-
+            st.caption(f"EDP {job.get('edp_mmhg', SIMULATOR_DEFAULT_EDP_MMHG):g} mmHg ({job.get('edp_source', 'default')}); "
+                       f"{job.get('base', 'clamped')} base (the emulator's simulations)")
+            verdicts = _verdicts(job, results)
             for m, res in results.items():
-                level, text = banner_status(res.convergence)
+                v = verdicts.get(m)
+                level, text = banner_status(res.convergence, flags=v.flags if v is not None else ())
                 getattr(st, level)(f"{MODEL_LABELS[m]}: {text}")
-                for flag in check_result(res, job["y"], SIGMA_V_ML).flags:  # posterior-predictive check
-                    st.warning(f"{MODEL_LABELS[m]}: the data look implausible for this model: {flag}")
             idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
             fig_pred = figs.predictive_density_figure(idatas, job["y"])
             st.plotly_chart(fig_pred, width="stretch")
@@ -258,6 +293,9 @@ if job is not None and job["done"]:
                         res.idata.to_netcdf(str(nc))
                         st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
                                            key=f"nc_{m}")
+            if job.get("h") is not None:
+                physiology_panel.show(idatas, h=job["h"], edp_mmhg=job["edp_mmhg"], angles=job["angles"],
+                                      measured_lvv_ml=float(job["y"][0]), subject=job["subject"], key="cal_edpvr")
             st.subheader("Export figures")
             for name, fig in downloads.items():
                 st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",

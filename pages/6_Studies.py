@@ -21,7 +21,11 @@ with st.sidebar:
     st.header("Results")
     extra = st.text_input("More result folders (comma-separated)", "",
                           help="--out folders of `lvcore study bo-fibres/operators/fibre-discrepancy`, or their parent")
-    folders = [Path(p.strip()).expanduser() for p in extra.split(",") if p.strip()]
+    try:
+        folders = results.parse_folders(extra)
+    except LVCoreError as err:
+        st.error(str(err))
+        folders = []
     if "studies_runs" in st.session_state:
         folders += [r.out for r in st.session_state["studies_runs"].values()]
 sources = results.result_sources(folders)

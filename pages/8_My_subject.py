@@ -3,11 +3,10 @@ from __future__ import annotations
 
 import streamlit as st
 
-from lvcore.app import freshness, subject_flow as flow
+from lvcore.app import freshness, physiology_panel, subject_flow as flow
 from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
-from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS
 from lvcore.inference.samplers import SamplerConfig
 from lvcore.resources import bundled_volunteers, volunteer_files
@@ -25,7 +24,7 @@ def _emulator(name: str):
 
 
 uploads = session_uploads()
-shared = shared_inputs()
+shared = shared_inputs(theta=False)
 
 # ----------------------------------------------------------------------------- 1. geometry
 st.header("1 · Geometry")
@@ -145,13 +144,19 @@ if stored is not None:
     with freshness.shown(stored, settings, "my subject"):
         summary = stored.result["summary"]
         for run in stored.result["runs"]:
-            level, text = banner_status(run.result.convergence)
-            getattr(st, level)(f"{MODEL_LABELS[run.model]}: {text}")
+            record = summary["models"][run.model]  # the banner of summary_record: convergence and bound flags
+            getattr(st, "success" if record["converged_cleanly"] else "warning")(
+                f"{MODEL_LABELS[run.model]}: {record['convergence']}")
             for flag in run.check.flags:
                 st.warning(f"{MODEL_LABELS[run.model]}: the data look implausible for this model: {flag}")
             st.dataframe(run.result.summary, width="stretch")
         for name, fig in stored.result["figures"].items():
             st.plotly_chart(fig, width="stretch", key=f"my_fig_{name}")
+        if geometry is not None and prepared is not None and data is not None:
+            physiology_panel.show({MODEL_LABELS[r.model]: r.result.idata for r in stored.result["runs"]},
+                                  h=geometry.h, scale=float(geometry.scale), edp_mmhg=prepared.conditions["edp_mmhg"],
+                                  angles=(prepared.conditions["alpha_endo"], prepared.conditions["alpha_epi"]),
+                                  measured_lvv_ml=float(data.lvv_ml), subject=summary["subject"], key="my_edpvr")
         st.header("5 · Download")
         st.download_button("Download everything (zip: netCDF, figures, settings.json, summary.html)",
                            stored.result["zip"], file_name=f"{summary['subject']}_lvcore.zip",

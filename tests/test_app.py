@@ -43,8 +43,11 @@ def test_switching_pages_by_navigation():
 
 
 def test_shared_sidebar_keeps_its_state_across_pages():
-    """main.py renders one sidebar (subject, emulator, log-scaled θ with units, EDP) before the page runs."""
+    """main.py renders one sidebar (subject, emulator, log-scaled θ with units, EDP) before the page runs; θ only on
+    the pages that read it (Emulator, Fibre angles), kept while hidden."""
     at = AppTest.from_file(APP, default_timeout=180).run()
+    at.switch_page(str(PAGES_DIR / "4_Emulator.py")).run()
+    assert not at.exception, at.exception
     a = next(s for s in at.sidebar.select_slider if s.key == "shared_a")
     assert a.label == "a (kPa)"
     new = a.options[a.options.index(str(a.value)) + 2] if str(a.value) in a.options else a.options[-5]
@@ -53,6 +56,14 @@ def test_shared_sidebar_keeps_its_state_across_pages():
     assert not at.exception, at.exception
     assert [s.key for s in at.sidebar.select_slider].count("shared_a") == 1  # rendered once, by main.py
     assert float(at.session_state["shared_inputs"]["theta"]["a"]) == float(new)
+    assert float(next(s for s in at.sidebar.select_slider if s.key == "shared_a").value) == float(new)
+    # the Calibration page reads no θ: its sidebar shows no θ sliders (they did nothing there), and θ is kept
+    at.switch_page(str(PAGES_DIR / "5_Calibration.py")).run()
+    assert not at.exception, at.exception
+    assert not [s for s in at.sidebar.select_slider if s.key.startswith("shared_")]
+    assert any("not used on this page" in c.value for c in at.sidebar.caption)
+    assert float(at.session_state["shared_inputs"]["theta"]["a"]) == float(new)
+    at.switch_page(str(PAGES_DIR / "4_Emulator.py")).run()
     assert float(next(s for s in at.sidebar.select_slider if s.key == "shared_a").value) == float(new)
 
 
@@ -67,12 +78,18 @@ def test_simulator_page_runs_and_responds_to_sliders():
     assert at.title[0].value == "LV Calibration Lab"
     assert at.radio(key="resolution").value == "fast"
     lvv0 = _lvv(at)
-    v_early = float([m for m in at.metric if m.label.startswith("V_early")][0].value.split()[0])
+    v_early = float([m for m in at.metric if m.label.startswith("V₀")][0].value.split()[0])
     assert 60 < v_early < 110 and lvv0 > v_early
+    # EDV/V0 with its typical range (Klotz et al. 2006); the default's ~2.1 at 8 mmHg is noted as unusual
+    (ratio,) = [m for m in at.metric if m.label.startswith("EDV / V₀")]
+    assert float(ratio.value) == pytest.approx(lvv0 / v_early, rel=2e-3)
+    assert any("typical EDV/V₀ at 8 mmHg: 1.66–1.99" in c.value for c in at.caption)
     assert len(at.get("plotly_chart")) >= 1 and len(at.get("image")) == 1
     assert {b.label for b in at.get("download_button")} >= {"Download mesh + displacement (VTU)",
                                                              "Download result (JSON)"}
-    assert not at.error and not at.warning
+    assert not at.error
+    assert [w.value for w in at.warning] == [w.value for w in at.warning if w.value.startswith("unusual result: EDV/V₀")]
+    assert len(at.warning) == 1
     # a stiffer isotropic matrix fills less
     slider = at.select_slider(key="a")
     slider.set_value(slider.options[-10])  # about 3 kPa (log-spaced stops)

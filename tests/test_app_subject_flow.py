@@ -98,7 +98,31 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     assert not at.exception and not at.error, [e.value for e in at.error]
     assert "my_subject_run" in at.session_state
     assert at.session_state["my_subject_run"].result["zip"][:2] == b"PK"
+    # physiology: the posterior EDV/V0 with its typical range and the assumed EDP (issue 27, item 2)
+    assert any("EDP assumed: 8 mmHg" in c.value and "typical EDV/V₀" in c.value for c in at.caption)
+    assert any("EDV/V₀ median" in d.value.columns for d in at.dataframe)
+    assert any(b.label.startswith("Simulate the EDPVR") for b in at.button)
     # a wrong EDP for the fixed-EDP chapter emulator is refused with a message naming the EDP
     at.selectbox(key="my_emulator").select("chapter")
     at.number_input(key="my_edp").set_value(12.0).run()
     assert any("EDP" in e.value or "edp" in e.value for e in at.error)
+
+
+def test_bound_flags_name_a_posterior_piled_on_the_prior_bound():
+    """My subject's banner (and summary) carries the verdict's bound flags: a, af at 0.05 were green (issue 27)."""
+    from types import SimpleNamespace
+
+    import arviz as az
+
+    prepared = flow.prepare(load_emulator("chapter"), "chapter",
+                            SimpleNamespace(h=np.zeros(5), scale=1.0, warnings=[]))
+    rng = np.random.default_rng(0)
+
+    def run(a):
+        post = {"a": a * np.exp(0.05 * rng.standard_normal((1, 200))), "b": np.full((1, 200), 1.3) + 0.1 * rng.random((1, 200)),
+                "af": np.full((1, 200), 1.0) + 0.1 * rng.random((1, 200)), "bf": np.full((1, 200), 3.6) + 0.1 * rng.random((1, 200))}
+        return SimpleNamespace(model="iid", result=SimpleNamespace(idata=az.from_dict(posterior=post)))
+
+    flags = flow.bound_flags(run(0.0507), prepared)
+    assert any(f.startswith("a: posterior piled on the prior's lower bound 0.05") for f in flags), flags
+    assert not any("bound" in f for f in flow.bound_flags(run(0.6), prepared))

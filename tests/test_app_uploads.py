@@ -247,6 +247,41 @@ def test_pc_scores_outside_the_emulator_box_are_flagged_on_the_page(calibration_
     assert len(jobs[2.5]["extrapolation"]) == 1 and "h1 = 2.5" in jobs[2.5]["extrapolation"][0]
 
 
+def test_calibration_page_takes_the_edp_from_the_data_and_shows_it(calibration_page, monkeypatch):
+    """edp_mmhg in the upload: used and recorded (8 with the fixed-EDP 'chapter'); a different one is refused."""
+    import arviz as az
+    import pandas as pd
+
+    from lvcore.inference import calibrate as cal
+
+    class Conv:
+        converged = True
+
+        def message(self):
+            return "converged (stand-in)"
+
+    def stand_in(y, forward, model, **kw):
+        idata = az.from_dict(posterior={"a": np.full((1, 20), y[0])}, observed_data={"y": np.asarray(y)})
+        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
+                                     {"min": 1.0})
+
+    monkeypatch.setattr(cal, "calibrate", stand_in)
+    for edp, ok in ((8.0, True), (11.0, False)):
+        at = calibration_page()
+        csv = (HEADER + ",edp_mmhg\nS1,140," + ",".join(["-0.15"] * 24) + f",{edp}\n").encode()
+        at.file_uploader(key="up_measured").upload("m.csv", csv, "text/csv")
+        at.file_uploader(key="up_geometry").upload("h.json", b'{"h": [0, 0, 0, 0, 0]}', "application/json")
+        at.run()
+        at.multiselect[0].set_value(["volume"]).run()
+        at.button[0].click().run(timeout=60)
+        assert not at.exception, at.exception
+        if ok:
+            job = at.session_state["calibration_job"]
+            assert job["edp_mmhg"] == 8.0 and job["edp_source"] == "data (edp_mmhg)"
+        else:
+            assert any("edp_mmhg = 11" in e.value for e in at.error), [e.value for e in at.error]
+
+
 # --------------------------------------------------------------------------- files that crashed VTK (issue 28)
 def test_uploads_that_crashed_the_server_show_an_error_and_the_server_lives():
     """A 169-byte PLY declaring 10^9 vertices (SIGABRT) and a 33-byte OBJ with face index 10^9 (SIGSEGV) killed

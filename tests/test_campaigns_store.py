@@ -98,6 +98,9 @@ def test_sigkill_then_resume_loses_nothing_and_runs_nothing_twice(tmp_path):
     started_after = Counter(k for ev, k in _log_events(log)[n_log_before:] if ev == "start")
     assert not set(started_after) & {keys[i] for i in done_before}
     assert started_after == Counter(keys[i] for i in pending_before)
+    # both runs were warm-started continuation chains (the default): rows started from neighbours' states
+    events = [ev for ev, _ in _log_events(log)]
+    assert events[:n_log_before].count("warm") > 0 and events[n_log_before:].count("warm") > 0
 
 
 def test_failed_rows_are_kept_and_reported(tmp_path, monkeypatch):

@@ -253,6 +253,13 @@ def _fake_calibration(monkeypatch):
                                upper=np.r_[10.0, 30.0, 10.0, 30.0, [2.0] * 5],
                                fixed={"alpha_endo": -60.0, "alpha_epi": 60.0, "edp": 8.0})
     monkeypatch.setattr(cal, "calibrate", fake)
+    # the verdict's best fit needs a real forward model: a clean verdict instead (lvcore.inference.verdict)
+    from lvcore.inference import verdict
+
+    monkeypatch.setattr(verdict, "consistency_check", lambda y, *a, **k: verdict.Consistency(
+        {}, np.asarray(y, float), np.ones(25)))
+    monkeypatch.setattr(verdict, "checked_bounds", lambda *a, **k: {})
+    monkeypatch.setattr(verdict, "run_verdict", lambda res, c, bounds: verdict.Verdict(c))
     monkeypatch.setattr(forward, "load_emulator_forward", lambda *a, **k: SimpleNamespace(emulator=emulator))
     monkeypatch.setattr(forward, "emulator_forward", lambda *a, **k: None)
 

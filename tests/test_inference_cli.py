@@ -40,3 +40,82 @@ def test_every_bundled_volunteer_but_hv5_is_inside_the_box_once_size_normalised(
     assert np.all(np.abs(g.h) <= 2.0) and 0.9 < g.scale < 1.0
     rec = g.record()
     assert rec["scale"] == pytest.approx(g.scale) and json.dumps(rec)
+
+
+def _csv(tmp_path, extra_header="", extra_values=""):
+    from lvcore.outputs import OUTPUT_COLUMNS
+    from lvcore.resources import volunteer_files
+    from lvcore.inference.data import read_measured_csv
+
+    y = read_measured_csv(volunteer_files("SYNTHETIC_HV2").measured)[0].y
+    p = tmp_path / "m.csv"
+    p.write_text("subject," + ",".join(OUTPUT_COLUMNS) + extra_header + "\nS1," + ",".join(map(str, y))
+                 + extra_values + "\n")
+    return p
+
+
+def test_data_edp_is_refused_by_a_fixed_edp_emulator(tmp_path, capsys):
+    """edp_mmhg = 10 in the data with the 'chapter' emulator (trained at 8 mmHg): exit 2, naming the column."""
+    p = _csv(tmp_path, ",edp_mmhg", ",10")
+    code = main(["calibrate", "--data", str(p), "--geometry", "mean", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "edp_mmhg = 10" in err and "'chapter'" in err and "angles" in err
+    # the same EDP as the emulator's is fine up to the sampling (checked by the guard itself)
+    from lvcore.emulator import load_emulator
+    from lvcore.inference.guards import subject_edp as _subject_edp
+    from lvcore.inference.data import read_measurements
+    from lvcore.inference.guards import check_conditions
+
+    emu = load_emulator("chapter")
+    (row,) = read_measurements(_csv(tmp_path, ",edp_mmhg", ",8"))
+    assert _subject_edp(row, check_conditions(emu), emu, "chapter", None) == 8.0
+    angles = load_emulator("angles")
+    (row,) = read_measurements(_csv(tmp_path, ",edp_mmhg", ",11.5"))
+    assert _subject_edp(row, check_conditions(angles), angles, "angles", None) == 11.5
+    with pytest.raises(DataError, match="disagree"):
+        _subject_edp(row, check_conditions(angles), angles, "angles", 9.0)
+
+
+def test_geometric_measures_need_geometry_infer(tmp_path, capsys):
+    p = _csv(tmp_path)
+    code = main(["calibrate", "--data", str(p), "--geometry", "mean", "--reference-volume", "50",
+                 "--out", str(tmp_path / "o")])
+    assert code == 2 and "--reference-volume" in capsys.readouterr().err
+    code = main(["calibrate", "--data", str(p), "--geometry", "infer", "--reference-volume", "5000",
+                 "--out", str(tmp_path / "o")])
+    assert code == 2 and "reference_volume_ml = 5000" in capsys.readouterr().err
+
+
+def test_default_emulator_is_one_for_cli_and_app():
+    """The CLI's default emulator is the app sidebar's default (issue 27: 'chapter' vs 'angles' before)."""
+    from lvcore.app import controls
+    from lvcore.inference.cli import DEFAULT_EMULATOR
+
+    assert controls.DEFAULT_EMULATOR == DEFAULT_EMULATOR == "chapter"
+
+
+def test_default_subject_is_inside_the_default_emulators_box():
+    from lvcore.app.controls import DEFAULT_SUBJECT
+    from lvcore.emulator import load_emulator
+    from lvcore.inference import guards
+    from lvcore.inference.calibrate import read_pc_scores
+    from lvcore.resources import volunteer_files
+
+    emu = load_emulator("chapter")
+    geo = volunteer_files(DEFAULT_SUBJECT).geometry
+    cond = guards.check_conditions(emu)
+    for h in (guards.resolve_geometry(str(geo)).h, read_pc_scores(geo)):   # size-normalised and as projected
+        guards.check_inputs_in_box(guards.fixed_inputs(h, cond, emu), emu)   # raises outside
+
+
+def test_geometry_infer_without_a_measure_warns_that_size_and_stiffness_trade_off(tmp_path, capsys, monkeypatch):
+    """The warning comes before any sampling (sampling replaced by nothing here); a measure silences it."""
+    from lvcore.inference import calibrate as cal
+
+    monkeypatch.setattr(cal, "calibrate_subjects", lambda *a, **k: [])
+    p = _csv(tmp_path)
+    assert main(["calibrate", "--data", str(p), "--geometry", "infer", "--out", str(tmp_path / "o")]) == 0
+    assert "size and stiffness trade off" in capsys.readouterr().err
+    p = _csv(tmp_path, ",reference_volume_ml", ",70")
+    assert main(["calibrate", "--data", str(p), "--geometry", "infer", "--out", str(tmp_path / "o2")]) == 0
+    assert "trade off" not in capsys.readouterr().err

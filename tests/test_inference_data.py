@@ -168,3 +168,41 @@ def test_json_and_aha_csv_readers(tmp_path):
     np.testing.assert_allclose(data.read_measurements(_write(tmp_path, [y]))[0].y, y)
     with pytest.raises(DataError, match="unknown measured-data format"):
         data.read_measurements(tmp_path / "m.xlsx") if (tmp_path / "m.xlsx").write_text("x") else None
+
+
+# ----------------------------------------------------------------------------- optional per-subject columns
+def test_optional_columns_edp_and_geometric_measures(tmp_path):
+    """edp_mmhg, reference_volume_ml, wall_volume_ml, long_axis_mm: CSV columns, JSON keys, .mat variables."""
+    import json
+
+    import scipy.io
+
+    y = _good()
+    header = "subject," + ",".join(OUTPUT_COLUMNS) + ",edp_mmhg,reference_volume_ml"
+    p = tmp_path / "x.csv"
+    p.write_text(header + "\nA," + ",".join(map(str, y)) + ",10.5,48\nB," + ",".join(map(str, y)) + ",,\n")
+    a, b = data.read_measurements(p)
+    assert a.edp_mmhg == 10.5 and a.measures == {"reference_volume_ml": 48.0}
+    assert b.edp_mmhg is None and b.measures == {}
+    np.testing.assert_allclose(a.y, y)
+    j = tmp_path / "x.json"
+    j.write_text(json.dumps({"subject": "J", "lvv_ml": y[0], "strains": list(y[1:]), "edp_mmhg": 12,
+                             "long_axis_mm": 70}))
+    (r,) = data.read_measurements(j)
+    assert r.edp_mmhg == 12.0 and r.measures == {"long_axis_mm": 70.0}
+    m = tmp_path / "x.mat"
+    scipy.io.savemat(m, {"lvv_ml": [y[0], y[0]], "strains": np.stack([y[1:], y[1:]]), "edp_mmhg": [9.0, 11.0],
+                         "wall_volume_ml": [100.0, 120.0]})
+    r1, r2 = data.read_measurements(m)
+    assert (r1.edp_mmhg, r2.edp_mmhg) == (9.0, 11.0) and r2.measures == {"wall_volume_ml": 120.0}
+
+
+@pytest.mark.parametrize("col,value,match", [("edp_mmhg", "1.2", "edp_mmhg = 1.2 is outside"),
+                                             ("edp_mmhg", "abc", "not a number"),
+                                             ("reference_volume_ml", "0.05", "outside the plausible range"),
+                                             ("long_axis_mm", "7", "long_axis_mm")])
+def test_optional_columns_are_validated(tmp_path, col, value, match):
+    p = tmp_path / "x.csv"
+    p.write_text("subject," + ",".join(OUTPUT_COLUMNS) + f",{col}\nA," + ",".join(map(str, _good())) + f",{value}\n")
+    with pytest.raises(DataError, match=match):
+        data.read_measurements(p)

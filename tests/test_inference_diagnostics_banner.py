@@ -33,3 +33,13 @@ def test_not_converged_is_amber_and_names_the_parameters():
 def test_every_reported_parameter_is_explained():
     for n in ("a", "b", "af", "bf", "sigma_s_sq", "sigma_s2", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau"):
         assert PARAMETER_HELP[n].strip()
+
+
+def test_banner_lists_the_verdicts_flags():
+    """A converged run whose posterior piles on a prior bound is amber, with the flag in the text (issue 27)."""
+    from lvcore.inference.diagnostics import Convergence, banner_status
+
+    conv = Convergence(True, 1.001, 2000.0, 2000.0, 0, ())
+    assert banner_status(conv)[0] == "success"
+    level, text = banner_status(conv, flags=["IDENTIFIABILITY: a: posterior piled on the prior's lower bound 0.05"])
+    assert level == "warning" and "exit code 4" in text and "lower bound 0.05" in text

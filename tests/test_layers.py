@@ -40,7 +40,8 @@ def test_the_contract_covers_every_subpackage_and_module():
     listed = {m for layer in _layers(contract) for m in layer}
     children = {p.stem for p in (ROOT / "lvcore").glob("*.py") if p.stem != "__init__"} \
         | {p.parent.name for p in (ROOT / "lvcore").glob("*/__init__.py")}
-    assert listed == children
+    assert listed == children, (f"add {sorted(children - listed)} to a layer of [tool.importlinter] in pyproject.toml "
+                                f"(and to README.md's Architecture table); remove {sorted(listed - children)}")
 
 
 def test_the_contract_can_fail(tmp_path):
@@ -63,7 +64,8 @@ def test_readme_architecture_table_matches_the_contract():
     rows = [line for line in section.splitlines() if line.startswith("| `")]
     readme = [[m.strip() for m in re.match(r"\| `([^`]*)`", row).group(1).replace("\\|", "|").split("|")]
               for row in rows]
-    assert readme == _layers(_contract())
+    assert readme == _layers(_contract()), ("README.md's Architecture table must list the layers of [tool.importlinter] "
+                                            "in pyproject.toml, one row per layer, in order")
 
 
 def test_studies_do_not_import_viz_at_module_level():

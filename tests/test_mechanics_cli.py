@@ -27,6 +27,7 @@ def test_simulate_json_and_vtu(case_file, tmp_path, capsys):
     assert main(["simulate", str(case_file), "--json", "--vtu", str(vtu), "--sensitivities"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["converged"] is True
+    assert out["boundary"] == {"base": "clamped"}  # every result names its base condition (issue 24)
     sens = out["sensitivities"]
     assert set(sens) == {"a", "b", "af", "bf"} and all(len(v) == 25 for v in sens.values())
     assert sens["a"][0] < 0 and sens["af"][0] < 0  # stiffer myocardium, smaller end-diastolic volume
@@ -51,6 +52,7 @@ def test_simulate_summary_text(case_file, capsys):
     assert main(["simulate", str(case_file)]) == 0
     text = capsys.readouterr().out
     assert "converged" in text and "LVV" in text and "mid-basal" in text
+    assert "boundary: base clamped (the default; the 'chapter' emulator is sliding)" in text
 
 
 def test_bad_case_exit_2(tmp_path, capsys):

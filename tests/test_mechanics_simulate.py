@@ -132,18 +132,34 @@ def test_base_plane_just_above_the_apex_is_refused():
         simulate(case)
 
 
-def test_ordinary_result_has_no_warnings(fast_result):
-    assert fast_result.warnings == ()
-    assert fast_result.to_dict()["warnings"] == []
+def test_default_lv_result_notes_its_unusual_edv_ratio(fast_result):
+    # the default LV at 8 mmHg inflates to ~2.1 times its reference cavity, above the typical range
+    (w,) = fast_result.warnings
+    assert w.startswith("unusual result: EDV/V₀ = ") and "Klotz" in w
+    assert fast_result.to_dict()["warnings"] == [w]
 
 
 def test_plausibility_warnings():
     from lvcore.mechanics.simulate import plausibility_warnings
 
-    assert plausibility_warnings((85e3, 120e3), 120 / 85) == ()
-    assert len(plausibility_warnings((85e3, 1751e3), 1751 / 85)) == 2
-    assert "times its reference" in plausibility_warnings((1e3, 3.5e3), 3.5)[0]
+    assert plausibility_warnings((85e3, 155e3), 155 / 85, 8.0) == ()  # 1.82: typical at 8 mmHg
+    assert len(plausibility_warnings((85e3, 1751e3), 1751 / 85, 8.0)) == 2
+    assert "times its reference" in plausibility_warnings((1e3, 3.5e3), 3.5, 20.0)[0]
+    assert "below the typical" in plausibility_warnings((85e3, 100e3), 100 / 85, 8.0)[0]
     assert plausibility_warnings(None, None) == ()
+    # not an LV at a physiological pressure (or unknown): EDV/V0 is not judged
+    assert plausibility_warnings((1e3, 3.5e3), 3.5, None) == ()
+    assert plausibility_warnings((2492.0, 10734.0), 10734 / 2492, 75.0) == ()
+
+
+def test_land_problem2_benchmark_is_not_flagged():
+    """Land et al. (2015) problem 2 (10 kPa = 75 mmHg, EDV/V0 ~ 4.3) is a benchmark, not a physiological LV."""
+    from lvcore.mechanics.verification import problem2_case
+
+    r = simulate(problem2_case("fast"))
+    assert r.converged, r.message
+    assert r.lvv_standardised > 3.0  # the inflation that used to print "implausible ... times"
+    assert r.warnings == ()
 
 
 @pytest.mark.slow
@@ -200,3 +216,43 @@ def test_dispersion_and_sheet_terms_change_the_solution(fast_case, fast_result):
         r = simulate(_with_material(fast_case, **extra))
         assert r.converged, (extra, r.message)
         assert np.sqrt(np.mean((r.strains - fast_result.strains) ** 2)) > 1e-3, extra
+
+
+def test_adjoint_sensitivities_with_every_mismatch_term(fast_case):
+    """Dispersion, moved sheet terms, a regional field and the epicardial spring: adjoint d(outputs)/d(a, bf)
+    still match central finite differences."""
+    f = list(np.exp(0.3 * np.random.default_rng(0).standard_normal(24)))
+    d = _with_material(fast_case, kappa=0.15, bs=2.0, regional={"a": f, "af": f[::-1]})
+    d["boundary"]["epicardial_spring"] = {"k": 0.1, "direction": "normal"}
+    r = simulate(d, with_sensitivities=True)
+    assert r.converged, r.message
+    for name in ("a", "bf"):
+        h = 1e-4 * THETA[name]
+        ys = []
+        for sgn in (1, -1):
+            dd = json.loads(json.dumps(d))
+            dd["material"][name] = THETA[name] + sgn * h
+            ys.append(simulate(dd).outputs())
+        fd = (ys[0] - ys[1]) / (2 * h)
+        np.testing.assert_allclose(r.sensitivities[name], fd, rtol=2e-4, atol=1e-6 * np.abs(fd).max())
+
+
+def test_prepared_case_cache_gives_the_results_of_a_fresh_build():
+    """simulate() reuses the material-independent part of a case (issue 25): same numbers as building it anew."""
+    from lvcore.mechanics import simulate as sim
+
+    base = Case.default_lv(resolution="fast")
+    stiff = Case.default_lv({"a": 1.2, "b": 2.0, "af": 1.5, "bf": 4.0}, resolution="fast")
+    sim.simulate(base)  # fills the cache with the reference material's system
+    cached = sim.simulate(stiff)
+    sim._PREPARED.clear()
+    fresh = sim.simulate(stiff)
+    np.testing.assert_array_equal(cached.outputs(), fresh.outputs())
+    assert cached.newton_iterations == fresh.newton_iterations
+    # another law on a geometry of the same mesh is a different prepared case (parameters per element differ)
+    gucc = Case.from_dict({**base.to_dict(), "material": {"law": "guccione", "C": 2.0, "bf": 8.0, "bt": 2.0,
+                                                          "bfs": 4.0}})
+    g_cached = sim.simulate(gucc)
+    sim._PREPARED.clear()
+    np.testing.assert_array_equal(g_cached.outputs(), sim.simulate(gucc).outputs())
+    assert len(sim._PREPARED) == 1

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from lvcore.campaigns.space import get_space
+from forward_double import JacobianDouble
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.optimise.bayesopt import StandardisedRSS, bayesian_optimise
 from lvcore.optimise.sqp import OperatorLoss, refit_theta
@@ -21,18 +22,11 @@ def smooth_forward(theta):
     return y
 
 
-class SmoothForward:
+class SmoothForward(JacobianDouble):
     """``smooth_forward`` as a JacobianForward over (a, b, af, bf), with a central-difference Jacobian."""
 
     input_names = THETA_NAMES
     label = "closed-form test function"
-    input_bounds = {}
-
-    def evaluate(self, inputs):
-        return self._batch(inputs, False)
-
-    def jacobian(self, inputs):
-        return self._batch(inputs, True)
 
     def _batch(self, inputs, jacobian):
         cols, n = as_columns(inputs, self.input_names)
@@ -43,9 +37,6 @@ class SmoothForward:
             jac = np.stack([(smooth_forward(theta + eps * e) - smooth_forward(theta - eps * e)) / (2 * eps)
                             for e in np.eye(4)], axis=2)
         return ForwardBatch(smooth_forward(theta), np.ones(n, bool), ("",) * n, jac)
-
-    def __call__(self, params):
-        return self.evaluate(params).outputs[0]
 
 
 def test_standardised_rss_weights_lvv():

@@ -4,6 +4,7 @@ import json
 import numpy as np
 import pytest
 
+from forward_double import JacobianDouble
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.optimise.sqp import OperatorLoss
 from lvcore.outputs import THETA_NAMES
@@ -15,21 +16,14 @@ TRUTH = np.array(ops.THETA_TRUE)
 M = np.random.default_rng(7).normal(size=(24, 4)) * 0.03
 
 
-class StandIn:
+class StandIn(JacobianDouble):
     """A cheap numpy closed-form forward (SYNTHETIC) whose 'geometry' shifts the reference theta."""
 
     input_names = THETA_NAMES
     label = "numpy stand-in (tests)"
-    input_bounds = {}
 
     def __init__(self, shift):
         self.ref = np.array([0.6, 5.0, 1.5, 5.0]) * (1.0 + shift * np.array([1, -1, 2, 1]))
-
-    def evaluate(self, inputs):
-        return self._batch(inputs, False)
-
-    def jacobian(self, inputs):
-        return self._batch(inputs, True)
 
     def _batch(self, inputs, jacobian):
         cols, n = as_columns(inputs, self.input_names)
@@ -44,9 +38,6 @@ class StandIn:
             js = (M[None, :, :] + 0.008 * u[:, None, :]) * du[:, None, :]
             jac = np.concatenate([j0[:, None, :], js], axis=1)
         return ForwardBatch(y, np.ones(n, bool), ("",) * n, jac)
-
-    def __call__(self, params):
-        return self.evaluate(params).outputs[0]
 
 
 def stand_in(geometry_name: str) -> StandIn:

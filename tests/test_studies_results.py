@@ -126,3 +126,17 @@ def test_fibre_discrepancy_writes_its_csvs_and_figures_from_one_result(tmp_path)
                  "fig_errors_violin.html"):
         assert (tmp_path / name).is_file(), name
     assert set(paths) >= {"json", "strain_predictive_csv", "sigma_s_csv", "errors_csv"}
+
+
+def test_typed_result_folders_are_bounded():
+    """The Studies page's typed folder list, like the fibre-angle pairs, is bounded (issue 28 finding 2)."""
+    from pathlib import Path
+
+    import pytest
+
+    from lvcore.exceptions import LVCoreError
+    from lvcore.studies.results import MAX_TYPED_FOLDERS, parse_folders
+
+    assert parse_folders(" a, ~/b ,") == [Path("a"), Path("~/b").expanduser()]
+    with pytest.raises(LVCoreError, match=f"at most {MAX_TYPED_FOLDERS}"):
+        parse_folders(",".join(["x"] * 10_000))

@@ -12,7 +12,7 @@ import json
 import numpy as np
 import streamlit as st
 
-from lvcore import conditions, units
+from lvcore import conditions, physiology, units
 from lvcore.app import PAGES
 from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: F401 (shared log sliders)
 from lvcore.exceptions import LVCoreError
@@ -151,9 +151,12 @@ def show_simulator_result(case: Case, case_json: str, sim: dict) -> None:
         st.warning(warning)
     m1, m2, m3, m4 = st.columns(4)
     m1.metric("LVV (end diastole)", f"{vol['loaded']:.1f} mL")
-    m2.metric("V_early (reference)", f"{vol['reference']:.1f} mL")
-    m3.metric("EDV / V_early", f"{summary['lvv_standardised']:.3f}")
+    m2.metric("V₀ (reference cavity)", f"{vol['reference']:.1f} mL")
+    typical = physiology.typical_edv_ratio(units.kpa_to_mmhg(case.load.pressure_kpa))
+    m3.metric("EDV / V₀", f"{summary['lvv_standardised']:.3f}",
+              help="End-diastolic over reference (stress-free) cavity volume; " + typical.text() + ".")
     m4.metric("Mean E_cc", f"{np.mean(summary['strains']):.3f}")
+    st.caption(f"EDV/V₀ = {summary['lvv_standardised']:.2f}; {typical.text()}.")
 
     left, right = st.columns([1.1, 1])
     with left:

@@ -15,7 +15,10 @@ coordinates, so the fibre field is the same at corresponding points). Then
   circumferential pins; or all base dofs clamped) map onto themselves.
 
 Hence every strain is unchanged and every volume scales by ``s^3`` (lengths
-by ``s``). The finite-element problem on the scaled template mesh is the same
+by ``s``). The identity needs every load and constraint to be free of a
+length scale: it does *not* hold with an epicardial Robin spring
+(``boundary.epicardial_spring``, k in kPa/mm: its traction ``k u`` grows
+with ``s`` while the stress does not), and the shipped emulators have none. The finite-element problem on the scaled template mesh is the same
 discrete problem with the same factors, so the identity holds to the Newton
 tolerance (``tests/test_geometry_scaling.py`` checks it with the simulator at
 ``s = 0.6`` and ``s = 1.5``).

@@ -83,6 +83,12 @@ def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig 
     y = validate_measurements(y)
     if model not in models.MODEL_NAMES:
         raise ValueError(f"unknown model '{model}'; choose one of {models.MODEL_NAMES}")
+    if getattr(forward, "sample_latents", None) is not None and model == "discrepancy":
+        # the blocked sampler's conditionals cover theta, the GP and b only; the sampled geometry needs joint NUTS
+        if sampler == "hmc_gibbs":
+            raise ValueError("--sampler hmc_gibbs cannot sample an inferred geometry (--geometry infer); "
+                             "use --sampler auto or nuts (joint NUTS)")
+        sampler = "nuts"
     kwargs = {"sigma_v": sigma_v, "infer_angles": infer_angles}
     run, conv = diagnostics.sample_until_converged(model, y, forward, config, sampler=sampler, rhat_max=rhat_max,
                                                    ess_min=ess_min, max_rounds=max_rounds, progress=progress,

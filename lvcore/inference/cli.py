@@ -1,12 +1,21 @@
 """``lvcore calibrate``: Bayesian calibration of theta from measured data and a geometry.
 
 Guards (exit code 2, see :mod:`lvcore.inference.guards`): ``--geometry`` is
-required (``mean`` is allowed with a bias warning); PC scores and conditions
-outside the emulator's training box are refused unless ``--allow-extrapolation``;
-``--edp``/angles given to an emulator trained at fixed values, or an EDP outside
-2-40 mmHg, are refused. After sampling, a posterior-predictive check
-(:mod:`lvcore.inference.plausibility`) flags data the model cannot reach; the
-flags are warnings, printed and recorded in ``summary.json``.
+required: PC scores or a mesh (size-normalised: scores plus a scale whose cube
+multiplies the emulated LVV, :mod:`lvcore.geometry.scaling`), ``infer`` (the
+scores and scale sampled with theta, informed by ``--reference-volume``,
+``--wall-volume``, ``--long-axis`` or the data's columns of the same names,
+:mod:`lvcore.inference.geometry_prior`), or ``mean`` (allowed with a bias
+warning); PC scores and conditions outside the emulator's training box are
+refused unless ``--allow-extrapolation``; ``--edp``/angles given to an
+emulator trained at fixed values, a data ``edp_mmhg`` that differs from a
+fixed-EDP emulator's, or an EDP outside 2-40 mmHg, are refused.
+
+After sampling, :mod:`lvcore.inference.verdict` gives one verdict per
+subject: consistency of volume and strains at the best fit (the same for
+every model), posterior mass on a prior bound, intervals as wide as the
+prior's, divergences. A run with any flag exits with :data:`EXIT_FLAGGED`
+(4, "ran, results flagged"); the flags are printed and listed in ``summary.json``.
 """
 from __future__ import annotations
 
@@ -22,6 +31,12 @@ from lvcore.conditions import SIGMA_V_ML
 SIGMA_V_RANGE_ML = (0.1, 50.0)
 #: Range of ``--strain-noise`` (strain sd): measured strain errors are 0.01-0.1.
 STRAIN_NOISE_RANGE = (0.001, 0.5)
+
+#: The emulator ``lvcore calibrate`` and the app use unless told otherwise: the chapter's, trained with the
+#: sliding base (docs/simulator.md's decision) at fixed fibre angles (-60/60 deg) and EDP (8 mmHg).
+DEFAULT_EMULATOR = "chapter"
+#: Exit code of a run whose results are flagged by the verdict (docs/reliability.md).
+EXIT_FLAGGED = 4
 
 
 def register(subparsers) -> None:
@@ -42,9 +57,20 @@ def register(subparsers) -> None:
                         "(aha) or sector-0 start (lvcore); default 0")
     p.add_argument("--geometry",
                    help="(required with --data, unless --emulator is a subject-specific one from `lvcore emulator "
-                        "build`, whose geometry is bound in) the subject's geometry: PC scores (.json/.csv), a template mesh (.vtu/.npy/.npz) or a "
-                        "volumetric mesh (.inp/.msh/.vtu) to fit and project; or 'mean' (warned: biased "
-                        "estimates when the subject's shape differs); default: none, give it or --volunteer")
+                        "build`, whose geometry is bound in) the subject's geometry: PC scores (.json/.csv, "
+                        "optional 'scale'), a template mesh (.vtu/.npy/.npz) or a volumetric mesh (.inp/.msh/.vtu) "
+                        "to fit and project (size-normalised: scores plus a scale); 'infer' (no mesh: PC scores and "
+                        "scale sampled with theta, give --reference-volume); or 'mean' (warned: biased estimates "
+                        "when the subject's shape or size differs); default: none, give it or --volunteer")
+    p.add_argument("--reference-volume", type=float, default=None, metavar="ML",
+                   help="with --geometry infer: the subject's early-diastolic (reference) cavity volume in mL; "
+                        "also a data column reference_volume_ml (default: none, size and stiffness trade off)")
+    p.add_argument("--wall-volume", type=float, default=None, metavar="ML",
+                   help="with --geometry infer: myocardial volume in mL (LV mass in g / 1.05); also a data column "
+                        "wall_volume_ml (default: none)")
+    p.add_argument("--long-axis", type=float, default=None, metavar="MM",
+                   help="with --geometry infer: base plane to epicardial apex in mm; also a data column long_axis_mm "
+                        "(default: none)")
     p.add_argument("--volunteer", default=None, metavar="NAME",
                    help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry "
                         "(default: none)")
@@ -58,8 +84,10 @@ def register(subparsers) -> None:
     p.add_argument("--angles", choices=("fixed", "infer"), default="fixed",
                    help="fibre angles fixed at the emulator's values, or inferred (needs the 'angles' emulator)")
     p.add_argument("--emulator", default=None,
-                   help="emulator name or directory (default: chapter, or angles with --angles infer); a "
-                        "subject-specific emulator directory (`lvcore emulator build`) needs no --geometry")
+                   help=f"emulator name or directory (default: {DEFAULT_EMULATOR}, the app's default too, or angles "
+                        "with --angles infer; 'angles' takes the EDP and fibre angles as inputs and is needed for "
+                        "per-subject edp_mmhg other than 8); a subject-specific emulator directory (`lvcore emulator "
+                        "build`) needs no --geometry")
     p.add_argument("--alpha-endo", type=float, default=None,
                    help="fixed alpha_endo (deg) for emulators that take angles (default -60); an error with "
                         "emulators trained at fixed angles (e.g. 'chapter', trained at -60/60)")
@@ -67,8 +95,9 @@ def register(subparsers) -> None:
                    help="fixed alpha_epi (deg) for emulators that take angles (default 90); an error with "
                         "emulators trained at fixed angles")
     p.add_argument("--edp", type=float, default=None,
-                   help="end-diastolic pressure (mmHg, 2-40) for emulators that take it (default 8); an error "
-                        "with emulators trained at a fixed EDP (e.g. 'chapter', 8 mmHg)")
+                   help="end-diastolic pressure (mmHg, 2-40) for emulators that take it (default: the data's "
+                        "edp_mmhg column, else 8); an error with emulators trained at a fixed EDP (e.g. 'chapter', "
+                        "8 mmHg)")
     p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML,
                    help=f"LVV noise sd (mL), fixed, in [{SIGMA_V_RANGE_ML[0]:g}, {SIGMA_V_RANGE_ML[1]:g}] "
                         f"(default {SIGMA_V_ML:g})")
@@ -153,14 +182,14 @@ def run_calibrate(args) -> int:
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal
-    from lvcore.inference import guards, plausibility
+    from lvcore.inference import geometry_prior, guards, plausibility, verdict
     from lvcore.inference.data import read_measurements
     from lvcore.inference.models import MODEL_NAMES
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.outputs import is_pc_name
 
     infer = args.angles == "infer"
-    name = args.emulator or ("angles" if infer else "chapter")
+    name = args.emulator or ("angles" if infer else DEFAULT_EMULATOR)
     emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
     subject = bool(getattr(emulator, "is_subject", False))  # geometry bound in (lvcore emulator build)
     if subject and args.geometry is not None:
@@ -197,69 +226,141 @@ def run_calibrate(args) -> int:
     cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
     cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
-    if subject:
+    base = str(getattr(emulator, "base", "clamped"))
+    cli_measures = geometry_prior.check_measures(
+        {"reference_volume_ml": args.reference_volume, "wall_volume_ml": args.wall_volume,
+         "long_axis_mm": args.long_axis}, "options")
+    inferred = str(args.geometry).strip().lower() == "infer"
+    if cli_measures and not inferred:
+        raise DataError(f"{', '.join(geometry_prior.MEASURE_OPTIONS[k] for k in cli_measures)} inform an inferred "
+                        "geometry; use them with --geometry infer (a mesh or PC scores already fix the size)")
+    if inferred:
+        geo = None
+    elif subject:
         sub = emulator.metadata["subject"]
         geo = guards.GeometrySource(np.zeros(0), str(sub.get("geometry_source")), "subject-emulator",
                                     fit_residual_mm=(sub.get("geometry_record") or {}).get("fit_residual_mm"))
     else:
         geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
-    box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, cond, emulator, infer), emulator,
-                                             args.allow_extrapolation,
-                                             what=f"{geometry_option}: the PC scores (or conditions)")
-    warnings = list(geo.warnings) + extrap
-    for w in warnings:
-        print(f"lvcore: warning: {w}", file=sys.stderr)
-    # the subject is geo.scale times the shape with scores geo.h: emulated LVV x scale^3 (lvcore.geometry.scaling)
-    forward = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
-                                             alpha_endo=cond["alpha_endo"], alpha_epi=cond["alpha_epi"],
-                                             edp_mmhg=cond["edp_mmhg"]), geo.scale)
+    warnings = [] if geo is None else list(geo.warnings)
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
     out = Path(args.out)
-    y_of = {r.subject: r.y for r in rows}
+    by_subject = {}   # subject -> (row, forward, conditions, box, warnings, geometry record)
+
+    for r in rows:
+        edp = guards.subject_edp(r, cond, emulator, name, args.edp)
+        c = {**cond, "edp_mmhg": edp}
+        w = list(warnings)
+        if inferred:
+            measures = _subject_measures(r, cli_measures)
+            forward = geometry_prior.inferred_geometry_forward(
+                emulator, name=name, measures=measures, infer_angles=infer, alpha_endo=c["alpha_endo"],
+                alpha_epi=c["alpha_epi"], edp_mmhg=c["edp_mmhg"])
+            fixed = {k: v for k, v in guards.fixed_inputs(np.zeros(n_pc), c, emulator, infer).items()
+                     if not is_pc_name(k)}
+            box, extrap = guards.check_inputs_in_box(fixed, emulator, args.allow_extrapolation,
+                                                     what=f"subject {r.subject}: the conditions")
+            if not measures:
+                w.append(geometry_prior.NO_MEASURE_WARNING)
+            georec = {"kind": "inferred", "source": "infer", "measures": measures,
+                      "measure_sd": {k: geometry_prior.MEASURE_SD[k] for k in measures}}
+        else:
+            box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, c, emulator, infer), emulator,
+                                                     args.allow_extrapolation,
+                                                     what=f"{geometry_option}: the PC scores (or conditions)")
+            # the subject is geo.scale times the shape with scores geo.h: emulated LVV x scale^3 (lvcore.geometry.scaling)
+            forward = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
+                                                     alpha_endo=c["alpha_endo"], alpha_epi=c["alpha_epi"],
+                                                     edp_mmhg=c["edp_mmhg"]), geo.scale)
+            georec = geo.record()
+        by_subject[r.subject] = (r, forward, c, box, w + extrap, georec)
+    for w in dict.fromkeys(w for v in by_subject.values() for w in v[4]):
+        print(f"lvcore: warning: {w}", file=sys.stderr)
     extra = {}
+    consistency = {}
 
     def finish(item):
-        """Plausibility check, its CSV and the guard records of one (subject, model) result."""
+        """Verdict, posterior-predictive CSV and the guard records of one (subject, model) result."""
+        r, forward, c, box, w, georec = by_subject[item.subject]
         res = item.result
-        check = plausibility.check_result(res, y_of[item.subject], args.sigma_v, sigma_ref, seed=args.seed)
+        if item.subject not in consistency:   # one per subject: the same for every model
+            consistency[item.subject] = verdict.consistency_check(r.y, forward, args.sigma_v, sigma_ref,
+                                                                  infer_angles=infer, seed=args.seed)
+        v = verdict.run_verdict(res, consistency[item.subject], verdict.checked_bounds(forward, infer))
+        check = plausibility.check_result(res, r.y, args.sigma_v, sigma_ref, seed=args.seed)
         out.mkdir(parents=True, exist_ok=True)
         ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"
-        ppc_csv.write_text("output,p_value\n" + "".join(f"{k},{v:.6g}\n"
-                                                        for k, v in check.record()["p_values"].items()))
+        ppc_csv.write_text("output,p_value\n" + "".join(f"{k},{val:.6g}\n"
+                                                        for k, val in check.record()["p_values"].items()))
+        geometry = dict(georec)
+        if inferred:
+            geometry["posterior"] = geometry_prior.geometry_posterior(
+                {n: np.asarray(res.idata.posterior[n]) for n in forward.latent_names}, forward)
+        else:
+            geometry["box"] = [b for b in box if is_pc_name(b["name"])]
         extra[(item.subject, item.model)] = {
             "ppc_csv": str(ppc_csv),
-            "geometry": {**geo.record(), "box": [b for b in box if is_pc_name(b["name"])]},
-            "conditions": {"emulator": name, "edp_mmhg": cond["edp_mmhg"],
-                           "alpha_endo": None if infer else cond["alpha_endo"],
-                           "alpha_epi": None if infer else cond["alpha_epi"],
-                           "fixed_by_emulator": cond["fixed"],
+            "geometry": geometry,
+            "conditions": {"emulator": name, "base": base, "edp_mmhg": c["edp_mmhg"],
+                           "edp_source": guards.edp_source(r, args.edp, emulator),
+                           "alpha_endo": None if infer else c["alpha_endo"],
+                           "alpha_epi": None if infer else c["alpha_epi"],
+                           "fixed_by_emulator": c["fixed"],
                            "box": [b for b in box if not is_pc_name(b["name"])]},
             "extrapolation_allowed": bool(args.allow_extrapolation),
-            "plausibility": check.record(),
-            "warnings": warnings + [f"PLAUSIBILITY: {f}" for f in check.flags]}
-        for f in check.flags:
-            print(f"lvcore: warning: [{item.subject}/{item.model}] data look implausible: {f}", file=sys.stderr)
+            "plausible": v.plausible,
+            "plausibility": v.consistency.record(),
+            "posterior_predictive": check.record(),
+            "verdict": v.record(),
+            "flags": v.flags,
+            "warnings": w + v.flags}
+        for f in v.flags:
+            print(f"lvcore: warning: [{item.subject}/{item.model}] FLAGGED: {f}", file=sys.stderr)
         if not args.json:
-            print(f"\n== {item.subject} / {item.model} ({res.sampler}, {res.wall_s:.1f} s) ==")
-            print(res.summary.to_string(float_format=lambda v: f"{v:.4g}"))
+            print(f"\n== {item.subject} / {item.model} ({res.sampler}, {res.wall_s:.1f} s; {name} emulator, "
+                  f"{base} base, EDP {c['edp_mmhg']:g} mmHg) ==")
+            print(res.summary.to_string(float_format=lambda val: f"{val:.4g}"))
             print(res.convergence.message())
             names = list(check.record()["p_values"])
-            worst = np.argsort(check.p_values)[:3]
-            print("posterior-predictive p-values (smallest): "
-                  + ", ".join(f"{names[i]} {check.p_values[i]:.2g}" for i in worst)
-                  + ("" if check.plausible else "  -> IMPLAUSIBLE, see warnings"))
+            worst = np.argsort(v.consistency.p_values)[:3]
+            print("best-fit p-values (smallest): "
+                  + ", ".join(f"{names[i]} {v.consistency.p_values[i]:.2g}" for i in worst)
+                  + ("" if v.plausible else "  -> IMPLAUSIBLE, see warnings")
+                  + (f"; {len(v.flags)} flag(s): exit code 4" if v.flagged else ""))
 
+    subjects = [(s, r.y, fw) for s, (r, fw, *_rest) in by_subject.items()]
+    attrs = {"data_file": str(args.data), "emulator": name, "angles": args.angles, "base": base,
+             "geometry": "infer" if inferred else geo.source}
+    if not inferred:
+        attrs.update({"pc_scores": json.dumps([float(v) for v in geo.h]), "scale": float(geo.scale)})
     results = cal.calibrate_subjects(
-        [(r.subject, r.y, forward) for r in rows], model_names, config=config, sampler=args.sampler,
-        sigma_v=args.sigma_v, infer_angles=infer, out_dir=args.out,
-        attrs={"data_file": str(args.data), "emulator": name, "angles": args.angles, "geometry": geo.source,
-               "pc_scores": json.dumps([float(v) for v in geo.h]), "scale": float(geo.scale)},
+        subjects, model_names, config=config, sampler=args.sampler,
+        sigma_v=args.sigma_v, infer_angles=infer, out_dir=args.out, attrs=attrs,
         progress=None if args.json else (lambda msg, frac: print(msg)), on_result=finish)
     records = [{**item.record(), **extra[(item.subject, item.model)]} for item in results]
+    for rec, item in zip(records, results):
+        rec["edp_mmhg"] = by_subject[item.subject][2]["edp_mmhg"]
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(records, indent=2))
     if args.json:
         print(json.dumps(records, indent=2))
     else:
         print(f"\nwrote {out}/summary.json and per-model .nc / _summary.csv / _ppc.csv")
-    return 0 if all(r["converged"] for r in records) else 1
+    if not all(r["converged"] for r in records):
+        return 1
+    return EXIT_FLAGGED if any(r["flags"] for r in records) else 0
+
+
+def _subject_measures(row, cli_measures: dict) -> dict:
+    """Geometric measures of one subject: the data's columns, and the CLI options (which must agree)."""
+    from lvcore.exceptions import DataError
+    from lvcore.inference.geometry_prior import MEASURE_OPTIONS
+
+    out = dict(row.measures)
+    for k, v in cli_measures.items():
+        if k in out and abs(out[k] - v) > 1e-9:
+            raise DataError(f"subject {row.subject}: the data's {k} {out[k]:g} and {MEASURE_OPTIONS[k]} {v:g} disagree; "
+                            "drop one of them")
+        out[k] = v
+    return out
+

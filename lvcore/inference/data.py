@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import csv
 import io
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +44,9 @@ from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
 LVV_RANGE_ML = (20.0, 600.0)
 #: Largest plausible |strain| (dimensionless Green strain).
 MAX_ABS_STRAIN = 0.6
+#: Optional per-subject columns (CSV), keys (JSON) and variables (.mat): the end-diastolic pressure
+#: (mmHg) and the geometric measures of ``--geometry infer`` (:mod:`lvcore.inference.geometry_prior`).
+OPTIONAL_COLUMNS = ("edp_mmhg", "reference_volume_ml", "wall_volume_ml", "long_axis_mm")
 
 
 @dataclass(frozen=True)
@@ -60,12 +63,26 @@ class MeasuredData:
         File the data came from ("" if built in memory).
     synthetic : bool
         True for generated data (shown to users as synthetic).
+    extras : dict
+        The optional per-subject values of :data:`OPTIONAL_COLUMNS` that were given
+        (``edp_mmhg``, ``reference_volume_ml``, ``wall_volume_ml``, ``long_axis_mm``).
     """
 
     y: np.ndarray
     subject: str = ""
     source: str = ""
     synthetic: bool = False
+    extras: dict = field(default_factory=dict)
+
+    @property
+    def edp_mmhg(self) -> float | None:
+        """The subject's end-diastolic pressure (mmHg), if the data give it."""
+        return self.extras.get("edp_mmhg")
+
+    @property
+    def measures(self) -> dict:
+        """The geometric measures the data give (reference_volume_ml, wall_volume_ml, long_axis_mm)."""
+        return {k: v for k, v in self.extras.items() if k != "edp_mmhg"}
 
     @property
     def lvv_ml(self) -> float:
@@ -128,6 +145,38 @@ def validate_measurements(y, where: str = "measurements") -> np.ndarray:
     return arr
 
 
+def check_extras(values: dict, where: str) -> dict:
+    """Validate the optional per-subject values (:data:`OPTIONAL_COLUMNS`); empty ones are dropped.
+
+    Raises
+    ------
+    DataError
+        Naming the column and the fix (EDP outside 2-40 mmHg, a measure outside its plausible range).
+    """
+    from lvcore.inference.geometry_prior import check_measures
+    from lvcore.inference.guards import EDP_RANGE_MMHG
+
+    out = {}
+    for name, value in values.items():
+        if value is None or (isinstance(value, str) and value.strip().lower() in ("", "nan")):
+            continue
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise DataError(f"{where}: {name} = {str(value)[:40]!r} is not a number") from None
+        if isinstance(value, bool) or not np.isfinite(v):
+            if isinstance(value, float) and np.isnan(v):
+                continue
+            raise DataError(f"{where}: {name} must be a finite number, got {value}")
+        out[name] = v
+    edp = out.get("edp_mmhg")
+    if edp is not None and not EDP_RANGE_MMHG[0] <= edp <= EDP_RANGE_MMHG[1]:
+        raise DataError(f"{where}: edp_mmhg = {edp:g} is outside the physiological range {EDP_RANGE_MMHG[0]:g}-"
+                        f"{EDP_RANGE_MMHG[1]:g} mmHg; give the end-diastolic pressure in mmHg (1 kPa = 7.5 mmHg)")
+    out.update(check_measures({k: v for k, v in out.items() if k != "edp_mmhg"}, where))
+    return out
+
+
 def _is_number(s) -> bool:
     try:
         float(s)
@@ -159,7 +208,8 @@ def read_measured_csv(path) -> list[MeasuredData]:
         subject_col = None
         if header and header[0].lower() in ("subject", "id", "subject_id"):
             subject_col = 0
-        data_cols = [i for i in range(len(header)) if i != subject_col]
+        extra_cols = {i: header[i] for i in range(len(header)) if header[i] in OPTIONAL_COLUMNS}
+        data_cols = [i for i in range(len(header)) if i != subject_col and i not in extra_cols]
         if len(data_cols) != N_OUTPUTS:
             raise DataError(
                 f"{path.name}: expected {N_OUTPUTS} data columns ({expected}), found {len(data_cols)}"
@@ -172,6 +222,7 @@ def read_measured_csv(path) -> list[MeasuredData]:
     else:
         body = raw
         subject_col = None
+        extra_cols = {}
         data_cols = list(range(raw.shape[1]))
         if len(data_cols) != N_OUTPUTS:
             raise DataError(
@@ -194,7 +245,8 @@ def read_measured_csv(path) -> list[MeasuredData]:
         if nonnum:
             raise DataError(f"{path.name} line {line}: non-numeric values in {', '.join(nonnum)}")
         y = validate_measurements(values, where=f"{path.name} line {line}")
-        out.append(MeasuredData(y=y, subject=subject, source=str(path)))
+        extras = check_extras({name: row.iloc[i] for i, name in extra_cols.items()}, f"{path.name} line {line}")
+        out.append(MeasuredData(y=y, subject=subject, source=str(path), extras=extras))
     return out
 
 
@@ -215,7 +267,8 @@ def _resolve_convention(file_value, cli_value, where: str) -> str:
     return file_value or cli_value or "lvcore"
 
 
-def _row(lvv, strains, subject, where: str, convention: str, offset_deg: float, source: str) -> MeasuredData:
+def _row(lvv, strains, subject, where: str, convention: str, offset_deg: float, source: str,
+         extras: dict | None = None) -> MeasuredData:
     from lvcore.inference.segments import N_AHA, to_lvcore
 
     try:
@@ -234,7 +287,7 @@ def _row(lvv, strains, subject, where: str, convention: str, offset_deg: float, 
     if not np.all(np.isfinite(st)):
         raise DataError(f"{where}: missing or non-finite strains; fill them in or drop the subject")
     y = validate_measurements(np.r_[lv, to_lvcore(st, convention, offset_deg)], where=where)
-    return MeasuredData(y=y, subject=str(subject), source=source)
+    return MeasuredData(y=y, subject=str(subject), source=source, extras=check_extras(extras or {}, where))
 
 
 def _read_json(path: Path, segments, offset_deg) -> list[MeasuredData]:
@@ -266,7 +319,8 @@ def _read_json(path: Path, segments, offset_deg) -> list[MeasuredData]:
             if missing:
                 raise DataError(f"{where}: missing 'strains' (a list) or the keys {', '.join(missing[:4])}...")
             st = [it[k] for k in keys]
-        out.append(_row(it["lvv_ml"], st, it.get("subject", f"row{i + 1}"), where, conv, off, str(path)))
+        out.append(_row(it["lvv_ml"], st, it.get("subject", f"row{i + 1}"), where, conv, off, str(path),
+                        {k: it[k] for k in OPTIONAL_COLUMNS if k in it}))
     return out
 
 
@@ -321,7 +375,18 @@ def _read_mat(path: Path, segments, offset_deg) -> list[MeasuredData]:
             subjects = [str(v).strip() for v in raw.reshape(-1)] if n > 1 else ["".join(raw.reshape(-1)).strip()]
         if len(subjects) != n:
             raise DataError(f"{path.name}: 'subject' names {len(subjects)} subjects, 'lvv_ml' {n}")
-    return [_row(lvv[i], st[i], subjects[i], f"{path.name} subject {subjects[i]}", conv, off, str(path))
+    extras = {}
+    for k in OPTIONAL_COLUMNS:
+        if k in mat:
+            try:
+                vals = np.asarray(mat[k], dtype=float).reshape(-1)
+            except (TypeError, ValueError):
+                raise DataError(f"{path.name}: MATLAB variable '{k}' must be numeric") from None
+            if vals.size not in (1, n):
+                raise DataError(f"{path.name}: '{k}' has {vals.size} values but 'lvv_ml' has {n}; give one per subject")
+            extras[k] = np.broadcast_to(vals, (n,))
+    return [_row(lvv[i], st[i], subjects[i], f"{path.name} subject {subjects[i]}", conv, off, str(path),
+                 {k: float(v[i]) for k, v in extras.items()})
             for i in range(n)]
 
 
@@ -342,7 +407,8 @@ def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
             return rows
         from lvcore.inference.segments import rotate_lvcore
 
-        return [MeasuredData(y=np.r_[r.y[0], rotate_lvcore(r.y[1:], off)], subject=r.subject, source=r.source)
+        return [MeasuredData(y=np.r_[r.y[0], rotate_lvcore(r.y[1:], off)], subject=r.subject, source=r.source,
+                             extras=r.extras)
                 for r in rows]
     if not is_aha:
         raise DataError(f"{path.name}: --segments aha needs columns lvv_ml, aha_01 .. aha_16 (aha_17 optional)")
@@ -363,7 +429,8 @@ def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
         vals = pd.to_numeric(row[list(cols)], errors="coerce").to_numpy(dtype=float)
         lvv = pd.to_numeric(pd.Series([row["lvv_ml"]]), errors="coerce").to_numpy(dtype=float)
         name = str(row[subj]) if subj else f"row{i + 1}"
-        out.append(_row(lvv, vals, name, f"{path.name} line {i + 2}", "aha", off, str(path)))
+        out.append(_row(lvv, vals, name, f"{path.name} line {i + 2}", "aha", off, str(path),
+                        {k: row[k] for k in OPTIONAL_COLUMNS if k in df.columns}))
     return out
 
 
@@ -409,5 +476,5 @@ def write_measured_csv(path, rows: list[MeasuredData]) -> Path:
     return path
 
 
-__all__ = ["MeasuredData", "validate_measurements", "read_measured_csv", "read_measurements", "write_measured_csv",
+__all__ = ["MeasuredData", "OPTIONAL_COLUMNS", "check_extras", "validate_measurements", "read_measured_csv", "read_measurements", "write_measured_csv",
            "LVV_RANGE_ML", "MEASUREMENT_SUFFIXES"]

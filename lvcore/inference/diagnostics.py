@@ -20,7 +20,7 @@ import pandas as pd
 
 from lvcore.conditions import SIGMA_V_ML
 from lvcore.inference import models, samplers
-from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
+from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES, is_pc_name
 
 #: Default convergence thresholds.
 DEFAULT_RHAT_MAX = 1.05
@@ -30,6 +30,9 @@ DEFAULT_ESS_MIN = 100.0
 def monitored_names(samples: dict) -> list[str]:
     """Scalar parameters whose convergence is checked (theta, angles, sigma_S^2, v, GP hyperparameters)."""
     order = THETA_NAMES + ANGLE_NAMES + ("sigma_s2", "v") + models.HYPER_NAMES
+    # the geometry of --geometry infer: PC scores h1..hk and the scale (lvcore.inference.geometry_prior)
+    pcs = sorted((n for n in samples if is_pc_name(n) and np.ndim(samples[n]) == 2), key=lambda n: int(n[1:]))
+    order = order + tuple(pcs) + ("scale",)
     return [n for n in order if n in samples]
 
 
@@ -228,7 +231,7 @@ def save_netcdf(idata: az.InferenceData, path) -> Path:
 BANNER_ESS_MIN = 400.0
 
 
-def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN) -> tuple[str, str]:
+def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN, flags=()) -> tuple[str, str]:
     """The level and text of the app's convergence banner for one run.
 
     Green (``"success"``) only when the run converged (R-hat and ESS
@@ -236,6 +239,9 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN) -> tuple[s
     parameter has bulk ESS >= ``ess_min``; otherwise ``"warning"`` (amber).
     The text always states the divergences, the worst R-hat and the
     smallest bulk and tail ESS, so a user never has to trust a colour.
+    ``flags`` are the verdict's (:mod:`lvcore.inference.verdict`, posterior
+    mass on a prior bound included): any flag makes the banner amber and is
+    listed, as ``lvcore calibrate`` exits with 4 for them.
 
     Returns
     -------
@@ -249,6 +255,8 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN) -> tuple[s
         problems.append(f"{conv.n_divergent} divergent transition{'s' if conv.n_divergent != 1 else ''}")
     if not conv.min_ess_bulk >= ess_min:
         problems.append(f"bulk ESS {conv.min_ess_bulk:.0f} < {ess_min:.0f}")
+    if flags:
+        problems.append(f"results flagged (the CLI's exit code 4): {'; '.join(flags)}")
     numbers = (f"divergences {conv.n_divergent}, max R-hat {conv.max_rhat:.3f}, min bulk ESS "
                f"{conv.min_ess_bulk:.0f}, min tail ESS {conv.min_ess_tail:.0f}, {conv.rounds} round(s)")
     if problems:

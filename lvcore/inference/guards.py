@@ -254,5 +254,40 @@ def fixed_inputs(h, conditions: dict, emulator, infer_angles: bool = False) -> d
     return out
 
 
+def subject_edp(row, cond: dict, emulator, name: str, cli_edp) -> float:
+    """The EDP (mmHg) of one subject: the data's ``edp_mmhg``, else ``--edp``, else the emulator's.
+
+    Raises
+    ------
+    DataError
+        The data and ``--edp`` disagree.
+    EmulatorError
+        The data's EDP differs from a fixed-EDP emulator's.
+    """
+    edp = row.edp_mmhg
+    if edp is None:
+        return float(cond["edp_mmhg"])
+    if cli_edp is not None and abs(float(cli_edp) - edp) > 1e-9:
+        raise DataError(f"subject {row.subject}: the data's edp_mmhg {edp:g} and --edp {cli_edp:g} disagree; drop "
+                        "one of them")
+    if EDP_NAME not in emulator.input_names:
+        fixed = dict(getattr(emulator, "fixed", None) or {}).get(EDP_NAME, cond["edp_mmhg"])
+        if abs(float(fixed) - edp) > 1e-6:
+            raise EmulatorError(f"subject {row.subject}: edp_mmhg = {edp:g} in the data, but the '{name}' emulator "
+                                f"was trained at a fixed EDP of {float(fixed):g} mmHg and cannot honour another; use "
+                                "an emulator with an 'edp' input (--emulator angles) or drop the column")
+    return float(edp)
+
+
+def edp_source(row, cli_edp, emulator) -> str:
+    """Where :func:`subject_edp` took the EDP from (recorded in the summary)."""
+    if row.edp_mmhg is not None:
+        return "data (edp_mmhg)"
+    if cli_edp is not None:
+        return "--edp"
+    return "emulator default" if EDP_NAME in emulator.input_names else "fixed by the emulator"
+
+
+
 __all__ = ["EDP_RANGE_MMHG", "MEAN_SHAPE_WARNING", "GeometrySource", "resolve_geometry", "box_report",
-           "check_inputs_in_box", "check_conditions", "fixed_inputs"]
+           "check_inputs_in_box", "check_conditions", "fixed_inputs", "subject_edp", "edp_source"]

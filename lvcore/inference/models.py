@@ -122,7 +122,14 @@ def check_traceable(forward, infer_angles: bool = False) -> None:
 
 
 def _sample_params(infer_angles: bool, forward) -> dict:
-    return {n: numpyro.sample(n, d) for n, d in theta_priors(infer_angles, forward).items()}
+    """theta (and the angles) from their priors, plus whatever latent geometry the forward model samples
+    (``forward.sample_latents()``: the PC scores and scale of ``--geometry infer``,
+    :class:`lvcore.inference.geometry_prior.InferredGeometryForward`)."""
+    params = {n: numpyro.sample(n, d) for n, d in theta_priors(infer_angles, forward).items()}
+    latents = getattr(forward, "sample_latents", None)
+    if latents is not None:
+        params.update(latents())
+    return params
 
 
 def _volume_term(eta0, y, sigma_v):

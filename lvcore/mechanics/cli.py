@@ -42,13 +42,19 @@ def run(args) -> int:
         from lvcore.mechanics.export import export_result
 
         export_result(result, args.vtu, case)
+    # every result names its base condition (clamped is the default; the chapter emulator is sliding)
+    boundary = ({"base": case.boundary.base} if case.geometry.is_lv
+                else {"clamped": list(case.boundary.clamped_faces)})
     if args.json:
-        out = result.to_dict()
+        out = {**result.to_dict(), "boundary": boundary}
         if args.sensitivities and getattr(result, "sensitivities", None) is not None:
             out["sensitivities"] = _clean(json.loads(json.dumps(result.sensitivities, default=_json_default)))
         print(json.dumps(out, indent=2, default=_json_default, allow_nan=False))
     else:
         print(format_summary(result))
+        print("boundary: " + (f"base {case.boundary.base}" + (" (the default; the 'chapter' emulator is sliding)"
+                                                                if case.boundary.base == "clamped" else "")
+                              if case.geometry.is_lv else f"clamped faces {', '.join(boundary['clamped'])}"))
         if args.vtu:
             print(f"wrote {args.vtu}")
     return 0 if bool(result.converged) else 1

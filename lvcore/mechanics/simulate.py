@@ -349,7 +349,8 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         newton_iterations=res.iterations, load_steps=res.load_steps, dofs=dofs,
         seconds=time.perf_counter() - t0, reference_nodes=mesh.nodes, displacement=u.reshape(-1, 3),
         elements=mesh.elements, sensitivities=sens, timings=res.timings,
-        warnings=plausibility_warnings(vol, standardised), solver_state=(res.u, res.p),
+        warnings=plausibility_warnings(vol, standardised, units.kpa_to_mmhg(case.load.pressure_kpa) if is_lv else None),
+        solver_state=(res.u, res.p),
         solver_tangent=res.tangent,
     )
 
@@ -375,18 +376,35 @@ def check_reference_volumes(mesh: FEMesh, cavity_mm3: float) -> None:
                             f"{limits.MIN_WALL_ML} mL (lvcore.limits.MIN_WALL_ML); check the geometry")
 
 
-def plausibility_warnings(volume_mm3, standardised) -> tuple[str, ...]:
-    """Flags for physiologically implausible LV results (values are kept, not hidden)."""
+def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None = None) -> tuple[str, ...]:
+    """Flags for physiologically implausible or unusual LV results (values are kept, not hidden).
+
+    The loaded cavity above :data:`lvcore.limits.PLAUSIBLE_MAX_LVV_ML` is always flagged (a units slip). EDV/V₀
+    (``standardised``) is judged only for an LV at a physiological pressure (``pressure_mmhg`` in
+    :data:`lvcore.physiology.PHYSIOLOGICAL_EDP_RANGE_MMHG`): above
+    :data:`lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV` it is "implausible", outside the typical range of
+    :func:`lvcore.physiology.typical_edv_ratio` "unusual". Benchmarks at other pressures (Land et al. 2015
+    problem 2 at 10 kPa) and ``pressure_mmhg=None`` (not an LV, or unknown) are not judged.
+    """
+    from lvcore import physiology
+
     out = []
     if volume_mm3 is not None and volume_mm3[1] is not None:
         lvv = float(volume_mm3[1]) / units.MM3_PER_ML
         if lvv > limits.PLAUSIBLE_MAX_LVV_ML:
             out.append(f"implausible result: loaded cavity volume {lvv:.0f} mL exceeds "
                        f"{limits.PLAUSIBLE_MAX_LVV_ML:.0f} mL (check the stiffness parameters and the pressure units)")
-    if standardised is not None and float(standardised) > limits.PLAUSIBLE_MAX_STANDARDISED_LVV:
+    if standardised is None or not physiology.is_physiological_pressure(pressure_mmhg):
+        return tuple(out)
+    if float(standardised) > limits.PLAUSIBLE_MAX_STANDARDISED_LVV:
         out.append(f"implausible result: the cavity inflated to {float(standardised):.2f} times its reference "
-                   f"volume (more than {limits.PLAUSIBLE_MAX_STANDARDISED_LVV:g}); passive filling stays well below "
-                   "2, so check the stiffness parameters and the pressure units")
+                   f"volume at {float(pressure_mmhg):g} mmHg (more than {limits.PLAUSIBLE_MAX_STANDARDISED_LVV:g}; "
+                   f"{physiology.typical_edv_ratio(pressure_mmhg).text()}), so check the stiffness parameters and "
+                   "the pressure units")
+    else:
+        note = physiology.edv_ratio_note(float(standardised), float(pressure_mmhg))
+        if note:
+            out.append(note)
     return tuple(out)
 
 

@@ -73,6 +73,27 @@ def result_sources(extra: Sequence = ()) -> dict[str, list[tuple[str, Path]]]:
     return found
 
 
+#: Most result folders typed into the Studies page (each is searched one level deep).
+MAX_TYPED_FOLDERS = 20
+
+
+def parse_folders(text: str, max_folders: int = MAX_TYPED_FOLDERS) -> list[Path]:
+    """Comma-separated result folders typed by a user (``~`` expanded); at most ``max_folders``.
+
+    Raises
+    ------
+    LVCoreError
+        More than ``max_folders`` folders; the message repeats at most 60 characters of the text.
+    """
+    from lvcore.limits import echo
+
+    items = [p.strip() for p in str(text).split(",") if p.strip()]
+    if len(items) > max_folders:
+        raise LVCoreError(f"{len(items):,} result folders typed ('{echo(text, 60)}'); give at most {max_folders}, "
+                          "or their common parent folder")
+    return [Path(p).expanduser() for p in items]
+
+
 def read_json(path):
     """A study's JSON file; a clear :class:`LVCoreError` naming the file when it is missing, not a regular
     file, over :data:`lvcore.limits.MAX_STUDY_RESULT_BYTES`, not UTF-8 text or not JSON."""

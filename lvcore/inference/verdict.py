@@ -1,0 +1,311 @@
+r"""One verdict per subject: consistency of the data, identifiability of the posterior, sampler health.
+
+The verdict of a calibration must not depend on which likelihood the user
+picked. It has three parts:
+
+1. **Consistency** (:func:`consistency_check`), computed from the data and the
+   *best-fitting* forward model, never from the posterior of the model that
+   ran: theta (and, with ``--geometry infer``, the PC scores and scale, with
+   their priors and the measured geometric measures) are fitted by maximum a
+   posteriori to the LVV with its noise ``sigma_V`` and the 24 strains with the
+   reference strain noise ``sigma_ref`` (:data:`lvcore.inference.plausibility.DEFAULT_SIGMA_REF`),
+   from :data:`N_STARTS` starting points (L-BFGS-B). At the best fit the
+   two-sided p-value of every output is ``2 (1 - Phi(|y - eta| / sigma))``.
+   The data are inconsistent when the LVV has ``p < ALPHA``, when at least
+   :data:`MIN_BAD_STRAINS` strains have ``p < ALPHA``, or when the data-only
+   checks of :mod:`lvcore.inference.plausibility` fire (mixed signs, no
+   deformation). The same data and forward model give the same answer for
+   every model: ``plausible`` is this check.
+2. **Identifiability** (:func:`identifiability_flags`), from the posterior:
+   mass piled on a prior bound (its q05 or q95 within :data:`BOUND_FRACTION`
+   of the prior's width from the bound; widths in log for a, b, af, bf and the
+   scale, whose priors span decades) and a 90 % interval of a, b, af, bf (or
+   the angles) no narrower than :data:`WIDTH_FRACTION` times the prior's 90 %
+   interval, both measured on the prior's own uniform scale (nothing learned),
+   and an ``a`` whose 90 % interval spans a factor :data:`MAX_A_RATIO` or more.
+3. **Sampler health**: divergent transitions above :data:`MAX_DIVERGENT_FRACTION`
+   of the kept draws, or a run that did not converge.
+
+Any flag makes the run *flagged*: ``lvcore calibrate`` exits with 4, "ran,
+results flagged" (docs/reliability.md), and lists the flags in
+``summary.json``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lvcore.outputs import ANGLE_NAMES, OUTPUT_COLUMNS, THETA_NAMES, is_pc_name
+
+#: p-value below which an output counts as not reached at the best fit.
+ALPHA = 0.01
+#: Strains with p < ALPHA at the best fit that make the data inconsistent. With 24 strains at
+#: the reference noise, 3 or more happen by chance with probability 0.2 % (binomial, p = 0.01).
+MIN_BAD_STRAINS = 3
+#: Starting points of the best fit.
+N_STARTS = 4
+#: A posterior quantile this close to a prior bound (fraction of the prior's width) is "piled on the bound".
+BOUND_FRACTION = 0.02
+#: A 90 % interval at least this fraction of the prior's 90 % interval has learned nothing.
+WIDTH_FRACTION = 0.9
+#: The stiffness ``a`` is flagged as unidentified when its 90 % interval spans this factor or more
+#: (q95 / q05), the precision issue 24 asks of a useful estimate.
+MAX_A_RATIO = 20.0
+#: Divergent transitions above this fraction of the kept draws flag the run (20 of 4 x 1000).
+MAX_DIVERGENT_FRACTION = 0.005
+#: Parameters whose widths are measured in log space.
+LOG_PARAMETERS = THETA_NAMES + ("scale",)
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """The best fit and its p-values (see the module docstring).
+
+    Attributes
+    ----------
+    best_fit : dict
+        Parameter values at the best fit (theta, and h/scale when inferred).
+    eta : ndarray, shape (25,)
+        Forward-model outputs at the best fit.
+    p_values : ndarray, shape (25,)
+    flags : tuple of str
+    sigma_ref : float
+    """
+
+    best_fit: dict
+    eta: np.ndarray
+    p_values: np.ndarray
+    flags: tuple = field(default=())
+    sigma_ref: float = 0.035
+
+    @property
+    def plausible(self) -> bool:
+        return not self.flags
+
+    def record(self) -> dict:
+        return {"plausible": self.plausible, "flags": list(self.flags), "sigma_ref": self.sigma_ref, "alpha": ALPHA,
+                "min_bad_strains": MIN_BAD_STRAINS, "best_fit": {k: float(v) for k, v in self.best_fit.items()},
+                "best_fit_outputs": {c: float(v) for c, v in zip(OUTPUT_COLUMNS, self.eta)},
+                "p_values": {c: float(p) for c, p in zip(OUTPUT_COLUMNS, self.p_values)}}
+
+
+def _reference_model(y=None, *, forward, sigma_v, sigma_ref, infer_angles):
+    """The consistency likelihood: LVV ~ N(eta0, sigma_v^2), strains ~ N(eta, sigma_ref^2), the models' priors."""
+    import numpyro
+    import numpyro.distributions as dist
+
+    from lvcore.inference.models import _sample_params
+
+    params = _sample_params(infer_angles, forward)
+    eta = forward(params)
+    numpyro.sample("lvv_obs", dist.Normal(eta[0], sigma_v), obs=y[0])
+    numpyro.sample("strain_obs", dist.Normal(eta[1:], sigma_ref).to_event(1), obs=y[1:])
+
+
+def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = False, n_starts: int = N_STARTS,
+             seed: int = 0) -> tuple[dict, np.ndarray]:
+    """Maximum a posteriori of :func:`_reference_model` from ``n_starts`` prior draws (L-BFGS-B).
+
+    Returns
+    -------
+    params : dict
+        Constrained values of every sampled site at the best fit.
+    eta : ndarray (25,)
+    """
+    import jax
+    import jax.numpy as jnp
+    from jax.flatten_util import ravel_pytree
+    from numpyro.infer.util import constrain_fn, initialize_model, log_density
+    from scipy.optimize import minimize
+
+    y = jnp.asarray(y, dtype=jnp.float64)
+    kw = {"y": y, "forward": forward, "sigma_v": float(sigma_v), "sigma_ref": float(sigma_ref),
+          "infer_angles": bool(infer_angles)}
+    keys = jax.random.split(jax.random.PRNGKey(seed), n_starts)
+    inits = [initialize_model(k, _reference_model, model_kwargs=kw).param_info.z for k in keys]
+    flat0, unravel = ravel_pytree(inits[0])
+
+    def objective(flat):
+        z = constrain_fn(_reference_model, (), kw, unravel(flat))
+        return -log_density(_reference_model, (), kw, z)[0]
+
+    vg = jax.jit(jax.value_and_grad(objective))
+
+    def fun(x):
+        v, g = vg(jnp.asarray(x))
+        v, g = float(v), np.asarray(g, dtype=float)
+        if not np.isfinite(v):
+            return 1e300, np.zeros_like(g)
+        return v, np.nan_to_num(g)
+
+    best = None
+    for z0 in inits:
+        x0 = np.asarray(ravel_pytree(z0)[0], dtype=float)
+        res = minimize(fun, x0, jac=True, method="L-BFGS-B", options={"maxiter": 300})
+        if best is None or res.fun < best.fun:
+            best = res
+    z = constrain_fn(_reference_model, (), kw, unravel(jnp.asarray(best.x)))
+    from numpyro.handlers import substitute, trace
+
+    tr = trace(substitute(_reference_model, data=z)).get_trace(**kw)
+    params = {k: float(np.asarray(v["value"])) for k, v in tr.items()
+              if v["type"] in ("sample", "deterministic") and not v.get("is_observed", False) and np.ndim(v["value"]) == 0}
+    eta = np.asarray(forward({k: jnp.asarray(v) for k, v in params.items()}), dtype=float)
+    return params, eta
+
+
+def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None, infer_angles: bool = False,
+                      n_starts: int = N_STARTS, seed: int = 0) -> Consistency:
+    """Best fit, p-values and consistency flags of one subject's data (module docstring, part 1)."""
+    from scipy.stats import norm
+
+    from lvcore.inference import plausibility
+
+    sigma_ref = plausibility.DEFAULT_SIGMA_REF if sigma_ref is None else float(sigma_ref)
+    y = np.asarray(y, float).reshape(-1)
+    params, eta = best_fit(y, forward, sigma_v, sigma_ref, infer_angles, n_starts, seed)
+    z = np.abs(y - eta) / np.r_[float(sigma_v), np.full(24, sigma_ref)]
+    p = 2.0 * norm.sf(z)
+    flags = []
+    if p[0] < ALPHA:
+        flags.append(f"the volume is not reached: measured LVV {y[0]:.1f} mL, the best fit of volume and strains "
+                     f"gives {eta[0]:.1f} mL (p = {p[0]:.2g}); volume and strains imply different stiffness, or the "
+                     "geometry (size) is not the subject's")
+    bad = np.flatnonzero(p[1:] < ALPHA)
+    if bad.size >= MIN_BAD_STRAINS:
+        rmse = float(np.sqrt(np.mean((eta[1:] - y[1:]) ** 2)))
+        flags.append(f"{bad.size} of 24 strains are not reached at the best fit (p < {ALPHA:g}; strain RMSE {rmse:.3f} "
+                     f"against a reference noise of {sigma_ref:g}): volume and strains imply different stiffness, "
+                     "the geometry is not the subject's, or the strains use another convention")
+    # the data-only checks (signs, no deformation) of the posterior-predictive module, at the best fit
+    data_only = plausibility.posterior_predictive_check(y, eta[None, :], sigma_v, sigma_ref)
+    flags += [f for f in data_only.flags if "sign opposite" in f or "within" in f]
+    return Consistency(best_fit=params, eta=eta, p_values=p, flags=tuple(flags), sigma_ref=sigma_ref)
+
+
+def _width(lo, hi, log: bool) -> float:
+    return math.log(hi / lo) if log else hi - lo
+
+
+def identifiability_flags(samples: dict, bounds: dict) -> tuple[list[str], dict]:
+    """Bound-piling and interval-width flags (module docstring, part 2).
+
+    Parameters
+    ----------
+    samples : dict
+        Posterior draws by name (any shape).
+    bounds : dict
+        Prior bounds ``name -> (lower, upper)`` of the parameters to check.
+
+    Returns
+    -------
+    flags : list of str
+    table : dict
+        Per parameter: q05, q95, prior bounds, distances to the bounds and the width ratio.
+    """
+    flags, table = [], {}
+    for n, (lo, hi) in bounds.items():
+        if n not in samples:
+            continue
+        v = np.asarray(samples[n], float).reshape(-1)
+        log = n in LOG_PARAMETERS and lo > 0
+        q05, q95 = float(np.quantile(v, 0.05)), float(np.quantile(v, 0.95))
+        w = _width(lo, hi, log)
+        d_lo = _width(lo, max(q05, lo), log) / w
+        d_hi = _width(min(q95, hi), hi, log) / w
+        # widths on the prior's own (uniform, linear) scale: its 90 % interval is 0.9 (hi - lo)
+        ratio = (q95 - q05) / (0.9 * (hi - lo))
+        row = {"q05": q05, "q95": q95, "lower": float(lo), "upper": float(hi), "scale": "log" if log else "linear",
+               "q05_from_lower": d_lo, "q95_from_upper": d_hi, "width_vs_prior": ratio}
+        table[n] = row
+        if d_lo < BOUND_FRACTION:
+            flags.append(f"{n}: posterior piled on the prior's lower bound {lo:g} (q05 = {q05:.4g}); the data push "
+                         f"{n} below what the prior allows, or do not inform it")
+        if d_hi < BOUND_FRACTION:
+            flags.append(f"{n}: posterior piled on the prior's upper bound {hi:g} (q95 = {q95:.4g}); the data push "
+                         f"{n} above what the prior allows, or do not inform it")
+        if n == "a" and q05 > 0 and q95 / q05 >= MAX_A_RATIO:
+            flags.append(f"a: the 90 % interval [{q05:.3g}, {q95:.3g}] kPa spans a factor {q95 / q05:.0f} (>= "
+                         f"{MAX_A_RATIO:g}); the stiffness is not identified to a useful precision")
+        if n in THETA_NAMES + ANGLE_NAMES and ratio >= WIDTH_FRACTION:
+            flags.append(f"{n}: the 90 % interval [{q05:.3g}, {q95:.3g}] is {100 * ratio:.0f} % of the prior's; the "
+                         "data do not identify it")
+    return flags, table
+
+
+def sampler_flags(convergence, n_draws: int) -> list[str]:
+    """Divergences above :data:`MAX_DIVERGENT_FRACTION` and non-convergence (module docstring, part 3)."""
+    flags = []
+    if not convergence.converged:
+        flags.append(f"not converged: {convergence.message()}")
+    if n_draws and convergence.n_divergent > MAX_DIVERGENT_FRACTION * n_draws:
+        flags.append(f"{convergence.n_divergent} divergent transitions in {n_draws} draws (more than "
+                     f"{100 * MAX_DIVERGENT_FRACTION:g} %): the sampler may have missed part of the posterior")
+    return flags
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """All flags of one (subject, model) run.
+
+    Attributes
+    ----------
+    consistency : Consistency
+        Shared by every model of a subject.
+    identifiability : tuple of str
+    sampler : tuple of str
+    table : dict
+        Per-parameter numbers behind the identifiability flags.
+    """
+
+    consistency: Consistency
+    identifiability: tuple = ()
+    sampler: tuple = ()
+    table: dict = field(default_factory=dict)
+
+    @property
+    def flags(self) -> list[str]:
+        return ([f"CONSISTENCY: {f}" for f in self.consistency.flags]
+                + [f"IDENTIFIABILITY: {f}" for f in self.identifiability] + [f"SAMPLER: {f}" for f in self.sampler])
+
+    @property
+    def plausible(self) -> bool:
+        """The model-independent part: the data are consistent with the best-fitting forward model."""
+        return self.consistency.plausible
+
+    @property
+    def flagged(self) -> bool:
+        return bool(self.flags)
+
+    def record(self) -> dict:
+        return {"flagged": self.flagged, "plausible": self.plausible, "flags": self.flags,
+                "consistency": self.consistency.record(), "identifiability": self.table,
+                "thresholds": {"alpha": ALPHA, "min_bad_strains": MIN_BAD_STRAINS, "bound_fraction": BOUND_FRACTION,
+                               "width_fraction": WIDTH_FRACTION, "max_a_ratio": MAX_A_RATIO,
+                               "max_divergent_fraction": MAX_DIVERGENT_FRACTION}}
+
+
+def run_verdict(result, consistency: Consistency, bounds: dict) -> Verdict:
+    """The :class:`Verdict` of a :class:`~lvcore.inference.calibrate.CalibrationResult`."""
+    post = result.idata.posterior
+    samples = {n: np.asarray(post[n]) for n in bounds if n in post}
+    ident, table = identifiability_flags(samples, bounds)
+    n_draws = int(np.prod(np.asarray(post[next(iter(THETA_NAMES))]).shape[:2]))
+    return Verdict(consistency, tuple(ident), tuple(sampler_flags(result.convergence, n_draws)), table)
+
+
+def checked_bounds(forward, infer_angles: bool = False) -> dict:
+    """Prior bounds of the parameters whose identifiability is checked (theta, angles, inferred geometry)."""
+    from lvcore.inference.models import prior_bounds
+
+    bounds = dict(prior_bounds(infer_angles, forward))
+    bounds.update(getattr(forward, "latent_bounds", {}) or {})
+    return {n: b for n, b in bounds.items() if n in THETA_NAMES + ANGLE_NAMES or is_pc_name(n) or n == "scale"}
+
+
+__all__ = ["ALPHA", "MIN_BAD_STRAINS", "N_STARTS", "BOUND_FRACTION", "WIDTH_FRACTION", "MAX_A_RATIO",
+           "MAX_DIVERGENT_FRACTION",
+           "Consistency", "best_fit", "consistency_check", "identifiability_flags", "sampler_flags", "Verdict",
+           "run_verdict", "checked_bounds"]

@@ -1,0 +1,82 @@
+"""One verdict per subject (lvcore.inference.verdict): consistency from the best fit, identifiability, sampler."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lvcore.testing.analytic import AnalyticForward
+from lvcore.inference import verdict
+
+THETA = {"a": 0.6, "b": 5.0, "af": 1.5, "bf": 5.0}
+
+
+def _y(theta=THETA, strains_from=None):
+    f = AnalyticForward()
+    y = np.array(f(theta), dtype=float)
+    if strains_from is not None:
+        y[1:] = np.asarray(f(strains_from), float)[1:]
+    return y
+
+
+def test_consistent_data_are_plausible():
+    c = verdict.consistency_check(_y(), AnalyticForward(), sigma_v=5.0)
+    assert c.plausible, c.flags
+    assert np.all(c.p_values > 0.5)
+
+
+def test_volume_and_strains_of_different_stiffness_are_flagged():
+    """LVV of a soft heart, strains of a stiff one: no theta reaches both."""
+    y = _y(THETA)
+    y[0] = 175.0   # beyond what the stand-in's LVV reaches (115-165 mL)
+    c = verdict.consistency_check(y, AnalyticForward(), sigma_v=5.0)
+    assert not c.plausible
+    assert "volume is not reached" in " ".join(c.flags)
+
+
+def test_identifiability_flags():
+    rng = np.random.default_rng(0)
+    bounds = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
+    samples = {"a": 0.05 + 0.002 * rng.random(4000),            # piled on the lower bound
+               "b": rng.uniform(0.1, 30.0, 4000),                # the prior: nothing learned
+               "af": rng.lognormal(np.log(1.5), 0.1, 4000),      # well identified
+               "bf": rng.lognormal(np.log(5.0), 0.2, 4000)}
+    flags, table = verdict.identifiability_flags(samples, bounds)
+    text = " ".join(flags)
+    assert "a: posterior piled on the prior's lower bound" in text
+    assert "b: the 90 % interval" in text and "do not identify" in text
+    assert not any(f.startswith(("af:", "bf:")) for f in flags)
+    assert table["af"]["width_vs_prior"] < 0.1
+    # a spread over more than a factor 20 (here 0.1 to 5 kPa) is flagged even if narrower than the prior
+    flags, _ = verdict.identifiability_flags({"a": np.exp(rng.uniform(np.log(0.1), np.log(5.0), 4000))},
+                                             {"a": (0.05, 10.0)})
+    assert any("spans a factor" in f for f in flags)
+
+
+def test_divergence_threshold():
+    from lvcore.inference.diagnostics import Convergence
+
+    ok = Convergence(True, 1.0, 1000.0, 1000.0, 20, ())
+    bad = Convergence(True, 1.0, 1000.0, 1000.0, 21, ())
+    assert verdict.sampler_flags(ok, 4000) == []
+    assert "21 divergent transitions" in verdict.sampler_flags(bad, 4000)[0]
+    assert "not converged" in verdict.sampler_flags(Convergence(False, 1.2, 50.0, 50.0, 0, ("a",)), 4000)[0]
+
+
+@pytest.mark.slow
+def test_plausible_is_the_same_whichever_model_ran():
+    """Data the model cannot fit: volume, iid and discrepancy runs all say plausible = False (issue 24)."""
+    from lvcore.inference.calibrate import calibrate
+    from lvcore.inference.samplers import SamplerConfig
+
+    y = _y(THETA)
+    y[0] = 175.0
+    f = AnalyticForward()
+    c = verdict.consistency_check(y, f, sigma_v=5.0)
+    config = SamplerConfig(num_warmup=150, num_samples=150, num_chains=2)
+    seen = {}
+    for model in ("volume", "iid", "discrepancy"):
+        res = calibrate(y, f, model, config=config, max_rounds=1)
+        v = verdict.run_verdict(res, c, verdict.checked_bounds(f))
+        seen[model] = (v.plausible, v.flagged)
+    assert {p for p, _ in seen.values()} == {False}, seen
+    assert all(flagged for _, flagged in seen.values())

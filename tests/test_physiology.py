@@ -1,0 +1,64 @@
+"""lvcore.physiology: the Klotz et al. (2006) EDPVR and typical EDV/V0, against their formulas."""
+import numpy as np
+import pytest
+
+from lvcore import physiology as ph
+from lvcore.mechanics.edpvr import simulate_edpvr
+
+
+def test_klotz_curve_matches_the_formula():
+    # EDP = An * EDVn**Bn with An = 27.78 mmHg, Bn = 2.76; EDVn = (V - V0)/(V30 - V0)
+    v0, v30 = 60.0, 180.0
+    p = np.array([0.0, 2.0, 8.0, 15.0, 27.78, 30.0])
+    v = ph.klotz_volume(p, v0, v30)
+    edvn = (v - v0) / (v30 - v0)
+    np.testing.assert_allclose(27.78 * edvn ** 2.76, p, rtol=1e-12, atol=1e-12)
+    assert v[0] == v0 and v[4] == pytest.approx(v30 - (v30 - v0) * (1 - 1.0))  # EDVn = 1 at An
+    assert ph.klotz_volume(30.0, v0, v30) == pytest.approx(v0 + (v30 - v0) * (30 / 27.78) ** (1 / 2.76))
+    np.testing.assert_allclose(ph.klotz_edp(ph.klotz_edvn(p)), p, atol=1e-12)
+    assert np.all(np.diff(v) > 0)
+    # the curve through one point passes through it
+    v30_fit = ph.klotz_v30(150.0, 8.0, 80.0)
+    assert ph.klotz_volume(8.0, 80.0, v30_fit) == pytest.approx(150.0)
+    with pytest.raises(ValueError):
+        ph.klotz_edvn(-1.0)
+
+
+def test_typical_edv_ratio_from_klotz_v0_estimate():
+    r = ph.typical_edv_ratio(8.0)
+    assert r.central == pytest.approx(1 / (0.6 - 0.006 * 8))  # 1.81
+    assert r.low == pytest.approx(1 / (0.552 + 0.05)) and r.high == pytest.approx(1 / (0.552 - 0.05))
+    assert r.low < r.central < r.high and "Klotz" in r.source
+    assert ph.typical_edv_ratio(20.0).central > r.central  # more pressure, more filling
+    with pytest.raises(ValueError, match="no typical"):
+        ph.typical_edv_ratio(75.0)
+
+
+def test_edv_ratio_note_speaks_only_where_unusual_and_physiological():
+    assert ph.edv_ratio_note(1.8, 8.0) is None
+    assert "above" in ph.edv_ratio_note(2.14, 8.0)
+    assert "below" in ph.edv_ratio_note(1.2, 8.0)
+    assert ph.edv_ratio_note(4.31, 75.0) is None  # Land et al. 2015 problem 2: 10 kPa
+    assert ph.edv_ratio_note(4.31, None) is None
+
+
+def test_posterior_edv_ratio():
+    draws = np.random.default_rng(0).normal(150.0, 5.0, size=(4, 500))
+    post = ph.posterior_edv_ratio(draws, 80.0, 8.0, measured_lvv_ml=152.0)
+    assert post.q05 < post.median < post.q95
+    assert post.median == pytest.approx(150 / 80, rel=0.01)
+    assert post.measured == pytest.approx(152 / 80)
+    with pytest.raises(ValueError):
+        ph.edv_ratio(100.0, 0.0)
+
+
+def test_simulated_edpvr_increases_and_starts_at_the_reference_cavity():
+    thetas = [{"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}, {"a": 1.2, "b": 1.3, "af": 2.0, "bf": 3.6}]
+    curve = simulate_edpvr(thetas, {"kind": "default"}, pressures_mmhg=(4.0, 12.0, 30.0), resolution="fast")
+    assert curve.n_failed == 0 and curve.volumes_ml.shape == (2, 3)
+    assert np.all(np.diff(curve.volumes_ml, axis=1) > 0) and np.all(curve.volumes_ml > curve.v0_ml)
+    assert np.all(curve.volumes_ml[1] < curve.volumes_ml[0])  # stiffer draw, smaller volumes
+    lo, mid, hi = curve.band()
+    assert np.all(lo <= mid) and np.all(mid <= hi)
+    with pytest.raises(ValueError):
+        simulate_edpvr(thetas, {"kind": "default"}, pressures_mmhg=(10.0, 5.0))
