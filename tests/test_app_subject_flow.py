@@ -106,3 +106,21 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     at.selectbox(key="my_emulator").select("chapter")
     at.number_input(key="my_edp").set_value(12.0).run()
     assert any("EDP" in e.value or "edp" in e.value for e in at.error)
+
+
+def test_a_mm_mesh_uploaded_as_cm_warns_naming_the_units_control(uploads, tmp_path):
+    """The app's geometry upload gets the wrong-units warning of the CLI, naming the page's own control."""
+    from lvcore.geometry.analytic import DEFAULT_LV
+    from lvcore.geometry.meshing import ellipsoid_tet_mesh
+
+    import meshio
+
+    path = tmp_path / "lv.inp"
+    ellipsoid_tet_mesh(DEFAULT_LV, 6.0, path)
+    mesh = meshio.read(path)
+    mesh.points = mesh.points * 0.3  # a 25 mm LV in mm: read as cm it is 255 mm long
+    meshio.write(path, mesh)
+    assert not any("units" in w for w in flow.read_geometry(uploads, "lv.inp", path.read_bytes()).warnings)
+    geo = flow.read_geometry(uploads, "lv.inp", path.read_bytes(), units="cm")
+    (w,) = [w for w in geo.warnings if "units" in w]
+    assert "check the 'Mesh length units' choice (read as cm" in w and "--geometry-units" not in w
