@@ -56,7 +56,7 @@ def _emulator(path: str):
     return load_emulator(path)
 
 
-shared = shared_inputs()  # the shared sidebar's subject and emulator are this page's defaults
+shared = shared_inputs(theta=False)  # subject and emulator are this page's defaults; it reads no θ
 shared_subject, shared_emu = shared.get("subject"), shared.get("emulator")
 
 # ----------------------------------------------------------------------------- data

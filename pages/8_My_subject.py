@@ -7,7 +7,6 @@ from lvcore.app import freshness, physiology_panel, subject_flow as flow
 from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
-from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS
 from lvcore.inference.samplers import SamplerConfig
 from lvcore.resources import bundled_volunteers, volunteer_files
@@ -25,7 +24,7 @@ def _emulator(name: str):
 
 
 uploads = session_uploads()
-shared = shared_inputs()
+shared = shared_inputs(theta=False)
 
 # ----------------------------------------------------------------------------- 1. geometry
 st.header("1 · Geometry")
@@ -145,8 +144,9 @@ if stored is not None:
     with freshness.shown(stored, settings, "my subject"):
         summary = stored.result["summary"]
         for run in stored.result["runs"]:
-            level, text = banner_status(run.result.convergence)
-            getattr(st, level)(f"{MODEL_LABELS[run.model]}: {text}")
+            record = summary["models"][run.model]  # the banner of summary_record: convergence and bound flags
+            getattr(st, "success" if record["converged_cleanly"] else "warning")(
+                f"{MODEL_LABELS[run.model]}: {record['convergence']}")
             for flag in run.check.flags:
                 st.warning(f"{MODEL_LABELS[run.model]}: the data look implausible for this model: {flag}")
             st.dataframe(run.result.summary, width="stretch")

@@ -11,7 +11,7 @@ from test_app_uploads import _csv, calibration_page  # noqa: F401 (fixture)
 THETA = {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}
 
 
-def _stand_in_calibrate(monkeypatch, lvv_draws_ml):
+def _stand_in_calibrate(monkeypatch, lvv_draws_ml, theta=THETA):
     import arviz as az
     import pandas as pd
 
@@ -25,7 +25,7 @@ def _stand_in_calibrate(monkeypatch, lvv_draws_ml):
 
     def stand_in(y, forward, model, **kw):
         rng = np.random.default_rng(0)
-        post = {k: v * np.exp(0.05 * rng.standard_normal((2, 50))) for k, v in THETA.items()}
+        post = {k: v * np.exp(0.05 * rng.standard_normal((2, 50))) for k, v in theta.items()}
         eta = np.zeros((2, 50, 25))
         eta[..., 0] = rng.normal(lvv_draws_ml, 2.0, (2, 50))
         eta[..., 1:] = -0.15
@@ -73,3 +73,28 @@ def test_calibration_results_show_edv_ratio_and_the_edpvr(calibration_page, monk
     assert curve.volumes_ml.shape == (8, len(curve.pressures_mmhg)) and curve.n_failed == 0
     assert np.all(np.diff(curve.volumes_ml, axis=1) > 0)
     assert len(at.get("plotly_chart")) == n_charts + 1
+
+
+def test_posterior_piled_on_a_prior_bound_turns_the_banner_amber(calibration_page, monkeypatch):  # noqa: F811
+    """The iid posterior of a and af at the prior's lower bound 0.05 had a green banner (issue 27)."""
+    from lvcore.inference.models import MODEL_LABELS
+
+    label = MODEL_LABELS["iid"]
+    piled = {**THETA, "a": 0.0507, "af": 0.052}
+    for theta, amber in ((THETA, False), (piled, True)):
+        _stand_in_calibrate(monkeypatch, 150.0, theta)
+        at = calibration_page()
+        at.file_uploader(key="up_measured").upload("m.csv", _csv("S1", 150.0), "text/csv")
+        at.file_uploader(key="up_geometry").upload("h.json", b'{"h": [0, 0, 0, 0, 0]}', "application/json")
+        at.run()
+        at.multiselect[0].set_value(["iid"]).run()
+        _run(at)
+        banners = [w.value for w in at.warning if w.value.startswith(label)] + \
+                  [s.value for s in at.success if s.value.startswith(label)]
+        assert banners, [w.value for w in at.warning]
+        bound = [b for b in banners if "piled on the prior's lower bound 0.05" in b]
+        if amber:
+            assert bound and any(b.startswith(label) for b in (w.value for w in at.warning))
+            assert "a: posterior piled" in bound[0] and "af: posterior piled" in bound[0]
+        else:
+            assert not bound

@@ -110,10 +110,10 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
 
 def test_a_mm_mesh_uploaded_as_cm_warns_naming_the_units_control(uploads, tmp_path):
     """The app's geometry upload gets the wrong-units warning of the CLI, naming the page's own control."""
+    import meshio
+
     from lvcore.geometry.analytic import DEFAULT_LV
     from lvcore.geometry.meshing import ellipsoid_tet_mesh
-
-    import meshio
 
     path = tmp_path / "lv.inp"
     ellipsoid_tet_mesh(DEFAULT_LV, 6.0, path)
@@ -124,3 +124,23 @@ def test_a_mm_mesh_uploaded_as_cm_warns_naming_the_units_control(uploads, tmp_pa
     geo = flow.read_geometry(uploads, "lv.inp", path.read_bytes(), units="cm")
     (w,) = [w for w in geo.warnings if "units" in w]
     assert "check the 'Mesh length units' choice (read as cm" in w and "--geometry-units" not in w
+
+
+def test_bound_flags_name_a_posterior_piled_on_the_prior_bound():
+    """My subject's banner (and summary) carries the verdict's bound flags: a, af at 0.05 were green (issue 27)."""
+    from types import SimpleNamespace
+
+    import arviz as az
+
+    prepared = flow.prepare(load_emulator("chapter"), "chapter",
+                            SimpleNamespace(h=np.zeros(5), scale=1.0, warnings=[]))
+    rng = np.random.default_rng(0)
+
+    def run(a):
+        post = {"a": a * np.exp(0.05 * rng.standard_normal((1, 200))), "b": np.full((1, 200), 1.3) + 0.1 * rng.random((1, 200)),
+                "af": np.full((1, 200), 1.0) + 0.1 * rng.random((1, 200)), "bf": np.full((1, 200), 3.6) + 0.1 * rng.random((1, 200))}
+        return SimpleNamespace(model="iid", result=SimpleNamespace(idata=az.from_dict(posterior=post)))
+
+    flags = flow.bound_flags(run(0.0507), prepared)
+    assert any(f.startswith("a: posterior piled on the prior's lower bound 0.05") for f in flags), flags
+    assert not any("bound" in f for f in flow.bound_flags(run(0.6), prepared))

@@ -106,3 +106,16 @@ def test_default_subject_is_inside_the_default_emulators_box():
     cond = guards.check_conditions(emu)
     for h in (guards.resolve_geometry(str(geo)).h, read_pc_scores(geo)):   # size-normalised and as projected
         guards.check_inputs_in_box(guards.fixed_inputs(h, cond, emu), emu)   # raises outside
+
+
+def test_geometry_infer_without_a_measure_warns_that_size_and_stiffness_trade_off(tmp_path, capsys, monkeypatch):
+    """The warning comes before any sampling (sampling replaced by nothing here); a measure silences it."""
+    from lvcore.inference import calibrate as cal
+
+    monkeypatch.setattr(cal, "calibrate_subjects", lambda *a, **k: [])
+    p = _csv(tmp_path)
+    assert main(["calibrate", "--data", str(p), "--geometry", "infer", "--out", str(tmp_path / "o")]) == 0
+    assert "size and stiffness trade off" in capsys.readouterr().err
+    p = _csv(tmp_path, ",reference_volume_ml", ",70")
+    assert main(["calibrate", "--data", str(p), "--geometry", "infer", "--out", str(tmp_path / "o2")]) == 0
+    assert "trade off" not in capsys.readouterr().err

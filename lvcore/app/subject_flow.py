@@ -233,6 +233,16 @@ def figures(runs: Sequence[ModelRun], y, truth: Mapping | None = None) -> dict:
     return out
 
 
+def bound_flags(run: ModelRun, prepared: Prepared) -> list:
+    """The verdict's identifiability flags of one run (posterior piled on a prior bound, intervals as wide as the
+    prior; :func:`lvcore.inference.verdict.identifiability_flags`), as ``lvcore calibrate`` reports them."""
+    from lvcore.inference import verdict
+
+    post = run.result.idata.posterior
+    bounds = verdict.checked_bounds(prepared.forward)
+    return list(verdict.identifiability_flags({n: np.asarray(post[n]) for n in bounds if n in post}, bounds)[0])
+
+
 def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence[ModelRun],
                    settings: Mapping) -> dict:
     """Plain-data summary of a subject's run: inputs used, geometry, conditions, per-likelihood results and flags."""
@@ -240,7 +250,7 @@ def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence
 
     models = {}
     for run in runs:
-        level, text = banner_status(run.result.convergence)
+        level, text = banner_status(run.result.convergence, flags=bound_flags(run, prepared))
         table = run.result.summary
         models[run.model] = {
             "convergence": text, "converged_cleanly": level == "success",
