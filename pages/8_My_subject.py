@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import streamlit as st
-
 from lvcore import units
 
 from lvcore.app import freshness, physiology_panel, subject_flow as flow
