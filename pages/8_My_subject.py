@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import streamlit as st
-from lvcore import units
 
+from lvcore import units
 from lvcore.app import freshness, physiology_panel, subject_flow as flow
 from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, load_emulator
