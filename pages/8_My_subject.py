@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import streamlit as st
 
-from lvcore import units
+from lvcore.units import rms_mm_from_mse_cm2
 from lvcore.app import freshness, physiology_panel, subject_flow as flow
 from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, load_emulator
@@ -62,7 +62,7 @@ if geometry is not None:
              f"{info['wall_volume_ml']:.1f} mL, length {info['length_mm']:.1f} mm"
              + (f"; fit residual {geometry.fit_residual_mm:.2f} mm" if geometry.fit_residual_mm is not None else "")
              + (f"; projection error {geometry.projection_mse_cm2:.4f} cm² mean squared node distance "
-                f"({units.rms_mm_from_mse_cm2(geometry.projection_mse_cm2):.2f} mm RMS)"
+                f"({rms_mm_from_mse_cm2(geometry.projection_mse_cm2):.2f} mm RMS)"
                 if geometry.projection_mse_cm2 is not None else ""))
     for w in list(geometry.warnings) + volume_warnings:
         st.warning(w)
