@@ -9,6 +9,7 @@ from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference.models import MODEL_LABELS
 from lvcore.inference.samplers import SamplerConfig
+from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files
 from lvcore.uploads import session_uploads
 
@@ -149,7 +150,7 @@ if stored is not None:
                 f"{MODEL_LABELS[run.model]}: {record['convergence']}")
             for flag in run.check.flags:
                 st.warning(f"{MODEL_LABELS[run.model]}: the data look implausible for this model: {flag}")
-            st.dataframe(run.result.summary, width="stretch")
+            st.dataframe(run.result.summary.rename(index=display_name), width="stretch")
         for name, fig in stored.result["figures"].items():
             st.plotly_chart(fig, width="stretch", key=f"my_fig_{name}")
         if geometry is not None and prepared is not None and data is not None:
