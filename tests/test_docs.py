@@ -40,7 +40,8 @@ def test_benchmarks_summary_is_one_short_line_per_row_with_details():
 
 
 #: Reference docs whose dated run logs live in one "## Appendix: measured runs" section at the end (issue 23).
-APPENDIX_DOCS = ("calibration.md", "simulator.md", "campaigns_and_emulators.md", "studies.md", "report.md")
+APPENDIX_DOCS = ("calibration.md", "simulator.md", "campaigns_and_emulators.md", "studies.md", "report.md",
+                 "real_data.md")
 
 
 def test_dated_run_logs_sit_in_one_appendix_at_the_end():
