@@ -23,6 +23,7 @@ from lvcore.geometry.scaling import ScaledForward
 from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
+from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
 
@@ -121,7 +122,7 @@ with right:
                                 f"- {PARAMETER_HELP[n]}" for n in ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam",
                                                                    "sigma1_sq", "sigma2_sq", "c", "tau")))
     with st.expander("What the parameters mean"):
-        st.markdown("\n".join(f"- **{n}** — {PARAMETER_HELP[n]}" for n in
+        st.markdown("\n".join(f"- **{display_name(n)}** — {PARAMETER_HELP[n]}" for n in
                                ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau")))
     angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
                       help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
@@ -262,6 +263,7 @@ if job is not None and job["done"]:
                     table.insert(0, "meaning", [parameter_meaning(n) for n in table.index])
                     if truth:
                         table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
+                    table.index = [display_name(n) for n in table.index]  # a_f, b_f as on the sliders
                     st.dataframe(table, width="stretch",
                                  column_config={"meaning": st.column_config.TextColumn(width="large")})
                     bounds = job.get("bounds") or {}
