@@ -34,6 +34,11 @@ def mm3_to_ml(v_mm3: float) -> float:
     return float(v_mm3) / MM3_PER_ML
 
 
+def rms_mm_from_mse_cm2(mse_cm2: float) -> float:
+    """Root-mean-square distance (mm) of a mean squared node distance given in cm² (10·√MSE)."""
+    return 10.0 * float(mse_cm2) ** 0.5
+
+
 def ml_to_mm3(v_ml: float) -> float:
     """Convert a volume from mL to mm³."""
     return float(v_ml) * MM3_PER_ML

@@ -149,7 +149,7 @@ def fit_segmentation(kind: str, files) -> dict:
     ``files`` are ``(name, bytes)`` pairs. Returns ``{"nodes", "summary"}``,
     or ``{"error": message}`` with a message in terms of the user's file names.
     """
-    from lvcore.geometry.fitting import fit_contours, fit_surfaces
+    from lvcore.geometry.fitting import fit_contours, fit_surfaces, units_warnings
     from lvcore.geometry.volume_mesh import fit_volume_mesh
 
     with UploadSession() as session:
@@ -164,9 +164,14 @@ def fit_segmentation(kind: str, files) -> dict:
             res = session.read(files[0][0], files[0][1], fit, slot=f"{kind}0")
         except UploadError as err:
             return {"error": str(err)}
-    if kind == "mesh":
-        return {"nodes": res.fit.nodes, "summary": res.summary()}
-    return {"nodes": res.nodes, "summary": res.summary()}
+    fitted = res.fit if kind == "mesh" else res
+    summary = res.summary()
+    summary["warnings"] = list(summary.get("warnings", [])) + units_warnings(fitted, "mm", UPLOAD_UNITS)
+    return {"nodes": fitted.nodes, "summary": summary}
+
+
+#: How the wrong-units warning of :func:`fit_segmentation` names the units: uploads are read as mm.
+UPLOAD_UNITS = "the file's units (uploads here are read as mm: convert the file to mm)"
 
 
 __all__ = ["MAX_UPLOAD_MB", "UploadError", "UploadSession", "session_uploads", "safe_name", "fit_segmentation"]

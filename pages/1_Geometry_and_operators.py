@@ -102,6 +102,7 @@ else:
 names = list(geoms)
 from lvcore.geometry.measures import geometry_info  # noqa: E402
 from lvcore.geometry.measures import node_mse_cm2  # noqa: E402
+from lvcore import units  # noqa: E402
 
 rows = []
 for n in names:
@@ -125,8 +126,10 @@ with right:
     if len(names) > 1:
         mse = pd.DataFrame([[node_mse_cm2(geoms[a], geoms[b]) for b in names] for a in names], index=names,
                            columns=names).round(4)
-        st.markdown("**Mean squared node distance (cm²)**")
+        st.markdown("**Mean squared node distance (cm², the chapter's unit)**")
         st.dataframe(mse, width="stretch")
+        st.caption("MSE in cm², as in the chapter's tables; its root is the RMS node distance: 10·√MSE mm "
+                   "(0.01 cm² = 1 mm RMS), comparable with the distances and residuals in mm.")
 
 if len(names) > 1:
     st.subheader("Per-node distance between two geometries")
@@ -135,7 +138,8 @@ if len(names) > 1:
     b = c2.selectbox("compared with", names, index=1)
     d = np.linalg.norm(geoms[a] - geoms[b], axis=1)
     m1, m2, m3 = st.columns(3)
-    m1.metric("node MSE (cm²)", f"{node_mse_cm2(geoms[a], geoms[b]):.4f}")
+    mse_ab = node_mse_cm2(geoms[a], geoms[b])
+    m1.metric("node MSE (cm²) and RMS distance (mm)", f"{mse_ab:.4f} cm² = {units.rms_mm_from_mse_cm2(mse_ab):.2f} mm RMS")
     m2.metric("mean distance (mm)", f"{d.mean():.2f}")
     m3.metric("max distance (mm)", f"{d.max():.2f}")
     st.image(_distance(geoms[a], geoms[b], f"{a} coloured by distance to {b}"))

@@ -5,6 +5,7 @@ import numpy as np
 import pandas as pd
 import streamlit as st
 
+from lvcore import units
 from lvcore.exceptions import LVCoreError
 
 st.set_page_config(page_title="Shape model", layout="wide")
@@ -83,12 +84,16 @@ for r in block["rows"]:
     row["first k beating both"] = r["first_k_beating_both"] or f">{table['ks'][-1]}"
     rows.append(row)
 st.dataframe(pd.DataFrame(rows).set_index("patient").style.format(precision=4), width="stretch")
+st.caption("Values: mean squared node distance in cm² (the chapter's unit); the RMS node distance is 10·√MSE mm, "
+           "e.g. 0.01 cm² = 1 mm.")
 share = pd.DataFrame([table["share_beating_both"], table["chapter_share"]],
                      index=["share of 18 cases where k PCs beat both operators (SYNTHETIC)", "chapter (real data)"])
 share.columns = [f"{k}PC" for k in share.columns]
 st.dataframe(share.style.format(precision=2), width="stretch")
 lo, hi = table["operator_mse_range"]
-st.caption(f"Imitation operators differ by {lo:.4f}–{hi:.4f} cm² (chapter: 0.003–0.03 cm²).")
+st.caption(f"Imitation operators differ by {lo:.4f}–{hi:.4f} cm² mean squared node distance, i.e. "
+           f"{units.rms_mm_from_mse_cm2(lo):.2f}–{units.rms_mm_from_mse_cm2(hi):.2f} mm RMS (chapter: 0.003–0.03 cm², "
+           "0.55–1.73 mm).")
 st.plotly_chart(operator_mse_figure(table, main), width="stretch")
 
 st.subheader("Reconstruction with k modes")
@@ -97,7 +102,9 @@ name = st.selectbox("Geometry (held out of the training set)", list(geoms))
 k = st.slider("modes k", 1, min(20, sm.n_modes), 5)
 g = geoms[name]
 rec = sm.reconstruct_nodes(g, k)
-st.metric("reconstruction error (mean squared node distance)", f"{sm.reconstruction_mse_cm2(g, k):.4f} cm²")
+rec_mse = sm.reconstruction_mse_cm2(g, k)
+st.metric("reconstruction error (mean squared node distance; RMS distance)",
+          f"{rec_mse:.4f} cm² = {units.rms_mm_from_mse_cm2(rec_mse):.2f} mm RMS")
 d1, d2 = st.columns(2)
 d1.image(_shape_png(g, name))
 d2.image(_shape_png(rec, f"{k}-mode reconstruction", "#9ecae1"))

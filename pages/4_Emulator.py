@@ -6,7 +6,7 @@ import pandas as pd
 import plotly.graph_objects as go
 import streamlit as st
 
-from lvcore.app.controls import input_label, log_options, shared_inputs
+from lvcore.app.controls import input_label, log_options, shared_inputs, shared_start
 
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
@@ -43,7 +43,8 @@ if not choices:
     )
     st.stop()
 
-_shared_emu = shared_inputs().get("emulator")
+shared = shared_inputs()
+_shared_emu = shared.get("emulator")
 label = st.selectbox("Emulator", list(choices), index=list(choices).index(_shared_emu) if _shared_emu in choices else 0,
                      help="Defaults to the shared sidebar's emulator.")
 try:
@@ -109,15 +110,20 @@ else:
 
 # ----- live check ----------------------------------------------------------------
 st.subheader("Live check: emulator vs one simulator run")
+st.caption("Starts at the shared sidebar's θ and EDP (clipped to the emulator's training box); move the sliders "
+           "to explore around it. The sliders follow the sidebar when it changes.")
 values = {}
 cols = st.columns(3)
 for i, (name, lo, hi, log) in enumerate(zip(emu.input_names, emu.lower, emu.upper, emu.log_inputs)):
+    start = shared_start(name, shared)
     mid = float(np.sqrt(lo * hi)) if log else float(0.5 * (lo + hi))
+    start = mid if start is None else float(np.clip(start, lo, hi))
+    key = f"in_{name}_{start:.6g}"  # a new sidebar value restarts the slider there
     if log:  # log-scaled stops over a log-scaled input (the stiffnesses)
-        values[name] = cols[i % 3].select_slider(input_label(name), options=log_options(float(lo), float(hi), float(f"{mid:.3g}")),
-                                                 value=float(f"{mid:.3g}"), key=f"in_{name}")
+        values[name] = cols[i % 3].select_slider(input_label(name), options=log_options(float(lo), float(hi), start),
+                                                 value=start, key=key)
     else:
-        values[name] = cols[i % 3].slider(input_label(name), float(lo), float(hi), mid, key=f"in_{name}")
+        values[name] = cols[i % 3].slider(input_label(name), float(lo), float(hi), start, key=key)
 x = np.array([values[n] for n in emu.input_names])
 y_emu = np.asarray(emu.predict(x, strict=True))
 st.write(f"Emulator: LVV **{y_emu[0]:.1f} mL**, mean strain **{y_emu[1:].mean():.4f}** (instant).")

@@ -22,7 +22,8 @@ from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.geometry.scaling import ScaledForward
 from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
-from lvcore.inference.samplers import SamplerConfig
+from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
+from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
 
@@ -56,7 +57,7 @@ def _emulator(path: str):
     return load_emulator(path)
 
 
-shared = shared_inputs()  # the shared sidebar's subject and emulator are this page's defaults
+shared = shared_inputs(theta=False)  # subject and emulator are this page's defaults; it reads no θ
 shared_subject, shared_emu = shared.get("subject"), shared.get("emulator")
 
 # ----------------------------------------------------------------------------- data
@@ -121,14 +122,14 @@ with right:
                                 f"- {PARAMETER_HELP[n]}" for n in ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam",
                                                                    "sigma1_sq", "sigma2_sq", "c", "tau")))
     with st.expander("What the parameters mean"):
-        st.markdown("\n".join(f"- **{n}** — {PARAMETER_HELP[n]}" for n in
+        st.markdown("\n".join(f"- **{display_name(n)}** — {PARAMETER_HELP[n]}" for n in
                                ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau")))
     angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
                       help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
     c1, c2, c3 = st.columns(3)
-    chains = c1.number_input("chains", 1, 8, 4)
-    warmup = c2.number_input("warm-up", 50, 5000, 1000, step=100)
-    samples = c3.number_input("draws kept", 50, 5000, 1000, step=100)
+    chains = c1.number_input("chains", 1, 8, INTERACTIVE.num_chains)  # defaults chosen by ESS per second
+    warmup = c2.number_input("warm-up", 50, 5000, INTERACTIVE.num_warmup, step=50)
+    samples = c3.number_input("draws kept", 50, 5000, INTERACTIVE.num_samples, step=100)
 
 # ----------------------------------------------------------------------------- background run
 job = st.session_state.get("calibration_job")
@@ -262,6 +263,7 @@ if job is not None and job["done"]:
                     table.insert(0, "meaning", [parameter_meaning(n) for n in table.index])
                     if truth:
                         table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
+                    table.index = [display_name(n) for n in table.index]  # a_f, b_f as on the sliders
                     st.dataframe(table, width="stretch",
                                  column_config={"meaning": st.column_config.TextColumn(width="large")})
                     bounds = job.get("bounds") or {}

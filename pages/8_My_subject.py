@@ -3,12 +3,14 @@ from __future__ import annotations
 
 import streamlit as st
 
+from lvcore.units import rms_mm_from_mse_cm2
 from lvcore.app import freshness, physiology_panel, subject_flow as flow
 from lvcore.app.controls import shared_inputs
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference.models import MODEL_LABELS
 from lvcore.inference.samplers import SamplerConfig
+from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files
 from lvcore.uploads import session_uploads
 
@@ -24,7 +26,7 @@ def _emulator(name: str):
 
 
 uploads = session_uploads()
-shared = shared_inputs()
+shared = shared_inputs(theta=False)
 
 # ----------------------------------------------------------------------------- 1. geometry
 st.header("1 · Geometry")
@@ -59,7 +61,8 @@ if geometry is not None:
     st.write(f"Read as **{geometry.kind}**; cavity {info['cavity_volume_ml']:.1f} mL, wall "
              f"{info['wall_volume_ml']:.1f} mL, length {info['length_mm']:.1f} mm"
              + (f"; fit residual {geometry.fit_residual_mm:.2f} mm" if geometry.fit_residual_mm is not None else "")
-             + (f"; projection error {geometry.projection_mse_cm2:.4f} cm²"
+             + (f"; projection error {geometry.projection_mse_cm2:.4f} cm² mean squared node distance "
+                f"({rms_mm_from_mse_cm2(geometry.projection_mse_cm2):.2f} mm RMS)"
                 if geometry.projection_mse_cm2 is not None else ""))
     for w in list(geometry.warnings) + volume_warnings:
         st.warning(w)
@@ -149,7 +152,7 @@ if stored is not None:
                 f"{MODEL_LABELS[run.model]}: {record['convergence']}")
             for flag in run.check.flags:
                 st.warning(f"{MODEL_LABELS[run.model]}: the data look implausible for this model: {flag}")
-            st.dataframe(run.result.summary, width="stretch")
+            st.dataframe(run.result.summary.rename(index=display_name), width="stretch")
         for name, fig in stored.result["figures"].items():
             st.plotly_chart(fig, width="stretch", key=f"my_fig_{name}")
         if geometry is not None and prepared is not None and data is not None:

@@ -138,7 +138,7 @@ def build_one(name: str, args) -> Path | None:
     from lvcore.campaigns.runner import resume_campaign, run_campaign
     from lvcore.campaigns.space import get_space
     from lvcore.emulator.cli import format_info, training_config
-    from lvcore.emulator.io import save_emulator, save_training_data
+    from lvcore.emulator.io import provenance_path, save_emulator, save_training_data
     from lvcore.emulator.training import load_store_data, train_emulator
 
     space_name, inputs = EMULATORS[name]
@@ -187,7 +187,7 @@ def build_one(name: str, args) -> Path | None:
         train.inputs, train.outputs, valid.inputs, valid.outputs,
         input_names=train.input_names, name=name, lower=train.lower, upper=train.upper, fixed=train.fixed,
         config=config, x_test=None if test is None else test.inputs, y_test=None if test is None else test.outputs,
-        source={**train.info, "stores": [build_relative(p, args.workdir) for p in train.info["stores"]],
+        source={**train.info, "stores": [provenance_path(p, args.workdir) for p in train.info["stores"]],
                 "paths_relative_to": "the build folder (--workdir of build_command)", "n_failed_excluded": train.n_failed,
                 "build_command": portable_command([Path(sys.argv[0]).name] + sys.argv[1:], args.workdir),
                 "design_seeds": {k: v[2] for k, v in sets.items()}},
@@ -209,14 +209,6 @@ def build_one(name: str, args) -> Path | None:
     print(format_info(emu.metadata))
     print(f"[{name}] saved to {out}")
     return out
-
-
-def build_relative(path, workdir: Path) -> str:
-    """``path`` relative to the build folder ``workdir`` (metadata never records a path of the build machine)."""
-    try:
-        return Path(path).resolve().relative_to(Path(workdir).resolve()).as_posix()
-    except ValueError:
-        return Path(path).name
 
 
 def portable_command(argv: list[str], workdir: Path) -> str:

@@ -12,6 +12,11 @@ repository root::
     OMP_NUM_THREADS=1 python scripts/ship_fibre_discrepancy.py              # chapter budget, ~15 min
     OMP_NUM_THREADS=1 python scripts/ship_fibre_discrepancy.py --warmup 300 --samples 300
 
+It also rewrites the generated block of ``docs/calibration.md`` (between
+``fibre_discrepancy.DOCS_BEGIN`` and ``DOCS_END``) from the shipped JSON, so
+the docs quote the shipped numbers (``--docs ''`` leaves the docs alone;
+``--docs-only`` rewrites the block from the JSON already shipped, without running).
+
 The full (unthinned) study output goes to ``--work`` (default
 ``build/study_fibre_discrepancy``).
 """
@@ -65,7 +70,16 @@ def main(argv=None) -> int:
     p.add_argument("--keep", type=int, default=250, help="error draws kept per set and model")
     p.add_argument("--work", default="build/study_fibre_discrepancy", help="full study output folder")
     p.add_argument("--dest", default=None, help="shipped JSON (default assets/studies/fibre_discrepancy.json)")
+    p.add_argument("--docs", default="docs/calibration.md", help="docs file whose generated block to rewrite ('' none)")
+    p.add_argument("--docs-only", action="store_true", help="only rewrite the docs block from the shipped JSON")
     args = p.parse_args(argv)
+    if args.docs_only:
+        from lvcore.studies.results import bundled_studies_dir
+
+        src = Path(args.dest) if args.dest else bundled_studies_dir() / "fibre_discrepancy.json"
+        update_docs(Path(args.docs), json.loads(src.read_text()))
+        print(f"rewrote the fibre-discrepancy block of {args.docs} from {src}")
+        return 0
 
     from lvcore.inference import samplers
 
@@ -86,7 +100,22 @@ def main(argv=None) -> int:
     dest.write_text(json.dumps(small, separators=(",", ":")))
     print(json.dumps(res["findings"], indent=1))
     print(f"wrote {dest} ({dest.stat().st_size / 1024:.0f} kB) in {time.perf_counter() - t0:.0f} s")
+    if args.docs:
+        update_docs(Path(args.docs), small)
+        print(f"rewrote the fibre-discrepancy block of {args.docs}")
     return 0
+
+
+def update_docs(path: Path, shipped: dict) -> None:
+    """Replace the generated block of ``path`` by ``fibre_discrepancy.docs_markdown(shipped)``."""
+    from lvcore.studies import fibre_discrepancy as fd
+
+    text = path.read_text()
+    if text.count(fd.DOCS_BEGIN) != 1 or text.count(fd.DOCS_END) != 1:
+        raise SystemExit(f"{path}: expected one {fd.DOCS_BEGIN!r} ... {fd.DOCS_END!r} block")
+    head, rest = text.split(fd.DOCS_BEGIN)
+    _, tail = rest.split(fd.DOCS_END)
+    path.write_text(f"{head}{fd.DOCS_BEGIN}\n{fd.docs_markdown(shipped)}\n{fd.DOCS_END}{tail}")
 
 
 if __name__ == "__main__":

@@ -43,8 +43,11 @@ def test_switching_pages_by_navigation():
 
 
 def test_shared_sidebar_keeps_its_state_across_pages():
-    """main.py renders one sidebar (subject, emulator, log-scaled θ with units, EDP) before the page runs."""
+    """main.py renders one sidebar (subject, emulator, log-scaled θ with units, EDP) before the page runs; θ only on
+    the pages that read it (Emulator, Fibre angles), kept while hidden."""
     at = AppTest.from_file(APP, default_timeout=180).run()
+    at.switch_page(str(PAGES_DIR / "4_Emulator.py")).run()
+    assert not at.exception, at.exception
     a = next(s for s in at.sidebar.select_slider if s.key == "shared_a")
     assert a.label == "a (kPa)"
     new = a.options[a.options.index(str(a.value)) + 2] if str(a.value) in a.options else a.options[-5]
@@ -53,6 +56,14 @@ def test_shared_sidebar_keeps_its_state_across_pages():
     assert not at.exception, at.exception
     assert [s.key for s in at.sidebar.select_slider].count("shared_a") == 1  # rendered once, by main.py
     assert float(at.session_state["shared_inputs"]["theta"]["a"]) == float(new)
+    assert float(next(s for s in at.sidebar.select_slider if s.key == "shared_a").value) == float(new)
+    # the Calibration page reads no θ: its sidebar shows no θ sliders (they did nothing there), and θ is kept
+    at.switch_page(str(PAGES_DIR / "5_Calibration.py")).run()
+    assert not at.exception, at.exception
+    assert not [s for s in at.sidebar.select_slider if s.key.startswith("shared_")]
+    assert any("not used on this page" in c.value for c in at.sidebar.caption)
+    assert float(at.session_state["shared_inputs"]["theta"]["a"]) == float(new)
+    at.switch_page(str(PAGES_DIR / "4_Emulator.py")).run()
     assert float(next(s for s in at.sidebar.select_slider if s.key == "shared_a").value) == float(new)
 
 

@@ -31,7 +31,8 @@ def _stand_in_calibrate(monkeypatch, lvv_draws_ml, theta=THETA):
         eta[..., 1:] = -0.15
         idata = az.from_dict(posterior={**post, "eta": eta}, posterior_predictive={"y_rep": eta.copy()},
                              observed_data={"y": np.asarray(y)})
-        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [0.6]}, index=["a"]), 0.5,
+        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [float(np.mean(post[k])) for k in THETA]}, index=list(THETA)),
+                                     0.5,
                                      {"min": 1.0})
 
     monkeypatch.setattr(cal, "calibrate", stand_in)
@@ -64,6 +65,17 @@ def test_calibration_results_show_edv_ratio_and_the_edpvr(calibration_page, monk
     assert len(table) == 1
     assert float(table[0]["EDV/V₀ median"].iloc[0]) == __import__("pytest").approx(2.3, abs=0.02)
     assert any("unusual result: EDV/V₀ = 2.3" in w.value for w in at.warning)
+    # one spelling of the fibre stiffness wherever a user reads it: a_f (as on the sliders), never "af"
+    summaries = [d.value for d in at.dataframe if "meaning" in d.value.columns]
+    assert summaries and "a_f" in list(summaries[0].index) and "af" not in list(summaries[0].index)
+    assert any("**a_f**" in m.value for m in at.markdown) and not any("**af**" in m.value for m in at.markdown)
+    import json as _json
+
+    for chart in at.get("plotly_chart"):
+        spec = _json.loads(chart.proto.spec)
+        labels = [dim.get("label", "") for t in spec["data"] for dim in t.get("dimensions", [])]
+        titles = [a.get("text", "") for a in spec["layout"].get("annotations", [])]
+        assert not [t for t in labels + titles if t.split(" ")[0] in ("af", "bf")], (labels, titles)
     # the EDPVR runs only on request (FE, fast mesh)
     n_charts = len(at.get("plotly_chart"))
     (button,) = [b for b in at.button if b.label.startswith("Simulate the EDPVR")]

@@ -108,6 +108,24 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     assert any("EDP" in e.value or "edp" in e.value for e in at.error)
 
 
+def test_a_mm_mesh_uploaded_as_cm_warns_naming_the_units_control(uploads, tmp_path):
+    """The app's geometry upload gets the wrong-units warning of the CLI, naming the page's own control."""
+    import meshio
+
+    from lvcore.geometry.analytic import DEFAULT_LV
+    from lvcore.geometry.meshing import ellipsoid_tet_mesh
+
+    path = tmp_path / "lv.inp"
+    ellipsoid_tet_mesh(DEFAULT_LV, 6.0, path)
+    mesh = meshio.read(path)
+    mesh.points = mesh.points * 0.3  # a 25 mm LV in mm: read as cm it is 255 mm long
+    meshio.write(path, mesh)
+    assert not any("units" in w for w in flow.read_geometry(uploads, "lv.inp", path.read_bytes()).warnings)
+    geo = flow.read_geometry(uploads, "lv.inp", path.read_bytes(), units="cm")
+    (w,) = [w for w in geo.warnings if "units" in w]
+    assert "check the 'Mesh length units' choice (read as cm" in w and "--geometry-units" not in w
+
+
 def test_bound_flags_name_a_posterior_piled_on_the_prior_bound():
     """My subject's banner (and summary) carries the verdict's bound flags: a, af at 0.05 were green (issue 27)."""
     from types import SimpleNamespace

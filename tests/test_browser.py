@@ -6,7 +6,8 @@ that no exception box appears; screenshots go to build/screenshots/ (CI
 artifacts). On the Fibre angles page the live map's slider-to-redraw time must
 stay under 1 s (median of 5; the 300 ms target is tracked in BENCHMARKS.md,
 ``benchmarks/bench_app_browser.py``). Finally 5 browser sessions work the app
-at the same time for a bounded loop.
+at the same time for a bounded loop. Every visible plot, table and image of every page is screenshotted alone
+at a 1400-px viewport (build/screenshots/figures/) and must have a non-zero box inside the viewport's width.
 
 In CI (env ``CI`` set) a missing Chromium or playwright is a failure, not a skip.
 """
@@ -96,6 +97,58 @@ def test_every_page_renders_and_survives_a_slider(app, chromium):
     assert any(b for _, _, b, _ in report), f"no page had a slider to move: {report}"
     assert not js_errors, f"JavaScript errors in the page: {js_errors[:3]}"
     assert "Traceback" not in app.log_text(), app.log_text()[-3000:]
+    ctx.close()
+
+
+#: The elements screenshotted one by one: plots (Plotly, live charts), tables and dataframes, images.
+FIGURE_SELECTORS = {"plot": '[data-testid="stPlotlyChart"], [data-testid="stCustomComponentV1"]',
+                    "dataframe": '[data-testid="stDataFrame"]', "table": '[data-testid="stTable"]',
+                    "image": '[data-testid="stImage"], [data-testid="stFullScreenFrame"] img'}
+VIEWPORT_WIDTH = 1400
+
+
+def test_every_figure_and_table_fits_at_1400_px(app, chromium):
+    """Every visible plot, table and image of every page, screenshotted alone at a 1400-px-wide viewport
+    (build/screenshots/figures/): each has a non-zero box and ends inside the viewport's width."""
+    import shutil
+
+    out = SHOTS / "figures"
+    shutil.rmtree(out, ignore_errors=True)  # only this run's pictures
+    out.mkdir(parents=True, exist_ok=True)
+    js_errors: list = []
+    ctx, page = _new_page(chromium, js_errors)
+    assert page.viewport_size["width"] == VIEWPORT_WIDTH
+    page.goto(app.url)
+    drv.wait_idle(page)
+    shot, problems = [], []
+    for label, href in drv.page_links(page):
+        page.goto(href)
+        drv.wait_idle(page)
+        for kind, selector in FIGURE_SELECTORS.items():
+            items = page.locator(selector)
+            for i in range(items.count()):
+                item = items.nth(i)
+                if not item.is_visible():  # e.g. in a tab not shown
+                    continue
+                item.scroll_into_view_if_needed()
+                box = item.bounding_box()
+                name = f"{drv.slug(label)}_{kind}_{i + 1}"
+                if box is None or box["width"] <= 0 or box["height"] <= 0:
+                    problems.append(f"{name}: empty box {box}")
+                    continue
+                if box["x"] < -0.5 or box["x"] + box["width"] > VIEWPORT_WIDTH + 0.5:
+                    problems.append(f"{name}: spans x = {box['x']:.0f}..{box['x'] + box['width']:.0f} px, beyond the "
+                                    f"{VIEWPORT_WIDTH}-px viewport")
+                item.screenshot(path=str(out / f"{name}.png"))
+                shot.append((name, round(box["width"]), round(box["height"])))
+        wide = page.evaluate("document.documentElement.scrollWidth")  # no sideways scrolling of the page
+        if wide > VIEWPORT_WIDTH + 1:
+            problems.append(f"page '{label}' is {wide} px wide at a {VIEWPORT_WIDTH}-px viewport")
+    print("\n".join(f"{n}: {w} x {h} px" for n, w, h in shot))
+    assert len(shot) >= 10, f"too few figures and tables found: {shot}"
+    assert {n.split("_")[-2] for n, _, _ in shot} >= {"plot", "dataframe", "image"}, shot
+    assert not problems, problems
+    assert not js_errors, f"JavaScript errors in the page: {js_errors[:3]}"
     ctx.close()
 
 

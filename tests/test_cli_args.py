@@ -222,11 +222,12 @@ def test_degenerate_septum_landmarks_are_refused(septum, words):
 def test_a_mm_mesh_read_as_cm_gets_a_units_warning():
     from types import SimpleNamespace
 
-    from lvcore.geometry.cli import units_warnings
+    from lvcore.geometry.fitting import units_warnings
 
     assert units_warnings(SimpleNamespace(cavity_volume_ml=120.0, length_mm=85.0), "mm") == []
     (w,) = units_warnings(SimpleNamespace(cavity_volume_ml=2470.0, length_mm=250.0), "cm")
-    assert "--units" in w and "2,470 mL" in w
+    assert "check --units (read as cm" in w and "2,470 mL" in w
+    assert units_warnings(SimpleNamespace(cavity_volume_ml=120.0, length_mm=170.0), "mm") != []
 
 
 # ----------------------------------------------------------------------------- messages (finding 6)

@@ -37,3 +37,19 @@ def test_benchmarks_summary_is_one_short_line_per_row_with_details():
     assert numbers == list(range(1, len(rows) + 1))
     missing = [n for n in numbers if f"\n### {n}. " not in details]
     assert not missing, f"summary rows without a details subsection: {missing}"
+
+
+#: Reference docs whose dated run logs live in one "## Appendix: measured runs" section at the end (issue 23).
+APPENDIX_DOCS = ("calibration.md", "simulator.md", "campaigns_and_emulators.md", "studies.md", "report.md",
+                 "real_data.md")
+
+
+def test_dated_run_logs_sit_in_one_appendix_at_the_end():
+    date = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+    for name in APPENDIX_DOCS:
+        headings = [h for h in (DOCS / name).read_text().splitlines() if h.startswith("## ")]
+        assert headings.count("## Appendix: measured runs") == 1 and headings[-1] == "## Appendix: measured runs", name
+        text = (DOCS / name).read_text()
+        above = [h for h in text[: text.index("## Appendix: measured runs")].splitlines()
+                 if h.startswith("#") and (date.search(h) or h.lstrip("#").strip().lower().startswith("measured ("))]
+        assert not above, f"docs/{name}: dated run-log sections above the appendix: {above}"

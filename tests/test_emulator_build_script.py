@@ -71,8 +71,10 @@ def test_recorded_paths_are_relative_to_the_build_folder(tmp_path):
     cmd = mod.portable_command(["build_emulators.py", "--emulators", "chapter", "--workdir", str(work),
                                 f"--out={work / 'x' / 'y'}", "--below-spec-out", str(tmp_path / "other" / "bs")], work)
     assert cmd == "build_emulators.py --emulators chapter --workdir WORKDIR --out=WORKDIR/x/y --below-spec-out bs"
-    assert mod.build_relative(work / "chapter" / "train_default.h5", work) == "chapter/train_default.h5"
-    assert mod.build_relative(tmp_path / "elsewhere.h5", work) == "elsewhere.h5"
+    from lvcore.emulator.io import provenance_path
+
+    assert provenance_path(work / "chapter" / "train_default.h5", work) == "chapter/train_default.h5"
+    assert provenance_path(tmp_path / "elsewhere.h5", work) == "elsewhere.h5"
 
 
 def test_shipped_files_record_no_machine_paths():

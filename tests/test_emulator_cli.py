@@ -33,6 +33,8 @@ def test_train_from_store_and_info(tmp_path, capsys):
     meta = emu.metadata
     assert meta["training"]["n_train"] + meta["training"]["n_valid"] == 256
     assert meta["source"]["forward"] == [campaign_double.NAME]
+    # store paths relative to --out: a store outside it by its name; no path of this machine (issue 23)
+    assert meta["source"]["stores"] == ["train.h5"] and str(tmp_path) not in json.dumps(meta)
     assert meta["test"]["n"] == 64 and meta["test"]["lvv_rmse_ml"] < 1.0
     x = np.array([0.6, 1.3, 1.0, 3.6])
     assert abs(float(emu.predict(x)[0]) - closed_form(*x)[0]) < 1.5

@@ -61,3 +61,17 @@ def test_page_labels_the_shipped_below_spec_demo(tmp_path, monkeypatch):
     assert len(controls) == 9
     labels = {c.label for c in controls}
     assert "EDP (mmHg)" in labels or any(lab.startswith("h1: PC score 1") for lab in labels), labels
+
+
+def test_live_check_starts_at_the_shared_sidebar(emulator_dir):
+    """The live check ignored the shared sidebar's θ (issue 27): it starts there now, and follows it."""
+    from streamlit.testing.v1 import AppTest
+
+    at = AppTest.from_file(str(PAGE), default_timeout=60).run()
+    assert not at.exception, at.exception
+    for name, label, k in (("a", "a (kPa)", -8), ("bf", "b_f (–)", -12)):
+        value = at.select_slider(key=f"shared_{name}").options[k]  # inside the test emulator's box
+        at.select_slider(key=f"shared_{name}").set_value(value).run()
+        assert not at.exception, at.exception
+        (live,) = [c for c in at.main.select_slider if c.label == label]
+        assert float(live.value) == pytest.approx(float(value))

@@ -89,7 +89,7 @@ def test_calibrate_cli_with_a_subject_emulator_needs_no_geometry(built, tmp_path
                    + "SYNTHETIC-S1," + ",".join(f"{v:.6g}" for v in y) + "\n")
     rc = main(["calibrate", "--emulator", str(out), "--data", str(csv), "--model", "volume", "--chains", "2",
                "--warmup", "100", "--samples", "100", "--out", str(tmp_path / "cal"), "--json"])
-    assert rc in (0, 1)  # 1: did not converge in the short run; the run itself went through
+    assert rc in (0, 1, 4)  # 1: not converged, 4: flagged (volume data leave theta unidentified); it ran
     rec = json.loads((tmp_path / "cal" / "summary.json").read_text())[0]
     assert rec["geometry"]["kind"] == "subject-emulator" and rec["geometry"]["scores"] == []
     capsys.readouterr()

@@ -23,6 +23,12 @@ def test_geometry_page_bundled_patient():
     at.selectbox[0].set_value("SYNTHETIC-P02").run()
     assert not at.exception, at.exception
     assert any("node MSE" in m.label for m in at.metric)
+    # MSE in cm² beside distances in mm: the MSE states its RMS distance in mm too (issue 27)
+    (mse,) = [m for m in at.metric if "node MSE" in m.label]
+    value, rms = mse.value.split(" cm² = ")
+    assert rms.endswith(" mm RMS") and float(rms.split()[0]) == __import__("pytest").approx(
+        10 * float(value) ** 0.5, abs=0.006)
+    assert any("10·√MSE mm" in c.value for c in at.caption)
 
 
 def test_geometry_page_upload_messages():
@@ -40,6 +46,9 @@ def test_shape_model_page():
     assert len(at.get("image")) >= 5  # mean, ±2 SD, original, reconstruction
     at.slider[0].set_value(10).run()
     assert not at.exception, at.exception
+    (rec,) = [m for m in at.metric if m.label.startswith("reconstruction error")]
+    assert " cm² = " in rec.value and rec.value.endswith(" mm RMS")
+    assert any("mm RMS" in c.value for c in at.caption)
     at.radio[0].set_value("op2").run()
     assert not at.exception, at.exception
 

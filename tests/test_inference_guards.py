@@ -147,3 +147,21 @@ def test_resolve_geometry_from_a_volume_mesh(tmp_path):
         guards.resolve_geometry("")
     with pytest.raises(GeometryError, match="no such file"):
         guards.resolve_geometry(str(tmp_path / "nope.json"))
+
+
+def test_a_mm_volume_mesh_read_as_cm_warns_naming_geometry_units(tmp_path):
+    """calibrate --geometry LV.inp --geometry-units cm on a mm mesh: a 1,000x cavity, flagged (issue 28, finding 5)."""
+    from lvcore.geometry.analytic import DEFAULT_LV
+    from lvcore.geometry.meshing import ellipsoid_tet_mesh
+
+    import meshio
+
+    # a small LV in mm (25 mm long, an extent the readers accept as mm or as cm): read as cm it is 255 mm long
+    path = tmp_path / "lv.inp"
+    ellipsoid_tet_mesh(DEFAULT_LV, 6.0, path)
+    mesh = meshio.read(path)
+    mesh.points = mesh.points * 0.3
+    meshio.write(path, mesh)
+    assert not any("units" in w for w in guards.resolve_geometry(str(path), units="mm").warnings)
+    (w,) = [w for w in guards.resolve_geometry(str(path), units="cm").warnings if "units" in w]
+    assert "check --geometry-units (read as cm" in w and "mL cavity" in w

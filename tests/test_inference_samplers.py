@@ -161,3 +161,62 @@ def test_data_passed_to_the_compiled_sampler_give_the_same_draws():
     assert np.max(np.abs(draws(samplers.pmap_vmap(1), y2) - ref) / ref) > 1e-2
     call, model_args = samplers._with_dynamic_model_args(lambda m: m)  # not numpyro's layout: passed through
     assert model_args is None and call(7, None) == 7
+
+
+def _chapter_forwards():
+    from lvcore.emulator.forward import load_emulator_forward
+    from lvcore.geometry.scaling import ScaledForward
+
+    f1 = ScaledForward(load_emulator_forward("chapter", [0.5, -0.4, 0.3, -0.2, 0.1]), 1.1)
+    f2 = ScaledForward(load_emulator_forward("chapter", [-1.0, 0.2, 0.0, 0.6, -0.3]), 0.9)
+    return f1, f2
+
+
+def test_runtime_conditions_compile_one_program_for_every_geometry():
+    """Two geometries (PC scores and scale) of one emulator: the same lowered program, their own outputs."""
+    params = {"a": 0.8, "b": 4.0, "af": 1.2, "bf": 6.0}
+    texts = []
+    for fwd in _chapter_forwards():
+        template, values = samplers.runtime_conditions(fwd)
+        assert values is not None and template.input_names == fwd.input_names
+        assert template.input_bounds == fwd.input_bounds
+        fn = jax.jit(lambda v, p, t=template: t.bind(v)(p))
+        np.testing.assert_allclose(np.asarray(fn(values, params)), np.asarray(fwd(params)), rtol=1e-12, atol=1e-12)
+        texts.append(fn.lower(values, params).as_text())
+    assert texts[0] == texts[1]
+    plain = AnalyticForward()  # not an emulator: kept as it is, constants compiled in
+    assert samplers.runtime_conditions(plain) == (plain, None)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model_name, warmup, draws, rtol", [("iid", 40, 30, 1e-3), ("discrepancy", 10, 10, 1e-6)])
+def test_runtime_conditions_draw_what_compiled_in_conditions_draw(model_name, warmup, draws, rtol):
+    """Run-time conditions give the chains that compiled-in conditions give, up to rounding (which the
+    Gibbs sampler's two NUTS blocks per sweep amplify: 5e-9 after 20 sweeps, above 1e-3 after 70)."""
+    from lvcore.geometry.scaling import ScaledForward
+
+    fwd = _chapter_forwards()[0]
+    y = np.asarray(fwd({"a": 0.8, "b": 4.0, "af": 1.2, "bf": 6.0})) + 0.01
+    cfg = samplers.SamplerConfig(num_warmup=warmup, num_samples=draws, num_chains=2, seed=1,
+                                 chain_method="vectorized")
+    new = samplers.run_model(model_name, y, fwd, cfg)
+    opaque = ScaledForward(fwd, 1.0)  # a wrapper runtime_conditions does not look into: conditions compiled in
+    assert samplers.runtime_conditions(opaque)[1] is None
+    old = samplers.run_model(model_name, y, opaque, cfg)
+    assert "conditions" in new.run_kwargs and "conditions" not in old.run_kwargs
+    np.testing.assert_allclose(new.samples["a"], old.samples["a"], rtol=rtol)
+    np.testing.assert_allclose(new.samples["eta"], old.samples["eta"], rtol=rtol, atol=1e-9)
+
+
+def test_gibbs_block4_potential_with_runtime_conditions():
+    """The HMC-within-Gibbs main block's potential at run-time conditions equals the compiled-in one."""
+    from lvcore.geometry.scaling import ScaledForward
+
+    fwd = _chapter_forwards()[1]
+    y = jnp.asarray(np.asarray(fwd({"a": 0.8, "b": 4.0, "af": 1.2, "bf": 6.0})) + 0.01)
+    new, old = samplers.PolarGPGibbs(fwd, y), samplers.PolarGPGibbs(ScaledForward(fwd, 1.0), y)
+    assert new.conditions is not None and old.conditions is None
+    chol = kernels.gram_cholesky({"lam": 0.9, "sigma1_sq": 2e-3, "sigma2_sq": 1e-3, "c": 1.5, "tau": 6.0})
+    u = {"a": 0.1, "b": 0.2, "af": -0.1, "bf": 0.3, "disc_tilde": jnp.full(24, 0.1), "v": jnp.asarray(0.01)}
+    pe_new = jax.jit(lambda c: new._main_potential_gen(1e-3, chol, y, c)(u))(new.conditions)
+    assert float(pe_new) == pytest.approx(float(old._main_potential_gen(1e-3, chol, y)(u)), rel=1e-12)

@@ -183,3 +183,21 @@ def test_study_pipeline_on_stand_ins(study_mismatched):
     for name in ("strain_predictive.csv", "sigma_s.csv", "errors.csv", "fig_strain_predictive.html",
                  "fig_errors_violin.html"):
         assert (tmp_path / name).is_file()
+
+
+def test_docs_quote_the_shipped_json():
+    """docs/calibration.md's shipped-run block is exactly fd.docs_markdown of the shipped JSON, so every
+    number it quotes comes from assets/studies/fibre_discrepancy.json; and the shipped run is the current
+    chapter emulator (default mesh, sliding base), reproducible by the documented script."""
+    from pathlib import Path
+
+    from lvcore.studies.results import bundled_studies_dir
+
+    shipped = fd.load(bundled_studies_dir())
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "calibration.md").read_text()
+    assert doc.count(fd.DOCS_BEGIN) == 1 and doc.count(fd.DOCS_END) == 1
+    block = doc.split(fd.DOCS_BEGIN)[1].split(fd.DOCS_END)[0].strip()
+    assert block == fd.docs_markdown(shipped).strip(), "re-run fd.docs_markdown on the shipped JSON into the docs"
+    build = shipped["forward_build"]
+    assert (build["name"], build["resolution"], build["base"]) == ("chapter", "default", "sliding")
+    assert shipped["shipped"]["script"] == "scripts/ship_fibre_discrepancy.py"

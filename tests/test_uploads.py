@@ -133,3 +133,22 @@ def test_surface_uploads_that_crashed_vtk_are_errors_naming_the_file():
                               ("face.obj", hf.far_face_obj(), "vertex 1,000,000,000")):
         out = fit_segmentation("surfaces", ((name, data), ("epi" + name[-4:], data)))
         assert name in out["error"] and words in out["error"] and "/tmp" not in out["error"]
+
+
+def test_an_upload_ten_times_too_large_gets_the_units_warning(tmp_path):
+    """A volume mesh in 0.4 mm units (read as mm, the LV is 2.5x too long): the fitted LV is flagged (issue 28)."""
+    import meshio
+
+    from lvcore.geometry.analytic import DEFAULT_LV
+    from lvcore.geometry.meshing import ellipsoid_tet_mesh
+
+    mm, big = tmp_path / "lv.inp", tmp_path / "lv_big.inp"
+    ellipsoid_tet_mesh(DEFAULT_LV, 6.0, mm)
+    mesh = meshio.read(mm)
+    mesh.points = mesh.points * 2.5
+    meshio.write(big, mesh)
+    ok = fit_segmentation("mesh", (("lv.inp", mm.read_bytes()),))
+    assert not any("units" in w for w in ok["summary"]["warnings"])
+    out = fit_segmentation("mesh", (("lv_big.inp", big.read_bytes()),))
+    (w,) = [w for w in out["summary"]["warnings"] if "units" in w]
+    assert "check the file's units (uploads here are read as mm" in w

@@ -64,6 +64,8 @@ def input_label(name: str) -> str:
 #: session_state key of the values of the shared sidebar (a plain dict, read by every page).
 SHARED = "shared_inputs"
 _BY_MAIN = "_shared_sidebar_by_main"
+#: session_state key of θ as last set in the sidebar (kept while a page hides the θ sliders).
+_THETA = "_shared_theta"
 
 
 def _shared_defaults() -> dict:
@@ -71,12 +73,13 @@ def _shared_defaults() -> dict:
             "subject": None, "emulator": None}
 
 
-def shared_sidebar() -> dict:
+def shared_sidebar(theta: bool = True) -> dict:
     """Render the sidebar shared by every page and return its values (also in ``st.session_state[SHARED]``).
 
     Subject (a bundled SYNTHETIC volunteer), emulator, θ (log-scaled, with units) and EDP. The entry script
     (:mod:`lvcore.app.main`) renders it before the page runs, so the values and the widgets' state are the
-    same on every page.
+    same on every page. ``theta=False`` (a page that does not read θ) hides the θ sliders; their values are
+    kept and come back with the sliders.
     """
     import streamlit as st
 
@@ -100,31 +103,47 @@ def shared_sidebar() -> dict:
                                               else 0,
                                               help="Default emulator of the Emulator and Calibration pages "
                                                    f"(default {DEFAULT_EMULATOR}, as for lvcore calibrate).")
-        for name in ("a", "b", "af", "bf"):
-            values["theta"][name] = theta_slider(name, key=f"shared_{name}")
+        saved = dict(st.session_state.get(_THETA) or values["theta"])
+        if theta:
+            for name in ("a", "b", "af", "bf"):
+                values["theta"][name] = theta_slider(name, saved[name], key=f"shared_{name}")
+            st.session_state[_THETA] = dict(values["theta"])
+        else:
+            values["theta"] = saved
+            st.caption("θ (a, b, a_f, b_f): not used on this page; set it on the Emulator or Fibre angles page.")
         values["edp_mmhg"] = float(st.slider("EDP (mmHg)", 2.0, 30.0, float(conditions.SIMULATOR_DEFAULT_EDP_MMHG), 0.5,
                                              key="shared_edp"))
     st.session_state[SHARED] = values
     return values
 
 
-def render_shared_sidebar() -> dict:
-    """The entry script's call: render the shared sidebar and mark that the pages need not."""
+def shared_start(name: str, shared: dict) -> float | None:
+    """The shared sidebar's value of emulator input ``name`` (θ component or EDP), or ``None`` if it sets none."""
+    if name in shared.get("theta", {}):
+        return float(shared["theta"][name])
+    if name.lower() in ("edp", "edp_mmhg") and shared.get("edp_mmhg") is not None:
+        return float(shared["edp_mmhg"])
+    return None
+
+
+def render_shared_sidebar(theta: bool = True) -> dict:
+    """The entry script's call: render the shared sidebar (θ sliders only if ``theta``) and mark that the pages
+    need not."""
     import streamlit as st
 
     st.session_state[_BY_MAIN] = True
-    return shared_sidebar()
+    return shared_sidebar(theta)
 
 
-def shared_inputs() -> dict:
+def shared_inputs(theta: bool = True) -> dict:
     """For a page: the shared sidebar's values; renders the sidebar itself when the page runs on its own
     (``streamlit run`` of one page, AppTest), so every page works with and without the navigation."""
     import streamlit as st
 
     if st.session_state.get(_BY_MAIN) and SHARED in st.session_state:
         return st.session_state[SHARED]
-    return shared_sidebar()
+    return shared_sidebar(theta)
 
 
 __all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label", "SHARED",
-           "shared_sidebar", "render_shared_sidebar", "shared_inputs"]
+           "shared_sidebar", "render_shared_sidebar", "shared_inputs", "shared_start"]

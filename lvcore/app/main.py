@@ -24,7 +24,9 @@ def main() -> None:
     pg = st.navigation(pages)
     from lvcore.app.controls import render_shared_sidebar
 
-    render_shared_sidebar()  # subject, emulator, θ, EDP: one sidebar, one state, every page
+    page = next((p for p in PAGES if p.title == pg.title), None)
+    # subject, emulator, θ (only where the page reads it), EDP: one sidebar, one state, every page
+    render_shared_sidebar(theta=page is None or page.uses_theta)
     pg.run()
 
 

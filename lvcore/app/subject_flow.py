@@ -43,6 +43,10 @@ GEOMETRY_TYPES = ("vtu", "vtk", "msh", "inp", "npy", "npz", "json", "csv")
 DATA_TYPES = ("csv", "json", "mat", "txt")
 
 
+#: The My-subject page's control for a volume mesh's length units, named by the wrong-units warning.
+UNITS_CONTROL = "the 'Mesh length units' choice"
+
+
 def read_geometry(session, name: str, data: bytes, *, n_pc: int = 5, units: str = "mm"):
     """The PC scores and scale of an uploaded geometry, as ``lvcore calibrate --geometry FILE`` reads it.
 
@@ -70,7 +74,8 @@ def read_geometry(session, name: str, data: bytes, *, n_pc: int = 5, units: str 
     """
     from lvcore.inference import guards
 
-    return session.read(name, data, lambda path: guards.resolve_geometry(path, n_pc=n_pc, units=units),
+    return session.read(name, data, lambda path: guards.resolve_geometry(path, n_pc=n_pc, units=units,
+                                                                          units_option=UNITS_CONTROL),
                         slot="geometry")
 
 

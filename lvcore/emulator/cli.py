@@ -130,7 +130,7 @@ def parse_architectures(text: str) -> tuple[tuple[int, int], ...]:
 
 
 def _train(args) -> int:
-    from lvcore.emulator.io import save_emulator
+    from lvcore.emulator.io import provenance_path, save_emulator
     from lvcore.emulator.training import load_store_data, train_emulator
 
     data = load_store_data(args.stores, args.inputs)
@@ -158,7 +158,9 @@ def _train(args) -> int:
           f"{data.n_inconsistent} inconsistent rows excluded), validating on {xv.shape[0]}; inputs {list(data.input_names)}")
     emu = train_emulator(x, y, xv, yv, input_names=data.input_names, name=name, lower=data.lower, upper=data.upper,
                          fixed=data.fixed, config=config, x_test=xt, y_test=yt,
-                         source={**data.info, "n_failed_excluded": data.n_failed,
+                         source={**data.info, "stores": [provenance_path(p, args.out) for p in data.info["stores"]],
+                                 "paths_relative_to": "the emulator folder (--out); a store outside it by its file name",
+                                 "n_failed_excluded": data.n_failed,
                                  "n_inconsistent_excluded": data.n_inconsistent}, log=print,
                          workers=args.workers)
     pred_x, pred_y = (xt, yt) if xt is not None else (xv, yv)

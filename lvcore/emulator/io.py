@@ -229,6 +229,19 @@ def _resolve_subject_geometry(meta: dict, directory: Path) -> None:
     meta["subject"] = {**sub, "geometry": geo}
 
 
+def provenance_path(path: str | Path, folder: str | Path) -> str:
+    """``path`` as metadata records it: relative to ``folder`` (POSIX separators), or by its file name alone when
+    it lies outside ``folder``, so an emulator's metadata never records a path of the machine that built it.
+
+    ``scripts/build_emulators.py`` records its stores relative to the build folder, ``lvcore emulator train``
+    relative to the emulator's folder (``--out``).
+    """
+    try:
+        return Path(path).resolve().relative_to(Path(folder).resolve()).as_posix()
+    except ValueError:
+        return Path(path).name
+
+
 def save_training_data(out_dir: str | Path, sets: dict) -> Path:
     """Ship the converged campaign rows an emulator was trained on: ``training_data.npz``.
 

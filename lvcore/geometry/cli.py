@@ -24,7 +24,7 @@ from lvcore.geometry.measures import geometry_info
 
 
 def _fit(args) -> int:
-    from lvcore.geometry.fitting import fit_contours, fit_surfaces
+    from lvcore.geometry.fitting import fit_contours, fit_surfaces, units_warnings
     from lvcore.geometry.io import write_template_mesh
 
     given = [n for n, v in (("CONTOURS.json", args.contours), ("--endo/--epi", args.endo or args.epi),
@@ -55,7 +55,7 @@ def _fit(args) -> int:
         meta = {"label": res.label, "residual_mean_mm": f"{res.residual_mean_mm:.4f}"}
         out = write_template_mesh(args.out, res.nodes, metadata=meta)
     summary = {**(mesh_fit.summary() if mesh_fit else res.summary()), "out": str(out) if out else None}
-    summary["warnings"] = list(summary.get("warnings", [])) + units_warnings(res, args.units)
+    summary["warnings"] = list(summary.get("warnings", [])) + units_warnings(res, args.units, "--units")
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
@@ -77,19 +77,6 @@ def _fit(args) -> int:
         if out:
             print(f"  wrote {out}  (use it as {{\"geometry\": {{\"kind\": \"mesh\", \"path\": \"{out}\"}}}})")
     return 0
-
-
-def units_warnings(res, units: str) -> list[str]:
-    """Warnings naming ``--units`` when a fitted LV is larger than any real one (wrong units)."""
-    from lvcore import limits
-
-    out = []
-    if res.cavity_volume_ml > limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML or res.length_mm > limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM:
-        out.append(f"the fitted LV has a {res.cavity_volume_ml:,.0f} mL cavity and is {res.length_mm:.0f} mm long, "
-                   f"more than a real LV (> {limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML:.0f} mL or "
-                   f"> {limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM:.0f} mm): check --units (read as {units}; a mm file "
-                   "read with --units cm is 1,000 times too large)")
-    return out
 
 
 def _info(args) -> int:

@@ -130,6 +130,38 @@ class FitResult:
         }
 
 
+def units_warnings(res, units: str = "mm", option: str = "--units") -> list[str]:
+    """Warnings naming the units option when a fitted LV is larger than any real one (wrong units).
+
+    The one home of this check: ``lvcore geometry fit`` (``--units``), ``lvcore calibrate --geometry MESH``
+    (``--geometry-units``) and the app's uploads each pass the name of their own units option.
+
+    Parameters
+    ----------
+    res : FitResult
+        Anything with ``cavity_volume_ml`` (mL) and ``length_mm`` (mm).
+    units : str
+        The length units the file was read in (``"mm"``, ``"cm"``, ``"m"``).
+    option : str
+        The option (or control) that sets ``units``, named in the warning.
+
+    Returns
+    -------
+    list of str
+        One warning when the cavity exceeds :data:`lvcore.limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML` or the
+        length exceeds :data:`lvcore.limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM`; empty otherwise.
+    """
+    from lvcore import limits
+
+    if not (res.cavity_volume_ml > limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML
+            or res.length_mm > limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM):
+        return []
+    return [f"the fitted LV has a {res.cavity_volume_ml:,.0f} mL cavity and is {res.length_mm:.0f} mm long, "
+            f"more than a real LV (> {limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML:.0f} mL or "
+            f"> {limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM:.0f} mm): check {option} (read as {units}; a mm file "
+            "read as cm is 1,000 times too large in volume)"]
+
+
 # ----------------------------------------------------------------------------- spherical harmonics
 def _sh_basis(theta, phi, degree: int) -> tuple[np.ndarray, np.ndarray]:
     """Orthonormal real spherical harmonics (n, P) up to ``degree`` and their degrees l (P,).

@@ -86,7 +86,7 @@ def _project(nodes, n_pc: int):
     return res.h, res.scale, res.projection_mse_cm2, res.unscaled_h
 
 
-def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
+def resolve_geometry(spec, n_pc: int = 5, units: str = "mm", units_option: str = "--geometry-units") -> GeometrySource:
     """PC scores for ``--geometry SPEC``: ``mean``, a scores file, a template mesh or a volume mesh.
 
     Raises
@@ -110,7 +110,7 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
 
         return GeometrySource(read_pc_scores(path, n_pc), str(path), "scores", scale=read_scale(path))
     if suffix in VOLUME_MESH_SUFFIXES:
-        return _from_volume_mesh(path, n_pc, units)
+        return _from_volume_mesh(path, n_pc, units, units_option)
     if suffix in (".vtu", ".vtk", ".xdmf"):
         from lvcore.geometry.io import read_template_mesh
 
@@ -118,7 +118,7 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
             nodes = read_template_mesh(path)
         except GeometryError as err:
             if "27-node hexahedra" in str(err) or "points, the template has" in str(err):
-                return _from_volume_mesh(path, n_pc, units)
+                return _from_volume_mesh(path, n_pc, units, units_option)
             raise
         h, scale, mse, raw = _project(nodes, n_pc)
         return GeometrySource(h, str(path), "template-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw)
@@ -131,14 +131,16 @@ def resolve_geometry(spec, n_pc: int = 5, units: str = "mm") -> GeometrySource:
                         f"mesh (.vtu), a volumetric mesh ({', '.join(VOLUME_MESH_SUFFIXES)}, .vtu) or 'mean'")
 
 
-def _from_volume_mesh(path: Path, n_pc: int, units: str) -> GeometrySource:
+def _from_volume_mesh(path: Path, n_pc: int, units: str, units_option: str) -> GeometrySource:
+    from lvcore.geometry.fitting import units_warnings
     from lvcore.geometry.volume_mesh import fit_volume_mesh
 
     res = fit_volume_mesh(path, units=units)
     h, scale, mse, raw = _project(res.fit.nodes, n_pc)
     return GeometrySource(h, str(path), "volume-mesh", projection_mse_cm2=mse, scale=scale, unscaled_scores=raw,
                           fit_residual_mm=float(res.fit.residual_mean_mm),
-                          warnings=tuple(res.boundary.warnings) + tuple(res.fit.warnings))
+                          warnings=tuple(res.boundary.warnings) + tuple(res.fit.warnings)
+                          + tuple(units_warnings(res.fit, units, units_option)))
 
 
 def box_report(values: dict, emulator) -> list[dict]:

@@ -82,6 +82,17 @@ class SamplerConfig:
     progress_bar: bool = False
 
 
+#: The app's default run: 4 chains x (250 warm-up + 500 draws). Chosen by measured ESS per CPU second
+#: (``benchmarks/bench_calibration.py --sweep``, 2 SYNTHETIC data sets, ``chapter`` emulator, docs/calibration.md):
+#: the discrepancy sampler (HMC-within-Gibbs) costs ~5 CPU-ms per chain iteration and gives a bulk ESS of theta
+#: of 0.35-0.7 per draw, so 4 x (1000 + 1000) (43 CPU-s, ESS 2,500-3,000) spends most of the click on draws
+#: nobody needs; 4 x (250 + 500) costs 18 CPU-s and still gives a worst theta ESS of 1,400 (all parameters,
+#: GP hyperparameters included: 395) with R-hat <= 1.01; 250 warm-up iterations gave the same ESS per draw as
+#: 500. The iid model (NUTS, ~1.2 CPU-ms per iteration) gets the same setting. Four chains keep R-hat
+#: meaningful; on 2 cores they run as 4 XLA host devices.
+INTERACTIVE = SamplerConfig(num_warmup=250, num_samples=500, num_chains=4)
+
+
 @dataclass
 class SamplerRun:
     """Output of one sampler call.
@@ -212,6 +223,92 @@ def _collect(mcmc: MCMC, stats_fields: dict) -> tuple[dict, dict]:
     return samples, stats
 
 
+# --------------------------------------------------------------------------- run-time conditions
+class ConditionedForward:
+    """An emulator forward whose bound conditions are read from run-time values, not compiled in.
+
+    :func:`runtime_conditions` splits a forward model into this template and
+    its values (PC scores, EDP, fixed angles, geometry scale). The samplers
+    pass the values as an argument of the compiled sampler, next to the data,
+    so one compiled program serves every subject of an emulator: a new
+    geometry reuses it (in memory, and across processes and app sessions
+    through JAX's persistent compilation cache, :mod:`lvcore.jax_cache`)
+    instead of compiling the sampler again (10-25 CPU-s per model).
+
+    Call :meth:`bind` with the (traced) values to get the forward model.
+    """
+
+    def __init__(self, forward, inner, keys: tuple[str, ...], scaled: bool):
+        self.forward, self._inner, self._keys, self._scaled = forward, inner, tuple(keys), bool(scaled)
+        self.input_names = tuple(forward.input_names)
+        self.label = getattr(forward, "label", type(forward).__name__)
+        self.traceable = True
+
+    @property
+    def input_bounds(self):
+        return self.forward.input_bounds
+
+    def bind(self, values):
+        """The forward model at ``values`` (:func:`runtime_conditions`' second output, possibly traced)."""
+        return _BoundConditions(self, values)
+
+
+class _BoundConditions:
+    """:class:`ConditionedForward` with its values: a traceable forward model (``__call__(params)``)."""
+
+    def __init__(self, template: ConditionedForward, values):
+        self._t, self._v = template, values
+        self.input_names, self.label, self.traceable = template.input_names, template.label, True
+
+    @property
+    def input_bounds(self):
+        return self._t.input_bounds
+
+    def __call__(self, params):
+        t, v = self._t, self._v
+        emu = t._inner.emulator
+        cond = {k: v["conditions"][i] for i, k in enumerate(t._keys)}
+        x = jnp.stack([jnp.asarray(params[n] if n in t._inner.input_names else cond[n], dtype=jnp.float64)
+                       for n in emu.input_names], axis=-1)
+        out = jnp.reshape(emu.apply(x), (N_OUTPUTS,))
+        if t._scaled:
+            from lvcore.geometry.scaling import scale_outputs
+
+            out = scale_outputs(out, v["scale"])
+        return out
+
+
+def runtime_conditions(forward):
+    """``(template, values)`` for passing ``forward``'s conditions at run time, or ``(forward, None)``.
+
+    Recognised: :class:`lvcore.emulator.forward.EmulatorForward` and a
+    :class:`lvcore.geometry.scaling.ScaledForward` around one (the scale
+    becomes a value too). Any other forward model is returned unchanged,
+    its constants compiled in as before.
+    """
+    from lvcore.emulator.forward import EmulatorForward
+    from lvcore.geometry.scaling import ScaledForward
+
+    inner, scale = forward, None
+    if type(forward) is ScaledForward:
+        inner, scale = forward.forward, float(forward.scale)
+    if type(inner) is not EmulatorForward:
+        return forward, None
+    keys = tuple(sorted(inner.conditions))
+    values = {"conditions": jnp.asarray([inner.conditions[k] for k in keys], dtype=jnp.float64).reshape(len(keys))}
+    if scale is not None:
+        values["scale"] = jnp.asarray(scale, dtype=jnp.float64)
+    return ConditionedForward(forward, inner, keys, scale is not None), values
+
+
+def _conditioned_model(model_fn, template, **model_kwargs):
+    """``model_fn`` with its forward model bound from a ``conditions`` argument (see :class:`ConditionedForward`)."""
+    def model(y=None, conditions=None):
+        return model_fn(y, forward=template.bind(conditions), **model_kwargs)
+
+    return model
+
+
 def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(), **model_kwargs) -> SamplerRun:
     """Run NUTS on model ``model_name`` (``volume``, ``iid`` or ``discrepancy`` = joint NUTS).
 
@@ -228,13 +325,20 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
     **model_kwargs
         ``sigma_v``, ``infer_angles`` (and ``nugget`` for the discrepancy model).
     """
-    # the forward model and settings are bound into the model; only the data y is a (dynamic) argument
-    model = partial(models.get_model(model_name), forward=forward, **model_kwargs)
+    # the forward model and settings are bound into the model; the data y and the forward model's conditions
+    # (runtime_conditions: PC scores, EDP, angles, scale) are (dynamic) arguments of the compiled sampler
+    template, values = runtime_conditions(forward)
+    if values is None:
+        model = partial(models.get_model(model_name), forward=forward, **model_kwargs)
+    else:
+        model = _conditioned_model(models.get_model(model_name), template, **model_kwargs)
     kernel = NUTS(model, target_accept_prob=config.target_accept_prob,
                   max_tree_depth=config.max_tree_depth, dense_mass=config.dense_mass)
     mcmc = _mcmc(kernel, config, dynamic_args=True)
     t0 = time.perf_counter()
     run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64))
+    if values is not None:
+        run_kwargs["conditions"] = values
     mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
     samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
     return SamplerRun("nuts", model_name, samples, stats, time.perf_counter() - t0, mcmc, run_kwargs)
@@ -295,6 +399,8 @@ class PolarGPGibbs(MCMCKernel):
     def __init__(self, forward, y=None, *, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
                  nugget: float = kernels.DEFAULT_NUGGET, target_accept_prob: float = 0.8, max_tree_depth: int = 10):
         self.forward = forward
+        # the forward model's conditions are run-time values (runtime_conditions), not compiled in
+        self._template, self.conditions = runtime_conditions(forward)
         self.y = None if y is None else jnp.asarray(y, dtype=jnp.float64)
         if self.y is not None and self.y.shape != (N_OUTPUTS,):
             raise ValueError(f"y must have shape ({N_OUTPUTS},), got {self.y.shape}")
@@ -319,11 +425,17 @@ class PolarGPGibbs(MCMCKernel):
             return -(loglik + logp)
         return potential
 
-    def _main_potential_gen(self, sigma_s2, chol, y):
+    def _forward_at(self, cond):
+        """The forward model with run-time conditions ``cond`` (None: the forward as given)."""
+        return self.forward if cond is None else self._template.bind(cond)
+
+    def _main_potential_gen(self, sigma_s2, chol, y, cond=None):
         """Potential of block 4 over (theta, b_tilde, v) given sigma_S^2 and L."""
+        forward = self._forward_at(cond)
+
         def potential(u):
             params, logp = _constrain(self.theta_priors, u)
-            eta = self.forward(params)
+            eta = forward(params)
             b = chol @ u["disc_tilde"]
             logl = dist.Normal(eta[0], self.sigma_v).log_prob(y[0])
             logl += jnp.sum(dist.Normal(eta[1:] + b + u["v"], jnp.sqrt(sigma_s2)).log_prob(y[1:]))
@@ -331,9 +443,9 @@ class PolarGPGibbs(MCMCKernel):
             return -(logl + logp)
         return potential
 
-    def _sigma_s2_draw(self, key, params, b, v, y):
+    def _sigma_s2_draw(self, key, params, b, v, y, cond=None):
         """Step 1: conjugate inverse-gamma draw of sigma_S^2."""
-        return sigma_s2_conditional(y[1:], self.forward(params)[1:] + b + v).sample(key)
+        return sigma_s2_conditional(y[1:], self._forward_at(cond)(params)[1:] + b + v).sample(key)
 
     @staticmethod
     def _refresh(state, potential):
@@ -342,15 +454,15 @@ class PolarGPGibbs(MCMCKernel):
 
     # --- MCMCKernel API -------------------------------------------------------
     def init(self, rng_key, num_warmup, init_params, model_args, model_kwargs):
-        y = self._data(model_args, model_kwargs)
+        y, cond = self._data(model_args, model_kwargs), self._conditions(model_kwargs)
         if jnp.ndim(rng_key) > 1 or (jnp.ndim(rng_key) == 1 and rng_key.shape[0] != 2):
             # vectorized chains: one key per chain
             if init_params is None:
-                return jax.vmap(lambda k: self._init_one(k, num_warmup, None, y))(rng_key)
-            return jax.vmap(lambda k, p: self._init_one(k, num_warmup, p, y))(rng_key, init_params)
-        return self._init_one(rng_key, num_warmup, init_params, y)
+                return jax.vmap(lambda k: self._init_one(k, num_warmup, None, y, cond))(rng_key)
+            return jax.vmap(lambda k, p: self._init_one(k, num_warmup, p, y, cond))(rng_key, init_params)
+        return self._init_one(rng_key, num_warmup, init_params, y, cond)
 
-    def _init_one(self, rng_key, num_warmup, init_params, y=None):
+    def _init_one(self, rng_key, num_warmup, init_params, y=None, cond=None):
         k_theta, k_hyp, k_bt, k_v, k_s, k_h, k_m, rng_key = jax.random.split(rng_key, 8)
         if init_params is None:
             u_theta = {n: jax.random.uniform(k, (), minval=-2.0, maxval=2.0)
@@ -374,12 +486,12 @@ class PolarGPGibbs(MCMCKernel):
         chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
         b = chol @ b_tilde
         params, _ = _constrain(self.theta_priors, u_theta)
-        sigma_s2 = self._sigma_s2_draw(k_s, params, b, v, y)
+        sigma_s2 = self._sigma_s2_draw(k_s, params, b, v, y, cond)
         common = dict(num_warmup=num_warmup, target_accept_prob=self.target_accept_prob,
                       max_tree_depth=self.max_tree_depth)
         hyper_state = self._hyper_init(u_hyper, model_args=(b,), rng_key=k_h, **common)
         main_state = self._main_init({**u_theta, "disc_tilde": b_tilde, "v": v},
-                                     model_args=(sigma_s2, chol, y), rng_key=k_m, **common)
+                                     model_args=(sigma_s2, chol, y, cond), rng_key=k_m, **common)
         z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": b, "v": v}
         return GibbsState(z, hyper_state, main_state, jnp.array(False), jnp.array(0), rng_key)
 
@@ -392,19 +504,25 @@ class PolarGPGibbs(MCMCKernel):
             return jnp.asarray(model_kwargs["y"], dtype=jnp.float64)
         return self.y
 
-    def sample(self, state, model_args, model_kwargs):
-        y = self._data(model_args, model_kwargs)
-        if jnp.ndim(state.rng_key) > 1:  # vectorized chains
-            return jax.vmap(lambda s: self._sample_one(s, y))(state)
-        return self._sample_one(state, y)
+    def _conditions(self, model_kwargs=None):
+        """Run-time conditions from ``MCMC.run(key, y=y, conditions=...)``, else the forward model's own."""
+        if model_kwargs and model_kwargs.get("conditions") is not None:
+            return model_kwargs["conditions"]
+        return self.conditions
 
-    def _sample_one(self, state, y):
+    def sample(self, state, model_args, model_kwargs):
+        y, cond = self._data(model_args, model_kwargs), self._conditions(model_kwargs)
+        if jnp.ndim(state.rng_key) > 1:  # vectorized chains
+            return jax.vmap(lambda s: self._sample_one(s, y, cond))(state)
+        return self._sample_one(state, y, cond)
+
+    def _sample_one(self, state, y, cond=None):
         rng_key, k_s = jax.random.split(state.rng_key)
         z = state.z
         params = {n: z[n] for n in self.theta_priors}
         b = z["disc"]
         # 1. sigma_S^2 from its conjugate inverse gamma.
-        sigma_s2 = self._sigma_s2_draw(k_s, params, b, z["v"], y)
+        sigma_s2 = self._sigma_s2_draw(k_s, params, b, z["v"], y, cond)
         # 2. NUTS on the GP hyperparameters given b.
         hyper_state = self._refresh(state.hyper_state, self._hyper_potential_gen(b))
         hyper_state = self._hyper_sample(hyper_state, model_args=(b,))
@@ -413,9 +531,9 @@ class PolarGPGibbs(MCMCKernel):
         chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
         b_tilde = solve_triangular(chol, b, lower=True)
         main_state = state.main_state._replace(z={**state.main_state.z, "disc_tilde": b_tilde})
-        main_state = self._refresh(main_state, self._main_potential_gen(sigma_s2, chol, y))
+        main_state = self._refresh(main_state, self._main_potential_gen(sigma_s2, chol, y, cond))
         # 4. NUTS on (theta, b_tilde, v) given sigma_S^2 and L.
-        main_state = self._main_sample(main_state, model_args=(sigma_s2, chol, y))
+        main_state = self._main_sample(main_state, model_args=(sigma_s2, chol, y, cond))
         params, _ = _constrain(self.theta_priors, main_state.z)
         b_tilde = main_state.z["disc_tilde"]
         z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": chol @ b_tilde,
@@ -445,6 +563,8 @@ def run_hmc_gibbs(y, forward, config: SamplerConfig = SamplerConfig(), **model_k
     mcmc = _mcmc(kernel, config, dynamic_args=True)  # y an argument of the compiled sampler, as for NUTS
     t0 = time.perf_counter()
     run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64))
+    if kernel.conditions is not None:  # and the forward model's conditions (runtime_conditions)
+        run_kwargs["conditions"] = kernel.conditions
     mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
     samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
     # eta at every draw (the blocked kernel does not record it as it goes).
@@ -495,4 +615,4 @@ def run_model(model_name: str, y, forward, config: SamplerConfig = SamplerConfig
 
 __all__ = ["SamplerConfig", "SamplerRun", "PolarGPGibbs", "GibbsState", "run_nuts", "run_hmc_gibbs",
            "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap", "pmap_chains",
-           "use_host_devices"]
+           "use_host_devices", "runtime_conditions", "ConditionedForward", "INTERACTIVE"]

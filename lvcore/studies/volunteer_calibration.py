@@ -15,7 +15,7 @@ from lvcore.outputs import THETA_NAMES
 #: The subject of the report's calibration.
 DEFAULT_SUBJECT = "SYNTHETIC-HV3"
 #: Seconds the calibration adds to ``lvcore report`` (JAX compilation included): the range measured on the
-#: 2-core development machine, ``timings_s["calibration posterior"]`` of the manifest (docs/report.md, Timing).
+#: 2-core development machine, ``timings_s["calibration posterior"]`` of the manifest (docs/report.md, Appendix: measured runs).
 TYPICAL_SECONDS = (20, 45)
 #: Figures and tables :func:`figures` draws (for the default subject), with their titles.
 TITLES = {"fig_calibration_posterior": f"Calibration posterior of θ, {DEFAULT_SUBJECT} (prior and truth shown)",

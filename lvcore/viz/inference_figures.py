@@ -22,6 +22,18 @@ from lvcore.viz.figures import SERIES_COLOURS, strain_heatmap, violin
 UNITS = {"a": "kPa", "b": "-", "af": "kPa", "bf": "-", "alpha_endo": "deg", "alpha_epi": "deg",
          "sigma_s2": "strain²", "v": "strain", "c": "rad", "tau": "-", "lam": "levels",
          "sigma1_sq": "strain²", "sigma2_sq": "strain²"}
+#: How parameters are written wherever a user reads them (the same as the θ sliders' labels: a_f, b_f).
+DISPLAY_NAMES = {"af": "a_f", "bf": "b_f", "alpha_endo": "α_endo", "alpha_epi": "α_epi"}
+
+
+def display_name(name: str) -> str:
+    """The user-facing name of parameter ``name`` (``af`` -> ``a_f``, ``bf`` -> ``b_f``; others unchanged)."""
+    return DISPLAY_NAMES.get(str(name), str(name))
+
+
+def display_label(name: str) -> str:
+    """``"a_f (kPa)"``: the user-facing name with the unit of :data:`UNITS`."""
+    return f"{display_name(name)} ({UNITS.get(name, '')})"
 
 
 def _draws(idata, name) -> np.ndarray:
@@ -52,7 +64,7 @@ def trace_figure(idata, var_names=None, *, height_per_var: int = 160) -> go.Figu
     height = max(300, height_per_var * len(names))
     fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True,
                         vertical_spacing=_stack_spacing(len(names), height),
-                        subplot_titles=[f"{n} ({UNITS.get(n, '')})" for n in names])
+                        subplot_titles=[display_label(n) for n in names])
     for i, n in enumerate(names):
         d = _draws(idata, n)
         for c in range(d.shape[0]):
@@ -71,7 +83,7 @@ def rank_figure(idata, var_names=None, *, bins: int = 20, height_per_var: int = 
     names = _scalar_vars(idata, var_names)
     height = max(300, height_per_var * len(names))
     fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True, vertical_spacing=_stack_spacing(len(names), height),
-                        subplot_titles=list(names))
+                        subplot_titles=[display_name(n) for n in names])
     for i, n in enumerate(names):
         d = _draws(idata, n)
         ranks = rankdata(d.reshape(-1)).reshape(d.shape)
@@ -102,11 +114,11 @@ def pair_figure(idata, var_names=THETA_NAMES, *, max_points: int = 1500, truth: 
     m = len(next(iter(flat.values())))
     idx = np.linspace(0, m - 1, min(m, max_points)).astype(int)
     fig = go.Figure(go.Splom(
-        dimensions=[dict(label=f"{n} ({UNITS.get(n, '')})", values=flat[n][idx]) for n in names],
+        dimensions=[dict(label=display_label(n), values=flat[n][idx]) for n in names],
         marker=dict(size=3, opacity=0.4, color=SERIES_COLOURS[0]), diagonal_visible=False, showupperhalf=False,
         name="posterior"))
     if truth:
-        fig.add_trace(go.Splom(dimensions=[dict(label=f"{n} ({UNITS.get(n, '')})", values=[truth[n]]) for n in names],
+        fig.add_trace(go.Splom(dimensions=[dict(label=display_label(n), values=[truth[n]]) for n in names],
                                marker=dict(size=10, color="red", symbol="x"), diagonal_visible=False,
                                showupperhalf=False, name="truth"))
     fig.update_layout(title="Posterior pair plot", height=650, margin=dict(l=10, r=10, t=50, b=10))
@@ -204,5 +216,5 @@ def write_html(fig: go.Figure, path) -> Path:
     return path
 
 
-__all__ = ["trace_figure", "rank_figure", "diagnostics_table", "pair_figure", "predictive_density_figure",
+__all__ = ["DISPLAY_NAMES", "display_name", "display_label", "trace_figure", "rank_figure", "diagnostics_table", "pair_figure", "predictive_density_figure",
            "discrepancy_figure", "sigma_s_figure", "strain_predictive_figure", "error_violin_figure", "write_html"]

@@ -271,10 +271,13 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
     truth : dict name -> float, optional
         The generating value of a SYNTHETIC subject (red dashed line).
     """
+    from lvcore.viz.inference_figures import display_name
+
     names = list(draws)
     units = units or {}
     fig = make_subplots(rows=1, cols=len(names),
-                        subplot_titles=[f"{n} ({units.get(n, '-')})" for n in names], horizontal_spacing=0.05)
+                        subplot_titles=[f"{display_name(n)} ({units.get(n, '-')})" for n in names],
+                        horizontal_spacing=0.05)
     for j, n in enumerate(names):
         d = np.asarray(draws[n], dtype=float).ravel()
         lo, hi = bounds[n]
@@ -285,7 +288,8 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
                         showlegend=j == 0, row=1, col=j + 1)
         if truth and n in truth:
             fig.add_vline(x=float(truth[n]), line=dict(color="red", dash="dash", width=2), row=1, col=j + 1)
-        fig.update_xaxes(range=[lo, hi], title_text=f"{n} ({units.get(n, '-')})", row=1, col=j + 1)
+        fig.update_xaxes(range=[lo, hi], title_text=f"{display_name(n)} ({units.get(n, '-')})", row=1,
+                         col=j + 1)
     if truth:
         fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="truth (SYNTHETIC)")
     fig.update_yaxes(title_text="density", col=1)
