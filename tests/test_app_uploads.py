@@ -117,14 +117,12 @@ def test_two_sessions_keep_their_own_uploads(calibration_page):
     assert any("LVV = 180.0" in m.value for m in b.markdown)
 
 
-def test_two_sessions_calibrating_at_once_keep_their_own_data(calibration_page, monkeypatch):
-    """Both sessions start a (stand-in) calibration; each result is computed from its own upload."""
+def _stand_in_calibration(monkeypatch, seen: list | None = None, delay_s: float = 0.0) -> None:
+    """Replace the sampler by a stand-in whose posterior of ``a`` is the measured LVV (records it in ``seen``)."""
     import arviz as az
     import pandas as pd
 
     from lvcore.inference import calibrate as cal
-
-    seen = []
 
     class Conv:
         converged = True
@@ -133,13 +131,20 @@ def test_two_sessions_calibrating_at_once_keep_their_own_data(calibration_page, 
             return "converged (stand-in)"
 
     def stand_in(y, forward, model, **kw):
-        seen.append(float(y[0]))
-        time.sleep(0.5)  # overlap the two runs
+        if seen is not None:
+            seen.append(float(y[0]))
+        time.sleep(delay_s)
         idata = az.from_dict(posterior={"a": np.full((1, 20), y[0])}, observed_data={"y": np.asarray(y)})
         return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
                                      {"min": 1.0})
 
     monkeypatch.setattr(cal, "calibrate", stand_in)
+
+
+def test_two_sessions_calibrating_at_once_keep_their_own_data(calibration_page, monkeypatch):
+    """Both sessions start a (stand-in) calibration; each result is computed from its own upload."""
+    seen = []
+    _stand_in_calibration(monkeypatch, seen, delay_s=0.5)  # overlap the two runs
     sessions = {}
     for lvv in (120.0, 180.0):
         at = calibration_page()
@@ -216,23 +221,7 @@ def test_case_box_applies_the_case_file_limits(tmp_path):
 
 def test_pc_scores_outside_the_emulator_box_are_flagged_on_the_page(calibration_page, monkeypatch):
     """The CLI refuses scores outside the training box; the page runs but records and shows the extrapolation."""
-    import arviz as az
-    import pandas as pd
-
-    from lvcore.inference import calibrate as cal
-
-    class Conv:
-        converged = True
-
-        def message(self):
-            return "converged (stand-in)"
-
-    def stand_in(y, forward, model, **kw):
-        idata = az.from_dict(posterior={"a": np.full((1, 20), y[0])}, observed_data={"y": np.asarray(y)})
-        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
-                                     {"min": 1.0})
-
-    monkeypatch.setattr(cal, "calibrate", stand_in)
+    _stand_in_calibration(monkeypatch)
     jobs = {}
     for h1 in (0.0, 2.5):
         at = calibration_page()
@@ -249,23 +238,7 @@ def test_pc_scores_outside_the_emulator_box_are_flagged_on_the_page(calibration_
 
 def test_calibration_page_takes_the_edp_from_the_data_and_shows_it(calibration_page, monkeypatch):
     """edp_mmhg in the upload: used and recorded (8 with the fixed-EDP 'chapter'); a different one is refused."""
-    import arviz as az
-    import pandas as pd
-
-    from lvcore.inference import calibrate as cal
-
-    class Conv:
-        converged = True
-
-        def message(self):
-            return "converged (stand-in)"
-
-    def stand_in(y, forward, model, **kw):
-        idata = az.from_dict(posterior={"a": np.full((1, 20), y[0])}, observed_data={"y": np.asarray(y)})
-        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
-                                     {"min": 1.0})
-
-    monkeypatch.setattr(cal, "calibrate", stand_in)
+    _stand_in_calibration(monkeypatch)
     for edp, ok in ((8.0, True), (11.0, False)):
         at = calibration_page()
         csv = (HEADER + ",edp_mmhg\nS1,140," + ",".join(["-0.15"] * 24) + f",{edp}\n").encode()
