@@ -151,7 +151,7 @@ if stored is not None:
             getattr(st, "success" if record["converged_cleanly"] else "warning")(
                 f"{MODEL_LABELS[run.model]}: {record['convergence']}")
             for flag in run.check.flags:
-                st.warning(f"{MODEL_LABELS[run.model]}: the data look implausible for this model: {flag}")
+                st.warning(f"{MODEL_LABELS[run.model]}: flagged: {flag}")
             st.dataframe(run.result.summary.rename(index=display_name), width="stretch")
         for name, fig in stored.result["figures"].items():
             st.plotly_chart(fig, width="stretch", key=f"my_fig_{name}")

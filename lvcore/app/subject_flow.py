@@ -188,7 +188,9 @@ def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = 
 
 @dataclass(frozen=True)
 class ModelRun:
-    """One likelihood's calibration result and its posterior-predictive plausibility check."""
+    """One likelihood's calibration result and its verdict (:class:`lvcore.inference.verdict.Verdict`: the
+    subject's consistency with the best-fitting model, shared by every likelihood, plus this run's
+    identifiability and sampler flags), as ``lvcore calibrate`` reports them."""
 
     model: str
     result: Any
@@ -198,18 +200,20 @@ class ModelRun:
 def calibrate(subject: str, y, prepared: Prepared, models: Sequence[str], *, config=None,
               sigma_v: float | None = None, progress: Callable[[str, float], None] | None = None,
               on_result: Callable[[ModelRun], None] | None = None) -> list[ModelRun]:
-    """Calibrate each likelihood in ``models`` for one subject and check each result's plausibility."""
+    """Calibrate each likelihood in ``models`` for one subject and give each result the CLI's verdict."""
     from lvcore.conditions import SIGMA_V_ML
     from lvcore.inference import calibrate as cal
-    from lvcore.inference.plausibility import check_result
+    from lvcore.inference import verdict
     from lvcore.inference.samplers import SamplerConfig
 
     sigma_v = SIGMA_V_ML if sigma_v is None else float(sigma_v)
     y = np.asarray(y, float)
+    consistency = verdict.consistency_check(y, prepared.forward, sigma_v)  # one per subject, whichever model runs
+    bounds = verdict.checked_bounds(prepared.forward)
     runs: list[ModelRun] = []
 
     def finish(item):
-        run = ModelRun(item.model, item.result, check_result(item.result, y, sigma_v))
+        run = ModelRun(item.model, item.result, verdict.run_verdict(item.result, consistency, bounds))
         runs.append(run)
         if on_result is not None:
             on_result(run)
@@ -255,11 +259,12 @@ def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence
         models[run.model] = {
             "convergence": text, "converged_cleanly": level == "success",
             "plausible": bool(run.check.plausible), "flags": list(run.check.flags),
+            "verdict": run.check.record(),
             "wall_s": float(run.result.wall_s),
             "posterior": {str(k): {c: float(table.loc[k, c]) for c in table.columns
                                    if np.issubdtype(type(table.loc[k, c]), np.number)} for k in table.index},
         }
-    flagged = [m for m, r in models.items() if not (r["plausible"] and r["converged_cleanly"])]
+    flagged = [m for m, r in models.items() if r["flags"] or not r["converged_cleanly"]]
     return {
         "subject": subject, "synthetic": str(subject).upper().startswith("SYNTHETIC"),
         "measured": {"lvv_ml": float(y[0]), "strains": [float(v) for v in np.asarray(y)[1:]]},
