@@ -123,19 +123,17 @@ def _stand_in_calibration(monkeypatch, seen: list | None = None, delay_s: float 
     import pandas as pd
 
     from lvcore.inference import calibrate as cal
+    from lvcore.inference.diagnostics import Convergence
 
-    class Conv:
-        converged = True
-
-        def message(self):
-            return "converged (stand-in)"
+    conv = Convergence(converged=True, max_rhat=1.0, min_ess_bulk=4000.0, min_ess_tail=4000.0, n_divergent=0,
+                       failing=())  # a clean run, so the page renders its whole results block
 
     def stand_in(y, forward, model, **kw):
         if seen is not None:
             seen.append(float(y[0]))
         time.sleep(delay_s)
         idata = az.from_dict(posterior={"a": np.full((1, 20), y[0])}, observed_data={"y": np.asarray(y)})
-        return cal.CalibrationResult(model, "nuts", idata, Conv(), pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
+        return cal.CalibrationResult(model, "nuts", idata, conv, pd.DataFrame({"mean": [y[0]]}, index=["a"]), 0.5,
                                      {"min": 1.0})
 
     monkeypatch.setattr(cal, "calibrate", stand_in)
@@ -238,7 +236,9 @@ def test_pc_scores_outside_the_emulator_box_are_flagged_on_the_page(calibration_
 
 def test_calibration_page_takes_the_edp_from_the_data_and_shows_it(calibration_page, monkeypatch):
     """edp_mmhg in the upload: used and recorded (8 with the fixed-EDP 'chapter'); a different one is refused."""
-    _stand_in_calibration(monkeypatch)
+    # the stand-in outlasts the click's rerun: this test checks what the job records when it starts, not the results
+    # block (a stand-in posterior is too thin for it, and a fast machine could finish first)
+    _stand_in_calibration(monkeypatch, delay_s=5.0)
     for edp, ok in ((8.0, True), (11.0, False)):
         at = calibration_page()
         csv = (HEADER + ",edp_mmhg\nS1,140," + ",".join(["-0.15"] * 24) + f",{edp}\n").encode()
