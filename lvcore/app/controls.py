@@ -39,8 +39,13 @@ def theta_slider(name: str, value: float | None = None, *, key: str | None = Non
     import streamlit as st
 
     lo, hi = THETA_RANGES[name]
-    value = float(conditions.THETA_TILDE[name] if value is None else value)
     where = container if container is not None else st
+    if value is None and key is not None and key in st.session_state:
+        # the value lives in the widget's state: fixed options and no default, so the widget keeps its identity
+        # (a default or options that change between reruns make Streamlit remount it and drop a key press)
+        options = log_options(lo, hi, float(conditions.THETA_TILDE[name]))
+        return where.select_slider(THETA_LABELS[name], options=options, key=key, help=THETA_HELP[name])
+    value = float(conditions.THETA_TILDE[name] if value is None else value)
     return where.select_slider(THETA_LABELS[name], options=log_options(lo, hi, value), value=value, key=key,
                                help=THETA_HELP[name])
 
@@ -106,7 +111,12 @@ def shared_sidebar(theta: bool = True) -> dict:
         saved = dict(st.session_state.get(_THETA) or values["theta"])
         if theta:
             for name in ("a", "b", "af", "bf"):
-                values["theta"][name] = theta_slider(name, saved[name], key=f"shared_{name}")
+                key = f"shared_{name}"
+                if key not in st.session_state:  # first shown, or shown again after a page that hid it
+                    lo, hi = THETA_RANGES[name]
+                    grid = np.asarray(log_options(lo, hi, float(conditions.THETA_TILDE[name])))
+                    st.session_state[key] = float(grid[np.argmin(np.abs(np.log(grid / float(saved[name]))))])
+                values["theta"][name] = theta_slider(name, key=key)
             st.session_state[_THETA] = dict(values["theta"])
         else:
             values["theta"] = saved
