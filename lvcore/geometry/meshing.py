@@ -86,18 +86,9 @@ def ellipsoid_tet_mesh(lv, size_mm: float, path=None, rotation=None, shift=None,
         gmsh.model.remove() if gmsh.isInitialized() else None
         if initialised_here:
             gmsh.finalize()
-    pts = np.asarray(coords, float).reshape(-1, 3)
-    index = np.full(int(np.max(node_tags)) + 1, -1, dtype=np.int64)
-    index[np.asarray(node_tags, dtype=np.int64)] = np.arange(len(node_tags))
-    nper = 4 if order == 1 else 10
-    cells = index[np.asarray(enodes, dtype=np.int64)].reshape(-1, nper)
-    if order == 2:
-        # gmsh tetra10 edge order (01, 12, 20, 30, 32, 31) -> VTK/meshio (01, 12, 20, 30, 31, 32)
-        cells = cells[:, [0, 1, 2, 3, 4, 5, 6, 7, 9, 8]]
-    used = np.unique(cells)
-    remap = np.full(len(pts), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    pts, cells = pts[used], remap[cells]
+    # gmsh tetra10 edge order (01, 12, 20, 30, 32, 31) -> VTK/meshio (01, 12, 20, 30, 31, 32)
+    pts, cells = gmsh_cells(node_tags, coords, enodes, 4 if order == 1 else 10,
+                            None if order == 1 else [0, 1, 2, 3, 4, 5, 6, 7, 9, 8])
     if rotation is not None:
         pts = pts @ np.asarray(rotation, float).T
     if shift is not None:
@@ -114,4 +105,19 @@ def ellipsoid_tet_mesh(lv, size_mm: float, path=None, rotation=None, shift=None,
     return mesh
 
 
-__all__ = ["ellipsoid_tet_mesh"]
+__all__ = ["ellipsoid_tet_mesh", "gmsh_cells"]
+
+
+def gmsh_cells(node_tags, coords, element_nodes, nodes_per_cell: int, reorder=None) -> tuple[np.ndarray, np.ndarray]:
+    """Points (n, 3) and cells (m, ``nodes_per_cell``) from gmsh's node tags and element node tags, keeping only
+    the nodes the cells use (0-based, compact); ``reorder`` permutes each cell's nodes (e.g. gmsh -> VTK order)."""
+    pts = np.asarray(coords, float).reshape(-1, 3)
+    index = np.full(int(np.max(node_tags)) + 1, -1, dtype=np.int64)
+    index[np.asarray(node_tags, dtype=np.int64)] = np.arange(len(node_tags))
+    cells = index[np.asarray(element_nodes, dtype=np.int64)].reshape(-1, nodes_per_cell)
+    if reorder is not None:
+        cells = cells[:, reorder]
+    used = np.unique(cells)
+    remap = np.full(len(pts), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return pts[used], remap[cells]

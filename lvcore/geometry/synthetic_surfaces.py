@@ -163,14 +163,10 @@ class SyntheticSurfacePair:
             gmsh.model.remove() if gmsh.isInitialized() else None
             if own:
                 gmsh.finalize()
-        xyz = np.asarray(coords, float).reshape(-1, 3)
-        index = np.full(int(np.max(tags)) + 1, -1, dtype=np.int64)
-        index[np.asarray(tags, dtype=np.int64)] = np.arange(len(tags))
-        cells = index[np.asarray(enodes, dtype=np.int64)].reshape(-1, 4)
-        used = np.unique(cells)
-        remap = np.full(len(xyz), -1, dtype=np.int64)
-        remap[used] = np.arange(len(used))
-        return meshio.Mesh(xyz[used], [("tetra", remap[cells])])
+        from lvcore.geometry.meshing import gmsh_cells
+
+        xyz, cells = gmsh_cells(tags, coords, enodes, 4)
+        return meshio.Mesh(xyz, [("tetra", cells)])
 
     def polydata(self, which: str):
         """The endo or epi surface as a ``pyvista.PolyData``."""
