@@ -238,7 +238,7 @@ def _diagnostics(draws: dict, names) -> tuple[np.ndarray, np.ndarray | None]:
     return ess, rhat
 
 
-def fit_datasets(forward, ys, conditions, truths, eta_trues, *, config, keys) -> dict:
+def fit_datasets(forward, ys, conditions, truths, eta_trues, *, config, keys, models=MODELS) -> dict:
     """Calibrate the data sets ``ys`` (n, 25) with the three likelihoods in one vmapped run each.
 
     Parameters
@@ -257,6 +257,8 @@ def fit_datasets(forward, ys, conditions, truths, eta_trues, *, config, keys) ->
         The emulator at the true θ and the data set's geometry.
     config : SamplerConfig
     keys : jax PRNG keys, shape (n, 2)
+    models : sequence of str
+        Likelihoods to run (default all three).
 
     Returns
     -------
@@ -280,7 +282,8 @@ def fit_datasets(forward, ys, conditions, truths, eta_trues, *, config, keys) ->
         cond_arg = conditions = np.asarray(conditions, dtype=float)
     truths, eta_trues = np.asarray(truths, dtype=float), np.asarray(eta_trues, dtype=float)
     out = {}
-    for j, m in enumerate(MODELS):
+    for m in models:
+        j = MODELS.index(m)
         sites = list(THETA_NAMES) + (["sigma_s2"] if m != "volume" else [])
         mkeys = jax.vmap(lambda k: jax.random.fold_in(k, j))(keys)
         d = coverage.batched_posteriors(forward, m, ys, mkeys, config, SIGMA_V_ML, sites=sites, group_by_chain=True,
