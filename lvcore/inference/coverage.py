@@ -143,24 +143,53 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
     models.check_traceable(forward)
     ys = jnp.asarray(ys, dtype=jnp.float64)
     n = ys.shape[0]
-    template = None
+    key = (id(forward), model_name, config, float(sigma_v), tuple(sites), conditions is not None)
+    hit = _COMPILED.get(key)
+    if hit is not None and hit[0] is forward:  # the same sampler again (another batch): no new trace/compile
+        run = hit[1]
+    else:
+        run = _batched_sampler(forward, model_name, ys[0], config, sigma_v, sites, conditions is not None)
+        if len(_COMPILED) >= 8:
+            _COMPILED.pop(next(iter(_COMPILED)))
+        _COMPILED[key] = (forward, run)
     if conditions is not None:
         template, values = samplers.runtime_conditions(forward)
-        if values is None or "scale" in values:
-            raise ValueError("per-data-set conditions need an emulator forward model without a geometry scale")
         conds = jnp.asarray(conditions, dtype=jnp.float64).reshape(n, -1)
         if conds.shape[1] != values["conditions"].shape[0]:
             raise ValueError(f"conditions must have shape ({n}, {values['conditions'].shape[0]}) "
                              f"({', '.join(template._keys)}), got {tuple(jnp.shape(conditions))}")
-        cond_of = lambda c: {"conditions": c}  # noqa: E731
     else:
         conds = jnp.zeros((n, 0))
+    chain_keys = jax.vmap(lambda k: jax.random.split(k, config.num_chains))(keys)
+    flat_keys = chain_keys.reshape((n * config.num_chains,) + chain_keys.shape[2:])
+    flat_y = jnp.repeat(ys, config.num_chains, axis=0)
+    flat_c = jnp.repeat(conds, config.num_chains, axis=0)
+    draws = run(flat_keys, flat_y, flat_c)
+    shape = (n, config.num_chains, config.num_samples) if group_by_chain else (n, -1)
+    return {k: np.asarray(v).reshape(shape + np.shape(v)[2:]) for k, v in draws.items()}
+
+
+#: Jitted batched samplers by (forward model, likelihood, settings): a second batch reuses the first one's
+#: trace and compilation (a new closure per call would be traced and compiled again).
+_COMPILED: dict = {}
+
+
+def _batched_sampler(forward, model_name, y0, config, sigma_v, sites, with_conditions: bool):
+    """The jitted ``(keys, ys, conditions) -> draws`` of :func:`batched_posteriors`, vmapped over chains."""
+    template = None
+    if with_conditions:
+        template, values = samplers.runtime_conditions(forward)
+        if values is None or "scale" in values:
+            raise ValueError("per-data-set conditions need an emulator forward model without a geometry scale")
+        cond_of = lambda c: {"conditions": c}  # noqa: E731
+        c0 = values["conditions"]
+    else:
         cond_of = lambda c: None  # noqa: E731
+        c0 = None
     if model_name == "discrepancy":
         init, sample, constrain = _gibbs_fns(forward, sigma_v, config)
     else:
-        init, sample, constrain = _nuts_fns(model_name, forward, sigma_v, config, ys[0], template,
-                                            cond_of(conds[0]))
+        init, sample, constrain = _nuts_fns(model_name, forward, sigma_v, config, y0, template, cond_of(c0))
     total = config.num_warmup + config.num_samples
 
     def one_chain(key, y, cv):
@@ -175,13 +204,7 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
         _, draws = jax.lax.scan(body, state, None, length=total)
         return {k: v[config.num_warmup:] for k, v in draws.items()}
 
-    chain_keys = jax.vmap(lambda k: jax.random.split(k, config.num_chains))(keys)
-    flat_keys = chain_keys.reshape((n * config.num_chains,) + chain_keys.shape[2:])
-    flat_y = jnp.repeat(ys, config.num_chains, axis=0)
-    flat_c = jnp.repeat(conds, config.num_chains, axis=0)
-    draws = jax.jit(jax.vmap(one_chain))(flat_keys, flat_y, flat_c)
-    shape = (n, config.num_chains, config.num_samples) if group_by_chain else (n, -1)
-    return {k: np.asarray(v).reshape(shape + np.shape(v)[2:]) for k, v in draws.items()}
+    return jax.jit(jax.vmap(one_chain))
 
 
 def coverage_study(forward, model_name: str = "iid", n_datasets: int = 50, *, level: float = 0.9,
