@@ -12,6 +12,7 @@ findings table with verdicts (:func:`lvcore.studies.findings.docs_markdown`).
 Everything in it is SYNTHETIC. From the repository root::
 
     nice python scripts/ship_mismatch.py                 # the shipped run (BENCHMARKS.md: its cost)
+    python scripts/ship_mismatch.py --recorded-only      # ship what --work holds, starting no new fits
     python scripts/ship_mismatch.py --docs-only          # rewrite the docs blocks from the shipped JSON
 
 The full study output goes to ``--work`` (default ``build/study_mismatch``).
@@ -31,7 +32,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 #: The shipped run's settings (see docs/studies.md for why these).
-SHIP = {"volunteers": "HV1,HV5", "seeds": 20, "warmup": 300, "samples": 300, "chains": 2, "batch": 40, "seed": 0,
+SHIP = {"volunteers": "HV1", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40, "seed": 0,
         "resolution": "default", "workers": 2}
 
 
@@ -75,6 +76,8 @@ def main(argv=None) -> int:
     p.add_argument("--dest", default=None, help="shipped JSON (default assets/studies/mismatch.json)")
     p.add_argument("--docs", default="docs/studies.md", help="docs file whose generated blocks to rewrite ('' none)")
     p.add_argument("--docs-only", action="store_true", help="only rewrite the docs blocks from the shipped JSON")
+    p.add_argument("--recorded-only", action="store_true",
+                   help="start no new fits: ship what --work holds (the JSON lists the doses not fitted)")
     args = p.parse_args(argv)
     from lvcore.studies.results import bundled_studies_dir
 
@@ -93,8 +96,10 @@ def main(argv=None) -> int:
     t0 = time.time()
     res = mismatch.run_study(volunteers=args.volunteers.split(","), seeds=args.seeds, config=cfg, seed=args.seed,
                              resolution=args.resolution, workers=args.workers, out=args.work, batch=args.batch,
+                             recorded_only=args.recorded_only,
                              progress=lambda m: print(time.strftime("%H:%M:%S"), m, flush=True))
-    cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k} {getattr(args, k)}" for k in SHIP)
+    cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k} {getattr(args, k)}" for k in SHIP) \
+        + (" --recorded-only" if args.recorded_only else "")
     res.pop("folder", None)
     res["shipped"] = {"script": "scripts/ship_mismatch.py", "command": cmd, "date": time.strftime("%Y-%m-%d"),
                       "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared)",

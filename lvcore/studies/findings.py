@@ -29,7 +29,9 @@ F3    output error: discrepancy ≈ volume      reproduced: the paired differenc
                                               its CI below 0 at every realistic dose
 F5    5/10 PCs no worse than an operator      share of comparisons (PC reconstruction vs each other
       in output space                         operator) no worse, CI by resampling cases; reproduced: CI
-                                              lower end ≥ 0.5; refuted: CI upper end < 0.5
+                                              lower end ≥ 0.5; refuted: CI upper end < 0.5 (per PC
+                                              count; the row's verdict when both agree, else
+                                              "not reproduced")
 F6    freeing the angles cuts the LVV error   paired LVV error fixed − free per volunteer (median, CI
                                               over volunteers); reproduced: CI lower end > 0; refuted:
                                               CI upper end < 0
@@ -178,9 +180,9 @@ def f5_verdict(operators_result) -> dict:
             continue
         per_case = np.array([np.mean(c) for c in cases])
         b = boot(per_case, stat=np.mean)
-        parts.append(f"{pc} no worse in {_ci_text(b, '.2f')} of comparisons ({len(cases)} cases)")
         verdicts.append("reproduced" if b["ci"][0] >= F5_SHARE else "refuted" if b["ci"][1] < F5_SHARE
                         else "not reproduced")
+        parts.append(f"{pc} no worse in {_ci_text(b, '.2f')} of comparisons ({len(cases)} cases; {verdicts[-1]})")
     verdict = ("reproduced" if verdicts and all(v == "reproduced" for v in verdicts) else
                "refuted" if verdicts and all(v == "refuted" for v in verdicts) else "not reproduced")
     return {"finding": "F5", "verdict": verdict, "ci": "; ".join(parts) or "no PC fits",

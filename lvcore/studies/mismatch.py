@@ -419,7 +419,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
               seeds: int = 20, config=None, seed: int = 0, resolution: str = "default", emulator: str = "chapter",
               workers: int = 1, scheduler: str | None = None, out: str | Path = "study_mismatch",
               progress: Callable | None = None, retry_failed: bool = False, simulate_only: bool = False,
-              batch: int = BATCH) -> dict:
+              batch: int = BATCH, recorded_only: bool = False) -> dict:
     """Run (or resume) the study under ``out``; returns the result (also written to ``out/mismatch.json``).
 
     Every data set of every volunteer and dose goes through one compiled
@@ -428,6 +428,8 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     dose)'s fits are written as soon as its batch finishes. With
     ``simulate_only`` only the simulations run and the measured strain RMS
     of each dose is returned (``doses_measured``) and written to ``out/doses.json``.
+    With ``recorded_only`` no new fits start: the result summarises the doses
+    whose fits are recorded and lists the others under ``not_fitted``.
     """
     from lvcore.emulator.forward import emulator_forward
     from lvcore.emulator.io import load_emulator
@@ -470,7 +472,8 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
                     fits.setdefault((source, dose), {})[v.name] = json.loads(path.read_text())
                 else:
                     todo.append((v, source, dose, key, np.asarray(rec["outputs"], dtype=float)))
-    if todo:
+    not_fitted = [{"volunteer": u[0].name, "source": u[1], "dose": u[2]} for u in todo] if recorded_only else []
+    if todo and not recorded_only:
         import jax
 
         emu = load_emulator(emulator)
@@ -510,7 +513,8 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
         "sampler": {"num_warmup": config.num_warmup, "num_samples": config.num_samples,
                     "num_chains": config.num_chains, "batch": batch},
         "noise": {"sigma_v_ml": SIGMA_V_ML, "sigma_s": SIGMA_S},
-        "rows": rows, "appearance": appearance(rows), "failed": failed,
+        "rows": rows, "appearance": appearance(rows), "failed": failed, "not_fitted": not_fitted,
+        "complete": not not_fitted and not failed,
         "timings_s": {"simulate": t_sim, "calibrate": t_fit, "total": time.perf_counter() - t0},
     }
     write_json_atomic(out / "mismatch.json", clean(result))
@@ -652,16 +656,19 @@ def docs_markdown(result: dict) -> str:
     function's output for the shipped JSON. The findings table with verdicts
     is :func:`lvcore.studies.findings.docs_markdown`.
     """
-    t = result.get("timings_s", {})
     shipped = result.get("shipped", {})
     lines = [f"Shipped run: {len(result['volunteers'])} SYNTHETIC volunteer(s) ({', '.join(result['volunteers'])}) × "
              f"{result['seeds_per_dose']} noise seeds per dose, {result.get('resolution')} mesh, "
              f"{result.get('emulator')} emulator, sampler {_sampler_text(result)} per data set; "
-             f"{sum(r.get('n_datasets', 0) for r in result['rows'])} data sets × 3 likelihoods; "
-             f"calibration {t.get('calibrate', float('nan')) / 60:.1f} min, simulations "
-             f"{t.get('simulate', float('nan')) / 60:.1f} min"
-             + (f" (command: `{shipped['command']}`, {shipped.get('date', '')})" if shipped.get("command") else "")
-             + ".", "",
+             f"{sum(r.get('n_datasets', 0) for r in result['rows'])} data sets × 3 likelihoods fitted"
+             + (f" (shipped by `{shipped['command']}`, {shipped.get('date', '')}; the run's cost is in "
+                "BENCHMARKS.md)" if shipped.get("command") else "") + "."]
+    nf = result.get("not_fitted") or []
+    if nf:
+        lines += ["", f"**Incomplete:** {len(nf)} (volunteer, source, dose) of the planned run are not fitted in "
+                  "this shipped run (" + ", ".join(f"{u['source']} {u['dose']:g}" for u in nf) + "); the same "
+                  "command without `--recorded-only` resumes the study and fits them."]
+    lines += ["",
              "| source | dose | strain RMS mismatch (mean [min, max] over volunteers) | iid σ_S / 0.03 [90 % CI] | "
              "discrepancy σ_S [90 % CI] | output error volume / iid / discrepancy | "
              "iid − discrepancy error [90 % CI] | θ coverage volume / iid / discrepancy | F1 | F3 |",
@@ -718,6 +725,8 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--retry-failed", action="store_true", help="run recorded failed simulations again")
     p.add_argument("--simulate-only", action="store_true",
                    help="only simulate and print the measured strain RMS of each dose (OUT/doses.json); no fits")
+    p.add_argument("--recorded-only", action="store_true",
+                   help="start no new fits: summarise the recorded ones and list the rest as not fitted")
     p.add_argument("--batch", type=int, default=BATCH,
                    help=f"data sets per compiled MCMC batch (default {BATCH}; the last batch is padded)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
@@ -767,7 +776,7 @@ def _cli(args) -> int:
     res = run_study(sources=sources, doses=doses, volunteers=vols, seeds=args.seeds, config=cfg, seed=args.seed,
                     resolution=args.resolution, emulator=args.emulator, workers=args.workers,
                     scheduler=args.scheduler, out=args.out, retry_failed=args.retry_failed,
-                    simulate_only=args.simulate_only, batch=args.batch,
+                    simulate_only=args.simulate_only, batch=args.batch, recorded_only=args.recorded_only,
                     progress=None if args.json else (lambda msg: print(msg, flush=True)))
     if args.simulate_only:
         for r in res["doses_measured"]:
