@@ -93,7 +93,7 @@ def test_small_run_with_the_analytic_stand_in(tmp_path):
 
     def simulate(case):
         m, f = case["material"], case["fibres"]
-        y = np.asarray(truth({**{n: m[n] for n in ("a", "b", "af", "bf")}, **f}), float)
+        y = np.array(truth({**{n: m[n] for n in ("a", "b", "af", "bf")}, **f}), float)
         if case["boundary"]["base"] == "clamped":
             y[1:] += 0.02
         return y

@@ -103,8 +103,9 @@ def test_small_run_with_a_stand_in_forward(tmp_path):
 def test_cli_rejects_a_bad_patient_count(tmp_path, capsys):
     from lvcore.cli import main
 
-    assert main(["study", "operators-realistic", "--patients", "0", "--out", str(tmp_path)]) == 2
-    assert "--patients" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # argparse's own check of the option's type
+        main(["study", "operators-realistic", "--patients", "0", "--out", str(tmp_path)])
+    assert exc.value.code == 2 and "--patients" in capsys.readouterr().err
 
 
 def test_docs_quote_the_shipped_verdicts():
