@@ -62,7 +62,8 @@ def main(argv=None) -> int:
     p.add_argument("--bo-initial", type=int, default=bo_mismatch.DEFAULT_INITIAL)
     p.add_argument("--bo-iterations", type=int, default=bo_mismatch.DEFAULT_ITERATIONS)
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--resolution", default="default")
+    p.add_argument("--resolution", default="default", help="simulator mesh preset of both studies (default 'default')")
+    p.add_argument("--all-mains", action="store_true", help="operators-realistic: every operator as the main one")
     p.add_argument("--skip-operators", action="store_true")
     p.add_argument("--skip-bo", action="store_true")
     p.add_argument("--copy-only", action="store_true", help="run nothing; copy what is finished in --work")
@@ -75,7 +76,7 @@ def main(argv=None) -> int:
     if not args.copy_only and not args.skip_operators:
         res = operators_realistic.run_study(args.patients, args.seed, out=args.work / "operators-realistic",
                                             workers=args.workers, resolution=args.resolution, progress=True,
-                                            log=print)
+                                            log=print, all_mains=args.all_mains)
         print(operators_realistic.format_findings(res))
     if not args.copy_only and not args.skip_bo:
         res = bo_mismatch.run_study(args.volunteers.split(","), args.kinds.split(","), out=args.work / "bo-mismatch",

@@ -80,9 +80,9 @@ def test_mixed_shares_are_not_reproduced():
 def test_small_run_with_a_stand_in_forward(tmp_path):
     from test_studies_operators import stand_in
 
-    res = orl.run_study(2, 5, out=tmp_path, forward_factory=stand_in, n_boot=200)
+    res = orl.run_study(2, 5, out=tmp_path, forward_factory=stand_in, n_boot=200, all_mains=True)
     data = orl.load(tmp_path)
-    assert data["meta"]["patients"] == ["SYNTHETIC-R01", "SYNTHETIC-R02"] and len(data["fits"]) == 24
+    assert data["meta"]["patients"] == ["SYNTHETIC-R01", "SYNTHETIC-R02"] and len(data["fits"]) == 24  # all mains
     assert set(data["verdicts"]) == {"F4", "F5"}
     for v in data["verdicts"].values():
         assert {"finding", "chapter", "value", "ci", "verdict", "note"} <= set(v)
@@ -96,8 +96,13 @@ def test_small_run_with_a_stand_in_forward(tmp_path):
     # slice choices were drawn and recorded per patient and operator
     assert set(data["meta"]["slice_choices"]) == {f"SYNTHETIC-R0{i}/{o}" for i in (1, 2) for o in OPS}
     # a rerun reuses the geometries and the refits
-    again = orl.run_study(2, 5, out=tmp_path, forward_factory=lambda g: pytest.fail("refitted"), n_boot=200)
+    again = orl.run_study(2, 5, out=tmp_path, forward_factory=lambda g: pytest.fail("refitted"), n_boot=200,
+                          all_mains=True)
     assert again["fits"] == res["fits"]
+    # the default design: one main operator per patient in turn, on the cached geometries
+    rot = orl.run_study(2, 5, out=tmp_path, forward_factory=stand_in, n_boot=200)
+    assert {(f["patient"], f["main_operator"]) for f in rot["fits"]} == {("SYNTHETIC-R01", "r1"), ("SYNTHETIC-R02", "r2")}
+    assert len(rot["fits"]) == 8 and rot["meta"]["n_fits"] == 8 and "one main operator" in rot["meta"]["design"]
 
 
 def test_cli_rejects_a_bad_patient_count(tmp_path, capsys):

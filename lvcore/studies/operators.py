@@ -63,6 +63,8 @@ PAIRS = tuple(combinations(THETA_NAMES, 2))
 GN_GRID, SURFACE_SPAN = 9, 2.0
 #: The chapter's geometric finding (Table 9.4): 10 PCs beat a new operator in 94 % of cases.
 CHAPTER_SHARE_10PC = 0.94
+#: SLSQP's ``ftol`` on loss (9.11) (:func:`lvcore.optimise.sqp.refit_theta`'s default).
+SQP_TOL = 1e-10
 #: θ̂ within this relative distance of a prior bound (Table 9.1) counts as on the bound: there the Laplace
 #: approximation behind the Mahalanobis distance is invalid (the mode is not a stationary point).
 BOUND_TOL = 1e-3
@@ -264,7 +266,7 @@ def surface_for_fit(fit: dict, geoms: dict, y_star, n: int, *, resolution: str =
 
 # ----------------------------------------------------------------------------- one fit
 def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution: str = "default",
-            forward_factory=None, surface_grid: int = 0) -> dict:
+            forward_factory=None, surface_grid: int = 0, sqp_tol: float = SQP_TOL) -> dict:
     """One SQP refit of θ on test geometry ``test`` against data ``y_star`` from ``main`` (a fit record).
 
     ``geoms``: :func:`patient_geometries`. ``forward_factory(geometry_name)``
@@ -293,7 +295,7 @@ def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution:
         loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
         y_fwd = fwd.jacobian(dict(zip(THETA_NAMES, truth))).raise_on_failure().outputs[0]
         err_fwd = y_fwd[1:] - y_star[1:]
-        res = refit_theta(fwd, loss, truth)
+        res = refit_theta(fwd, loss, truth, tol=sqp_tol)
         b_hat = fwd.jacobian(dict(zip(THETA_NAMES, res.theta))).raise_on_failure()
         r, J = residual_jacobian(loss, b_hat.outputs[0], b_hat.jacobian[0])
         cov = laplace_covariance(J)
@@ -346,8 +348,13 @@ def _data_task(patient, main, geoms, resolution, forward_factory):
 # ----------------------------------------------------------------------------- the study
 def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, scheduler: str | None = None,
               resolution: str = "default", surface_grid: int = 0, forward_factory=None, progress: bool = False,
-              operator_geometries=None, shape_model=None, collect_only: bool = False) -> dict:
+              operator_geometries=None, shape_model=None, collect_only: bool = False, mains=None,
+              sqp_tol: float = SQP_TOL) -> dict:
     """Run every fit of ``patients`` (default: all 6) and write ``out/operators.json`` and the figures.
+
+    ``mains(patient) -> operators``: the main operators of each patient (default: every operator, the
+    chapter's design; the realistic-operator study rotates one main per patient to save simulations).
+    ``sqp_tol``: SLSQP's ``ftol`` (recorded in the settings when it is not the default).
 
     Returns ``{"fits": [...], "findings": {...}, "meta": {...}}``. Finished
     fits are kept in ``out/fits/`` and not repeated when the study is re-run
@@ -364,8 +371,9 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
     t0 = time.perf_counter()
     geoms = {p: patient_geometries(p, out / "geometries", og, shape_model) for p in patients}
     ops = list(og.operators)
+    mains_of = (lambda p: ops) if mains is None else (lambda p: [m for m in mains(p) if m in ops])
     settings = {"resolution": resolution if forward_factory is None else "stand-in", "theta_true": THETA_TRUE,
-                "surface_grid": surface_grid}
+                "surface_grid": surface_grid, **({} if sqp_tol == SQP_TOL else {"sqp_tol": sqp_tol})}
     executor = None
     if not collect_only and (scheduler or workers > 1):
         from lvcore.parallel import make_executor
@@ -390,7 +398,7 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
     try:
         todo = []
         for p in patients:
-            for m in ops:
+            for m in mains_of(p):
                 for t, _ in test_geometries(m, ops):
                     fp = fit_path(p, m, t)
                     if fp.is_file():
@@ -402,14 +410,14 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
         if collect_only:
             todo = []
         with progress_bar(len(todo) + len({(p, m) for p, m, _ in todo}), "operators", progress) as bar:
-            mains = sorted({(p, m) for p, m, _ in todo})
-            data_f = {pm: submit(_data_task, pm[0], pm[1], geoms[pm[0]], resolution, forward_factory) for pm in mains}
+            main_pairs = sorted({(p, m) for p, m, _ in todo})
+            data_f = {pm: submit(_data_task, pm[0], pm[1], geoms[pm[0]], resolution, forward_factory) for pm in main_pairs}
             y_star = {}
             for pm, f in data_f.items():
                 y_star[pm] = f.result()
                 bar.update(1)
             fut = {submit(fit_one, p, m, t, y_star[(p, m)], geoms[p], resolution, forward_factory,
-                          surface_grid): (p, m, t) for p, m, t in todo}
+                          surface_grid, sqp_tol): (p, m, t) for p, m, t in todo}
             pending = list(fut)
             done_iter = executor.as_completed(pending) if executor is not None else pending
             for f in done_iter:
@@ -421,16 +429,17 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
     finally:
         if executor is not None:
             executor.close()
-    order = [(p, m, t) for p in patients for m in ops for t, _ in test_geometries(m, ops)]
+    order = [(p, m, t) for p in patients for m in mains_of(p) for t, _ in test_geometries(m, ops)]
     fits = [records[k] for k in order if k in records]
+    n_design = (len(og.patients) * len(ops) * (len(ops) - 1 + len(PC_TESTS)) if mains is None
+                else sum(len(mains_of(p)) for p in og.patients) * (len(ops) - 1 + len(PC_TESTS)))
     result = {"fits": fits, "findings": findings(fits, ops),
               "meta": {"study": "operators", "label": "SYNTHETIC operator study (imitation operators on synthetic LVs)",
                        "patients": patients, "operators": ops, "n_fits": len(fits),
-                       "complete_study": len(fits) == len(og.patients) * len(ops) * (len(ops) - 1 + len(PC_TESTS)),
-                       "budget": (f"{len(fits)} of {len(og.patients) * len(ops) * (len(ops) - 1 + len(PC_TESTS))} fits "
+                       "complete_study": len(fits) == n_design,
+                       "budget": (f"{len(fits)} of {n_design} fits "
                                   f"({', '.join(sorted({f['patient'] for f in fits}))})" +
-                                  ("" if len(fits) == len(og.patients) * len(ops) * (len(ops) - 1 + len(PC_TESTS))
-                                   else " (PARTIAL run; the chapter made all 72)")),
+                                  ("" if len(fits) == n_design else " (PARTIAL run; the chapter made all 72)")),
                        "settings": settings, "seconds_this_session": round(time.perf_counter() - t0, 1),
                        "simulations": int(sum(f.get("simulations", 0) for f in fits)),
                        "fit_seconds_total": round(sum(f.get("seconds", 0.0) for f in fits), 1),
