@@ -73,7 +73,8 @@ def test_verdicts_per_kind():
     def run(kind, vol, fixed, free):
         mk = lambda e: {"lvv_abs_error_ml": e, "strain_rmse": 0.02, "objective_common_at_best": e,  # noqa: E731
                         "lvv_abs_error_vs_noise_free_ml": e}
-        return {"volunteer": vol, "kind": kind, "strain_rms_mismatch": 0.02, "fixed": mk(fixed), "free": mk(free)}
+        return {"volunteer": vol, "kind": kind, "strain_rms_mismatch": 0.02, "lvv_mismatch_ml": -3.0, "fixed": mk(fixed),
+                "free": mk(free)}
     runs = [run("angles", v, 10.0 + i, 3.0 + i) for i, v in enumerate(("HV1", "HV2", "HV3"))]
     runs += [run("sheet", v, 5.0, 5.0 + d) for v, d in (("HV1", -1.0), ("HV2", 1.0), ("HV3", 0.5))]
     runs += [run("base", v, 4.0, 6.0 + i) for i, v in enumerate(("HV1", "HV2", "HV3"))]
