@@ -223,10 +223,12 @@ def test_gibbs_block4_potential_with_runtime_conditions():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("model_name, warmup, draws, rtol", [("iid", 40, 30, 1e-3), ("discrepancy", 10, 10, 1e-6)])
+@pytest.mark.parametrize("model_name, warmup, draws, rtol", [("iid", 40, 30, 1e-3), ("discrepancy", 10, 10, 1e-4)])
 def test_batched_posteriors_per_data_set_conditions_match_compiled_in(model_name, warmup, draws, rtol):
     """batched_posteriors with each data set's PC scores as run-time conditions (data sets of two geometries
-    in one compiled run) draws what one run per geometry with the scores compiled in draws, key for key."""
+    in one compiled run) draws what one run per geometry with the scores compiled in draws, key for key, up to
+    rounding that the samplers amplify (measured: 1.5e-6 relative after 20 Gibbs sweeps; a wrong geometry or key
+    gives O(1) differences)."""
     fwds = [f.forward for f in _chapter_forwards()]  # unscaled emulator forwards of two geometries
     params = {"a": 0.8, "b": 4.0, "af": 1.2, "bf": 6.0}
     ys = np.stack([np.asarray(f(params)) + 0.01 for f in fwds])

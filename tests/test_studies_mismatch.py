@@ -185,7 +185,11 @@ def test_shipped_results_docs_and_locator():
     folder = dict(results.result_sources()["mismatch"])["bundled"]
     shipped = mm.load(folder)
     assert shipped["synthetic"] and shipped["shipped"]["script"] == "scripts/ship_mismatch.py"
-    assert shipped["seeds_per_dose"] >= 20 and len(shipped["rows"]) >= 20
+    assert shipped["seeds_per_dose"] >= 20 and shipped["rows"] and all(r["n_datasets"] >= 20 for r in shipped["rows"])
+    planned = {(s, d) for s, ds in shipped["doses"].items() for d in ds}  # fitted + listed as not fitted = planned
+    assert {(r["source"], r["dose"]) for r in shipped["rows"]} | {(u["source"], u["dose"]) for u in
+                                                                  shipped["not_fitted"]} == planned
+    assert shipped["complete"] == (not shipped["not_fitted"] and not shipped["failed"])
     doc = (Path(__file__).resolve().parents[1] / "docs" / "studies.md").read_text()
     for mod, text in ((mm, mm.docs_markdown(shipped)), (fd, fd.docs_markdown(fd.load(folder)))):
         assert doc.count(mod.DOCS_BEGIN) == 1 and doc.count(mod.DOCS_END) == 1
