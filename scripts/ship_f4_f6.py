@@ -2,7 +2,9 @@
 
 One command (from the repository root; resumable: rerun it after a kill)::
 
-    nice python scripts/ship_f4_f6.py --work /tmp/f4_f6_ship --workers 2
+    nice python scripts/ship_f4_f6.py --work /tmp/f4_f6_ship --workers 2 --patients 21 --resolution fast
+
+(the shipped run's settings: 21 patients drawn, of which 20 fitted; the ``fast`` mesh on a loaded machine).
 
 It runs, into ``--work``:
 
