@@ -154,14 +154,14 @@ def _worker(job: dict, y, forward, models, config, infer):
         job["message"] = msg
         job["fraction"] = frac
 
-    # the verdict's best fit of the data needs no posterior: it runs beside the sampler, not after it
-    consistency = threading.Thread(target=_consistency, args=(job, y, forward, infer), daemon=True)
-    consistency.start()
     try:
         cal.calibrate_subjects([(job["subject"], y, forward)], models, config=config, infer_angles=infer,
                                progress=progress, on_result=lambda item: job["results"].__setitem__(item.model,
                                                                                                     item.result))
-        consistency.join()
+        # the verdict's best fit, in this thread after the sampler (numpyro's handler stack is global, so two
+        # model traces must never run at once): the results render without waiting for it
+        progress("verdict: best fit of volume and strains", 1.0)
+        _consistency(job, y, forward, infer)
         job["message"] = "done"
         job["fraction"] = 1.0
     except Exception as err:  # noqa: BLE001 - shown to the user
@@ -231,7 +231,7 @@ def _verdicts(job: dict, results: dict) -> dict:
         try:
             with st.spinner("Verdict: best fit of volume and strains"):
                 forward, infer = job["forward"], job.get("infer", False)
-                consistency = job.get("consistency")  # computed beside the sampler (_consistency)
+                consistency = job.get("consistency")  # computed by the worker after the sampler (_consistency)
                 if isinstance(consistency, Exception):
                     raise consistency
                 if consistency is None:

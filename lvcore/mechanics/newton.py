@@ -243,8 +243,7 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
              "t_line": 0.0}
     u = np.zeros(system.n_free)
     p = system.zero_pressure()
-    r1, _, _, _ = system.residual(u, p, 1.0)
-    scale = max(np.linalg.norm(r1), 1e-30)
+    scale = max(system.load_norm(), 1e-30)
     vol = float(np.max(np.sum(system.wdet, axis=1)))
 
     def tolerances(rtol):  # (force, volume) tolerances of a load step solved to relative tolerance rtol
