@@ -92,16 +92,18 @@ class Consistency:
 
 
 def _reference_model(y=None, *, forward, sigma_v, sigma_ref, infer_angles):
-    """The consistency likelihood: LVV ~ N(eta0, sigma_v^2), strains ~ N(eta, sigma_ref^2), the models' priors."""
+    """The consistency likelihood: LVV ~ N(eta0, sigma_v^2), strains ~ N(eta, sigma_ref^2), the models' priors
+    (with ``--geometry infer``, the shape model's representation error added as in the models:
+    :func:`lvcore.inference.models.strain_likelihood`)."""
     import numpyro
     import numpyro.distributions as dist
 
-    from lvcore.inference.models import _sample_params
+    from lvcore.inference.models import _sample_params, lvv_sd, strain_likelihood
 
     params = _sample_params(infer_angles, forward)
     eta = forward(params)
-    numpyro.sample("lvv_obs", dist.Normal(eta[0], sigma_v), obs=y[0])
-    numpyro.sample("strain_obs", dist.Normal(eta[1:], sigma_ref).to_event(1), obs=y[1:])
+    numpyro.sample("lvv_obs", dist.Normal(eta[0], lvv_sd(eta[0], sigma_v, forward)), obs=y[0])
+    numpyro.sample("strain_obs", strain_likelihood(eta[1:], sigma_ref ** 2, forward), obs=y[1:])
 
 
 def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = False, n_starts: int = N_STARTS,
@@ -156,6 +158,17 @@ def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = 
     return params, eta
 
 
+def output_sds(eta, sigma_v: float, sigma_ref: float, forward=None) -> np.ndarray:
+    """Marginal sd of each of the 25 outputs in the consistency likelihood: ``sigma_v`` and ``sigma_ref``,
+    widened by the shape model's representation error when ``forward`` carries one (``--geometry infer``)."""
+    from lvcore.inference.models import representation_error
+
+    rep = representation_error(forward)
+    if rep is None:
+        return np.r_[float(sigma_v), np.full(24, float(sigma_ref))]
+    return np.r_[float(rep.lvv_sd(sigma_v, float(eta[0]))), np.sqrt(float(sigma_ref) ** 2 + np.diag(rep.strain_cov))]
+
+
 def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None, infer_angles: bool = False,
                       n_starts: int = N_STARTS, seed: int = 0) -> Consistency:
     """Best fit, p-values and consistency flags of one subject's data (module docstring, part 1)."""
@@ -166,7 +179,7 @@ def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None
     sigma_ref = plausibility.DEFAULT_SIGMA_REF if sigma_ref is None else float(sigma_ref)
     y = np.asarray(y, float).reshape(-1)
     params, eta = best_fit(y, forward, sigma_v, sigma_ref, infer_angles, n_starts, seed)
-    z = np.abs(y - eta) / np.r_[float(sigma_v), np.full(24, sigma_ref)]
+    z = np.abs(y - eta) / output_sds(eta, sigma_v, sigma_ref, forward)
     p = 2.0 * norm.sf(z)
     flags = []
     if p[0] < ALPHA:
@@ -307,5 +320,5 @@ def checked_bounds(forward, infer_angles: bool = False) -> dict:
 
 __all__ = ["ALPHA", "MIN_BAD_STRAINS", "N_STARTS", "BOUND_FRACTION", "WIDTH_FRACTION", "MAX_A_RATIO",
            "MAX_DIVERGENT_FRACTION",
-           "Consistency", "best_fit", "consistency_check", "identifiability_flags", "sampler_flags", "Verdict",
+           "Consistency", "best_fit", "output_sds", "consistency_check", "identifiability_flags", "sampler_flags", "Verdict",
            "run_verdict", "checked_bounds"]
