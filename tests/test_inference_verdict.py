@@ -80,3 +80,39 @@ def test_plausible_is_the_same_whichever_model_ran():
         seen[model] = (v.plausible, v.flagged)
     assert {p for p, _ in seen.values()} == {False}, seen
     assert all(flagged for _, flagged in seen.values())
+
+
+def _level_pattern():
+    """A smooth misfit: the apical level 0.025 less negative, the next 0.01 (the benchmark ellipsoid's pattern
+    against its 5-mode reconstruction, benchmarks/real_data.py --steps projection)."""
+    return np.repeat([-0.003, -0.001, 0.009, 0.026], 6) + 0.001 * np.random.default_rng(5).standard_normal(24)
+
+
+def test_residual_structure_tells_a_pattern_from_noise():
+    i, p = verdict.residual_structure(_level_pattern())
+    assert i > 0.5 and p < 0.01
+    rng = np.random.default_rng(0)
+    ps = [verdict.residual_structure(0.03 * rng.standard_normal(24), n_permutations=500, seed=k)[1] for k in range(200)]
+    assert np.mean(np.asarray(ps) < 0.01) <= 0.04     # about 1 % false alarms for independent residuals
+    assert 0.3 < np.median(ps) < 0.7
+
+
+def test_misfit_is_flagged_beyond_the_representation_error_only():
+    from lvcore.inference.representation_error import RepresentationError
+
+    class Fw:
+        def __init__(self, sd):
+            self.representation = RepresentationError(5, np.eye(24) * sd ** 2, 0.01)
+
+    r = _level_pattern()
+    rms = float(np.sqrt(np.mean(r ** 2)))
+    structure, flags = verdict.misfit_check(r, Fw(0.5 * rms))
+    assert flags and "spatially structured" in flags[0] and structure["p_value"] < 0.01
+    assert verdict.misfit_check(r, Fw(2.0 * rms))[1] == []          # within what the floor allows
+    structure, flags = verdict.misfit_check(r, None)                 # a given geometry: recorded, not flagged
+    assert flags == [] and structure["moran_i"] > 0.5 and structure["representation_error_rms"] is None
+    noise = 0.03 * np.random.default_rng(1).standard_normal(24)
+    assert verdict.misfit_check(noise, Fw(0.001))[1] == []           # large but unstructured: the noise model's job
+    c = verdict.Consistency({}, np.zeros(25), np.ones(25), misfit=("x",))
+    v = verdict.Verdict(c)
+    assert v.plausible and v.flagged and v.flags == ["MISFIT: x"]

@@ -57,6 +57,53 @@ MAX_A_RATIO = 20.0
 MAX_DIVERGENT_FRACTION = 0.005
 #: Parameters whose widths are measured in log space.
 LOG_PARAMETERS = THETA_NAMES + ("scale",)
+#: Random permutations of the strain residuals behind the p-value of their spatial structure (Moran's I).
+N_PERMUTATIONS = 2000
+
+
+def _grid_adjacency():
+    """Neighbours on lvcore's 6 x 4 strain grid (region = level * 6 + sector): the two sectors beside a region
+    on its ring (circular) and the regions above and below it in the same sector."""
+    from lvcore.outputs import N_LEVELS, N_SECTORS
+
+    n = N_LEVELS * N_SECTORS
+    w = np.zeros((n, n))
+    for r in range(n):
+        level, sector = divmod(r, N_SECTORS)
+        for lv, sc in ((level, (sector + 1) % N_SECTORS), (level, (sector - 1) % N_SECTORS),
+                       (level + 1, sector), (level - 1, sector)):
+            if 0 <= lv < N_LEVELS:
+                w[r, lv * N_SECTORS + sc] = 1.0
+    return w
+
+
+def residual_structure(residuals, n_permutations: int = N_PERMUTATIONS, seed: int = 0) -> tuple[float, float]:
+    """Moran's I of 24 strain residuals on the 6 x 4 grid and its one-sided permutation p-value.
+
+    Independent residuals (what the iid likelihood assumes) give I near
+    ``-1/23`` and a uniform p-value; a smooth pattern (a misfit of the
+    model, e.g. a whole level off) gives a large I and a small p.
+
+    Returns
+    -------
+    moran_i, p_value : float
+    """
+    r = np.asarray(residuals, float).reshape(-1)
+    w = _grid_adjacency()
+    if r.size != w.shape[0]:
+        raise ValueError(f"need {w.shape[0]} strain residuals, got {r.size}")
+
+    def moran(z):
+        z = z - z.mean(axis=-1, keepdims=True)
+        return r.size / w.sum() * np.einsum("...i,ij,...j->...", z, w, z) / np.einsum("...i,...i->...", z, z)
+
+    if not np.any(r - r.mean()):
+        return 0.0, 1.0
+    i0 = float(moran(r))
+    rng = np.random.default_rng(seed)
+    perm = np.stack([rng.permutation(r) for _ in range(int(n_permutations))])
+    p = (1.0 + float(np.sum(moran(perm) >= i0 - 1e-12))) / (1.0 + n_permutations)
+    return i0, p
 
 
 @dataclass(frozen=True)
@@ -79,13 +126,19 @@ class Consistency:
     p_values: np.ndarray
     flags: tuple = field(default=())
     sigma_ref: float = 0.035
+    #: Model-misfit flags (structured strain residuals beyond the representation error); they do not make
+    #: the data implausible, they say the likelihood's intervals may be too narrow.
+    misfit: tuple = field(default=())
+    #: Moran's I of the strain residuals at the best fit, its p-value and the residual RMS.
+    structure: dict = field(default_factory=dict)
 
     @property
     def plausible(self) -> bool:
         return not self.flags
 
     def record(self) -> dict:
-        return {"plausible": self.plausible, "flags": list(self.flags), "sigma_ref": self.sigma_ref, "alpha": ALPHA,
+        return {"plausible": self.plausible, "flags": list(self.flags), "misfit": list(self.misfit),
+                "residual_structure": dict(self.structure), "sigma_ref": self.sigma_ref, "alpha": ALPHA,
                 "min_bad_strains": MIN_BAD_STRAINS, "best_fit": {k: float(v) for k, v in self.best_fit.items()},
                 "best_fit_outputs": {c: float(v) for c, v in zip(OUTPUT_COLUMNS, self.eta)},
                 "p_values": {c: float(p) for c, p in zip(OUTPUT_COLUMNS, self.p_values)}}
@@ -195,7 +248,39 @@ def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None
     # the data-only checks (signs, no deformation) of the posterior-predictive module, at the best fit
     data_only = plausibility.posterior_predictive_check(y, eta[None, :], sigma_v, sigma_ref)
     flags += [f for f in data_only.flags if "sign opposite" in f or "within" in f]
-    return Consistency(best_fit=params, eta=eta, p_values=p, flags=tuple(flags), sigma_ref=sigma_ref)
+    structure, misfit = misfit_check(y[1:] - eta[1:], forward, seed)
+    return Consistency(best_fit=params, eta=eta, p_values=p, flags=tuple(flags), sigma_ref=sigma_ref,
+                       misfit=tuple(misfit), structure=structure)
+
+
+def misfit_check(strain_residuals, forward=None, seed: int = 0) -> tuple[dict, list[str]]:
+    """Structure of the strain residuals at the best fit, and a flag when it exceeds the shape model's
+    representation error (``--geometry infer``).
+
+    The residuals are flagged when their spatial structure is significant
+    (Moran's I on the 6 x 4 grid, permutation p < :data:`ALPHA`,
+    :func:`residual_structure`) *and* their RMS exceeds the RMS sd of the
+    representation error the likelihood allows for
+    (:class:`lvcore.inference.representation_error.RepresentationError`):
+    the subject is further from the shape model's span than the cohort the
+    floor was estimated on, and the intervals may be too narrow. Without a
+    representation error (a given geometry) the structure is recorded, not flagged.
+    """
+    from lvcore.inference.models import representation_error
+
+    r = np.asarray(strain_residuals, float).reshape(-1)
+    moran_i, p = residual_structure(r, seed=seed)
+    rms = float(np.sqrt(np.mean(r ** 2)))
+    rep = representation_error(forward)
+    out = {"moran_i": moran_i, "p_value": p, "residual_rms": rms,
+           "representation_error_rms": None if rep is None else rep.strain_rms}
+    flags = []
+    if rep is not None and p < ALPHA and rms > rep.strain_rms:
+        flags.append(f"the strain residuals at the best fit are spatially structured (Moran's I {moran_i:.2f}, "
+                     f"p = {p:.2g}) and larger (RMS {rms:.4f}) than the shape model's representation error allows "
+                     f"({rep.strain_rms:.4f}): the subject's shape is further from the shape model than the cohort's, "
+                     "so the intervals may be too narrow and biased; give the subject's mesh (--geometry FILE)")
+    return out, flags
 
 
 def _width(lo, hi, log: bool) -> float:
@@ -281,6 +366,7 @@ class Verdict:
     @property
     def flags(self) -> list[str]:
         return ([f"CONSISTENCY: {f}" for f in self.consistency.flags]
+                + [f"MISFIT: {f}" for f in self.consistency.misfit]
                 + [f"IDENTIFIABILITY: {f}" for f in self.identifiability] + [f"SAMPLER: {f}" for f in self.sampler])
 
     @property
@@ -320,5 +406,6 @@ def checked_bounds(forward, infer_angles: bool = False) -> dict:
 
 __all__ = ["ALPHA", "MIN_BAD_STRAINS", "N_STARTS", "BOUND_FRACTION", "WIDTH_FRACTION", "MAX_A_RATIO",
            "MAX_DIVERGENT_FRACTION",
-           "Consistency", "best_fit", "output_sds", "consistency_check", "identifiability_flags", "sampler_flags", "Verdict",
+           "N_PERMUTATIONS", "Consistency", "best_fit", "output_sds", "consistency_check", "misfit_check",
+           "residual_structure", "identifiability_flags", "sampler_flags", "Verdict",
            "run_verdict", "checked_bounds"]
