@@ -4,6 +4,7 @@
     python benchmarks/real_data.py --workdir build/real_data --steps simulate
     python benchmarks/real_data.py --workdir build/real_data --steps calibrate --chains 2 --warmup 500 --samples 500
     python benchmarks/real_data.py --workdir build/real_data --steps table     # from results*.json
+    python benchmarks/real_data.py --workdir build/real_data --steps compare --tag floor=floor_nf+floor_noisy,known_fe
 
 Subjects (all SYNTHETIC, made by lvcore's FE simulator): one truncated
 ellipsoid (endo rs 25 / ry 22.5 / rl 60 mm, wall 9.5 mm, 10 mm thicker at
@@ -271,6 +272,39 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def compare(results_by_tag: dict) -> str:
+    """One row per case, per variant: a's q95/q05, whether all four theta are inside, the exit code."""
+    tags = list(results_by_tag)
+    by = {t: {r["subject"]: r for r in rs} for t, rs in results_by_tag.items()}
+    subjects = sorted({s for t in tags for s in by[t]},
+                      key=lambda s: (float(s.split("-V")[1].split("-")[0]), s.split("-")[2], "noisy" in s))
+    lines = ["| case | " + " | ".join(f"{t}: a q95/q05, all four in, exit" for t in tags) + " |",
+             "|---|" + "---|" * len(tags)]
+    for sub in subjects:
+        cells = []
+        for t in tags:
+            r = by[t].get(sub)
+            if r is None:
+                cells.append("-")
+                continue
+            out = [n for n, ok in (r.get("inside") or {}).items() if not ok]
+            mark = "yes" if not out else "no (" + ", ".join(out) + ")"
+            bad = " **unflagged miss**" if not r["covered"] and r["exit"] != 4 else ""
+            cells.append(f"{r['a_ratio']:.0f}, {mark}, {r['exit']}{bad}")
+        lines.append(f"| {sub.replace('SYNTHETIC-', '')} | " + " | ".join(cells) + " |")
+    lines.append("")
+    for t in tags:
+        rs = list(by[t].values())
+        cov = sum(r["covered"] for r in rs)
+        inside = sum(all((r.get("inside") or {"x": False}).values()) for r in rs)
+        ratios = sorted(r["a_ratio"] for r in rs)
+        miss = [r["subject"] for r in rs if not r["covered"] and r["exit"] != 4]
+        lines.append(f"{t}: {len(rs)} cases; covered {cov}; all four inside {inside}; a q95/q05 median "
+                     f"{ratios[len(ratios) // 2]:.0f} (min {ratios[0]:.0f}, max {ratios[-1]:.0f}); not covered and "
+                     f"not flagged: {len(miss)} {miss}")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--workdir", default="build/real_data")
@@ -297,8 +331,17 @@ def main(argv=None) -> int:
     sims = (simulate_all(work) if "simulate" in steps
             else json.loads((work / "simulations.json").read_text()) if ("calibrate" in steps or "projection" in steps)
             else [])
+    if steps == ["compare"]:   # the variants side by side: --tag a,b,c (results_<tag>.json; "" = results.json)
+        # a variant may span several files: "floor=floor_nf+floor_noisy"
+        res = {}
+        for spec in args.tag.split(","):
+            name, _, files = spec.partition("=")
+            res[name] = [r for f in (files or name).split("+") for r in json.loads((work / f"results_{f}.json").read_text())]
+        print(compare(res))
+        return 0
     if steps == ["table"]:   # the table of the results of --tag (every results*.json without one)
-        files = [work / f"results_{args.tag}.json"] if args.tag else sorted(work.glob("results*.json"))
+        files = ([work / f"results_{t}.json" for t in args.tag.split(",")] if args.tag
+                 else sorted(work.glob("results*.json")))
         results = [r for f in files for r in json.loads(f.read_text())]
         print(table(results))
         return 0
