@@ -350,8 +350,8 @@ def main(argv=None) -> int:
     if "calibrate" in steps:
         rows = subject_rows(sims, args.data_source, args.emulator)
         if args.only:
-            keep = set(args.only.split(","))
-            rows = [r for r in rows if r["subject"] in keep]
+            order = args.only.split(",")   # in the order given
+            rows = sorted((r for r in rows if r["subject"] in order), key=lambda r: order.index(r["subject"]))
         results = calibrate_all(rows, work, args.chains, args.warmup, args.samples, args.emulator, args.tag,
                                 args.geometry, args.representation_error)
         print(table(results))

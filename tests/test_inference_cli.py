@@ -164,6 +164,7 @@ def test_measure_sd_columns_are_read_from_csv_json_and_mat(tmp_path):
     assert row.measure_sds == {"long_axis_mm": 2.0}
 
 
+@pytest.mark.slow
 def test_geometry_infer_records_the_measure_sds_and_the_representation_floor(tmp_path):
     """A short infer run (not converged: the sampler is cut short): summary.json names each measure's sd,
     where it came from, the likelihood sd with the floor and the representation error; 'off' drops the floor."""
@@ -178,7 +179,7 @@ def test_geometry_infer_records_the_measure_sds_and_the_representation_floor(tmp
     assert geo["measure_sd_source"] == {"reference_volume_ml": "--reference-volume-sd", "long_axis_mm": "default"}
     assert geo["likelihood_sd"]["reference_volume_ml"] > 4.0 and geo["likelihood_sd"]["long_axis_mm"] > 3.0
     rep = geo["representation_error"]
-    assert rep["mode"] == "floor" and rep["n_cases"] >= 40 and 0 < rep["strain_sd_rms"] < 0.1
+    assert rep["mode"] == "floor" and rep["n_cases"] >= 30 and 0 < rep["strain_sd_rms"] < 0.1
     assert geo["posterior"]["measure_sd"] == geo["measure_sd"]
     code = main(["calibrate", "--data", str(p), "--geometry", "infer", "--representation-error", "off", *short,
                  "--out", str(tmp_path / "o2")])

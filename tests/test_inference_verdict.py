@@ -97,22 +97,35 @@ def test_residual_structure_tells_a_pattern_from_noise():
     assert 0.3 < np.median(ps) < 0.7
 
 
-def test_misfit_is_flagged_beyond_the_representation_error_only():
+def _result(y, eta_strains, sigma_s2, model="iid"):
+    """A stand-in CalibrationResult: posterior eta (200 draws around ``eta_strains``), sigma_s2, observed y."""
+    from types import SimpleNamespace
+
+    import arviz as az
+
+    rng = np.random.default_rng(2)
+    eta = np.tile(np.r_[y[0], eta_strains], (1, 200, 1)) + 1e-4 * rng.standard_normal((1, 200, 25))
+    idata = az.from_dict(posterior={"eta": eta, "sigma_s2": np.full((1, 200), sigma_s2)}, observed_data={"y": y})
+    return SimpleNamespace(model=model, idata=idata)
+
+
+def test_posterior_misfit_flags_structured_residuals_the_likelihood_calls_independent():
     from lvcore.inference.representation_error import RepresentationError
 
-    class Fw:
-        def __init__(self, sd):
-            self.representation = RepresentationError(5, np.eye(24) * sd ** 2, 0.01)
-
-    r = _level_pattern()
-    rms = float(np.sqrt(np.mean(r ** 2)))
-    structure, flags = verdict.misfit_check(r, Fw(0.5 * rms))
+    eta = np.full(24, -0.15)
+    y = np.r_[120.0, eta + _level_pattern()]                     # a smooth misfit, no noise
+    structure, flags = verdict.posterior_misfit(_result(y, eta, 0.011 ** 2))
     assert flags and "spatially structured" in flags[0] and structure["p_value"] < 0.01
-    assert verdict.misfit_check(r, Fw(2.0 * rms))[1] == []          # within what the floor allows
-    structure, flags = verdict.misfit_check(r, None)                 # a given geometry: recorded, not flagged
-    assert flags == [] and structure["moran_i"] > 0.5 and structure["representation_error_rms"] is None
-    noise = 0.03 * np.random.default_rng(1).standard_normal(24)
-    assert verdict.misfit_check(noise, Fw(0.001))[1] == []           # large but unstructured: the noise model's job
-    c = verdict.Consistency({}, np.zeros(25), np.ones(25), misfit=("x",))
-    v = verdict.Verdict(c)
+    noisy = np.r_[120.0, eta + 0.03 * np.random.default_rng(1).standard_normal(24)]
+    assert verdict.posterior_misfit(_result(noisy, eta, 0.03 ** 2))[1] == []      # independent noise: no flag
+    assert verdict.posterior_misfit(_result(y, eta, 0.011 ** 2, model="volume")) == ({}, [])  # strains not modelled
+
+    class Fw:   # a representation error along this pattern: whitened, what is left is the independent noise
+        representation = RepresentationError(5, np.outer(_level_pattern(), _level_pattern()), 0.0)
+
+    y = np.r_[120.0, eta + _level_pattern() + 0.001 * np.random.default_rng(4).standard_normal(24)]
+    assert verdict.posterior_misfit(_result(y, eta, 0.001 ** 2))[1]          # without the floor: flagged
+    structure, flags = verdict.posterior_misfit(_result(y, eta, 0.001 ** 2), Fw())
+    assert flags == [] and structure["whitened_by"].endswith("representation error")
+    v = verdict.Verdict(verdict.Consistency({}, np.zeros(25), np.ones(25)), misfit=("x",))
     assert v.plausible and v.flagged and v.flags == ["MISFIT: x"]

@@ -318,7 +318,7 @@ def run_calibrate(args) -> int:
         if item.subject not in consistency:   # one per subject: the same for every model
             consistency[item.subject] = verdict.consistency_check(r.y, forward, args.sigma_v, sigma_ref,
                                                                   infer_angles=infer, seed=args.seed)
-        v = verdict.run_verdict(res, consistency[item.subject], verdict.checked_bounds(forward, infer))
+        v = verdict.run_verdict(res, consistency[item.subject], verdict.checked_bounds(forward, infer), forward)
         check = plausibility.check_result(res, r.y, args.sigma_v, sigma_ref, seed=args.seed)
         out.mkdir(parents=True, exist_ok=True)
         ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"

@@ -123,7 +123,7 @@ def check_measure_sds(sds: Mapping[str, Any] | None, where: str = "geometric-mea
         except (TypeError, ValueError):
             raise DataError(f"{where}: {label} must be a number, got {str(value)[:40]!r}") from None
         lo, hi = MEASURE_SD_RANGES[name]
-        unit = name.rsplit("_", 1)[-1]
+        unit = {"ml": "mL"}.get(name.rsplit("_", 1)[-1], "mm")
         if not (math.isfinite(v) and lo <= v <= hi):
             raise DataError(f"{where}: {label} = {v:g} is outside {lo:g}-{hi:g} {unit}; give the measurement's "
                             f"standard deviation in {unit} (default {MEASURE_SD[name]:g} {unit})")
