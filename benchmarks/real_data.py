@@ -272,6 +272,43 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def reverdict(workdir: Path, tag: str) -> list[dict]:
+    """Re-apply the posterior-predictive MISFIT check of the current verdict to the saved runs of ``tag``.
+
+    Runs sampled before :func:`lvcore.inference.verdict.posterior_misfit` existed keep their posterior
+    (netCDF) and every other flag; the MISFIT flags are recomputed (with the representation error
+    when the run had the floor) and the exit code follows (4 with any flag, 1 when not converged).
+    ``exit_at_run`` keeps the code the run returned.
+    """
+    import arviz as az
+
+    from lvcore.inference import verdict
+    from lvcore.inference.representation_error import load_representation_error
+
+    path = workdir / f"results_{tag}.json"
+    results = json.loads(path.read_text())
+    for r in results:
+        out = workdir / "runs" / tag / r["subject"] / "out"
+        rec = json.loads((out / "summary.json").read_text())[0]
+        idata = az.from_netcdf(rec["netcdf"] if Path(rec["netcdf"]).is_file() else out / Path(rec["netcdf"]).name)
+        floor = (rec.get("geometry") or {}).get("representation_error")
+
+        class _Fw:
+            representation = load_representation_error(5) if floor else None
+
+        class _Res:
+            model = rec["model"]
+
+        _Res.idata = idata
+        structure, misfit = verdict.posterior_misfit(_Res, _Fw)
+        flags = [f for f in rec.get("flags", []) if not f.startswith("MISFIT")] + [f"MISFIT: {f}" for f in misfit]
+        r.setdefault("exit_at_run", r["exit"])
+        r["flags"], r["residual_structure"], r["reverdict"] = flags, structure, True
+        r["exit"] = 1 if not rec["converged"] else (4 if flags else 0)
+    path.write_text(json.dumps(results, indent=1))
+    return results
+
+
 def compare(results_by_tag: dict) -> str:
     """One row per case, per variant: a's q95/q05, whether all four theta are inside, the exit code."""
     tags = list(results_by_tag)
@@ -331,6 +368,10 @@ def main(argv=None) -> int:
     sims = (simulate_all(work) if "simulate" in steps
             else json.loads((work / "simulations.json").read_text()) if ("calibrate" in steps or "projection" in steps)
             else [])
+    if steps == ["reverdict"]:   # the current MISFIT check on saved runs: --tag a,b
+        for t in args.tag.split(","):
+            print(table(reverdict(work, t)))
+        return 0
     if steps == ["compare"]:   # the variants side by side: --tag a,b,c (results_<tag>.json; "" = results.json)
         # a variant may span several files: "floor=floor_nf+floor_noisy"
         res = {}
