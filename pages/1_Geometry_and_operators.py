@@ -143,3 +143,18 @@ if len(names) > 1:
     m2.metric("mean distance (mm)", f"{d.mean():.2f}")
     m3.metric("max distance (mm)", f"{d.max():.2f}")
     st.image(_distance(geoms[a], geoms[b], f"{a} coloured by distance to {b}"))
+
+with st.expander("Build a subject emulator for one of these geometries (optional, minutes)",
+                 expanded=st.session_state.get("geo_build_job") is not None):
+    from lvcore.app import subject_emulator_panel
+    from lvcore.app.subject_flow import template_mesh_file
+    from lvcore.uploads import session_uploads
+
+    which = st.selectbox("Geometry", names, key="geo_build_which")
+    label = f"{patient} {which}" if source.startswith("Bundled") else which
+    try:
+        fitted = template_mesh_file(session_uploads(), geoms[which], label)
+    except LVCoreError as err:
+        st.error(f"Cannot write the fitted geometry: {err}")
+    else:
+        subject_emulator_panel.show(fitted, np.asarray(geoms[which], float).tobytes(), fitted.name, key="geo_build")

@@ -57,7 +57,7 @@ def _emulator(path: str):
     return load_emulator(path)
 
 
-shared = shared_inputs(theta=False)  # subject and emulator are this page's defaults; it reads no θ
+shared = shared_inputs(theta=False, edp=False)  # subject and emulator are its defaults; it reads no θ, no EDP
 shared_subject, shared_emu = shared.get("subject"), shared.get("emulator")
 
 # ----------------------------------------------------------------------------- data

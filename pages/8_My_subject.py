@@ -1,11 +1,14 @@
 """My subject: one's own geometry and measurements, from upload to a calibrated, downloadable result."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import streamlit as st
 
 from lvcore.units import rms_mm_from_mse_cm2
-from lvcore.app import freshness, physiology_panel, subject_flow as flow
+from lvcore.app import freshness, physiology_panel, subject_emulator_panel, subject_flow as flow
 from lvcore.app.controls import shared_inputs
+from lvcore.conditions import SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference.models import MODEL_LABELS
@@ -26,31 +29,51 @@ def _emulator(name: str):
 
 
 uploads = session_uploads()
-shared = shared_inputs(theta=False)
+shared = shared_inputs(theta=False, edp=False)  # this page has its own EDP (step 3), as lvcore calibrate --edp
 
 # ----------------------------------------------------------------------------- 1. geometry
+NO_MESH = "No mesh: infer it from CMR measures"
 st.header("1 · Geometry")
+mode = st.radio("Geometry", ["A mesh or PC scores", NO_MESH], horizontal=True, key="my_geometry_mode",
+                help="No mesh: the PC scores h and the scale s are sampled with θ, informed by the volumes you "
+                     "measured (lvcore calibrate --geometry infer).")
+inferred = mode == NO_MESH
 g1, g2 = st.columns([2, 1])
 with g1:
-    up_geom = st.file_uploader("Geometry: a volume mesh (.vtu/.vtk/.msh/.inp, fitted to the template), a template "
-                               "mesh, or PC scores (.json/.csv)", type=list(flow.GEOMETRY_TYPES), key="my_geometry")
-    units = st.radio("Mesh length units", ["mm", "cm", "m"], horizontal=True, key="my_units")
+    if not inferred:
+        up_geom = st.file_uploader("Geometry: a volume mesh (.vtu/.vtk/.msh/.inp, fitted to the template), a "
+                                   "template mesh, or PC scores (.json/.csv)", type=list(flow.GEOMETRY_TYPES),
+                                   key="my_geometry")
+        units = st.radio("Mesh length units", ["mm", "cm", "m"], horizontal=True, key="my_units")
+    else:
+        up_geom, units = None, "mm"
     example = st.selectbox("…or a bundled SYNTHETIC example", ["(none)"] + bundled_volunteers(), key="my_example",
-                           help="Generated data, not a real subject; useful to try the flow.")
+                           help="Generated data, not a real subject; useful to try the flow. Without a mesh, only "
+                                "its measurements are used.")
     ref_volume = st.number_input("Reference (early-diastolic) cavity volume, mL (optional, 0 = not measured)",
                                  min_value=0.0, max_value=500.0, value=0.0, step=1.0, key="my_ref_volume")
-geometry, geometry_name, measured_bytes = None, None, None
+    if inferred:
+        wall_volume = st.number_input(flow.MEASURE_LABELS["wall_volume_ml"] + " (optional, 0 = not measured)",
+                                      min_value=0.0, max_value=600.0, value=0.0, step=1.0, key="my_wall_volume")
+        long_axis = st.number_input(flow.MEASURE_LABELS["long_axis_mm"] + " (optional, 0 = not measured)",
+                                    min_value=0.0, max_value=200.0, value=0.0, step=1.0, key="my_long_axis")
+        entered = {"reference_volume_ml": ref_volume, "wall_volume_ml": wall_volume, "long_axis_mm": long_axis}
+geometry, geometry_name, measured_bytes, geometry_file = None, None, None, None
 try:
     if up_geom is not None:
         geometry_name = up_geom.name
+        geometry_file = (uploads.save(up_geom.name, up_geom.getvalue(), slot="build_geometry"), up_geom.getvalue())
         geometry = flow.read_geometry(uploads, up_geom.name, up_geom.getvalue(), units=units)
     elif example != "(none)":
         files = volunteer_files(example)
-        geometry_name = files.geometry.name
-        geometry = flow.read_geometry(uploads, files.geometry.name, files.geometry.read_bytes())
         measured_bytes = (files.measured.name, files.measured.read_bytes())
+        if not inferred:
+            geometry_name = files.geometry.name
+            geometry_file = (files.geometry, files.geometry.read_bytes())
+            geometry = flow.read_geometry(uploads, files.geometry.name, geometry_file[1])
 except LVCoreError as err:
     st.error(f"Geometry: {err}")
+    geometry_file = None
 if geometry is not None:
     info, volume_warnings = flow.geometry_measures(geometry, ref_volume or None)
     with g2:
@@ -66,6 +89,13 @@ if geometry is not None:
                 if geometry.projection_mse_cm2 is not None else ""))
     for w in list(geometry.warnings) + volume_warnings:
         st.warning(w)
+if inferred:
+    from lvcore.inference.geometry_prior import MEASURE_SD
+
+    st.caption("No mesh: the shape model's PC scores h (prior N(0, 1) within the emulator's box) and a uniform "
+               "scale s are sampled with θ, as `lvcore calibrate --geometry infer`; the measures you enter are "
+               f"observed with SD {MEASURE_SD['reference_volume_ml']:g} mL (volumes) and "
+               f"{MEASURE_SD['long_axis_mm']:g} mm (long axis).")
 
 # ----------------------------------------------------------------------------- 2. measurements
 st.header("2 · Measurements")
@@ -94,34 +124,67 @@ if rows:
 
 # ----------------------------------------------------------------------------- 3. model and box check
 st.header("3 · Model")
-names = available_emulators()
+subject_emus = subject_emulator_panel.built_emulators()  # built in this session on a loaded geometry
+names = available_emulators() + list(subject_emus)
 m1, m2, m3 = st.columns(3)
 emu_name = m1.selectbox("Emulator", names, index=names.index(shared["emulator"]) if shared.get("emulator") in names
-                        else 0, key="my_emulator")
-edp = m2.number_input("EDP (mmHg)", min_value=0.0, max_value=40.0, value=float(shared.get("edp_mmhg", 8.0)),
-                      step=0.5, key="my_edp")
+                        else 0, key="my_emulator",
+                        help="A shared emulator of the shape model's PC scores, or a subject emulator built below "
+                             "(its geometry is bound in).")
+edp = m2.number_input("EDP (mmHg)", min_value=0.0, max_value=40.0, value=float(SIMULATOR_DEFAULT_EDP_MMHG),
+                      step=0.5, key="my_edp", help="lvcore calibrate --edp; a fixed-EDP emulator takes only its own.")
 models = m3.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid"], format_func=MODEL_LABELS.get,
                         key="my_models")
 c1, c2, c3 = st.columns(3)
 chains = c1.number_input("chains", 1, 8, 2, key="my_chains")
 warmup = c2.number_input("warm-up", 50, 5000, 500, step=50, key="my_warmup")
 draws = c3.number_input("draws kept", 50, 5000, 500, step=50, key="my_draws")
-prepared = None
-if geometry is not None:
-    try:
-        prepared = flow.prepare(_emulator(emu_name), emu_name, geometry, edp_mmhg=edp)
-    except LVCoreError as err:
-        st.error(f"Model: {err}")
+emulator = None
+try:
+    emulator = _emulator(subject_emus.get(emu_name, emu_name))
+except LVCoreError as err:
+    st.error(f"Emulator: {err}")
+is_subject_emu = bool(getattr(emulator, "is_subject", False))
+prepared, measures, used_geometry = None, None, None
+try:
+    if emulator is None:
+        pass
+    elif inferred:
+        measures = flow.inferred_measures(entered, None if data is None else data.measures)
+        prepared = flow.prepare_inferred(emulator, emu_name, measures, edp_mmhg=edp)
+        used_geometry = flow.InferredGeometry(dict(measures))
+    elif is_subject_emu:
+        prepared = flow.prepare(emulator, emu_name, geometry, edp_mmhg=edp)
+        used_geometry = flow.subject_emulator_geometry(emulator)
+    elif geometry is not None:
+        prepared = flow.prepare(emulator, emu_name, geometry, edp_mmhg=edp)
+        used_geometry = geometry
+except LVCoreError as err:
+    st.error(f"Model: {err}")
 if prepared is not None:
-    st.dataframe(prepared.box, width="stretch", hide_index=True)
+    if prepared.box:
+        st.dataframe(prepared.box, width="stretch", hide_index=True)
     if prepared.extrapolating:
         st.warning("EXTRAPOLATION: some inputs lie outside the emulator's training box; the results are flagged.")
+    if prepared.inferred:
+        st.write("Geometric measures used: " + (", ".join(f"{k} {v:g}" for k, v in prepared.measures.items())
+                                                 or "none"))
+        for w in prepared.warnings:
+            st.warning(w)
+    if is_subject_emu:
+        st.info(f"Subject emulator: the geometry it was built on ({Path(used_geometry.source).name}) is bound in, "
+                "as it is; no PC scores are used.")
     st.caption(f"Conditions used: EDP {prepared.conditions['edp_mmhg']:.2f} mmHg, fibre angles "
                f"{prepared.conditions['alpha_endo']:.0f}° / {prepared.conditions['alpha_epi']:.0f}°.")
+if not inferred and geometry_file is not None:
+    with st.expander("Build a subject emulator for this geometry (optional, minutes)",
+                     expanded=st.session_state.get("my_build_job") is not None):
+        subject_emulator_panel.show(geometry_file[0], geometry_file[1], geometry_name, units=units, key="my_build")
 
 # ----------------------------------------------------------------------------- 4. calibrate
 st.header("4 · Calibrate")
-settings = {"geometry": geometry_name, "units": units, "reference_volume_ml": ref_volume or None,
+settings = {"geometry": "infer" if inferred else geometry_name, "units": units,
+            "reference_volume_ml": ref_volume or None, "measures": measures,
             "subject": None if data is None else data.subject, "emulator": emu_name, "edp_mmhg": float(edp),
             "models": list(models), "chains": int(chains), "warmup": int(warmup), "draws": int(draws)}
 if st.button("Run calibration", type="primary", key="my_run",
@@ -135,8 +198,8 @@ if st.button("Run calibration", type="primary", key="my_run",
             st.error(str(err))
             runs = None
         if runs:
-            summary = flow.summary_record(data.subject, data.y, geometry, prepared, runs, settings)
-            figures = flow.figures(runs, data.y)
+            summary = flow.summary_record(data.subject, data.y, used_geometry, prepared, runs, settings)
+            figures = flow.figures(runs, data.y, prepared=prepared)
             st.session_state["my_subject_run"] = freshness.Stored(
                 {"runs": runs, "summary": summary, "figures": figures,
                  "zip": flow.bundle(summary, runs, figures)}, dict(settings))
@@ -153,9 +216,23 @@ if stored is not None:
             for flag in run.check.flags:
                 st.warning(f"{MODEL_LABELS[run.model]}: flagged: {flag}")
             st.dataframe(run.result.summary.rename(index=display_name), width="stretch")
+            if "geometry_posterior" in record:
+                st.markdown(f"**Inferred geometry, {MODEL_LABELS[run.model]}**: posterior of the PC scores h, the "
+                            "scale s and the implied measures (5–95 %), against what was measured")
+                st.dataframe(flow.geometry_posterior_rows(record["geometry_posterior"]), width="stretch",
+                             hide_index=True)
+        for w in summary["warnings"]:
+            if summary["geometry"]["kind"] == "inferred":
+                st.warning(w)
         for name, fig in stored.result["figures"].items():
             st.plotly_chart(fig, width="stretch", key=f"my_fig_{name}")
-        if geometry is not None and prepared is not None and data is not None:
+        if summary["geometry"]["kind"] == "inferred":
+            st.caption("EDV/V₀ and the EDPVR need a known reference geometry: with the geometry inferred, see the "
+                       "implied reference cavity above.")
+        elif summary["geometry"]["kind"] == "subject-emulator":
+            st.caption("EDV/V₀ and the EDPVR are computed on the shape model's geometry (PC scores), not on a "
+                       "subject emulator's exact one; choose a shared emulator to see them.")
+        elif geometry is not None and prepared is not None and data is not None:
             physiology_panel.show({MODEL_LABELS[r.model]: r.result.idata for r in stored.result["runs"]},
                                   h=geometry.h, scale=float(geometry.scale), edp_mmhg=prepared.conditions["edp_mmhg"],
                                   angles=(prepared.conditions["alpha_endo"], prepared.conditions["alpha_epi"]),

@@ -67,6 +67,38 @@ def test_shared_sidebar_keeps_its_state_across_pages():
     assert float(next(s for s in at.sidebar.select_slider if s.key == "shared_a").value) == float(new)
 
 
+def _edp_slider(at):
+    return [s for s in at.sidebar.slider if s.key == "shared_edp"]
+
+
+def test_shared_edp_slider_only_where_it_acts():
+    """The sidebar's EDP slider is shown on the pages that read it (Emulator, Fibre angles) and hidden elsewhere
+    (the Simulator and My subject have their own EDP, Calibration takes the data's or the emulator's), its value
+    kept while hidden; the widget keeps its identity (fixed range, value in the widget state: commit f72aa68)."""
+    at = AppTest.from_file(APP, default_timeout=180).run()
+    assert not at.exception, at.exception
+    assert not _edp_slider(at)  # the Simulator's own EDP slider is in its form
+    at.switch_page(str(PAGES_DIR / "4_Emulator.py")).run()
+    assert not at.exception, at.exception
+    (edp,) = _edp_slider(at)
+    assert edp.label == "EDP (mmHg)" and (edp.min, edp.max) == (2.0, 30.0)
+    edp.set_value(12.5).run()
+    assert at.session_state["shared_inputs"]["edp_mmhg"] == 12.5
+    for page in ("5_Calibration.py", "8_My_subject.py", "1_Geometry_and_operators.py"):
+        at.switch_page(str(PAGES_DIR / page)).run()
+        assert not at.exception, (page, at.exception)
+        assert not _edp_slider(at), page
+        assert any("EDP" in c.value and "not used on this page" in c.value for c in at.sidebar.caption), page
+        assert at.session_state["shared_inputs"]["edp_mmhg"] == 12.5  # kept while hidden
+    at.switch_page(str(PAGES_DIR / "3_Fibre_angles.py")).run()
+    assert not at.exception, at.exception
+    (edp,) = _edp_slider(at)
+    assert edp.value == 12.5  # back with the value set on the Emulator page
+    # My subject's own EDP starts at lvcore calibrate's default, not at the hidden sidebar value
+    at.switch_page(str(PAGES_DIR / "8_My_subject.py")).run()
+    assert at.number_input(key="my_edp").value == 8.0
+
+
 def _lvv(at) -> float:
     (metric,) = [m for m in at.metric if m.label.startswith("LVV")]
     return float(metric.value.split()[0])

@@ -144,3 +144,196 @@ def test_bound_flags_name_a_posterior_piled_on_the_prior_bound():
     flags = flow.bound_flags(run(0.0507), prepared)
     assert any(f.startswith("a: posterior piled on the prior's lower bound 0.05") for f in flags), flags
     assert not any("bound" in f for f in flow.bound_flags(run(0.6), prepared))
+
+
+# ----------------------------------------------------------------------------- the no-mesh route (issue 27)
+def test_inferred_measures_take_the_fields_and_the_data_columns():
+    from lvcore.exceptions import DataError
+
+    assert flow.inferred_measures({"reference_volume_ml": 0.0, "wall_volume_ml": None, "long_axis_mm": 0.0}) == {}
+    assert flow.inferred_measures({"reference_volume_ml": 120.0}) == {"reference_volume_ml": 120.0}
+    assert flow.inferred_measures({"reference_volume_ml": 0.0}, {"reference_volume_ml": 110.0}) == \
+        {"reference_volume_ml": 110.0}  # the file's column when the field is left at 0
+    with pytest.raises(DataError, match=r"'Reference \(early-diastolic\) cavity volume, mL' = 5 is outside .*10-500 "
+                                        r"mL; enter it in mL"):
+        flow.inferred_measures({"reference_volume_ml": 5.0})
+    with pytest.raises(DataError, match="Long axis.* = 900 .*mm"):
+        flow.inferred_measures({"long_axis_mm": 900.0})
+    with pytest.raises(DataError, match="disagree"):
+        flow.inferred_measures({"reference_volume_ml": 120.0}, {"reference_volume_ml": 110.0})
+
+
+def test_no_mesh_route_is_the_clis_geometry_infer(uploads, tmp_path):
+    """prepare_inferred + calibrate give lvcore calibrate --geometry infer --reference-volume's geometry posterior
+    (same functions, same seed), the warning without any measure, and a bundle with the inferred geometry."""
+    from lvcore.cli import main
+    from lvcore.inference.geometry_prior import MEASURE_SD, InferredGeometryForward
+
+    files = volunteer_files(SUBJECT)
+    (row,) = flow.read_data(uploads, "m.csv", files.measured.read_bytes())
+    geo = flow.read_geometry(uploads, "g.vtu", files.geometry.read_bytes())
+    ref = round(flow.geometry_measures(geo)[0]["cavity_volume_ml"], 1)
+    emulator = load_emulator("chapter")
+    bare = flow.prepare_inferred(emulator, "chapter", {})
+    assert bare.inferred and flow.NO_MEASURE_WARNING in bare.warnings
+    prepared = flow.prepare_inferred(emulator, "chapter", flow.inferred_measures({"reference_volume_ml": ref}))
+    assert isinstance(prepared.forward, InferredGeometryForward)
+    assert prepared.forward.measures == {"reference_volume_ml": ref} and flow.NO_MEASURE_WARNING not in prepared.warnings
+    assert [b["name"] for b in prepared.box] == []  # chapter fixes EDP and angles: no condition to box-check
+    config = SamplerConfig(num_warmup=150, num_samples=100, num_chains=1, seed=0)
+    runs = flow.calibrate(row.subject, row.y, prepared, ["iid"], config=config)
+    settings = {"geometry": "infer", "measures": {"reference_volume_ml": ref}}
+    summary = flow.summary_record(row.subject, row.y, flow.InferredGeometry({"reference_volume_ml": ref}), prepared,
+                                  runs, settings)
+    post = summary["models"]["iid"]["geometry_posterior"]
+    assert {"h1", "h2", "h3", "h4", "h5", "scale", "implied_reference_volume_ml"} <= set(post)
+    # the implied reference cavity follows the measured one (observed with SD MEASURE_SD, 5 mL)
+    assert abs(post["implied_reference_volume_ml"]["median"] - ref) < 3 * MEASURE_SD["reference_volume_ml"], \
+        (post["implied_reference_volume_ml"], ref)
+    rc = main(["calibrate", "--data", str(files.measured), "--geometry", "infer", "--reference-volume", str(ref),
+               "--model", "iid", "--chains", "1", "--warmup", "150", "--samples", "100", "--seed", "0",
+               "--out", str(tmp_path / "cli"), "--json"])
+    assert rc in (0, 1, 4)
+    cli = json.loads((tmp_path / "cli" / "summary.json").read_text())[0]
+    assert cli["geometry"]["kind"] == summary["geometry"]["kind"] == "inferred"
+    assert cli["geometry"]["measures"] == summary["geometry"]["measures"]
+    for name in ("h1", "h5", "scale", "implied_reference_volume_ml"):
+        for q in ("median", "q05", "q95"):
+            assert post[name][q] == pytest.approx(cli["geometry"]["posterior"][name][q], rel=1e-6, abs=1e-9), name
+    assert summary["models"]["iid"]["flags"] == cli["flags"]
+    figs = flow.figures(runs, row.y, prepared=prepared)
+    assert "iid_geometry" in figs
+    rows = flow.geometry_posterior_rows(post)
+    assert [r["quantity"] for r in rows][:6] == ["h1", "h2", "h3", "h4", "h5", "scale"]
+    assert next(r for r in rows if r["quantity"] == "implied reference_volume_ml")["measured"] == ref
+    with zipfile.ZipFile(BytesIO(flow.bundle(summary, runs, figs))) as z:
+        assert "figures/iid_geometry.html" in z.namelist()
+        assert json.loads(z.read("summary.json"))["models"]["iid"]["geometry_posterior"]["scale"]["median"] > 0
+        page = z.read("summary.html").decode()
+        assert "inferred (no mesh)" in page and "implied reference_volume_ml" in page
+
+
+def test_a_subject_emulator_has_no_geometry_to_infer():
+    from types import SimpleNamespace
+
+    fake = SimpleNamespace(is_subject=True)
+    with pytest.raises(LVCoreError, match="subject-specific.*no-mesh"):
+        flow.prepare_inferred(fake, "subject-x", {})
+
+
+def test_my_subject_page_no_mesh_route():
+    """AppTest: the no-mesh route needs no geometry file, warns without a measure, and calibrates with the
+    reference volume; the results show the inferred geometry's posterior."""
+    from streamlit.testing.v1 import AppTest
+
+    from lvcore.app import PAGES_DIR
+    from lvcore.inference.geometry_prior import MEASURE_SD
+
+    at = AppTest.from_file(str(PAGES_DIR / "8_My_subject.py"), default_timeout=180).run()
+    at.radio(key="my_geometry_mode").set_value("No mesh: infer it from CMR measures").run()
+    assert not at.exception and not [u for u in at.get("file_uploader") if u.proto.label.startswith("Geometry")]
+    at.selectbox(key="my_example").select(SUBJECT).run()
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    assert any(w.value == flow.NO_MEASURE_WARNING for w in at.warning)
+    at.number_input(key="my_ref_volume").set_value(110.0)
+    at.number_input(key="my_chains").set_value(1)
+    at.number_input(key="my_warmup").set_value(100)
+    at.number_input(key="my_draws").set_value(100).run()
+    assert not any(w.value == flow.NO_MEASURE_WARNING for w in at.warning)
+    at.button(key="my_run").click().run(timeout=300)
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    summary = at.session_state["my_subject_run"].result["summary"]
+    assert summary["geometry"] == {"kind": "inferred", "source": "infer", "measures": {"reference_volume_ml": 110.0},
+                                   "measure_sd": {"reference_volume_ml": MEASURE_SD["reference_volume_ml"]}}
+    assert any("Inferred geometry" in m.value for m in at.markdown)
+    assert any("quantity" in d.value.columns for d in at.dataframe)
+    assert "iid_geometry" in at.session_state["my_subject_run"].result["figures"]
+
+
+# ----------------------------------------------------------------------------- a subject emulator (issue 25 item 2)
+def test_subject_build_design_defaults_are_the_clis():
+    """The app's build (and its design controls) default to `lvcore emulator build`'s options."""
+    from lvcore.cli import build_parser
+
+    args = build_parser().parse_args(["emulator", "build", "--geometry", "g.vtu", "--out", "o"])
+    build = flow.SubjectBuild("g.vtu", "out")
+    assert (build.design.n_train, build.design.n_valid, build.design.n_test, build.design.method) == \
+        (args.n_train, args.n_valid, args.n_test, args.design)
+    assert (build.workers, build.seed, build.resolution, build.units) == \
+        (args.workers, args.seed, args.resolution, args.units)
+
+
+def test_build_dir_names_the_geometry_and_design(tmp_path):
+    from lvcore.emulator.subject import SubjectDesign
+
+    a = flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path)
+    assert a.parent == tmp_path and a.name.startswith("my_lv-")
+    assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path) == a
+    assert flow.build_dir(b"mesh2", "my lv.vtu", root=tmp_path) != a
+    assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path, design=SubjectDesign(10, 5, 5)) != a
+    assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path, units="cm") != a
+
+
+def test_subject_build_runs_stops_keeps_and_resumes(tmp_path):
+    """SubjectBuild: a stopped build says what to do and keeps the FE runs; the next build resumes from them and
+    gives the held-out accuracy; a third finds it in the folder."""
+    from lvcore.emulator.subject import RUNS_FILE, SubjectDesign
+
+    geometry = volunteer_files(SUBJECT).geometry
+    out = tmp_path / "emu"
+    design = SubjectDesign(8, 3, 3)
+    job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu")
+    job.stop()  # before the first batch: nothing done
+    job.start(background=False)
+    assert job.finished and not job.ok and "No FE run was finished" in job.error
+    assert "lvcore emulator build --geometry hv3.vtu" in job.error and "--n-train 8" in job.error
+    job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu").start()
+    job.join(600)
+    assert job.ok, job.error
+    info = flow.held_out_summary(job.metadata)
+    assert info["n_test"] == 3 and info["runs_total"] == 14 and info["lvv_rmse_ml"] > 0
+    assert info["geometry_source"] == str(geometry)
+    assert not (out / RUNS_FILE).exists()  # the converged rows are in training_data.npz
+    again = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1).start()
+    assert again.ok and again.cached and again.metadata["test"] == job.metadata["test"]
+
+
+def test_my_subject_page_builds_and_uses_a_subject_emulator(tmp_path, monkeypatch):
+    """AppTest: the build panel (CLI defaults; a small design here, on the fast mesh), its held-out RMSE, the
+    emulator offered for calibration, and a calibration with the geometry bound in."""
+    from streamlit.testing.v1 import AppTest
+
+    from lvcore.app import PAGES_DIR
+
+    class SmallBuild(flow.SubjectBuild):  # the page's build on the fast mesh in this process (CI-sized)
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **{**kwargs, "resolution": "fast", "workers": 1})
+
+    monkeypatch.setattr(flow, "SubjectBuild", SmallBuild)
+    monkeypatch.setattr(flow, "BUILD_CACHE", tmp_path)
+    at = AppTest.from_file(str(PAGES_DIR / "8_My_subject.py"), default_timeout=180).run()
+    at.selectbox(key="my_example").select(SUBJECT).run()
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    assert [at.number_input(key=f"my_build_{k}").value for k in ("train", "valid", "test")] == [800, 100, 100]
+    at.number_input(key="my_build_train").set_value(8)
+    at.number_input(key="my_build_valid").set_value(3)
+    at.number_input(key="my_build_test").set_value(3).run()
+    at.button(key="my_build_start").click().run()
+    assert not at.exception, at.exception
+    job = at.session_state["my_build_job"]
+    job.join(600)
+    assert job.ok, job.error
+    at.run()
+    assert any("held-out test (3 FE runs never used in training) LVV RMSE" in s.value for s in at.success)
+    label = next(o for o in at.selectbox(key="my_emulator").options if o.startswith("subject: "))
+    at.selectbox(key="my_emulator").select(label)
+    at.number_input(key="my_chains").set_value(1)
+    at.number_input(key="my_warmup").set_value(100)
+    at.number_input(key="my_draws").set_value(100).run()
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    assert any("bound in" in i.value for i in at.info)
+    at.button(key="my_run").click().run(timeout=300)
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    summary = at.session_state["my_subject_run"].result["summary"]
+    assert summary["geometry"]["kind"] == "subject-emulator" and summary["geometry"]["scores"] == []
+    assert summary["emulator"] == label

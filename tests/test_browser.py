@@ -107,9 +107,66 @@ FIGURE_SELECTORS = {"plot": '[data-testid="stPlotlyChart"], [data-testid="stCust
 VIEWPORT_WIDTH = 1400
 
 
+#: Selector of the tabs of the main area.
+TAB = "[data-testid=stMain] [data-baseweb=tab], [data-testid=stMain] [role=tab]"
+
+
+def _shoot_visible(page, name: str, out: Path, shot: list, problems: list) -> None:
+    """Screenshot every visible plot, table and image not yet taken on this page state (marked in the DOM), and
+    check that each has a non-zero box inside the viewport's width."""
+    for kind, selector in FIGURE_SELECTORS.items():
+        items = page.locator(selector)
+        for i in range(items.count()):
+            item = items.nth(i)
+            if not item.is_visible() or item.get_attribute("data-lv-shot"):  # in a tab not shown, or done
+                continue
+            item.scroll_into_view_if_needed()
+            box = item.bounding_box()
+            label = f"{name}_{kind}_{len(shot) + len(problems) + 1}"
+            item.evaluate("e => e.setAttribute('data-lv-shot', '1')")
+            if box is None or box["width"] <= 0 or box["height"] <= 0:
+                problems.append(f"{label}: empty box {box}")
+                continue
+            if box["x"] < -0.5 or box["x"] + box["width"] > VIEWPORT_WIDTH + 0.5:
+                problems.append(f"{label}: spans x = {box['x']:.0f}..{box['x'] + box['width']:.0f} px, beyond the "
+                                f"{VIEWPORT_WIDTH}-px viewport")
+            item.screenshot(path=str(out / f"{label}.png"))
+            shot.append((label, round(box["width"]), round(box["height"])))
+
+
+def _check_figures(page, name: str, out: Path, shot: list, problems: list) -> int:
+    """:func:`_shoot_visible` on the page as shown, then on every visible tab, clicked one by one (a tab nested in
+    a panel is clicked when its panel is the one shown); the number of tabs clicked."""
+    _shoot_visible(page, name, out, shot, problems)
+    clicked = 0
+    tabs = page.locator(TAB)
+    for t in range(tabs.count()):
+        tab = tabs.nth(t)
+        if not tab.is_visible():  # a nested tab in a panel not shown: reached when its parent tab is clicked
+            continue
+        tab.click()
+        clicked += 1
+        page.wait_for_timeout(400)  # a tab switch is drawn in the browser (no rerun); let Plotly resize
+        _shoot_visible(page, f"{name}_tab{t + 1}", out, shot, problems)
+    wide = page.evaluate("document.documentElement.scrollWidth")  # no sideways scrolling of the page
+    if wide > VIEWPORT_WIDTH + 1:
+        problems.append(f"page '{name}' is {wide} px wide at a {VIEWPORT_WIDTH}-px viewport")
+    return clicked
+
+
+def _run_small_calibration(page, chains: int = 1, warmup: int = 100, draws: int = 100) -> None:
+    """Set the page's sampler to a small run, press "Run calibration" and wait for the results."""
+    _number_input(page, "chains", chains)
+    _number_input(page, "warm-up", warmup)
+    _number_input(page, "draws kept", draws)
+    page.get_by_role("button", name="Run calibration").click()
+    drv.wait_rerun(page, timeout_s=600)
+
+
 def test_every_figure_and_table_fits_at_1400_px(app, chromium):
-    """Every visible plot, table and image of every page, screenshotted alone at a 1400-px-wide viewport
-    (build/screenshots/figures/): each has a non-zero box and ends inside the viewport's width."""
+    """Every plot, table and image of every page, on every tab, screenshotted alone at a 1400-px-wide viewport
+    (build/screenshots/figures/): each has a non-zero box and ends inside the viewport's width; then the same
+    for the results of a small calibration on the Calibration page (its per-likelihood tabs)."""
     import shutil
 
     out = SHOTS / "figures"
@@ -120,31 +177,25 @@ def test_every_figure_and_table_fits_at_1400_px(app, chromium):
     assert page.viewport_size["width"] == VIEWPORT_WIDTH
     page.goto(app.url)
     drv.wait_idle(page)
-    shot, problems = [], []
-    for label, href in drv.page_links(page):
+    shot, problems, tabs = [], [], 0
+    links = drv.page_links(page)
+    for label, href in links:
         page.goto(href)
         drv.wait_idle(page)
-        for kind, selector in FIGURE_SELECTORS.items():
-            items = page.locator(selector)
-            for i in range(items.count()):
-                item = items.nth(i)
-                if not item.is_visible():  # e.g. in a tab not shown
-                    continue
-                item.scroll_into_view_if_needed()
-                box = item.bounding_box()
-                name = f"{drv.slug(label)}_{kind}_{i + 1}"
-                if box is None or box["width"] <= 0 or box["height"] <= 0:
-                    problems.append(f"{name}: empty box {box}")
-                    continue
-                if box["x"] < -0.5 or box["x"] + box["width"] > VIEWPORT_WIDTH + 0.5:
-                    problems.append(f"{name}: spans x = {box['x']:.0f}..{box['x'] + box['width']:.0f} px, beyond the "
-                                    f"{VIEWPORT_WIDTH}-px viewport")
-                item.screenshot(path=str(out / f"{name}.png"))
-                shot.append((name, round(box["width"]), round(box["height"])))
-        wide = page.evaluate("document.documentElement.scrollWidth")  # no sideways scrolling of the page
-        if wide > VIEWPORT_WIDTH + 1:
-            problems.append(f"page '{label}' is {wide} px wide at a {VIEWPORT_WIDTH}-px viewport")
+        tabs += _check_figures(page, drv.slug(label), out, shot, problems)
+    # figures that appear only after a calibration: the Calibration page's results, one tab per likelihood
+    page.goto(dict(links)["Calibration"])
+    drv.wait_idle(page)
+    _run_small_calibration(page)
+    page.get_by_text("Export figures").wait_for(timeout=600_000)
+    drv.wait_idle(page)
+    assert not drv.exceptions(page), drv.exceptions(page)
+    before = len(shot)
+    result_tabs = _check_figures(page, "calibration_results", out, shot, problems)
     print("\n".join(f"{n}: {w} x {h} px" for n, w, h in shot))
+    assert result_tabs >= 2, "the calibration results show no per-likelihood tabs"
+    assert len(shot) - before >= 6, f"too few result figures: {shot[before:]}"  # predictive, per tab: table, 4 plots
+    assert tabs >= 5, f"only {tabs} tabs clicked on the pages"
     assert len(shot) >= 10, f"too few figures and tables found: {shot}"
     assert {n.split("_")[-2] for n, _, _ in shot} >= {"plot", "dataframe", "image"}, shot
     assert not problems, problems
@@ -245,6 +296,10 @@ def test_my_subject_end_to_end_stays_on_localhost(app, chromium, tmp_path):
     drv.wait_idle(page)
     page.screenshot(path=str(SHOTS / "my_subject_results.png"), full_page=True)
     assert not drv.exceptions(page), drv.exceptions(page)
+    shot, problems = [], []  # the results' figures and tables at 1400 px, as every page's
+    (SHOTS / "figures").mkdir(parents=True, exist_ok=True)
+    _check_figures(page, "my_subject_results", SHOTS / "figures", shot, problems)
+    assert len(shot) >= 4 and not problems, (shot, problems)
     with page.expect_download() as info:
         download_button.click()
     target = tmp_path / "subject.zip"
@@ -259,4 +314,60 @@ def test_my_subject_end_to_end_stays_on_localhost(app, chromium, tmp_path):
     assert not js_errors, js_errors[:3]
     outside = {h for h in hosts if h not in ("127.0.0.1", "localhost", "::1", "data", "blob", "about")}
     assert not outside, f"requests left localhost: {sorted(outside)}"
+    ctx.close()
+
+
+def test_my_subject_without_a_mesh(app, chromium, tmp_path):
+    """The no-mesh route of My subject (``lvcore calibrate --geometry infer``): measurements and the reference
+    volume only; the warning while no measure is given; the posterior of the PC scores, the scale and the implied
+    reference cavity on the page and in the zip; every result figure and table fits at 1400 px."""
+    import json
+    import zipfile
+
+    from lvcore.app import subject_flow as flow
+    from lvcore.inference import guards
+    from lvcore.resources import volunteer_files
+
+    files = volunteer_files("SYNTHETIC_HV3")
+    ref = round(flow.geometry_measures(guards.resolve_geometry(files.geometry, n_pc=5))[0]["cavity_volume_ml"])
+    js_errors: list = []
+    ctx, page = _new_page(chromium, js_errors)
+    page.goto(app.url)
+    drv.wait_idle(page)
+    page.goto(dict(drv.page_links(page))["My subject"])
+    drv.wait_idle(page)
+    page.get_by_text("No mesh: infer it from CMR measures", exact=True).click()
+    drv.wait_rerun(page)
+    uploads = page.locator("[data-testid=stFileUploader] input[type=file]")
+    assert uploads.count() == 1, "the no-mesh route still asks for a geometry file"
+    uploads.nth(0).set_input_files(str(files.measured))
+    drv.wait_rerun(page)
+    assert page.get_by_text("no geometric measure given", exact=False).count() >= 1, "no warning without measures"
+    _number_input(page, "Reference (early-diastolic) cavity volume, mL (optional, 0 = not measured)", ref)
+    assert page.get_by_text("no geometric measure given", exact=False).count() == 0
+    _run_small_calibration(page, chains=1, warmup=150, draws=100)
+    download_button = page.get_by_role("button", name=re.compile("Download everything"))
+    download_button.wait_for(timeout=600_000)
+    drv.wait_idle(page)
+    page.screenshot(path=str(SHOTS / "my_subject_no_mesh_results.png"), full_page=True)
+    assert not drv.exceptions(page), drv.exceptions(page)
+    assert page.get_by_text("Inferred geometry", exact=False).count() >= 1
+    shot, problems = [], []
+    (SHOTS / "figures").mkdir(parents=True, exist_ok=True)
+    _check_figures(page, "my_subject_no_mesh_results", SHOTS / "figures", shot, problems)
+    assert len(shot) >= 4 and not problems, (shot, problems)
+    with page.expect_download() as info:
+        download_button.click()
+    target = tmp_path / "no_mesh.zip"
+    info.value.save_as(target)
+    with zipfile.ZipFile(target) as z:
+        names = set(z.namelist())
+        assert {"settings.json", "summary.json", "summary.html", "figures/iid_geometry.html"} <= names, names
+        summary = json.loads(z.read("summary.json"))
+        assert summary["geometry"]["kind"] == "inferred"
+        assert summary["geometry"]["measures"] == {"reference_volume_ml": ref}
+        post = summary["models"]["iid"]["geometry_posterior"]
+        assert {"h1", "h5", "scale", "implied_reference_volume_ml"} <= set(post)
+        assert "inferred (no mesh)" in z.read("summary.html").decode()
+    assert not js_errors, js_errors[:3]
     ctx.close()

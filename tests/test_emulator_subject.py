@@ -133,3 +133,33 @@ def test_design_space():
     assert dict(space.fixed) == {"edp": 10.0, "alpha_endo": -60.0, "alpha_epi": 60.0} and space.base == "sliding"
     with pytest.raises(EmulatorError):
         parse_inputs("edp")
+
+
+def test_simulate_rows_keeps_the_runs_done_and_resumes(tmp_path):
+    """A stopped simulation keeps its finished batches in the checkpoint; the next call with the same inputs
+    resumes from them, and its results equal one uninterrupted batch (within solver tolerance)."""
+    from lvcore.campaigns.designs import make_design
+    from lvcore.emulator.subject import simulate_rows
+
+    space = subject_space(("theta",), bounds=BOUNDS)
+    x = make_design(space, "sobol", 6, 1).points
+    geometry = resolve_subject_geometry("default").section
+    ckpt = tmp_path / "fe_runs.npz"
+    seen = []
+    with pytest.raises(EmulatorError, match=f"stopped after 3 of 6 FE runs; they are kept in {ckpt}"):
+        simulate_rows(space, x, geometry, resolution="fast", workers=1, checkpoint=ckpt, chunk=3,
+                      progress=lambda done, total: seen.append(done), stop=lambda: len(seen) >= 1)
+    assert seen == [3]
+    with np.load(ckpt) as z:
+        assert z["inputs"].shape == (3, 4) and z["converged"].all()
+        kept = z["outputs"].copy()
+    calls = []
+    res = simulate_rows(space, x, geometry, resolution="fast", workers=1, checkpoint=ckpt, chunk=3,
+                        progress=lambda done, total: calls.append(done))
+    assert calls == [3, 6]  # the 3 kept rows were not simulated again
+    assert res.converged.all()
+    np.testing.assert_array_equal(res.outputs[:3], kept)
+    other = simulate_rows(space, x[::-1], geometry, resolution="fast", workers=1, checkpoint=ckpt, chunk=6,
+                          progress=lambda done, total: calls.append(("other", done)))
+    assert calls[2:] == [("other", 6)]  # other inputs: nothing taken from the checkpoint
+    np.testing.assert_allclose(other.outputs[::-1], res.outputs, rtol=1e-5, atol=1e-7)

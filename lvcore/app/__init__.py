@@ -25,14 +25,15 @@ ENTRY = APP_DIR / "main.py"
 @dataclass(frozen=True)
 class AppPage:
     """One page of the app: its script (``pages/<name>`` or, for the home page, relative to :data:`APP_DIR`),
-    title in the navigation, icon and URL; ``uses_theta``: the page reads θ from the shared sidebar (elsewhere the
-    sidebar hides its θ sliders, which would do nothing)."""
+    title in the navigation, icon and URL; ``uses_theta``/``uses_edp``: the page reads θ / the EDP from the shared
+    sidebar (elsewhere the sidebar hides those controls, which would do nothing there)."""
 
     script: str
     title: str
     icon: str
     url_path: str
     uses_theta: bool = False
+    uses_edp: bool = False
 
     @property
     def path(self) -> Path:
@@ -47,8 +48,9 @@ PAGES = (
     AppPage("simulator.py", "Simulator", ":material/monitor_heart:", "simulator"),
     AppPage("pages/1_Geometry_and_operators.py", "Geometry & operators", ":material/view_in_ar:", "geometry"),
     AppPage("pages/2_Shape_model.py", "Shape model", ":material/scatter_plot:", "shape-model"),
-    AppPage("pages/3_Fibre_angles.py", "Fibre angles", ":material/tune:", "fibre-angles", uses_theta=True),
-    AppPage("pages/4_Emulator.py", "Emulator", ":material/speed:", "emulator", uses_theta=True),
+    AppPage("pages/3_Fibre_angles.py", "Fibre angles", ":material/tune:", "fibre-angles", uses_theta=True,
+            uses_edp=True),
+    AppPage("pages/4_Emulator.py", "Emulator", ":material/speed:", "emulator", uses_theta=True, uses_edp=True),
     AppPage("pages/5_Calibration.py", "Calibration", ":material/query_stats:", "calibration"),
     AppPage("pages/6_Studies.py", "Studies", ":material/science:", "studies"),
     AppPage("pages/8_My_subject.py", "My subject", ":material/person:", "my-subject"),

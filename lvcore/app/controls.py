@@ -71,6 +71,11 @@ SHARED = "shared_inputs"
 _BY_MAIN = "_shared_sidebar_by_main"
 #: session_state key of θ as last set in the sidebar (kept while a page hides the θ sliders).
 _THETA = "_shared_theta"
+#: session_state key of the EDP as last set in the sidebar (kept while a page hides the EDP slider).
+_EDP = "_shared_edp"
+#: Widget key and range (mmHg) of the sidebar's EDP slider.
+EDP_KEY = "shared_edp"
+EDP_RANGE = (2.0, 30.0)
 
 
 def _shared_defaults() -> dict:
@@ -78,13 +83,15 @@ def _shared_defaults() -> dict:
             "subject": None, "emulator": None}
 
 
-def shared_sidebar(theta: bool = True) -> dict:
+def shared_sidebar(theta: bool = True, edp: bool = True) -> dict:
     """Render the sidebar shared by every page and return its values (also in ``st.session_state[SHARED]``).
 
     Subject (a bundled SYNTHETIC volunteer), emulator, θ (log-scaled, with units) and EDP. The entry script
     (:mod:`lvcore.app.main`) renders it before the page runs, so the values and the widgets' state are the
-    same on every page. ``theta=False`` (a page that does not read θ) hides the θ sliders; their values are
-    kept and come back with the sliders.
+    same on every page. ``theta=False`` (a page that does not read θ) hides the θ sliders, ``edp=False`` (a page
+    that does not read the sidebar's EDP) the EDP slider; their values are kept and come back with the sliders.
+    Each slider has fixed options and no default once its value is in the widget state (a default or options that
+    change between reruns make Streamlit remount the widget and drop a key press).
     """
     import streamlit as st
 
@@ -120,9 +127,19 @@ def shared_sidebar(theta: bool = True) -> dict:
             st.session_state[_THETA] = dict(values["theta"])
         else:
             values["theta"] = saved
-            st.caption("θ (a, b, a_f, b_f): not used on this page; set it on the Emulator or Fibre angles page.")
-        values["edp_mmhg"] = float(st.slider("EDP (mmHg)", 2.0, 30.0, float(conditions.SIMULATOR_DEFAULT_EDP_MMHG), 0.5,
-                                             key="shared_edp"))
+        saved_edp = float(st.session_state.get(_EDP, values["edp_mmhg"]))
+        if edp:
+            if EDP_KEY not in st.session_state:  # first shown, or shown again after a page that hid it
+                st.session_state[EDP_KEY] = saved_edp
+            values["edp_mmhg"] = float(st.slider("EDP (mmHg)", EDP_RANGE[0], EDP_RANGE[1], step=0.5, key=EDP_KEY,
+                                                 help="End-diastolic pressure of the Emulator and Fibre angles pages."))
+            st.session_state[_EDP] = values["edp_mmhg"]
+        else:
+            values["edp_mmhg"] = saved_edp
+        hidden = [what for what, shown in (("θ (a, b, a_f, b_f)", theta), ("EDP", edp)) if not shown]
+        if hidden:
+            st.caption(f"{' and '.join(hidden)}: not used on this page; set {'them' if len(hidden) > 1 else 'it'} "
+                       "on the Emulator or Fibre angles page.")
     st.session_state[SHARED] = values
     return values
 
@@ -136,24 +153,25 @@ def shared_start(name: str, shared: dict) -> float | None:
     return None
 
 
-def render_shared_sidebar(theta: bool = True) -> dict:
-    """The entry script's call: render the shared sidebar (θ sliders only if ``theta``) and mark that the pages
-    need not."""
+def render_shared_sidebar(theta: bool = True, edp: bool = True) -> dict:
+    """The entry script's call: render the shared sidebar (θ sliders only if ``theta``, the EDP slider only if
+    ``edp``) and mark that the pages need not."""
     import streamlit as st
 
     st.session_state[_BY_MAIN] = True
-    return shared_sidebar(theta)
+    return shared_sidebar(theta, edp)
 
 
-def shared_inputs(theta: bool = True) -> dict:
+def shared_inputs(theta: bool = True, edp: bool = True) -> dict:
     """For a page: the shared sidebar's values; renders the sidebar itself when the page runs on its own
     (``streamlit run`` of one page, AppTest), so every page works with and without the navigation."""
     import streamlit as st
 
     if st.session_state.get(_BY_MAIN) and SHARED in st.session_state:
         return st.session_state[SHARED]
-    return shared_sidebar(theta)
+    return shared_sidebar(theta, edp)
 
 
 __all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label", "SHARED",
+           "EDP_KEY", "EDP_RANGE",
            "shared_sidebar", "render_shared_sidebar", "shared_inputs", "shared_start"]

@@ -25,8 +25,8 @@ def main() -> None:
     from lvcore.app.controls import render_shared_sidebar
 
     page = next((p for p in PAGES if p.title == pg.title), None)
-    # subject, emulator, θ (only where the page reads it), EDP: one sidebar, one state, every page
-    render_shared_sidebar(theta=page is None or page.uses_theta)
+    # subject, emulator, θ and EDP (each only where the page reads it): one sidebar, one state, every page
+    render_shared_sidebar(theta=page is None or page.uses_theta, edp=page is None or page.uses_edp)
     pg.run()
 
 

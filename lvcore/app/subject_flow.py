@@ -11,6 +11,10 @@ The steps:
 1. :func:`read_geometry` — an uploaded geometry (a volume mesh, a template
    mesh, or PC scores) becomes a :class:`~lvcore.inference.guards.GeometrySource`
    (PC scores ``h`` and the uniform scale ``s``; the fit residual of a mesh).
+   Without a mesh (``lvcore calibrate --geometry infer``), :func:`inferred_measures`
+   takes the CMR measures (reference volume, wall volume, long axis) and
+   :func:`prepare_inferred` samples ``h`` and ``s`` with θ
+   (:mod:`lvcore.inference.geometry_prior`).
 2. :func:`read_data` — uploaded measurements (24-region or AHA-16 CSV, JSON
    or ``.mat``) become :class:`~lvcore.inference.data.MeasuredData` rows.
 3. :func:`prepare` — binds geometry and conditions (EDP) into the emulator,
@@ -21,13 +25,22 @@ The steps:
 5. :func:`bundle` — one zip: InferenceData (netCDF) per likelihood, the
    figures (HTML), ``settings.json``, ``summary.json`` and a one-page
    ``summary.html``.
+
+Optionally, :class:`SubjectBuild` builds a subject-specific emulator on the
+loaded geometry as it is (``lvcore emulator build --geometry FILE``,
+:func:`lvcore.emulator.subject.build_subject_emulator`) in a background thread,
+with progress and a stop request; :func:`prepare` then binds no PC scores
+(the geometry is in the emulator), as ``lvcore calibrate --emulator DIR``.
 """
 from __future__ import annotations
 
+import hashlib
 import html
 import io
 import json
 import tempfile
+import threading
+import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +48,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from lvcore.exceptions import DataError
+from lvcore.exceptions import DataError, LVCoreError
 
 #: File types the geometry step takes (volume meshes are fitted, template meshes projected).
 GEOMETRY_TYPES = ("vtu", "vtk", "msh", "inp", "npy", "npz", "json", "csv")
@@ -144,6 +157,8 @@ class Prepared:
         Each fixed input against the emulator's training range (``name``, ``value``, ``low``, ``high``, ``inside``).
     warnings : list of str
         Geometry warnings and extrapolation warnings (scores outside the box).
+    measures : dict or None
+        See :attr:`inferred`.
     """
 
     forward: Any
@@ -151,10 +166,28 @@ class Prepared:
     conditions: dict
     box: list
     warnings: list = field(default_factory=list)
+    #: The measured geometric measures of an inferred geometry (the no-mesh route), None for a given geometry.
+    measures: dict | None = None
 
     @property
     def extrapolating(self) -> bool:
         return any(not row.get("inside", True) for row in self.box)
+
+    @property
+    def inferred(self) -> bool:
+        """The geometry (PC scores and scale) is sampled with θ (``--geometry infer``)."""
+        return self.measures is not None
+
+
+def _conditions(emulator, edp_mmhg):
+    """The CLI's conditions check; the EDP a fixed-EDP emulator was trained at counts as not given."""
+    from lvcore.inference import guards
+    from lvcore.outputs import EDP_NAME
+
+    fixed_edp = dict(getattr(emulator, "fixed", None) or {}).get(EDP_NAME)
+    if edp_mmhg is not None and fixed_edp is not None and abs(float(edp_mmhg) - float(fixed_edp)) <= 1e-6:
+        edp_mmhg = None  # the EDP the emulator was trained at: nothing to honour (another EDP is refused)
+    return guards.check_conditions(emulator, edp_mmhg, None, None, infer_angles=False)
 
 
 def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = None) -> Prepared:
@@ -162,6 +195,8 @@ def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = 
 
     Scores outside the training box do not stop the flow (the CLI refuses them without
     ``--allow-extrapolation``); they come back as warnings and :attr:`Prepared.extrapolating`.
+    A subject-specific emulator (``emulator.is_subject``) has its geometry bound in: no PC scores, scale 1,
+    as ``lvcore calibrate --emulator DIR``; ``geometry`` may then be None.
 
     Raises
     ------
@@ -172,18 +207,157 @@ def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = 
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.inference import guards
 
-    from lvcore.outputs import EDP_NAME
-
-    fixed_edp = dict(getattr(emulator, "fixed", None) or {}).get(EDP_NAME)
-    if edp_mmhg is not None and fixed_edp is not None and abs(float(edp_mmhg) - float(fixed_edp)) <= 1e-6:
-        edp_mmhg = None  # the EDP the emulator was trained at: nothing to honour (another EDP is refused)
-    cond = guards.check_conditions(emulator, edp_mmhg, None, None, infer_angles=False)
-    box, extrapolation = guards.check_inputs_in_box(guards.fixed_inputs(geometry.h, cond, emulator, False), emulator,
+    cond = _conditions(emulator, edp_mmhg)
+    bound = bool(getattr(emulator, "is_subject", False))
+    h, scale = (np.zeros(0), 1.0) if bound else (geometry.h, geometry.scale)
+    box, extrapolation = guards.check_inputs_in_box(guards.fixed_inputs(h, cond, emulator, False), emulator,
                                                     allow_extrapolation=True, what="the subject's PC scores")
-    forward = ScaledForward(emulator_forward(emulator, geometry.h, name=emulator_name,
+    forward = ScaledForward(emulator_forward(emulator, h, name=emulator_name,
                                              alpha_endo=cond["alpha_endo"], alpha_epi=cond["alpha_epi"],
-                                             edp_mmhg=cond["edp_mmhg"]), geometry.scale)
-    return Prepared(forward, emulator_name, cond, list(box), list(geometry.warnings) + list(extrapolation))
+                                             edp_mmhg=cond["edp_mmhg"]), scale)
+    geometry_warnings = list(subject_emulator_geometry(emulator).warnings) if bound else list(geometry.warnings)
+    return Prepared(forward, emulator_name, cond, list(box), geometry_warnings + list(extrapolation))
+
+
+def subject_emulator_geometry(emulator):
+    """The geometry record of a subject-specific emulator (bound in), as ``lvcore calibrate --emulator DIR``
+    records it: no PC scores, scale 1, the file it was built on."""
+    from lvcore.inference import guards
+
+    sub = emulator.metadata["subject"]
+    return guards.GeometrySource(np.zeros(0), str(sub.get("geometry_source")), "subject-emulator",
+                                 fit_residual_mm=(sub.get("geometry_record") or {}).get("fit_residual_mm"),
+                                 warnings=tuple(sub.get("geometry_warnings") or ()))
+
+
+# ----------------------------------------------------------------------------- no mesh: geometry inferred
+#: The no-mesh route's geometric measures, as the page labels them (units in the name).
+MEASURE_LABELS = {"reference_volume_ml": "Reference (early-diastolic) cavity volume, mL",
+                  "wall_volume_ml": "Wall (myocardial) volume, mL (LV mass in g / 1.05)",
+                  "long_axis_mm": "Long axis, base plane to epicardial apex, mm"}
+#: The warning of a no-mesh run without any geometric measure (the CLI's, in the page's terms).
+NO_MEASURE_WARNING = ("no geometric measure given: the subject's size is inferred from the LVV and strains alone, and "
+                      "size and stiffness trade off (a larger reference cavity inflated less fits the same LVV as a "
+                      "smaller one inflated more); measure the early-diastolic cavity volume and enter it as the "
+                      "reference volume")
+
+
+@dataclass(frozen=True)
+class InferredGeometry:
+    """The no-mesh route's geometry: PC scores and scale sampled with θ, informed by ``measures``.
+
+    Attributes
+    ----------
+    measures : dict
+        Measured ``reference_volume_ml``, ``wall_volume_ml`` (mL) and ``long_axis_mm`` (mm); any subset.
+    """
+
+    measures: dict
+    kind: str = "inferred"
+    source: str = "infer"
+
+    def record(self) -> dict:
+        """The CLI's geometry record of ``--geometry infer``."""
+        from lvcore.inference.geometry_prior import MEASURE_SD
+
+        return {"kind": self.kind, "source": self.source, "measures": dict(self.measures),
+                "measure_sd": {k: MEASURE_SD[k] for k in self.measures}}
+
+
+def inferred_measures(entered: Mapping[str, float | None], data_measures: Mapping[str, float] | None = None) -> dict:
+    """The geometric measures of the no-mesh route: those entered (0 or None: not measured) and the data's columns.
+
+    Validated as ``lvcore calibrate --reference-volume/--wall-volume/--long-axis``
+    (:func:`lvcore.inference.geometry_prior.check_measures`).
+
+    Raises
+    ------
+    lvcore.exceptions.DataError
+        A measure outside its plausible range, or an entered measure that disagrees with the data's column,
+        naming the field.
+    """
+    from lvcore.inference.geometry_prior import check_measures
+
+    import math
+
+    from lvcore.inference.geometry_prior import MEASURE_NAMES, MEASURE_RANGES
+
+    given = {k: (None if v is None or float(v) == 0.0 else float(v)) for k, v in dict(entered).items()}
+    for name, value in given.items():
+        if name not in MEASURE_NAMES:
+            raise DataError(f"unknown geometric measure '{name}'; use {', '.join(MEASURE_NAMES)}")
+        lo, hi = MEASURE_RANGES[name]
+        unit = {"ml": "mL", "mm": "mm"}[name.rsplit("_", 1)[-1]]
+        if value is not None and not (math.isfinite(value) and lo <= value <= hi):
+            raise DataError(f"'{MEASURE_LABELS[name]}' = {value:g} is outside the plausible range {lo:g}-{hi:g} "
+                            f"{unit}; enter it in {unit}, or 0 if not measured")
+    out = check_measures(data_measures or {}, "the measurements file's geometric columns")
+    for name, value in given.items():
+        if value is None:
+            continue
+        if name in out and abs(out[name] - value) > 1e-9:
+            raise DataError(f"'{MEASURE_LABELS.get(name, name)}' {value:g} and the measurements file's {name} "
+                            f"{out[name]:g} disagree; enter 0 to use the file's value, or correct one of them")
+        out[name] = value
+    return out
+
+
+def prepare_inferred(emulator, emulator_name: str, measures: Mapping[str, float], *,
+                     edp_mmhg: float | None = None) -> Prepared:
+    """The forward model of the no-mesh route: ``lvcore calibrate --geometry infer`` for one subject.
+
+    The emulator with the conditions bound in and its PC scores and a scale sampled with θ
+    (:func:`lvcore.inference.geometry_prior.inferred_geometry_forward`), the measures observed; the conditions
+    checked against the emulator's box; :data:`NO_MEASURE_WARNING` when no measure is given.
+
+    Raises
+    ------
+    lvcore.exceptions.EmulatorError
+        The emulator has no PC-score inputs (e.g. a subject-specific one), or cannot take the EDP asked for.
+    """
+    from lvcore.inference import geometry_prior, guards
+    from lvcore.outputs import is_pc_name
+
+    if getattr(emulator, "is_subject", False):
+        from lvcore.exceptions import EmulatorError
+
+        raise EmulatorError(f"the '{emulator_name}' emulator is subject-specific: its geometry is bound in, so there "
+                            "is none to infer; choose a shape-model emulator (e.g. 'chapter') for the no-mesh route")
+    cond = _conditions(emulator, edp_mmhg)
+    measures = geometry_prior.check_measures(measures)
+    forward = geometry_prior.inferred_geometry_forward(emulator, name=emulator_name, measures=measures,
+                                                       alpha_endo=cond["alpha_endo"], alpha_epi=cond["alpha_epi"],
+                                                       edp_mmhg=cond["edp_mmhg"])
+    n_pc = len(forward.pc_names)
+    fixed = {k: v for k, v in guards.fixed_inputs(np.zeros(n_pc), cond, emulator, False).items() if not is_pc_name(k)}
+    box, extrapolation = guards.check_inputs_in_box(fixed, emulator, allow_extrapolation=True,
+                                                    what="the conditions")
+    warnings = list(extrapolation) + ([] if measures else [NO_MEASURE_WARNING])
+    return Prepared(forward, emulator_name, cond, list(box), warnings, measures=dict(measures))
+
+
+def geometry_posterior(run: "ModelRun", prepared: Prepared) -> dict:
+    """Posterior (median, 5 % and 95 % quantiles) of the PC scores, the scale and the implied measures of an
+    inferred geometry, as ``lvcore calibrate --geometry infer`` writes it (summary.json's ``geometry.posterior``)."""
+    from lvcore.inference.geometry_prior import geometry_posterior as posterior
+
+    forward = prepared.forward
+    return posterior({n: np.asarray(run.result.idata.posterior[n]) for n in forward.latent_names}, forward)
+
+
+def geometry_posterior_rows(posterior: Mapping) -> list[dict]:
+    """Table rows of :func:`geometry_posterior`: one per PC score, the scale and each implied measure."""
+    units = {"scale": "–", "implied_reference_volume_ml": "mL", "implied_wall_volume_ml": "mL",
+             "implied_long_axis_mm": "mm"}
+    rows = []
+    for name, q in posterior.items():
+        if not isinstance(q, Mapping) or "median" not in q:
+            continue
+        measured = posterior.get("measured", {}).get(name.replace("implied_", ""))
+        rows.append({"quantity": name.replace("implied_", "implied "), "unit": units.get(name, "SD"),
+                     "median": q["median"], "5 %": q["q05"], "95 %": q["q95"],
+                     "measured": measured})
+    return rows
 
 
 @dataclass(frozen=True)
@@ -220,13 +394,16 @@ def calibrate(subject: str, y, prepared: Prepared, models: Sequence[str], *, con
 
     cal.calibrate_subjects([(subject, y, prepared.forward)], list(models), config=config or SamplerConfig(),
                            sigma_v=sigma_v, progress=progress, on_result=finish,
-                           attrs={"emulator": prepared.emulator_name, "edp_mmhg": prepared.conditions["edp_mmhg"]})
+                           attrs={"emulator": prepared.emulator_name, "edp_mmhg": prepared.conditions["edp_mmhg"],
+                                  "geometry": "infer" if prepared.inferred else "given"})
     return runs
 
 
-def figures(runs: Sequence[ModelRun], y, truth: Mapping | None = None) -> dict:
+def figures(runs: Sequence[ModelRun], y, truth: Mapping | None = None, prepared: Prepared | None = None) -> dict:
     """The run's figures by file stem: the posterior predictive of every likelihood and, per likelihood, the
-    θ pair plot (the a–b trade-off), with the hidden truth of a SYNTHETIC subject when given."""
+    θ pair plot (the a–b trade-off), with the hidden truth of a SYNTHETIC subject when given; for an inferred
+    geometry (``prepared.inferred``), per likelihood the posterior of the PC scores, the scale and the implied
+    reference cavity against the measured one."""
     from lvcore.inference.models import MODEL_LABELS
     from lvcore.viz import inference_figures as figs
 
@@ -234,7 +411,44 @@ def figures(runs: Sequence[ModelRun], y, truth: Mapping | None = None) -> dict:
         {MODEL_LABELS[r.model]: r.result.idata for r in runs}, np.asarray(y, float))}
     for r in runs:
         out[f"{r.model}_pair"] = figs.pair_figure(r.result.idata, truth=truth)
+        if prepared is not None and prepared.inferred:
+            out[f"{r.model}_geometry"] = geometry_figure(r, prepared)
     return out
+
+
+def implied_cavity_draws(run: ModelRun, prepared: Prepared, max_draws: int = 1000) -> np.ndarray:
+    """Posterior draws (thinned to ``max_draws``) of the implied reference cavity ``s^3 V_cav(h)`` (mL) of an
+    inferred geometry (:class:`lvcore.inference.geometry_prior.ShapeMeasures`, as the sampler's likelihood)."""
+    import jax
+    import jax.numpy as jnp
+
+    forward = prepared.forward
+    post = run.result.idata.posterior
+    h = np.stack([np.asarray(post[n], float).reshape(-1) for n in forward.pc_names], axis=-1)
+    s = np.asarray(post["scale"], float).reshape(-1)
+    idx = np.linspace(0, h.shape[0] - 1, min(h.shape[0], max_draws)).astype(int)
+    meas = jax.vmap(lambda hh, ss: forward.shape(hh, ss)["reference_volume_ml"])(jnp.asarray(h[idx]),
+                                                                               jnp.asarray(s[idx]))
+    return np.asarray(meas, float)
+
+
+def geometry_figure(run: ModelRun, prepared: Prepared):
+    """The posterior of an inferred geometry: PC scores within the emulator's box, the scale, and the implied
+    reference cavity against the measured one (± its SD)."""
+    from lvcore.inference.geometry_prior import MEASURE_SD, SCALE_NAME
+    from lvcore.inference.models import MODEL_LABELS
+    from lvcore.viz.inference_figures import geometry_posterior_figure
+
+    forward = prepared.forward
+    post = run.result.idata.posterior
+    bounds = forward.latent_bounds
+    box = bounds[forward.pc_names[0]] if forward.pc_names else None
+    measured = prepared.measures.get("reference_volume_ml")
+    return geometry_posterior_figure({n: np.asarray(post[n]) for n in forward.pc_names},
+                                     np.asarray(post[SCALE_NAME]), implied_cavity_draws(run, prepared), box=box,
+                                     measured_ml=measured,
+                                     measured_sd_ml=MEASURE_SD["reference_volume_ml"] if measured else None,
+                                     title=f"Inferred geometry (no mesh), {MODEL_LABELS[run.model]}")
 
 
 def bound_flags(run: ModelRun, prepared: Prepared) -> list:
@@ -264,6 +478,8 @@ def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence
             "posterior": {str(k): {c: float(table.loc[k, c]) for c in table.columns
                                    if np.issubdtype(type(table.loc[k, c]), np.number)} for k in table.index},
         }
+        if prepared.inferred:
+            models[run.model]["geometry_posterior"] = geometry_posterior(run, prepared)
     flagged = [m for m, r in models.items() if r["flags"] or not r["converged_cleanly"]]
     return {
         "subject": subject, "synthetic": str(subject).upper().startswith("SYNTHETIC"),
@@ -291,6 +507,25 @@ def summary_html(summary: Mapping) -> str:
     conv = "".join(f"<li><b>{esc(m)}</b>: {esc(r['convergence'])}</li>" for m, r in summary["models"].items())
     geo = summary["geometry"]
     cond = summary["conditions"]
+    if geo["kind"] == "inferred":
+        given = ", ".join(f"{k} {v:g}" for k, v in geo["measures"].items()) or "none (size and stiffness trade off)"
+        geo_rows = []
+        for model, rec in summary["models"].items():
+            for row in geometry_posterior_rows(rec.get("geometry_posterior", {})):
+                geo_rows.append(f"<tr><td>{esc(model)}</td><td>{esc(row['quantity'])} ({esc(row['unit'])})</td>"
+                                f"<td>{row['median']:.4g}</td><td>{row['5 %']:.4g}</td><td>{row['95 %']:.4g}</td>"
+                                f"<td>{'' if row['measured'] is None else format(row['measured'], '.4g')}</td></tr>")
+        geometry_text = (f"<p>Geometry: inferred (no mesh): PC scores h and scale s sampled with &theta; "
+                         f"(lvcore calibrate --geometry infer); geometric measures given: {esc(given)}.</p>"
+                         "<table><tr><th>likelihood</th><th>quantity</th><th>median</th><th>5 %</th><th>95 %</th>"
+                         f"<th>measured</th></tr>{''.join(geo_rows)}</table>")
+    elif geo["kind"] == "subject-emulator":
+        geometry_text = (f"<p>Geometry: bound into the subject-specific emulator, built on "
+                         f"{esc(Path(str(geo['source'])).name)} as it is (no PC projection).</p>")
+    else:
+        geometry_text = (f"<p>Geometry: {esc(geo['kind'])} from {esc(Path(str(geo['source'])).name)}; PC scores "
+                         f"{esc(', '.join(f'{v:.2f}' for v in geo['scores']))}; scale s = {geo['scale']:.3f} "
+                         "(emulated LVV &times; s&sup3;).</p>")
     label = " (SYNTHETIC data: generated, not a real subject)" if summary["synthetic"] else ""
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>{esc(summary['subject'])}: calibration</title>
 <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}table{{border-collapse:collapse}}
@@ -298,9 +533,7 @@ td,th{{border:1px solid #bbb;padding:2px 6px;text-align:right}}td:first-child,td
 </head><body><h1>Calibration of {esc(summary['subject'])}{esc(label)}</h1>
 <p>Measured LVV {summary['measured']['lvv_ml']:.1f} mL; strains {min(summary['measured']['strains']):.3f} to
 {max(summary['measured']['strains']):.3f}.</p>
-<p>Geometry: {esc(geo['kind'])} from {esc(Path(str(geo['source'])).name)}; PC scores
-{esc(', '.join(f'{v:.2f}' for v in geo['scores']))}; scale s = {geo['scale']:.3f}
-(emulated LVV &times; s&sup3;).</p>
+{geometry_text}
 <p>Emulator {esc(summary['emulator'])}; EDP {cond['edp_mmhg']:.2f} mmHg; fibre angles
 {cond['alpha_endo']:.0f}&deg; / {cond['alpha_epi']:.0f}&deg;.</p>
 <h2>Verdict</h2><p>{'Flagged: ' + esc(', '.join(summary['flagged_models'])) if summary['flagged_models']
@@ -338,3 +571,185 @@ def _plain(value):
     if isinstance(value, np.ndarray):
         return value.tolist()
     raise DataError(f"cannot write {type(value).__name__} to summary.json")
+
+
+# ----------------------------------------------------------------------------- a subject-specific emulator
+#: Where the app keeps the subject emulators it builds (one folder per geometry, design and seed; a rebuild of
+#: the same is found there, and a stopped or failed build resumes from the FE runs it kept).
+BUILD_CACHE = Path(tempfile.gettempdir()) / "lvcore_subject_emulators"
+#: Held-out accuracy targets of a subject emulator (issue 25): LVV RMSE (mL) and strain RMSE.
+HELD_OUT_TARGETS = {"lvv_rmse_ml": 1.0, "strain_rmse": 0.003}
+
+
+def build_dir(geometry_bytes: bytes, stem: str, *, units: str = "mm", design=None, seed: int = 0,
+              resolution: str = "default", root: Path | None = None) -> Path:
+    """The cache folder of a subject emulator: named by the geometry file's stem and a digest of its contents,
+    units, design, seed and mesh, so the same request finds the same folder."""
+    from lvcore.emulator.subject import SubjectDesign
+    from lvcore.uploads import safe_name
+
+    design = design or SubjectDesign()
+    key = json.dumps({"units": units, "design": [design.n_train, design.n_valid, design.n_test, design.method],
+                      "seed": int(seed), "resolution": resolution}, sort_keys=True).encode()
+    digest = hashlib.sha256(bytes(geometry_bytes) + b"\0" + key).hexdigest()[:16]
+    return Path(root or BUILD_CACHE) / f"{safe_name(Path(stem).stem, 'geometry')}-{digest}"
+
+
+def held_out_summary(metadata: Mapping) -> dict:
+    """The held-out test accuracy of a subject emulator (``metadata["test"]``: FE runs the training never saw),
+    the run counts and wall time, and whether the accuracy meets :data:`HELD_OUT_TARGETS`."""
+    test = dict(metadata.get("test") or {})
+    sub = dict(metadata.get("subject") or {})
+    runs, secs = dict(sub.get("runs") or {}), dict(sub.get("seconds") or {})
+    return {"n_test": test.get("n"), "lvv_rmse_ml": test.get("lvv_rmse_ml"), "strain_rmse": test.get("strain_rmse"),
+            "runs_converged": runs.get("converged"), "runs_total": runs.get("total"), "wall_s": secs.get("total"),
+            "geometry_source": sub.get("geometry_source"),
+            "within_targets": bool(test) and all(float(test[k]) <= v for k, v in HELD_OUT_TARGETS.items())}
+
+
+class SubjectBuild:
+    """One subject-emulator build, ``lvcore emulator build --geometry FILE --out DIR``, for the app.
+
+    :meth:`start` runs :func:`lvcore.emulator.subject.build_subject_emulator` in a background thread (or finds a
+    finished build in ``out``); the page polls :attr:`fraction`, :attr:`lines` and :attr:`finished`. A failed or
+    stopped build sets :attr:`error`, a message saying what to do; the FE runs done are kept in ``out`` and the
+    next build of the same design resumes from them.
+
+    Parameters
+    ----------
+    geometry_file : path
+        The geometry as the CLI's ``--geometry`` takes it (a volume or template mesh, contours, PC scores).
+    out : path
+        The emulator folder (:func:`build_dir`).
+    design : lvcore.emulator.subject.SubjectDesign, optional
+        Run counts; default the CLI's (800 + 100 + 100).
+    units : str
+        Units of a volume mesh.
+    workers, seed, resolution
+        As the CLI's ``--workers`` (2), ``--seed`` (0) and ``--resolution`` (``default``).
+    label : str, optional
+        The user's name of the geometry (messages).
+    """
+
+    def __init__(self, geometry_file, out, *, design=None, units: str = "mm", workers: int = 2, seed: int = 0,
+                 resolution: str = "default", label: str | None = None):
+        from lvcore.emulator.subject import SubjectDesign
+
+        self.geometry_file = Path(geometry_file)
+        self.out = Path(out)
+        self.design = design or SubjectDesign()
+        self.units, self.workers, self.seed, self.resolution = units, int(workers), int(seed), resolution
+        self.label = label or self.geometry_file.name
+        self.lines: list[str] = []
+        self.done_runs = 0
+        self.error: str | None = None
+        self.metadata: dict | None = None
+        self.finished = False
+        self.cached = False
+        self.t0 = time.perf_counter()
+        self.elapsed: float | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    # --- state the page reads ------------------------------------------------
+    @property
+    def total_runs(self) -> int:
+        return int(self.design.total)
+
+    @property
+    def running(self) -> bool:
+        return not self.finished
+
+    @property
+    def ok(self) -> bool:
+        return self.finished and self.error is None and self.metadata is not None
+
+    @property
+    def fraction(self) -> float:
+        """Progress in [0, 1]: the FE runs are 90 %, the training the rest."""
+        if self.finished:
+            return 1.0
+        return 0.9 * min(1.0, self.done_runs / max(1, self.total_runs))
+
+    def status(self) -> str:
+        """One line: what the build is doing now."""
+        t = (self.elapsed if self.elapsed is not None else time.perf_counter() - self.t0)
+        if self.finished:
+            return f"{'found in the cache' if self.cached else 'built'} in {t:.0f} s" if self.ok else "failed"
+        if self.done_runs < self.total_runs:
+            return f"FE runs {self.done_runs} of {self.total_runs} ({t:.0f} s)"
+        return f"training the network on the converged runs ({t:.0f} s)"
+
+    # --- running -------------------------------------------------------------
+    def start(self, background: bool = True) -> "SubjectBuild":
+        """Start the build (in a daemon thread unless ``background`` is False); a finished build in ``out`` is
+        loaded instead."""
+        if (self.out / "metadata.json").is_file() and (self.out / "network.npz").is_file():
+            try:
+                from lvcore.emulator.io import load_emulator
+
+                self.metadata = dict(load_emulator(self.out).metadata)
+                self.cached = True
+                self._finish()
+                return self
+            except LVCoreError:
+                pass  # damaged: build again
+        if background:
+            self._thread = threading.Thread(target=self.run, name=f"subject-emulator {self.label}", daemon=True)
+            self._thread.start()
+        else:
+            self.run()
+        return self
+
+    def stop(self) -> None:
+        """Ask the build to stop before its next batch of FE runs (the runs done are kept)."""
+        self._stop.set()
+
+    def join(self, timeout: float | None = None) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def run(self) -> None:
+        """The build itself (what the thread runs)."""
+        from lvcore.emulator.subject import build_subject_emulator
+
+        try:
+            emu = build_subject_emulator(self.geometry_file, self.out, design=self.design, units=self.units,
+                                         workers=self.workers, seed=self.seed, resolution=self.resolution,
+                                         log=self.lines.append, progress=self._progress, stop=self._stop.is_set)
+            self.metadata = dict(emu.metadata)
+        except (LVCoreError, ValueError) as err:
+            self.error = self._failure(str(err))
+        except Exception as err:  # noqa: BLE001 - a dead worker or the like: shown to the user, never a traceback
+            self.error = self._failure(f"{type(err).__name__}: {err}")
+        finally:
+            self._finish()
+
+    def _progress(self, done: int, total: int) -> None:
+        self.done_runs = int(done)
+
+    def _finish(self) -> None:
+        self.elapsed = time.perf_counter() - self.t0
+        self.finished = True
+
+    def _failure(self, reason: str) -> str:
+        from lvcore.emulator.subject import RUNS_FILE
+
+        kept = (f"The {self.done_runs} FE runs done are kept ({self.out / RUNS_FILE}); build again with the same "
+                "geometry, design size and seed to resume from them") if self.done_runs else "No FE run was finished"
+        d = self.design
+        return (f"The subject emulator for {self.label} was not built: {reason}. {kept}. If it fails again, run it "
+                f"in a terminal, where it reports every stage: lvcore emulator build --geometry {self.label} "
+                f"--units {self.units} --n-train {d.n_train} --n-valid {d.n_valid} --n-test {d.n_test} "
+                f"--out {self.out}")
+
+
+def template_mesh_file(session, nodes, label: str) -> Path:
+    """Write fitted template nodes (mm) as a template mesh in the session's upload folder, the file
+    ``lvcore emulator build --geometry`` takes (the Geometry page's fitted segmentations)."""
+    from lvcore.geometry.io import write_template_mesh
+    from lvcore.uploads import safe_name
+
+    path = Path(session.path) / f"fitted_{safe_name(label, 'geometry')}.vtu"
+    write_template_mesh(path, np.asarray(nodes, float), metadata={"label": f"fitted geometry {label}"})
+    return path

@@ -16,7 +16,10 @@ geometry as it is, with no projection:
    random into training, validation and held-out test rows.
 3. Every row is simulated on the exact geometry (:func:`simulate_rows`:
    continuation chains of :mod:`lvcore.chains`, each solve starting Newton
-   from a neighbour's solution, shared out to the worker processes).
+   from a neighbour's solution, shared out to the worker processes), in
+   batches of :data:`CHECKPOINT_ROWS` after each of which the runs done are
+   saved (``fe_runs.npz``): a build that fails, is stopped or killed keeps
+   them, and the next build of the same design resumes from them.
 4. The network is trained with :func:`lvcore.emulator.training.train_emulator`
    (validation rows: early stopping and selection); the test rows, which the
    training never sees, give the held-out LVV and strain RMSE recorded in the
@@ -42,7 +45,7 @@ from lvcore import limits
 from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
 from lvcore.core.space import ANGLE_BOUNDS, ANGLES_THETA_BOUNDS, EDP_BOUNDS, THETA_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import EmulatorError, GeometryError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES
 
 #: Input groups of ``--inputs``: θ (always), the EDP, the two fibre angles.
 INPUT_GROUPS = {"theta": THETA_NAMES, "edp": (EDP_NAME,), "angles": ANGLE_NAMES}
@@ -54,6 +57,11 @@ VOLUME_MESH_SUFFIXES = (".inp", ".msh", ".med", ".mesh")
 MESH_SUFFIXES = (".vtu", ".vtk", ".xdmf")
 #: Most FE runs one build may ask for.
 MAX_RUNS = 20_000
+#: FE runs per batch of a build: progress is reported, and the runs done are saved to :data:`RUNS_FILE`, after each.
+CHECKPOINT_ROWS = 100
+#: The FE runs of a build so far, in the emulator directory; kept when a build fails or is stopped (a new build of
+#: the same design, geometry and mesh resumes from it), removed when the emulator is saved.
+RUNS_FILE = "fe_runs.npz"
 
 
 # --------------------------------------------------------------------------- geometry
@@ -289,7 +297,9 @@ class SimulatedRows:
 
 
 def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, resolution: str = "default",
-                  workers: int = 2) -> SimulatedRows:
+                  workers: int = 2, checkpoint=None, chunk: int | None = None,
+                  progress: Callable[[int, int], None] | None = None,
+                  stop: Callable[[], bool] | None = None) -> SimulatedRows:
     """Simulate every row of ``x`` (physical units, columns ``space.names``) on ``geometry``.
 
     The FE simulator with warm starts (:class:`~lvcore.mechanics.forward.SimulatorForward`
@@ -299,16 +309,98 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     the results satisfy the same tolerances as cold solves; the chains are
     shared out to ``workers`` processes (``1``: this process). Failures are
     data (NaN rows, ``converged`` False).
+
+    Parameters
+    ----------
+    checkpoint : path, optional
+        An ``.npz`` file where the rows done so far are saved after every
+        ``chunk`` rows. Rows already saved there for the same inputs, geometry,
+        mesh and base are taken from it, not simulated again (a stopped or
+        failed build resumes).
+    chunk : int, optional
+        Rows per batch (default :data:`CHECKPOINT_ROWS`); the simulator and its
+        worker pool, and so the warm-start states, are kept from batch to batch.
+    progress : callable, optional
+        ``progress(done, total)`` after every batch (rows).
+    stop : callable, optional
+        Asked before every batch; when it returns True the simulation stops
+        with an :class:`~lvcore.exceptions.EmulatorError` (the rows done are in
+        ``checkpoint``).
     """
+    import contextlib
+
     from lvcore.mechanics.forward import SimulatorForward
 
     x = np.atleast_2d(np.asarray(x, dtype=float))
+    n = x.shape[0]
+    chunk = max(1, int(chunk or CHECKPOINT_ROWS))
+    outputs = np.full((n, N_OUTPUTS), np.nan)
+    converged = np.zeros(n, dtype=bool)
+    messages = [""] * n
+    seconds = np.zeros(n)
+    signature = _runs_signature(space, geometry, resolution)
+    done = _resume_rows(checkpoint, signature, x, outputs, converged, messages, seconds)
+    if progress is not None and done:
+        progress(done, n)
     fwd = SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), geometry=dict(geometry),
                            resolution=resolution, base=space.base, workers=int(workers), warm_start=True)
     t0 = time.perf_counter()
-    batch = fwd.evaluate({n: x[:, i] for i, n in enumerate(space.names)})
-    return SimulatedRows(batch.outputs, batch.converged, batch.messages, batch.seconds, time.perf_counter() - t0,
-                         int(workers))
+    with contextlib.ExitStack() as stack:
+        executor = None
+        if int(workers) > 1 and n - done > 1:
+            from lvcore.parallel import make_executor
+
+            executor = stack.enter_context(make_executor(workers=int(workers)))
+        while done < n:
+            if stop is not None and stop():
+                where = f"; they are kept in {checkpoint} and a new build of the same design resumes from them" \
+                    if checkpoint is not None else ""
+                raise EmulatorError(f"stopped after {done} of {n} FE runs{where}")
+            rows = slice(done, min(n, done + chunk))
+            batch = fwd.evaluate({name: x[rows, i] for i, name in enumerate(space.names)}, executor=executor)
+            outputs[rows], converged[rows], seconds[rows] = batch.outputs, batch.converged, batch.seconds
+            messages[rows] = list(batch.messages)
+            done = rows.stop
+            if checkpoint is not None:
+                _save_rows(checkpoint, signature, x[:done], outputs[:done], converged[:done], messages[:done],
+                           seconds[:done])
+            if progress is not None:
+                progress(done, n)
+    return SimulatedRows(outputs, converged, tuple(messages), seconds, time.perf_counter() - t0, int(workers))
+
+
+def _runs_signature(space: ParameterSpace, geometry: Mapping, resolution: str) -> str:
+    import json
+
+    return json.dumps({"space": space.to_dict(), "geometry": dict(geometry), "resolution": str(resolution)},
+                      sort_keys=True, default=str)
+
+
+def _save_rows(path, signature: str, x, outputs, converged, messages, seconds) -> None:
+    """Write the rows done so far (atomically: a killed build leaves the previous file whole)."""
+    path = Path(path)
+    tmp = path.with_name(path.stem + ".partial.npz")
+    np.savez(tmp, signature=np.array(signature), inputs=x, outputs=outputs, converged=converged,
+             messages=np.array(messages, dtype=str), seconds=seconds)
+    tmp.replace(path)
+
+
+def _resume_rows(path, signature: str, x, outputs, converged, messages, seconds) -> int:
+    """Fill the leading rows of ``x`` already saved in ``path`` (same signature and inputs); their count."""
+    if path is None or not Path(path).is_file():
+        return 0
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if str(z["signature"]) != signature:
+                return 0
+            k = int(z["inputs"].shape[0])
+            if k > x.shape[0] or not np.array_equal(z["inputs"], x[:k]):
+                return 0
+            outputs[:k], converged[:k], seconds[:k] = z["outputs"], z["converged"], z["seconds"]
+            messages[:k] = [str(m) for m in z["messages"]]
+    except (OSError, KeyError, ValueError):  # a damaged file: simulate again
+        return 0
+    return k
 
 
 # --------------------------------------------------------------------------- the build
@@ -365,7 +457,9 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                            base: str = "sliding", edp: float = CHAPTER_EDP, alpha_endo: float = CHAPTER_ANGLES[0],
                            alpha_epi: float = CHAPTER_ANGLES[1], bounds: Mapping | None = None, units: str = "mm",
                            workers: int = 2, seed: int = 0, config=None, name: str | None = None,
-                           log: Callable[[str], None] | None = None):
+                           log: Callable[[str], None] | None = None,
+                           progress: Callable[[int, int], None] | None = None,
+                           stop: Callable[[], bool] | None = None):
     """Build, validate and save a subject-specific emulator (see the module docstring).
 
     Parameters
@@ -396,6 +490,14 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
         Emulator name (default ``subject-<file stem>``).
     log : callable, optional
         Progress lines.
+    progress : callable, optional
+        ``progress(done, total)`` FE runs, after every batch of :data:`CHECKPOINT_ROWS`.
+    stop : callable, optional
+        Asked between batches of FE runs; True stops the build with an
+        :class:`~lvcore.exceptions.EmulatorError`.
+
+    The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) after every batch, so a build that
+    fails, is stopped or killed keeps them, and a new build of the same design into ``out`` resumes from them.
 
     Returns
     -------
@@ -437,7 +539,8 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     say(f"design: {design.total} {design.method} points over {list(space.names)} "
         f"({design.n_train} train / {design.n_valid} validation / {design.n_test} held-out test), "
         f"{resolution} mesh, {base} base, {workers} worker(s)")
-    runs = simulate_rows(space, d.points, section, resolution=resolution, workers=workers)
+    runs = simulate_rows(space, d.points, section, resolution=resolution, workers=workers,
+                         checkpoint=out / RUNS_FILE, progress=progress, stop=stop)
     n_failed = int(np.sum(~runs.converged))
     say(f"FE runs: {runs.converged.sum()} of {design.total} converged in {runs.wall_s:.1f} s "
         f"({design.total / max(runs.wall_s, 1e-9):.1f} solves/s, warm-started chains on {runs.workers} worker(s))")
@@ -448,7 +551,8 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
         if ok.size < 2:
             reasons = sorted({runs.messages[i] for i in idx if not runs.converged[i]})[:3]
             raise EmulatorError(f"only {ok.size} of the {idx.size} {key} runs converged (e.g. {reasons}); "
-                                "narrow the bounds or use another resolution")
+                                "narrow the bounds or use another resolution (the FE runs are kept in "
+                                f"{out / RUNS_FILE})")
 
     t_train0 = time.perf_counter()
     cfg = config or default_training_config(seed)
@@ -479,6 +583,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     save_training_data(out, sets)
     emu.metadata["subject"]["seconds"]["total"] = round(time.perf_counter() - t_start, 2)
     save_emulator(emu, out, validation={"inputs": xt, "outputs": yt, "predictions": np.asarray(emu.apply(xt))})
+    (out / RUNS_FILE).unlink(missing_ok=True)  # the converged rows are in training_data.npz
     say(f"held-out test ({test['n']} runs): LVV RMSE {test['lvv_rmse_ml']:.3f} mL, strain RMSE "
         f"{test['strain_rmse']:.4f}; training {t_train:.1f} s; total {emu.metadata['subject']['seconds']['total']:.1f} s")
     from lvcore.emulator.io import load_emulator
@@ -486,6 +591,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     return load_emulator(out)
 
 
-__all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", "build_subject_emulator",
+__all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", "CHECKPOINT_ROWS", "RUNS_FILE",
+           "build_subject_emulator",
            "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
            "default_training_config"]
