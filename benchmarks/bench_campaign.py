@@ -21,6 +21,18 @@ within one run.
 
 Without ``--chains``: the older 1 vs 2 workers comparison (cold rows; best of
 ``--repeats`` alternating runs).
+
+``--chain-profile N`` (issue 25): where the time of a warm-chained solve goes.
+The first N points of the same design's continuation order are solved in this
+process, one chain (:func:`lvcore.chains.solve_in_order`, each point warm-started
+from the nearest converged one, as a campaign worker does), after one
+compile run. Printed per solve: Newton iterations, tangents (= numeric
+factorisations), residual evaluations and cold fallbacks (deterministic
+counts: comparable on a loaded machine), and the wall and CPU time split into
+tangent assembly, factorisation, back-substitutions, residuals (line search),
+the rest of Newton and the rest of the solve (case set-up, outputs)::
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_campaign.py --chain-profile 200
 """
 from __future__ import annotations
 
@@ -116,6 +128,73 @@ def chains_table(args) -> int:
     return 0
 
 
+def chain_profile(args) -> int:
+    """Per-solve counts and time split of one warm chain in this process (see the module docstring)."""
+    import statistics
+
+    from lvcore.campaigns.runner import execute_warm_row
+    from lvcore.chains import continuation_order, solve_in_order
+    from lvcore.mechanics import newton
+    from lvcore.mechanics.linear import default_backend
+
+    design = _design(args.box, args.rows, args.seed)
+    fwd = make_forward(args.forward, design.space, args.resolution)
+    U = design.space.to_unit(design.points)
+    order = [int(i) for i in continuation_order(U)[:args.chain_profile]]
+    keys = ("iterations", "tangents", "residuals", "seconds", "t_tangent", "t_factor", "t_solve", "t_line")
+    point: dict = {}
+    runs = []
+    real_solve = newton.solve
+
+    def counted_solve(system, opts=None, initial=None):  # every Newton solve of a point: warm, continuation, cold
+        res = real_solve(system, opts, initial)
+        for k in keys:
+            point[k] = point.get(k, 0) + res.timings.get(k, 0)
+        point["solves"] = point.get("solves", 0) + 1
+        return res
+
+    def solve(i, initial):
+        point.clear()
+        c0, t0 = time.process_time(), time.perf_counter()
+        row, state = execute_warm_row(fwd, i, row_inputs(design, i), initial)
+        runs.append((row.converged, time.perf_counter() - t0, time.process_time() - c0, dict(point)))
+        return row, state
+
+    newton.solve = counted_solve
+    try:
+        solve_in_order(order[:2], U[order[:2]], [], solve)  # compile
+        runs.clear()
+        load0, when = _load(), _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        c0, t0 = time.process_time(), time.perf_counter()
+        solve_in_order(order, U[order], [], solve)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    finally:
+        newton.solve = real_solve
+    n = len(runs)
+
+    def mean(key):
+        return sum(r[3].get(key, 0) for r in runs) / n
+
+    parts = {"tangent assembly": mean("t_tangent"), "factorisation": mean("t_factor"),
+             "back-substitutions": mean("t_solve"), "residuals (line search)": mean("t_line")}
+    parts["Newton other"] = mean("seconds") - sum(parts.values())
+    parts["outside Newton (case set-up, outputs)"] = sum(r[1] for r in runs) / n - mean("seconds")
+    print(f"bench_campaign --chain-profile, {when}; linear solver {default_backend()}; resolution {args.resolution}; "
+          f"box {args.box}; the first {n} points of the continuation order of {design.n} rows (seed {args.seed}), "
+          f"one chain in one process (the campaign worker's path); load average (1/5/15 min) {load0} -> {_load()}")
+    print(f"\n{n / wall:.2f} solves/s wall, {1e3 * wall / n:.1f} ms wall and {1e3 * cpu / n:.1f} ms CPU per solve; "
+          f"median solve {1e3 * statistics.median(r[1] for r in runs):.1f} ms wall; "
+          f"{sum(r[0] for r in runs)}/{n} converged\n")
+    print(f"per solve: {mean('iterations'):.2f} Newton iterations, {mean('tangents'):.2f} tangents (= numeric "
+          f"factorisations), {mean('residuals'):.2f} residual evaluations (line search), {mean('solves'):.2f} Newton "
+          "solves (1 = the warm start converged; more: continuation or cold fallback)\n")
+    print("| phase | ms per solve (wall) | share |\n|---|---|---|")
+    total = sum(parts.values())
+    for k, v in parts.items():
+        print(f"| {k} | {1e3 * v:.1f} | {v / total:.0%} |")
+    return 0
+
+
 def throughput(workers: int, design: Design, forward: str, resolution: str) -> tuple[float, int, float]:
     fwd = make_forward(forward, design.space, resolution)
     with LocalExecutor(workers) as ex, tempfile.TemporaryDirectory() as tmp:
@@ -126,6 +205,8 @@ def throughput(workers: int, design: Design, forward: str, resolution: str) -> t
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--chains", action="store_true", help="warm-chained vs cold (issue 25); else 1 vs 2 workers")
+    p.add_argument("--chain-profile", type=int, default=0, metavar="N",
+                   help="per-solve counts and time split of one warm chain of N points in this process")
     p.add_argument("--rows", type=int, default=None, help="design rows (default 1000 with --chains, else 24)")
     p.add_argument("--cold-rows", type=int, default=100, help="--chains: rows of the cold phases")
     p.add_argument("--box", choices=("moderate", "material"), default="moderate")
@@ -136,6 +217,10 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--repeats", type=int, default=2, help="alternate 1- and 2-worker runs this many times; best of each")
     args = p.parse_args(argv)
+    if args.chain_profile:
+        args.rows = args.rows or 1000
+        args.resolution = args.resolution or "default"
+        return chain_profile(args)
     if args.chains:
         args.rows = args.rows or 1000
         args.resolution = args.resolution or "default"

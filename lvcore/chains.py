@@ -170,7 +170,10 @@ def solve_in_order(keys: Sequence[int], units: np.ndarray, seeds: Sequence[Seed]
 
 
 def light_state(state):
-    """A solver state without its factorised tangent (``(u, p, tangent)`` -> ``(u, p)``); others unchanged."""
+    """A solver state without its factorised tangent (``(u, p, tangent)`` -> ``(u, p)``; a
+    :class:`~lvcore.mechanics.forward.WarmState` keeps its parameters); others unchanged."""
+    if hasattr(state, "_replace") and hasattr(state, "tangent"):  # a WarmState keeps its parameters
+        return state._replace(tangent=None)
     if isinstance(state, tuple) and len(state) > 2:
         return state[:2]
     return state

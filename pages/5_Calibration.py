@@ -1,9 +1,9 @@
 """Calibration: posterior of theta = (a, b, af, bf) from LVV + 24 strains, with honest uncertainty."""
 from __future__ import annotations
 
-import tempfile
 import threading
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,7 @@ from lvcore.inference import calibrate as cal
 from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.geometry.scaling import ScaledForward
-from lvcore.inference.diagnostics import banner_status
+from lvcore.inference.diagnostics import banner_status, netcdf_bytes
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
 from lvcore.viz.inference_figures import display_name
@@ -138,6 +138,17 @@ cal_inputs = {"subject": None if data is None else data.subject, "emulator": emu
               "warm-up": int(warmup), "draws": int(samples)}
 
 
+def _consistency(job: dict, y, forward, infer: bool):
+    """The verdict's consistency check (best fit of volume and strains), stored in the job (an error is kept)."""
+    from lvcore.conditions import SIGMA_V_ML
+    from lvcore.inference import verdict
+
+    try:
+        job["consistency"] = verdict.consistency_check(y, forward, SIGMA_V_ML, infer_angles=infer)
+    except Exception as err:  # noqa: BLE001 - shown beside the results, never hides them
+        job["consistency"] = err
+
+
 def _worker(job: dict, y, forward, models, config, infer):
     def progress(msg, frac):
         job["message"] = msg
@@ -147,6 +158,10 @@ def _worker(job: dict, y, forward, models, config, infer):
         cal.calibrate_subjects([(job["subject"], y, forward)], models, config=config, infer_angles=infer,
                                progress=progress, on_result=lambda item: job["results"].__setitem__(item.model,
                                                                                                     item.result))
+        # the verdict's best fit, in this thread after the sampler (numpyro's handler stack is global, so two
+        # model traces must never run at once): the results render without waiting for it
+        progress("verdict: best fit of volume and strains", 1.0)
+        _consistency(job, y, forward, infer)
         job["message"] = "done"
         job["fraction"] = 1.0
     except Exception as err:  # noqa: BLE001 - shown to the user
@@ -216,7 +231,11 @@ def _verdicts(job: dict, results: dict) -> dict:
         try:
             with st.spinner("Verdict: best fit of volume and strains"):
                 forward, infer = job["forward"], job.get("infer", False)
-                consistency = verdict.consistency_check(job["y"], forward, SIGMA_V_ML, infer_angles=infer)
+                consistency = job.get("consistency")  # computed by the worker after the sampler (_consistency)
+                if isinstance(consistency, Exception):
+                    raise consistency
+                if consistency is None:
+                    consistency = verdict.consistency_check(job["y"], forward, SIGMA_V_ML, infer_angles=infer)
                 for m, res in results.items():
                     out[m] = verdict.run_verdict(res, consistency, verdict.checked_bounds(forward, infer))
         except Exception as err:  # noqa: BLE001 - shown, never hides the results
@@ -290,15 +309,14 @@ if job is not None and job["done"]:
                         fig_disc = figs.discrepancy_figure(res.idata)
                         st.plotly_chart(fig_disc, width="stretch")
                         downloads[f"{m}_discrepancy.html"] = fig_disc
-                    with tempfile.TemporaryDirectory() as d:
-                        nc = Path(d) / f"{cal.file_stem(job['subject'])}_{m}.nc"
-                        res.idata.to_netcdf(str(nc))
-                        st.download_button(f"InferenceData ({m}, netCDF)", nc.read_bytes(), file_name=nc.name,
-                                           key=f"nc_{m}")
+                    st.download_button(f"InferenceData ({m}, netCDF)", partial(netcdf_bytes, res.idata),
+                                       file_name=f"{cal.file_stem(job['subject'])}_{m}.nc", key=f"nc_{m}")
             if job.get("h") is not None:
                 physiology_panel.show(idatas, h=job["h"], edp_mmhg=job["edp_mmhg"], angles=job["angles"],
                                       measured_lvv_ml=float(job["y"][0]), subject=job["subject"], key="cal_edpvr")
             st.subheader("Export figures")
             for name, fig in downloads.items():
-                st.download_button(name, fig.to_html(include_plotlyjs=True), file_name=f"{cal.file_stem(job['subject'])}_{name}",
-                                   mime="text/html", key=f"html_{name}")
+                # written on the click (each HTML carries plotly.js, ~4 MB): not on every rerun
+                st.download_button(name, partial(fig.to_html, include_plotlyjs=True),
+                                   file_name=f"{cal.file_stem(job['subject'])}_{name}", mime="text/html",
+                                   key=f"html_{name}")

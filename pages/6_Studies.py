@@ -11,7 +11,8 @@ from pathlib import Path
 import streamlit as st
 
 from lvcore.exceptions import LVCoreError
-from lvcore.studies import bo_fibres, fibre_discrepancy, geometry_operators, operators, results
+from lvcore.studies import (bo_fibres, bo_mismatch, fibre_discrepancy, geometry_operators, operators,
+                            operators_realistic, results)
 
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
@@ -59,6 +60,15 @@ def show(module, result, figures=None, tables=()) -> None:
             st.dataframe(tabs[name].round(4), hide_index=True, width="stretch")
 
 
+def verdict_section(study: str, module, key: str, heading: str) -> None:
+    """A study whose findings are verdicts with CIs (issue 26): its source, verdict table and figures."""
+    st.subheader(heading)
+    res = load(study, module, key)
+    if res is not None:
+        st.caption(module.source_line(res))
+        show(module, res, tables=["verdicts"])
+
+
 tab_bo, tab_ops, tab_fd, tab_geo, tab_run = st.tabs(
     ["Fibre-angle BO (Tables 9.2/9.3)", "Operators (Figs 9.11–9.14)", "Fibre discrepancy (Figs 9.6–9.9)",
      "Operators, geometry (Table 9.4)", "Run a small study"])
@@ -77,6 +87,7 @@ with tab_bo:
         st.subheader("Tables 9.2 (angles fixed at −60°, 90°) and 9.3 (angles optimised)")
         show(bo_fibres, res, figures=["fig_bo_lvv_error", "fig_strain_residuals", "fig_convergence"],
              tables=["table9_2_bo_fixed_angles", "table9_3_bo_free_angles", "angles_vs_hidden"])
+    verdict_section("bo-mismatch", bo_mismatch, "bom_src", "F6 as a real test: data with a known mismatch")
 
 with tab_ops:
     res = load("operators", operators, "ops_src")
@@ -93,6 +104,8 @@ with tab_ops:
             labels = [f"{s['patient']} main {s['main_operator']} test {s['test_geometry']}" for s in res["surfaces"]]
             i = st.selectbox("Loss surface (Fig 9.13) of fit", range(len(labels)), format_func=labels.__getitem__)
             st.plotly_chart(operators.surface_figure(res, i), width="stretch")
+    verdict_section("operators-realistic", operators_realistic, "opr_src",
+                    "F4/F5 with realistic operators (whole slices, trabeculae, breath-hold shifts)")
 
 with tab_fd:
     res = load("fibre-discrepancy", fibre_discrepancy, "fd_src")

@@ -288,7 +288,8 @@ def test_subject_build_runs_stops_keeps_and_resumes(tmp_path):
     assert job.finished and not job.ok and "No FE run was finished" in job.error
     assert "lvcore emulator build --geometry hv3.vtu" in job.error and "--n-train 8" in job.error
     job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu").start()
-    job.join(600)
+    job.join(1500)  # about a minute on a quiet machine
+    assert job.finished, f"the build is still running after 1500 s: {job.status()}"
     assert job.ok, job.error
     info = flow.held_out_summary(job.metadata)
     assert info["n_test"] == 3 and info["runs_total"] == 14 and info["lvv_rmse_ml"] > 0
@@ -321,7 +322,8 @@ def test_my_subject_page_builds_and_uses_a_subject_emulator(tmp_path, monkeypatc
     at.button(key="my_build_start").click().run()
     assert not at.exception, at.exception
     job = at.session_state["my_build_job"]
-    job.join(600)
+    job.join(1500)
+    assert job.finished, f"the build is still running after 1500 s: {job.status()}"
     assert job.ok, job.error
     at.run()
     assert any("held-out test (3 FE runs never used in training) LVV RMSE" in s.value for s in at.success)

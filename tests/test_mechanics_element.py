@@ -98,3 +98,27 @@ def test_unit_scale_and_zero_spring_leave_the_system_bit_for_bit_unchanged():
     t0, t1 = S0.tangent(u, p, 0.6), S1.tangent(u, p, 0.6)
     np.testing.assert_array_equal(t0[0], t1[0])
     np.testing.assert_array_equal(t0[1].data, t1[1].data)
+
+
+def test_load_norm_is_the_external_load_at_the_reference_state_and_shared_by_model_copies():
+    """Newton's force scale: ‖f_ext‖ on the free dofs (the residual at zero displacement and pressure, whose
+    internal part vanishes in the stress-free reference) for the pressure potential and a follower load."""
+    m = lv_mesh(LAND_LV.position, (6, 4, 1), 5.0)
+    frames = build_frames(m, FibreSpec(-60.0, 90.0, None))
+    S = DiscreteSystem(m, _model(HO, 1e3), frames, "endocardium", 2.0, boundary.fixed_dofs(m, "clamped"))
+    r1 = S.residual(np.zeros(S.n_free), S.zero_pressure(), 1.0)[0]
+    assert S.load_norm() == pytest.approx(np.linalg.norm(r1), rel=1e-12) and S.load_norm() > 0
+    stiffer = S.with_model(_model(materials.HolzapfelOgden.from_params({"a": 5.0, "b": 2.0, "af": 9.0, "bf": 1.0}), 1e4))
+    assert stiffer.load_norm() == S.load_norm() and stiffer._shared is S._shared
+    mb = box_mesh((2.0, 1.0, 1.0), (2, 1, 1))
+    law = materials.Guccione.from_params({"C": 2, "bf": 8, "bt": 2, "bfs": 4})
+    B = DiscreteSystem(mb, _model(law, 2e3), build_frames(mb, FibreSpec(0.0, 0.0, (1.0, 0.0, 0.0))), "z0", 0.5,
+                       boundary.fixed_dofs(mb, clamped_faces=("x0",)))
+    rb = B.residual(np.zeros(B.n_free), B.zero_pressure(), 1.0)[0]
+    assert B.load_norm() == pytest.approx(np.linalg.norm(rb), rel=1e-12) and B.load_norm() > 0
+
+
+def test_constitutive_model_as_arrays_gives_float64_scalars():
+    m = _model(HO, 1e3).as_arrays()
+    leaves = [m.kappa] + [getattr(m.material, k) for k in ("a", "b", "a_f", "b_f", "kappa_f")]
+    assert all(np.asarray(v).dtype == np.float64 and np.ndim(v) == 0 for v in leaves)

@@ -76,3 +76,28 @@ def test_simulator_warm_start_reproduces_cold_solves(sim):
     cold = sim.jacobian(dict(zip(THETA_NAMES, near)))
     np.testing.assert_allclose(b.outputs, cold.outputs, rtol=1e-7, atol=1e-9)
     np.testing.assert_allclose(b.jacobian, cold.jacobian, rtol=1e-5, atol=1e-8)
+
+
+def test_warm_continuation_reaches_a_point_a_plain_warm_start_cannot_and_equals_the_cold_solve():
+    """A failed warm start continues through the parameter midpoint (issue 25): bf 1 -> 10 at soft a, af is out
+    of a plain warm start's reach on the fast mesh, the midpoint path converges, and to the cold solve's outputs."""
+    from lvcore.chains import light_state
+    from lvcore.core.space import build_case
+    from lvcore.mechanics import forward as F
+    from lvcore.mechanics.simulate import simulate
+
+    def case(theta):
+        return build_case(dict(zip(("a", "b", "af", "bf"), theta)), resolution="fast", base="sliding")
+
+    start, target = case((0.3, 0.5, 0.2, 1.0)), case((0.3, 0.5, 0.2, 10.0))
+    state = F._as_warm(simulate(start), F.case_values(start))
+    assert state.values == (0.3, 0.5, 0.2, 1.0, -60.0, 60.0, 8.0)
+    light = light_state(state)
+    assert light.tangent is None and light.values == state.values  # chains drop the factor, keep the parameters
+    plain = simulate(target, options=F._warm_only_options(), initial=light)
+    assert not plain.converged and plain.message == "warm start did not converge"
+    via = F.warm_continuation(target, light)
+    assert via.converged and via.message == "converged (warm start)"
+    cold = simulate(target)
+    np.testing.assert_allclose(via.outputs(), cold.outputs(), rtol=1e-7, atol=1e-9)
+    assert F.warm_continuation(target, light, depth=0).converged is False  # without the midpoint: as plain

@@ -130,3 +130,17 @@ def test_cli_names_a_bad_patient(tmp_path, capsys):
 
     assert main(["study", "operators", "--patients", "SYNTHETIC-P99", "--out", str(tmp_path)]) == 2
     assert "SYNTHETIC-P01" in capsys.readouterr().err
+
+
+def test_docs_quote_the_bound_aware_laplace_medians_of_the_shipped_fits():
+    from pathlib import Path
+
+    from lvcore.studies.results import bundled_studies_dir
+
+    f = ops.load(bundled_studies_dir())["findings"]
+    text = " ".join((Path(__file__).resolve().parents[1] / "docs" / "studies.md").read_text().split())
+    n = sum(f["n_on_bound"].values())
+    inner = f["median_mahalanobis_interior"]
+    assert (f"{n} of {f['n_fits']} fits on a bound" in text
+            and f"interior medians are {inner['operator']:.2f} (operators), {inner['pc5']:.2f} (pc5) and "
+                f"{inner['pc10']:.2f} (pc10)" in text)

@@ -182,7 +182,22 @@ class OperatorStyle:
     basal_slices : whole-slice choice of the base: +1 includes one more slice
         above the true base, -1 drops the basal slice (not used by
         :data:`OPERATORS`: a whole 10 mm slice moves nodes by up to 10 mm, an
-        order of magnitude beyond the chapter's operator differences).
+        order of magnitude beyond the chapter's operator differences; the
+        realistic operators of :mod:`lvcore.geometry.operator_model` draw it
+        per patient).
+    apical_slices : whole-slice choice of the apex: +1 includes one more
+        (partial-volume) slice below the usual last one when it still cuts
+        the epicardium, -1 drops the most apical slice.
+    trabecular_mm : depth (mm) by which the endocardial contour is pulled
+        inwards over a local arc (trabeculae and papillary muscles counted as
+        myocardium) on the slices it affects; 0 for none.
+    trabecular_arc_deg : width of that arc (deg; raised-cosine profile), centred
+        on the lateral wall (phi = 180 deg) ± 60 deg, drawn per slice.
+    trabecular_share : probability that a slice with an endocardial contour is
+        affected.
+    registration : fraction of the scan's per-slice breath-hold shifts
+        (``contour_stack(..., breath_hold=...)``) the operator removes by
+        realigning the slices (0: traced as acquired, 1: fully corrected).
     """
 
     name: str
@@ -193,6 +208,11 @@ class OperatorStyle:
     shift_mm: float = 0.2
     motion_error_mm: float = 0.0
     basal_slices: int = 0
+    apical_slices: int = 0
+    trabecular_mm: float = 0.0
+    trabecular_arc_deg: float = 90.0
+    trabecular_share: float = 0.0
+    registration: float = 0.0
 
 
 #: The three imitation operators of the operator study (see docs/geometry.md).
@@ -216,7 +236,8 @@ def random_pose(rng) -> tuple[np.ndarray, np.ndarray]:
 
 
 def contour_stack(lv: SyntheticLV, operator: OperatorStyle = REFERENCE_OPERATOR, rng=None, patient: str = "",
-                  spacing: float = DEFAULT_SPACING, n_points: int = 48, pose=None, jitter: float = 0.3) -> ContourStack:
+                  spacing: float = DEFAULT_SPACING, n_points: int = 48, pose=None, jitter: float = 0.3,
+                  breath_hold=None) -> ContourStack:
     """The SYNTHETIC contour stack an operator would draw of ``lv``.
 
     Parameters
@@ -232,6 +253,12 @@ def contour_stack(lv: SyntheticLV, operator: OperatorStyle = REFERENCE_OPERATOR,
         Scanner pose; default random from ``rng``.
     jitter : float
         SD (mm) of the per-patient variation of the operator's biases.
+    breath_hold : (n, 2) array, optional
+        The scan's in-plane shift (mm) of each short-axis slice, shared by every
+        operator who segments the same scan (:func:`breath_hold_shifts`). Row 0
+        is the slice one spacing above the base level, row ``k + 1`` the slice
+        ``k`` spacings below it (slices beyond the rows: the last row). Each
+        operator keeps ``1 - registration`` of it. Default: none.
     """
     rng = np.random.default_rng(rng)
     R, t = pose if pose is not None else random_pose(rng)
@@ -247,25 +274,43 @@ def contour_stack(lv: SyntheticLV, operator: OperatorStyle = REFERENCE_OPERATOR,
         ph = rng.uniform(0, 2 * np.pi, 5)
         return np.sum(amp[:, None] * np.cos(m[:, None] * phi[None, :] + ph[:, None]), axis=0)
 
+    levels = [0] + list(range(1, 40))  # slice level: k spacings below the base level
     zs = [base] + list(-spacing * np.arange(1, 40))
     if operator.basal_slices > 0:
+        levels = list(range(-operator.basal_slices, 0)) + levels
         zs = [base + spacing * k for k in range(operator.basal_slices, 0, -1)] + zs
     elif operator.basal_slices < 0:
-        zs = zs[-operator.basal_slices:]
+        levels, zs = levels[-operator.basal_slices:], zs[-operator.basal_slices:]
     z_epi_apex, z_endo_apex = lv.apex_z("epi"), lv.apex_z("endo")
-    zs = [z for z in zs if z > z_epi_apex + 4.0]
+    keep = [i for i, z in enumerate(zs) if z > z_epi_apex + 4.0]
+    endo_floor = np.full(len(zs), z_endo_apex + 4.0)
+    if operator.apical_slices > 0:  # partial-volume apical slices that still cut the epicardium (endo: the cavity)
+        extra = [i for i in range(keep[-1] + 1, len(zs)) if zs[i] > z_epi_apex + 0.5][:operator.apical_slices]
+        endo_floor[extra] = z_endo_apex + 1.0
+        keep += extra
+    elif operator.apical_slices < 0:
+        keep = keep[:max(3, len(keep) + operator.apical_slices)]
+    levels, zs, endo_floor = [levels[i] for i in keep], [zs[i] for i in keep], endo_floor[keep]
     n_slices = len(zs)
     motion_dir = rng.uniform(0, 2 * np.pi)
+    bh = None if breath_hold is None else np.asarray(breath_hold, float).reshape(-1, 2)
+    trabeculae = operator.trabecular_mm > 0 and operator.trabecular_share > 0
     slices = []
     for k, z in enumerate(zs):
         shift = operator.shift_mm * rng.standard_normal(2)
         if operator.motion_error_mm and k >= n_slices // 2:
             shift = shift + operator.motion_error_mm * np.array([np.cos(motion_dir), np.sin(motion_dir)])
+        if bh is not None:
+            shift = shift + (1.0 - operator.registration) * bh[min(max(levels[k] + 1, 0), len(bh) - 1)]
         epi = lv.ring("epi", z, n_points, radial_offset=pb + noise())
         epi[:, :2] += shift
         endo = None
-        if z > z_endo_apex + 4.0:
-            endo = lv.ring("endo", z, n_points, radial_offset=eb + noise())
+        if z > endo_floor[k]:
+            inward = 0.0
+            if trabeculae and rng.random() < operator.trabecular_share:
+                inward = operator.trabecular_mm * trabecular_profile(phi, np.pi + rng.uniform(-np.pi / 3, np.pi / 3),
+                                                                     np.deg2rad(operator.trabecular_arc_deg))
+            endo = lv.ring("endo", z, n_points, radial_offset=eb + noise() - inward)
             endo[:, :2] += shift
         slices.append(ContourSlice(epi=tf(epi), endo=None if endo is None else tf(endo), position=float(z)))
     # long axis: 4CH through septum (phi = 0) and lateral wall, 2CH at 90 degrees
@@ -294,6 +339,20 @@ def contour_stack(lv: SyntheticLV, operator: OperatorStyle = REFERENCE_OPERATOR,
                          synthetic=True, septum=tf(sep), source=f"{label} {operator.name}",
                          extra={"generator": "lvcore.geometry.cohort.contour_stack", "spacing_mm": spacing})
     return validate_contours(stack)
+
+
+def trabecular_profile(phi, centre: float, arc: float) -> np.ndarray:
+    """Raised-cosine bump over azimuth: 1 at ``centre``, 0 beyond ±arc/2 (rad); the trabecular pull's shape."""
+    d = np.angle(np.exp(1j * (np.asarray(phi, float) - centre)))  # wrapped to (-pi, pi]
+    return np.where(np.abs(d) < arc / 2, 0.5 * (1.0 + np.cos(2.0 * np.pi * d / arc)), 0.0)
+
+
+def breath_hold_shifts(rng, sd_mm: float, n_levels: int = 42) -> np.ndarray:
+    """A scan's per-slice in-plane breath-hold shifts (mm), ``(n_levels, 2)``, i.i.d. N(0, sd²) per axis.
+
+    Rows as ``contour_stack``'s ``breath_hold``: row 0 one spacing above the base level, row k + 1 k spacings below.
+    """
+    return float(sd_mm) * np.random.default_rng(rng).standard_normal((int(n_levels), 2))
 
 
 def with_motion_error(operator: OperatorStyle, shift_mm: float = 3.5) -> OperatorStyle:

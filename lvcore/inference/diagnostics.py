@@ -227,6 +227,14 @@ def save_netcdf(idata: az.InferenceData, path) -> Path:
     return path
 
 
+def netcdf_bytes(idata: az.InferenceData) -> bytes:
+    """InferenceData as the bytes of a netCDF file (for a download; written to a temporary file)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        return save_netcdf(idata, Path(d) / "posterior.nc").read_bytes()
+
+
 #: Bulk ESS below which the app's banner is amber even when the run passed its convergence check.
 BANNER_ESS_MIN = 400.0
 
@@ -264,6 +272,6 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN, flags=()) 
     return "success", "Converged: " + numbers
 
 
-__all__ = ["Convergence", "BANNER_ESS_MIN", "banner_status", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table",
+__all__ = ["Convergence", "BANNER_ESS_MIN", "banner_status", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table", "netcdf_bytes",
            "check_convergence", "sample_until_converged", "ess_per_second", "posterior_predictive", "to_inference_data",
            "save_netcdf"]

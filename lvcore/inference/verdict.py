@@ -176,17 +176,21 @@ def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = 
     kw = {"y": y, "forward": forward, "sigma_v": float(sigma_v), "sigma_ref": float(sigma_ref),
           "infer_angles": bool(infer_angles)}
     keys = jax.random.split(jax.random.PRNGKey(seed), n_starts)
-    inits = [initialize_model(k, _reference_model, model_kwargs=kw).param_info.z for k in keys]
-    flat0, unravel = ravel_pytree(inits[0])
+    # the first start as numpyro initialises a model (a valid point, uniform in (-2, 2) unconstrained); the
+    # others drawn the same way without re-tracing the model for each
+    first = initialize_model(keys[0], _reference_model, model_kwargs=kw).param_info.z
+    flat0, unravel = ravel_pytree(first)
+    inits = [flat0] + [jax.random.uniform(k, flat0.shape, minval=-2.0, maxval=2.0) for k in keys[1:]]
 
-    def objective(flat):
-        z = constrain_fn(_reference_model, (), kw, unravel(flat))
-        return -log_density(_reference_model, (), kw, z)[0]
+    def objective(flat, data):  # the data are an argument: one compiled program serves every data set
+        args = {**kw, "y": data}
+        z = constrain_fn(_reference_model, (), args, unravel(flat))
+        return -log_density(_reference_model, (), args, z)[0]
 
     vg = jax.jit(jax.value_and_grad(objective))
 
     def fun(x):
-        v, g = vg(jnp.asarray(x))
+        v, g = vg(jnp.asarray(x), y)
         v, g = float(v), np.asarray(g, dtype=float)
         if not np.isfinite(v):
             return 1e300, np.zeros_like(g)
@@ -194,7 +198,7 @@ def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = 
 
     best = None
     for z0 in inits:
-        x0 = np.asarray(ravel_pytree(z0)[0], dtype=float)
+        x0 = np.asarray(z0, dtype=float)
         res = minimize(fun, x0, jac=True, method="L-BFGS-B", options={"maxiter": 300})
         if best is None or res.fun < best.fun:
             best = res

@@ -13,9 +13,11 @@ Importing this module registers the default campaign forward model
 """
 from __future__ import annotations
 
+import copy
+import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Mapping, NamedTuple
 
 import numpy as np
 
@@ -27,20 +29,120 @@ from lvcore.mechanics.simulate import simulate
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
 
 
+class WarmState(NamedTuple):
+    """A converged solve as a warm start: ``simulate(..., initial=)`` reads ``(u, p, tangent)``.
+
+    ``values`` (:func:`case_values`) are the material parameters, fibre angles
+    and pressure it was solved at, so that a failed warm start can continue
+    through intermediate parameters (:func:`warm_continuation`).
+    """
+
+    u: np.ndarray
+    p: np.ndarray
+    tangent: Any = None
+    values: tuple | None = None
+
+
+#: Material parameters interpolated geometrically by the continuation (positive), then the linear ones.
+_LOG_FIELDS = (("material", "a"), ("material", "b"), ("material", "af"), ("material", "bf"))
+_LIN_FIELDS = (("fibres", "alpha_endo"), ("fibres", "alpha_epi"), ("load", "pressure"))
+#: Halvings of the parameter step a failed warm start may try before the cold solve (2: down to a quarter).
+CONTINUATION_DEPTH = 1
+#: Newton iterations a warm attempt may take before the continuation halves the step (successful warm
+#: starts on the default LV take 3-6; a failing one would otherwise spend the full 25 with line searches).
+WARM_MAX_ITERATIONS = 25
+#: Newton settings of the warm attempts: no restart from zero load (the continuation or the cold solve follows).
+_WARM_ONLY = None
+
+
+def _warm_only_options():
+    global _WARM_ONLY
+    if _WARM_ONLY is None:
+        from lvcore.mechanics.newton import NewtonOptions
+
+        _WARM_ONLY = NewtonOptions(cold_fallback=False, max_iterations=WARM_MAX_ITERATIONS)
+    return _WARM_ONLY
+
+
+def case_values(case: Mapping) -> tuple | None:
+    """``(a, b, af, bf, alpha_endo, alpha_epi, pressure)`` of a case dict (kPa, -, kPa, -, deg, deg, the case's
+    pressure units), or None when it lacks one of them (another law, a box case)."""
+    try:
+        vals = tuple(float(case[s][k]) for s, k in _LOG_FIELDS + _LIN_FIELDS)
+    except (KeyError, TypeError, ValueError):
+        return None
+    return vals if all(v > 0 for v in vals[:len(_LOG_FIELDS)]) else None
+
+
+def _with_values(case: Mapping, values: tuple) -> dict:
+    out = copy.deepcopy(dict(case))
+    for (sec, key), v in zip(_LOG_FIELDS + _LIN_FIELDS, values):
+        out[sec][key] = float(v)
+    return out
+
+
+def _midpoint(v0: tuple, v1: tuple) -> tuple:
+    n = len(_LOG_FIELDS)
+    return tuple(math.sqrt(x * y) if i < n else 0.5 * (x + y) for i, (x, y) in enumerate(zip(v0, v1)))
+
+
+def _as_warm(result, values) -> WarmState:
+    u, p, tangent = result.warm_state
+    return WarmState(u, p, tangent, values)
+
+
+def warm_continuation(case: Mapping, initial, *, with_sensitivities: bool = False,
+                      depth: int | None = None):
+    """Solve ``case`` from a converged neighbour ``initial`` by a continuation in its parameters.
+
+    A Newton warm start at full load from ``initial`` (a :class:`WarmState`);
+    if it does not converge and ``initial`` knows its parameters, the
+    midpoint between the two parameter sets (geometric for a, b, af, bf;
+    arithmetic for the angles and the pressure) is solved warm first, and the
+    case from there, halving again up to ``depth`` times. Each step is a
+    warm start at full load (at most :data:`WARM_MAX_ITERATIONS` Newton
+    iterations; default ``depth`` :data:`CONTINUATION_DEPTH`), so the path costs a few Newton iterations where
+    a cold solve from zero load costs a dozen load steps on soft materials.
+
+    Returns the :class:`~lvcore.mechanics.simulate.SimulationResult` of the
+    case, ``converged`` False when no path converged (the caller then solves
+    cold, see :func:`_simulate_point`); the converged solution satisfies the
+    same tolerances as a cold solve.
+    """
+    depth = CONTINUATION_DEPTH if depth is None else int(depth)
+    opts = _warm_only_options()
+    r = simulate(case, with_sensitivities=with_sensitivities, options=opts, initial=initial)
+    start, target = getattr(initial, "values", None), case_values(case)
+    if r.converged or depth <= 0 or start is None or target is None:
+        return r
+    mid_values = _midpoint(start, target)
+    mid = warm_continuation(_with_values(case, mid_values), initial, depth=depth - 1)
+    if not mid.converged:
+        return r
+    return warm_continuation(case, _as_warm(mid, mid_values), with_sensitivities=with_sensitivities,
+                             depth=depth - 1)
+
+
 def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, warm: dict | None = None):
     """One simulator run -> ``(outputs (25,), converged, message, jacobian (25, p) or None, seconds)``.
 
     Runs in worker processes; never raises for a failing simulation. ``warm``
-    (in-process only): a dict whose ``"state"`` warm-starts the solve and is
-    replaced by this solve's state when it converges.
+    (in-process only): a dict whose ``"state"`` warm-starts the solve
+    (:func:`warm_continuation`, then a cold solve if that fails) and is
+    replaced by this solve's :class:`WarmState` when it converges.
     """
     t0 = time.perf_counter()
     nan_jac = np.full((N_OUTPUTS, len(input_names)), np.nan) if jacobian else None
     try:
-        r = simulate(case, with_sensitivities=jacobian, initial=None if warm is None else warm.get("state"))
+        initial = None if warm is None else warm.get("state")
+        r = None
+        if initial is not None:
+            r = warm_continuation(case, initial, with_sensitivities=jacobian)
+        if r is None or not r.converged:
+            r = simulate(case, with_sensitivities=jacobian)
         if warm is not None and r.converged:
-            warm["state"] = r.warm_state
-        seconds = float(getattr(r, "seconds", time.perf_counter() - t0))
+            warm["state"] = _as_warm(r, case_values(case))
+        seconds = time.perf_counter() - t0
         if not r.converged:
             return np.full(N_OUTPUTS, np.nan), False, str(r.message or "did not converge"), nan_jac, seconds
         y = np.asarray(r.outputs(), dtype=float)

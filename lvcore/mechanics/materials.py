@@ -387,8 +387,13 @@ class ConstitutiveModel:
         return ConstitutiveModel(type(self.material).from_vector(v), self.compressibility)
 
     def as_arrays(self) -> "ConstitutiveModel":
-        """Every parameter as a float64 JAX scalar (a fixed jit signature, whatever the input types)."""
-        return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.float64), self)
+        """Every parameter as a float64 0-d array (a fixed jit signature, whatever the input types).
+
+        NumPy arrays: a jitted kernel takes them as it takes JAX arrays (same
+        signature, same values), and making them costs no device transfer per
+        parameter (a solve of a batch builds one model per point).
+        """
+        return jax.tree_util.tree_map(lambda x: np.asarray(x, dtype=np.float64), self)
 
 
 __all__ = ["MaterialLaw", "HolzapfelOgden", "Guccione", "NeoHookean", "LAWS", "law_class", "material_law",

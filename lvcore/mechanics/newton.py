@@ -50,6 +50,10 @@ class NewtonOptions:
         for a fresh tangent instead of cutting the step unless ``cut_on_predictor``).
         Switched off for the rest of the solve after the first failed load step
         (on hard paths it could lead Newton astray: 2 of 256 sweep points failed).
+    cold_fallback : with a warm start (``solve(initial=...)``) that does not
+        converge, restart from zero load (True, the default) or return the
+        failure at once (False: the caller has a cheaper way on, e.g. a
+        parameter continuation, :func:`lvcore.mechanics.forward.warm_continuation`).
     """
 
     rtol: float = 1e-9
@@ -66,6 +70,7 @@ class NewtonOptions:
     reuse_ratio: float = 0.3
     chord_predictor: bool = True
     cut_on_predictor: bool = False
+    cold_fallback: bool = True
 
 
 class Tangent:
@@ -238,8 +243,7 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
              "t_line": 0.0}
     u = np.zeros(system.n_free)
     p = system.zero_pressure()
-    r1, _, _, _ = system.residual(u, p, 1.0)
-    scale = max(np.linalg.norm(r1), 1e-30)
+    scale = max(system.load_norm(), 1e-30)
     vol = float(np.max(np.sum(system.wdet, axis=1)))
 
     def tolerances(rtol):  # (force, volume) tolerances of a load step solved to relative tolerance rtol
@@ -259,6 +263,9 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
                 stats["seconds"] = time.perf_counter() - t_start
                 return NewtonResult(True, "converged (warm start)", u_w, p_w, 1.0, stats["iterations"], 1, 0, stats,
                                     Tangent(*last) if last else Tangent())
+            if not opts.cold_fallback:
+                stats["seconds"] = time.perf_counter() - t_start
+                return NewtonResult(False, "warm start did not converge", u, p, 0.0, stats["iterations"], 0, 0, stats)
     lam, step, steps, cuts = 0.0, opts.first_step, 0, 0
     carry = None  # (factorisation, D) of the last tangent of the last converged step
     predict = opts.chord_predictor

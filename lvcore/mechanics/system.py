@@ -89,6 +89,13 @@ def _spring_forces(data, u):
     return jnp.einsum("mij,mj->mi", data["spring_K"], uf).reshape(-1, 9, 3)
 
 
+@partial(jax.jit, static_argnames=("potential",))
+def _external_load(pressure, data, potential):
+    """The external nodal forces (mN) in the reference configuration, (n_nodes, 3)."""
+    x = data["X"]
+    return jnp.zeros_like(x).at[data["faces"]].add(_external_forces(data, x, pressure, potential))
+
+
 @partial(jax.jit, static_argnames=("potential", "nnz"))
 def _tangent(u, p, pressure, model, data, potential, nnz):
     x = data["X"] + u.reshape(-1, 3)
@@ -187,6 +194,7 @@ class DiscreteSystem:
             "dest": jnp.asarray(self.pattern.dest),
         }
         self.free = self.pattern.free
+        self._shared = {}  # values computed once per system, shared by its with_model copies
         self.Minv = np.linalg.inv(M)
         self.edofs = block_dofs(elements)
 
@@ -221,21 +229,33 @@ class DiscreteSystem:
         u = self.full(u_free).reshape(-1, 3)
         return robin.spring_energy(u[self.spring_faces], self.spring_K)
 
+    def load_norm(self) -> float:
+        """‖f_ext‖ (mN): the norm of the full external load on the free dofs, in the reference configuration.
+
+        Independent of the material, so computed once per system (and shared by
+        :meth:`with_model` copies); Newton's force tolerances are relative to it.
+        """
+        v = self._shared.get("load_norm")
+        if v is None:
+            f = np.asarray(_external_load(float(self.pressure), self.data, potential=self.potential)).ravel()
+            v = self._shared["load_norm"] = float(np.linalg.norm(f[self.free]))
+        return v
+
     def zero_pressure(self) -> np.ndarray:
         return np.zeros((self.mesh.n_elements, 4))
 
     def residual(self, u_free, p, load_factor: float):
         """Mixed residuals at (u, p): (r_u on free dofs, r_p (n_el, 4), min J, strain energy)."""
-        R, r_p, mj, w = _residual(jnp.asarray(self.full(u_free)), jnp.asarray(p),
-                                  jnp.asarray(load_factor * self.pressure), self.model, self.data,
-                                  potential=self.potential)
+        # NumPy arrays and a Python float go to the jitted kernel as they are (its C++ dispatch
+        # transfers them; a jnp.asarray per argument costs more than a small residual)
+        R, r_p, mj, w = _residual(self.full(u_free), np.asarray(p, dtype=float), float(load_factor * self.pressure),
+                                  self.model, self.data, potential=self.potential)
         return np.asarray(R)[self.free], np.asarray(r_p), float(mj), float(w)
 
     def tangent(self, u_free, p, load_factor: float):
         """Condensed system: (rhs on free dofs, CSR tangent, D (n_el, 4, 81), r_p (n_el, 4))."""
-        R, kd, D, r_p = _tangent(jnp.asarray(self.full(u_free)), jnp.asarray(p),
-                                 jnp.asarray(load_factor * self.pressure), self.model,
-                                 self.data, potential=self.potential, nnz=self.pattern.nnz)
+        R, kd, D, r_p = _tangent(self.full(u_free), np.asarray(p, dtype=float), float(load_factor * self.pressure),
+                                 self.model, self.data, potential=self.potential, nnz=self.pattern.nnz)
         return np.asarray(R)[self.free], self.pattern.matrix(kd), np.asarray(D), np.asarray(r_p)
 
     def pressure_increment(self, du_free, D, r_p) -> np.ndarray:

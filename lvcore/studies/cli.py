@@ -10,6 +10,8 @@ STUDY_MODULES = (
     "lvcore.studies.bo_fibres",            # lvcore study bo-fibres
     "lvcore.studies.operators",            # lvcore study operators
     "lvcore.studies.mismatch",             # lvcore study mismatch
+    "lvcore.studies.operators_realistic",  # lvcore study operators-realistic
+    "lvcore.studies.bo_mismatch",          # lvcore study bo-mismatch
 )
 
 

@@ -145,3 +145,28 @@ def surface_figure(surface: dict, theta_true: Sequence[float], *, title: str):
 
 
 __all__ = ["residual_figure", "convergence_figure", "bo_error_bars", "surface_figure"]
+
+
+def ci_dots(rows: Sequence[dict], *, title: str, reference: float | None = None, percent: bool = True):
+    """Estimates with their bootstrap CIs as dots with error bars, one colour per ``test``.
+
+    ``rows``: dicts with ``quantity`` (x category), ``test`` (series), ``value``, ``lo``, ``hi`` (CI ends or None).
+    ``reference``: a horizontal line (e.g. 0.5, where a "most cases" claim starts to hold).
+    """
+    import plotly.graph_objects as go
+
+    scale = 100.0 if percent else 1.0
+    fig = go.Figure()
+    for k, test in enumerate(dict.fromkeys(r["test"] for r in rows)):
+        sub = [r for r in rows if r["test"] == test]
+        y = np.array([r["value"] for r in sub], float) * scale
+        lo = np.array([r["lo"] if r["lo"] is not None else r["value"] for r in sub], float) * scale
+        hi = np.array([r["hi"] if r["hi"] is not None else r["value"] for r in sub], float) * scale
+        fig.add_scatter(x=[r["quantity"] for r in sub], y=y, mode="markers", name=test,
+                        marker=dict(size=11, color=SERIES_COLOURS[k % len(SERIES_COLOURS)]),
+                        error_y=dict(type="data", symmetric=False, array=hi - y, arrayminus=y - lo))
+    if reference is not None:
+        fig.add_hline(y=reference * scale, line_dash="dot", line_color="grey")
+    fig.update_layout(title=title, scattermode="group", height=440, margin=dict(l=60, r=20, t=90, b=40),
+                      yaxis_title="share (%)" if percent else "value")
+    return fig
