@@ -11,8 +11,8 @@ from pathlib import Path
 import streamlit as st
 
 from lvcore.exceptions import LVCoreError
-from lvcore.studies import (bo_fibres, bo_mismatch, fibre_discrepancy, geometry_operators, operators,
-                            operators_realistic, results)
+from lvcore.studies import (bo_fibres, bo_mismatch, fibre_discrepancy, findings, geometry_operators, mismatch,
+                            operators, operators_realistic, results)
 
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
@@ -69,9 +69,9 @@ def verdict_section(study: str, module, key: str, heading: str) -> None:
         show(module, res, tables=["verdicts"])
 
 
-tab_bo, tab_ops, tab_fd, tab_geo, tab_run = st.tabs(
+tab_bo, tab_ops, tab_fd, tab_geo, tab_mm, tab_run = st.tabs(
     ["Fibre-angle BO (Tables 9.2/9.3)", "Operators (Figs 9.11–9.14)", "Fibre discrepancy (Figs 9.6–9.9)",
-     "Operators, geometry (Table 9.4)", "Run a small study"])
+     "Operators, geometry (Table 9.4)", "Mismatch dose–response and findings", "Run a small study"])
 
 with tab_bo:
     res = load("bo-fibres", bo_fibres, "bo_src")
@@ -122,6 +122,21 @@ with tab_geo:
         show(geometry_operators, _table94())
     except LVCoreError as err:
         st.error(str(err))
+
+with tab_mm:
+    res = load("mismatch", mismatch, "mm_src")
+    if res is not None:
+        st.caption(mismatch.source_line(res))
+        try:
+            fres = findings.load(res["folder"])
+            st.subheader("The chapter's findings: verdicts")
+            st.dataframe(findings.tables(fres)["table_findings"], hide_index=True, width="stretch")
+            st.caption(findings.source_line(fres))
+        except (LVCoreError, KeyError, TypeError, ValueError, FileNotFoundError) as err:
+            st.error(f"cannot compute the findings table: {err}")
+        st.subheader("Dose–response")
+        show(mismatch, res, figures=["fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s",
+                                     "fig_mismatch_output_error"], tables=["table_mismatch_doses"])
 
 with tab_run:
     st.write("Start a small run (fast mesh) in the background; the page stays usable while it runs and its "

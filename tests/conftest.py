@@ -34,3 +34,35 @@ def fast_lv_result(fast_lv_case):
     from lvcore.mechanics.simulate import simulate
 
     return simulate(fast_lv_case, with_sensitivities=True)
+
+
+# ---------------------------------------------------------------------------- mismatch study results (made up)
+def _mismatch_result(doses=((0.01, 0.031, 0.01), (0.03, 0.04, 0.02), (0.06, 0.07, 0.04)), source="dispersion"):
+    """A study result from summarise() over made-up per-data-set metrics (test fixture, not study output)."""
+    import numpy as np
+
+    from lvcore.studies import mismatch as mm
+
+    rng = np.random.default_rng(1)
+    fits, rms = {}, {}
+    for d, (r, iid_sigma, iid_err) in enumerate(doses):
+        rec = {m: {"coverage": list(rng.uniform(0.5, 1, 20)),
+                   "output_error": list(abs(({"iid": iid_err}.get(m, 0.01)) + 0.002 * rng.standard_normal(20))),
+                   "min_ess": list(rng.uniform(100, 300, 20)), "max_rhat": list(rng.uniform(1.0, 1.02, 20))}
+               for m in mm.MODELS}
+        for m, s in (("iid", iid_sigma), ("discrepancy", 0.03)):
+            rec[m]["sigma_s"] = list(s + 0.002 * rng.standard_normal(20))
+        fits[(source, float(d + 1))] = {"HV1": rec}
+        rms[(source, float(d + 1))] = {"mean": r, "min": r * 0.8, "max": r * 1.2}
+    rows = mm.summarise(fits, rms)
+    return {"study": "mismatch", "synthetic": True, "volunteers": ["HV1"], "seeds_per_dose": 20, "emulator": "chapter",
+            "resolution": "default", "sampler": {"num_warmup": 300, "num_samples": 300, "num_chains": 2},
+            "rows": rows, "appearance": mm.appearance(rows), "failed": [], "folder": "/tmp/x",
+            "timings_s": {"simulate": 60.0, "calibrate": 600.0, "total": 660.0}}
+
+
+@pytest.fixture
+def mismatch_result():
+    """A factory of mismatch-study results from :func:`lvcore.studies.mismatch.summarise` over made-up
+    per-data-set metrics: ``mismatch_result(doses=((rms, iid σ_S, iid output error), ...))``."""
+    return _mismatch_result

@@ -76,25 +76,134 @@ def test_cli_refuses_bad_options(capsys):
 
 
 @pytest.mark.slow
-def test_fit_doses_sees_a_strain_mismatch_on_the_analytic_stand_in():
-    """fit_doses on the SYNTHETIC closed-form stand-in: without mismatch iid σ_S ≈ 0.03 and θ is mostly
+def test_fit_datasets_sees_a_strain_mismatch_on_the_analytic_stand_in():
+    """fit_datasets on the SYNTHETIC closed-form stand-in: without mismatch iid σ_S ≈ 0.03 and θ is mostly
     covered; a strain offset of RMS 0.06 that θ cannot absorb (alternating by sector, orthogonal to the
-    stand-in's loadings 1, cos γ, sin γ, cos 2γ) inflates iid σ_S."""
-    from lvcore.testing.analytic import AnalyticForward
+    stand-in's loadings 1, cos γ, sin γ, cos 2γ) inflates iid σ_S; ESS and R-hat come per data set."""
+    import jax
+
     from lvcore.inference import samplers
+    from lvcore.outputs import THETA_NAMES
+    from lvcore.testing.analytic import AnalyticForward
 
     fwd = AnalyticForward()
-    vol = mm.Volunteer("T", H, THETA)
     z = np.asarray(fwd(THETA), dtype=float)
     bump = 0.06 * (-1.0) ** (np.arange(24) % 6)
-    zs = {("none", 0.0): z, ("bump", 1.0): z + np.r_[0.0, bump]}
-    cfg = samplers.SamplerConfig(num_warmup=150, num_samples=150, num_chains=1)
-    res = mm.fit_doses(vol, zs, fwd, seeds=3, config=cfg, seed=0,
-                       noise_seeds={("none", 0.0): 1, ("bump", 1.0): 2})
-    clean_iid = np.median(res[("none", 0.0)]["iid"]["sigma_s"])
-    bumped_iid = np.median(res[("bump", 1.0)]["iid"]["sigma_s"])
+    ys = np.concatenate([mm.noisy_copies(z, 3, 1), mm.noisy_copies(z + np.r_[0.0, bump], 3, 2)])
+    truths = np.repeat(np.array([[THETA[n] for n in THETA_NAMES]]), 6, axis=0)
+    cfg = samplers.SamplerConfig(num_warmup=150, num_samples=150, num_chains=2)
+    res = mm.fit_datasets(fwd, ys, None, truths, np.repeat(z[None], 6, axis=0), config=cfg,
+                          keys=jax.random.split(jax.random.PRNGKey(0), 6))
+    clean_iid, bumped_iid = np.median(res["iid"]["sigma_s"][:3]), np.median(res["iid"]["sigma_s"][3:])
     assert clean_iid == pytest.approx(0.03, abs=0.008) and bumped_iid > 1.5 * clean_iid
-    assert np.mean(res[("none", 0.0)]["iid"]["coverage"]) >= 0.6
-    for k in zs:
-        assert all(len(res[k][m]["output_error"]) == 3 and len(res[k][m]["coverage"]) == 3 for m in mm.MODELS)
-        assert "sigma_s" not in res[k]["volume"] and np.all(np.asarray(res[k]["discrepancy"]["sigma_s"]) > 0)
+    assert np.mean(res["iid"]["coverage"][:3]) >= 0.6
+    for m in mm.MODELS:
+        assert all(len(res[m][k]) == 6 for k in ("coverage", "output_error", "min_ess", "max_rhat"))
+        assert np.all(res[m]["min_ess"] > 0) and np.all(res[m]["max_rhat"] > 0.9)
+    assert "sigma_s" not in res["volume"] and np.all(np.asarray(res["discrepancy"]["sigma_s"]) > 0)
+
+
+def test_unit_seed_depends_only_on_the_key():
+    assert mm.unit_seed("HV1__sheet__4", 0) == mm.unit_seed("HV1__sheet__4", 0)
+    assert mm.unit_seed("HV1__sheet__4", 0) != mm.unit_seed("HV1__sheet__8", 0)
+    assert mm.unit_seed("HV1__sheet__4", 0) != mm.unit_seed("HV1__sheet__4", 1)
+    a, b = mm.noisy_copies(np.zeros(25), 4, 7), mm.noisy_copies(np.zeros(25), 4, 7)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (4, 25) and 2 < np.std(a[:, 0]) < 9 and 0.01 < np.std(a[:, 1:]) < 0.05
+
+
+def test_measured_doses_are_the_strain_rms_over_volunteers():
+    vols = [mm.Volunteer("A", H, THETA), mm.Volunteer("B", H, THETA)]
+    nom = np.r_[100.0, np.zeros(24)]
+    sims = {"A__none__0": {"converged": True, "outputs": nom.tolist()},
+            "B__none__0": {"converged": True, "outputs": nom.tolist()},
+            "A__sheet__2": {"converged": True, "outputs": (nom + np.r_[5.0, np.full(24, 0.02)]).tolist()},
+            "B__sheet__2": {"converged": True, "outputs": (nom + np.r_[0.0, np.full(24, 0.04)]).tolist()},
+            "A__sheet__4": {"converged": False, "reason": "diverged"}, "B__sheet__4": {"converged": False}}
+    m = mm.measured_doses(sims, vols, {"sheet": (2.0, 4.0)})
+    assert m[("sheet", 2.0)] == pytest.approx({"mean": 0.03, "min": 0.02, "max": 0.04, "n": 2, "failed": 0})
+    assert m[("sheet", 4.0)]["n"] == 0 and m[("sheet", 4.0)]["failed"] == 2 and m[("sheet", 4.0)]["mean"] is None
+
+
+# ---------------------------------------------------------------------------- results, figures, findings
+def test_figures_have_axis_titles_ci_bands_and_no_negative_values(mismatch_result):
+    res = mismatch_result()
+    figs = mm.figures(res)
+    assert set(figs) == set(mm.TITLES)
+    for name in ("fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s", "fig_mismatch_output_error"):
+        fig = figs[name]
+        assert "SYNTHETIC" in fig.layout.title.text
+        assert fig.layout.xaxis.title.text and "strain RMS" in fig.layout.xaxis.title.text
+        assert fig.layout.yaxis.title.text
+        bands = [t for t in fig.data if t.fill == "toself"]
+        lines = [t for t in fig.data if t.mode == "lines+markers"]
+        assert bands and len(bands) == len(lines)
+        for band, line in zip(bands, lines):
+            assert band.name == f"{line.name} CI"
+            n = len(line.x)
+            hi, lo = np.asarray(band.y[:n]), np.asarray(band.y[n:])[::-1]
+            assert np.all(lo <= np.asarray(line.y) + 1e-12) and np.all(np.asarray(line.y) <= hi + 1e-12)
+            assert np.all(np.asarray(band.y) >= 0) and np.all(np.asarray(line.y) >= 0)
+            assert np.all(np.asarray(line.x) >= 0)
+    err = figs["fig_mismatch_output_error"]
+    assert {t.name for t in err.data if t.mode == "lines+markers"} == set(mm.MODELS)
+    tabs = mm.tables(res)
+    assert len(tabs["table_mismatch_doses"]) == 3 and (tabs["fig_mismatch_output_error"]["lo"] >= 0).all()
+    assert mm.figures({**res, "rows": []}) == {}
+
+
+def test_inflation_ci_and_f3_gap_from_paired_differences(mismatch_result):
+    rows = mismatch_result()["rows"]
+    assert [r["f1"] for r in rows] == [False, False, True]
+    assert rows[2]["iid_sigma_s_inflation"]["ci"][0] > 2.0
+    assert [r["f3"] for r in rows] == [False, True, True]
+    assert rows[0]["diagnostics"]["iid"]["share_rhat_over_1_05"] == 0.0
+    assert mm.appearance(rows)["dispersion"] == {"f1": {"dose": 3.0, "strain_rms": 0.06},
+                                                 "f3": {"dose": 2.0, "strain_rms": 0.03}}
+
+
+def test_load_refuses_other_json(tmp_path):
+    import json
+
+    from lvcore.exceptions import LVCoreError
+
+    (tmp_path / "mismatch.json").write_text(json.dumps({"study": "operators"}))
+    with pytest.raises(ValueError, match="not the output of lvcore study mismatch"):
+        mm.load(tmp_path)
+    with pytest.raises(LVCoreError):
+        mm.load(tmp_path / "nowhere")
+
+
+def test_shipped_results_docs_and_locator():
+    """The shipped mismatch.json is found by the results locator, drawn, and docs/studies.md's two generated
+    blocks (per-dose table; findings table with verdicts) are exactly what the shipped JSON gives."""
+    from pathlib import Path
+
+    from lvcore.studies import findings as fd
+    from lvcore.studies import results
+
+    folder = dict(results.result_sources()["mismatch"])["bundled"]
+    shipped = mm.load(folder)
+    assert shipped["synthetic"] and shipped["shipped"]["script"] == "scripts/ship_mismatch.py"
+    assert shipped["seeds_per_dose"] >= 20 and shipped["rows"] and all(r["n_datasets"] >= 20 for r in shipped["rows"])
+    planned = {(s, d) for s, ds in shipped["doses"].items() for d in ds}  # fitted + listed as not fitted = planned
+    assert {(r["source"], r["dose"]) for r in shipped["rows"]} | {(u["source"], u["dose"]) for u in
+                                                                  shipped["not_fitted"]} == planned
+    assert shipped["complete"] == (not shipped["not_fitted"] and not shipped["failed"])
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "studies.md").read_text()
+    for mod, text in ((mm, mm.docs_markdown(shipped)), (fd, fd.docs_markdown(fd.load(folder)))):
+        assert doc.count(mod.DOCS_BEGIN) == 1 and doc.count(mod.DOCS_END) == 1
+        block = doc.split(mod.DOCS_BEGIN)[1].split(mod.DOCS_END)[0].strip()
+        assert block == text.strip(), f"run python scripts/ship_mismatch.py --docs-only ({mod.__name__})"
+    rows = fd.verdicts(fd.load(folder))
+    assert {r["verdict"] for r in rows} <= set(fd.VERDICTS)
+    assert [r["finding"].split(" ")[0] for r in rows][:3] == ["F1", "F2", "F3"]
+    # F5 / F6: the realistic studies' own verdicts decide where they are shipped; the first studies stay beside them
+    from lvcore.studies import bo_mismatch, operators_realistic
+
+    for name, mod, key in (("F5", operators_realistic, "F5"), ("F6", bo_mismatch, "F6")):
+        path = results.find_result(mod.RESULT_FILE)
+        if path is not None:
+            assert next(r for r in rows if r["finding"] == name)["verdict"] == mod.load(path.parent)["verdicts"][key]["verdict"]
+            assert any(r["finding"].startswith(f"{name} (") for r in rows)
+    assert set(mm.figures(shipped)) == set(mm.TITLES)

@@ -76,27 +76,38 @@ def prior_draw(rng: np.random.Generator) -> dict:
     return {n: float(rng.uniform(*models.THETA_BOUNDS[n])) for n in THETA_NAMES}
 
 
-def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.SamplerConfig, y0):
-    """Pure (jittable, vmappable) init/sample/constrain functions of NUTS on a named model."""
-    model = partial(models.get_model(model_name), forward=forward, sigma_v=sigma_v)
-    info = initialize_model(jax.random.PRNGKey(0), model, model_args=(jnp.asarray(y0),), dynamic_args=True)
+def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.SamplerConfig, y0, template=None,
+              c0=None):
+    """Pure (jittable, vmappable) init/sample/constrain functions of NUTS on a named model.
+
+    With ``template`` (:func:`lvcore.inference.samplers.runtime_conditions`) the
+    functions take the forward model's conditions ``c`` (``{"conditions": (k,)}``)
+    next to the data; otherwise ``c`` is ignored.
+    """
+    if template is None:
+        model = partial(models.get_model(model_name), forward=forward, sigma_v=sigma_v)
+        args = lambda y, c: (y,)  # noqa: E731
+    else:
+        model = samplers._conditioned_model(models.get_model(model_name), template, sigma_v=sigma_v)
+        args = lambda y, c: (y, c)  # noqa: E731
+    info = initialize_model(jax.random.PRNGKey(0), model, model_args=args(jnp.asarray(y0), c0), dynamic_args=True)
     init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
     z_proto = info.param_info.z
 
-    def init(key, y):
+    def init(key, y, c=None):
         k_z, k_h = jax.random.split(key)
         keys = jax.random.split(k_z, len(z_proto))
         z = {n: jax.random.uniform(k, jnp.shape(v), minval=-2.0, maxval=2.0)
              for k, (n, v) in zip(keys, z_proto.items())}
-        return init_kernel(z, config.num_warmup, model_args=(y,), rng_key=k_h,
+        return init_kernel(z, config.num_warmup, model_args=args(y, c), rng_key=k_h,
                            target_accept_prob=config.target_accept_prob, max_tree_depth=config.max_tree_depth,
                            dense_mass=config.dense_mass)
 
-    def sample(state, y):
-        return sample_kernel(state, model_args=(y,))
+    def sample(state, y, c=None):
+        return sample_kernel(state, model_args=args(y, c))
 
-    def constrain(z, y):
-        return info.postprocess_fn(y)(z)
+    def constrain(z, y, c=None):
+        return info.postprocess_fn(*args(y, c))(z)
 
     return init, sample, constrain
 
@@ -104,13 +115,15 @@ def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.Sampler
 def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
     kernel = samplers.PolarGPGibbs(forward, None, sigma_v=sigma_v, target_accept_prob=config.target_accept_prob,
                                    max_tree_depth=config.max_tree_depth)
-    return (lambda key, y: kernel.init(key, config.num_warmup, None, (y,), None),
-            lambda state, y: kernel.sample(state, (y,), None),
-            lambda z, y: z)
+    kw = lambda c: None if c is None else {"conditions": c}  # noqa: E731
+    return (lambda key, y, c=None: kernel.init(key, config.num_warmup, None, (y,), kw(c)),
+            lambda state, y, c=None: kernel.sample(state, (y,), kw(c)),
+            lambda z, y, c=None: z)
 
 
 def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.SamplerConfig,
-                       sigma_v: float = SIGMA_V_ML, sites=THETA_NAMES, group_by_chain: bool = False) -> dict:
+                       sigma_v: float = SIGMA_V_ML, sites=THETA_NAMES, group_by_chain: bool = False,
+                       conditions=None) -> dict:
     """Posterior draws for many data sets at once: one jit, vmapped over (data set x chain).
 
     Parameters
@@ -120,33 +133,78 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
     group_by_chain : bool
         Return arrays of shape (n_datasets, num_chains, num_samples, ...) instead
         of (n_datasets, num_chains * num_samples, ...).
+    conditions : array_like, shape (n_datasets, k), optional
+        Per data set, the forward model's run-time conditions (the values of
+        :func:`lvcore.inference.samplers.runtime_conditions`, e.g. each data
+        set's PC scores): data sets of several geometries then share one
+        compiled program. ``forward`` must be an emulator forward model
+        (without a geometry scale); its own conditions are replaced.
     """
     models.check_traceable(forward)
     ys = jnp.asarray(ys, dtype=jnp.float64)
     n = ys.shape[0]
+    key = (id(forward), model_name, config, float(sigma_v), tuple(sites), conditions is not None)
+    hit = _COMPILED.get(key)
+    if hit is not None and hit[0] is forward:  # the same sampler again (another batch): no new trace/compile
+        run = hit[1]
+    else:
+        run = _batched_sampler(forward, model_name, ys[0], config, sigma_v, sites, conditions is not None)
+        if len(_COMPILED) >= 8:
+            _COMPILED.pop(next(iter(_COMPILED)))
+        _COMPILED[key] = (forward, run)
+    if conditions is not None:
+        template, values = samplers.runtime_conditions(forward)
+        conds = jnp.asarray(conditions, dtype=jnp.float64).reshape(n, -1)
+        if conds.shape[1] != values["conditions"].shape[0]:
+            raise ValueError(f"conditions must have shape ({n}, {values['conditions'].shape[0]}) "
+                             f"({', '.join(template._keys)}), got {tuple(jnp.shape(conditions))}")
+    else:
+        conds = jnp.zeros((n, 0))
+    chain_keys = jax.vmap(lambda k: jax.random.split(k, config.num_chains))(keys)
+    flat_keys = chain_keys.reshape((n * config.num_chains,) + chain_keys.shape[2:])
+    flat_y = jnp.repeat(ys, config.num_chains, axis=0)
+    flat_c = jnp.repeat(conds, config.num_chains, axis=0)
+    draws = run(flat_keys, flat_y, flat_c)
+    shape = (n, config.num_chains, config.num_samples) if group_by_chain else (n, -1)
+    return {k: np.asarray(v).reshape(shape + np.shape(v)[2:]) for k, v in draws.items()}
+
+
+#: Jitted batched samplers by (forward model, likelihood, settings): a second batch reuses the first one's
+#: trace and compilation (a new closure per call would be traced and compiled again).
+_COMPILED: dict = {}
+
+
+def _batched_sampler(forward, model_name, y0, config, sigma_v, sites, with_conditions: bool):
+    """The jitted ``(keys, ys, conditions) -> draws`` of :func:`batched_posteriors`, vmapped over chains."""
+    template = None
+    if with_conditions:
+        template, values = samplers.runtime_conditions(forward)
+        if values is None or "scale" in values:
+            raise ValueError("per-data-set conditions need an emulator forward model without a geometry scale")
+        cond_of = lambda c: {"conditions": c}  # noqa: E731
+        c0 = values["conditions"]
+    else:
+        cond_of = lambda c: None  # noqa: E731
+        c0 = None
     if model_name == "discrepancy":
         init, sample, constrain = _gibbs_fns(forward, sigma_v, config)
     else:
-        init, sample, constrain = _nuts_fns(model_name, forward, sigma_v, config, ys[0])
+        init, sample, constrain = _nuts_fns(model_name, forward, sigma_v, config, y0, template, cond_of(c0))
     total = config.num_warmup + config.num_samples
 
-    def one_chain(key, y):
-        state = init(key, y)
+    def one_chain(key, y, cv):
+        c = cond_of(cv)
+        state = init(key, y, c)
 
         def body(st, _):
-            st = sample(st, y)
-            zc = constrain(st.z, y)
+            st = sample(st, y, c)
+            zc = constrain(st.z, y, c)
             return st, {k: zc[k] for k in sites}
 
         _, draws = jax.lax.scan(body, state, None, length=total)
         return {k: v[config.num_warmup:] for k, v in draws.items()}
 
-    chain_keys = jax.vmap(lambda k: jax.random.split(k, config.num_chains))(keys)
-    flat_keys = chain_keys.reshape((n * config.num_chains,) + chain_keys.shape[2:])
-    flat_y = jnp.repeat(ys, config.num_chains, axis=0)
-    draws = jax.jit(jax.vmap(one_chain))(flat_keys, flat_y)
-    shape = (n, config.num_chains, config.num_samples) if group_by_chain else (n, -1)
-    return {k: np.asarray(v).reshape(shape + np.shape(v)[2:]) for k, v in draws.items()}
+    return jax.jit(jax.vmap(one_chain))
 
 
 def coverage_study(forward, model_name: str = "iid", n_datasets: int = 50, *, level: float = 0.9,

@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import json
 import time
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -67,15 +68,18 @@ MODELS = ("volume", "iid", "discrepancy")
 #: The calibration model's fixed conditions (the ``chapter`` emulator).
 MODEL_ANGLES = CHAPTER_ANGLES
 MODEL_BASE = "sliding"
-#: Doses per source for the full study (chosen to span strain RMS mismatch ~0.005-0.06; to be confirmed by
-#: the full run: the RMS each dose gives is measured and reported, not assumed).
+#: Doses per source, chosen from a simulation-only pass (``--simulate-only``, HV1 and HV5, docs/studies.md) to
+#: span a strain RMS mismatch of about 0.005-0.06 where the physics reaches it: the angle rotation peaks near
+#: 0.017 (30°) and falls beyond; the sheet terms stay below 0.002 even at 32x (a null control, two doses);
+#: heterogeneity 1.6 is refused by the case's multiplier bounds [0.01, 100] (1.2 gives 0.045); dispersion
+#: reaches 0.03-0.11 at kappa = 1/3 depending on the volunteer; the pericardial spring saturates near 0.21.
 DEFAULT_DOSES = {
-    "angles": (10.0, 20.0, 30.0, 45.0),
+    "angles": (5.0, 15.0, 30.0, 45.0),
     "base": (1.0,),
-    "sheet": (2.0, 4.0, 8.0, 16.0),
-    "dispersion": (0.05, 0.1, 0.2, 0.3),
-    "heterogeneity": (0.1, 0.2, 0.4, 0.8),
-    "pericardium": (0.02, 0.05, 0.1, 0.2),
+    "sheet": (4.0, 32.0),
+    "dispersion": (0.025, 0.05, 0.1, 0.2, 0.333),
+    "heterogeneity": (0.2, 0.4, 0.8, 1.2),
+    "pericardium": (0.03, 0.1, 0.2, 0.3),
 }
 SOURCES = tuple(DEFAULT_DOSES)
 #: Seed of the heterogeneity field (the same regional pattern at every dose and for every volunteer).
@@ -210,48 +214,112 @@ def simulate_all(volunteers, plan, out: Path, *, resolution="default", workers=1
     return {p.stem: json.loads(p.read_text()) for p in sims.glob("*.json")}
 
 
-def _fit_one(forward, y, model: str, config, seed: int) -> dict:
-    """Posterior draws of one likelihood for data sets ``y`` (n, 25) in one vmapped run."""
+def unit_seed(key: str, seed: int = 0) -> int:
+    """A seed of one (volunteer, source, dose) from its key: its data sets and chains do not depend on which
+    other doses are run, nor on how they are batched (resumed runs give the same numbers)."""
+    return (zlib.crc32(key.encode()) + 7919 * int(seed)) % (2**31 - 1)
+
+
+def noisy_copies(z, seeds: int, noise_seed: int) -> np.ndarray:
+    """``seeds`` data sets (seeds, 25): the outputs ``z`` plus noise (σ_V = 5 mL, σ_S = 0.03)."""
+    return np.asarray(z, dtype=float)[None, :] + np.r_[SIGMA_V_ML, np.full(24, SIGMA_S)] \
+        * np.random.default_rng(noise_seed).standard_normal((seeds, 25))
+
+
+def _diagnostics(draws: dict, names) -> tuple[np.ndarray, np.ndarray | None]:
+    """Per data set: the smallest bulk ESS over ``names`` and the largest rank-normalised split R-hat, by ArviZ
+    (with one chain, the R-hat of its two halves).
+
+    ``draws[name]``: (n_datasets, chains, samples).
+    """
+    import arviz as az
+
+    arrays = {n: np.moveaxis(np.asarray(draws[n]), 0, -1) for n in names}  # (chains, samples, n_datasets)
+    ds = az.convert_to_dataset(arrays)
+    ess = np.min(np.stack([np.asarray(az.ess(ds, method="bulk")[n]) for n in names]), axis=0)
+    chains, samples = arrays[names[0]].shape[:2]
+    if chains < 2:  # one chain: R-hat of its two halves (split R-hat), as ArviZ needs two chains
+        if samples < 8:
+            return ess, None
+        half = samples // 2
+        ds = az.convert_to_dataset({n: a[:, :2 * half].reshape((2, half) + a.shape[2:]) for n, a in arrays.items()})
+    rhat = np.max(np.stack([np.asarray(az.rhat(ds)[n]) for n in names]), axis=0)
+    return ess, rhat
+
+
+#: The jitted η-at-every-draw function of the last forward model (reused by the next batch: no recompilation).
+_ETA: dict = {}
+
+
+def fit_datasets(forward, ys, conditions, truths, eta_trues, *, config, keys, models=MODELS) -> dict:
+    """Calibrate the data sets ``ys`` (n, 25) with the three likelihoods in one vmapped run each.
+
+    Parameters
+    ----------
+    forward : lvcore.emulator.forward.EmulatorForward
+        The emulator; each data set's geometry comes from ``conditions``.
+    ys : ndarray, shape (n, 25)
+    conditions : ndarray, shape (n, k), optional
+        Each data set's run-time conditions (its volunteer's PC scores,
+        :func:`lvcore.inference.samplers.runtime_conditions`): data sets of
+        every volunteer share one compiled sampler. None: ``forward`` as given
+        (any traceable forward model).
+    truths : ndarray, shape (n, 4)
+        True θ of each data set.
+    eta_trues : ndarray, shape (n, 25)
+        The emulator at the true θ and the data set's geometry.
+    config : SamplerConfig
+    keys : jax PRNG keys, shape (n, 2)
+    models : sequence of str
+        Likelihoods to run (default all three).
+
+    Returns
+    -------
+    dict
+        Per likelihood, arrays over the data sets: ``coverage`` (fraction of the
+        4 central 90 % θ intervals covering the truth), ``output_error`` (median
+        over draws of the mean |η(θ, h) − η(θ_true, h)| over the 24 strains),
+        ``sigma_s`` (posterior median; iid and discrepancy), ``min_ess`` (the
+        smallest bulk ESS over θ and σ_S², ArviZ) and ``max_rhat`` (the largest
+        R-hat; with one chain, of its two halves).
+    """
     import jax
 
-    from lvcore.inference import coverage
+    from lvcore.inference import coverage, samplers
 
-    sites = list(THETA_NAMES) + {"volume": [], "iid": ["sigma_s2"], "discrepancy": ["sigma_s2"]}[model]
-    keys = jax.random.split(jax.random.PRNGKey(seed), y.shape[0])
-    draws = coverage.batched_posteriors(forward, model, y, keys, config, SIGMA_V_ML, sites=sites)
-    eta = jax.jit(jax.vmap(jax.vmap(forward)))({n: draws[n] for n in THETA_NAMES})
-    draws["eta"] = np.asarray(eta)
-    return draws
-
-
-def fit_doses(vol: Volunteer, zs: dict, forward, *, seeds: int, config, seed: int, noise_seeds: dict) -> dict:
-    """Calibrate ``seeds`` noisy copies of each outputs vector in ``zs`` (key -> (25,)) with the three likelihoods.
-
-    All data sets of one volunteer go through one vmapped, compiled run per
-    likelihood (one compilation per volunteer and likelihood, not per dose).
-    ``noise_seeds[key]`` seeds the noise of ``key``'s data sets. Returns key ->
-    per-likelihood lists over its data sets: ``coverage`` (fraction of the 4
-    central 90 % θ intervals covering the truth), ``output_error`` (median over
-    draws of the mean |η(θ, h) − η(θ_true, h)| over the 24 strains) and ``sigma_s``
-    (posterior median).
-    """
-    keys = list(zs)
-    ys = np.concatenate([np.asarray(zs[k])[None, :] + np.r_[SIGMA_V_ML, np.full(24, SIGMA_S)]
-                         * np.random.default_rng(noise_seeds[k]).standard_normal((seeds, 25)) for k in keys])
-    truth = np.array([vol.theta[n] for n in THETA_NAMES])
-    eta_true = np.asarray(forward(vol.theta), dtype=float)
-    out = {k: {} for k in keys}
-    for j, m in enumerate(MODELS):
-        d = _fit_one(forward, ys, m, config, seed + 1 + j)
-        th = np.stack([d[n] for n in THETA_NAMES], axis=-1)  # (n, draws, 4)
+    cached = _ETA.get((id(forward), conditions is None))
+    if cached is not None and cached[0] is forward:
+        eta_fn = cached[1]
+    elif conditions is None:  # one geometry, compiled into the forward model (any traceable forward model)
+        eta_fn = jax.jit(jax.vmap(lambda p, c: jax.vmap(forward)(p)))
+    else:
+        template, _ = samplers.runtime_conditions(forward)
+        eta_fn = jax.jit(jax.vmap(lambda p, c: jax.vmap(template.bind({"conditions": c}))(p)))
+    _ETA.clear()
+    _ETA[(id(forward), conditions is None)] = (forward, eta_fn)
+    if conditions is None:
+        conditions, cond_arg = np.zeros((ys.shape[0], 0)), None
+    else:
+        cond_arg = conditions = np.asarray(conditions, dtype=float)
+    truths, eta_trues = np.asarray(truths, dtype=float), np.asarray(eta_trues, dtype=float)
+    out = {}
+    for m in models:
+        j = MODELS.index(m)
+        sites = list(THETA_NAMES) + (["sigma_s2"] if m != "volume" else [])
+        mkeys = jax.vmap(lambda k: jax.random.fold_in(k, j))(keys)
+        d = coverage.batched_posteriors(forward, m, ys, mkeys, config, SIGMA_V_ML, sites=sites, group_by_chain=True,
+                                        conditions=cond_arg)
+        ess, rhat = _diagnostics(d, sites)
+        n = ys.shape[0]
+        flat = {k: np.asarray(v).reshape(n, -1) for k, v in d.items()}
+        th = np.stack([flat[k] for k in THETA_NAMES], axis=-1)  # (n, draws, 4)
         lo, hi = np.quantile(th, [0.05, 0.95], axis=1)
-        cov = np.mean((lo <= truth) & (truth <= hi), axis=1)
-        err = np.median(np.abs(d["eta"][:, :, 1:] - eta_true[1:]).mean(axis=2), axis=1)
-        sig = np.median(np.sqrt(d["sigma_s2"]), axis=1) if "sigma_s2" in d else None
-        for i, k in enumerate(keys):
-            sl = slice(i * seeds, (i + 1) * seeds)
-            out[k][m] = {"coverage": cov[sl].tolist(), "output_error": err[sl].tolist(),
-                         **({"sigma_s": sig[sl].tolist()} if sig is not None else {})}
+        cov = np.mean((lo <= truths) & (truths <= hi), axis=1)
+        eta = np.asarray(eta_fn({k: flat[k] for k in THETA_NAMES}, conditions))
+        err = np.median(np.abs(eta[:, :, 1:] - eta_trues[:, None, 1:]).mean(axis=2), axis=1)
+        out[m] = {"coverage": cov, "output_error": err, "min_ess": ess,
+                  **({"max_rhat": rhat} if rhat is not None else {}),
+                  **({"sigma_s": np.median(np.sqrt(flat["sigma_s2"]), axis=1)} if m != "volume" else {})}
     return out
 
 
@@ -264,24 +332,45 @@ def _boot(values, stat=np.median, n_boot: int = 2000, seed: int = 0, level: floa
 
 
 def summarise(fits_by_dose: dict, rms_by_dose: dict) -> list[dict]:
-    """Per (source, dose): the bootstrap summaries of the pooled per-data-set metrics."""
+    """Per (source, dose): the bootstrap summaries of the pooled per-data-set metrics.
+
+    ``output_error_gap``: the paired differences iid − discrepancy and
+    iid − volume of each data set's output error (median, bootstrap CI):
+    the F3 ordering appears when both CIs lie above 0. ``diagnostics``: per
+    likelihood, the median and smallest per-data-set minimum bulk ESS and the
+    share of data sets with R-hat > 1.05.
+    """
     rows = []
+    keys = ("coverage", "output_error", "sigma_s", "min_ess", "max_rhat")
     for (source, dose), per_vol in fits_by_dose.items():
-        pool = {m: {k: [] for k in ("coverage", "output_error", "sigma_s")} for m in MODELS}
+        pool = {m: {k: [] for k in keys} for m in MODELS}
         for rec in per_vol.values():
             for m in MODELS:
-                for k in pool[m]:
+                for k in keys:
                     pool[m][k].extend(rec[m].get(k, []))
+        err = {m: np.asarray(pool[m]["output_error"], dtype=float) for m in MODELS}
         row = {"source": source, "dose": dose, "strain_rms_mismatch": rms_by_dose[(source, dose)],
+               "n_datasets": int(err["iid"].size),
                "iid_sigma_s_inflation": _boot(np.asarray(pool["iid"]["sigma_s"]) / SIGMA_S),
                "discrepancy_sigma_s": _boot(pool["discrepancy"]["sigma_s"]),
                "output_error": {m: _boot(pool[m]["output_error"]) for m in MODELS},
+               "output_error_gap": {"iid_minus_discrepancy": _boot(err["iid"] - err["discrepancy"]),
+                                    "iid_minus_volume": _boot(err["iid"] - err["volume"])},
                "theta_coverage": {m: _boot(pool[m]["coverage"], stat=np.mean) for m in MODELS}}
-        e = row["output_error"]
+        diag = {}
+        for m in MODELS:
+            ess, rhat = pool[m]["min_ess"], pool[m]["max_rhat"]
+            if ess:
+                diag[m] = {"min_ess_median": float(np.median(ess)), "min_ess_min": float(np.min(ess)),
+                           "share_rhat_over_1_05": (float(np.mean(np.asarray(rhat) > 1.05)) if rhat else None)}
+        if diag:
+            row["diagnostics"] = diag
+        gap = row["output_error_gap"]
         row["f1"] = bool(row["iid_sigma_s_inflation"]["value"] >= F1_INFLATION
                          and row["iid_sigma_s_inflation"]["ci"][0] > F1_CI_FLOOR)
-        row["f3"] = bool(e["discrepancy"]["value"] < e["iid"]["value"] and e["volume"]["value"] < e["iid"]["value"])
+        row["f3"] = bool(gap["iid_minus_discrepancy"]["ci"][0] > 0 and gap["iid_minus_volume"]["ci"][0] > 0)
         rows.append(row)
+    rows.sort(key=lambda r: (SOURCES.index(r["source"]) if r["source"] in SOURCES else 99, r["dose"]))
     return rows
 
 
@@ -299,12 +388,51 @@ def appearance(rows: list[dict]) -> dict:
     return out
 
 
+def strain_rms(z, nominal) -> float:
+    """The size of a dose: RMS over the 24 strains of the mismatched minus the nominal outputs."""
+    return float(np.sqrt(np.mean((np.asarray(z)[1:] - np.asarray(nominal)[1:]) ** 2)))
+
+
+def measured_doses(sims: dict, volunteers, plan: dict) -> dict:
+    """``(source, dose) -> {"mean", "min", "max", "n", "failed"}`` of the strain RMS over the volunteers."""
+    out = {}
+    for source, ds in plan.items():
+        for dose in ds:
+            vals, failed = [], 0
+            for v in volunteers:
+                nom, rec = sims.get(_key(v.name, None, 0.0)), sims.get(_key(v.name, source, dose))
+                if nom and rec and nom["converged"] and rec["converged"]:
+                    vals.append(strain_rms(rec["outputs"], nom["outputs"]))
+                else:
+                    failed += 1
+            out[(source, dose)] = ({"mean": float(np.mean(vals)), "min": float(np.min(vals)),
+                                    "max": float(np.max(vals)), "n": len(vals), "failed": failed} if vals
+                                   else {"mean": None, "min": None, "max": None, "n": 0, "failed": failed})
+    return out
+
+
+#: Data sets per compiled MCMC batch: every batch has this size (the last is padded), so one program serves all.
+BATCH = 40
+
+
 def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, volunteers: Sequence[str] | None = None,
               seeds: int = 20, config=None, seed: int = 0, resolution: str = "default", emulator: str = "chapter",
               workers: int = 1, scheduler: str | None = None, out: str | Path = "study_mismatch",
-              progress: Callable | None = None, retry_failed: bool = False) -> dict:
-    """Run (or resume) the study under ``out``; returns the result (also written to ``out/mismatch.json``)."""
-    from lvcore.emulator.forward import load_emulator_forward
+              progress: Callable | None = None, retry_failed: bool = False, simulate_only: bool = False,
+              batch: int = BATCH, recorded_only: bool = False) -> dict:
+    """Run (or resume) the study under ``out``; returns the result (also written to ``out/mismatch.json``).
+
+    Every data set of every volunteer and dose goes through one compiled
+    sampler per likelihood, in batches of ``batch`` data sets (the
+    volunteers' PC scores are run-time arguments); each (volunteer, source,
+    dose)'s fits are written as soon as its batch finishes. With
+    ``simulate_only`` only the simulations run and the measured strain RMS
+    of each dose is returned (``doses_measured``) and written to ``out/doses.json``.
+    With ``recorded_only`` no new fits start: the result summarises the doses
+    whose fits are recorded and lists the others under ``not_fitted``.
+    """
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.emulator.io import load_emulator
     from lvcore.inference import samplers
 
     t0 = time.perf_counter()
@@ -318,14 +446,20 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     sims = simulate_all(vols, plan, out, resolution=resolution, workers=workers, scheduler=scheduler,
                         progress=progress, retry_failed=retry_failed)
     t_sim = time.perf_counter() - t0
-    fits, rms, failed = {}, {}, []
+    rms = measured_doses(sims, vols, plan)
+    measured = [{"source": s, "dose": d, "strain_rms_mismatch": r} for (s, d), r in rms.items()]
+    if simulate_only:
+        res = {"study": "mismatch", "synthetic": True, "volunteers": [v.name for v in vols], "resolution": resolution,
+               "doses_measured": measured, "timings_s": {"simulate": t_sim}}
+        write_json_atomic(out / "doses.json", clean(res))
+        return res
+    fits, failed, todo = {}, [], []
     tag = f"s{seeds}_w{config.num_warmup}_n{config.num_samples}_c{config.num_chains}"
     for v in vols:
         nominal = sims[_key(v.name, None, 0.0)]
         if not nominal["converged"]:
             failed.append({"key": _key(v.name, None, 0.0), "reason": nominal["reason"]})
             continue
-        todo, done = {}, {}
         for source, ds in plan.items():
             for dose in ds:
                 key = _key(v.name, source, dose)
@@ -333,45 +467,237 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
                 if not rec["converged"]:
                     failed.append({"key": key, "reason": rec["reason"]})
                     continue
-                z = np.asarray(rec["outputs"])
-                rms.setdefault((source, dose), []).append(
-                    float(np.sqrt(np.mean((z[1:] - np.asarray(nominal["outputs"])[1:]) ** 2))))
                 path = out / "fits" / f"{key}__{tag}.json"
                 if path.is_file():
-                    done[(source, dose)] = json.loads(path.read_text())
+                    fits.setdefault((source, dose), {})[v.name] = json.loads(path.read_text())
                 else:
-                    todo[(source, dose)] = z
-        if todo:
+                    todo.append((v, source, dose, key, np.asarray(rec["outputs"], dtype=float)))
+    not_fitted = [{"volunteer": u[0].name, "source": u[1], "dose": u[2]} for u in todo] if recorded_only else []
+    if todo and not recorded_only:
+        import jax
+
+        emu = load_emulator(emulator)
+        fwd = {v.name: emulator_forward(emu, v.h, name=emulator) for v in vols}
+        cond = {n: np.asarray(samplers.runtime_conditions(f)[1]["conditions"]) for n, f in fwd.items()}
+        per = max(1, batch // seeds)  # (volunteer, source, dose) units per batch
+        for b in range(0, len(todo), per):
+            units = todo[b:b + per]
+            padded = units + [units[0]] * (per - len(units))  # same shape every batch: no recompilation
+            ys, cs, th, et, ks = [], [], [], [], []
+            for v, source, dose, key, z in padded:
+                us = unit_seed(key, seed)
+                ys.append(noisy_copies(z, seeds, us))
+                cs.append(np.repeat(cond[v.name][None, :], seeds, axis=0))
+                th.append(np.repeat(np.array([[v.theta[n] for n in THETA_NAMES]]), seeds, axis=0))
+                et.append(np.repeat(np.asarray(fwd[v.name](v.theta), dtype=float)[None, :], seeds, axis=0))
+                ks.append(jax.random.split(jax.random.PRNGKey(us), seeds))
             if progress:
-                progress(f"calibrating {v.name}: {len(todo)} dose(s) x {seeds} data sets x {len(MODELS)} likelihoods")
-            forward = load_emulator_forward(emulator, v.h)
-            noise = {sd: seed + 1000 * SOURCES.index(sd[0]) + 17 * plan[sd[0]].index(sd[1]) + 7919 * vols.index(v)
-                     for sd in todo}
-            new = fit_doses(v, todo, forward, seeds=seeds, config=config, seed=seed + 31 * vols.index(v),
-                            noise_seeds=noise)
-            for sd, fit in new.items():
-                fit = clean(fit)
-                write_json_atomic(out / "fits" / f"{_key(v.name, *sd)}__{tag}.json", fit)
-                done[sd] = fit
-        for sd, fit in done.items():
-            fits.setdefault(sd, {})[v.name] = fit
+                progress(f"calibrating {', '.join(u[3] for u in units)}: {len(units) * seeds} data sets x "
+                         f"{len(MODELS)} likelihoods ({b + len(units)}/{len(todo)})")
+            res = fit_datasets(fwd[vols[0].name], np.concatenate(ys), np.concatenate(cs), np.concatenate(th),
+                               np.concatenate(et), config=config, keys=np.concatenate(ks))
+            for i, (v, source, dose, key, _) in enumerate(units):
+                sl = slice(i * seeds, (i + 1) * seeds)
+                fit = clean({m: {k: np.asarray(a)[sl] for k, a in r.items()} for m, r in res.items()})
+                write_json_atomic(out / "fits" / f"{key}__{tag}.json", fit)
+                fits.setdefault((source, dose), {})[v.name] = fit
     t_fit = time.perf_counter() - t0 - t_sim
-    rms_s = {k: {"mean": float(np.mean(r)), "min": float(np.min(r)), "max": float(np.max(r))} for k, r in rms.items()}
-    rows = summarise(fits, rms_s)
+    rows = summarise({k: fits[k] for k in rms if k in fits}, rms)
     result = {
         "study": "mismatch", "synthetic": True,
         "emulator": emulator, "resolution": resolution,
         "model_conditions": {"angles": list(MODEL_ANGLES), "base": MODEL_BASE},
         "volunteers": [v.name for v in vols], "seeds_per_dose": seeds,
         "doses": {s: list(d) for s, d in plan.items()},
+        "doses_measured": measured,
         "sampler": {"num_warmup": config.num_warmup, "num_samples": config.num_samples,
-                    "num_chains": config.num_chains},
+                    "num_chains": config.num_chains, "batch": batch},
         "noise": {"sigma_v_ml": SIGMA_V_ML, "sigma_s": SIGMA_S},
-        "rows": rows, "appearance": appearance(rows), "failed": failed,
+        "rows": rows, "appearance": appearance(rows), "failed": failed, "not_fitted": not_fitted,
+        "complete": not not_fitted and not failed,
         "timings_s": {"simulate": t_sim, "calibrate": t_fit, "total": time.perf_counter() - t0},
     }
     write_json_atomic(out / "mismatch.json", clean(result))
     return result
+
+
+# ----------------------------------------------------------------------------
+# results: load, tables, figures (the Studies page, lvcore report and the docs read these)
+# ----------------------------------------------------------------------------
+#: Result file of :func:`run_study` (and the shipped ``assets/studies/mismatch.json``), read by :func:`load`.
+RESULT_FILE = "mismatch.json"
+#: The command that makes the results.
+COMMAND = "python scripts/ship_mismatch.py (or lvcore study mismatch --out RESULTS)"
+#: Figures and tables :func:`figures` draws, with their titles.
+TITLES = {"fig_mismatch_sigma_s_inflation": "Mismatch dose–response: iid σ_S inflation vs strain RMS mismatch",
+          "fig_mismatch_discrepancy_sigma_s": "Mismatch dose–response: the discrepancy model's σ_S vs mismatch",
+          "fig_mismatch_output_error": "Mismatch dose–response: output error per likelihood vs dose",
+          "table_mismatch_doses": "Mismatch dose–response: per source and dose, with 90 % bootstrap CIs"}
+#: Why a figure can be missing.
+MISSING = {n: "the results hold no fitted doses (a --simulate-only run)" for n in TITLES}
+#: Display names of the sources.
+SOURCE_LABELS = {"angles": "fibre angles (°)", "base": "clamped base", "sheet": "sheet terms (× as, afs)",
+                 "dispersion": "dispersion κ", "heterogeneity": "heterogeneity (log-sd)",
+                 "pericardium": "pericardium k (kPa/mm)"}
+
+
+def load(folder) -> dict:
+    """The results of a mismatch ``--out`` folder (or the bundled one): ``mismatch.json`` plus ``folder``."""
+    from lvcore.studies.results import read_json
+
+    data = read_json(Path(folder) / RESULT_FILE)
+    if not isinstance(data, dict) or data.get("study") != "mismatch" or "rows" not in data:
+        raise ValueError(f"{Path(folder) / RESULT_FILE} is not the output of lvcore study mismatch")
+    data["folder"] = str(folder)
+    return data
+
+
+def _sampler_text(result: dict) -> str:
+    smp = result.get("sampler") or {}
+    return (f"{smp.get('num_chains', '?')} chain(s) × ({smp.get('num_warmup', '?')} warm-up + "
+            f"{smp.get('num_samples', '?')} draws)")
+
+
+def source_line(result: dict) -> str:
+    """Where the numbers come from, as one readable line."""
+    from lvcore.studies.results import source_label
+
+    vols = result.get("volunteers", [])
+    return (f"{RESULT_FILE} ({source_label(result['folder'])}); SYNTHETIC data from the FE simulator "
+            f"({result.get('resolution', '?')} mesh), {len(vols)} volunteer(s) ({', '.join(vols)}) × "
+            f"{result.get('seeds_per_dose', '?')} noise seeds per dose; calibrated on the "
+            f"{result.get('emulator', '?')} emulator; sampler {_sampler_text(result)}")
+
+
+def _dose_label(source: str, dose: float) -> str:
+    return "clamped base" if source == "base" else f"{source} {dose:g}"
+
+
+def tables(result: dict) -> dict:
+    """The data behind each figure (by figure name): one row per (source, dose[, likelihood])."""
+    import pandas as pd
+
+    rows = result.get("rows", [])
+    if not rows:
+        return {}
+    infl, disc, err, flat = [], [], [], []
+    for r in rows:
+        x = r["strain_rms_mismatch"]["mean"]
+        base = {"panel": SOURCE_LABELS.get(r["source"], r["source"]), "source": r["source"], "dose": r["dose"],
+                "x": x, "label": _dose_label(r["source"], r["dose"])}
+        i, d = r["iid_sigma_s_inflation"], r["discrepancy_sigma_s"]
+        infl.append({**base, "series": SOURCE_LABELS.get(r["source"], r["source"]), "value": i["value"],
+                     "lo": i["ci"][0], "hi": i["ci"][1]})
+        disc.append({**base, "series": SOURCE_LABELS.get(r["source"], r["source"]), "value": d["value"],
+                     "lo": d["ci"][0], "hi": d["ci"][1]})
+        for m in MODELS:
+            e = r["output_error"][m]
+            err.append({**base, "series": m, "value": e["value"], "lo": e["ci"][0], "hi": e["ci"][1]})
+        c = r["theta_coverage"]
+        flat.append({"source": r["source"], "dose": r["dose"], "strain RMS": x,
+                     "data sets": r.get("n_datasets", i["n"]),
+                     "iid σ_S/0.03": i["value"], "iid CI": f"[{i['ci'][0]:.2f}, {i['ci'][1]:.2f}]",
+                     "discrepancy σ_S": d["value"], "disc. CI": f"[{d['ci'][0]:.3f}, {d['ci'][1]:.3f}]",
+                     **{f"error {m}": r["output_error"][m]["value"] for m in MODELS},
+                     **{f"coverage {m}": c[m]["value"] for m in MODELS},
+                     "F1": r["f1"], "F3": r["f3"]})
+    return {"fig_mismatch_sigma_s_inflation": pd.DataFrame(infl),
+            "fig_mismatch_discrepancy_sigma_s": pd.DataFrame(disc),
+            "fig_mismatch_output_error": pd.DataFrame(err),
+            "table_mismatch_doses": pd.DataFrame(flat)}
+
+
+def figures(result: dict) -> dict:
+    """The study's figures by name (see :data:`TITLES`); none when the results hold no fitted doses."""
+    from lvcore.viz.report_figures import table_figure
+    from lvcore.viz.study_figures import dose_response_figure
+
+    tabs = tables(result)
+    if not tabs:
+        return {}
+    n = f"{len(result.get('volunteers', []))} volunteer(s) × {result.get('seeds_per_dose')} seeds per dose"
+    xt = "strain RMS mismatch of the dose (mismatched − nominal simulator outputs, 24 strains)"
+    out = {"fig_mismatch_sigma_s_inflation": dose_response_figure(
+        tabs["fig_mismatch_sigma_s_inflation"].to_dict("records"),
+        title=f"SYNTHETIC mismatch dose–response ({n}): iid posterior median σ_S / 0.03, median over data sets, "
+              "90 % bootstrap CI band; F1 (chapter) ≈ 2×",
+        xaxis_title=xt, yaxis_title="iid σ_S inflation (σ_S / 0.03)", refs=((1.0, "no inflation"),
+                                                                            (2.0, "chapter ≈ 2×")))}
+    out["fig_mismatch_discrepancy_sigma_s"] = dose_response_figure(
+        tabs["fig_mismatch_discrepancy_sigma_s"].to_dict("records"),
+        title=f"SYNTHETIC mismatch dose–response ({n}): discrepancy model's posterior median σ_S, 90 % bootstrap "
+              "CI band; truth 0.03, chapter 0.024 (F2)",
+        xaxis_title=xt, yaxis_title="discrepancy σ_S (strain)", refs=((SIGMA_S, "truth 0.03"),))
+    panels = list(dict.fromkeys(tabs["fig_mismatch_output_error"]["panel"]))
+    out["fig_mismatch_output_error"] = dose_response_figure(
+        tabs["fig_mismatch_output_error"].to_dict("records"), panels=panels,
+        title=f"SYNTHETIC mismatch dose–response ({n}): output error |η(θ_post, h) − η(θ̃, h)| per likelihood, "
+              "median over data sets, 90 % bootstrap CI band (F3: discrepancy ≈ volume < iid)",
+        xaxis_title="strain RMS mismatch", yaxis_title="output error (strain)")
+    out["table_mismatch_doses"] = table_figure(tabs["table_mismatch_doses"],
+                                               title=f"SYNTHETIC mismatch study ({n}): per source and dose")
+    return out
+
+
+#: Markers of the block of docs/studies.md written by :func:`docs_markdown` (a test compares the two).
+DOCS_BEGIN = "<!-- mismatch shipped numbers: begin (generated by lvcore.studies.mismatch.docs_markdown) -->"
+DOCS_END = "<!-- mismatch shipped numbers: end -->"
+
+
+def _ci(b: dict, fmt: str = ".2f") -> str:
+    return f"{b['value']:{fmt}} [{b['ci'][0]:{fmt}}, {b['ci'][1]:{fmt}}]"
+
+
+def docs_markdown(result: dict) -> str:
+    """The docs' text of a shipped result: the run, the dose table, and the per-dose metrics with CIs.
+
+    docs/studies.md quotes the shipped run through this text only (between
+    :data:`DOCS_BEGIN` and :data:`DOCS_END`); a test checks it equals this
+    function's output for the shipped JSON. The findings table with verdicts
+    is :func:`lvcore.studies.findings.docs_markdown`.
+    """
+    shipped = result.get("shipped", {})
+    lines = [f"Shipped run: {len(result['volunteers'])} SYNTHETIC volunteer(s) ({', '.join(result['volunteers'])}) × "
+             f"{result['seeds_per_dose']} noise seeds per dose, {result.get('resolution')} mesh, "
+             f"{result.get('emulator')} emulator, sampler {_sampler_text(result)} per data set; "
+             f"{sum(r.get('n_datasets', 0) for r in result['rows'])} data sets × 3 likelihoods fitted"
+             + (f" (shipped by `{shipped['command']}`, {shipped.get('date', '')}; the run's cost is in "
+                "BENCHMARKS.md)" if shipped.get("command") else "") + "."]
+    nf = result.get("not_fitted") or []
+    if nf:
+        lines += ["", f"**Incomplete:** {len(nf)} (volunteer, source, dose) of the planned run are not fitted in "
+                  "this shipped run (" + ", ".join(f"{u['source']} {u['dose']:g}" for u in nf) + "); the same "
+                  "command without `--recorded-only` resumes the study and fits them."]
+    lines += ["",
+             "| source | dose | strain RMS mismatch (mean [min, max] over volunteers) | iid σ_S / 0.03 [90 % CI] | "
+             "discrepancy σ_S [90 % CI] | output error volume / iid / discrepancy | "
+             "iid − discrepancy error [90 % CI] | θ coverage volume / iid / discrepancy | F1 | F3 |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    yes = {True: "yes", False: "no"}
+    for r in result["rows"]:
+        m, e, c = r["strain_rms_mismatch"], r["output_error"], r["theta_coverage"]
+        lines.append(f"| {r['source']} | {r['dose']:g} | {m['mean']:.4f} [{m['min']:.4f}, {m['max']:.4f}] | "
+                     f"{_ci(r['iid_sigma_s_inflation'])} | {_ci(r['discrepancy_sigma_s'], '.4f')} | "
+                     + " / ".join(f"{e[k]['value']:.4f}" for k in MODELS) + " | "
+                     f"{_ci(r['output_error_gap']['iid_minus_discrepancy'], '.4f')} | "
+                     + " / ".join(f"{c[k]['value']:.2f}" for k in MODELS) + f" | {yes[r['f1']]} | {yes[r['f3']]} |")
+    if any("diagnostics" in r for r in result["rows"]):
+        lines += ["", "Sampler checks per dose (ArviZ; per data set the smallest bulk ESS over θ and σ_S², and the "
+                  "largest split R-hat): median over data sets of that ESS, its minimum, and the share of data sets "
+                  "with R-hat > 1.05, volume / iid / discrepancy.", "",
+                  "| source | dose | ESS, median | ESS, minimum | share R-hat > 1.05 |", "|---|---|---|---|---|"]
+        for r in result["rows"]:
+            d = r.get("diagnostics", {})
+            cell = [" / ".join(("—" if d.get(m, {}).get(k) is None else f.format(d[m][k])) for m in MODELS)
+                    for k, f in (("min_ess_median", "{:.0f}"), ("min_ess_min", "{:.0f}"),
+                                 ("share_rhat_over_1_05", "{:.2f}"))]
+            lines.append(f"| {r['source']} | {r['dose']:g} | {cell[0]} | {cell[1]} | {cell[2]} |")
+    lines += ["", "| source | F1 appears (dose, strain RMS) | F3 ordering appears (dose, strain RMS) |", "|---|---|---|"]
+    for source, a in result["appearance"].items():
+        cell = [x if isinstance(x, str) else f"dose {x['dose']:g}, RMS {x['strain_rms']:.4f}"
+                for x in (a["f1"], a["f3"])]
+        lines.append(f"| {source} | {cell[0]} | {cell[1]} |")
+    return "\n".join(lines)
 
 
 # ----------------------------------------------------------------------------
@@ -397,6 +723,12 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--scheduler", default=None,
                    help="tcp://HOST:PORT of a Dask scheduler for the simulations (default: none, local workers)")
     p.add_argument("--retry-failed", action="store_true", help="run recorded failed simulations again")
+    p.add_argument("--simulate-only", action="store_true",
+                   help="only simulate and print the measured strain RMS of each dose (OUT/doses.json); no fits")
+    p.add_argument("--recorded-only", action="store_true",
+                   help="start no new fits: summarise the recorded ones and list the rest as not fitted")
+    p.add_argument("--batch", type=int, default=BATCH,
+                   help=f"data sets per compiled MCMC batch (default {BATCH}; the last batch is padded)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
     p.set_defaults(func=_cli)
 
@@ -425,6 +757,11 @@ def _cli(args) -> int:
     if unknown:
         print(f"lvcore study mismatch: --sources: unknown {unknown}; choose from {','.join(SOURCES)}", file=sys.stderr)
         return 2
+    for opt, val in (("--seeds", args.seeds), ("--warmup", args.warmup), ("--samples", args.samples),
+                     ("--chains", args.chains), ("--batch", args.batch), ("--workers", args.workers)):
+        if val < 1:
+            print(f"lvcore study mismatch: {opt} {val}: give a positive integer", file=sys.stderr)
+            return 2
     try:
         doses = _parse_doses(args.doses, sources)
         vols = args.volunteers.split(",") if args.volunteers else None
@@ -439,7 +776,15 @@ def _cli(args) -> int:
     res = run_study(sources=sources, doses=doses, volunteers=vols, seeds=args.seeds, config=cfg, seed=args.seed,
                     resolution=args.resolution, emulator=args.emulator, workers=args.workers,
                     scheduler=args.scheduler, out=args.out, retry_failed=args.retry_failed,
+                    simulate_only=args.simulate_only, batch=args.batch, recorded_only=args.recorded_only,
                     progress=None if args.json else (lambda msg: print(msg, flush=True)))
+    if args.simulate_only:
+        for r in res["doses_measured"]:
+            m = r["strain_rms_mismatch"]
+            size = "all failed" if m["mean"] is None else f"{m['mean']:.4f} [{m['min']:.4f}, {m['max']:.4f}]"
+            print(f"{r['source']:>14} {r['dose']:>8g}  strain RMS {size}  ({m['n']} ok, {m['failed']} failed)")
+        print(f"wrote {args.out}/doses.json")
+        return 0
     brief = {"appearance": res["appearance"], "failed": res["failed"], "timings_s": res["timings_s"]}
     print(json.dumps(brief, indent=2))
     if not args.json:
@@ -447,5 +792,6 @@ def _cli(args) -> int:
     return 0
 
 
-__all__ = ["SOURCES", "DEFAULT_DOSES", "mismatch_case", "bundled_volunteers", "simulate_all", "fit_doses", "run_study",
-           "summarise", "appearance"]
+__all__ = ["SOURCES", "DEFAULT_DOSES", "mismatch_case", "bundled_volunteers", "simulate_all", "fit_datasets", "run_study",
+           "summarise", "appearance", "measured_doses", "strain_rms", "RESULT_FILE", "COMMAND", "TITLES", "load",
+           "source_line", "tables", "figures", "docs_markdown", "DOCS_BEGIN", "DOCS_END"]

@@ -7,8 +7,8 @@ Each study module owns its results (``load(folder)``, ``tables(result)``,
   (``studies/`` under the bundled assets), the only place that folder is located;
 * :func:`find_result` looks a result file up in a given folder, then in the bundled one;
 * :func:`result_sources` lists folders holding ``bo_fibres.json``,
-  ``operators.json``, ``fibre_discrepancy.json``, ``operators_realistic.json``
-  or ``bo_mismatch.json`` (the app's Studies page);
+  ``operators.json``, ``fibre_discrepancy.json``, ``operators_realistic.json``,
+  ``bo_mismatch.json`` or ``mismatch.json`` (the app's Studies page);
 * :func:`read_json` is the reader the study modules' ``load`` use;
 * :class:`BackgroundRun` starts ``lvcore study ...`` in a subprocess and
   reports its progress from the files it writes, so a page is never blocked.
@@ -28,7 +28,8 @@ from lvcore.exceptions import LVCoreError
 #: The result file of each study.
 RESULT_FILES = {"bo-fibres": "bo_fibres.json", "operators": "operators.json",
                 "fibre-discrepancy": "fibre_discrepancy.json",
-                "operators-realistic": "operators_realistic.json", "bo-mismatch": "bo_mismatch.json"}
+                "operators-realistic": "operators_realistic.json", "bo-mismatch": "bo_mismatch.json",
+                "mismatch": "mismatch.json"}
 
 
 def bundled_studies_dir() -> Path:

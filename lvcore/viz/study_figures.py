@@ -144,7 +144,67 @@ def surface_figure(surface: dict, theta_true: Sequence[float], *, title: str):
     return fig
 
 
-__all__ = ["residual_figure", "convergence_figure", "bo_error_bars", "surface_figure"]
+def _rgba(hex_colour: str, alpha: float) -> str:
+    h = hex_colour.lstrip("#")
+    return f"rgba({int(h[0:2], 16)}, {int(h[2:4], 16)}, {int(h[4:6], 16)}, {alpha})"
+
+
+def dose_response_figure(rows: Sequence[dict], *, title: str, xaxis_title: str, yaxis_title: str,
+                         panels: Sequence[str] | None = None, refs: Sequence[tuple[float, str]] = (),
+                         height: int | None = None):
+    """Value against dose with a CI band per series, optionally one panel per group (plotly).
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Each with ``series``, ``x``, ``value``, ``lo``, ``hi`` (the CI) and, for
+        panels, ``panel``; optional ``label`` (hover text, e.g. the dose).
+    panels : sequence of str, optional
+        Panel names in order (one subplot each, shared y axis); None: one panel.
+    refs : sequence of (y, text)
+        Dotted horizontal reference lines (e.g. the truth, the chapter's value).
+
+    Each series is a line through its medians and a shaded band between the
+    CI ends (a trace named ``"<series> CI"``).
+    """
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    names = list(panels) if panels else [None]
+    cols = min(3, len(names))
+    nrows = int(np.ceil(len(names) / cols))
+    fig = make_subplots(rows=nrows, cols=cols, subplot_titles=[n or "" for n in names], shared_yaxes=True,
+                        horizontal_spacing=0.06, vertical_spacing=0.16 if nrows > 1 else 0.1)
+    series = list(dict.fromkeys(r["series"] for r in rows))
+    for p, panel in enumerate(names):
+        r_, c_ = p // cols + 1, p % cols + 1
+        for k, s in enumerate(series):
+            rs = sorted((r for r in rows if r["series"] == s and (panel is None or r.get("panel") == panel)
+                         and r.get("value") is not None and r.get("x") is not None), key=lambda r: r["x"])
+            if not rs:
+                continue
+            colour = SERIES_COLOURS[k % len(SERIES_COLOURS)]
+            x = [r["x"] for r in rs]
+            fig.add_trace(go.Scatter(x=x + x[::-1], y=[r["hi"] for r in rs] + [r["lo"] for r in rs][::-1],
+                                     fill="toself", fillcolor=_rgba(colour, 0.18), line=dict(width=0),
+                                     hoverinfo="skip", name=f"{s} CI", legendgroup=s, showlegend=False),
+                          row=r_, col=c_)
+            fig.add_trace(go.Scatter(x=x, y=[r["value"] for r in rs], mode="lines+markers", name=s, legendgroup=s,
+                                     line=dict(color=colour), showlegend=p == 0,
+                                     text=[r.get("label", "") for r in rs],
+                                     hovertemplate="%{text}<br>x %{x:.4f}<br>%{y:.4g}<extra>" + str(s) + "</extra>"),
+                          row=r_, col=c_)
+        for y, text in refs:
+            fig.add_hline(y=y, line=dict(color="black", dash="dot", width=1), row=r_, col=c_,
+                          annotation_text=text if p == 0 else None)
+    fig.update_xaxes(title_text=xaxis_title, rangemode="tozero")
+    fig.update_yaxes(title_text=yaxis_title, col=1, rangemode="tozero")
+    fig.update_layout(title=title, height=height or 360 + 300 * nrows, margin=dict(l=60, r=20, t=90, b=60),
+                      legend=dict(orientation="h", y=-0.12, yanchor="top"))
+    return fig
+
+
+__all__ = ["residual_figure", "convergence_figure", "bo_error_bars", "surface_figure", "dose_response_figure"]
 
 
 def ci_dots(rows: Sequence[dict], *, title: str, reference: float | None = None, percent: bool = True):

@@ -1,0 +1,120 @@
+#!/usr/bin/env python
+"""Run the model–data mismatch dose–response study (issue 26) and ship its results for the app and the report.
+
+Runs ``lvcore study mismatch`` (:func:`lvcore.studies.mismatch.run_study`,
+resumable: a rerun with the same ``--work`` skips every recorded simulation
+and fit) with the shipped settings below, then writes
+``assets/studies/mismatch.json`` (the study's JSON, floats rounded to 6
+significant digits, plus a ``shipped`` record: command, date, machine, load)
+and rewrites the two generated blocks of ``docs/studies.md`` from it: the
+per-dose table (:func:`lvcore.studies.mismatch.docs_markdown`) and the
+findings table with verdicts (:func:`lvcore.studies.findings.docs_markdown`).
+Everything in it is SYNTHETIC. From the repository root::
+
+    nice python scripts/ship_mismatch.py                 # the shipped run (BENCHMARKS.md: its cost)
+    python scripts/ship_mismatch.py --recorded-only      # ship what --work holds, starting no new fits
+    python scripts/ship_mismatch.py --docs-only          # rewrite the docs blocks from the shipped JSON
+
+The full study output goes to ``--work`` (default ``build/study_mismatch``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+#: The shipped run's settings (see docs/studies.md for why these).
+SHIP = {"volunteers": "HV1", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40, "seed": 0,
+        "resolution": "default", "workers": 2}
+
+
+def round_floats(obj, digits: int = 6):
+    """Every float rounded to ``digits`` significant digits (the shipped file stays small)."""
+    if isinstance(obj, float):
+        return float(f"{obj:.{digits}g}")
+    if isinstance(obj, dict):
+        return {k: round_floats(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [round_floats(v, digits) for v in obj]
+    return obj
+
+
+def replace_block(text: str, begin: str, end: str, body: str, path) -> str:
+    """``text`` with the block between ``begin`` and ``end`` replaced by ``body``."""
+    if text.count(begin) != 1 or text.count(end) != 1:
+        raise SystemExit(f"{path}: expected one {begin!r} ... {end!r} block")
+    head, rest = text.split(begin)
+    tail = rest.split(end)[1]
+    return f"{head}{begin}\n{body}\n{end}{tail}"
+
+
+def update_docs(path: Path, dest: Path) -> None:
+    """Rewrite docs/studies.md's mismatch and findings blocks from the shipped JSON in ``dest``'s folder."""
+    from lvcore.studies import findings, mismatch
+
+    shipped = mismatch.load(dest.parent)
+    text = path.read_text()
+    text = replace_block(text, mismatch.DOCS_BEGIN, mismatch.DOCS_END, mismatch.docs_markdown(shipped), path)
+    text = replace_block(text, findings.DOCS_BEGIN, findings.DOCS_END,
+                         findings.docs_markdown(findings.load(dest.parent)), path)
+    path.write_text(text)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    for k, v in SHIP.items():
+        p.add_argument(f"--{k}", type=type(v), default=v, help=f"default {v}")
+    p.add_argument("--work", default="build/study_mismatch", help="full study output (and resume) folder")
+    p.add_argument("--dest", default=None, help="shipped JSON (default assets/studies/mismatch.json)")
+    p.add_argument("--docs", default="docs/studies.md", help="docs file whose generated blocks to rewrite ('' none)")
+    p.add_argument("--docs-only", action="store_true", help="only rewrite the docs blocks from the shipped JSON")
+    p.add_argument("--recorded-only", action="store_true",
+                   help="start no new fits: ship what --work holds (the JSON lists the doses not fitted)")
+    args = p.parse_args(argv)
+    from lvcore.studies.results import bundled_studies_dir
+
+    dest = Path(args.dest) if args.dest else bundled_studies_dir() / "mismatch.json"
+    if args.docs_only:
+        update_docs(Path(args.docs), dest)
+        print(f"rewrote the generated blocks of {args.docs} from {dest}")
+        return 0
+    from lvcore.inference import samplers
+    from lvcore.studies import mismatch
+
+    samplers.use_host_devices(1)
+    cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
+                                 seed=args.seed)
+    load_before = os.getloadavg()
+    t0 = time.time()
+    res = mismatch.run_study(volunteers=args.volunteers.split(","), seeds=args.seeds, config=cfg, seed=args.seed,
+                             resolution=args.resolution, workers=args.workers, out=args.work, batch=args.batch,
+                             recorded_only=args.recorded_only,
+                             progress=lambda m: print(time.strftime("%H:%M:%S"), m, flush=True))
+    cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k} {getattr(args, k)}" for k in SHIP) \
+        + (" --recorded-only" if args.recorded_only else "")
+    res.pop("folder", None)
+    res["shipped"] = {"script": "scripts/ship_mismatch.py", "command": cmd, "date": time.strftime("%Y-%m-%d"),
+                      "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared)",
+                      "load_before": [round(x, 2) for x in load_before],
+                      "load_after": [round(x, 2) for x in os.getloadavg()],
+                      "wall_s_this_invocation": round(time.time() - t0, 1),
+                      "cpu_s_this_process": round(time.process_time(), 1)}
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    dest.write_text(json.dumps(round_floats(res), indent=1))
+    print(f"wrote {dest} ({dest.stat().st_size / 1024:.0f} KiB)")
+    if args.docs:
+        update_docs(Path(args.docs), dest)
+        print(f"rewrote the generated blocks of {args.docs}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
