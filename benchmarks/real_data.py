@@ -4,6 +4,7 @@
     python benchmarks/real_data.py --workdir build/real_data --steps simulate
     python benchmarks/real_data.py --workdir build/real_data --steps calibrate --chains 2 --warmup 500 --samples 500
     python benchmarks/real_data.py --workdir build/real_data --steps table     # from results*.json
+    python benchmarks/real_data.py --workdir build/real_data --steps compare --tag floor=floor_nf+floor_noisy,known_fe
 
 Subjects (all SYNTHETIC, made by lvcore's FE simulator): one truncated
 ellipsoid (endo rs 25 / ry 22.5 / rl 60 mm, wall 9.5 mm, 10 mm thicker at
@@ -19,6 +20,23 @@ sigma_V = 5 mL on the LVV and the reference volume and sigma_S = 0.03 on the
 strains (seeded). A case *covers* when all four true theta lie in the 90 %
 intervals (q05-q95) and a's q95/q05 < 20. Criterion (issue 24): covered in
 >= 90 % of the cases, and every case that does not cover exits 4 (flagged).
+
+Variants (``--tag`` names the results file, ``results_<tag>.json``):
+
+* ``--representation-error off``: infer mode without the shape model's
+  representation-error floor (:mod:`lvcore.inference.representation_error`);
+* ``--geometry known``: the identifiability floor. The geometry is given
+  (``--geometry`` the ellipsoid's template nodes, .npy: the CLI splits them
+  into the scale and the 5 PC scores, so the emulator runs at the
+  ellipsoid's projection and exact size) instead of inferred;
+* ``--data-source emulator`` (with ``--geometry known``): the data are the
+  ``chapter`` emulator's own outputs at that projection and scale (LVV x s^3),
+  with the same noise: no model error at all, so what is left of a's
+  spread is the data's (one pressure, 24 strains, sigma_S, the priors).
+
+``--steps projection`` simulates each ellipsoid's 5-mode reconstruction
+(``s * reconstruct(h)``) at the true theta: the benchmark subjects' own
+representation error, to set against the cohort's floor.
 """
 from __future__ import annotations
 
@@ -85,8 +103,82 @@ def simulate_all(workdir: Path) -> list[dict]:
     return done
 
 
-def subject_rows(sims: list[dict]) -> list[dict]:
-    """The 24 calibration cases: every simulation noise-free and noisy."""
+def template_nodes(scale: float):
+    """Template nodes (mm) of the benchmark ellipsoid scaled by ``scale`` (the simulator's parametric map)."""
+    from lvcore.geometry.analytic import EllipsoidSurface, TruncatedEllipsoidLV
+    from lvcore.geometry.template import DEFAULT_TEMPLATE
+
+    g = ellipsoid(scale)
+    lv = TruncatedEllipsoidLV(EllipsoidSurface(**g["endo"]), EllipsoidSurface(**g["epi"]), g["base_z"])
+    return DEFAULT_TEMPLATE.nodes_from_map(lv.position)
+
+
+def projection(scale: float, n_pc: int = 5):
+    """:class:`lvcore.geometry.scaling.ScaledScores` of the ellipsoid scaled by ``scale`` (what the CLI computes)."""
+    from lvcore.geometry.scaling import size_normalised_scores
+
+    return size_normalised_scores(template_nodes(scale), n_pc)
+
+
+def emulator_outputs(sim: dict, emulator: str = "chapter"):
+    """The emulator's [LVV, 24 strains] at the true theta and the ellipsoid's projection and scale."""
+    import numpy as np
+
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.emulator import load_emulator
+    from lvcore.geometry.scaling import ScaledForward
+
+    sc = projection(sim["scale"])
+    fw = ScaledForward(emulator_forward(load_emulator(emulator), sc.h, name=emulator), sc.scale)
+    return np.asarray(fw(dict(zip(("a", "b", "af", "bf"), sim["theta"]))), float)
+
+
+def project_all(workdir: Path, sims: list[dict]) -> list[dict]:
+    """FE solves of each ellipsoid's 5-mode reconstruction at its true theta: its own representation error."""
+    import numpy as np
+
+    from lvcore.geometry.io import write_template_mesh
+    from lvcore.geometry.shape_model import load_shape_model
+    from lvcore.mechanics.simulate import simulate
+
+    path = workdir / "projections.json"
+    done = json.loads(path.read_text()) if path.is_file() else []
+    have = {(r["volume_ml"], tuple(r["theta"])) for r in done}
+    model = load_shape_model()
+    for sim in sims:
+        if not sim["converged"] or (sim["volume_ml"], tuple(sim["theta"])) in have:
+            continue
+        sc = projection(sim["scale"])
+        mesh = workdir / "projection.vtu"
+        write_template_mesh(mesh, sc.scale * model.reconstruct(sc.h))
+        case = {"geometry": {"kind": "mesh", "path": str(mesh)},
+                "material": {"law": "holzapfel-ogden", **dict(zip(("a", "b", "af", "bf"), sim["theta"]))},
+                "fibres": {"alpha_endo": -60.0, "alpha_epi": 60.0}, "load": {"pressure": 8.0, "units": "mmHg"},
+                "boundary": {"base": "sliding"}}
+        r = simulate(case)
+        y, yr = np.asarray(sim["outputs"], float), np.asarray(r.outputs(), float)
+        v0r = float(r.cavity_volume_mm3[0]) / 1000.0
+        d = y[1:] - yr[1:]
+        rec = {"volume_ml": sim["volume_ml"], "theta": sim["theta"], "h": sc.h.tolist(), "scale": sc.scale,
+               "projection_mse_cm2": sc.projection_mse_cm2, "v0_recon_ml": v0r, "strain_delta": d.tolist(),
+               "strain_rms": float(np.sqrt(np.mean(d ** 2))),
+               "lvv_rel_delta": float((y[0] / sim["reference_volume_ml"]) / (yr[0] / v0r) - 1.0),
+               "emulator_strain_rms": float(np.sqrt(np.mean((y[1:] - emulator_outputs(sim)[1:]) ** 2)))}
+        done.append(rec)
+        path.write_text(json.dumps(done, indent=1))
+        print(f"projection V0 {sim['volume_ml']:g} mL theta {sim['theta']}: strain RMS difference "
+              f"{rec['strain_rms']:.4f} (ellipsoid vs its 5-mode reconstruction, FE), EDV/V0 "
+              f"{100 * rec['lvv_rel_delta']:+.2f} %; emulator at the projection vs the ellipsoid FE: strain RMS "
+              f"{rec['emulator_strain_rms']:.4f}", flush=True)
+    return done
+
+
+def subject_rows(sims: list[dict], data_source: str = "fe", emulator: str = "chapter") -> list[dict]:
+    """The 24 calibration cases: every simulation noise-free and noisy.
+
+    ``data_source="emulator"`` replaces the FE outputs by the emulator's at the
+    ellipsoid's projection and scale (:func:`emulator_outputs`); the noise is the same.
+    """
     import numpy as np
 
     rng = np.random.default_rng(NOISE_SEED)
@@ -94,7 +186,7 @@ def subject_rows(sims: list[dict]) -> list[dict]:
     for k, sim in enumerate(sims):
         if not sim["converged"]:
             continue
-        y = np.asarray(sim["outputs"], float)
+        y = np.asarray(sim["outputs"], float) if data_source == "fe" else emulator_outputs(sim, emulator)
         for noisy in (False, True):
             yy, v0 = y.copy(), sim["reference_volume_ml"]
             if noisy:
@@ -104,24 +196,39 @@ def subject_rows(sims: list[dict]) -> list[dict]:
             rows.append({"subject": f"SYNTHETIC-V{sim['volume_ml']:g}-T{THETAS.index(tuple(sim['theta'])) + 1}"
                                     + ("-noisy" if noisy else ""),
                          "y": yy, "reference_volume_ml": v0, "theta": sim["theta"], "volume_ml": sim["volume_ml"],
-                         "noisy": noisy})
+                         "scale": sim["scale"], "noisy": noisy})
     return rows
 
 
-def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, emulator: str) -> list[dict]:
-    """Calibrate each case through the CLI (in-process, so the sampler is compiled once)."""
+def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, emulator: str, tag: str = "",
+                  geometry: str = "infer", representation_error: str = "floor") -> list[dict]:
+    """Calibrate each case through the CLI (in-process, so the sampler is compiled once).
+
+    ``geometry="infer"``: ``--geometry infer`` with the reference volume as a data column;
+    ``"known"``: ``--geometry`` the ellipsoid's template nodes (.npy). Results go to
+    ``results_<tag>.json`` (``results.json`` without a tag).
+    """
+    import numpy as np
+
     from lvcore.cli import main
     from lvcore.outputs import OUTPUT_COLUMNS
 
     out = []
+    runs = workdir / "runs" / tag if tag else workdir / "runs"
     for row in rows:
-        d = workdir / "runs" / row["subject"]
+        d = runs / row["subject"]
         d.mkdir(parents=True, exist_ok=True)
         csv = d / "data.csv"
-        csv.write_text("subject," + ",".join(OUTPUT_COLUMNS) + ",reference_volume_ml\n" + row["subject"] + ","
-                       + ",".join(f"{v:.8g}" for v in row["y"]) + f",{row['reference_volume_ml']:.6g}\n")
+        extra = (",reference_volume_ml", f",{row['reference_volume_ml']:.6g}") if geometry == "infer" else ("", "")
+        csv.write_text("subject," + ",".join(OUTPUT_COLUMNS) + extra[0] + "\n" + row["subject"] + ","
+                       + ",".join(f"{v:.8g}" for v in row["y"]) + extra[1] + "\n")
+        if geometry == "infer":
+            geo = ["--geometry", "infer", "--representation-error", representation_error]
+        else:
+            np.save(d / "geometry.npy", template_nodes(row["scale"]))
+            geo = ["--geometry", str(d / "geometry.npy")]
         t0 = time.perf_counter()
-        code = main(["calibrate", "--data", str(csv), "--geometry", "infer", "--emulator", emulator,
+        code = main(["calibrate", "--data", str(csv), *geo, "--emulator", emulator,
                      "--model", "iid", "--chains", str(chains), "--warmup", str(warmup), "--samples", str(samples),
                      "--out", str(d / "out"), "--json"])
         wall = time.perf_counter() - t0
@@ -133,11 +240,14 @@ def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, e
         out.append({"subject": row["subject"], "volume_ml": row["volume_ml"], "noisy": row["noisy"],
                     "theta": row["theta"], "exit": code, "covered": covered, "inside": inside, "a_ratio": ratio,
                     "a": rec.get("a"), "scale": rec.get("geometry", {}).get("posterior", {}).get("scale"),
-                    "flags": rec.get("verdict", {}).get("flags", []), "wall_s": wall})
+                    "theta_q": {n: [rec[n]["q05"], rec[n]["median"], rec[n]["q95"]] for n in truth} if rec else {},
+                    "sigma_s": (float(np.sqrt(rec["sigma_s2"]["median"])) if rec and "sigma_s2" in rec else None),
+                    "flags": rec.get("verdict", {}).get("flags", []), "wall_s": wall, "tag": tag,
+                    "geometry": geometry, "representation_error": representation_error if geometry == "infer" else None})
         print(f"{row['subject']:28s} exit {code}  covered {covered}  a q05-q95 "
               f"{rec.get('a', {}).get('q05', float('nan')):.3g}-{rec.get('a', {}).get('q95', float('nan')):.3g} "
               f"(true {truth['a']:g})  inside {inside}  ({wall:.0f} s)", flush=True)
-        (workdir / "results.json").write_text(json.dumps(out, indent=1))
+        (workdir / (f"results_{tag}.json" if tag else "results.json")).write_text(json.dumps(out, indent=1))
     return out
 
 
@@ -162,6 +272,76 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def reverdict(workdir: Path, tag: str) -> list[dict]:
+    """Re-apply the posterior-predictive MISFIT check of the current verdict to the saved runs of ``tag``.
+
+    Runs sampled before :func:`lvcore.inference.verdict.posterior_misfit` existed keep their posterior
+    (netCDF) and every other flag; the MISFIT flags are recomputed (with the representation error
+    when the run had the floor) and the exit code follows (4 with any flag, 1 when not converged).
+    ``exit_at_run`` keeps the code the run returned.
+    """
+    import arviz as az
+
+    from lvcore.inference import verdict
+    from lvcore.inference.representation_error import load_representation_error
+
+    path = workdir / f"results_{tag}.json"
+    results = json.loads(path.read_text())
+    for r in results:
+        out = workdir / "runs" / tag / r["subject"] / "out"
+        rec = json.loads((out / "summary.json").read_text())[0]
+        idata = az.from_netcdf(rec["netcdf"] if Path(rec["netcdf"]).is_file() else out / Path(rec["netcdf"]).name)
+        floor = (rec.get("geometry") or {}).get("representation_error")
+
+        class _Fw:
+            representation = load_representation_error(5) if floor else None
+
+        class _Res:
+            model = rec["model"]
+
+        _Res.idata = idata
+        structure, misfit = verdict.posterior_misfit(_Res, _Fw)
+        flags = [f for f in rec.get("flags", []) if not f.startswith("MISFIT")] + [f"MISFIT: {f}" for f in misfit]
+        r.setdefault("exit_at_run", r["exit"])
+        r["flags"], r["residual_structure"], r["reverdict"] = flags, structure, True
+        r["exit"] = 1 if not rec["converged"] else (4 if flags else 0)
+    path.write_text(json.dumps(results, indent=1))
+    return results
+
+
+def compare(results_by_tag: dict) -> str:
+    """One row per case, per variant: a's q95/q05, whether all four theta are inside, the exit code."""
+    tags = list(results_by_tag)
+    by = {t: {r["subject"]: r for r in rs} for t, rs in results_by_tag.items()}
+    subjects = sorted({s for t in tags for s in by[t]},
+                      key=lambda s: (float(s.split("-V")[1].split("-")[0]), s.split("-")[2], "noisy" in s))
+    lines = ["| case | " + " | ".join(f"{t}: a q95/q05, all four in, exit" for t in tags) + " |",
+             "|---|" + "---|" * len(tags)]
+    for sub in subjects:
+        cells = []
+        for t in tags:
+            r = by[t].get(sub)
+            if r is None:
+                cells.append("-")
+                continue
+            out = [n for n, ok in (r.get("inside") or {}).items() if not ok]
+            mark = "yes" if not out else "no (" + ", ".join(out) + ")"
+            bad = " **unflagged miss**" if not r["covered"] and r["exit"] != 4 else ""
+            cells.append(f"{r['a_ratio']:.0f}, {mark}, {r['exit']}{bad}")
+        lines.append(f"| {sub.replace('SYNTHETIC-', '')} | " + " | ".join(cells) + " |")
+    lines.append("")
+    for t in tags:
+        rs = list(by[t].values())
+        cov = sum(r["covered"] for r in rs)
+        inside = sum(all((r.get("inside") or {"x": False}).values()) for r in rs)
+        ratios = sorted(r["a_ratio"] for r in rs)
+        miss = [r["subject"] for r in rs if not r["covered"] and r["exit"] != 4]
+        lines.append(f"{t}: {len(rs)} cases; covered {cov}; all four inside {inside}; a q95/q05 median "
+                     f"{ratios[len(ratios) // 2]:.0f} (min {ratios[0]:.0f}, max {ratios[-1]:.0f}); not covered and "
+                     f"not flagged: {len(miss)} {miss}")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--workdir", default="build/real_data")
@@ -171,6 +351,13 @@ def main(argv=None) -> int:
     p.add_argument("--warmup", type=int, default=1000)
     p.add_argument("--samples", type=int, default=1000)
     p.add_argument("--only", default=None, help="comma-separated subject names to calibrate")
+    p.add_argument("--geometry", choices=("infer", "known"), default="infer",
+                   help="infer (--geometry infer --reference-volume) or known (the ellipsoid's template nodes)")
+    p.add_argument("--representation-error", choices=("floor", "off"), default="floor",
+                   help="with --geometry infer: the CLI's --representation-error (default floor)")
+    p.add_argument("--data-source", choices=("fe", "emulator"), default="fe",
+                   help="fe: the FE simulations; emulator: the emulator's outputs at the projection (no model error)")
+    p.add_argument("--tag", default="", help="results_<tag>.json and runs/<tag>/ (default: results.json, runs/)")
     args = p.parse_args(argv)
     work = Path(args.workdir)
     steps = args.steps.split(",")
@@ -179,17 +366,35 @@ def main(argv=None) -> int:
 
         use_host_devices(args.chains)
     sims = (simulate_all(work) if "simulate" in steps
-            else json.loads((work / "simulations.json").read_text()) if "calibrate" in steps else [])
-    if steps == ["table"]:   # the table of every results*.json in the work folder
-        results = [r for f in sorted(work.glob("results*.json")) for r in json.loads(f.read_text())]
+            else json.loads((work / "simulations.json").read_text()) if ("calibrate" in steps or "projection" in steps)
+            else [])
+    if steps == ["reverdict"]:   # the current MISFIT check on saved runs: --tag a,b
+        for t in args.tag.split(","):
+            print(table(reverdict(work, t)))
+        return 0
+    if steps == ["compare"]:   # the variants side by side: --tag a,b,c (results_<tag>.json; "" = results.json)
+        # a variant may span several files: "floor=floor_nf+floor_noisy"
+        res = {}
+        for spec in args.tag.split(","):
+            name, _, files = spec.partition("=")
+            res[name] = [r for f in (files or name).split("+") for r in json.loads((work / f"results_{f}.json").read_text())]
+        print(compare(res))
+        return 0
+    if steps == ["table"]:   # the table of the results of --tag (every results*.json without one)
+        files = ([work / f"results_{t}.json" for t in args.tag.split(",")] if args.tag
+                 else sorted(work.glob("results*.json")))
+        results = [r for f in files for r in json.loads(f.read_text())]
         print(table(results))
         return 0
+    if "projection" in steps:
+        project_all(work, sims)
     if "calibrate" in steps:
-        rows = subject_rows(sims)
+        rows = subject_rows(sims, args.data_source, args.emulator)
         if args.only:
-            keep = set(args.only.split(","))
-            rows = [r for r in rows if r["subject"] in keep]
-        results = calibrate_all(rows, work, args.chains, args.warmup, args.samples, args.emulator)
+            order = args.only.split(",")   # in the order given
+            rows = sorted((r for r in rows if r["subject"] in order), key=lambda r: order.index(r["subject"]))
+        results = calibrate_all(rows, work, args.chains, args.warmup, args.samples, args.emulator, args.tag,
+                                args.geometry, args.representation_error)
         print(table(results))
     return 0
 

@@ -10,7 +10,8 @@ from lvcore.app.controls import input_label, log_options, shared_inputs, shared_
 
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import OUTPUT_NAMES
+from lvcore.geometry.scaling import SCALE_BOUNDS, ScaledForward, scale_outputs
+from lvcore.outputs import OUTPUT_NAMES, is_pc_name
 
 
 st.set_page_config(page_title="Emulator", layout="wide")
@@ -124,8 +125,20 @@ for i, (name, lo, hi, log) in enumerate(zip(emu.input_names, emu.lower, emu.uppe
                                                  value=start, key=key)
     else:
         values[name] = cols[i % 3].slider(input_label(name), float(lo), float(hi), start, key=key)
+pcs = [n for n in emu.input_names if is_pc_name(n)]
+scale = 1.0
+if pcs:  # exact uniform scaling (lvcore.geometry.scaling): the geometry s * reconstruct(h), strains unchanged, LVV x s^3
+    from lvcore.app.physiology_panel import reference_volume_ml
+
+    scale = cols[len(emu.input_names) % 3].slider(
+        "scale s of the geometry", float(SCALE_BOUNDS[0]), float(SCALE_BOUNDS[1]), 1.0, 0.01, key="in_scale",
+        help="the reference geometry is s times the shape with these PC scores: every strain is unchanged and "
+             "the LVV is s³ times the emulated one (exact scaling, docs/real_data.md); a heart of any size")
+    st.caption(f"Reference cavity V₀ of this geometry: {reference_volume_ml([values[n] for n in pcs], scale):.1f} mL "
+               f"(scale {scale:.2f}).")
 x = np.array([values[n] for n in emu.input_names])
-y_emu = np.asarray(emu.predict(x, strict=True))
+y_emu = np.asarray(scale_outputs(np.asarray(emu.predict(x, strict=True), dtype=float), scale))
+x = np.r_[x, scale]
 st.write(f"Emulator: LVV **{y_emu[0]:.1f} mL**, mean strain **{y_emu[1:].mean():.4f}** (instant).")
 
 space_dict = source.get("space")
@@ -134,7 +147,9 @@ run = st.button("Run the simulator at this point", disabled=space_dict is None,
 if run:
     res = None
     try:
-        sim = emu.simulator()
+        # the simulator at s * reconstruct(h) is the simulator at reconstruct(h) with its LVV x s^3, to the Newton
+        # tolerance (tests/test_geometry_scaling.py checks the identity at s = 0.6 and 1.5)
+        sim = ScaledForward(emu.simulator(), scale)
         with st.spinner("Simulating..."):
             res = sim.evaluate({n: [values.get(n, emu.fixed.get(n))] for n in sim.input_names})
     except LVCoreError as err:

@@ -58,9 +58,17 @@ def test_page_labels_the_shipped_below_spec_demo(tmp_path, monkeypatch):
     at.selectbox[0].select(next(o for o in at.selectbox[0].options if o.startswith("chapter (below spec"))).run()
     assert any("BELOW SPEC" in w.value for w in at.warning)
     controls = list(at.main.slider) + list(at.main.select_slider)  # the shared sidebar aside
-    assert len(controls) == 9
+    assert len(controls) == 10   # 9 inputs and the geometry's scale
     labels = {c.label for c in controls}
     assert "EDP (mmHg)" in labels or any(lab.startswith("h1: PC score 1") for lab in labels), labels
+    # exact scaling on the page: the geometry s * reconstruct(h) has the same strains and s^3 times the LVV
+    lvv = lambda: float(next(m.value for m in at.markdown if "Emulator: LVV" in m.value)  # noqa: E731
+                        .split("LVV **")[1].split(" mL")[0])
+    v1 = lvv()
+    at.slider(key="in_scale").set_value(1.5).run()
+    assert not at.exception, at.exception
+    assert lvv() == pytest.approx(1.5 ** 3 * v1, rel=2e-3)   # the page prints one decimal
+    assert any("Reference cavity V₀" in c.value and "scale 1.50" in c.value for c in at.caption)
 
 
 def test_live_check_starts_at_the_shared_sidebar(emulator_dir):

@@ -119,3 +119,70 @@ def test_geometry_infer_without_a_measure_warns_that_size_and_stiffness_trade_of
     p = _csv(tmp_path, ",reference_volume_ml", ",70")
     assert main(["calibrate", "--data", str(p), "--geometry", "infer", "--out", str(tmp_path / "o2")]) == 0
     assert "trade off" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra_args,header,values,match", [
+    (["--reference-volume", "70", "--reference-volume-sd", "0.01"], "", "", "--reference-volume-sd = 0.01 is outside"),
+    (["--long-axis", "80", "--long-axis-sd", "100"], "", "", "--long-axis-sd = 100 is outside 0.2-30 mm"),
+    (["--wall-volume-sd", "4"], "", "", "--wall-volume-sd is given without the measure"),
+    ([], ",reference_volume_ml,reference_volume_ml_sd", ",70,80", "reference_volume_ml_sd = 80 is outside 0.5-50 mL"),
+    ([], ",reference_volume_ml,reference_volume_ml_sd", ",70,x", "reference_volume_ml_sd = 'x' is not a number"),
+    (["--reference-volume-sd", "5"], ",reference_volume_ml,reference_volume_ml_sd", ",70,4", "disagree"),
+    ([], ",long_axis_mm_sd", ",2", "long_axis_mm_sd is given without the measure"),
+])
+def test_measure_sds_are_checked_and_named(tmp_path, capsys, extra_args, header, values, match):
+    """--reference-volume-sd / --wall-volume-sd / --long-axis-sd and the *_sd columns: exit 2 naming them."""
+    p = _csv(tmp_path, header, values)
+    code = main(["calibrate", "--data", str(p), "--geometry", "infer", *extra_args, "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert match in capsys.readouterr().err
+
+
+def test_measure_sds_need_geometry_infer(tmp_path, capsys):
+    code = main(["calibrate", "--data", str(_csv(tmp_path)), "--geometry", "mean", "--long-axis-sd", "2",
+                 "--out", str(tmp_path / "o")])
+    assert code == 2 and "--long-axis-sd inform an inferred geometry" in capsys.readouterr().err
+
+
+def test_measure_sd_columns_are_read_from_csv_json_and_mat(tmp_path):
+    from scipy.io import savemat
+
+    from lvcore.inference.data import read_measurements
+
+    (row,) = read_measurements(_csv(tmp_path, ",reference_volume_ml,reference_volume_ml_sd,long_axis_mm",
+                                    ",70,3.5,82"))
+    assert row.measures == {"reference_volume_ml": 70.0, "long_axis_mm": 82.0}
+    assert row.measure_sds == {"reference_volume_ml": 3.5}
+    j = tmp_path / "m.json"
+    j.write_text(json.dumps({"subject": "S", "lvv_ml": 120.0, "strains": [-0.15] * 24, "wall_volume_ml": 90.0,
+                             "wall_volume_ml_sd": 6.0}))
+    (row,) = read_measurements(j)
+    assert row.measure_sds == {"wall_volume_ml": 6.0} and row.measures == {"wall_volume_ml": 90.0}
+    m = tmp_path / "m.mat"
+    savemat(m, {"lvv_ml": 120.0, "strains": np.full(24, -0.15), "long_axis_mm": 80.0, "long_axis_mm_sd": 2.0})
+    (row,) = read_measurements(m)
+    assert row.measure_sds == {"long_axis_mm": 2.0}
+
+
+@pytest.mark.slow
+def test_geometry_infer_records_the_measure_sds_and_the_representation_floor(tmp_path):
+    """A short infer run (not converged: the sampler is cut short): summary.json names each measure's sd,
+    where it came from, the likelihood sd with the floor and the representation error; 'off' drops the floor."""
+    p = _csv(tmp_path, ",reference_volume_ml,long_axis_mm", ",70,82")
+    short = ["--chains", "1", "--warmup", "15", "--samples", "15", "--model", "iid"]
+    code = main(["calibrate", "--data", str(p), "--geometry", "infer", "--reference-volume-sd", "4", *short,
+                 "--out", str(tmp_path / "o")])
+    assert code in (0, 1, 4)
+    (rec,) = json.loads((tmp_path / "o" / "summary.json").read_text())
+    geo = rec["geometry"]
+    assert geo["measure_sd"] == {"reference_volume_ml": 4.0, "long_axis_mm": 3.0}
+    assert geo["measure_sd_source"] == {"reference_volume_ml": "--reference-volume-sd", "long_axis_mm": "default"}
+    assert geo["likelihood_sd"]["reference_volume_ml"] > 4.0 and geo["likelihood_sd"]["long_axis_mm"] > 3.0
+    rep = geo["representation_error"]
+    assert rep["mode"] == "floor" and rep["n_cases"] >= 30 and 0 < rep["strain_sd_rms"] < 0.1
+    assert geo["posterior"]["measure_sd"] == geo["measure_sd"]
+    code = main(["calibrate", "--data", str(p), "--geometry", "infer", "--representation-error", "off", *short,
+                 "--out", str(tmp_path / "o2")])
+    (rec,) = json.loads((tmp_path / "o2" / "summary.json").read_text())
+    assert rec["geometry"]["representation_error"] is None
+    assert rec["geometry"]["likelihood_sd"] == {"reference_volume_ml": 5.0, "long_axis_mm": 3.0}

@@ -80,3 +80,52 @@ def test_plausible_is_the_same_whichever_model_ran():
         seen[model] = (v.plausible, v.flagged)
     assert {p for p, _ in seen.values()} == {False}, seen
     assert all(flagged for _, flagged in seen.values())
+
+
+def _level_pattern():
+    """A smooth misfit: the apical level 0.025 less negative, the next 0.01 (the benchmark ellipsoid's pattern
+    against its 5-mode reconstruction, benchmarks/real_data.py --steps projection)."""
+    return np.repeat([-0.003, -0.001, 0.009, 0.026], 6) + 0.001 * np.random.default_rng(5).standard_normal(24)
+
+
+def test_residual_structure_tells_a_pattern_from_noise():
+    i, p = verdict.residual_structure(_level_pattern())
+    assert i > 0.5 and p < 0.01
+    rng = np.random.default_rng(0)
+    ps = [verdict.residual_structure(0.03 * rng.standard_normal(24), n_permutations=500, seed=k)[1] for k in range(200)]
+    assert np.mean(np.asarray(ps) < 0.01) <= 0.04     # about 1 % false alarms for independent residuals
+    assert 0.3 < np.median(ps) < 0.7
+
+
+def _result(y, eta_strains, sigma_s2, model="iid"):
+    """A stand-in CalibrationResult: posterior eta (200 draws around ``eta_strains``), sigma_s2, observed y."""
+    from types import SimpleNamespace
+
+    import arviz as az
+
+    rng = np.random.default_rng(2)
+    eta = np.tile(np.r_[y[0], eta_strains], (1, 200, 1)) + 1e-4 * rng.standard_normal((1, 200, 25))
+    idata = az.from_dict(posterior={"eta": eta, "sigma_s2": np.full((1, 200), sigma_s2)}, observed_data={"y": y})
+    return SimpleNamespace(model=model, idata=idata)
+
+
+def test_posterior_misfit_flags_structured_residuals_the_likelihood_calls_independent():
+    from lvcore.inference.representation_error import RepresentationError
+
+    eta = np.full(24, -0.15)
+    y = np.r_[120.0, eta + _level_pattern()]                     # a smooth misfit, no noise
+    structure, flags = verdict.posterior_misfit(_result(y, eta, 0.011 ** 2))
+    assert flags and "spatially structured" in flags[0] and structure["p_value"] < 0.01
+    noisy = np.r_[120.0, eta + 0.03 * np.random.default_rng(1).standard_normal(24)]
+    assert verdict.posterior_misfit(_result(noisy, eta, 0.03 ** 2))[1] == []      # independent noise: no flag
+    assert verdict.posterior_misfit(_result(y, eta, 0.011 ** 2, model="volume")) == ({}, [])  # strains not modelled
+
+    class Fw:   # a representation error along this pattern: whitened, what is left is the independent noise
+        representation = RepresentationError(5, np.outer(_level_pattern(), _level_pattern()), 0.0)
+
+    y = np.r_[120.0, eta + _level_pattern() + 0.001 * np.random.default_rng(4).standard_normal(24)]
+    assert verdict.posterior_misfit(_result(y, eta, 0.001 ** 2))[1]          # without the floor: flagged
+    structure, flags = verdict.posterior_misfit(_result(y, eta, 0.001 ** 2), Fw())
+    assert flags == [] and structure["whitened_by"].endswith("representation error")
+    v = verdict.Verdict(verdict.Consistency({}, np.zeros(25), np.ones(25)), misfit=("x",))
+    assert v.plausible and v.flagged and v.flags == ["MISFIT: x"]

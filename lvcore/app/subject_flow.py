@@ -387,7 +387,7 @@ def calibrate(subject: str, y, prepared: Prepared, models: Sequence[str], *, con
     runs: list[ModelRun] = []
 
     def finish(item):
-        run = ModelRun(item.model, item.result, verdict.run_verdict(item.result, consistency, bounds))
+        run = ModelRun(item.model, item.result, verdict.run_verdict(item.result, consistency, bounds, prepared.forward))
         runs.append(run)
         if on_result is not None:
             on_result(run)

@@ -310,6 +310,10 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     shared out to ``workers`` processes (``1``: this process). Failures are
     data (NaN rows, ``converged`` False).
 
+    The rows are solved in the order of one continuation walk over the whole
+    design (:func:`lvcore.chains.continuation_order`), in batches of ``chunk``
+    consecutive rows of that walk; results come back in the input order.
+
     Parameters
     ----------
     checkpoint : path, optional
@@ -331,8 +335,14 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
 
     from lvcore.mechanics.forward import SimulatorForward
 
-    x = np.atleast_2d(np.asarray(x, dtype=float))
-    n = x.shape[0]
+    from lvcore.chains import continuation_order, scaled_coordinates
+
+    x_given = np.atleast_2d(np.asarray(x, dtype=float))
+    n = x_given.shape[0]
+    # batches are consecutive stretches of one continuation walk over the whole design, so every batch is a
+    # neighbourhood (a space-filling batch of a Sobol sequence would leave its warm starts far apart)
+    order = continuation_order(scaled_coordinates(space.names, x_given)) if n > 2 else np.arange(n)
+    x = x_given[order]
     chunk = max(1, int(chunk or CHECKPOINT_ROWS))
     outputs = np.full((n, N_OUTPUTS), np.nan)
     converged = np.zeros(n, dtype=bool)
@@ -366,7 +376,10 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
                            seconds[:done])
             if progress is not None:
                 progress(done, n)
-    return SimulatedRows(outputs, converged, tuple(messages), seconds, time.perf_counter() - t0, int(workers))
+    back = np.empty(n, dtype=int)
+    back[order] = np.arange(n)  # row i of the design was solved at position back[i]
+    return SimulatedRows(outputs[back], converged[back], tuple(messages[j] for j in back), seconds[back],
+                         time.perf_counter() - t0, int(workers))
 
 
 def _runs_signature(space: ParameterSpace, geometry: Mapping, resolution: str) -> str:

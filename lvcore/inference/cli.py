@@ -71,6 +71,21 @@ def register(subparsers) -> None:
     p.add_argument("--long-axis", type=float, default=None, metavar="MM",
                    help="with --geometry infer: base plane to epicardial apex in mm; also a data column long_axis_mm "
                         "(default: none)")
+    p.add_argument("--reference-volume-sd", type=float, default=None, metavar="ML",
+                   help="with --geometry infer: standard deviation of --reference-volume in mL, 0.5-50; also a data "
+                        "column reference_volume_ml_sd (default 5)")
+    p.add_argument("--wall-volume-sd", type=float, default=None, metavar="ML",
+                   help="with --geometry infer: standard deviation of --wall-volume in mL, 0.5-50; also a data column "
+                        "wall_volume_ml_sd (default 5)")
+    p.add_argument("--long-axis-sd", type=float, default=None, metavar="MM",
+                   help="with --geometry infer: standard deviation of --long-axis in mm, 0.2-30; also a data column "
+                        "long_axis_mm_sd (default 3)")
+    p.add_argument("--representation-error", choices=("floor", "off"), default="floor",
+                   help="with --geometry infer: 'floor' adds the shape model's representation error (how far a real "
+                        "LV is from its 5-mode reconstruction, estimated from the SYNTHETIC cohort by "
+                        "scripts/build_representation_error.py) to the variance of the strains, the LVV and the "
+                        "geometric measures; 'off' leaves it out, as for a subject that is a shape-model shape "
+                        "(default floor)")
     p.add_argument("--volunteer", default=None, metavar="NAME",
                    help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry "
                         "(default: none)")
@@ -230,10 +245,20 @@ def run_calibrate(args) -> int:
     cli_measures = geometry_prior.check_measures(
         {"reference_volume_ml": args.reference_volume, "wall_volume_ml": args.wall_volume,
          "long_axis_mm": args.long_axis}, "options")
+    cli_sds = geometry_prior.check_measure_sds(
+        {"reference_volume_ml": args.reference_volume_sd, "wall_volume_ml": args.wall_volume_sd,
+         "long_axis_mm": args.long_axis_sd}, "options")
     inferred = str(args.geometry).strip().lower() == "infer"
-    if cli_measures and not inferred:
-        raise DataError(f"{', '.join(geometry_prior.MEASURE_OPTIONS[k] for k in cli_measures)} inform an inferred "
-                        "geometry; use them with --geometry infer (a mesh or PC scores already fix the size)")
+    if (cli_measures or cli_sds) and not inferred:
+        opts = [geometry_prior.MEASURE_OPTIONS[k] for k in cli_measures] + [geometry_prior.MEASURE_SD_OPTIONS[k]
+                                                                              for k in cli_sds]
+        raise DataError(f"{', '.join(opts)} inform an inferred geometry; use them with --geometry infer (a mesh or "
+                        "PC scores already fix the size)")
+    representation = None
+    if inferred and args.representation_error == "floor":
+        from lvcore.inference.representation_error import load_representation_error
+
+        representation = load_representation_error(n_pc)
     if inferred:
         geo = None
     elif subject:
@@ -253,9 +278,10 @@ def run_calibrate(args) -> int:
         w = list(warnings)
         if inferred:
             measures = _subject_measures(r, cli_measures)
+            sds = _subject_measure_sds(r, cli_sds, measures)
             forward = geometry_prior.inferred_geometry_forward(
                 emulator, name=name, measures=measures, infer_angles=infer, alpha_endo=c["alpha_endo"],
-                alpha_epi=c["alpha_epi"], edp_mmhg=c["edp_mmhg"])
+                alpha_epi=c["alpha_epi"], edp_mmhg=c["edp_mmhg"], measure_sd=sds, representation=representation)
             fixed = {k: v for k, v in guards.fixed_inputs(np.zeros(n_pc), c, emulator, infer).items()
                      if not is_pc_name(k)}
             box, extrap = guards.check_inputs_in_box(fixed, emulator, args.allow_extrapolation,
@@ -263,7 +289,13 @@ def run_calibrate(args) -> int:
             if not measures:
                 w.append(geometry_prior.NO_MEASURE_WARNING)
             georec = {"kind": "inferred", "source": "infer", "measures": measures,
-                      "measure_sd": {k: geometry_prior.MEASURE_SD[k] for k in measures}}
+                      "measure_sd": forward.measure_sds,
+                      "measure_sd_source": {k: ("data column " + geometry_prior.MEASURE_SD_COLUMNS[k]
+                                                if k in r.measure_sds else geometry_prior.MEASURE_SD_OPTIONS[k]
+                                                if k in cli_sds else "default") for k in measures},
+                      "likelihood_sd": forward.likelihood_sds,
+                      "representation_error": (None if representation is None else
+                                               {"mode": "floor", **representation.record()})}
         else:
             box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, c, emulator, infer), emulator,
                                                      args.allow_extrapolation,
@@ -286,7 +318,7 @@ def run_calibrate(args) -> int:
         if item.subject not in consistency:   # one per subject: the same for every model
             consistency[item.subject] = verdict.consistency_check(r.y, forward, args.sigma_v, sigma_ref,
                                                                   infer_angles=infer, seed=args.seed)
-        v = verdict.run_verdict(res, consistency[item.subject], verdict.checked_bounds(forward, infer))
+        v = verdict.run_verdict(res, consistency[item.subject], verdict.checked_bounds(forward, infer), forward)
         check = plausibility.check_result(res, r.y, args.sigma_v, sigma_ref, seed=args.seed)
         out.mkdir(parents=True, exist_ok=True)
         ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"
@@ -349,6 +381,26 @@ def run_calibrate(args) -> int:
     if not all(r["converged"] for r in records):
         return 1
     return EXIT_FLAGGED if any(r["flags"] for r in records) else 0
+
+
+def _subject_measure_sds(row, cli_sds: dict, measures: dict) -> dict:
+    """Measure sds of one subject: the data's ``*_sd`` columns and the CLI options (which must agree);
+    an sd for a measure the subject does not have is refused."""
+    from lvcore.exceptions import DataError
+    from lvcore.inference.geometry_prior import MEASURE_OPTIONS, MEASURE_SD_COLUMNS, MEASURE_SD_OPTIONS
+
+    out = dict(row.measure_sds)
+    for k, v in cli_sds.items():
+        if k in out and abs(out[k] - v) > 1e-9:
+            raise DataError(f"subject {row.subject}: the data's {MEASURE_SD_COLUMNS[k]} {out[k]:g} and "
+                            f"{MEASURE_SD_OPTIONS[k]} {v:g} disagree; drop one of them")
+        out[k] = v
+    for k in out:
+        if k not in measures:
+            where = MEASURE_SD_COLUMNS[k] if k in row.measure_sds else MEASURE_SD_OPTIONS[k]
+            raise DataError(f"subject {row.subject}: {where} is given without the measure itself; give "
+                            f"{MEASURE_OPTIONS[k]} (or the data column {k}) too, or drop it")
+    return out
 
 
 def _subject_measures(row, cli_measures: dict) -> dict:

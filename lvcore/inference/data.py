@@ -46,7 +46,9 @@ LVV_RANGE_ML = (20.0, 600.0)
 MAX_ABS_STRAIN = 0.6
 #: Optional per-subject columns (CSV), keys (JSON) and variables (.mat): the end-diastolic pressure
 #: (mmHg) and the geometric measures of ``--geometry infer`` (:mod:`lvcore.inference.geometry_prior`).
-OPTIONAL_COLUMNS = ("edp_mmhg", "reference_volume_ml", "wall_volume_ml", "long_axis_mm")
+#: Each measure may come with its standard deviation, ``<measure>_sd`` (mL, mL, mm).
+OPTIONAL_COLUMNS = ("edp_mmhg", "reference_volume_ml", "wall_volume_ml", "long_axis_mm", "reference_volume_ml_sd",
+                    "wall_volume_ml_sd", "long_axis_mm_sd")
 
 
 @dataclass(frozen=True)
@@ -82,7 +84,12 @@ class MeasuredData:
     @property
     def measures(self) -> dict:
         """The geometric measures the data give (reference_volume_ml, wall_volume_ml, long_axis_mm)."""
-        return {k: v for k, v in self.extras.items() if k != "edp_mmhg"}
+        return {k: v for k, v in self.extras.items() if k != "edp_mmhg" and not k.endswith("_sd")}
+
+    @property
+    def measure_sds(self) -> dict:
+        """Standard deviations of the measures that the data give (``<measure>_sd`` columns), by measure name."""
+        return {k[:-3]: v for k, v in self.extras.items() if k.endswith("_sd")}
 
     @property
     def lvv_ml(self) -> float:
@@ -153,7 +160,7 @@ def check_extras(values: dict, where: str) -> dict:
     DataError
         Naming the column and the fix (EDP outside 2-40 mmHg, a measure outside its plausible range).
     """
-    from lvcore.inference.geometry_prior import check_measures
+    from lvcore.inference.geometry_prior import check_measure_sds, check_measures
     from lvcore.inference.guards import EDP_RANGE_MMHG
 
     out = {}
@@ -173,7 +180,9 @@ def check_extras(values: dict, where: str) -> dict:
     if edp is not None and not EDP_RANGE_MMHG[0] <= edp <= EDP_RANGE_MMHG[1]:
         raise DataError(f"{where}: edp_mmhg = {edp:g} is outside the physiological range {EDP_RANGE_MMHG[0]:g}-"
                         f"{EDP_RANGE_MMHG[1]:g} mmHg; give the end-diastolic pressure in mmHg (1 kPa = 7.5 mmHg)")
-    out.update(check_measures({k: v for k, v in out.items() if k != "edp_mmhg"}, where))
+    out.update(check_measures({k: v for k, v in out.items() if k != "edp_mmhg" and not k.endswith("_sd")}, where))
+    sds = check_measure_sds({k[:-3]: v for k, v in out.items() if k.endswith("_sd")}, where, by="column")
+    out.update({f"{k}_sd": v for k, v in sds.items()})
     return out
 
 

@@ -49,6 +49,14 @@ MEASURE_OPTIONS = {"reference_volume_ml": "--reference-volume", "wall_volume_ml"
 #: Plausible ranges (accepted without complaint).
 MEASURE_RANGES = {"reference_volume_ml": (10.0, 500.0), "wall_volume_ml": (20.0, 600.0),
                   "long_axis_mm": (30.0, 200.0)}
+#: The CLI options that set each measure's standard deviation (default :data:`MEASURE_SD`).
+MEASURE_SD_OPTIONS = {"reference_volume_ml": "--reference-volume-sd", "wall_volume_ml": "--wall-volume-sd",
+                      "long_axis_mm": "--long-axis-sd"}
+#: The data columns (CSV), keys (JSON) and .mat variables that set them per subject.
+MEASURE_SD_COLUMNS = {name: f"{name}_sd" for name in MEASURE_NAMES}
+#: Accepted standard deviations (mL, mL, mm): below, the measure would pin the geometry to a precision no CMR
+#: has (and the likelihood degenerates); above, it carries no information at the sizes of MEASURE_RANGES.
+MEASURE_SD_RANGES = {"reference_volume_ml": (0.5, 50.0), "wall_volume_ml": (0.5, 50.0), "long_axis_mm": (0.2, 30.0)}
 #: Site name of the scale.
 SCALE_NAME = "scale"
 #: Warning of a run without any geometric measure.
@@ -81,6 +89,44 @@ def check_measures(measures: Mapping[str, Any] | None, where: str = "geometric m
             unit = name.rsplit("_", 1)[-1]
             raise DataError(f"{where}: {name} = {value} ({MEASURE_OPTIONS[name]}) is outside the plausible range "
                             f"{lo:g}-{hi:g} {unit}; check the unit ({unit})")
+        out[name] = v
+    return out
+
+
+def check_measure_sds(sds: Mapping[str, Any] | None, where: str = "geometric-measure sds",
+                      by: str = "option") -> dict:
+    """Validated measure standard deviations, keyed by measure name; None/NaN dropped.
+
+    Parameters
+    ----------
+    sds : mapping
+        ``measure name -> sd`` (mL for the volumes, mm for the long axis).
+    where : str
+        What to name in an error (the file and line, or "options").
+    by : {"option", "column"}
+        Name the CLI option (``--reference-volume-sd``) or the data column (``reference_volume_ml_sd``).
+
+    Raises
+    ------
+    DataError
+        Naming the option/column, the accepted range and the unit.
+    """
+    out = {}
+    for name, value in dict(sds or {}).items():
+        if name not in MEASURE_NAMES:
+            raise DataError(f"{where}: unknown geometric measure '{name}'; use {', '.join(MEASURE_NAMES)}")
+        label = MEASURE_SD_OPTIONS[name] if by == "option" else MEASURE_SD_COLUMNS[name]
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            continue
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise DataError(f"{where}: {label} must be a number, got {str(value)[:40]!r}") from None
+        lo, hi = MEASURE_SD_RANGES[name]
+        unit = {"ml": "mL"}.get(name.rsplit("_", 1)[-1], "mm")
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise DataError(f"{where}: {label} = {v:g} is outside {lo:g}-{hi:g} {unit}; give the measurement's "
+                            f"standard deviation in {unit} (default {MEASURE_SD[name]:g} {unit})")
         out[name] = v
     return out
 
@@ -157,12 +203,19 @@ class InferredGeometryForward:
         Measured ``reference_volume_ml`` / ``wall_volume_ml`` / ``long_axis_mm`` (any subset, may be empty).
     shape : ShapeMeasures
     scale_bounds : (float, float)
+    measure_sd : mapping
+        Standard deviation of a measure (mL, mL, mm), overriding :data:`MEASURE_SD`.
+    representation : lvcore.inference.representation_error.RepresentationError or None
+        The shape model's representation error: a variance floor on the strains, the LVV and the
+        measures (:mod:`lvcore.inference.representation_error`); None: no floor.
     """
 
     forward: Any
     measures: Mapping[str, float] = field(default_factory=dict)
     shape: ShapeMeasures | None = None
     scale_bounds: tuple = None
+    measure_sd: Mapping[str, float] = field(default_factory=dict)
+    representation: Any = None
 
     def __post_init__(self):
         from lvcore.geometry.scaling import SCALE_BOUNDS
@@ -174,6 +227,10 @@ class InferredGeometryForward:
             raise EmulatorError(f"emulator '{self.forward.label}' has no PC-score inputs; --geometry infer needs "
                                 "an emulator of the shape model's scores (e.g. 'chapter' or 'angles')")
         object.__setattr__(self, "measures", check_measures(self.measures))
+        object.__setattr__(self, "measure_sd", check_measure_sds(self.measure_sd))
+        if self.representation is not None and int(self.representation.n_pc) != len(pcs):
+            raise EmulatorError(f"the representation error is for {self.representation.n_pc} PC scores, the "
+                                f"emulator '{self.forward.label}' has {len(pcs)}")
         object.__setattr__(self, "scale_bounds", tuple(self.scale_bounds or SCALE_BOUNDS))
         if self.shape is None:
             object.__setattr__(self, "shape", shape_measures(len(pcs)))
@@ -230,6 +287,20 @@ class InferredGeometryForward:
     def conditions(self) -> dict:
         return {k: v for k, v in self.forward.conditions.items() if not is_pc_name(k)}
 
+    @property
+    def measure_sds(self) -> dict:
+        """Measurement sd of each given measure (mL, mL, mm): the user's, else :data:`MEASURE_SD`."""
+        return {k: float(self.measure_sd.get(k, MEASURE_SD[k])) for k in self.measures}
+
+    @property
+    def likelihood_sds(self) -> dict:
+        """Sd of each measure's likelihood: :attr:`measure_sds` widened by the representation error's
+        relative floor at the measured value (equal to :attr:`measure_sds` without one)."""
+        sds = self.measure_sds
+        if self.representation is None:
+            return sds
+        return {k: self.representation.measure_sd(k, sd, self.measures[k]) for k, sd in sds.items()}
+
     # --- numpyro ---------------------------------------------------------------
     def sample_latents(self) -> dict:
         """Sample ``h`` and ``s`` (numpyro sites) and observe the measured geometric measures."""
@@ -245,8 +316,9 @@ class InferredGeometryForward:
                 out[n] = numpyro.sample(n, dist.TruncatedNormal(0.0, 1.0, low=lo, high=hi))
         if self.measures:
             pred = self.shape(jnp.stack([out[n] for n in self.pc_names]), out[SCALE_NAME])
+            sds = self.likelihood_sds
             for name, value in self.measures.items():
-                numpyro.sample(f"{name}_obs", dist.Normal(pred[name], MEASURE_SD[name]), obs=value)
+                numpyro.sample(f"{name}_obs", dist.Normal(pred[name], sds[name]), obs=value)
         return out
 
     def __call__(self, params):
@@ -263,11 +335,17 @@ class InferredGeometryForward:
 def inferred_geometry_forward(emulator, *, name: str | None = None, measures: Mapping | None = None,
                               infer_angles: bool = False, alpha_endo: float | None = None,
                               alpha_epi: float | None = None, edp_mmhg: float | None = None,
-                              scale_bounds=None) -> InferredGeometryForward:
+                              scale_bounds=None, measure_sd: Mapping | None = None,
+                              representation: Any = "bundled") -> InferredGeometryForward:
     """Bind conditions into ``emulator`` and let calibration sample its PC scores and a scale.
 
     Parameters are those of :func:`lvcore.emulator.forward.emulator_forward`
-    (``None``: its defaults), plus ``measures`` (:data:`MEASURE_NAMES`).
+    (``None``: its defaults), plus ``measures`` (:data:`MEASURE_NAMES`), their
+    ``measure_sd`` (default :data:`MEASURE_SD`) and ``representation``: the
+    shape model's representation error added as a variance floor
+    (``"bundled"``: the asset of the emulator's number of modes,
+    :func:`lvcore.inference.representation_error.load_representation_error`;
+    None: no floor; or a ``RepresentationError``).
     """
     from lvcore.emulator.forward import EmulatorForward, emulator_forward
 
@@ -280,7 +358,14 @@ def inferred_geometry_forward(emulator, *, name: str | None = None, measures: Ma
     reads = THETA_NAMES + (ANGLE_NAMES if infer_angles else ()) + pcs
     inner = EmulatorForward(bound.emulator, {k: v for k, v in bound.conditions.items() if k not in pcs}, reads,
                             bound.label)
-    return InferredGeometryForward(inner, measures or {}, scale_bounds=scale_bounds)
+    if isinstance(representation, str):
+        if representation != "bundled":
+            raise ValueError(f"representation must be 'bundled', None or a RepresentationError, got {representation!r}")
+        from lvcore.inference.representation_error import load_representation_error
+
+        representation = load_representation_error(n_pc)
+    return InferredGeometryForward(inner, measures or {}, scale_bounds=scale_bounds, measure_sd=measure_sd or {},
+                                   representation=representation)
 
 
 def geometry_posterior(samples: Mapping, forward: InferredGeometryForward) -> dict:
@@ -300,10 +385,12 @@ def geometry_posterior(samples: Mapping, forward: InferredGeometryForward) -> di
     out[SCALE_NAME] = q(s)
     out.update({f"implied_{k}": q(v) for k, v in meas.items()})
     out["measured"] = dict(forward.measures)
-    out["measure_sd"] = {k: MEASURE_SD[k] for k in forward.measures}
+    out["measure_sd"] = forward.measure_sds
+    out["likelihood_sd"] = forward.likelihood_sds
     return out
 
 
-__all__ = ["MEASURE_NAMES", "MEASURE_SD", "MEASURE_OPTIONS", "MEASURE_RANGES", "SCALE_NAME", "NO_MEASURE_WARNING",
+__all__ = ["MEASURE_NAMES", "MEASURE_SD", "MEASURE_OPTIONS", "MEASURE_RANGES", "MEASURE_SD_OPTIONS",
+           "MEASURE_SD_COLUMNS", "MEASURE_SD_RANGES", "SCALE_NAME", "NO_MEASURE_WARNING", "check_measure_sds",
            "check_measures", "ShapeMeasures", "shape_measures", "InferredGeometryForward",
            "inferred_geometry_forward", "geometry_posterior"]

@@ -132,8 +132,33 @@ def _sample_params(infer_angles: bool, forward) -> dict:
     return params
 
 
-def _volume_term(eta0, y, sigma_v):
-    numpyro.sample("lvv_obs", dist.Normal(eta0, sigma_v), obs=None if y is None else y[0])
+def representation_error(forward):
+    """The shape model's representation error the forward model carries (``--geometry infer``), or None.
+
+    :class:`lvcore.inference.geometry_prior.InferredGeometryForward` carries one
+    (:mod:`lvcore.inference.representation_error`); every other forward model none.
+    """
+    return None if forward is None else getattr(forward, "representation", None)
+
+
+def lvv_sd(eta0, sigma_v, forward=None):
+    """Sd (mL) of the LVV likelihood: ``sigma_v``, with the representation error's floor
+    ``sqrt(sigma_v^2 + (r_V eta0)^2)`` when ``forward`` carries one."""
+    rep = representation_error(forward)
+    return sigma_v if rep is None else rep.lvv_sd(sigma_v, eta0)
+
+
+def strain_likelihood(mean, sigma_s2, forward=None):
+    """Distribution of the 24 strains: iid ``N(mean, sigma_s2)``, or, when ``forward`` carries a
+    representation error, ``MVN(mean, sigma_s2 I + Sigma_rep)`` (the shape model's known discrepancy)."""
+    rep = representation_error(forward)
+    if rep is None:
+        return dist.Normal(mean, jnp.sqrt(sigma_s2)).to_event(1)
+    return dist.MultivariateNormal(mean, covariance_matrix=rep.strain_covariance(sigma_s2))
+
+
+def _volume_term(eta0, y, sigma_v, forward=None):
+    numpyro.sample("lvv_obs", dist.Normal(eta0, lvv_sd(eta0, sigma_v, forward)), obs=None if y is None else y[0])
 
 
 def volume_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False):
@@ -141,7 +166,7 @@ def volume_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: 
     _check_y(y)
     params = _sample_params(infer_angles, forward)
     eta = numpyro.deterministic("eta", forward(params))
-    _volume_term(eta[0], y, sigma_v)
+    _volume_term(eta[0], y, sigma_v, forward)
 
 
 def iid_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False):
@@ -150,9 +175,8 @@ def iid_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: boo
     params = _sample_params(infer_angles, forward)
     sigma_s2 = numpyro.sample("sigma_s2", sigma_s2_prior())
     eta = numpyro.deterministic("eta", forward(params))
-    _volume_term(eta[0], y, sigma_v)
-    numpyro.sample("strain_obs", dist.Normal(eta[1:], jnp.sqrt(sigma_s2)).to_event(1),
-                   obs=None if y is None else y[1:])
+    _volume_term(eta[0], y, sigma_v, forward)
+    numpyro.sample("strain_obs", strain_likelihood(eta[1:], sigma_s2, forward), obs=None if y is None else y[1:])
 
 
 def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
@@ -172,8 +196,8 @@ def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_ang
     chol = kernels.gram_cholesky(hyper, nugget=nugget)
     b = numpyro.deterministic("disc", chol @ b_tilde)
     eta = numpyro.deterministic("eta", forward(params))
-    _volume_term(eta[0], y, sigma_v)
-    numpyro.sample("strain_obs", dist.Normal(eta[1:] + b + v, jnp.sqrt(sigma_s2)).to_event(1),
+    _volume_term(eta[0], y, sigma_v, forward)
+    numpyro.sample("strain_obs", strain_likelihood(eta[1:] + b + v, sigma_s2, forward),
                    obs=None if y is None else y[1:])
 
 
@@ -224,5 +248,6 @@ def parameter_meaning(name: str, max_chars: int = 48) -> str:
 __all__ = [
     "parameter_meaning", "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
-    "volume_model", "iid_model", "discrepancy_model", "get_model",
+    "volume_model", "iid_model", "discrepancy_model", "get_model", "representation_error", "lvv_sd",
+    "strain_likelihood",
 ]

@@ -57,6 +57,53 @@ MAX_A_RATIO = 20.0
 MAX_DIVERGENT_FRACTION = 0.005
 #: Parameters whose widths are measured in log space.
 LOG_PARAMETERS = THETA_NAMES + ("scale",)
+#: Random permutations of the strain residuals behind the p-value of their spatial structure (Moran's I).
+N_PERMUTATIONS = 2000
+
+
+def _grid_adjacency():
+    """Neighbours on lvcore's 6 x 4 strain grid (region = level * 6 + sector): the two sectors beside a region
+    on its ring (circular) and the regions above and below it in the same sector."""
+    from lvcore.outputs import N_LEVELS, N_SECTORS
+
+    n = N_LEVELS * N_SECTORS
+    w = np.zeros((n, n))
+    for r in range(n):
+        level, sector = divmod(r, N_SECTORS)
+        for lv, sc in ((level, (sector + 1) % N_SECTORS), (level, (sector - 1) % N_SECTORS),
+                       (level + 1, sector), (level - 1, sector)):
+            if 0 <= lv < N_LEVELS:
+                w[r, lv * N_SECTORS + sc] = 1.0
+    return w
+
+
+def residual_structure(residuals, n_permutations: int = N_PERMUTATIONS, seed: int = 0) -> tuple[float, float]:
+    """Moran's I of 24 strain residuals on the 6 x 4 grid and its one-sided permutation p-value.
+
+    Independent residuals (what the iid likelihood assumes) give I near
+    ``-1/23`` and a uniform p-value; a smooth pattern (a misfit of the
+    model, e.g. a whole level off) gives a large I and a small p.
+
+    Returns
+    -------
+    moran_i, p_value : float
+    """
+    r = np.asarray(residuals, float).reshape(-1)
+    w = _grid_adjacency()
+    if r.size != w.shape[0]:
+        raise ValueError(f"need {w.shape[0]} strain residuals, got {r.size}")
+
+    def moran(z):
+        z = z - z.mean(axis=-1, keepdims=True)
+        return r.size / w.sum() * np.einsum("...i,ij,...j->...", z, w, z) / np.einsum("...i,...i->...", z, z)
+
+    if not np.any(r - r.mean()):
+        return 0.0, 1.0
+    i0 = float(moran(r))
+    rng = np.random.default_rng(seed)
+    perm = np.stack([rng.permutation(r) for _ in range(int(n_permutations))])
+    p = (1.0 + float(np.sum(moran(perm) >= i0 - 1e-12))) / (1.0 + n_permutations)
+    return i0, p
 
 
 @dataclass(frozen=True)
@@ -79,29 +126,34 @@ class Consistency:
     p_values: np.ndarray
     flags: tuple = field(default=())
     sigma_ref: float = 0.035
+    #: Moran's I of the strain residuals at the best fit, its p-value and the residual RMS (recorded; the
+    #: MISFIT flag comes from the posterior of the model that ran, :func:`posterior_misfit`).
+    structure: dict = field(default_factory=dict)
 
     @property
     def plausible(self) -> bool:
         return not self.flags
 
     def record(self) -> dict:
-        return {"plausible": self.plausible, "flags": list(self.flags), "sigma_ref": self.sigma_ref, "alpha": ALPHA,
+        return {"plausible": self.plausible, "flags": list(self.flags), "residual_structure": dict(self.structure), "sigma_ref": self.sigma_ref, "alpha": ALPHA,
                 "min_bad_strains": MIN_BAD_STRAINS, "best_fit": {k: float(v) for k, v in self.best_fit.items()},
                 "best_fit_outputs": {c: float(v) for c, v in zip(OUTPUT_COLUMNS, self.eta)},
                 "p_values": {c: float(p) for c, p in zip(OUTPUT_COLUMNS, self.p_values)}}
 
 
 def _reference_model(y=None, *, forward, sigma_v, sigma_ref, infer_angles):
-    """The consistency likelihood: LVV ~ N(eta0, sigma_v^2), strains ~ N(eta, sigma_ref^2), the models' priors."""
+    """The consistency likelihood: LVV ~ N(eta0, sigma_v^2), strains ~ N(eta, sigma_ref^2), the models' priors
+    (with ``--geometry infer``, the shape model's representation error added as in the models:
+    :func:`lvcore.inference.models.strain_likelihood`)."""
     import numpyro
     import numpyro.distributions as dist
 
-    from lvcore.inference.models import _sample_params
+    from lvcore.inference.models import _sample_params, lvv_sd, strain_likelihood
 
     params = _sample_params(infer_angles, forward)
     eta = forward(params)
-    numpyro.sample("lvv_obs", dist.Normal(eta[0], sigma_v), obs=y[0])
-    numpyro.sample("strain_obs", dist.Normal(eta[1:], sigma_ref).to_event(1), obs=y[1:])
+    numpyro.sample("lvv_obs", dist.Normal(eta[0], lvv_sd(eta[0], sigma_v, forward)), obs=y[0])
+    numpyro.sample("strain_obs", strain_likelihood(eta[1:], sigma_ref ** 2, forward), obs=y[1:])
 
 
 def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = False, n_starts: int = N_STARTS,
@@ -160,6 +212,17 @@ def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = 
     return params, eta
 
 
+def output_sds(eta, sigma_v: float, sigma_ref: float, forward=None) -> np.ndarray:
+    """Marginal sd of each of the 25 outputs in the consistency likelihood: ``sigma_v`` and ``sigma_ref``,
+    widened by the shape model's representation error when ``forward`` carries one (``--geometry infer``)."""
+    from lvcore.inference.models import representation_error
+
+    rep = representation_error(forward)
+    if rep is None:
+        return np.r_[float(sigma_v), np.full(24, float(sigma_ref))]
+    return np.r_[float(rep.lvv_sd(sigma_v, float(eta[0]))), np.sqrt(float(sigma_ref) ** 2 + np.diag(rep.strain_cov))]
+
+
 def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None, infer_angles: bool = False,
                       n_starts: int = N_STARTS, seed: int = 0) -> Consistency:
     """Best fit, p-values and consistency flags of one subject's data (module docstring, part 1)."""
@@ -170,7 +233,7 @@ def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None
     sigma_ref = plausibility.DEFAULT_SIGMA_REF if sigma_ref is None else float(sigma_ref)
     y = np.asarray(y, float).reshape(-1)
     params, eta = best_fit(y, forward, sigma_v, sigma_ref, infer_angles, n_starts, seed)
-    z = np.abs(y - eta) / np.r_[float(sigma_v), np.full(24, sigma_ref)]
+    z = np.abs(y - eta) / output_sds(eta, sigma_v, sigma_ref, forward)
     p = 2.0 * norm.sf(z)
     flags = []
     if p[0] < ALPHA:
@@ -186,7 +249,69 @@ def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None
     # the data-only checks (signs, no deformation) of the posterior-predictive module, at the best fit
     data_only = plausibility.posterior_predictive_check(y, eta[None, :], sigma_v, sigma_ref)
     flags += [f for f in data_only.flags if "sign opposite" in f or "within" in f]
-    return Consistency(best_fit=params, eta=eta, p_values=p, flags=tuple(flags), sigma_ref=sigma_ref)
+    i, p_s = residual_structure(y[1:] - eta[1:], seed=seed)
+    structure = {"moran_i": i, "p_value": p_s, "residual_rms": float(np.sqrt(np.mean((y[1:] - eta[1:]) ** 2)))}
+    return Consistency(best_fit=params, eta=eta, p_values=p, flags=tuple(flags), sigma_ref=sigma_ref,
+                       structure=structure)
+
+
+def posterior_misfit(result, forward=None, seed: int = 0) -> tuple[dict, list[str]]:
+    """Posterior-predictive check of the strain likelihood's noise model: are the residuals independent?
+
+    The residual is the data minus the posterior mean of the model's strain
+    mean (``eta``, plus the discrepancy ``disc`` and offset ``v`` of model
+    (iii)), whitened by the likelihood's own strain covariance at the
+    posterior median ``sigma_S^2`` (``sigma_S^2 I``, plus the shape model's
+    representation error ``Sigma_rep`` with ``--geometry infer``; symmetric
+    square root, so each value stays at its region). The likelihood says
+    these are independent; a significant spatial structure (Moran's I on the
+    6 x 4 grid, permutation p < :data:`ALPHA`, :func:`residual_structure`)
+    says the model misses a pattern the data have (a shape further from the
+    shape model than the floor allows, a geometry that is not the
+    subject's, a mismatch of the mechanics) and the intervals may be too
+    narrow and biased. Noise-free data of an imperfect model show it;
+    measurement noise larger than the misfit hides it (and then the
+    intervals are wide enough). The volume model does not model the strains:
+    not checked.
+
+    Returns
+    -------
+    structure : dict
+        ``moran_i``, ``p_value``, ``residual_rms`` (unwhitened), or empty when not checked.
+    flags : list of str
+    """
+    from lvcore.inference.models import representation_error
+
+    idata = result.idata
+    post = idata.posterior
+    if result.model == "volume" or "eta" not in post or getattr(idata, "observed_data", None) is None \
+            or "y" not in idata.observed_data or "sigma_s2" not in post:
+        return {}, []
+    y = np.asarray(idata.observed_data["y"], float).reshape(-1)
+    mean = np.asarray(post["eta"], float).reshape(-1, y.size)[:, 1:]
+    if "disc" in post:
+        mean = mean + np.asarray(post["disc"], float).reshape(mean.shape)
+    if "v" in post:
+        mean = mean + np.asarray(post["v"], float).reshape(-1, 1)
+    r = y[1:] - mean.mean(axis=0)
+    cov = float(np.median(np.asarray(post["sigma_s2"], float))) * np.eye(r.size)
+    rep = representation_error(forward)
+    if rep is not None:
+        cov = cov + rep.strain_cov
+    lam, u = np.linalg.eigh(cov)
+    w = u @ ((u.T @ r) / np.sqrt(np.maximum(lam, 1e-300)))
+    moran_i, p = residual_structure(w, seed=seed)
+    out = {"moran_i": moran_i, "p_value": p, "residual_rms": float(np.sqrt(np.mean(r ** 2))),
+           "whitened_by": "sigma_S^2 I" + (" + representation error" if rep is not None else "")}
+    flags = []
+    if p < ALPHA:
+        flags.append(f"the strain residuals (data minus the posterior mean, whitened by the likelihood's "
+                     f"{out['whitened_by']}) are spatially structured (Moran's I {moran_i:.2f}, p = {p:.2g}): the model "
+                     "misses a pattern in the data that its noise model treats as independent, so the intervals may "
+                     "be too narrow and biased (a shape the shape model does not reach, a geometry that is not the "
+                     "subject's, other mechanics)" + ("; give the subject's mesh (--geometry FILE)" if rep is not None
+                                                      else ""))
+    return out, flags
 
 
 def _width(lo, hi, log: bool) -> float:
@@ -268,10 +393,13 @@ class Verdict:
     identifiability: tuple = ()
     sampler: tuple = ()
     table: dict = field(default_factory=dict)
+    misfit: tuple = ()
+    structure: dict = field(default_factory=dict)
 
     @property
     def flags(self) -> list[str]:
         return ([f"CONSISTENCY: {f}" for f in self.consistency.flags]
+                + [f"MISFIT: {f}" for f in self.misfit]
                 + [f"IDENTIFIABILITY: {f}" for f in self.identifiability] + [f"SAMPLER: {f}" for f in self.sampler])
 
     @property
@@ -286,18 +414,22 @@ class Verdict:
     def record(self) -> dict:
         return {"flagged": self.flagged, "plausible": self.plausible, "flags": self.flags,
                 "consistency": self.consistency.record(), "identifiability": self.table,
+                "residual_structure": dict(self.structure),
                 "thresholds": {"alpha": ALPHA, "min_bad_strains": MIN_BAD_STRAINS, "bound_fraction": BOUND_FRACTION,
                                "width_fraction": WIDTH_FRACTION, "max_a_ratio": MAX_A_RATIO,
                                "max_divergent_fraction": MAX_DIVERGENT_FRACTION}}
 
 
-def run_verdict(result, consistency: Consistency, bounds: dict) -> Verdict:
-    """The :class:`Verdict` of a :class:`~lvcore.inference.calibrate.CalibrationResult`."""
+def run_verdict(result, consistency: Consistency, bounds: dict, forward=None) -> Verdict:
+    """The :class:`Verdict` of a :class:`~lvcore.inference.calibrate.CalibrationResult`
+    (``forward``: the forward model that ran, for the representation error of :func:`posterior_misfit`)."""
     post = result.idata.posterior
     samples = {n: np.asarray(post[n]) for n in bounds if n in post}
     ident, table = identifiability_flags(samples, bounds)
     n_draws = int(np.prod(np.asarray(post[next(iter(THETA_NAMES))]).shape[:2]))
-    return Verdict(consistency, tuple(ident), tuple(sampler_flags(result.convergence, n_draws)), table)
+    structure, misfit = posterior_misfit(result, forward)
+    return Verdict(consistency, tuple(ident), tuple(sampler_flags(result.convergence, n_draws)), table,
+                   tuple(misfit), structure)
 
 
 def checked_bounds(forward, infer_angles: bool = False) -> dict:
@@ -311,5 +443,6 @@ def checked_bounds(forward, infer_angles: bool = False) -> dict:
 
 __all__ = ["ALPHA", "MIN_BAD_STRAINS", "N_STARTS", "BOUND_FRACTION", "WIDTH_FRACTION", "MAX_A_RATIO",
            "MAX_DIVERGENT_FRACTION",
-           "Consistency", "best_fit", "consistency_check", "identifiability_flags", "sampler_flags", "Verdict",
+           "N_PERMUTATIONS", "Consistency", "best_fit", "output_sds", "consistency_check", "posterior_misfit",
+           "residual_structure", "identifiability_flags", "sampler_flags", "Verdict",
            "run_verdict", "checked_bounds"]

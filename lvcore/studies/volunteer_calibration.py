@@ -1,10 +1,13 @@
 """A short live calibration of one bundled SYNTHETIC volunteer (the report's calibration posterior).
 
 The iid likelihood and the ``chapter`` emulator, on the volunteer's measured
-CSV with ``h`` the 5-PC projection of its geometry; the uniform prior and the
+CSV with its geometry size-normalised as ``lvcore calibrate --volunteer`` does
+(:func:`lvcore.inference.guards.resolve_geometry`): ``h`` the 5-PC projection
+of the geometry at the shape model's mean size and ``s`` its scale, the
+emulated LVV times ``s^3`` (:mod:`lvcore.geometry.scaling`); the uniform prior and the
 volunteer's hidden truth are kept beside the posterior so that the figure can
 show both (the truth scores the fit, it never enters it). The default subject
-is SYNTHETIC-HV3, whose PC scores lie inside the emulator box (HV1 and HV5 do not).
+is SYNTHETIC-HV3, whose PC scores lie inside the emulator box (HV5's do not, even size-normalised).
 """
 from __future__ import annotations
 
@@ -41,15 +44,18 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
     if "chapter" not in available_emulators():
         return None
     from lvcore.emulator.forward import load_emulator_forward
+    from lvcore.geometry.scaling import ScaledForward
     from lvcore.inference import models
-    from lvcore.inference.calibrate import calibrate, read_pc_scores
+    from lvcore.inference.calibrate import calibrate
+    from lvcore.inference.guards import resolve_geometry
     from lvcore.inference.data import read_measured_csv
     from lvcore.inference.samplers import SamplerConfig
     from lvcore.resources import volunteer_files, volunteer_truth
 
     files = volunteer_files(subject.replace("-", "_"))
     row = read_measured_csv(files.measured)[0]
-    forward = load_emulator_forward("chapter", read_pc_scores(files.geometry))
+    geo = resolve_geometry(str(files.geometry))   # size-normalised: scores h and scale s, as the CLI
+    forward = ScaledForward(load_emulator_forward("chapter", geo.h), geo.scale)
     config = SamplerConfig(num_warmup=num_warmup, num_samples=num_samples, num_chains=num_chains, seed=seed)
     res = calibrate(row.y, forward, "iid", config=config, max_rounds=1)
     truth = volunteer_truth(row.subject)  # the hidden truth scores the fit; it never enters it
@@ -66,8 +72,8 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
 
 
 def source_line(result: dict) -> str:
-    return (f"live NUTS run ({result['wall_s']:.1f} s) on {result['subject']}'s measured CSV, h = 5-PC projection "
-            "of its geometry")
+    return (f"live NUTS run ({result['wall_s']:.1f} s) on {result['subject']}'s measured CSV, its geometry "
+            "size-normalised: h = 5-PC projection at the mean size, emulated LVV x s^3")
 
 
 def tables(result: dict) -> dict:

@@ -1,0 +1,150 @@
+"""The shape model's representation error: statistics, the bundled asset and the infer-mode likelihood."""
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lvcore.exceptions import DataError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _rep(cov=None, lvv=0.02, measures=None):
+    from lvcore.inference.representation_error import RepresentationError
+
+    if cov is None:
+        a = np.random.default_rng(1).normal(size=(24, 24)) * 0.004
+        cov = a @ a.T
+    return RepresentationError(5, cov, lvv, measures or {"reference_volume_ml": 0.03})
+
+
+def test_stats_recover_a_known_covariance_and_count_a_bias():
+    """Many draws of a known covariance give it back; a pure bias is an error too (second moment about zero)."""
+    from lvcore.inference.representation_error import representation_error_stats
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(24, 24)) * 0.003
+    true = a @ a.T + np.diag(np.full(24, 1e-5))
+    d = rng.multivariate_normal(np.zeros(24), true, size=20000)
+    st = representation_error_stats(d, rng.normal(0, 0.02, 20000), {"long_axis_mm": np.full(20000, -0.01)})
+    cov = np.asarray(st["strain_cov"])
+    assert np.max(np.abs(cov - true)) < 0.05 * np.max(np.abs(true))
+    assert st["lvv_rel_sd"] == pytest.approx(0.02, rel=0.03)
+    assert st["measure_rel_sd"]["long_axis_mm"] == pytest.approx(0.01)
+    # a systematic bias b with no scatter: the floor is b b^T (shrunk), not zero
+    b = np.linspace(-0.01, 0.01, 24)
+    st = representation_error_stats(np.tile(b, (50, 1)), np.zeros(50))
+    cov = np.asarray(st["strain_cov"])
+    assert np.trace(cov) == pytest.approx(float(b @ b), rel=1e-6)
+    with pytest.raises(DataError, match="strain_deltas"):
+        representation_error_stats(np.zeros((5, 23)), np.zeros(5))
+
+
+def test_the_bundled_asset_is_synthetic_reproducible_and_positive_definite():
+    from lvcore.inference.representation_error import FORMAT, asset_file, load_representation_error
+
+    meta = json.loads(asset_file(5).read_text())
+    assert meta["format"] == FORMAT and meta["synthetic"] and "SYNTHETIC" in meta["label"]
+    assert meta["command"].startswith("python scripts/build_representation_error.py")
+    assert (ROOT / "scripts" / "build_representation_error.py").is_file()
+    assert asset_file(5).stat().st_size < 200_000
+    rep = load_representation_error(5)
+    assert rep.n_cases == len(meta["cases"]) >= 30
+    assert np.linalg.eigvalsh(rep.strain_cov).min() > 0
+    # the stored statistics are those of the stored cases
+    from lvcore.inference.representation_error import representation_error_stats
+
+    st = representation_error_stats([c["strain_delta"] for c in meta["cases"]],
+                                    [c["lvv_rel_delta"] for c in meta["cases"]])
+    np.testing.assert_allclose(st["strain_cov"], rep.strain_cov, rtol=1e-4, atol=1e-10)
+    assert st["lvv_rel_sd"] == pytest.approx(rep.lvv_rel_sd, rel=1e-4)
+    with pytest.raises(DataError, match="build it with"):
+        load_representation_error(7)
+
+
+def test_strain_likelihood_is_the_multivariate_normal_with_the_floor():
+    import jax.numpy as jnp
+    from scipy.stats import multivariate_normal, norm
+
+    from lvcore.inference.models import lvv_sd, strain_likelihood
+
+    class Fw:
+        representation = _rep()
+
+    rng = np.random.default_rng(3)
+    mean, y, s2 = rng.normal(-0.15, 0.03, 24), rng.normal(-0.15, 0.03, 24), 0.02 ** 2
+    got = float(strain_likelihood(jnp.asarray(mean), s2, Fw()).log_prob(jnp.asarray(y)))
+    want = multivariate_normal(mean, s2 * np.eye(24) + Fw.representation.strain_cov).logpdf(y)
+    assert got == pytest.approx(want, rel=1e-10)
+    plain = float(strain_likelihood(jnp.asarray(mean), s2, None).log_prob(jnp.asarray(y)))
+    assert plain == pytest.approx(norm(mean, 0.02).logpdf(y).sum(), rel=1e-10)
+    assert got != pytest.approx(plain, rel=1e-3)   # the floor changes the likelihood
+    assert float(lvv_sd(150.0, 5.0, Fw())) == pytest.approx(np.hypot(5.0, 0.02 * 150.0))
+    assert lvv_sd(150.0, 5.0, None) == 5.0
+
+
+def test_infer_mode_models_and_measures_use_the_floor():
+    """The iid model's log density with an inferred geometry carrying the floor = the hand-written one."""
+    import jax.numpy as jnp
+    from numpyro.infer.util import log_density
+    from scipy.stats import multivariate_normal, norm
+
+    from lvcore.emulator import load_emulator
+    from lvcore.inference.geometry_prior import inferred_geometry_forward
+    from lvcore.inference.models import iid_model, prior_bounds
+
+    rep = _rep()
+    fw = inferred_geometry_forward(load_emulator("chapter"), measures={"reference_volume_ml": 80.0},
+                                   measure_sd={"reference_volume_ml": 4.0}, representation=rep)
+    assert fw.measure_sds == {"reference_volume_ml": 4.0}
+    assert fw.likelihood_sds["reference_volume_ml"] == pytest.approx(np.hypot(4.0, 0.03 * 80.0))
+    h = np.array([0.3, -0.2, 0.1, 0.0, 0.4])
+    p = {"a": 0.5, "b": 3.0, "af": 1.5, "bf": 5.0, **{f"h{i + 1}": h[i] for i in range(5)},
+         "log_scale": np.log(0.95), "sigma_s2": 0.03 ** 2}
+    eta = np.asarray(fw({**p, "scale": 0.95}))
+    y = eta + np.r_[6.0, np.full(24, 0.01)]
+    got_floor = float(log_density(iid_model, (jnp.asarray(y),), {"forward": fw}, p)[0])
+    fw0 = inferred_geometry_forward(load_emulator("chapter"), measures={"reference_volume_ml": 80.0},
+                                    measure_sd={"reference_volume_ml": 4.0}, representation=None)
+    got_plain = float(log_density(iid_model, (jnp.asarray(y),), {"forward": fw0}, p)[0])
+    v0 = float(fw.measures_of(h, 0.95)["reference_volume_ml"])
+    diff_want = (norm(eta[0], np.hypot(5.0, rep.lvv_rel_sd * eta[0])).logpdf(y[0]) - norm(eta[0], 5.0).logpdf(y[0])
+                 + multivariate_normal(eta[1:], 0.03 ** 2 * np.eye(24) + rep.strain_cov).logpdf(y[1:])
+                 - norm(eta[1:], 0.03).logpdf(y[1:]).sum()
+                 + norm(v0, fw.likelihood_sds["reference_volume_ml"]).logpdf(80.0) - norm(v0, 4.0).logpdf(80.0))
+    assert got_floor - got_plain == pytest.approx(diff_want, rel=1e-8)
+    assert set(prior_bounds(False, fw)) == {"a", "b", "af", "bf"}
+
+
+def _script():
+    path = ROOT / "scripts" / "build_representation_error.py"
+    spec = importlib.util.spec_from_file_location("build_representation_error", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.slow
+def test_a_shape_model_shape_has_no_representation_error_and_a_cohort_shape_has(tmp_path):
+    """The control: a scaled shape-model shape (the mean shape, 1.2 times its size) is split into
+    s = 1.2 and h = 0 and reconstructs exactly, so both FE solves agree; a held-out cohort shape does
+    not (the effect the floor accounts for)."""
+    from lvcore.geometry.cohort import ROLE_VOLUNTEER, load_cohort
+    from lvcore.geometry.scaling import scale_nodes
+    from lvcore.geometry.shape_model import load_shape_model
+
+    mod = _script()
+    model = load_shape_model()
+    theta = {"a": 0.8, "b": 4.0, "af": 1.5, "bf": 6.0}
+    inside = scale_nodes(model.mean, 1.2, base_z=0.0)
+    rec = mod.one_case(inside, model, 5, theta, tmp_path)
+    assert rec["scale"] == pytest.approx(1.2, rel=1e-6)
+    assert np.max(np.abs(rec["strain_delta"])) < 1e-6 and abs(rec["lvv_rel_delta"]) < 1e-6
+    assert all(abs(v) < 1e-9 for v in rec["measure_rel_delta"].values())
+    _, vols = load_cohort().select(ROLE_VOLUNTEER)
+    rec = mod.one_case(vols[0], model, 5, theta, tmp_path)
+    assert np.sqrt(np.mean(np.square(rec["strain_delta"]))) > 1e-3
