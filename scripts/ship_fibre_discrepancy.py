@@ -29,6 +29,8 @@ import sys
 import time
 from pathlib import Path
 
+from lvcore.studies._common import round_floats
+
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
@@ -48,17 +50,6 @@ def thin_result(result: dict, keep: int = 250) -> dict:
     out["error_draws"] = thinned
     out["error_draws_thinned_to_per_set"] = int(min(keep, per_set.shape[1]))
     return out
-
-
-def round_floats(obj, digits: int = 6):
-    """Every float rounded to ``digits`` significant digits (the shipped file stays small)."""
-    if isinstance(obj, float):
-        return float(f"{obj:.{digits}g}")
-    if isinstance(obj, dict):
-        return {k: round_floats(v, digits) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [round_floats(v, digits) for v in obj]
-    return obj
 
 
 def main(argv=None) -> int:

@@ -27,6 +27,8 @@ import sys
 import time
 from pathlib import Path
 
+from lvcore.studies._common import round_floats
+
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
@@ -34,17 +36,6 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 #: The shipped run's settings (see docs/studies.md for why these).
 SHIP = {"volunteers": "HV1", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40, "seed": 0,
         "resolution": "default", "workers": 2}
-
-
-def round_floats(obj, digits: int = 6):
-    """Every float rounded to ``digits`` significant digits (the shipped file stays small)."""
-    if isinstance(obj, float):
-        return float(f"{obj:.{digits}g}")
-    if isinstance(obj, dict):
-        return {k: round_floats(v, digits) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [round_floats(v, digits) for v in obj]
-    return obj
 
 
 def replace_block(text: str, begin: str, end: str, body: str, path) -> str:

@@ -30,6 +30,17 @@ def write_json_atomic(path, data: Any) -> Path:
     return path
 
 
+def round_floats(obj, digits: int = 6):
+    """Every float rounded to ``digits`` significant digits (the shipped file stays small)."""
+    if isinstance(obj, float):
+        return float(f"{obj:.{digits}g}")
+    if isinstance(obj, dict):
+        return {k: round_floats(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [round_floats(v, digits) for v in obj]
+    return obj
+
+
 def clean(obj):
     """``obj`` with numpy scalars/arrays as Python values and non-finite floats as None (strict JSON)."""
     if isinstance(obj, dict):
