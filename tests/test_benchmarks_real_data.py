@@ -37,7 +37,8 @@ def test_small_subject_is_covered_or_flagged(tmp_path):
             "fibres": {"alpha_endo": -60.0, "alpha_epi": 60.0}, "load": {"pressure": 8.0, "units": "mmHg"},
             "boundary": {"base": "sliding"}}
     r = simulate(case, raise_on_failure=True)
-    sim = {"volume_ml": 40.0, "theta": list(theta), "converged": True, "outputs": [float(v) for v in r.outputs()],
+    sim = {"volume_ml": 40.0, "theta": list(theta), "scale": s, "converged": True,
+           "outputs": [float(v) for v in r.outputs()],
            "reference_volume_ml": float(r.cavity_volume_mm3[0]) / 1000.0}
     assert sim["reference_volume_ml"] == pytest.approx(40.0, rel=0.02)
     rows = [row for row in bench.subject_rows([sim]) if not row["noisy"]]
