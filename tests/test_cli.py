@@ -259,7 +259,7 @@ def _fake_calibration(monkeypatch):
     monkeypatch.setattr(verdict, "consistency_check", lambda y, *a, **k: verdict.Consistency(
         {}, np.asarray(y, float), np.ones(25)))
     monkeypatch.setattr(verdict, "checked_bounds", lambda *a, **k: {})
-    monkeypatch.setattr(verdict, "run_verdict", lambda res, c, bounds: verdict.Verdict(c))
+    monkeypatch.setattr(verdict, "run_verdict", lambda res, c, bounds, *a, **k: verdict.Verdict(c))
     monkeypatch.setattr(forward, "load_emulator_forward", lambda *a, **k: SimpleNamespace(emulator=emulator))
     monkeypatch.setattr(forward, "emulator_forward", lambda *a, **k: None)
 
