@@ -98,6 +98,16 @@ def save_figure(fig, stem: Path) -> list[str]:
     return paths
 
 
+def percentile_bootstrap(values, stat=np.median, n_boot: int = 2000, seed: int = 0, level: float = 0.9) -> dict:
+    """``{"value", "ci", "n"}``: ``stat(values, axis=...)`` and its percentile bootstrap CI, resampling the values
+    themselves (vectorised; :func:`bootstrap_ci` resamples units through any Python statistic)."""
+    v = np.asarray(values, dtype=float)
+    rng = np.random.default_rng(seed)
+    boots = stat(v[rng.integers(0, v.size, size=(n_boot, v.size))], axis=1)
+    lo, hi = np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])
+    return {"value": float(stat(v)), "ci": [float(lo), float(hi)], "n": int(v.size)}
+
+
 def bootstrap_ci(units, statistic, n_boot: int = 2000, seed: int = 0, level: float = 0.9) -> dict:
     """Percentile bootstrap over independent units (patients, volunteers) of any statistic.
 

@@ -67,11 +67,9 @@ VERDICTS = ("reproduced", "not reproduced", "refuted")
 
 def boot(values, stat=np.median, n_boot: int = 4000, seed: int = 0, level: float = 0.9) -> dict:
     """``{"value", "ci", "n"}``: ``stat`` of ``values`` and its percentile bootstrap CI (resampling the values)."""
-    v = np.asarray(values, dtype=float)
-    rng = np.random.default_rng(seed)
-    boots = stat(v[rng.integers(0, v.size, size=(n_boot, v.size))], axis=1)
-    lo, hi = np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])
-    return {"value": float(stat(v)), "ci": [float(lo), float(hi)], "n": int(v.size)}
+    from lvcore.studies._common import percentile_bootstrap
+
+    return percentile_bootstrap(values, stat, n_boot=n_boot, seed=seed, level=level)
 
 
 def load(folder=None) -> dict:

@@ -62,7 +62,7 @@ import numpy as np
 from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.core.space import build_case
 from lvcore.outputs import THETA_NAMES
-from lvcore.studies._common import clean, write_json_atomic
+from lvcore.studies._common import clean, percentile_bootstrap, write_json_atomic
 
 MODELS = ("volume", "iid", "discrepancy")
 #: The calibration model's fixed conditions (the ``chapter`` emulator).
@@ -324,11 +324,7 @@ def fit_datasets(forward, ys, conditions, truths, eta_trues, *, config, keys, mo
 
 
 def _boot(values, stat=np.median, n_boot: int = 2000, seed: int = 0, level: float = 0.9) -> dict:
-    v = np.asarray(values, dtype=float)
-    rng = np.random.default_rng(seed)
-    boots = stat(v[rng.integers(0, v.size, size=(n_boot, v.size))], axis=1)
-    lo, hi = np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])
-    return {"value": float(stat(v)), "ci": [float(lo), float(hi)], "n": int(v.size)}
+    return percentile_bootstrap(values, stat, n_boot=n_boot, seed=seed, level=level)
 
 
 def summarise(fits_by_dose: dict, rms_by_dose: dict) -> list[dict]:
