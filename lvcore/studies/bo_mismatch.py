@@ -318,11 +318,9 @@ def summarise(runs: Sequence[dict], meta: dict, n_boot: int = N_BOOT) -> dict:
 # ----------------------------------------------------------------------------- results interface
 def load(folder) -> dict:
     """The results of a ``bo-mismatch`` ``--out`` folder (or the bundled one): the JSON plus ``folder``."""
-    from lvcore.studies.results import read_json
+    from lvcore.studies.results import read_result
 
-    data = read_json(Path(folder) / RESULT_FILE)
-    data["folder"] = str(folder)
-    return data
+    return read_result(folder, RESULT_FILE)
 
 
 def source_line(result: dict) -> str:

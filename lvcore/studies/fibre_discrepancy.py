@@ -239,11 +239,9 @@ MISSING = {"fig9_7_sigma_s": "the results hold no σ_S draws (older study output
 
 def load(folder) -> dict:
     """``fibre_discrepancy.json`` of a result folder (or the bundled one), with ``folder``."""
-    from lvcore.studies.results import read_json
+    from lvcore.studies.results import read_result
 
-    data = read_json(Path(folder) / RESULT_FILE)
-    data["folder"] = str(folder)
-    return data
+    return read_result(folder, RESULT_FILE)
 
 
 def _build_text(build) -> str:

@@ -277,11 +277,9 @@ def run_study(n_patients: int | None = None, seed: int | None = None, *, out, wo
 # ----------------------------------------------------------------------------- results interface
 def load(folder) -> dict:
     """The results of an ``operators-realistic`` ``--out`` folder (or the bundled one): the JSON plus ``folder``."""
-    from lvcore.studies.results import read_json
+    from lvcore.studies.results import read_result
 
-    data = read_json(Path(folder) / RESULT_FILE)
-    data["folder"] = str(folder)
-    return data
+    return read_result(folder, RESULT_FILE)
 
 
 def source_line(result: dict) -> str:

@@ -97,6 +97,13 @@ def parse_folders(text: str, max_folders: int = MAX_TYPED_FOLDERS) -> list[Path]
     return [Path(p).expanduser() for p in items]
 
 
+def read_result(folder, filename: str) -> dict:
+    """A study's JSON result ``folder/filename`` (:func:`read_json`) with ``folder`` added: a study's ``load``."""
+    data = read_json(Path(folder) / filename)
+    data["folder"] = str(folder)
+    return data
+
+
 def read_json(path):
     """A study's JSON file; a clear :class:`LVCoreError` naming the file when it is missing, not a regular
     file, over :data:`lvcore.limits.MAX_STUDY_RESULT_BYTES`, not UTF-8 text or not JSON."""
