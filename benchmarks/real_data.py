@@ -213,9 +213,14 @@ def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, e
     from lvcore.cli import main
     from lvcore.outputs import OUTPUT_COLUMNS
 
-    out = []
+    res_path = workdir / (f"results_{tag}.json" if tag else "results.json")
+    out = json.loads(res_path.read_text()) if res_path.is_file() else []   # resumable: cases done are kept
+    done = {r["subject"] for r in out}
     runs = workdir / "runs" / tag if tag else workdir / "runs"
     for row in rows:
+        if row["subject"] in done:
+            print(f"{row['subject']:28s} done (results_{tag or ''}.json), skipped", flush=True)
+            continue
         d = runs / row["subject"]
         d.mkdir(parents=True, exist_ok=True)
         csv = d / "data.csv"
@@ -247,7 +252,7 @@ def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, e
         print(f"{row['subject']:28s} exit {code}  covered {covered}  a q05-q95 "
               f"{rec.get('a', {}).get('q05', float('nan')):.3g}-{rec.get('a', {}).get('q95', float('nan')):.3g} "
               f"(true {truth['a']:g})  inside {inside}  ({wall:.0f} s)", flush=True)
-        (workdir / (f"results_{tag}.json" if tag else "results.json")).write_text(json.dumps(out, indent=1))
+        res_path.write_text(json.dumps(out, indent=1))
     return out
 
 

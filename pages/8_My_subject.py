@@ -58,6 +58,21 @@ with g1:
         long_axis = st.number_input(flow.MEASURE_LABELS["long_axis_mm"] + " (optional, 0 = not measured)",
                                     min_value=0.0, max_value=200.0, value=0.0, step=1.0, key="my_long_axis")
         entered = {"reference_volume_ml": ref_volume, "wall_volume_ml": wall_volume, "long_axis_mm": long_axis}
+        from lvcore.inference.geometry_prior import MEASURE_SD
+
+        with st.expander("Measurement SDs and the shape model's representation error"):
+            sd_cols = st.columns(3)
+            entered_sd = {k: sd_cols[i].number_input(
+                f"SD of the {k.rsplit('_', 1)[0].replace('_', ' ')}, {'mL' if k.endswith('_ml') else 'mm'} "
+                f"(0 = default {MEASURE_SD[k]:g})", min_value=0.0, max_value=50.0, value=0.0, step=0.5,
+                key=f"my_{k}_sd", help="lvcore calibrate --reference-volume-sd / --wall-volume-sd / --long-axis-sd "
+                                       "(or the data's *_sd column): how well your CMR analysis knows the measure")
+                for i, k in enumerate(entered)}
+            floor = st.checkbox("Representation-error floor (lvcore calibrate --representation-error floor)",
+                                value=True, key="my_rep_floor",
+                                help="adds how far a real LV is from the shape model's 5 modes (estimated from the "
+                                     "SYNTHETIC cohort) to the likelihood; off only for a subject that is exactly a "
+                                     "shape-model shape")
 geometry, geometry_name, measured_bytes, geometry_file = None, None, None, None
 try:
     if up_geom is not None:
@@ -151,8 +166,11 @@ try:
         pass
     elif inferred:
         measures = flow.inferred_measures(entered, None if data is None else data.measures)
-        prepared = flow.prepare_inferred(emulator, emu_name, measures, edp_mmhg=edp)
-        used_geometry = flow.InferredGeometry(dict(measures))
+        sds, sd_sources = flow.inferred_measure_sds(entered_sd, None if data is None else data.measure_sds, measures)
+        prepared = flow.prepare_inferred(emulator, emu_name, measures, edp_mmhg=edp, measure_sd=sds,
+                                         measure_sd_source=sd_sources,
+                                         representation_error="floor" if floor else "off")
+        used_geometry = flow.InferredGeometry.of(prepared)
     elif is_subject_emu:
         prepared = flow.prepare(emulator, emu_name, geometry, edp_mmhg=edp)
         used_geometry = flow.subject_emulator_geometry(emulator)
@@ -167,8 +185,14 @@ if prepared is not None:
     if prepared.extrapolating:
         st.warning("EXTRAPOLATION: some inputs lie outside the emulator's training box; the results are flagged.")
     if prepared.inferred:
-        st.write("Geometric measures used: " + (", ".join(f"{k} {v:g}" for k, v in prepared.measures.items())
-                                                 or "none"))
+        rec = used_geometry.record()
+        st.write("Geometric measures used: " + (", ".join(
+            f"{k} {v:g} (SD {rec['measure_sd'][k]:g}, {rec['measure_sd_source'][k]}; in the likelihood "
+            f"{rec['likelihood_sd'][k]:.3g})" for k, v in prepared.measures.items()) or "none"))
+        rep = rec["representation_error"]
+        st.caption("Representation-error floor: " + (
+            f"on ({rep.get('n_cases', '?')} SYNTHETIC cohort cases; strain sd RMS "
+            f"{rep.get('strain_sd_rms', float('nan')):.4f})" if rep else "off"))
         for w in prepared.warnings:
             st.warning(w)
     if is_subject_emu:

@@ -67,6 +67,10 @@ def test_flow_end_to_end_gives_a_complete_bundle(uploads):
     summary = flow.summary_record(rows[0].subject, rows[0].y, geo, prepared, runs, settings)
     assert summary["synthetic"] and summary["conditions"]["edp_mmhg"] == pytest.approx(8.0)
     assert set(summary["models"]["iid"]["posterior"]) >= {"a", "b", "af", "bf"}
+    # a mesh gets the CLI's representation-error floor (lvcore calibrate --geometry MESH)
+    assert summary["geometry"]["kind"] == "template-mesh"
+    assert summary["geometry"]["representation_error"]["mode"] == "floor"
+    assert flow.prepare(emulator, "chapter", geo, representation_error="off").representation_error is None
     data = flow.bundle(summary, runs, flow.figures(runs, rows[0].y))
     with zipfile.ZipFile(BytesIO(data)) as z:
         names = set(z.namelist())
@@ -183,8 +187,7 @@ def test_no_mesh_route_is_the_clis_geometry_infer(uploads, tmp_path):
     config = SamplerConfig(num_warmup=150, num_samples=100, num_chains=1, seed=0)
     runs = flow.calibrate(row.subject, row.y, prepared, ["iid"], config=config)
     settings = {"geometry": "infer", "measures": {"reference_volume_ml": ref}}
-    summary = flow.summary_record(row.subject, row.y, flow.InferredGeometry({"reference_volume_ml": ref}), prepared,
-                                  runs, settings)
+    summary = flow.summary_record(row.subject, row.y, flow.InferredGeometry.of(prepared), prepared, runs, settings)
     post = summary["models"]["iid"]["geometry_posterior"]
     assert {"h1", "h2", "h3", "h4", "h5", "scale", "implied_reference_volume_ml"} <= set(post)
     # the implied reference cavity follows the measured one (observed with SD MEASURE_SD, 5 mL)
@@ -197,6 +200,11 @@ def test_no_mesh_route_is_the_clis_geometry_infer(uploads, tmp_path):
     cli = json.loads((tmp_path / "cli" / "summary.json").read_text())[0]
     assert cli["geometry"]["kind"] == summary["geometry"]["kind"] == "inferred"
     assert cli["geometry"]["measures"] == summary["geometry"]["measures"]
+    # the same sds, the same floor: the app's record is the CLI's
+    for k in ("measure_sd", "measure_sd_source", "likelihood_sd", "representation_error"):
+        assert summary["geometry"][k] == pytest.approx(cli["geometry"][k]) if k == "likelihood_sd" else \
+            summary["geometry"][k] == cli["geometry"][k], k
+    assert summary["geometry"]["representation_error"]["mode"] == "floor"
     for name in ("h1", "h5", "scale", "implied_reference_volume_ml"):
         for q in ("median", "q05", "q95"):
             assert post[name][q] == pytest.approx(cli["geometry"]["posterior"][name][q], rel=1e-6, abs=1e-9), name
@@ -211,6 +219,38 @@ def test_no_mesh_route_is_the_clis_geometry_infer(uploads, tmp_path):
         assert json.loads(z.read("summary.json"))["models"]["iid"]["geometry_posterior"]["scale"]["median"] > 0
         page = z.read("summary.html").decode()
         assert "inferred (no mesh)" in page and "implied reference_volume_ml" in page
+
+
+def test_inferred_measure_sds_and_the_record_follow_the_cli():
+    """The page's SD fields: 0 is the default, the data's *_sd column is used and must agree, an SD without its
+    measure or outside its range is refused; the record carries the sds, their sources and the floor."""
+    from lvcore.exceptions import DataError
+    from lvcore.inference.geometry_prior import MEASURE_SD
+
+    m = {"reference_volume_ml": 60.0}
+    assert flow.inferred_measure_sds({"reference_volume_ml": 0.0}, None, m) == ({}, {})
+    assert flow.inferred_measure_sds({"reference_volume_ml": 2.0}, None, m) == (
+        {"reference_volume_ml": 2.0}, {"reference_volume_ml": "entered"})
+    assert flow.inferred_measure_sds({"reference_volume_ml": 0.0}, {"reference_volume_ml": 3.0}, m) == (
+        {"reference_volume_ml": 3.0}, {"reference_volume_ml": "data column reference_volume_ml_sd"})
+    with pytest.raises(DataError, match="disagree"):
+        flow.inferred_measure_sds({"reference_volume_ml": 2.0}, {"reference_volume_ml": 3.0}, m)
+    with pytest.raises(DataError, match=r"SD of 'Reference .* = 0.1 is outside 0.5-50 mL"):
+        flow.inferred_measure_sds({"reference_volume_ml": 0.1}, None, m)
+    with pytest.raises(DataError, match="not the measure itself"):
+        flow.inferred_measure_sds({"long_axis_mm": 2.0}, None, m)
+    emulator = load_emulator("chapter")
+    p = flow.prepare_inferred(emulator, "chapter", m, measure_sd={"reference_volume_ml": 2.0},
+                              measure_sd_source={"reference_volume_ml": "entered"})
+    rec = flow.InferredGeometry.of(p).record()
+    assert rec["measure_sd"] == {"reference_volume_ml": 2.0} and rec["measure_sd_source"] == {
+        "reference_volume_ml": "entered"}
+    assert rec["likelihood_sd"]["reference_volume_ml"] > 2.0   # widened by the floor's relative sd
+    assert rec["representation_error"]["mode"] == "floor" and rec["representation_error"]["n_cases"] > 0
+    off = flow.InferredGeometry.of(flow.prepare_inferred(emulator, "chapter", m, representation_error="off")).record()
+    assert off["representation_error"] is None and off["measure_sd"] == {
+        "reference_volume_ml": MEASURE_SD["reference_volume_ml"]}
+    assert off["likelihood_sd"] == off["measure_sd"] and off["measure_sd_source"] == {"reference_volume_ml": "default"}
 
 
 def test_a_subject_emulator_has_no_geometry_to_infer():
@@ -243,8 +283,13 @@ def test_my_subject_page_no_mesh_route():
     at.button(key="my_run").click().run(timeout=300)
     assert not at.exception and not at.error, [e.value for e in at.error]
     summary = at.session_state["my_subject_run"].result["summary"]
-    assert summary["geometry"] == {"kind": "inferred", "source": "infer", "measures": {"reference_volume_ml": 110.0},
-                                   "measure_sd": {"reference_volume_ml": MEASURE_SD["reference_volume_ml"]}}
+    geo = summary["geometry"]
+    assert {k: geo[k] for k in ("kind", "source", "measures", "measure_sd", "measure_sd_source")} == {
+        "kind": "inferred", "source": "infer", "measures": {"reference_volume_ml": 110.0},
+        "measure_sd": {"reference_volume_ml": MEASURE_SD["reference_volume_ml"]},
+        "measure_sd_source": {"reference_volume_ml": "default"}}
+    assert geo["representation_error"]["mode"] == "floor"   # the CLI's default, shown on the page
+    assert geo["likelihood_sd"]["reference_volume_ml"] > MEASURE_SD["reference_volume_ml"]
     assert any("Inferred geometry" in m.value for m in at.markdown)
     assert any("quantity" in d.value.columns for d in at.dataframe)
     assert "iid_geometry" in at.session_state["my_subject_run"].result["figures"]

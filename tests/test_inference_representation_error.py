@@ -148,3 +148,71 @@ def test_a_shape_model_shape_has_no_representation_error_and_a_cohort_shape_has(
     _, vols = load_cohort().select(ROLE_VOLUNTEER)
     rec = mod.one_case(vols[0], model, 5, theta, tmp_path)
     assert np.sqrt(np.mean(np.square(rec["strain_delta"]))) > 1e-3
+
+
+def test_a_mesh_gets_the_floor_and_pc_scores_do_not():
+    """--geometry FILE: a template or volume mesh is seen through its 5-mode projection, so its forward model
+    carries the floor (same outputs, capabilities and likelihood variances as infer mode); PC scores, the mean
+    shape and --representation-error off get none."""
+    import jax.numpy as jnp
+    from numpyro.infer.util import log_density
+    from scipy.stats import multivariate_normal, norm
+
+    from lvcore.emulator import load_emulator
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.geometry.scaling import ScaledForward
+    from lvcore.inference import verdict
+    from lvcore.inference.models import iid_model, representation_error
+    from lvcore.inference.representation_error import FlooredForward, MESH_KINDS, given_geometry_floor
+
+    rep = _rep()
+    h = np.array([0.3, -0.2, 0.1, 0.0, 0.4])
+    base = ScaledForward(emulator_forward(load_emulator("chapter"), h), 1.1)
+    for kind in MESH_KINDS:
+        fw, rec = given_geometry_floor(base, kind, "floor", 5, representation=rep)
+        assert isinstance(fw, FlooredForward) and representation_error(fw) is rep
+        assert rec["mode"] == "floor" and rec["n_cases"] == rep.n_cases
+    for kind, mode in (("scores", "floor"), ("mean", "floor"), ("template-mesh", "off")):
+        fw0, rec0 = given_geometry_floor(base, kind, mode, 5, representation=rep)
+        assert fw0 is base and rec0 is None and representation_error(fw0) is None
+    with pytest.raises(ValueError, match="floor.*off"):
+        given_geometry_floor(base, "template-mesh", "on")
+    fw, _ = given_geometry_floor(base, "volume-mesh", "floor", 5, representation=rep)
+    theta = {"a": 0.5, "b": 3.0, "af": 1.5, "bf": 5.0}
+    np.testing.assert_array_equal(np.asarray(fw(theta)), np.asarray(base(theta)))
+    assert fw.input_names == base.input_names and fw.scale == 1.1 and hasattr(fw, "apply") == hasattr(base, "apply")
+    # the iid likelihood of a mesh with the floor: MVN(eta, sigma_S^2 I + Sigma_rep), LVV sd with r_V
+    eta = np.asarray(base(theta))
+    y = eta + np.r_[6.0, np.full(24, 0.01)]
+    p = {**theta, "sigma_s2": 0.03 ** 2}
+    got = float(log_density(iid_model, (jnp.asarray(y),), {"forward": fw}, p)[0])
+    plain = float(log_density(iid_model, (jnp.asarray(y),), {"forward": base}, p)[0])
+    want = (norm(eta[0], np.hypot(5.0, rep.lvv_rel_sd * eta[0])).logpdf(y[0]) - norm(eta[0], 5.0).logpdf(y[0])
+            + multivariate_normal(eta[1:], 0.03 ** 2 * np.eye(24) + rep.strain_cov).logpdf(y[1:])
+            - norm(eta[1:], 0.03).logpdf(y[1:]).sum())
+    assert got - plain == pytest.approx(want, rel=1e-8)
+    # and the verdict's consistency p-values use the same variances
+    sd = verdict.output_sds(eta, 5.0, 0.035, fw)
+    assert sd[0] == pytest.approx(np.hypot(5.0, rep.lvv_rel_sd * eta[0]))
+    np.testing.assert_allclose(sd[1:], np.sqrt(0.035 ** 2 + np.diag(rep.strain_cov)))
+
+
+def test_calibrate_with_a_mesh_records_the_floor(tmp_path):
+    """lvcore calibrate --geometry MESH: summary.json's geometry.representation_error is the floor's record;
+    --representation-error off records None."""
+    from lvcore.cli import main
+    from lvcore.resources import asset_path
+
+    mesh = asset_path("volunteers", "SYNTHETIC_HV1_geometry.vtu")
+    data = asset_path("volunteers", "SYNTHETIC_HV1_measured.csv")
+    for mode in ("floor", "off"):
+        out = tmp_path / mode
+        rc = main(["calibrate", "--data", str(data), "--geometry", str(mesh), "--representation-error", mode,
+                   "--model", "iid", "--chains", "1", "--warmup", "60", "--samples", "40", "--out", str(out), "--json"])
+        assert rc in (0, 1, 4)
+        rec = json.loads((out / "summary.json").read_text())[0]["geometry"]
+        assert rec["kind"] == "template-mesh"
+        if mode == "floor":
+            assert rec["representation_error"]["mode"] == "floor" and rec["representation_error"]["n_cases"] >= 30
+        else:
+            assert rec["representation_error"] is None

@@ -44,3 +44,27 @@ def test_cli_json(capsys):
     assert main(["study", "geometry-operators", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out["share_beating_both"]) == {"5", "6", "7", "8", "9", "10"}
+
+
+def test_geometry_effect_size_normalises_like_calibrate():
+    """Fig 9.10 feeds the emulator the size-normalised scores (as ``lvcore calibrate``): a patient's geometry
+    scaled by 1.3 about the long axis' base point has the same scores and strains, and 1.3^3 times the LVV."""
+    from lvcore.geometry.cohort import load_operator_geometries
+    from lvcore.geometry.scaling import size_normalised_scores
+    from lvcore.geometry.template import DEFAULT_TEMPLATE
+    from lvcore.studies.geometry_operators import geometry_effect
+
+    og = load_operator_geometries()
+    x = og.nodes[0, 0]
+    c = np.r_[0.0, 0.0, np.mean(x[DEFAULT_TEMPLATE.base_nodes, 2])]   # about the long axis at the base plane
+    big = c + 1.3 * (x - c)
+    two = OperatorGeometries(patients=("p", "p_big"), operators=og.operators[:1],
+                             nodes=np.stack([[x], [big]]), fits={}, meta={})
+    ge = geometry_effect(operator_geometries=two)
+    r0, r1 = ge["rows"]
+    sc = size_normalised_scores(x, 5)
+    assert np.allclose([r0[f"h{i + 1}"] for i in range(5)], sc.h) and np.isclose(r0["scale"], sc.scale)
+    assert np.allclose([r1[f"h{i + 1}"] for i in range(5)], sc.h, atol=1e-8)
+    assert np.isclose(r1["scale"], 1.3 * sc.scale, rtol=1e-9)
+    assert np.isclose(r1["lvv_ml"], 1.3 ** 3 * r0["lvv_ml"], rtol=1e-9)
+    assert np.allclose([r1[f"strain_{k:02d}"] for k in range(1, 25)], [r0[f"strain_{k:02d}"] for k in range(1, 25)])

@@ -168,6 +168,11 @@ class Prepared:
     warnings: list = field(default_factory=list)
     #: The measured geometric measures of an inferred geometry (the no-mesh route), None for a given geometry.
     measures: dict | None = None
+    #: Where each measure sd given to an inferred geometry came from (:func:`inferred_measure_sds`).
+    measure_sd_source: dict | None = None
+    #: The representation-error floor's record of a given mesh (``lvcore calibrate``'s
+    #: ``geometry.representation_error``), None without one (:func:`prepare`).
+    representation_error: dict | None = None
 
     @property
     def extrapolating(self) -> bool:
@@ -190,8 +195,13 @@ def _conditions(emulator, edp_mmhg):
     return guards.check_conditions(emulator, edp_mmhg, None, None, infer_angles=False)
 
 
-def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = None) -> Prepared:
+def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = None,
+            representation_error: str = "floor") -> Prepared:
     """Bind ``geometry`` and the EDP into ``emulator``, with the CLI's condition and box checks.
+
+    A mesh (a template or volume mesh) is seen through its 5-mode projection and gets the shape model's
+    representation-error floor, as ``lvcore calibrate --geometry MESH`` (``representation_error`` "floor",
+    the default, or "off"; :func:`lvcore.inference.representation_error.given_geometry_floor`).
 
     Scores outside the training box do not stop the flow (the CLI refuses them without
     ``--allow-extrapolation``); they come back as warnings and :attr:`Prepared.extrapolating`.
@@ -215,8 +225,14 @@ def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = 
     forward = ScaledForward(emulator_forward(emulator, h, name=emulator_name,
                                              alpha_endo=cond["alpha_endo"], alpha_epi=cond["alpha_epi"],
                                              edp_mmhg=cond["edp_mmhg"]), scale)
+    floor = None
+    if not bound:   # a mesh is seen through its projection: the CLI's representation-error floor
+        from lvcore.inference.representation_error import given_geometry_floor
+
+        forward, floor = given_geometry_floor(forward, geometry.kind, representation_error, len(h))
     geometry_warnings = list(subject_emulator_geometry(emulator).warnings) if bound else list(geometry.warnings)
-    return Prepared(forward, emulator_name, cond, list(box), geometry_warnings + list(extrapolation))
+    return Prepared(forward, emulator_name, cond, list(box), geometry_warnings + list(extrapolation),
+                    representation_error=floor)
 
 
 def subject_emulator_geometry(emulator):
@@ -250,18 +266,51 @@ class InferredGeometry:
     ----------
     measures : dict
         Measured ``reference_volume_ml``, ``wall_volume_ml`` (mL) and ``long_axis_mm`` (mm); any subset.
+    measure_sd : dict
+        Each measure's standard deviation (mL, mm; default
+        :data:`lvcore.inference.geometry_prior.MEASURE_SD`).
+    measure_sd_source : dict
+        Where each sd came from: ``"default"``, ``"entered"`` (the page's field) or ``"data column <name>_sd"``.
+    likelihood_sd : dict
+        The sd the likelihood used: ``measure_sd`` widened by the shape model's representation error.
+    representation_error : dict or None
+        The representation-error floor's record (``mode`` "floor" and
+        :meth:`lvcore.inference.representation_error.RepresentationError.record`), None without a floor.
+
+    :meth:`of` builds it from :func:`prepare_inferred`'s result; :meth:`record`
+    is ``lvcore calibrate --geometry infer``'s geometry record.
     """
 
     measures: dict
     kind: str = "inferred"
     source: str = "infer"
+    measure_sd: dict | None = None
+    measure_sd_source: dict | None = None
+    likelihood_sd: dict | None = None
+    representation_error: dict | None = None
+
+    @classmethod
+    def of(cls, prepared: "Prepared") -> "InferredGeometry":
+        """The geometry record of an inferred :class:`Prepared` (its forward model's sds and floor)."""
+        if not prepared.inferred:
+            raise ValueError("not an inferred geometry: prepare it with prepare_inferred")
+        fw = prepared.forward
+        rep = getattr(fw, "representation", None)
+        return cls(dict(prepared.measures), measure_sd=dict(fw.measure_sds),
+                   measure_sd_source=dict(prepared.measure_sd_source or {}),
+                   likelihood_sd=dict(fw.likelihood_sds),
+                   representation_error=None if rep is None else {"mode": "floor", **rep.record()})
 
     def record(self) -> dict:
         """The CLI's geometry record of ``--geometry infer``."""
         from lvcore.inference.geometry_prior import MEASURE_SD
 
+        sd = self.measure_sd if self.measure_sd is not None else {k: MEASURE_SD[k] for k in self.measures}
         return {"kind": self.kind, "source": self.source, "measures": dict(self.measures),
-                "measure_sd": {k: MEASURE_SD[k] for k in self.measures}}
+                "measure_sd": dict(sd),
+                "measure_sd_source": {k: (self.measure_sd_source or {}).get(k, "default") for k in self.measures},
+                "likelihood_sd": dict(self.likelihood_sd if self.likelihood_sd is not None else sd),
+                "representation_error": self.representation_error}
 
 
 def inferred_measures(entered: Mapping[str, float | None], data_measures: Mapping[str, float] | None = None) -> dict:
@@ -302,12 +351,64 @@ def inferred_measures(entered: Mapping[str, float | None], data_measures: Mappin
     return out
 
 
+def inferred_measure_sds(entered: Mapping[str, float | None], data_sds: Mapping[str, float] | None = None,
+                         measures: Mapping[str, float] | None = None) -> tuple[dict, dict]:
+    """The measures' standard deviations of the no-mesh route, as ``--reference-volume-sd`` etc. and the data's
+    ``*_sd`` columns: those entered (0 or None: the default) and the data's, which must agree.
+
+    Returns
+    -------
+    sds : dict
+        Measure name -> sd (mL, mm), only those given (the rest take
+        :data:`lvcore.inference.geometry_prior.MEASURE_SD`).
+    sources : dict
+        Measure name -> ``"entered"`` or ``"data column <name>_sd"``.
+
+    Raises
+    ------
+    lvcore.exceptions.DataError
+        An sd outside its range (naming the field and the range), an entered sd that disagrees with the data's
+        column, or an sd for a measure that is not given.
+    """
+    from lvcore.inference.geometry_prior import MEASURE_SD_COLUMNS, MEASURE_SD_RANGES, check_measure_sds
+
+    given = {k: (None if v is None or float(v) == 0.0 else float(v)) for k, v in dict(entered).items()}
+    for name, value in given.items():
+        if name not in MEASURE_SD_RANGES:
+            raise DataError(f"unknown geometric measure '{name}'")
+        lo, hi = MEASURE_SD_RANGES[name]
+        unit = {"ml": "mL", "mm": "mm"}[name.rsplit("_", 1)[-1]]
+        if value is not None and not (np.isfinite(value) and lo <= value <= hi):
+            raise DataError(f"SD of '{MEASURE_LABELS[name]}' = {value:g} is outside {lo:g}-{hi:g} {unit}; enter the "
+                            f"measurement's standard deviation in {unit}, or 0 for the default")
+    out = check_measure_sds(data_sds or {}, "the measurements file's geometric columns", by="column")
+    sources = {k: f"data column {MEASURE_SD_COLUMNS[k]}" for k in out}
+    for name, value in given.items():
+        if value is None:
+            continue
+        if name in out and abs(out[name] - value) > 1e-9:
+            raise DataError(f"SD of '{MEASURE_LABELS[name]}' {value:g} and the measurements file's "
+                            f"{MEASURE_SD_COLUMNS[name]} {out[name]:g} disagree; enter 0 to use the file's value")
+        out[name], sources[name] = value, "entered"
+    have = set(measures or {})
+    for name in out:
+        if name not in have:
+            raise DataError(f"an SD is given for '{MEASURE_LABELS[name]}' ({sources[name]}) but not the measure "
+                            "itself; enter the measure too, or drop the SD")
+    return out, sources
+
+
 def prepare_inferred(emulator, emulator_name: str, measures: Mapping[str, float], *,
-                     edp_mmhg: float | None = None) -> Prepared:
+                     edp_mmhg: float | None = None, measure_sd: Mapping[str, float] | None = None,
+                     measure_sd_source: Mapping[str, str] | None = None,
+                     representation_error: str = "floor") -> Prepared:
     """The forward model of the no-mesh route: ``lvcore calibrate --geometry infer`` for one subject.
 
     The emulator with the conditions bound in and its PC scores and a scale sampled with θ
-    (:func:`lvcore.inference.geometry_prior.inferred_geometry_forward`), the measures observed; the conditions
+    (:func:`lvcore.inference.geometry_prior.inferred_geometry_forward`), the measures observed with
+    ``measure_sd`` (default :data:`lvcore.inference.geometry_prior.MEASURE_SD`; ``measure_sd_source`` says
+    where each came from, :func:`inferred_measure_sds`); ``representation_error`` "floor" (the CLI's default)
+    adds the shape model's representation error to the likelihood, "off" leaves it out; the conditions
     checked against the emulator's box; :data:`NO_MEASURE_WARNING` when no measure is given.
 
     Raises
@@ -323,17 +424,23 @@ def prepare_inferred(emulator, emulator_name: str, measures: Mapping[str, float]
 
         raise EmulatorError(f"the '{emulator_name}' emulator is subject-specific: its geometry is bound in, so there "
                             "is none to infer; choose a shape-model emulator (e.g. 'chapter') for the no-mesh route")
+    if representation_error not in ("floor", "off"):
+        raise ValueError(f"representation_error must be 'floor' or 'off', got {representation_error!r}")
     cond = _conditions(emulator, edp_mmhg)
     measures = geometry_prior.check_measures(measures)
+    sds = geometry_prior.check_measure_sds(measure_sd or {})
     forward = geometry_prior.inferred_geometry_forward(emulator, name=emulator_name, measures=measures,
                                                        alpha_endo=cond["alpha_endo"], alpha_epi=cond["alpha_epi"],
-                                                       edp_mmhg=cond["edp_mmhg"])
+                                                       edp_mmhg=cond["edp_mmhg"], measure_sd=sds,
+                                                       representation="bundled" if representation_error == "floor"
+                                                       else None)
     n_pc = len(forward.pc_names)
     fixed = {k: v for k, v in guards.fixed_inputs(np.zeros(n_pc), cond, emulator, False).items() if not is_pc_name(k)}
     box, extrapolation = guards.check_inputs_in_box(fixed, emulator, allow_extrapolation=True,
                                                     what="the conditions")
     warnings = list(extrapolation) + ([] if measures else [NO_MEASURE_WARNING])
-    return Prepared(forward, emulator_name, cond, list(box), warnings, measures=dict(measures))
+    return Prepared(forward, emulator_name, cond, list(box), warnings, measures=dict(measures),
+                    measure_sd_source={k: (measure_sd_source or {}).get(k, "entered") for k in sds})
 
 
 def geometry_posterior(run: "ModelRun", prepared: Prepared) -> dict:
@@ -461,6 +568,15 @@ def bound_flags(run: ModelRun, prepared: Prepared) -> list:
     return list(verdict.identifiability_flags({n: np.asarray(post[n]) for n in bounds if n in post}, bounds)[0])
 
 
+def _geometry_record(geometry, prepared: Prepared) -> dict:
+    """``lvcore calibrate``'s geometry record: a given geometry's (with its representation-error floor, or None)
+    or an inferred one's (:meth:`InferredGeometry.record`)."""
+    rec = geometry.record()
+    if not prepared.inferred:
+        rec["representation_error"] = prepared.representation_error
+    return rec
+
+
 def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence[ModelRun],
                    settings: Mapping) -> dict:
     """Plain-data summary of a subject's run: inputs used, geometry, conditions, per-likelihood results and flags."""
@@ -484,7 +600,7 @@ def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence
     return {
         "subject": subject, "synthetic": str(subject).upper().startswith("SYNTHETIC"),
         "measured": {"lvv_ml": float(y[0]), "strains": [float(v) for v in np.asarray(y)[1:]]},
-        "geometry": geometry.record(), "emulator": prepared.emulator_name,
+        "geometry": _geometry_record(geometry, prepared), "emulator": prepared.emulator_name,
         "conditions": {k: v for k, v in prepared.conditions.items() if k != "fixed"},
         "box": prepared.box, "warnings": list(prepared.warnings), "settings": dict(settings),
         "models": models, "flagged_models": flagged,

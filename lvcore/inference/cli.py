@@ -81,11 +81,11 @@ def register(subparsers) -> None:
                    help="with --geometry infer: standard deviation of --long-axis in mm, 0.2-30; also a data column "
                         "long_axis_mm_sd (default 3)")
     p.add_argument("--representation-error", choices=("floor", "off"), default="floor",
-                   help="with --geometry infer: 'floor' adds the shape model's representation error (how far a real "
-                        "LV is from its 5-mode reconstruction, estimated from the SYNTHETIC cohort by "
+                   help="with --geometry infer or a mesh: 'floor' adds the shape model's representation error (how "
+                        "far a real LV is from its 5-mode reconstruction, estimated from the SYNTHETIC cohort by "
                         "scripts/build_representation_error.py) to the variance of the strains, the LVV and the "
                         "geometric measures; 'off' leaves it out, as for a subject that is a shape-model shape "
-                        "(default floor)")
+                        "(default floor; PC scores and the mean shape never get one)")
     p.add_argument("--volunteer", default=None, metavar="NAME",
                    help="a bundled SYNTHETIC volunteer (e.g. SYNTHETIC_HV1) instead of --data and --geometry "
                         "(default: none)")
@@ -201,6 +201,7 @@ def run_calibrate(args) -> int:
     from lvcore.inference.data import read_measurements
     from lvcore.inference.models import MODEL_NAMES
     from lvcore.inference.samplers import SamplerConfig
+    from lvcore.inference.representation_error import given_geometry_floor
     from lvcore.outputs import is_pc_name
 
     infer = args.angles == "infer"
@@ -304,7 +305,9 @@ def run_calibrate(args) -> int:
             forward = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
                                                      alpha_endo=c["alpha_endo"], alpha_epi=c["alpha_epi"],
                                                      edp_mmhg=c["edp_mmhg"]), geo.scale)
-            georec = geo.record()
+            # a mesh is seen through its 5-mode projection: the same representation-error floor as infer mode
+            forward, floor = given_geometry_floor(forward, geo.kind, args.representation_error, n_pc)
+            georec = {**geo.record(), "representation_error": floor}
         by_subject[r.subject] = (r, forward, c, box, w + extrap, georec)
     for w in dict.fromkeys(w for v in by_subject.values() for w in v[4]):
         print(f"lvcore: warning: {w}", file=sys.stderr)

@@ -37,12 +37,24 @@ standard deviations (root mean squares). The models of
 
 The asset is SYNTHETIC (a SYNTHETIC cohort and shape model), bundled as
 ``assets/shape_model/SYNTHETIC_representation_error_<k>pc.json``.
+
+**With a mesh** (``--geometry FILE``, a template or volume mesh) the
+emulator runs at the mesh's size-normalised ``k``-mode projection: the same
+reconstruction, at a known ``(h, s)``, so the same error applies (the
+strains and the LVV; there are no geometric measures to widen).
+:func:`given_geometry_floor` wraps that forward model
+(:class:`FlooredForward`) so the models and the verdict use the same
+variances as in infer mode. PC scores (``--geometry scores.json``), the
+mean shape and a subject emulator get no floor: the first two are shape-model
+shapes by construction (the mean shape warns that the subject's is not), the
+last has the subject's own geometry bound in.
 """
 from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -195,5 +207,74 @@ def load_representation_error(n_pc: int = 5, path=None) -> RepresentationError:
                                n_cases=int(st["n_cases"]), source=f"{p.name} ({meta.get('label', '')})")
 
 
-__all__ = ["FORMAT", "MEASURE_KEYS", "asset_file", "RepresentationError", "representation_error_stats",
-           "load_representation_error"]
+#: Geometry kinds (:class:`lvcore.inference.guards.GeometrySource`) that are a subject's mesh seen through its
+#: k-mode projection, and so carry the shape model's representation error.
+MESH_KINDS = ("template-mesh", "volume-mesh")
+
+
+@dataclass(frozen=True, eq=False)
+class FlooredForward:
+    """A forward model that carries a :class:`RepresentationError` (``representation``).
+
+    Outputs, inputs, bounds and capabilities (``jacobian``, ``apply``, ``evaluate``) are the wrapped
+    model's, unchanged; the likelihoods of :mod:`lvcore.inference.models` and the verdict read
+    ``representation`` and widen their variances by it, as for ``--geometry infer``.
+    """
+
+    forward: Any
+    representation: RepresentationError
+
+    @property
+    def input_names(self) -> tuple:
+        return tuple(self.forward.input_names)
+
+    @property
+    def input_bounds(self):
+        return self.forward.input_bounds
+
+    @property
+    def label(self) -> str:
+        return getattr(self.forward, "label", type(self.forward).__name__)
+
+    def __getattr__(self, name):
+        if name in ("forward", "representation"):
+            raise AttributeError(name)
+        return getattr(self.forward, name)   # jacobian / apply / evaluate / scale / emulator ... as wrapped
+
+    def __call__(self, params):
+        return self.forward(params)
+
+
+def given_geometry_floor(forward, kind: str, mode: str = "floor", n_pc: int = 5, representation=None):
+    """The representation-error floor of a given geometry (``--geometry FILE``; module docstring).
+
+    Parameters
+    ----------
+    forward : Forward
+        The emulator at the geometry's scores and scale (a :class:`lvcore.geometry.scaling.ScaledForward`).
+    kind : str
+        The geometry's kind: a floor only for :data:`MESH_KINDS`.
+    mode : {"floor", "off"}
+        ``--representation-error``.
+    n_pc : int
+        Modes of the emulator's shape space (selects the bundled asset).
+    representation : RepresentationError, optional
+        Default :func:`load_representation_error` of ``n_pc``.
+
+    Returns
+    -------
+    forward : Forward
+        ``forward`` itself, or a :class:`FlooredForward` around it.
+    record : dict or None
+        ``{"mode": "floor", **representation.record()}`` when floored, else None.
+    """
+    if mode not in ("floor", "off"):
+        raise ValueError(f"--representation-error must be 'floor' or 'off', got {mode!r}")
+    if mode == "off" or kind not in MESH_KINDS:
+        return forward, None
+    rep = load_representation_error(n_pc) if representation is None else representation
+    return FlooredForward(forward, rep), {"mode": "floor", **rep.record()}
+
+
+__all__ = ["FORMAT", "MEASURE_KEYS", "MESH_KINDS", "asset_file", "RepresentationError", "representation_error_stats",
+           "load_representation_error", "FlooredForward", "given_geometry_floor"]

@@ -262,7 +262,7 @@ def posterior_misfit(result, forward=None, seed: int = 0) -> tuple[dict, list[st
     mean (``eta``, plus the discrepancy ``disc`` and offset ``v`` of model
     (iii)), whitened by the likelihood's own strain covariance at the
     posterior median ``sigma_S^2`` (``sigma_S^2 I``, plus the shape model's
-    representation error ``Sigma_rep`` with ``--geometry infer``; symmetric
+    representation error ``Sigma_rep`` with ``--geometry infer`` or a mesh; symmetric
     square root, so each value stays at its region). The likelihood says
     these are independent; a significant spatial structure (Moran's I on the
     6 x 4 grid, permutation p < :data:`ALPHA`, :func:`residual_structure`)
@@ -309,8 +309,8 @@ def posterior_misfit(result, forward=None, seed: int = 0) -> tuple[dict, list[st
                      f"{out['whitened_by']}) are spatially structured (Moran's I {moran_i:.2f}, p = {p:.2g}): the model "
                      "misses a pattern in the data that its noise model treats as independent, so the intervals may "
                      "be too narrow and biased (a shape the shape model does not reach, a geometry that is not the "
-                     "subject's, other mechanics)" + ("; give the subject's mesh (--geometry FILE)" if rep is not None
-                                                      else ""))
+                     "subject's, other mechanics)" + ("; give the subject's mesh (--geometry FILE)"
+                                                      if getattr(forward, "latent_names", None) else ""))
     return out, flags
 
 

@@ -126,7 +126,15 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
                     operator_geometries=None, shape_model=None) -> dict | None:
     """Fig 9.10's data: the emulator at one θ on each patient's geometry (first operator, 5-PC projection).
 
-    Returns ``{"operator", "theta", "emulator", "rows": [{patient, operator, h1..h5, lvv_ml,
+    Each geometry is size-normalised as ``lvcore calibrate`` does
+    (:func:`lvcore.geometry.scaling.size_normalised_scores`): ``h`` is the
+    projection of the geometry scaled to the shape model's mean reference
+    cavity, ``scale`` the factor back to the patient's size, and the emulated
+    LVV is multiplied by ``scale**3`` (:class:`lvcore.geometry.scaling.ScaledForward`;
+    strains do not change with size). The emulator is then evaluated inside
+    the box its scores were trained on, whatever the patient's size.
+
+    Returns ``{"operator", "theta", "emulator", "rows": [{patient, operator, h1..h5, scale, lvv_ml,
     strain_01..strain_24}]}``, or None when the emulator is not installed.
     """
     from lvcore import conditions, units
@@ -136,6 +144,7 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
         return None
     from lvcore.emulator.forward import load_emulator_forward
     from lvcore.geometry.cohort import load_operator_geometries
+    from lvcore.geometry.scaling import ScaledForward, size_normalised_scores
     from lvcore.geometry.shape_model import load_shape_model
 
     og = operator_geometries or load_operator_geometries()
@@ -144,10 +153,11 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
     op = og.operators[0]
     rows = []
     for p, pid in enumerate(og.patients):
-        h = np.asarray(sm.project(og.nodes[p, 0]), dtype=float)[:5]
-        y = np.asarray(load_emulator_forward(emulator, h)(theta), dtype=float)
-        rows.append({"patient": pid, "operator": op, **{f"h{i + 1}": float(v) for i, v in enumerate(h)},
-                     "lvv_ml": float(y[0]), **{f"strain_{k + 1:02d}": float(y[1 + k]) for k in range(24)}})
+        sc = size_normalised_scores(og.nodes[p, 0], 5, sm)
+        y = np.asarray(ScaledForward(load_emulator_forward(emulator, sc.h), sc.scale)(theta), dtype=float)
+        rows.append({"patient": pid, "operator": op, **{f"h{i + 1}": float(v) for i, v in enumerate(sc.h)},
+                     "scale": float(sc.scale), "lvv_ml": float(y[0]),
+                     **{f"strain_{k + 1:02d}": float(y[1 + k]) for k in range(24)}})
     return {"operator": op, "theta": theta, "emulator": emulator, "rows": rows}
 
 
