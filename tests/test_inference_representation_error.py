@@ -191,6 +191,14 @@ def test_a_mesh_gets_the_floor_and_pc_scores_do_not():
             + multivariate_normal(eta[1:], 0.03 ** 2 * np.eye(24) + rep.strain_cov).logpdf(y[1:])
             - norm(eta[1:], 0.03).logpdf(y[1:]).sum())
     assert got - plain == pytest.approx(want, rel=1e-8)
+    # the samplers pass the mesh's scores and scale at run time (one compiled program for every subject) and
+    # keep the floor: the bound forward model gives the same log density
+    from lvcore.inference.samplers import runtime_conditions
+
+    template, values = runtime_conditions(fw)
+    assert values is not None and template.representation is rep
+    bound = template.bind(values)
+    assert float(log_density(iid_model, (jnp.asarray(y),), {"forward": bound}, p)[0]) == pytest.approx(got, rel=1e-10)
     # and the verdict's consistency p-values use the same variances
     sd = verdict.output_sds(eta, 5.0, 0.035, fw)
     assert sd[0] == pytest.approx(np.hypot(5.0, rep.lvv_rel_sd * eta[0]))

@@ -240,6 +240,9 @@ class ConditionedForward:
 
     def __init__(self, forward, inner, keys: tuple[str, ...], scaled: bool):
         self.forward, self._inner, self._keys, self._scaled = forward, inner, tuple(keys), bool(scaled)
+        # the shape model's representation error a mesh's forward model carries (a constant of the model,
+        # the same for every subject: lvcore.inference.representation_error.FlooredForward), or None
+        self.representation = getattr(forward, "representation", None)
         self.input_names = tuple(forward.input_names)
         self.label = getattr(forward, "label", type(forward).__name__)
         self.traceable = True
@@ -259,6 +262,7 @@ class _BoundConditions:
     def __init__(self, template: ConditionedForward, values):
         self._t, self._v = template, values
         self.input_names, self.label, self.traceable = template.input_names, template.label, True
+        self.representation = template.representation
 
     @property
     def input_bounds(self):
@@ -283,15 +287,20 @@ def runtime_conditions(forward):
 
     Recognised: :class:`lvcore.emulator.forward.EmulatorForward` and a
     :class:`lvcore.geometry.scaling.ScaledForward` around one (the scale
-    becomes a value too). Any other forward model is returned unchanged,
-    its constants compiled in as before.
+    becomes a value too), either possibly inside a
+    :class:`lvcore.inference.representation_error.FlooredForward` (a mesh's
+    representation-error floor, carried by the template). Any other forward
+    model is returned unchanged, its constants compiled in as before.
     """
     from lvcore.emulator.forward import EmulatorForward
     from lvcore.geometry.scaling import ScaledForward
+    from lvcore.inference.representation_error import FlooredForward
 
     inner, scale = forward, None
-    if type(forward) is ScaledForward:
-        inner, scale = forward.forward, float(forward.scale)
+    if type(inner) is FlooredForward:
+        inner = inner.forward
+    if type(inner) is ScaledForward:
+        inner, scale = inner.forward, float(inner.scale)
     if type(inner) is not EmulatorForward:
         return forward, None
     keys = tuple(sorted(inner.conditions))
