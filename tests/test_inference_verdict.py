@@ -129,3 +129,37 @@ def test_posterior_misfit_flags_structured_residuals_the_likelihood_calls_indepe
     assert flags == [] and structure["whitened_by"].endswith("representation error")
     v = verdict.Verdict(verdict.Consistency({}, np.zeros(25), np.ones(25)), misfit=("x",))
     assert v.plausible and v.flagged and v.flags == ["MISFIT: x"]
+
+
+def test_weak_identification_flag_is_one_rule_for_every_model():
+    """a's q95/q05 >= 20 ("not informative enough", docs/reliability.md) flags a run whichever model produced
+    the posterior: run_verdict gives the same IDENTIFIABILITY flags for the same draws of a volume, iid or
+    discrepancy run, and just below the threshold none of them is flagged."""
+    from types import SimpleNamespace
+
+    import arviz as az
+
+    from lvcore.inference.diagnostics import Convergence
+
+    bounds = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
+    rng = np.random.default_rng(7)
+
+    def run(model, a_lo, a_hi):
+        # log-uniform draws of a spanning q05..q95 = a_lo..a_hi; b, af, bf well identified
+        u = rng.uniform(size=(2, 2000))
+        la, lb = np.log(a_lo), np.log(a_hi)
+        a = np.exp(la + (lb - la) * (u - 0.05) / 0.9)
+        post = {"a": a, "b": rng.lognormal(np.log(3.0), 0.1, (2, 2000)),
+                "af": rng.lognormal(np.log(1.5), 0.1, (2, 2000)), "bf": rng.lognormal(np.log(5.0), 0.1, (2, 2000))}
+        res = SimpleNamespace(model=model, idata=az.from_dict(posterior=post),
+                              convergence=Convergence(True, 1.0, 1000.0, 1000.0, 0, ()))
+        return verdict.run_verdict(res, verdict.Consistency({}, np.zeros(25), np.ones(25)), bounds)
+
+    for lo, hi, flagged in ((0.1, 2.5, True), (0.1, 1.9, False)):   # factors 25 and 19
+        seen = {}
+        for model in ("volume", "iid", "discrepancy"):
+            rng = np.random.default_rng(7)   # the same draws for every model
+            v = run(model, lo, hi)
+            seen[model] = [f for f in v.flags if f.startswith("IDENTIFIABILITY")]
+        assert seen["volume"] == seen["iid"] == seen["discrepancy"], seen
+        assert any("spans a factor" in f for f in seen["iid"]) == flagged, seen
