@@ -101,6 +101,10 @@ def parse_args(argv=None):
     p.add_argument("--n-test", type=int, default=1_000, help="held-out test simulations (default %(default)s)")
     p.add_argument("--seed", type=int, default=2026, help="design seed S (training S, validation S+1, test S+2)")
     p.add_argument("--resolution", choices=("fast", "default"), default=SPEC["resolution"])
+    p.add_argument("--base", choices=("space", "sliding", "clamped"), default="space",
+                   help="LV base condition of the campaigns: the space's own (default; chapter sliding, angles "
+                        "clamped) or one for every emulator built (recorded in the designs and stores); "
+                        "issue 24 asks for the angles emulator with the sliding base")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=int, default=None,
                    help="local worker processes for the campaigns and the architecture search (default one per core)")
@@ -151,6 +155,10 @@ def build_one(name: str, args) -> Path | None:
 
     if "design" in args.steps:
         space = get_space(space_name)
+        if getattr(args, "base", "space") != "space" and space.base != args.base:
+            import dataclasses
+
+            space = dataclasses.replace(space, base=args.base)
         for k, (method, n, seed) in sets.items():
             design_path = paths[k][0]
             if design_path.exists():
