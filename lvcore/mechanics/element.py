@@ -21,9 +21,10 @@ pressure increment is condensed per element:
     dp = κ M⁻¹ (r_p + D du),  D_{m,ai} = Σ_q w_q P_{qm} (cof F_q)_{iJ} ∂N_a/∂X_J,
     (K_uu + κ Dᵀ M⁻¹ D) du = −(r_u + κ Dᵀ M⁻¹ r_p),
 
-with ``K_uu = Σ_q w_q ∇Nᵀ (∂²W/∂F² + p_q ∂²J/∂F²) ∇N``. The 9x9 pointwise
-tangent comes from automatic differentiation of the energy density in F
-only (cheap) followed by this explicit chain rule.
+with ``K_uu = Σ_q w_q ∇Nᵀ (∂²W/∂F² + p_q ∂²J/∂F²) ∇N``. The pointwise stress
+and 9x9 tangent come from the model (:meth:`~lvcore.mechanics.materials.ConstitutiveModel.first_piola_tangent`:
+in closed form for the Holzapfel-Ogden law, else automatic differentiation of the
+energy density in F), followed by this explicit chain rule.
 """
 from __future__ import annotations
 
@@ -52,7 +53,7 @@ def element_residual(x_e, p_e, dNdX, wdet, frames, Minv, P, model):
     F = deformation_gradient(x_e, dNdX)
     J = det3(F)
     pq = P @ p_e
-    Pst = jax.vmap(jax.grad(model.psi))(F, frames, pq)
+    Pst = jax.vmap(model.first_piola)(F, frames, pq)
     r_u = jnp.einsum("q,qiJ,qaJ->ai", wdet, Pst, dNdX)
     r_p = P.T @ (wdet * (J - 1.0)) - jnp.linalg.solve(Minv, p_e) / kappa
     w = jax.vmap(model.material.strain_energy)(F, frames)
@@ -71,9 +72,7 @@ def element_tangent(x_e, p_e, dNdX, wdet, frames, Minv, P, model):
     F = deformation_gradient(x_e, dNdX)
     J = det3(F)
     pq = P @ p_e
-    psi = model.psi
-    Pst = jax.vmap(jax.grad(psi))(F, frames, pq)  # (q, 3, 3)
-    A = jax.vmap(jax.hessian(psi))(F, frames, pq)  # (q, 3, 3, 3, 3)
+    Pst, A = jax.vmap(model.first_piola_tangent)(F, frames, pq)  # (q, 3, 3), (q, 3, 3, 3, 3)
     r_u = jnp.einsum("q,qiJ,qaJ->ai", wdet, Pst, dNdX).reshape(81)
     r_p = P.T @ (wdet * (J - 1.0)) - jnp.linalg.solve(Minv, p_e) / kappa
     wG = wdet[:, None, None] * dNdX

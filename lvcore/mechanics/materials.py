@@ -35,7 +35,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore import conditions, units
-from lvcore.mechanics.kinematics import det3, green_strain, isochoric_i1, right_cauchy_green
+from lvcore.mechanics.kinematics import cofactor, det3, green_strain, isochoric_i1, right_cauchy_green
+
+#: Levi-Civita symbol: ``∂²J/∂F_iJ ∂F_kL = ε_ikm ε_JLN F_mN`` (the second derivative of a determinant).
+_EPS = np.zeros((3, 3, 3))
+for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+    _EPS[_i, _j, _k], _EPS[_i, _k, _j] = 1.0, -1.0
 
 
 def _expm1_over(a, b, x):
@@ -168,6 +173,18 @@ class MaterialLaw:
         """Strain-energy density (kPa) at deformation gradient ``F`` in the fibre ``frame``."""
         raise NotImplementedError
 
+    #: Whether the law gives its stress and elasticity tensor in closed form (:meth:`pk2_tangent`); the
+    #: others are differentiated automatically from :meth:`strain_energy`.
+    closed_form: ClassVar[bool] = False
+
+    def pk2_tangent(self, C, frame, with_tangent: bool = True):
+        """Second Piola-Kirchhoff stress ``S = 2 ∂W/∂C`` (kPa) and, with ``with_tangent``, the
+        elasticity tensor ``ℂ = 4 ∂²W/∂C∂C`` (3, 3, 3, 3) (kPa, minor and major symmetric), in closed form.
+
+        Only for laws with :attr:`closed_form`; returns ``(S, ℂ or None)``.
+        """
+        raise NotImplementedError
+
 
 @_pytree
 @dataclass(frozen=True)
@@ -242,6 +259,63 @@ class HolzapfelOgden(MaterialLaw):
             + _expm1_over(self.a_s, self.b_s, es * es)
             + _expm1_over(self.a_fs, self.b_fs, i8 * i8)
         )
+
+    closed_form: ClassVar[bool] = True
+
+    def pk2_tangent(self, C, frame, with_tangent: bool = True):
+        """``S = 2 ∂W/∂C`` and ``ℂ = 4 ∂²W/∂C∂C`` in closed form (see :meth:`MaterialLaw.pk2_tangent`).
+
+        W is a sum of terms ``ψ(x)`` of scalar invariants ``x(C)``:
+        ``S = 2 Σ ψ'(x) ∂x/∂C`` and ``ℂ = 4 Σ [ψ''(x) ∂x/∂C ⊗ ∂x/∂C + ψ'(x) ∂²x/∂C∂C]``, with
+        ``∂E_f/∂C = H``, ``∂I4s/∂C = s0 ⊗ s0``, ``∂I8fs/∂C = sym(f0 ⊗ s0)`` (all linear in C) and, for
+        ``Ī1 = I3^{-1/3} I1`` (``I3 = det C``),
+        ``∂Ī1/∂C = I3^{-1/3} (I − I1/3 C⁻¹)`` and
+        ``∂²Ī1/∂C∂C = I3^{-1/3} [−(I ⊗ C⁻¹ + C⁻¹ ⊗ I)/3 + I1/9 C⁻¹ ⊗ C⁻¹ + I1/3 C⁻¹ ⊙ C⁻¹]``,
+        ``(C⁻¹ ⊙ C⁻¹)_IJKL = (C⁻¹_IK C⁻¹_JL + C⁻¹_IL C⁻¹_JK)/2``. The tension switches give
+        ``ψ' = ψ'' = 0`` where the fibre (sheet) term is off, as the automatic derivatives do.
+        Equal to the automatic derivatives of :meth:`strain_energy` to round-off
+        (``tests/test_mechanics_materials.py``).
+        """
+        eye = jnp.eye(3)
+        f0, s0 = frame[0], frame[1]
+        kf = self.kappa_f
+        i1 = jnp.trace(C)
+        i3 = det3(C)
+        cofC = cofactor(C)  # symmetric C: cof C = det C · C⁻¹
+        Cinv = cofC / i3
+        j23 = i3 ** (-1.0 / 3.0)
+        i1b = j23 * i1
+        H = kf * eye + (1.0 - 3.0 * kf) * jnp.outer(f0, f0)
+        ss = jnp.outer(s0, s0)
+        fs = 0.5 * (jnp.outer(f0, s0) + jnp.outer(s0, f0))
+        e_f = jnp.sum(H * C) - 1.0
+        i4s = s0 @ C @ s0
+        i8 = f0 @ C @ s0
+        ef = jnp.where(e_f > 0.0, e_f, 0.0)
+        es = jnp.where(i4s > 1.0, i4s - 1.0, 0.0)
+        # ψ', ψ'' of each term
+        g_iso = 0.5 * self.a * jnp.exp(self.b * (i1b - 3.0))
+        x_f = jnp.exp(self.b_f * ef * ef)
+        x_s = jnp.exp(self.b_s * es * es)
+        x_fs = jnp.exp(self.b_fs * i8 * i8)
+        d1_f, d1_s, d1_fs = self.a_f * ef * x_f, self.a_s * es * x_s, self.a_fs * i8 * x_fs
+        dI1b = j23 * (eye - (i1 / 3.0) * Cinv)
+        S = 2.0 * (g_iso * dI1b + d1_f * H + d1_s * ss + d1_fs * fs)
+        if not with_tangent:
+            return S, None
+        d2_iso = self.b * g_iso
+        d2_f = jnp.where(e_f > 0.0, self.a_f * (1.0 + 2.0 * self.b_f * ef * ef) * x_f, 0.0)
+        d2_s = jnp.where(i4s > 1.0, self.a_s * (1.0 + 2.0 * self.b_s * es * es) * x_s, 0.0)
+        d2_fs = self.a_fs * (1.0 + 2.0 * self.b_fs * i8 * i8) * x_fs
+        CC = jnp.einsum("IJ,KL->IJKL", Cinv, Cinv)
+        CsC = 0.5 * (jnp.einsum("IK,JL->IJKL", Cinv, Cinv) + jnp.einsum("IL,JK->IJKL", Cinv, Cinv))
+        IC = jnp.einsum("IJ,KL->IJKL", eye, Cinv)
+        d2I1b = j23 * (-(IC + jnp.swapaxes(jnp.swapaxes(IC, 0, 2), 1, 3)) / 3.0 + (i1 / 9.0) * CC
+                       + (i1 / 3.0) * CsC)
+        Cm = 4.0 * (d2_iso * jnp.einsum("IJ,KL->IJKL", dI1b, dI1b) + g_iso * d2I1b
+                    + d2_f * jnp.einsum("IJ,KL->IJKL", H, H) + d2_s * jnp.einsum("IJ,KL->IJKL", ss, ss)
+                    + d2_fs * jnp.einsum("IJ,KL->IJKL", fs, fs))
+        return S, Cm
 
 
 @_pytree
@@ -377,6 +451,29 @@ class ConstitutiveModel:
     def psi(self, F, frame, p):
         """Pointwise energy ``W(F) + p J`` (kPa) of the mixed form at pressure ``p``."""
         return self.material.strain_energy(F, frame) + self.compressibility.pressure_energy(F, p)
+
+    def first_piola(self, F, frame, p):
+        """First Piola stress ``∂ψ/∂F`` (kPa) of :meth:`psi`: in closed form for laws with
+        :attr:`MaterialLaw.closed_form` (``F S + p cof F``), else by automatic differentiation."""
+        if self.material.closed_form:
+            S, _ = self.material.pk2_tangent(right_cauchy_green(F), frame, with_tangent=False)
+            return F @ S + p * cofactor(F)
+        return jax.grad(self.psi)(F, frame, p)
+
+    def first_piola_tangent(self, F, frame, p):
+        """``(P, A)``: the first Piola stress and ``A_iJkL = ∂²ψ/∂F_iJ ∂F_kL`` (kPa).
+
+        Closed form for laws with :attr:`MaterialLaw.closed_form`:
+        ``A_iJkL = δ_ik S_JL + F_iI F_kK ℂ_IJKL + p ε_ikm ε_JLN F_mN``; else automatic differentiation
+        (the Hessian of :meth:`psi`).
+        """
+        if self.material.closed_form:
+            S, Cm = self.material.pk2_tangent(right_cauchy_green(F), frame, with_tangent=True)
+            P = F @ S + p * cofactor(F)
+            A = (jnp.einsum("ik,JL->iJkL", jnp.eye(3), S) + jnp.einsum("iI,kK,IJKL->iJkL", F, F, Cm)
+                 + p * jnp.einsum("ikm,JLN,mN->iJkL", _EPS, _EPS, F))
+            return P, A
+        return jax.grad(self.psi)(F, frame, p), jax.hessian(self.psi)(F, frame, p)
 
     def scaled(self, s) -> "ConstitutiveModel":
         """The model with the law's parameters multiplied by ``s`` (:attr:`MaterialLaw.keys` order); κ unchanged."""
