@@ -5,6 +5,7 @@
     python benchmarks/real_data.py --workdir build/real_data --steps calibrate --chains 2 --warmup 500 --samples 500
     python benchmarks/real_data.py --workdir build/real_data --steps table     # from results*.json
     python benchmarks/real_data.py --workdir build/real_data --steps compare --tag floor=floor_nf+floor_noisy,known_fe
+    python benchmarks/real_data.py --workdir build/real_data --steps fisher    # Laplace: a's best-case precision
 
 Subjects (all SYNTHETIC, made by lvcore's FE simulator): one truncated
 ellipsoid (endo rs 25 / ry 22.5 / rl 60 mm, wall 9.5 mm, 10 mm thicker at
@@ -171,6 +172,55 @@ def project_all(workdir: Path, sims: list[dict]) -> list[dict]:
               f"{100 * rec['lvv_rel_delta']:+.2f} %; emulator at the projection vs the ellipsoid FE: strain RMS "
               f"{rec['emulator_strain_rms']:.4f}", flush=True)
     return done
+
+
+def fisher_all(sims: list[dict], emulator: str = "chapter", sigma_s: float = SIGMA_S, sigma_v: float = SIGMA_V) -> list[dict]:
+    """The best case for a's precision, without sampling: the Laplace (Fisher-information) approximation of
+    the posterior of log theta with the geometry known and no model error at all.
+
+    For each subject, the ``chapter`` emulator at the ellipsoid's 5-mode projection and exact scale
+    (:func:`emulator_outputs`' forward model) is differentiated at the true theta with respect to
+    ``log a, log b, log af, log bf``; with the benchmark's noise (LVV sd ``sigma_v``, 24 strains sd
+    ``sigma_s``) the information is ``I = J^T diag(sigma^-2) J`` and the approximate posterior sd of
+    ``log a`` is ``sqrt((I^-1)_aa)``, so a's q95/q05 is about ``exp(2 * 1.645 * sd)``. The prior box is
+    ignored (it can only narrow an interval that reaches it); everything else can only widen it (the
+    geometry inferred, a model error, a non-Gaussian posterior along the a-b trade-off).
+    """
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from lvcore.emulator import load_emulator
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.geometry.scaling import ScaledForward
+
+    emu = load_emulator(emulator)
+    out = []
+    w = np.r_[1.0 / sigma_v ** 2, np.full(24, 1.0 / sigma_s ** 2)]
+    for sim in sims:
+        sc = projection(sim["scale"])
+        fw = ScaledForward(emulator_forward(emu, sc.h, name=emulator), sc.scale)
+
+        def f(lt):
+            return jnp.asarray(fw(dict(zip(("a", "b", "af", "bf"), jnp.exp(lt)))))
+
+        lt0 = jnp.log(jnp.asarray(sim["theta"], dtype=jnp.float64))
+        jac = np.asarray(jax.jacfwd(f)(lt0), float)             # (25, 4)
+        info = jac.T @ (w[:, None] * jac)
+        cov = np.linalg.inv(info)
+        sd = np.sqrt(np.diag(cov))
+        strains_only = np.linalg.inv(jac[1:].T @ jac[1:] / sigma_s ** 2 + 1e-12 * np.eye(4))
+        lam, vec = np.linalg.eigh(info)                          # ascending: the least-informed direction first
+        v0 = vec[:, 0] * np.sign(vec[0, 0] or 1.0)
+        out.append({"volume_ml": sim["volume_ml"], "theta": sim["theta"], "sd_log": sd.tolist(),
+                    "weakest_direction": v0.tolist(), "weakest_sd": float(1.0 / np.sqrt(max(lam[0], 1e-300))),
+                    "second_sd": float(1.0 / np.sqrt(max(lam[1], 1e-300))),
+                    "a_ratio": float(np.exp(2 * 1.645 * sd[0])),
+                    # both noise sds scaled by this factor give the Laplace a q95/q05 = 20 (the sd scales with them)
+                    "noise_factor_for_20": float(np.log(20.0) / (2 * 1.645 * sd[0])),
+                    "a_ratio_strains_only": float(np.exp(2 * 1.645 * np.sqrt(strains_only[0, 0]))),
+                    "corr_a_b": float(cov[0, 1] / (sd[0] * sd[1]))})
+    return out
 
 
 def subject_rows(sims: list[dict], data_source: str = "fe", emulator: str = "chapter") -> list[dict]:
@@ -390,6 +440,24 @@ def main(argv=None) -> int:
                  else sorted(work.glob("results*.json")))
         results = [r for f in files for r in json.loads(f.read_text())]
         print(table(results))
+        return 0
+    if steps == ["fisher"]:   # the Laplace approximation of a's precision with the geometry known (no sampling)
+        sims = json.loads((work / "simulations.json").read_text())
+        rows = fisher_all(sims, args.emulator)
+        (work / "fisher.json").write_text(json.dumps(rows, indent=1))
+        print("| V0 (mL) | true theta | Laplace sd of log a, b, af, bf | a q95/q05 (Laplace, no prior) | "
+              "corr(log a, log b) | least-informed direction (log a, b, af, bf): sd | next: sd | sigma_S for 20 |")
+        print("|---|---|---|---|---|---|---|---|")
+        for r in rows:
+            print(f"| {r['volume_ml']:g} | {', '.join(f'{v:g}' for v in r['theta'])} | "
+                  f"{', '.join(f'{v:.2f}' for v in r['sd_log'])} | {r['a_ratio']:.2g} | {r['corr_a_b']:+.2f} | "
+                  f"({', '.join(f'{v:+.2f}' for v in r['weakest_direction'])}): {r['weakest_sd']:.2g} | "
+                  f"{r['second_sd']:.2g} | {SIGMA_S * r['noise_factor_for_20']:.2g} |")
+        ratios = sorted(r["a_ratio"] for r in rows)
+        print(f"\nLaplace a q95/q05 with sigma_S {SIGMA_S:g}, sigma_V {SIGMA_V:g} mL, geometry known, no model error, "
+              f"no prior: median {ratios[len(ratios) // 2]:.2g} (min {ratios[0]:.2g}, max {ratios[-1]:.2g}); "
+              f"below 20 in {sum(r < 20 for r in ratios)} of {len(ratios)} (the prior box's own 90 % interval of a "
+              "spans a factor 117)")
         return 0
     if "projection" in steps:
         project_all(work, sims)

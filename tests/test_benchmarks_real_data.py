@@ -53,3 +53,15 @@ def test_small_subject_is_covered_or_flagged(tmp_path):
     assert rec["conditions"]["base"] == "sliding" and rec["edp_mmhg"] == 8.0
     assert "flags" in rec and "verdict" in rec
     print(bench.table([res]))
+
+
+def test_fisher_information_says_one_pressure_does_not_separate_a_from_b():
+    """The data-limited evidence of benchmarks/real_data.py --steps fisher: with the geometry known and no model
+    error, the benchmark's noise leaves log a and log b almost perfectly anti-correlated and a's Laplace
+    q95/q05 far above 20; the noise would have to shrink about tenfold for 20."""
+    bench = _bench()
+    s = (120.0 / bench.unit_volume_ml()) ** (1 / 3)
+    (r,) = bench.fisher_all([{"volume_ml": 120.0, "theta": list(bench.THETAS[0]), "scale": s}])
+    assert r["corr_a_b"] < -0.95 and r["a_ratio"] > 1e3
+    assert 0.02 < r["noise_factor_for_20"] < 0.3
+    assert abs(r["weakest_direction"][0]) > 0.5 and abs(r["weakest_direction"][1]) > 0.5   # mostly (log a, log b)
