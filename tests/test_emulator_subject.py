@@ -40,7 +40,8 @@ def test_subject_emulator_reproduces_held_out_fe_runs(built):
     assert (out / "geometry.vtu").is_file() and emu.subject_geometry["path"] == str((out / "geometry.vtu").resolve())
     assert json.loads((out / "metadata.json").read_text())["subject"]["geometry"]["path"] == "geometry.vtu"
     runs = meta["subject"]["runs"]
-    assert runs["total"] == 36 and runs["converged"] == 36 and runs["n_test"] == 6
+    assert runs["total"] == 36 and runs["converged"] == 36 and runs["n_test"] == 6 and runs["n_train"] == 24
+    assert not (out / "fe_runs.npz").exists()
     # held-out rows: never in the training or validation set
     with np.load(out / "training_data.npz") as z:
         seen = np.concatenate([z["train_inputs"], z["valid_inputs"]])
@@ -136,8 +137,8 @@ def test_design_space():
 
 
 def test_simulate_rows_keeps_the_runs_done_and_resumes(tmp_path):
-    """A stopped simulation keeps its finished batches in the checkpoint; the next call with the same inputs
-    resumes from them, and its results equal one uninterrupted batch (within solver tolerance)."""
+    """A stopped simulation keeps its finished chunks in the checkpoint; the next call with the same inputs
+    resumes from them, and its results equal one uninterrupted run (within solver tolerance)."""
     from lvcore.campaigns.designs import make_design
     from lvcore.emulator.subject import simulate_rows
 
@@ -152,7 +153,7 @@ def test_simulate_rows_keeps_the_runs_done_and_resumes(tmp_path):
     assert seen == [3]
     with np.load(ckpt) as z:
         assert z["inputs"].shape == (3, 4) and z["converged"].all()
-        kept = z["outputs"].copy()
+        kept_x, kept = z["inputs"].copy(), z["outputs"].copy()
     calls = []
     res = simulate_rows(space, x, geometry, resolution="fast", workers=1, checkpoint=ckpt, chunk=3,
                         progress=lambda done, total: calls.append(done))
@@ -161,8 +162,56 @@ def test_simulate_rows_keeps_the_runs_done_and_resumes(tmp_path):
     from lvcore.chains import continuation_order, scaled_coordinates
 
     first = continuation_order(scaled_coordinates(space.names, x))[:3]  # solved in the walk's order
+    np.testing.assert_array_equal(x[first], kept_x)
     np.testing.assert_array_equal(res.outputs[first], kept)
-    other = simulate_rows(space, x[::-1], geometry, resolution="fast", workers=1, checkpoint=ckpt, chunk=6,
+    other_x = make_design(space, "sobol", 6, 2).points
+    other = simulate_rows(space, other_x, geometry, resolution="fast", workers=1, checkpoint=ckpt, chunk=6,
                           progress=lambda done, total: calls.append(("other", done)))
     assert calls[2:] == [("other", 6)]  # other inputs: nothing taken from the checkpoint
-    np.testing.assert_allclose(other.outputs[::-1], res.outputs, rtol=1e-5, atol=1e-7)
+    cold = simulate_rows(space, x[::-1], geometry, resolution="fast", workers=1, chunk=1)  # another walk, no file
+    np.testing.assert_allclose(cold.outputs[::-1], res.outputs, rtol=1e-5, atol=1e-7)
+    assert other.converged.all()
+
+
+def test_simulate_rows_on_two_workers_streams_chunks_and_resumes(tmp_path):
+    """With a pool, chain chunks are recorded as they return (no barrier per batch): a stop keeps every chunk
+    returned so far (any subset of the walk), the resumed run simulates only the rest, and the results equal
+    those of the in-process walk within solver tolerance."""
+    from lvcore.campaigns.designs import make_design
+    from lvcore.emulator.subject import simulate_rows
+
+    space = subject_space(("theta",), bounds=BOUNDS)
+    x = make_design(space, "sobol", 10, 4).points
+    geometry = resolve_subject_geometry("default").section
+    ckpt = tmp_path / "fe_runs.npz"
+    seen = []
+    with pytest.raises(EmulatorError, match="stopped after [0-9]+ of 10 FE runs"):
+        simulate_rows(space, x, geometry, resolution="fast", workers=2, checkpoint=ckpt, chunk=2,
+                      progress=lambda done, total: seen.append(done), stop=lambda: len(seen) >= 1)
+    with np.load(ckpt) as z:
+        n_kept = z["inputs"].shape[0]
+        assert 2 <= n_kept < 10 and z["converged"].all()
+    calls = []
+    res = simulate_rows(space, x, geometry, resolution="fast", workers=2, checkpoint=ckpt, chunk=2,
+                        progress=lambda done, total: calls.append(done))
+    assert calls[0] == n_kept and calls[-1] == 10 and calls == sorted(calls)
+    assert res.converged.all() and res.workers == 2
+    ref = simulate_rows(space, x, geometry, resolution="fast", workers=1)
+    np.testing.assert_allclose(res.outputs, ref.outputs, rtol=1e-5, atol=1e-7)
+
+
+def test_design_rows_fill_the_box_and_hold_out_other_points():
+    from lvcore.campaigns.designs import make_design
+    from lvcore.emulator.subject import design_rows
+
+    space = subject_space(("theta",))
+    design = SubjectDesign(16, 5, 7)
+    x, parts = design_rows(space, design, seed=3)
+    assert x.shape == (28, 4) and [len(parts[k]) for k in ("train", "valid", "test")] == [16, 5, 7]
+    assert sorted(np.concatenate(list(parts.values()))) == list(range(28))
+    # the training rows are one 16-point Sobol design: every 1/16 slab of every axis holds one point
+    np.testing.assert_array_equal(x[parts["train"]], make_design(space, "sobol", 16, 3).points)
+    u = space.to_unit(x[parts["train"]])
+    assert all(len(set(np.floor(u[:, j] * 16).astype(int))) == 16 for j in range(4))
+    held = x[np.concatenate([parts["valid"], parts["test"]])]
+    assert not any(np.any(np.all(held == row, axis=1)) for row in x[parts["train"]])

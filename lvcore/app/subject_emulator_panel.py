@@ -5,8 +5,8 @@ It runs ``lvcore emulator build --geometry FILE`` (:class:`lvcore.app.subject_fl
 :func:`lvcore.emulator.subject.build_subject_emulator`) in the background with a progress bar and a stop
 button, shows the held-out LVV and strain RMSE of its metadata, and keeps the emulator in the session (and on
 disk in :data:`lvcore.app.subject_flow.BUILD_CACHE`), where the My subject page offers it for calibration
-instead of a shared emulator. The design size is the CLI's by default (800 + 100 + 100 FE runs); a smaller one
-is for trying the flow.
+instead of a shared emulator. The design size is the CLI's by default (:class:`lvcore.emulator.subject.SubjectDesign`);
+a smaller one is for trying the flow, a larger one for a tighter emulator.
 """
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def _design_controls(key: str):
                               help=f"early stopping; --n-valid (default {default.n_valid})")
     n_test = c3.number_input("held-out test FE runs", 2, 5_000, default.n_test, step=10, key=f"{key}_test",
                              help=f"never used in training; their RMSE is recorded; --n-test (default {default.n_test})")
-    return SubjectDesign(int(n_train), int(n_valid), int(n_test))
+    return SubjectDesign(int(n_train), int(n_valid), int(n_test), default.method)
 
 
 def _progress(key: str) -> None:
@@ -67,6 +67,7 @@ def show_summary(job) -> None:
     import streamlit as st
 
     from lvcore.app import subject_flow as flow
+    from lvcore.emulator.subject import SubjectDesign
 
     info = flow.held_out_summary(job.metadata)
     st.success(f"Subject emulator for {job.label} {job.status()}: held-out test ({info['n_test']} FE runs never "
@@ -76,7 +77,7 @@ def show_summary(job) -> None:
         t = flow.HELD_OUT_TARGETS
         st.warning(f"The held-out accuracy misses the targets (LVV RMSE ≤ {t['lvv_rmse_ml']:g} mL, strain RMSE ≤ "
                    f"{t['strain_rmse']:g}): calibrations with it carry that emulator error; build with more "
-                   "training runs (the default is 800).")
+                   f"training runs (the default is {SubjectDesign().n_train}).")
 
 
 def show(geometry_file, geometry_bytes: bytes, label: str, *, units: str = "mm", key: str = "build"):
@@ -98,11 +99,12 @@ def show(geometry_file, geometry_bytes: bytes, label: str, *, units: str = "mm",
     import streamlit as st
 
     from lvcore.app import subject_flow as flow
+    from lvcore.emulator.subject import SubjectDesign
     from lvcore.exceptions import LVCoreError
 
     st.markdown("**Build a subject emulator** (optional): the FE simulator on this geometry as it is, with no "
                 "PC projection and no ±2 score box, emulated and validated on held-out FE runs. The default design "
-                "is `lvcore emulator build`'s: 1,000 FE runs, minutes on two cores.")
+                f"is `lvcore emulator build`'s: {SubjectDesign().total:,} FE runs, minutes on two cores.")
     try:
         design = _design_controls(key)
     except LVCoreError as err:

@@ -50,11 +50,17 @@ def register(subparsers) -> None:
     b.add_argument("--inputs", default="theta",
                    help="varied inputs: theta, plus optionally edp and angles, comma-separated (default theta)")
     b.add_argument("--units", choices=("mm", "cm", "m"), default="mm", help="units of a volumetric mesh")
-    b.add_argument("--n-train", type=int, default=800, help="training FE runs (default 800)")
-    b.add_argument("--n-valid", type=int, default=100, help="validation FE runs: early stopping (default 100)")
-    b.add_argument("--n-test", type=int, default=100,
-                   help="held-out FE runs, never used in training; their RMSE is recorded (default 100)")
-    b.add_argument("--design", choices=("sobol", "lhs"), default="sobol", help="space-filling design (default sobol)")
+    from lvcore.emulator.subject import SubjectDesign
+
+    dd = SubjectDesign()  # one home of the default design (the app's build panel uses it too)
+    b.add_argument("--n-train", type=int, default=dd.n_train,
+                   help=f"training FE runs (default {dd.n_train}; more for a tighter emulator, e.g. 800)")
+    b.add_argument("--n-valid", type=int, default=dd.n_valid,
+                   help=f"validation FE runs: early stopping (default {dd.n_valid})")
+    b.add_argument("--n-test", type=int, default=dd.n_test,
+                   help=f"held-out FE runs, never used in training; their RMSE is recorded (default {dd.n_test})")
+    b.add_argument("--design", choices=("sobol", "lhs"), default=dd.method,
+                   help=f"space-filling design (default {dd.method})")
     b.add_argument("--resolution", default="default", help="mesh preset of the FE runs (default 'default')")
     b.add_argument("--base", choices=("sliding", "clamped"), default="sliding",
                    help="basal boundary condition (default sliding, as the 'chapter' emulator)")

@@ -12,13 +12,14 @@ geometry as it is, with no projection:
    is self-contained.
 2. A scrambled Sobol design (:func:`lvcore.campaigns.designs.make_design`,
    ``scipy.stats.qmc``) over the prior box of the chosen inputs (θ, and
-   optionally the EDP and the fibre angles: :data:`INPUT_GROUPS`) is split at
-   random into training, validation and held-out test rows.
+   optionally the EDP and the fibre angles: :data:`INPUT_GROUPS`) gives the
+   training rows, and an independent one the validation and held-out test
+   rows, split at random (:func:`design_rows`).
 3. Every row is simulated on the exact geometry (:func:`simulate_rows`:
    continuation chains of :mod:`lvcore.chains`, each solve starting Newton
-   from a neighbour's solution, shared out to the worker processes), in
-   batches of :data:`CHECKPOINT_ROWS` after each of which the runs done are
-   saved (``fe_runs.npz``): a build that fails, is stopped or killed keeps
+   from a neighbour's solution, fed chunk by chunk to the worker processes
+   with no barrier between them); the runs done are saved (``fe_runs.npz``)
+   as every chunk returns: a build that fails, is stopped or killed keeps
    them, and the next build of the same design resumes from them.
 4. The network is trained with :func:`lvcore.emulator.training.train_emulator`
    (validation rows: early stopping and selection); the test rows, which the
@@ -57,7 +58,8 @@ VOLUME_MESH_SUFFIXES = (".inp", ".msh", ".med", ".mesh")
 MESH_SUFFIXES = (".vtu", ".vtk", ".xdmf")
 #: Most FE runs one build may ask for.
 MAX_RUNS = 20_000
-#: FE runs per batch of a build: progress is reported, and the runs done are saved to :data:`RUNS_FILE`, after each.
+#: FE runs per batch of a build on one worker (in this process): progress is reported, and the runs done are saved
+#: to :data:`RUNS_FILE`, after each. With a pool every chain chunk (:data:`lvcore.chains.DEFAULT_CHUNK` runs) is.
 CHECKPOINT_ROWS = 100
 #: The FE runs of a build so far, in the emulator directory; kept when a build fails or is stopped (a new build of
 #: the same design, geometry and mesh resumes from it), removed when the emulator is saved.
@@ -299,87 +301,140 @@ class SimulatedRows:
 def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, resolution: str = "default",
                   workers: int = 2, checkpoint=None, chunk: int | None = None,
                   progress: Callable[[int, int], None] | None = None,
-                  stop: Callable[[], bool] | None = None) -> SimulatedRows:
+                  stop: Callable[[], bool] | None = None, executor=None) -> SimulatedRows:
     """Simulate every row of ``x`` (physical units, columns ``space.names``) on ``geometry``.
 
-    The FE simulator with warm starts (:class:`~lvcore.mechanics.forward.SimulatorForward`
-    ``(warm_start=True)``): the rows are ordered into continuation chains
-    (:mod:`lvcore.chains`), each solve starting Newton from a neighbour's
-    converged solution and falling back to a cold solve when that fails, so
-    the results satisfy the same tolerances as cold solves; the chains are
-    shared out to ``workers`` processes (``1``: this process). Failures are
-    data (NaN rows, ``converged`` False).
+    The FE simulator with warm starts (:meth:`~lvcore.mechanics.forward.SimulatorForward.evaluate_warm`):
+    the rows are ordered along one continuation walk over the whole design
+    (:func:`lvcore.chains.continuation_order`), each solve starting Newton from
+    a neighbour's converged solution and falling back to a cold solve when that
+    fails, so the results satisfy the same tolerances as cold solves. Failures
+    are data (NaN rows, ``converged`` False); results come back in the input order.
 
-    The rows are solved in the order of one continuation walk over the whole
-    design (:func:`lvcore.chains.continuation_order`), in batches of ``chunk``
-    consecutive rows of that walk; results come back in the input order.
+    With ``workers > 1`` the walk is split into continuation chains fed to a
+    process pool chunk by chunk (:func:`lvcore.chains.run_chains`: the next
+    chunk of a chain is submitted as soon as the previous one returns, and a
+    chain that runs dry splits the longest remaining one), with no barrier
+    anywhere: both cores are busy until the last chunk. With ``workers=1`` the
+    walk is solved in this process, ``chunk`` rows at a time.
 
     Parameters
     ----------
     checkpoint : path, optional
-        An ``.npz`` file where the rows done so far are saved after every
-        ``chunk`` rows. Rows already saved there for the same inputs, geometry,
-        mesh and base are taken from it, not simulated again (a stopped or
-        failed build resumes).
+        An ``.npz`` file where the rows done so far are saved as every chunk
+        returns. Rows already saved there for the same inputs, geometry, mesh
+        and base are taken from it, not simulated again (a stopped or failed
+        build resumes; the rest is walked again from cold starts).
     chunk : int, optional
-        Rows per batch (default :data:`CHECKPOINT_ROWS`); the simulator and its
-        worker pool, and so the warm-start states, are kept from batch to batch.
+        Rows per task (default :data:`lvcore.chains.DEFAULT_CHUNK` with a pool,
+        :data:`CHECKPOINT_ROWS` in this process).
     progress : callable, optional
-        ``progress(done, total)`` after every batch (rows).
+        ``progress(done, total)`` (rows) as every chunk returns.
     stop : callable, optional
-        Asked before every batch; when it returns True the simulation stops
-        with an :class:`~lvcore.exceptions.EmulatorError` (the rows done are in
-        ``checkpoint``).
+        Asked as every chunk returns (and before the first); when it returns
+        True the simulation stops with an :class:`~lvcore.exceptions.EmulatorError`
+        (the rows done are in ``checkpoint``; chunks in flight are finished
+        and kept too).
+    executor : optional
+        A running pool of :mod:`lvcore.parallel` to use (not closed), e.g.
+        shared by the stages of a build; default one of ``workers`` processes
+        is started for the call.
     """
     import contextlib
 
+    from lvcore.chains import DEFAULT_CHUNK, ChainTaskError, continuation_order, run_chains, scaled_coordinates
     from lvcore.mechanics.forward import SimulatorForward
-
-    from lvcore.chains import continuation_order, scaled_coordinates
 
     x_given = np.atleast_2d(np.asarray(x, dtype=float))
     n = x_given.shape[0]
-    # batches are consecutive stretches of one continuation walk over the whole design, so every batch is a
-    # neighbourhood (a space-filling batch of a Sobol sequence would leave its warm starts far apart)
     order = continuation_order(scaled_coordinates(space.names, x_given)) if n > 2 else np.arange(n)
-    x = x_given[order]
-    chunk = max(1, int(chunk or CHECKPOINT_ROWS))
+    x = x_given[order]  # walk order: a chain is a stretch of it
+    units = scaled_coordinates(space.names, x)
+    pooled = int(workers) > 1
+    chunk = max(1, int(chunk or (DEFAULT_CHUNK if pooled else CHECKPOINT_ROWS)))
     outputs = np.full((n, N_OUTPUTS), np.nan)
     converged = np.zeros(n, dtype=bool)
     messages = [""] * n
     seconds = np.zeros(n)
     signature = _runs_signature(space, geometry, resolution)
     done = _resume_rows(checkpoint, signature, x, outputs, converged, messages, seconds)
-    if progress is not None and done:
-        progress(done, n)
+    if progress is not None and done.any():
+        progress(int(done.sum()), n)
     fwd = SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), geometry=dict(geometry),
-                           resolution=resolution, base=space.base, workers=int(workers), warm_start=True)
-    t0 = time.perf_counter()
-    with contextlib.ExitStack() as stack:
-        executor = None
-        if int(workers) > 1 and n - done > 1:
-            from lvcore.parallel import make_executor
+                           resolution=resolution, base=space.base, workers=1, warm_start=True)
 
-            executor = stack.enter_context(make_executor(workers=int(workers)))
-        while done < n:
-            if stop is not None and stop():
-                where = f"; they are kept in {checkpoint} and a new build of the same design resumes from them" \
-                    if checkpoint is not None else ""
-                raise EmulatorError(f"stopped after {done} of {n} FE runs{where}")
-            rows = slice(done, min(n, done + chunk))
-            batch = fwd.evaluate({name: x[rows, i] for i, name in enumerate(space.names)}, executor=executor)
-            outputs[rows], converged[rows], seconds[rows] = batch.outputs, batch.converged, batch.seconds
-            messages[rows] = list(batch.messages)
-            done = rows.stop
-            if checkpoint is not None:
-                _save_rows(checkpoint, signature, x[:done], outputs[:done], converged[:done], messages[:done],
-                           seconds[:done])
-            if progress is not None:
-                progress(done, n)
+    def record(rows) -> None:
+        for r in rows:
+            outputs[r.key], converged[r.key], messages[r.key], seconds[r.key] = r.result
+            done[r.key] = True
+        if checkpoint is not None:
+            _save_rows(checkpoint, signature, x, done, outputs, converged, messages, seconds)
+        if progress is not None:
+            progress(int(done.sum()), n)
+        check_stop()
+
+    def check_stop() -> None:
+        if stop is not None and not done.all() and stop():
+            where = f"; they are kept in {checkpoint} and a new build of the same design resumes from them" \
+                if checkpoint is not None else ""
+            raise EmulatorError(f"stopped after {int(done.sum())} of {n} FE runs{where}")
+
+    t0 = time.perf_counter()
+    check_stop()
+    todo = np.flatnonzero(~done)
+    if todo.size and pooled and todo.size > 1:
+        from lvcore.parallel import make_executor
+
+        with contextlib.ExitStack() as stack:
+            if executor is None:
+                executor = stack.enter_context(make_executor(workers=int(workers)))
+
+            def submit(positions, seeds):  # rows keyed by position in todo (run_chains' bookkeeping)
+                walk = todo[positions]
+                return executor.submit(_fe_chunk, fwd, x[walk], positions, units[walk], seeds)
+
+            def on_rows(rows):
+                record([r.__class__(int(todo[r.key]), r.unit, r.result) for r in rows])
+
+            try:
+                run_chains(executor, submit, units[todo], workers=int(workers), on_rows=on_rows, chunk=chunk)
+            except ChainTaskError as err:
+                raise err.__cause__ or err from None
+    else:
+        state = None
+        for start in range(0, todo.size, chunk):
+            keys = [int(k) for k in todo[start:start + chunk]]
+            seeds = [] if state is None else [state]
+            rows = _fe_chunk(fwd, x[keys], keys, units[keys], seeds)
+            last = [r for r in rows if r.state is not None]
+            if last:
+                from lvcore.chains import Seed
+
+                state = Seed(last[-1].unit, last[-1].state)
+            record(rows)
     back = np.empty(n, dtype=int)
     back[order] = np.arange(n)  # row i of the design was solved at position back[i]
     return SimulatedRows(outputs[back], converged[back], tuple(messages[j] for j in back), seconds[back],
                          time.perf_counter() - t0, int(workers))
+
+
+def _fe_chunk(forward, points: np.ndarray, keys: Sequence[int], units: np.ndarray, seeds) -> list:
+    """Worker task: FE runs of one chain chunk, in order, each warm-started from the nearest converged state.
+
+    Returns :class:`lvcore.chains.ChainRow` objects keyed by ``keys`` whose results are
+    ``(outputs (25,), converged, message, seconds)``.
+    """
+    from lvcore.chains import solve_in_order
+
+    by_key = {int(k): p for k, p in zip(keys, np.atleast_2d(points))}
+
+    def solve(key, initial):
+        batch, state = forward.evaluate_warm(dict(zip(forward.input_names, by_key[key])), initial)
+        result = (np.asarray(batch.outputs[0], dtype=float), bool(batch.converged[0]), str(batch.messages[0] or ""),
+                  float(batch.seconds[0]))
+        return result, state
+
+    return solve_in_order(keys, units, seeds, solve)
 
 
 def _runs_signature(space: ParameterSpace, geometry: Mapping, resolution: str) -> str:
@@ -389,31 +444,42 @@ def _runs_signature(space: ParameterSpace, geometry: Mapping, resolution: str) -
                       sort_keys=True, default=str)
 
 
-def _save_rows(path, signature: str, x, outputs, converged, messages, seconds) -> None:
+def _save_rows(path, signature: str, x, done, outputs, converged, messages, seconds) -> None:
     """Write the rows done so far (atomically: a killed build leaves the previous file whole)."""
     path = Path(path)
     tmp = path.with_name(path.stem + ".partial.npz")
-    np.savez(tmp, signature=np.array(signature), inputs=x, outputs=outputs, converged=converged,
-             messages=np.array(messages, dtype=str), seconds=seconds)
+    np.savez(tmp, signature=np.array(signature), inputs=x[done], outputs=outputs[done], converged=converged[done],
+             messages=np.array([m for m, d in zip(messages, done) if d], dtype=str), seconds=seconds[done])
     tmp.replace(path)
 
 
-def _resume_rows(path, signature: str, x, outputs, converged, messages, seconds) -> int:
-    """Fill the leading rows of ``x`` already saved in ``path`` (same signature and inputs); their count."""
+def _resume_rows(path, signature: str, x, outputs, converged, messages, seconds) -> np.ndarray:
+    """Fill the rows of ``x`` already saved in ``path`` (same signature, identical inputs); the mask of rows done.
+
+    The saved rows may be any subset of ``x`` (chains return out of order); a saved row that is not a row of
+    ``x`` means another design, and nothing is taken.
+    """
+    done = np.zeros(x.shape[0], dtype=bool)
     if path is None or not Path(path).is_file():
-        return 0
+        return done
     try:
         with np.load(path, allow_pickle=False) as z:
             if str(z["signature"]) != signature:
-                return 0
-            k = int(z["inputs"].shape[0])
-            if k > x.shape[0] or not np.array_equal(z["inputs"], x[:k]):
-                return 0
-            outputs[:k], converged[:k], seconds[:k] = z["outputs"], z["converged"], z["seconds"]
-            messages[:k] = [str(m) for m in z["messages"]]
+                return done
+            saved = np.asarray(z["inputs"], dtype=float)
+            where = {row.tobytes(): i for i, row in enumerate(x)}
+            idx = [where.get(row.tobytes(), -1) for row in saved]
+            if saved.ndim != 2 or saved.shape[1] != x.shape[1] or min(idx, default=0) < 0 \
+                    or len(set(idx)) != len(idx):
+                return done
+            idx = np.asarray(idx, dtype=int)
+            outputs[idx], converged[idx], seconds[idx] = z["outputs"], z["converged"], z["seconds"]
+            for i, m in zip(idx, z["messages"]):
+                messages[i] = str(m)
+            done[idx] = True
     except (OSError, KeyError, ValueError):  # a damaged file: simulate again
-        return 0
-    return k
+        done[:] = False
+    return done
 
 
 # --------------------------------------------------------------------------- the build
@@ -465,6 +531,26 @@ class SubjectDesign:
         return int(self.n_train) + int(self.n_valid) + int(self.n_test)
 
 
+def design_rows(space: ParameterSpace, design: SubjectDesign, seed: int) -> tuple[np.ndarray, dict]:
+    """The design's points (physical units) and the row indices of its ``train``, ``valid`` and ``test`` parts.
+
+    The training rows are one space-filling design of ``n_train`` points
+    (:func:`lvcore.campaigns.designs.make_design`, seed ``seed``), so they fill
+    the box as evenly as that many points can (a random subset of a larger
+    design leaves holes). The validation and held-out test rows are an
+    independent design of their own (seed ``seed + 1``), split at random: they
+    cover the same box, and none of them is a training point.
+    """
+    from lvcore.campaigns.designs import make_design
+
+    train = make_design(space, design.method, design.n_train, seed).points
+    held = make_design(space, design.method, design.n_valid + design.n_test, (int(seed) + 1) % 2 ** 32).points
+    split = design.n_train + np.random.default_rng(seed).permutation(design.n_valid + design.n_test)
+    parts = {"train": np.arange(design.n_train), "valid": split[:design.n_valid],
+             "test": split[design.n_valid:]}
+    return np.concatenate([train, held]), parts
+
+
 def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("theta",),
                            design: SubjectDesign = SubjectDesign(), resolution: str = "default",
                            base: str = "sliding", edp: float = CHAPTER_EDP, alpha_endo: float = CHAPTER_ANGLES[0],
@@ -504,12 +590,12 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     log : callable, optional
         Progress lines.
     progress : callable, optional
-        ``progress(done, total)`` FE runs, after every batch of :data:`CHECKPOINT_ROWS`.
+        ``progress(done, total)`` FE runs, as every chunk of runs returns (:func:`simulate_rows`).
     stop : callable, optional
-        Asked between batches of FE runs; True stops the build with an
+        Asked as every chunk of FE runs returns; True stops the build with an
         :class:`~lvcore.exceptions.EmulatorError`.
 
-    The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) after every batch, so a build that
+    The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) as every chunk returns, so a build that
     fails, is stopped or killed keeps them, and a new build of the same design into ``out`` resumes from them.
 
     Returns
@@ -523,7 +609,6 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     GeometryError, EmulatorError
         Bad geometry or options; too few converged rows to train.
     """
-    from lvcore.campaigns.designs import make_design
     from lvcore.emulator.io import save_emulator, save_training_data
     from lvcore.emulator.training import train_emulator
 
@@ -545,14 +630,11 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     for w in geo.warnings:
         say(f"  warning: {w}")
 
-    d = make_design(space, design.method, design.total, seed)
-    split = np.random.default_rng(seed).permutation(design.total)
-    parts = {"train": split[:design.n_train], "valid": split[design.n_train:design.n_train + design.n_valid],
-             "test": split[design.n_train + design.n_valid:]}
+    points, parts = design_rows(space, design, seed)
     say(f"design: {design.total} {design.method} points over {list(space.names)} "
         f"({design.n_train} train / {design.n_valid} validation / {design.n_test} held-out test), "
         f"{resolution} mesh, {base} base, {workers} worker(s)")
-    runs = simulate_rows(space, d.points, section, resolution=resolution, workers=workers,
+    runs = simulate_rows(space, points, section, resolution=resolution, workers=workers,
                          checkpoint=out / RUNS_FILE, progress=progress, stop=stop)
     n_failed = int(np.sum(~runs.converged))
     say(f"FE runs: {runs.converged.sum()} of {design.total} converged in {runs.wall_s:.1f} s "
@@ -560,7 +642,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     sets = {}
     for key, idx in parts.items():
         ok = idx[runs.converged[idx]]
-        sets[key] = (d.points[ok], runs.outputs[ok])
+        sets[key] = (points[ok], runs.outputs[ok])
         if ok.size < 2:
             reasons = sorted({runs.messages[i] for i in idx if not runs.converged[i]})[:3]
             raise EmulatorError(f"only {ok.size} of the {idx.size} {key} runs converged (e.g. {reasons}); "
@@ -605,6 +687,6 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
 
 
 __all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", "CHECKPOINT_ROWS", "RUNS_FILE",
-           "build_subject_emulator",
+           "build_subject_emulator", "design_rows",
            "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
            "default_training_config"]
