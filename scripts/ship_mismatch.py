@@ -15,7 +15,11 @@ Everything in it is SYNTHETIC. From the repository root::
     python scripts/ship_mismatch.py --recorded-only      # ship what --work holds, starting no new fits
     python scripts/ship_mismatch.py --docs-only          # rewrite the docs blocks from the shipped JSON
 
-The full study output goes to ``--work`` (default ``build/study_mismatch``).
+The full study output goes to ``--work`` (default ``build/study_mismatch``). The
+convergence check (``--check-doses``) refits the doses that decide the verdicts
+on the same data sets at ``--check-chains`` × (``--check-warmup`` +
+``--check-samples``); its fits sit beside the main run's in ``--work`` (the
+file names carry the budget) and its rows go to the JSON's ``check``.
 """
 from __future__ import annotations
 
@@ -23,6 +27,7 @@ import argparse
 import json
 import os
 import platform
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -33,9 +38,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
-#: The shipped run's settings (see docs/studies.md for why these).
+#: The shipped run's settings (see docs/studies.md for why these). ``check_*``: the convergence check, the doses
+#: that decide the verdicts (``SOURCE=D1,D2;SOURCE=D``; '' for none) refitted on the same data sets at a larger
+#: sampler budget (``lvcore.studies.mismatch.verdict_rows`` puts them in place of the main run's rows).
 SHIP = {"volunteers": "HV1", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40, "seed": 0,
-        "resolution": "default", "workers": 2}
+        "resolution": "default", "workers": 1,
+        "check_doses": "heterogeneity=1.2;pericardium=0.2,0.3", "check_chains": 2, "check_warmup": 300,
+        "check_samples": 300, "check_batch": 60}
 
 
 def replace_block(text: str, begin: str, end: str, body: str, path) -> str:
@@ -62,7 +71,7 @@ def update_docs(path: Path, dest: Path) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     for k, v in SHIP.items():
-        p.add_argument(f"--{k}", type=type(v), default=v, help=f"default {v}")
+        p.add_argument(f"--{k.replace('_', '-')}", type=type(v), default=v, help=f"default {v!r}")
     p.add_argument("--work", default="build/study_mismatch", help="full study output (and resume) folder")
     p.add_argument("--dest", default=None, help="shipped JSON (default assets/studies/mismatch.json)")
     p.add_argument("--docs", default="docs/studies.md", help="docs file whose generated blocks to rewrite ('' none)")
@@ -89,8 +98,19 @@ def main(argv=None) -> int:
                              resolution=args.resolution, workers=args.workers, out=args.work, batch=args.batch,
                              recorded_only=args.recorded_only,
                              progress=lambda m: print(time.strftime("%H:%M:%S"), m, flush=True))
-    cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k} {getattr(args, k)}" for k in SHIP) \
-        + (" --recorded-only" if args.recorded_only else "")
+    if args.check_doses:
+        plan = mismatch._parse_doses(args.check_doses.split(";"), mismatch.SOURCES)
+        ccfg = samplers.SamplerConfig(num_warmup=args.check_warmup, num_samples=args.check_samples,
+                                      num_chains=args.check_chains, seed=args.seed)
+        chk = mismatch.run_study(sources=tuple(plan), doses=plan, volunteers=args.volunteers.split(","),
+                                 seeds=args.seeds, config=ccfg, seed=args.seed, resolution=args.resolution,
+                                 workers=args.workers, out=args.work, batch=args.check_batch,
+                                 recorded_only=args.recorded_only, result_file="mismatch_check.json",
+                                 progress=lambda m: print(time.strftime("%H:%M:%S"), "check:", m, flush=True))
+        res["check"] = {k: chk[k] for k in ("sampler", "doses", "rows", "appearance", "failed", "not_fitted",
+                                            "fit_cost")}
+    cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k.replace('_', '-')} {shlex.quote(str(getattr(args, k)))}"
+                                                        for k in SHIP) + (" --recorded-only" if args.recorded_only else "")
     res.pop("folder", None)
     res["shipped"] = {"script": "scripts/ship_mismatch.py", "command": cmd, "date": time.strftime("%Y-%m-%d"),
                       "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared)",

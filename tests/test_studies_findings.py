@@ -29,3 +29,15 @@ def test_f5_f6_verdicts_from_operators_and_bo_results():
     assert fd.f5_verdict({"fits": fits})["verdict"] == "reproduced"
     fits = [{**f, "output_rmse_refit": 0.003 if f["test_geometry"].startswith("pc") else 0.002} for f in fits]
     assert fd.f5_verdict({"fits": fits})["verdict"] == "refuted"
+
+
+def test_f1_to_f3_use_the_convergence_checks_rows(mismatch_result):
+    """Where the check refitted a dose at a larger budget, F1-F3 are decided on the check's row (and say so)."""
+    res = mismatch_result()
+    base = {"mismatch": res, "operators": None, "bo_fibres": None, "operators_realistic": None, "bo_mismatch": None}
+    assert fd.verdicts(base)[0]["verdict"] == "reproduced"
+    no_f1 = dict(res["rows"][2], iid_sigma_s_inflation={"value": 1.1, "ci": [1.0, 1.2], "n": 20}, f1=False)
+    checked = {**res, "check": {"sampler": {"num_chains": 2, "num_warmup": 300, "num_samples": 300},
+                                "rows": [no_f1]}}
+    f1 = fd.verdicts({**base, "mismatch": checked})[0]
+    assert f1["verdict"] == "refuted" and "2 × (300 + 300)" in f1["ci"]  # the realistic dose, CI below 1.5

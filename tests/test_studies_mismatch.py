@@ -207,3 +207,33 @@ def test_shipped_results_docs_and_locator():
             assert next(r for r in rows if r["finding"] == name)["verdict"] == mod.load(path.parent)["verdicts"][key]["verdict"]
             assert any(r["finding"].startswith(f"{name} (") for r in rows)
     assert set(mm.figures(shipped)) == set(mm.TITLES)
+
+
+def test_fit_cost_sums_batches_once_and_reports_per_dataset_cost():
+    a = {"cpu_s": 120.0, "wall_s": 300.0, "datasets": 40, "units": 2}  # one batch behind two fits
+    b = {"cpu_s": 80.0, "wall_s": 200.0, "datasets": 40, "units": 1}  # a padded last batch behind one fit
+    c = mm.fit_cost([a, a, b])
+    assert c["cpu_s"] == pytest.approx(200.0) and c["batches"] == pytest.approx(2.0) and c["fits_with_cost"] == 3
+    assert c["cpu_s_per_dataset_median"] == pytest.approx(3.0) and c["cpu_s_per_dataset_range"] == [2.0, 3.0]
+    assert mm.fit_cost([]) is None
+
+
+def test_verdict_rows_take_the_convergence_check_in_place_of_the_main_rows(mismatch_result):
+    res = mismatch_result()
+    check_rows = [dict(res["rows"][2], iid_sigma_s_inflation={"value": 1.1, "ci": [1.0, 1.2], "n": 20}, f1=False)]
+    res = {**res, "sampler": {"num_chains": 1, "num_warmup": 150, "num_samples": 150},
+           "check": {"sampler": {"num_chains": 2, "num_warmup": 300, "num_samples": 300}, "rows": check_rows,
+                     "not_fitted": [], "fit_cost": None}}
+    rows = mm.verdict_rows(res)
+    assert [r["checked"] for r in rows] == [False, False, True]
+    assert [r["budget"] for r in rows] == ["1 × (150 + 150)"] * 2 + ["2 × (300 + 300)"]
+    assert rows[2]["iid_sigma_s_inflation"]["value"] == 1.1 and not rows[2]["f1"]
+    assert rows[0]["iid_sigma_s_inflation"] == res["rows"][0]["iid_sigma_s_inflation"]
+    text = mm.docs_markdown(res)
+    assert "**Convergence check.**" in text and "2 × (300 + 300)" in text
+    # the checked dose appears at both budgets in the check table
+    check_table = text.split("**Convergence check.**")[1]
+    assert check_table.count("| dispersion | 3 | 1 × (150 + 150) |") == 1
+    assert check_table.count("| dispersion | 3 | 2 × (300 + 300) |") == 1
+    assert mm.verdict_rows({**res, "check": None}) == [{**r, "budget": "1 × (150 + 150)", "checked": False}
+                                                       for r in res["rows"]]

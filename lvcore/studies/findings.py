@@ -121,7 +121,8 @@ def f6_realistic(result) -> dict | None:
 
 
 def _dose_text(row: dict) -> str:
-    return f"{row['source']} {row['dose']:g} (strain RMS {row['strain_rms_mismatch']['mean']:.3f})"
+    budget = f"; sampler {row['budget']}" if row.get("budget") else ""
+    return f"{row['source']} {row['dose']:g} (strain RMS {row['strain_rms_mismatch']['mean']:.3f}{budget})"
 
 
 def _ci_text(b: dict, fmt: str = ".2f", unit: str = "") -> str:
@@ -251,8 +252,16 @@ CLAIMS = {"F1": "iid inflates σ_S ≈ 2×", "F2": "discrepancy σ_S near the tr
 
 
 def verdicts(result: dict) -> list[dict]:
-    """One row per finding: ``finding``, ``claim``, ``verdict``, ``ci``, ``dose``."""
-    rows = result["mismatch"]["rows"]
+    """One row per finding: ``finding``, ``claim``, ``verdict``, ``ci``, ``dose``.
+
+    F1–F3 are decided on :func:`lvcore.studies.mismatch.verdict_rows`: the
+    mismatch run's rows, with the convergence check's rows (a larger sampler
+    budget) in place of them at the doses the check refitted; the dose text
+    names each row's budget.
+    """
+    from lvcore.studies.mismatch import verdict_rows
+
+    rows = verdict_rows(result["mismatch"])
     out = [f1_verdict(rows), f2_verdict(rows), f3_verdict(rows)]
     for new, first, label in ((f5_realistic(result.get("operators_realistic")), f5_verdict(result.get("operators")),
                                "first operator model"),

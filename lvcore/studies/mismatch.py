@@ -384,6 +384,27 @@ def appearance(rows: list[dict]) -> dict:
     return out
 
 
+def budget_text(sampler: dict | None) -> str:
+    """A sampler budget as ``chains × (warm-up + draws)``, e.g. ``2 × (300 + 300)``."""
+    smp = sampler or {}
+    return f"{smp.get('num_chains', '?')} × ({smp.get('num_warmup', '?')} + {smp.get('num_samples', '?')})"
+
+
+def verdict_rows(result: dict) -> list[dict]:
+    """The rows the findings are decided on: the main run's rows, with the rows of the convergence check
+    (``result["check"]``: the same data sets refitted at a larger sampler budget, for the doses that decide the
+    verdicts) in place of the main run's for those doses. Each row carries ``budget`` (its sampler budget, text)
+    and ``checked`` (True when it comes from the check).
+    """
+    main = budget_text(result.get("sampler"))
+    check = result.get("check") or {}
+    by_dose = {(r["source"], r["dose"]): r for r in check.get("rows", [])}
+    cb = budget_text(check.get("sampler"))
+    return [({**by_dose[(r["source"], r["dose"])], "budget": cb, "checked": True}
+             if (r["source"], r["dose"]) in by_dose else {**r, "budget": main, "checked": False})
+            for r in result.get("rows", [])]
+
+
 def strain_rms(z, nominal) -> float:
     """The size of a dose: RMS over the 24 strains of the mismatched minus the nominal outputs."""
     return float(np.sqrt(np.mean((np.asarray(z)[1:] - np.asarray(nominal)[1:]) ** 2)))
@@ -411,12 +432,29 @@ def measured_doses(sims: dict, volunteers, plan: dict) -> dict:
 BATCH = 40
 
 
+def fit_cost(costs: Sequence[dict]) -> dict | None:
+    """The CPU cost of the MCMC batches behind some fits, from each fit's ``batch_cost`` record.
+
+    ``costs``: one record per (volunteer, source, dose) fit, ``{"cpu_s", "wall_s", "datasets", "units"}`` of the
+    batch it came from (a batch of ``units`` fits records the same cost in each). Returns ``cpu_s`` (the sum over
+    batches, compilation and padding included), ``batches``, and the median CPU seconds per data set (the three
+    likelihoods together) over the batches; None when no fit records its cost (fits of an older run).
+    """
+    if not costs:
+        return None
+    share = [c["cpu_s"] / c["units"] for c in costs]
+    per_set = [c["cpu_s"] / c["datasets"] for c in costs]
+    return {"cpu_s": float(np.sum(share)), "batches": float(np.sum([1.0 / c["units"] for c in costs])),
+            "fits_with_cost": len(costs), "cpu_s_per_dataset_median": float(np.median(per_set)),
+            "cpu_s_per_dataset_range": [float(np.min(per_set)), float(np.max(per_set))]}
+
+
 def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, volunteers: Sequence[str] | None = None,
               seeds: int = 20, config=None, seed: int = 0, resolution: str = "default", emulator: str = "chapter",
               workers: int = 1, scheduler: str | None = None, out: str | Path = "study_mismatch",
               progress: Callable | None = None, retry_failed: bool = False, simulate_only: bool = False,
-              batch: int = BATCH, recorded_only: bool = False) -> dict:
-    """Run (or resume) the study under ``out``; returns the result (also written to ``out/mismatch.json``).
+              batch: int = BATCH, recorded_only: bool = False, result_file: str = "mismatch.json") -> dict:
+    """Run (or resume) the study under ``out``; returns the result (also written to ``out/<result_file>``).
 
     Every data set of every volunteer and dose goes through one compiled
     sampler per likelihood, in batches of ``batch`` data sets (the
@@ -426,6 +464,8 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     of each dose is returned (``doses_measured``) and written to ``out/doses.json``.
     With ``recorded_only`` no new fits start: the result summarises the doses
     whose fits are recorded and lists the others under ``not_fitted``.
+    ``fit_cost`` sums the CPU seconds of the MCMC batches behind the fits
+    (each fit file records its batch's cost; a padded batch counts in full).
     """
     from lvcore.emulator.forward import emulator_forward
     from lvcore.emulator.io import load_emulator
@@ -490,15 +530,23 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
             if progress:
                 progress(f"calibrating {', '.join(u[3] for u in units)}: {len(units) * seeds} data sets x "
                          f"{len(MODELS)} likelihoods ({b + len(units)}/{len(todo)})")
+            cpu0, wall0 = time.process_time(), time.perf_counter()
             res = fit_datasets(fwd[vols[0].name], np.concatenate(ys), np.concatenate(cs), np.concatenate(th),
                                np.concatenate(et), config=config, keys=np.concatenate(ks))
+            cost = {"cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - wall0,
+                    "datasets": len(padded) * seeds, "units": len(units)}
+            if progress:
+                progress(f"  batch done: {cost['cpu_s']:.0f} CPU-s, {cost['wall_s']:.0f} s wall for "
+                         f"{cost['datasets']} data sets x {len(MODELS)} likelihoods")
             for i, (v, source, dose, key, _) in enumerate(units):
                 sl = slice(i * seeds, (i + 1) * seeds)
-                fit = clean({m: {k: np.asarray(a)[sl] for k, a in r.items()} for m, r in res.items()})
+                fit = clean({**{m: {k: np.asarray(a)[sl] for k, a in r.items()} for m, r in res.items()},
+                             "batch_cost": cost})
                 write_json_atomic(out / "fits" / f"{key}__{tag}.json", fit)
                 fits.setdefault((source, dose), {})[v.name] = fit
     t_fit = time.perf_counter() - t0 - t_sim
     rows = summarise({k: fits[k] for k in rms if k in fits}, rms)
+    costs = [f["batch_cost"] for per in fits.values() for f in per.values() if "batch_cost" in f]
     result = {
         "study": "mismatch", "synthetic": True,
         "emulator": emulator, "resolution": resolution,
@@ -512,8 +560,9 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
         "rows": rows, "appearance": appearance(rows), "failed": failed, "not_fitted": not_fitted,
         "complete": not not_fitted and not failed,
         "timings_s": {"simulate": t_sim, "calibrate": t_fit, "total": time.perf_counter() - t0},
+        "fit_cost": fit_cost(costs),
     }
-    write_json_atomic(out / "mismatch.json", clean(result))
+    write_json_atomic(out / result_file, clean(result))
     return result
 
 
@@ -644,6 +693,47 @@ def _ci(b: dict, fmt: str = ".2f") -> str:
     return f"{b['value']:{fmt}} [{b['ci'][0]:{fmt}}, {b['ci'][1]:{fmt}}]"
 
 
+def _cost_text(cost: dict | None) -> str:
+    if not cost:
+        return "cost not recorded"
+    lo, hi = cost["cpu_s_per_dataset_range"]
+    return (f"{cost['cpu_s'] / 60:.1f} CPU-min of MCMC in {cost['batches']:.0f} batches (compilation and padding "
+            f"included), median {cost['cpu_s_per_dataset_median']:.2f} CPU-s per data set × 3 likelihoods "
+            f"[{lo:.2f}, {hi:.2f}]")
+
+
+def _diag_cell(d: dict, key: str, fmt: str) -> str:
+    return " / ".join("—" if d.get(m, {}).get(key) is None else fmt.format(d[m][key]) for m in MODELS)
+
+
+def _check_markdown(result: dict) -> list[str]:
+    """The convergence check's block of :func:`docs_markdown`: each checked dose at both budgets."""
+    check = result.get("check")
+    if not check or not check.get("rows"):
+        return []
+    main = {(r["source"], r["dose"]): r for r in result["rows"]}
+    lines = ["", f"**Convergence check.** The doses that decide the verdicts, refitted on the same data sets (same "
+             f"noise seeds) with {budget_text(check.get('sampler'))} instead of "
+             f"{budget_text(result.get('sampler'))}; the findings below use these rows "
+             f"(`lvcore.studies.mismatch.verdict_rows`). MCMC: {_cost_text(check.get('fit_cost'))}."
+             + (" Not fitted: " + ", ".join(_dose_label(u["source"], u["dose"]) for u in check["not_fitted"]) + "."
+                if check.get("not_fitted") else ""), "",
+             "| source | dose | sampler | iid σ_S / 0.03 [90 % CI] | discrepancy σ_S [90 % CI] | "
+             "iid − discrepancy error [90 % CI] | iid − volume error [90 % CI] | ESS median | "
+             "share R-hat > 1.05 | F1 | F3 |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    yes = {True: "yes", False: "no"}
+    for c in check["rows"]:
+        for r, smp in ((main.get((c["source"], c["dose"])), result.get("sampler")), (c, check.get("sampler"))):
+            if r is None:
+                continue
+            g, d = r["output_error_gap"], r.get("diagnostics", {})
+            lines.append(f"| {r['source']} | {r['dose']:g} | {budget_text(smp)} | {_ci(r['iid_sigma_s_inflation'])} | "
+                         f"{_ci(r['discrepancy_sigma_s'], '.4f')} | {_ci(g['iid_minus_discrepancy'], '.4f')} | "
+                         f"{_ci(g['iid_minus_volume'], '.4f')} | {_diag_cell(d, 'min_ess_median', '{:.0f}')} | "
+                         f"{_diag_cell(d, 'share_rhat_over_1_05', '{:.2f}')} | {yes[r['f1']]} | {yes[r['f3']]} |")
+    return lines
+
+
 def docs_markdown(result: dict) -> str:
     """The docs' text of a shipped result: the run, the dose table, and the per-dose metrics with CIs.
 
@@ -657,6 +747,7 @@ def docs_markdown(result: dict) -> str:
              f"{result['seeds_per_dose']} noise seeds per dose, {result.get('resolution')} mesh, "
              f"{result.get('emulator')} emulator, sampler {_sampler_text(result)} per data set; "
              f"{sum(r.get('n_datasets', 0) for r in result['rows'])} data sets × 3 likelihoods fitted"
+             + (f" ({_cost_text(result['fit_cost'])})" if result.get("fit_cost") else "")
              + (f" (shipped by `{shipped['command']}`, {shipped.get('date', '')}; the run's cost is in "
                 "BENCHMARKS.md)" if shipped.get("command") else "") + "."]
     nf = result.get("not_fitted") or []
@@ -688,6 +779,7 @@ def docs_markdown(result: dict) -> str:
                     for k, f in (("min_ess_median", "{:.0f}"), ("min_ess_min", "{:.0f}"),
                                  ("share_rhat_over_1_05", "{:.2f}"))]
             lines.append(f"| {r['source']} | {r['dose']:g} | {cell[0]} | {cell[1]} | {cell[2]} |")
+    lines += _check_markdown(result)
     lines += ["", "| source | F1 appears (dose, strain RMS) | F3 ordering appears (dose, strain RMS) |", "|---|---|---|"]
     for source, a in result["appearance"].items():
         cell = [x if isinstance(x, str) else f"dose {x['dose']:g}, RMS {x['strain_rms']:.4f}"
