@@ -68,6 +68,33 @@ def update_docs(path: Path, dest: Path) -> None:
     path.write_text(text)
 
 
+def carry_over(res: dict, path: Path) -> None:
+    """Fill ``res``'s not-fitted doses with the rows of an earlier shipped result at ``path`` (in place).
+
+    Only an earlier run of the same design qualifies (volunteers, seeds per dose, sampler budget): its rows
+    are what this run would compute for those doses (the data sets and chains of a dose depend only on its key,
+    :func:`lvcore.studies.mismatch.unit_seed`). Each carried row gets ``carried_over`` (the earlier run's
+    date); ``res["carried_over"]`` says from which command.
+    """
+    from lvcore.studies import mismatch
+
+    old = json.loads(path.read_text())
+    keys = ("num_warmup", "num_samples", "num_chains")
+    if (old.get("volunteers") != res["volunteers"] or old.get("seeds_per_dose") != res["seeds_per_dose"]
+            or any(old.get("sampler", {}).get(k) != res["sampler"][k] for k in keys)):
+        raise SystemExit(f"--carry-from {path}: another design (volunteers, seeds or sampler budget differ)")
+    missing = {(u["source"], u["dose"]) for u in res["not_fitted"]}
+    carried = [{**r, "carried_over": old.get("shipped", {}).get("date", "?")} for r in old["rows"]
+               if (r["source"], r["dose"]) in missing]
+    got = {(r["source"], r["dose"]) for r in carried}
+    res["rows"] = sorted(res["rows"] + carried, key=lambda r: (mismatch.SOURCES.index(r["source"]), r["dose"]))
+    res["not_fitted"] = [u for u in res["not_fitted"] if (u["source"], u["dose"]) not in got]
+    res["appearance"] = mismatch.appearance(res["rows"])
+    res["complete"] = not res["not_fitted"] and not res["failed"]
+    res["carried_over"] = {"command": old.get("shipped", {}).get("command"), "date": old.get("shipped", {}).get("date"),
+                           "doses": [{"source": s, "dose": d} for s, d in sorted(got)]}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     for k, v in SHIP.items():
@@ -78,6 +105,10 @@ def main(argv=None) -> int:
     p.add_argument("--docs-only", action="store_true", help="only rewrite the docs blocks from the shipped JSON")
     p.add_argument("--recorded-only", action="store_true",
                    help="start no new fits: ship what --work holds (the JSON lists the doses not fitted)")
+    p.add_argument("--carry-from", default="",
+                   help="with --recorded-only: a previously shipped mismatch.json whose rows fill the main run's "
+                        "doses not fitted in --work (same volunteers, seeds and sampler budget; marked "
+                        "carried_over in the JSON and the docs)")
     args = p.parse_args(argv)
     from lvcore.studies.results import bundled_studies_dir
 
@@ -98,6 +129,10 @@ def main(argv=None) -> int:
                              resolution=args.resolution, workers=args.workers, out=args.work, batch=args.batch,
                              recorded_only=args.recorded_only,
                              progress=lambda m: print(time.strftime("%H:%M:%S"), m, flush=True))
+    if args.carry_from:
+        if not args.recorded_only:
+            raise SystemExit("--carry-from needs --recorded-only (a full run fits every dose itself)")
+        carry_over(res, Path(args.carry_from))
     if args.check_doses:
         plan = mismatch._parse_doses(args.check_doses.split(";"), mismatch.SOURCES)
         ccfg = samplers.SamplerConfig(num_warmup=args.check_warmup, num_samples=args.check_samples,
@@ -110,7 +145,8 @@ def main(argv=None) -> int:
         res["check"] = {k: chk[k] for k in ("sampler", "doses", "rows", "appearance", "failed", "not_fitted",
                                             "fit_cost")}
     cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k.replace('_', '-')} {shlex.quote(str(getattr(args, k)))}"
-                                                        for k in SHIP) + (" --recorded-only" if args.recorded_only else "")
+                                                        for k in SHIP) + (" --recorded-only" if args.recorded_only else "") \
+        + (f" --carry-from {shlex.quote(args.carry_from)}" if args.carry_from else "")
     res.pop("folder", None)
     res["shipped"] = {"script": "scripts/ship_mismatch.py", "command": cmd, "date": time.strftime("%Y-%m-%d"),
                       "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared)",

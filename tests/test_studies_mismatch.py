@@ -237,3 +237,36 @@ def test_verdict_rows_take_the_convergence_check_in_place_of_the_main_rows(misma
     assert check_table.count("| dispersion | 3 | 2 × (300 + 300) |") == 1
     assert mm.verdict_rows({**res, "check": None}) == [{**r, "budget": "1 × (150 + 150)", "checked": False}
                                                        for r in res["rows"]]
+
+
+def _ship_script():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "ship_mismatch.py"
+    spec = importlib.util.spec_from_file_location("ship_mismatch", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_carry_over_fills_only_not_fitted_doses_of_the_same_design(mismatch_result, tmp_path):
+    import json
+
+    ship = _ship_script()
+    full = mismatch_result()
+    old = {**full, "shipped": {"date": "2026-11-25", "command": "python scripts/ship_mismatch.py"}}
+    old.pop("folder")
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    res = {**full, "rows": full["rows"][:1], "failed": [],
+           "not_fitted": [{"volunteer": "HV1", "source": "dispersion", "dose": d} for d in (2.0, 3.0)]}
+    ship.carry_over(res, tmp_path / "old.json")
+    assert [r["dose"] for r in res["rows"]] == [1.0, 2.0, 3.0] and res["complete"] and not res["not_fitted"]
+    assert [r.get("carried_over") for r in res["rows"]] == [None, "2026-11-25", "2026-11-25"]
+    assert res["appearance"] == mm.appearance(full["rows"]) and len(res["carried_over"]["doses"]) == 2
+    text = mm.docs_markdown({**res, "seeds_per_dose": 20})
+    assert "**Carried over (†):** 2 doses" in text and "| dispersion | 2 † |" in text
+    other = {**old, "sampler": {**old["sampler"], "num_chains": 1}}
+    (tmp_path / "other.json").write_text(json.dumps(other))
+    with pytest.raises(SystemExit, match="another design"):
+        ship.carry_over({**full, "not_fitted": []}, tmp_path / "other.json")

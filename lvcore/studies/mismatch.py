@@ -693,6 +693,10 @@ def _ci(b: dict, fmt: str = ".2f") -> str:
     return f"{b['value']:{fmt}} [{b['ci'][0]:{fmt}}, {b['ci'][1]:{fmt}}]"
 
 
+def _dose_cell(row: dict) -> str:
+    return f"{row['dose']:g}" + (" †" if row.get("carried_over") else "")
+
+
 def _cost_text(cost: dict | None) -> str:
     if not cost:
         return "cost not recorded"
@@ -750,6 +754,13 @@ def docs_markdown(result: dict) -> str:
              + (f" ({_cost_text(result['fit_cost'])})" if result.get("fit_cost") else "")
              + (f" (shipped by `{shipped['command']}`, {shipped.get('date', '')}; the run's cost is in "
                 "BENCHMARKS.md)" if shipped.get("command") else "") + "."]
+    co = result.get("carried_over")
+    if co:
+        lines += ["", f"**Carried over (†):** {len(co['doses'])} doses (" + ", ".join(
+            _dose_label(d["source"], d["dose"]) for d in co["doses"]) + f") are the rows of the {co.get('date')} "
+            f"run of the same design (`{co.get('command')}`), not refitted in this one (its time went to the "
+            "convergence check); a dose's data sets and chain seeds depend only on its key, so a full run of the "
+            "command above recomputes the same data sets."]
     nf = result.get("not_fitted") or []
     if nf:
         lines += ["", f"**Incomplete:** {len(nf)} (volunteer, source, dose) of the planned run are not fitted in "
@@ -763,7 +774,7 @@ def docs_markdown(result: dict) -> str:
     yes = {True: "yes", False: "no"}
     for r in result["rows"]:
         m, e, c = r["strain_rms_mismatch"], r["output_error"], r["theta_coverage"]
-        lines.append(f"| {r['source']} | {r['dose']:g} | {m['mean']:.4f} [{m['min']:.4f}, {m['max']:.4f}] | "
+        lines.append(f"| {r['source']} | {_dose_cell(r)} | {m['mean']:.4f} [{m['min']:.4f}, {m['max']:.4f}] | "
                      f"{_ci(r['iid_sigma_s_inflation'])} | {_ci(r['discrepancy_sigma_s'], '.4f')} | "
                      + " / ".join(f"{e[k]['value']:.4f}" for k in MODELS) + " | "
                      f"{_ci(r['output_error_gap']['iid_minus_discrepancy'], '.4f')} | "
@@ -778,7 +789,7 @@ def docs_markdown(result: dict) -> str:
             cell = [" / ".join(("—" if d.get(m, {}).get(k) is None else f.format(d[m][k])) for m in MODELS)
                     for k, f in (("min_ess_median", "{:.0f}"), ("min_ess_min", "{:.0f}"),
                                  ("share_rhat_over_1_05", "{:.2f}"))]
-            lines.append(f"| {r['source']} | {r['dose']:g} | {cell[0]} | {cell[1]} | {cell[2]} |")
+            lines.append(f"| {r['source']} | {_dose_cell(r)} | {cell[0]} | {cell[1]} | {cell[2]} |")
     lines += _check_markdown(result)
     lines += ["", "| source | F1 appears (dose, strain RMS) | F3 ordering appears (dose, strain RMS) |", "|---|---|---|"]
     for source, a in result["appearance"].items():
