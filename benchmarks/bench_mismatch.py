@@ -75,15 +75,22 @@ def main(argv=None) -> int:
                 rows.append((batch, budget, m, times[0], timed, timed / batch, float(np.median(d["min_ess"])),
                              float(np.min(d["min_ess"])), float(np.mean(np.asarray(rhat) > 1.05)) if rhat is not None
                              else float("nan")))
-                print(f"  done batch {batch} {budget} {m}", flush=True)
+                print("  done: " + _row_text(rows[-1]), flush=True)  # each row as it ends (a run cut short keeps it)
     print(f"\nload average (1 min) before {load0:.2f}, after {os.getloadavg()[0]:.2f}; "
           f"{os.cpu_count()} CPUs; CPU seconds of this process")
-    print(f"{'batch':>5} {'budget':>12} {'likelihood':>12} {'first CPU-s':>11} {'median CPU-s':>12} "
-          f"{'CPU-s/set':>9} {'ESS med':>8} {'ESS min':>8} {'Rhat>1.05':>9}")
+    print(HEADER)
     for r in rows:
-        print(f"{r[0]:>5} {r[1]:>12} {r[2]:>12} {r[3]:>11.1f} {r[4]:>12.1f} {r[5]:>9.2f} {r[6]:>8.0f} {r[7]:>8.0f} "
-              f"{r[8]:>9.2f}")
+        print(_row_text(r))
     return 0
+
+
+HEADER = (f"{'batch':>5} {'budget':>12} {'likelihood':>12} {'first CPU-s':>11} {'median CPU-s':>12} "
+          f"{'CPU-s/set':>9} {'ESS med':>8} {'ESS min':>8} {'Rhat>1.05':>9}")
+
+
+def _row_text(r) -> str:
+    return (f"{r[0]:>5} {r[1]:>12} {r[2]:>12} {r[3]:>11.1f} {r[4]:>12.1f} {r[5]:>9.2f} {r[6]:>8.0f} {r[7]:>8.0f} "
+            f"{r[8]:>9.2f}")
 
 
 if __name__ == "__main__":
