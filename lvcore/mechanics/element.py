@@ -23,7 +23,7 @@ pressure increment is condensed per element:
 
 with ``K_uu = Σ_q w_q ∇Nᵀ (∂²W/∂F² + p_q ∂²J/∂F²) ∇N``. The pointwise stress
 and 9x9 tangent come from the model (:meth:`~lvcore.mechanics.materials.ConstitutiveModel.first_piola_tangent`:
-in closed form for the Holzapfel-Ogden law, else automatic differentiation of the
+in closed form for the laws of :mod:`lvcore.mechanics.materials`, else automatic differentiation of the
 energy density in F), followed by this explicit chain rule.
 """
 from __future__ import annotations

@@ -54,6 +54,31 @@ def _pytree(cls):
         cls, data_fields=[f.name for f in dataclasses.fields(cls)], meta_fields=[])
 
 
+def _isochoric(C, Sbar, CCbar):
+    """Stress and elasticity tensor of ``W(C) = Ŵ(C̄)``, ``C̄ = I3^{-1/3} C`` (``I3 = det C``), from
+    ``S̄ = 2 ∂Ŵ/∂C̄`` and ``ℂ̄ = 4 ∂²Ŵ/∂C̄∂C̄`` (Holzapfel 2000, eqs. 6.88 and 6.168)::
+
+        S = I3^{-1/3} Dev S̄,  Dev X = X − (X : C)/3 C⁻¹,
+        ℂ = ℙ : (I3^{-2/3} ℂ̄) : ℙᵀ + 2/3 (I3^{-1/3} S̄ : C) ℙ̃ − 2/3 (C⁻¹ ⊗ S + S ⊗ C⁻¹),
+
+    with ``ℙ = 𝕀 − C⁻¹ ⊗ C / 3`` and ``ℙ̃ = C⁻¹ ⊙ C⁻¹ − C⁻¹ ⊗ C⁻¹ / 3``. ``CCbar`` None: stress only.
+    """
+    i3 = det3(C)
+    Cinv = cofactor(C) / i3  # C symmetric: cof C = det C · C⁻¹
+    j23 = i3 ** (-1.0 / 3.0)
+    S = j23 * (Sbar - (jnp.sum(Sbar * C) / 3.0) * Cinv)
+    if CCbar is None:
+        return S, None
+    Y = (j23 * j23) * CCbar
+    Y = Y - jnp.einsum("IJ,KL->IJKL", Cinv, jnp.einsum("AB,ABKL->KL", C, Y)) / 3.0
+    Y = Y - jnp.einsum("IJ,KL->IJKL", jnp.einsum("IJAB,AB->IJ", Y, C), Cinv) / 3.0
+    CsC = 0.5 * (jnp.einsum("IK,JL->IJKL", Cinv, Cinv) + jnp.einsum("IL,JK->IJKL", Cinv, Cinv))
+    Pt = CsC - jnp.einsum("IJ,KL->IJKL", Cinv, Cinv) / 3.0
+    CC = (Y + (2.0 / 3.0) * j23 * jnp.sum(Sbar * C) * Pt
+          - (2.0 / 3.0) * (jnp.einsum("IJ,KL->IJKL", Cinv, S) + jnp.einsum("IJ,KL->IJKL", S, Cinv)))
+    return S, CC
+
+
 class MaterialLaw:
     """Base class of the hyperelastic laws (frozen dataclasses of their parameters).
 
@@ -362,6 +387,30 @@ class Guccione(MaterialLaw):
         )
         return 0.5 * self.C * jnp.expm1(Q)
 
+    closed_form: ClassVar[bool] = True
+
+    def pk2_tangent(self, C, frame, with_tangent: bool = True):
+        """Closed form (see :meth:`MaterialLaw.pk2_tangent`): with ``Ē' = R Ē Rᵀ`` (R the frame rows),
+        ``Q = Σ_ab β_ab Ē'_ab²`` (``β`` the exponents: ``b_f`` on 11, ``b_t`` on 22, 33, 23, ``b_fs`` on
+        12, 13) and ``T = ∂Q/∂C̄ = Rᵀ (β ∘ Ē') R``: ``S̄ = C e^Q T``,
+        ``ℂ̄ = 2 C e^Q (T ⊗ T + ∂T/∂C̄)``, ``(∂T/∂C̄)_IJKL = sym_KL Σ_ab β_ab R_aI R_bJ R_aK R_bL / 2``;
+        then the isochoric projection (:func:`_isochoric`)."""
+        bf, bt, bfs = self.b_f, self.b_t, self.b_fs
+        beta = jnp.array([[bf, bfs, bfs], [bfs, bt, bt], [bfs, bt, bt]])
+        i3 = det3(C)
+        Cbar = i3 ** (-1.0 / 3.0) * C
+        Ep = frame @ (0.5 * (Cbar - jnp.eye(3))) @ frame.T
+        Q = jnp.sum(beta * Ep * Ep)
+        eQ = jnp.exp(Q)
+        T = frame.T @ (beta * Ep) @ frame
+        Sbar = self.C * eQ * T
+        if not with_tangent:
+            return _isochoric(C, Sbar, None)
+        B = jnp.einsum("ab,aI,bJ,aK,bL->IJKL", beta, frame, frame, frame, frame)
+        dT = 0.25 * (B + jnp.swapaxes(B, 2, 3))
+        CCbar = 2.0 * self.C * eQ * (jnp.einsum("IJ,KL->IJKL", T, T) + dT)
+        return _isochoric(C, Sbar, CCbar)
+
 
 @_pytree
 @dataclass(frozen=True)
@@ -388,6 +437,12 @@ class NeoHookean(MaterialLaw):
 
     def strain_energy(self, F, frame):
         return 0.5 * self.mu * (isochoric_i1(F) - 3.0)
+
+    closed_form: ClassVar[bool] = True
+
+    def pk2_tangent(self, C, frame, with_tangent: bool = True):
+        """Closed form: ``S̄ = mu I``, ``ℂ̄ = 0``, then the isochoric projection (:func:`_isochoric`)."""
+        return _isochoric(C, self.mu * jnp.eye(3), jnp.zeros((3, 3, 3, 3)) if with_tangent else None)
 
 
 #: The one registry of material laws: case-schema name -> law class.
