@@ -270,3 +270,12 @@ def test_carry_over_fills_only_not_fitted_doses_of_the_same_design(mismatch_resu
     (tmp_path / "other.json").write_text(json.dumps(other))
     with pytest.raises(SystemExit, match="another design"):
         ship.carry_over({**full, "not_fitted": []}, tmp_path / "other.json")
+
+
+def test_an_unfitted_convergence_check_is_said_in_the_docs_block(mismatch_result):
+    res = {**mismatch_result(), "check": {"sampler": {"num_chains": 2, "num_warmup": 300, "num_samples": 300},
+                                          "rows": [], "not_fitted": [{"volunteer": "HV1", "source": "dispersion",
+                                                                      "dose": 3.0}]}}
+    text = mm.docs_markdown(res)
+    assert "**Convergence check** (2 × (300 + 300) on dispersion 3): not fitted" in text
+    assert all(not r["checked"] for r in mm.verdict_rows(res))

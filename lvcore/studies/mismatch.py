@@ -713,8 +713,12 @@ def _diag_cell(d: dict, key: str, fmt: str) -> str:
 def _check_markdown(result: dict) -> list[str]:
     """The convergence check's block of :func:`docs_markdown`: each checked dose at both budgets."""
     check = result.get("check")
-    if not check or not check.get("rows"):
+    if not check:
         return []
+    if not check.get("rows"):
+        return ["", f"**Convergence check** ({budget_text(check.get('sampler'))} on "
+                + ", ".join(_dose_label(u["source"], u["dose"]) for u in check.get("not_fitted", []))
+                + "): not fitted in this shipped run; the findings use the main run's budget."]
     main = {(r["source"], r["dose"]): r for r in result["rows"]}
     lines = ["", f"**Convergence check.** The doses that decide the verdicts, refitted on the same data sets (same "
              f"noise seeds) with {budget_text(check.get('sampler'))} instead of "
@@ -765,7 +769,7 @@ def docs_markdown(result: dict) -> str:
     if nf:
         lines += ["", f"**Incomplete:** {len(nf)} (volunteer, source, dose) of the planned run are not fitted in "
                   "this shipped run (" + ", ".join(f"{u['source']} {u['dose']:g}" for u in nf) + "); the same "
-                  "command without `--recorded-only` resumes the study and fits them."]
+                  "command without `--recorded-only` (and `--carry-from`) resumes the study and fits them."]
     lines += ["",
              "| source | dose | strain RMS mismatch (mean [min, max] over volunteers) | iid σ_S / 0.03 [90 % CI] | "
              "discrepancy σ_S [90 % CI] | output error volume / iid / discrepancy | "
