@@ -762,8 +762,8 @@ def docs_markdown(result: dict) -> str:
     if co:
         lines += ["", f"**Carried over (†):** {len(co['doses'])} doses (" + ", ".join(
             _dose_label(d["source"], d["dose"]) for d in co["doses"]) + f") are the rows of the {co.get('date')} "
-            f"run of the same design (`{co.get('command')}`), not refitted in this one (its time went to the "
-            "convergence check); a dose's data sets and chain seeds depend only on its key, so a full run of the "
+            f"run of the same design (`{co.get('command')}`), not refitted in this one; a dose's data sets and chain "
+            "seeds depend only on its key, so a full run of the "
             "command above recomputes the same data sets."]
     nf = result.get("not_fitted") or []
     if nf:
