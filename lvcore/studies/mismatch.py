@@ -701,8 +701,8 @@ def _cost_text(cost: dict | None) -> str:
     if not cost:
         return "cost not recorded"
     lo, hi = cost["cpu_s_per_dataset_range"]
-    return (f"{cost['cpu_s'] / 60:.1f} CPU-min of MCMC in {cost['batches']:.0f} batches (compilation and padding "
-            f"included), median {cost['cpu_s_per_dataset_median']:.2f} CPU-s per data set × 3 likelihoods "
+    return (f"MCMC of the {cost['fits_with_cost']} dose fits recorded in the work folder: {cost['cpu_s'] / 60:.1f} "
+            f"CPU-min in {cost['batches']:.0f} batches (compilation and padding included), median {cost['cpu_s_per_dataset_median']:.2f} CPU-s per data set × 3 likelihoods "
             f"[{lo:.2f}, {hi:.2f}]")
 
 
