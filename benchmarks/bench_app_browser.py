@@ -3,7 +3,8 @@
     python benchmarks/bench_app_browser.py                      # every page x 3 sessions, 7 redraws
     python benchmarks/bench_app_browser.py --repeats 5 --redraws 11
     python benchmarks/bench_app_browser.py --screenshots docs/screenshots   # also refresh the docs' small PNGs
-    python benchmarks/bench_app_browser.py --calibration   # also time a calibration, click to results
+    python benchmarks/bench_app_browser.py --calibration   # also time a calibration: click to results, to the
+                                                           # verdict banners (R-hat, ESS), to every figure drawn
     python benchmarks/bench_app_browser.py --redraw-only --redraws 15   # only the Fibre-angles slider-to-redraw
 
 Starts ``streamlit run app.py`` on 127.0.0.1 and, for every page linked in the
@@ -47,6 +48,9 @@ def main(argv=None) -> int:
     p.add_argument("--slider", choices=("sidebar", "map"), default="sidebar",
                    help="slider timed on Fibre angles: the shared sidebar's first θ slider (the whole page reruns) "
                         "or the map's first slider (only the map's fragment reruns)")
+    p.add_argument("--app-script", type=Path, default=REPO / "app.py",
+                   help="entry script to serve (e.g. another checkout's app.py, with PYTHONPATH set to that checkout, "
+                        "for an A/B in one run)")
     args = p.parse_args(argv)
 
     from playwright.sync_api import sync_playwright
@@ -57,7 +61,7 @@ def main(argv=None) -> int:
     shots.mkdir(parents=True, exist_ok=True)
     rows = []
     t_start = time.perf_counter()
-    with drv.StreamlitServer(app=REPO / "app.py", log=REPO / "build" / "streamlit_bench.log") as server, \
+    with drv.StreamlitServer(app=args.app_script, log=REPO / "build" / "streamlit_bench.log") as server, \
             sync_playwright() as pw:
         t_server = time.perf_counter() - t_start
         b = drv.launch(pw)
@@ -119,14 +123,27 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             button.click()
             page.get_by_text(re.compile("^Results for")).first.wait_for(timeout=1_800_000)
-            calib = time.perf_counter() - t0
+            calib = {"results": time.perf_counter() - t0}
+            # the verdict's banners (one per likelihood, green or amber, with divergences, R-hat and ESS)
+            banners = page.get_by_text(re.compile(r"(Converged: divergences|Treat with care: )"))
+            models = page.locator("[data-testid=stMain] [data-testid=stMultiSelect] [data-baseweb=tag]").count() or 1
+            deadline = time.perf_counter() + 600
+            while banners.count() < models and time.perf_counter() < deadline:
+                time.sleep(0.02)
+            calib["verdict"] = time.perf_counter() - t0
             drv.wait_idle(page)
+            calib["idle"] = time.perf_counter() - t0
+            calib["banners"] = [banners.nth(i).inner_text() for i in range(banners.count())]
             page.screenshot(path=str(shots / "calibration_results.png"), full_page=True)
             if args.screenshots:
                 drv.shrink_png(shots / "calibration_results.png", args.screenshots / "calibration_results.png")
             errs = drv.exceptions(page)
             ctx.close()
-            print(f"calibration: click to results {calib:.1f} s" + (f"; exceptions {errs}" if errs else ""), flush=True)
+            print(f"calibration: click to results {calib['results']:.1f} s, to the verdict banners "
+                  f"{calib['verdict']:.1f} s, to every figure drawn {calib['idle']:.1f} s"
+                  + (f"; exceptions {errs}" if errs else ""), flush=True)
+            for text in calib["banners"]:
+                print(f"  banner: {text}", flush=True)
         b.close()
 
     print(f"\nserver start {t_server:.1f} s; {args.repeats} fresh sessions per page; cpus {os.cpu_count()}, "
@@ -139,7 +156,10 @@ def main(argv=None) -> int:
         print(f"\nFibre angles live map, slider '{slider_label}' -> redraw: median {statistics.median(redraw) * 1000:.0f} ms, "
               f"min {min(redraw) * 1000:.0f}, max {max(redraw) * 1000:.0f} (n={len(redraw)}; target <= 300 ms)")
     if calib is not None:
-        print(f"Calibration page, 'Run calibration' with the page's defaults -> results shown: {calib:.1f} s")
+        print(f"Calibration page, 'Run calibration' with the page's defaults -> results shown: {calib['results']:.1f} s; "
+              f"verdict banners: {calib['verdict']:.1f} s; every figure drawn: {calib['idle']:.1f} s")
+    print(f"time {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}; server log {REPO / 'build' / 'streamlit_bench.log'} "
+          "(the app's warm-up reports there)")
     return 0
 
 

@@ -2,6 +2,7 @@
 
     python benchmarks/bench_calibration.py                      # the real 'chapter' emulator
     python benchmarks/bench_calibration.py --forward analytic   # SYNTHETIC closed-form stand-in
+    python benchmarks/bench_calibration.py --app                # the Calibration page's click, compile vs sampling
 
 Runs (4 chains x 1000 warm-up + 1000 draws by default): volume (NUTS), iid
 (NUTS), discrepancy (HMC-within-Gibbs, Algorithm 4) and discrepancy (joint
@@ -30,7 +31,7 @@ def main(argv=None) -> int:
     p.add_argument("--warmup", type=int, default=1000)
     p.add_argument("--samples", type=int, default=1000)
     p.add_argument("--chain-method", default="auto")
-    p.add_argument("--runs", default="volume,iid,discrepancy,discrepancy-nuts")
+    p.add_argument("--runs", default=p_default_runs())
     p.add_argument("--dense-mass", action="store_true", help="dense NUTS mass matrix (default: diagonal)")
     p.add_argument("--profile", action="store_true",
                    help="split each run into its fixed cost (trace, lower, compile or cache load, init: a 5 + 5 run, "
@@ -40,8 +41,18 @@ def main(argv=None) -> int:
                         "e.g. 300:250/500/1000,500:250/500/1000")
     p.add_argument("--datasets", type=int, default=1,
                    help="SYNTHETIC data sets per setting (seeds 0..n-1; --sweep reports the worst minimum ESS)")
+    p.add_argument("--app", action="store_true",
+                   help="the Calibration page's work in this process, at the page's defaults (subject, emulator, iid + "
+                        "discrepancy at samplers.INTERACTIVE): the app's warm-up (trace, lower, compile or cache load: "
+                        "lvcore.app.warmup) against a click (sampling and the verdict's best fit), one by one and in "
+                        "threads as the page runs them; wall and process CPU seconds, ESS and R-hat per run")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
+    if args.app:
+        from lvcore.app.process import setup_process
+
+        setup_process(args.chains)
+        return app_profile(args)
     from lvcore.inference.samplers import use_host_devices
 
     use_host_devices(args.chains)
@@ -131,6 +142,75 @@ def profile(args, forward, y, cfg, samplers, diagnostics) -> int:
     print(json.dumps({"load_average": os.getloadavg(), "time": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
                       "forward": getattr(forward, "label", "")}))
     return 0
+
+
+def app_profile(args) -> int:
+    """The Calibration page's click in this process (``--app``): warm-up, then sampling + best fit."""
+    import dataclasses
+    from concurrent.futures import ThreadPoolExecutor
+
+    import lvcore  # noqa: F401
+    from lvcore.app import warmup
+    from lvcore.app.controls import DEFAULT_SUBJECT
+    from lvcore.conditions import SIGMA_V_ML, SIMULATOR_DEFAULT_EDP_MMHG
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.emulator.io import load_emulator
+    from lvcore.geometry.scaling import ScaledForward
+    from lvcore.inference import calibrate as cal
+    from lvcore.inference import guards, samplers, verdict
+    from lvcore.inference.cli import DEFAULT_EMULATOR
+    from lvcore.inference.data import read_measured_csv
+    from lvcore.resources import bundled_volunteers, volunteer_files
+
+    cfg = dataclasses.replace(samplers.INTERACTIVE, num_chains=args.chains)
+    models = [m for m in args.runs.split(",") if m in ("volume", "iid", "discrepancy")] or ["iid", "discrepancy"]
+    if args.runs == p_default_runs():
+        models = ["iid", "discrepancy"]
+    load = os.getloadavg()
+    print(f"{'stage':52s} {'wall s':>7s} {'CPU s':>7s}", flush=True)
+    stage = lambda label, wall, cpu: print(f"{label:52s} {wall:7.2f} {cpu:7.2f}", flush=True)  # noqa: E731
+    (_, wall, cpu) = _timed(lambda: warmup.warm(models=models))
+    stage(f"warm-up: {', '.join(models)} samplers + best fit (compile)", wall, cpu)
+    emu = load_emulator(DEFAULT_EMULATOR)
+
+    def forward_of(name):
+        vol = volunteer_files(name)
+        data = read_measured_csv(vol.measured)[0]
+        geo = guards.resolve_geometry(str(vol.geometry))
+        cond = {"edp_mmhg": SIMULATOR_DEFAULT_EDP_MMHG, **guards.check_conditions(emu)}
+        edp = guards.subject_edp(data, cond, emu, DEFAULT_EMULATOR, None)
+        return data, ScaledForward(emulator_forward(emu, geo.h, name=DEFAULT_EMULATOR, edp_mmhg=edp), geo.scale)
+
+    subjects = [DEFAULT_SUBJECT] + [n for n in bundled_volunteers() if n != DEFAULT_SUBJECT][:1]
+    rows = []
+    for name in subjects:
+        data, fwd = forward_of(name)
+        tasks = {m: (lambda m=m: cal.calibrate(data.y, fwd, m, config=cfg)) for m in models}
+        tasks["best fit"] = lambda: verdict.consistency_check(data.y, fwd, SIGMA_V_ML)
+        for label, task in tasks.items():
+            res, wall, cpu = _timed(task)
+            stage(f"{name}: {label} alone", wall, cpu)
+            if label in models:
+                c = res.convergence
+                print(f"    {label}: max R-hat {c.max_rhat:.3f}, min bulk ESS {c.min_ess_bulk:.0f} (all monitored; "
+                      f"theta {float(res.summary.loc[['a', 'b', 'af', 'bf'], 'ess_bulk'].min()):.0f}), "
+                      f"{c.n_divergent} divergent, {c.rounds} round(s)", flush=True)
+                rows.append({"subject": name, "model": label, "wall_s": wall, "cpu_s": cpu, "max_rhat": c.max_rhat,
+                             "min_ess_bulk": c.min_ess_bulk, "divergent": c.n_divergent})
+
+        def together():
+            with ThreadPoolExecutor(len(tasks)) as pool:
+                return [f.result() for f in [pool.submit(t) for t in tasks.values()]]
+        _, wall, cpu = _timed(together)
+        stage(f"{name}: {' + '.join(tasks)} in threads (the click)", wall, cpu)
+    print(json.dumps({"load_average_before": load, "load_average": os.getloadavg(),
+                      "time": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()), "emulator": DEFAULT_EMULATOR,
+                      "config": f"{cfg.num_chains} x ({cfg.num_warmup} + {cfg.num_samples})", "rows": rows}))
+    return 0
+
+
+def p_default_runs() -> str:
+    return "volume,iid,discrepancy,discrepancy-nuts"
 
 
 def sweep(args, forward, theta, disc, cfg, samplers, diagnostics, simulate_data) -> int:

@@ -150,23 +150,36 @@ def _consistency(job: dict, y, forward, infer: bool):
 
 
 def _worker(job: dict, y, forward, models, config, infer):
+    """Every likelihood's sampler and the verdict's best fit, side by side in threads (both cores busy).
+
+    numpyro's handler stack is global, so model traces never overlap: they hold
+    ``samplers.TRACE_LOCK``; compiled samplers (warmed when the app starts, lvcore.app.warmup) run
+    without it. The results are stored in the order the user chose the likelihoods.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
     def progress(msg, frac):
         job["message"] = msg
         job["fraction"] = frac
 
+    done: dict = {}
+
+    def one(m):
+        cal.calibrate_subjects([(job["subject"], y, forward)], [m], config=config, infer_angles=infer,
+                               progress=progress, on_result=lambda item: done.__setitem__(item.model, item.result))
+
     try:
-        cal.calibrate_subjects([(job["subject"], y, forward)], models, config=config, infer_angles=infer,
-                               progress=progress, on_result=lambda item: job["results"].__setitem__(item.model,
-                                                                                                    item.result))
-        # the verdict's best fit, in this thread after the sampler (numpyro's handler stack is global, so two
-        # model traces must never run at once): the results render without waiting for it
-        progress("verdict: best fit of volume and strains", 1.0)
-        _consistency(job, y, forward, infer)
-        job["message"] = "done"
-        job["fraction"] = 1.0
+        with ThreadPoolExecutor(max_workers=len(models) + 1) as pool:
+            verdict_future = pool.submit(_consistency, job, y, forward, infer)
+            futures = [pool.submit(one, m) for m in models]
+            for f in futures:
+                f.result()  # the first error is shown
+            verdict_future.result()
+        progress("done", 1.0)
     except Exception as err:  # noqa: BLE001 - shown to the user
         job["error"] = f"{type(err).__name__}: {err}"
     finally:
+        job["results"].update({m: done[m] for m in models if m in done})
         job["done"] = True
         job["elapsed"] = time.perf_counter() - job["t0"]
 
@@ -204,7 +217,8 @@ if run_clicked:
 
 
 def _progress():
-    """Progress bar and elapsed time, visible; reruns itself once a second only while a run is in flight."""
+    """Progress bar and elapsed time, visible; reruns itself twice a second only while a run is in flight (the
+    results show at most 0.5 s after the run ends)."""
     j = st.session_state.get("calibration_job")
     if j is None or j.get("shown"):
         return
@@ -217,8 +231,8 @@ def _progress():
 
 
 _job = st.session_state.get("calibration_job")
-if _job is not None and not _job["done"]:  # the 1 Hz timer exists only while sampling: no idle reruns
-    st.fragment(run_every=1.0)(_progress)()
+if _job is not None and not _job["done"]:  # the 2 Hz timer exists only while sampling: no idle reruns
+    st.fragment(run_every=0.5)(_progress)()
 
 # ----------------------------------------------------------------------------- results
 def _verdicts(job: dict, results: dict) -> dict:

@@ -6,6 +6,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+# the app's background warm-up (lvcore.app.warmup) would compile the Calibration page's samplers in every
+# test process that starts the app; tests that want it call lvcore.app.warmup.warm themselves
+os.environ.setdefault("LVCORE_APP_WARMUP", "0")
 
 import lvcore  # noqa: E402,F401  (turns on float64 before any test makes arrays)
 from lvcore.inference.samplers import use_host_devices  # noqa: E402

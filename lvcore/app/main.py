@@ -22,6 +22,9 @@ def main() -> None:
     pages = [st.Page(p.path, title=p.title, icon=p.icon, url_path=p.url_path, default=(k == 0))
              for k, p in enumerate(PAGES)]
     pg = st.navigation(pages)
+    from lvcore.app import warmup
+
+    warmup.start()  # once per server process: the Calibration page's samplers and best fit, compiled in the background
     from lvcore.app.controls import render_shared_sidebar
 
     page = next((p for p in PAGES if p.title == pg.title), None)

@@ -23,8 +23,13 @@ so chains run sequentially, vectorised or in parallel like any numpyro kernel.
 """
 from __future__ import annotations
 
+import copy
+import hashlib
+import threading
 import time
-from dataclasses import dataclass, field
+from collections import OrderedDict
+from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any, NamedTuple
 
@@ -144,10 +149,69 @@ def _with_dynamic_model_args(fn):
     return call, model_args
 
 
-def pmap_chains(fn):
-    """numpyro chain method: one chain per JAX device (pmap), the data passed as an argument."""
+#: Held while a numpyro model is traced. numpyro's effect-handler stack is one global list, so two threads
+#: tracing models at once corrupt each other's traces ("all sites must have unique names"); running an
+#: already compiled sampler needs no lock, so compiled samplers of several models can run side by side.
+TRACE_LOCK = threading.RLock()
+
+_COMPILE_ONLY = threading.local()
+
+
+@contextmanager
+def compile_only():
+    """Within this block the chain methods compile (or load from the persistent cache) without sampling.
+
+    ``MCMC.run`` then returns zeros of the right shapes; used by :func:`precompile` to warm an app.
+    """
+    _COMPILE_ONLY.on = True
+    try:
+        yield
+    finally:
+        _COMPILE_ONLY.on = False
+
+
+def _avals(tree):
+    leaves, treedef = jax.tree.flatten(tree)
+    return treedef, tuple((tuple(np.shape(x)), str(jnp.result_type(x))) for x in leaves)
+
+
+def _compiled_call(fn, transform, name: str, pre=lambda a: a, post=lambda out: out):
+    """``transform(call)(map_args, model_args)``, compiled once per MCMC object, phase and input shapes.
+
+    The executable is kept on the :class:`numpyro.infer.MCMC` object (``fn`` is a partial of its bound
+    ``_single_chain_mcmc``), keyed on what the trace reads besides the inputs (collected fields, the
+    collection window) and on the inputs' structure and shapes: a reused MCMC object with new data of
+    the same shape runs the compiled program without tracing the model again. Tracing and compiling
+    happen under :data:`TRACE_LOCK`. ``pre`` and ``post`` reshape the chain axis around the compiled call.
+    """
     call, model_args = _with_dynamic_model_args(fn)
-    return lambda map_args: jax.pmap(call, in_axes=(0, None))(map_args, model_args)
+    owner = getattr(getattr(fn, "func", None), "__self__", None)
+    params = getattr(owner, "_collection_params", None)
+
+    def run(map_args):
+        map_args = pre(map_args)
+        if owner is None or params is None:
+            with TRACE_LOCK:
+                return post(transform(call)(map_args, model_args))
+        key = (name, getattr(fn.func, "__name__", ""), fn.keywords.get("collect_fields"),
+               fn.keywords.get("remove_sites"), tuple(sorted(params.items())), _avals((map_args, model_args)))
+        cache = owner.__dict__.setdefault("_lvcore_compiled", {})
+        compiled = cache.get(key)
+        if compiled is None:
+            with TRACE_LOCK:
+                compiled = cache.get(key)  # compiled meanwhile by another thread (the app's warm-up)?
+                if compiled is None:
+                    compiled = cache[key] = transform(call).lower(map_args, model_args).compile()
+        if getattr(_COMPILE_ONLY, "on", False):
+            return post(jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), compiled.out_info))
+        return post(compiled(map_args, model_args))
+    return run
+
+
+def pmap_chains(fn):
+    """numpyro chain method: one chain per JAX device (pmap), the data passed as an argument; compiled once
+    per MCMC object and input shapes (:func:`_compiled_call`)."""
+    return _compiled_call(fn, lambda call: jax.pmap(call, in_axes=(0, None)), "parallel")
 
 
 pmap_chains.__name__ = "parallel"
@@ -159,14 +223,15 @@ def pmap_vmap(n_devices: int):
     With 2 CPU cores, ``numpyro.set_host_device_count(2)`` and 4 chains this
     runs two vectorised pairs of chains side by side.
     """
-    def wrap(fn):
-        call, model_args = _with_dynamic_model_args(fn)
+    def pre(args):
+        return jax.tree.map(lambda x: x.reshape((n_devices, x.shape[0] // n_devices) + x.shape[1:]), args)
 
-        def run(args):
-            split = jax.tree.map(lambda x: x.reshape((n_devices, x.shape[0] // n_devices) + x.shape[1:]), args)
-            out = jax.pmap(jax.vmap(call, in_axes=(0, None)), in_axes=(0, None))(split, model_args)
-            return jax.tree.map(lambda x: x.reshape((x.shape[0] * x.shape[1],) + x.shape[2:]), out)
-        return run
+    def post(out):
+        return jax.tree.map(lambda x: x.reshape((x.shape[0] * x.shape[1],) + x.shape[2:]), out)
+
+    def wrap(fn):
+        return _compiled_call(fn, lambda call: jax.pmap(jax.vmap(call, in_axes=(0, None)), in_axes=(0, None)),
+                              f"pmap{n_devices}_vmap", pre, post)
     wrap.__name__ = f"pmap{n_devices}_vmap"
     return wrap
 
@@ -214,6 +279,94 @@ def _mcmc(kernel, config: SamplerConfig, dynamic_args: bool = False) -> MCMC:
         progress_bar=config.progress_bar,
         jit_model_args=dynamic_args,
     )
+
+
+#: Compiled samplers kept in this process (least recently used first out): an app that calibrates
+#: several subjects with one emulator traces and compiles each sampler once, not once per click.
+MCMC_CACHE_SIZE = 8
+_MCMC_CACHE: OrderedDict = OrderedDict()
+_MCMC_CACHE_LOCK = threading.Lock()
+
+
+def emulator_fingerprint(emulator) -> str:
+    """A digest of an emulator's arrays and settings: two loads of one emulator share compiled samplers."""
+    fp = getattr(emulator, "_lvcore_fingerprint", None)
+    if fp is not None:
+        return fp
+    h = hashlib.sha1(type(emulator).__name__.encode())
+    for name, value in sorted(vars(emulator).items()):
+        if name.startswith("_lvcore") or name == "metadata":
+            continue
+        h.update(name.encode())
+        for leaf in jax.tree.leaves(value):
+            if hasattr(leaf, "shape") and hasattr(leaf, "dtype"):
+                arr = np.asarray(leaf)
+                h.update(f"{arr.shape}{arr.dtype}".encode())
+                h.update(np.ascontiguousarray(arr).tobytes())
+            else:
+                h.update(type(leaf).__name__.encode() + repr(leaf).encode() if isinstance(
+                    leaf, (str, int, float, bool, type(None))) else type(leaf).__name__.encode())
+    fp = h.hexdigest()
+    try:
+        object.__setattr__(emulator, "_lvcore_fingerprint", fp)
+    except (AttributeError, TypeError):  # pragma: no cover - slots: recomputed next time
+        pass
+    return fp
+
+
+def _template_key(template):
+    """What a :class:`ConditionedForward` compiles in (the emulator, which inputs are read, which are
+    run-time conditions, whether there is a scale; not its label, which names the scale), or None for any
+    other forward model (those are not cached)."""
+    if not isinstance(template, ConditionedForward):
+        return None
+    return (emulator_fingerprint(template._inner.emulator), template.input_names, template._keys, template._scaled)
+
+
+def _cached_mcmc(key, factory) -> MCMC:
+    """A numpyro MCMC for one run: a shallow copy of the cached one for ``key`` (sharing its compiled
+    programs, :func:`_compiled_call`) or, with ``key`` None, ``factory()``.
+
+    The copy has its own run state (last state, draws, collection window), so concurrent runs of one
+    cached sampler (two app sessions) do not disturb each other.
+    """
+    if key is None:
+        return factory()
+    with _MCMC_CACHE_LOCK:
+        base = _MCMC_CACHE.get(key)
+        if base is None:
+            base = factory()
+            base.__dict__["_lvcore_compiled"] = {}
+            _MCMC_CACHE[key] = base
+            while len(_MCMC_CACHE) > MCMC_CACHE_SIZE:
+                _MCMC_CACHE.popitem(last=False)
+        _MCMC_CACHE.move_to_end(key)
+    mcmc = copy.copy(base)
+    mcmc._collection_params = dict(base._collection_params)
+    mcmc._warmup_state = None
+    mcmc._last_state = None
+    mcmc._states = mcmc._states_flat = None
+    return mcmc
+
+
+def _trace_guard(mcmc: MCMC):
+    """:data:`TRACE_LOCK` around a whole run whose chain method traces outside :func:`_compiled_call`
+    (numpyro's own ``vectorized`` / ``sequential``, or one chain); nothing for the compiled chain methods."""
+    if callable(mcmc.chain_method) and mcmc.num_chains > 1:
+        return nullcontext()
+    return TRACE_LOCK
+
+
+def clear_sampler_cache() -> None:
+    """Forget the compiled samplers kept in this process (:data:`MCMC_CACHE_SIZE`)."""
+    with _MCMC_CACHE_LOCK:
+        _MCMC_CACHE.clear()
+    _ETA_CACHE.clear()
+
+
+def _config_key(config: SamplerConfig, model_kwargs: dict):
+    """The settings compiled into a sampler: everything but the seed (the PRNG key is an argument)."""
+    return (replace(config, seed=0), tuple(sorted((k, repr(v)) for k, v in model_kwargs.items())))
 
 
 def _collect(mcmc: MCMC, stats_fields: dict) -> tuple[dict, dict]:
@@ -341,14 +494,17 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
         model = partial(models.get_model(model_name), forward=forward, **model_kwargs)
     else:
         model = _conditioned_model(models.get_model(model_name), template, **model_kwargs)
-    kernel = NUTS(model, target_accept_prob=config.target_accept_prob,
-                  max_tree_depth=config.max_tree_depth, dense_mass=config.dense_mass)
-    mcmc = _mcmc(kernel, config, dynamic_args=True)
+    key = _template_key(template)
+    key = None if key is None else ("nuts", model_name, key, _config_key(config, model_kwargs))
+    mcmc = _cached_mcmc(key, lambda: _mcmc(NUTS(model, target_accept_prob=config.target_accept_prob,
+                                                max_tree_depth=config.max_tree_depth, dense_mass=config.dense_mass),
+                                           config, dynamic_args=True))
     t0 = time.perf_counter()
     run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64))
     if values is not None:
         run_kwargs["conditions"] = values
-    mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
+    with _trace_guard(mcmc):
+        mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
     samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
     return SamplerRun("nuts", model_name, samples, stats, time.perf_counter() - t0, mcmc, run_kwargs)
 
@@ -567,14 +723,19 @@ def sigma_s2_conditional(y_strain, mean_strain):
 
 def run_hmc_gibbs(y, forward, config: SamplerConfig = SamplerConfig(), **model_kwargs) -> SamplerRun:
     """Run :class:`PolarGPGibbs` (model (iii), Algorithm 4); ``model_kwargs`` as for the kernel."""
-    kernel = PolarGPGibbs(forward, y, target_accept_prob=config.target_accept_prob,
-                          max_tree_depth=config.max_tree_depth, **model_kwargs)
-    mcmc = _mcmc(kernel, config, dynamic_args=True)  # y an argument of the compiled sampler, as for NUTS
+    template, values = runtime_conditions(forward)
+    key = _template_key(template)
+    key = None if key is None else ("hmc_gibbs", key, _config_key(config, model_kwargs))
+    # y (and the forward model's conditions, runtime_conditions) are arguments of the compiled sampler, as for NUTS
+    mcmc = _cached_mcmc(key, lambda: _mcmc(PolarGPGibbs(forward, y, target_accept_prob=config.target_accept_prob,
+                                                        max_tree_depth=config.max_tree_depth, **model_kwargs),
+                                           config, dynamic_args=True))
     t0 = time.perf_counter()
     run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64))
-    if kernel.conditions is not None:  # and the forward model's conditions (runtime_conditions)
-        run_kwargs["conditions"] = kernel.conditions
-    mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
+    if values is not None:
+        run_kwargs["conditions"] = values
+    with _trace_guard(mcmc):
+        mcmc.run(jax.random.PRNGKey(config.seed), extra_fields=("diverging", "num_steps"), **run_kwargs)
     samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
     # eta at every draw (the blocked kernel does not record it as it goes).
     samples["eta"] = np.asarray(posterior_eta(forward, samples))
@@ -590,7 +751,8 @@ def continue_run(run: SamplerRun, forward) -> SamplerRun:
     mcmc = run.mcmc
     mcmc.post_warmup_state = mcmc.last_state
     t0 = time.perf_counter()
-    mcmc.run(mcmc.post_warmup_state.rng_key, extra_fields=("diverging", "num_steps"), **run.run_kwargs)
+    with _trace_guard(mcmc):
+        mcmc.run(mcmc.post_warmup_state.rng_key, extra_fields=("diverging", "num_steps"), **run.run_kwargs)
     samples, stats = _collect(mcmc, {"diverging": "diverging", "n_steps": "num_steps"})
     if "eta" not in samples:
         samples["eta"] = np.asarray(posterior_eta(forward, samples))
@@ -598,12 +760,27 @@ def continue_run(run: SamplerRun, forward) -> SamplerRun:
                       run.run_kwargs)
 
 
+_ETA_CACHE: dict = {}
+
+
 def posterior_eta(forward, samples: dict):
-    """Forward-model outputs at every draw, shape (chain, draw, 25)."""
+    """Forward-model outputs at every draw, shape (chain, draw, 25).
+
+    An emulator forward model's conditions are an argument (:func:`runtime_conditions`), so the
+    compiled map is kept per emulator and reused for every subject.
+    """
     names = forward.input_names
     flat = {n: jnp.reshape(jnp.asarray(samples[n]), (-1,)) for n in names}
     lead = np.shape(samples[names[0]])
-    eta = jax.jit(jax.vmap(lambda p: forward(p)))(flat)
+    template, values = runtime_conditions(forward)
+    key = _template_key(template)
+    if key is None:
+        eta = jax.jit(jax.vmap(lambda p: forward(p)))(flat)
+    else:
+        fn = _ETA_CACHE.get(key)
+        if fn is None:
+            fn = _ETA_CACHE.setdefault(key, jax.jit(lambda p, v, t=template: jax.vmap(lambda q: t.bind(v)(q))(p)))
+        eta = fn(flat, values)
     return jnp.reshape(eta, lead + (N_OUTPUTS,))
 
 
@@ -622,6 +799,23 @@ def run_model(model_name: str, y, forward, config: SamplerConfig = SamplerConfig
     return run_nuts(model_name, y, forward, config, **model_kwargs)
 
 
+def precompile(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(), *, sampler: str = "auto",
+               **model_kwargs) -> float:
+    """Trace and compile (or load from the persistent cache) the sampler :func:`run_model` would run, without
+    sampling; later runs with this emulator and these settings in this process start sampling at once.
+
+    Returns
+    -------
+    float
+        Wall time (s).
+    """
+    t0 = time.perf_counter()
+    with compile_only():
+        run_model(model_name, y, forward, config, sampler=sampler, **model_kwargs)
+    return time.perf_counter() - t0
+
+
 __all__ = ["SamplerConfig", "SamplerRun", "PolarGPGibbs", "GibbsState", "run_nuts", "run_hmc_gibbs",
            "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap", "pmap_chains",
-           "use_host_devices", "runtime_conditions", "ConditionedForward", "INTERACTIVE"]
+           "use_host_devices", "runtime_conditions", "ConditionedForward", "INTERACTIVE", "TRACE_LOCK", "compile_only",
+           "precompile", "clear_sampler_cache", "emulator_fingerprint", "MCMC_CACHE_SIZE"]

@@ -156,9 +156,92 @@ def _reference_model(y=None, *, forward, sigma_v, sigma_ref, infer_angles):
     numpyro.sample("strain_obs", strain_likelihood(eta[1:], sigma_ref ** 2, forward), obs=y[1:])
 
 
+#: Compiled best-fit programs kept in this process, per emulator and settings (:func:`_best_fit_programs`).
+_BEST_FIT_PROGRAMS: dict = {}
+
+
+def _best_fit_programs(forward, sigma_v: float, sigma_ref: float, infer_angles: bool, n_starts: int):
+    """The jitted pieces of :func:`best_fit` and the forward model's run-time conditions.
+
+    An emulator forward model's conditions (PC scores, EDP, angles, scale) are an argument
+    (:func:`lvcore.inference.samplers.runtime_conditions`), so the programs are traced and compiled
+    once per emulator and settings and kept; any other forward model is compiled in, per call. Every
+    step is jitted: numpyro's ``initialize_model`` run eagerly dispatched (and compiled) over a hundred
+    small programs, about 2.5 CPU-s the first time in a process (6-10 CPU-s under load).
+
+    Returns
+    -------
+    programs : dict
+        ``starts(keys, y, cond)`` -> (n_starts, d) unconstrained starting points (the first as numpyro
+        initialises the model, the others uniform in (-2, 2)); ``value_and_grad(flat, y, cond)`` of the
+        negative log posterior; ``final(flat, y, cond)`` -> (scalar sites, eta).
+    values : pytree or None
+        The run-time conditions to pass as ``cond``.
+    """
+    import jax
+    import jax.numpy as jnp
+    from jax.flatten_util import ravel_pytree
+    from numpyro.handlers import substitute, trace
+    from numpyro.infer.util import constrain_fn, initialize_model, log_density
+
+    from lvcore.inference import samplers
+
+    template, values = samplers.runtime_conditions(forward)
+    tkey = samplers._template_key(template)
+    key = None if tkey is None else (tkey, float(sigma_v), float(sigma_ref), bool(infer_angles), int(n_starts))
+    if key is not None and key in _BEST_FIT_PROGRAMS:
+        return _BEST_FIT_PROGRAMS[key], values
+
+    def fwd(cond):
+        return forward if values is None else template.bind(cond)
+
+    def model(y=None, conditions=None):
+        _reference_model(y, forward=fwd(conditions), sigma_v=float(sigma_v), sigma_ref=float(sigma_ref),
+                         infer_angles=bool(infer_angles))
+
+    def first(k, y, cond):
+        return initialize_model(k, model, model_kwargs={"y": y, "conditions": cond}).param_info.z
+
+    @jax.jit
+    def starts(keys, y, cond):
+        flat0, _ = ravel_pytree(first(keys[0], y, cond))
+        rest = [jax.random.uniform(k, flat0.shape, minval=-2.0, maxval=2.0) for k in keys[1:]]
+        return jnp.stack([flat0] + rest)
+
+    def unravel(flat, y, cond):
+        return ravel_pytree(jax.eval_shape(lambda: first(jax.random.PRNGKey(0), y, cond)))[1](flat)
+
+    def objective(flat, y, cond):  # data and conditions are arguments: one program serves every data set
+        args = {"y": y, "conditions": cond}
+        z = constrain_fn(model, (), args, unravel(flat, y, cond))
+        return -log_density(model, (), args, z)[0]
+
+    order: list = []  # the sites in the model's order (a jitted dict comes back sorted by name)
+
+    @jax.jit
+    def final(flat, y, cond):
+        args = {"y": y, "conditions": cond}
+        z = constrain_fn(model, (), args, unravel(flat, y, cond))
+        tr = trace(substitute(model, data=z)).get_trace(**args)
+        params = {k: v["value"] for k, v in tr.items() if v["type"] in ("sample", "deterministic")
+                  and not v.get("is_observed", False) and jnp.ndim(v["value"]) == 0}
+        order[:] = list(params)
+        return params, fwd(cond)(params)
+
+    programs = {"starts": starts, "value_and_grad": jax.jit(jax.value_and_grad(objective)), "final": final,
+                "order": order}
+    if key is not None:
+        _BEST_FIT_PROGRAMS[key] = programs
+    return programs, values
+
+
 def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = False, n_starts: int = N_STARTS,
              seed: int = 0) -> tuple[dict, np.ndarray]:
     """Maximum a posteriori of :func:`_reference_model` from ``n_starts`` prior draws (L-BFGS-B).
+
+    The first start is where numpyro initialises the model (a valid point, uniform in (-2, 2)
+    unconstrained), the others are drawn the same way. The programs are compiled once per emulator
+    (:func:`_best_fit_programs`); tracing holds :data:`lvcore.inference.samplers.TRACE_LOCK`.
 
     Returns
     -------
@@ -168,48 +251,31 @@ def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = 
     """
     import jax
     import jax.numpy as jnp
-    from jax.flatten_util import ravel_pytree
-    from numpyro.infer.util import constrain_fn, initialize_model, log_density
     from scipy.optimize import minimize
 
+    from lvcore.inference import samplers
+
     y = jnp.asarray(y, dtype=jnp.float64)
-    kw = {"y": y, "forward": forward, "sigma_v": float(sigma_v), "sigma_ref": float(sigma_ref),
-          "infer_angles": bool(infer_angles)}
     keys = jax.random.split(jax.random.PRNGKey(seed), n_starts)
-    # the first start as numpyro initialises a model (a valid point, uniform in (-2, 2) unconstrained); the
-    # others drawn the same way without re-tracing the model for each
-    first = initialize_model(keys[0], _reference_model, model_kwargs=kw).param_info.z
-    flat0, unravel = ravel_pytree(first)
-    inits = [flat0] + [jax.random.uniform(k, flat0.shape, minval=-2.0, maxval=2.0) for k in keys[1:]]
+    with samplers.TRACE_LOCK:  # numpyro's handler stack is global: no other trace may run meanwhile
+        programs, cond = _best_fit_programs(forward, sigma_v, sigma_ref, infer_angles, n_starts)
+        inits = np.asarray(programs["starts"](keys, y, cond), dtype=float)
+        vg = programs["value_and_grad"]
 
-    def objective(flat, data):  # the data are an argument: one compiled program serves every data set
-        args = {**kw, "y": data}
-        z = constrain_fn(_reference_model, (), args, unravel(flat))
-        return -log_density(_reference_model, (), args, z)[0]
+        def fun(x):
+            v, g = vg(jnp.asarray(x), y, cond)
+            v, g = float(v), np.asarray(g, dtype=float)
+            if not np.isfinite(v):
+                return 1e300, np.zeros_like(g)
+            return v, np.nan_to_num(g)
 
-    vg = jax.jit(jax.value_and_grad(objective))
-
-    def fun(x):
-        v, g = vg(jnp.asarray(x), y)
-        v, g = float(v), np.asarray(g, dtype=float)
-        if not np.isfinite(v):
-            return 1e300, np.zeros_like(g)
-        return v, np.nan_to_num(g)
-
-    best = None
-    for z0 in inits:
-        x0 = np.asarray(z0, dtype=float)
-        res = minimize(fun, x0, jac=True, method="L-BFGS-B", options={"maxiter": 300})
-        if best is None or res.fun < best.fun:
-            best = res
-    z = constrain_fn(_reference_model, (), kw, unravel(jnp.asarray(best.x)))
-    from numpyro.handlers import substitute, trace
-
-    tr = trace(substitute(_reference_model, data=z)).get_trace(**kw)
-    params = {k: float(np.asarray(v["value"])) for k, v in tr.items()
-              if v["type"] in ("sample", "deterministic") and not v.get("is_observed", False) and np.ndim(v["value"]) == 0}
-    eta = np.asarray(forward({k: jnp.asarray(v) for k, v in params.items()}), dtype=float)
-    return params, eta
+        best = None
+        for x0 in inits:
+            res = minimize(fun, x0, jac=True, method="L-BFGS-B", options={"maxiter": 300})
+            if best is None or res.fun < best.fun:
+                best = res
+        params, eta = programs["final"](jnp.asarray(best.x), y, cond)
+    return {k: float(params[k]) for k in programs["order"]}, np.asarray(eta, dtype=float)
 
 
 def output_sds(eta, sigma_v: float, sigma_ref: float, forward=None) -> np.ndarray:
