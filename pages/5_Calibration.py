@@ -1,6 +1,7 @@
 """Calibration: posterior of theta = (a, b, af, bf) from LVV + 24 strains, with honest uncertainty."""
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from functools import partial
@@ -150,38 +151,42 @@ def _consistency(job: dict, y, forward, infer: bool):
 
 
 def _worker(job: dict, y, forward, models, config, infer):
-    """Every likelihood's sampler and the verdict's best fit, side by side in threads (both cores busy).
+    """Every likelihood's sampler, then the verdict's best fit, one after the other in this thread.
 
-    numpyro's handler stack is global, so model traces never overlap: they hold
-    ``samplers.TRACE_LOCK``; compiled samplers (warmed when the app starts, lvcore.app.warmup) run
-    without it. The results are stored in the order the user chose the likelihoods.
+    The samplers and the best fit are compiled when the app starts (lvcore.app.warmup) and kept in the
+    process, so a click samples at once. numpyro's handler stack is global: model traces hold
+    ``samplers.TRACE_LOCK``. (Side by side in threads they took no less wall on 2 cores, the 4-chain
+    samplers already keep both busy: ``benchmarks/bench_calibration.py --app``.)
     """
-    from concurrent.futures import ThreadPoolExecutor
-
     def progress(msg, frac):
         job["message"] = msg
         job["fraction"] = frac
 
-    done: dict = {}
+    timings = job.setdefault("timings", {})  # (start, end) of each step, s after the click
 
-    def one(m):
-        cal.calibrate_subjects([(job["subject"], y, forward)], [m], config=config, infer_angles=infer,
-                               progress=progress, on_result=lambda item: done.__setitem__(item.model, item.result))
+    def step(name, fn, *args, **kwargs):
+        start = time.perf_counter() - job["t0"]
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            timings[name] = (start, time.perf_counter() - job["t0"])
 
     try:
-        with ThreadPoolExecutor(max_workers=len(models) + 1) as pool:
-            verdict_future = pool.submit(_consistency, job, y, forward, infer)
-            futures = [pool.submit(one, m) for m in models]
-            for f in futures:
-                f.result()  # the first error is shown
-            verdict_future.result()
-        progress("done", 1.0)
+        for m in models:
+            step(m, cal.calibrate_subjects, [(job["subject"], y, forward)], [m], config=config, infer_angles=infer,
+                 progress=progress, on_result=lambda item: job["results"].__setitem__(item.model, item.result))
+        # the verdict's best fit, after the samplers: the results render with it (the banner needs it)
+        progress("verdict: best fit of volume and strains", 1.0)
+        step("best fit", _consistency, job, y, forward, infer)
+        job["message"] = "done"
+        job["fraction"] = 1.0
     except Exception as err:  # noqa: BLE001 - shown to the user
         job["error"] = f"{type(err).__name__}: {err}"
     finally:
-        job["results"].update({m: done[m] for m in models if m in done})
         job["done"] = True
         job["elapsed"] = time.perf_counter() - job["t0"]
+        print(f"lvcore calibration {job['subject']}: done {job['elapsed']:.1f} s after the click; "
+              + ", ".join(f"{k} {a:.1f}-{b:.1f} s" for k, (a, b) in timings.items()), file=sys.stderr, flush=True)
 
 
 run_clicked = st.button("Run calibration", type="primary",
@@ -217,8 +222,7 @@ if run_clicked:
 
 
 def _progress():
-    """Progress bar and elapsed time, visible; reruns itself twice a second only while a run is in flight (the
-    results show at most 0.5 s after the run ends)."""
+    """Progress bar and elapsed time, visible; reruns itself once a second only while a run is in flight."""
     j = st.session_state.get("calibration_job")
     if j is None or j.get("shown"):
         return
@@ -231,8 +235,8 @@ def _progress():
 
 
 _job = st.session_state.get("calibration_job")
-if _job is not None and not _job["done"]:  # the 2 Hz timer exists only while sampling: no idle reruns
-    st.fragment(run_every=0.5)(_progress)()
+if _job is not None and not _job["done"]:  # the 1 Hz timer exists only while sampling: no idle reruns
+    st.fragment(run_every=1.0)(_progress)()
 
 # ----------------------------------------------------------------------------- results
 def _verdicts(job: dict, results: dict) -> dict:
