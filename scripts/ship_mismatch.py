@@ -146,7 +146,7 @@ def main(argv=None) -> int:
                                             "fit_cost")}
     cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k.replace('_', '-')} {shlex.quote(str(getattr(args, k)))}"
                                                         for k in SHIP) + (" --recorded-only" if args.recorded_only else "") \
-        + (f" --carry-from {shlex.quote(args.carry_from)}" if args.carry_from else "")
+        + (f" --carry-from {shlex.quote(Path(args.carry_from).name)}" if args.carry_from else "")  # no build-machine folder
     res.pop("folder", None)
     res["shipped"] = {"script": "scripts/ship_mismatch.py", "command": cmd, "date": time.strftime("%Y-%m-%d"),
                       "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared)",
