@@ -199,6 +199,14 @@ def test_a_mesh_gets_the_floor_and_pc_scores_do_not():
     assert values is not None and template.representation is rep
     bound = template.bind(values)
     assert float(log_density(iid_model, (jnp.asarray(y),), {"forward": bound}, p)[0]) == pytest.approx(got, rel=1e-10)
+    # the kept compiled samplers (samplers._template_key) never mix a floored and an unfloored model
+    from lvcore.inference.samplers import _template_key
+
+    plain_template, _ = runtime_conditions(base)
+    assert _template_key(template) != _template_key(plain_template)
+    assert _template_key(template) == _template_key(runtime_conditions(given_geometry_floor(
+        ScaledForward(emulator_forward(load_emulator("chapter"), -h), 0.9), "template-mesh", "floor", 5,
+        representation=rep)[0])[0])   # another mesh, the same floor: the same program
     # and the verdict's consistency p-values use the same variances
     sd = verdict.output_sds(eta, 5.0, 0.035, fw)
     assert sd[0] == pytest.approx(np.hypot(5.0, rep.lvv_rel_sd * eta[0]))

@@ -320,7 +320,19 @@ def _template_key(template):
     other forward model (those are not cached)."""
     if not isinstance(template, ConditionedForward):
         return None
-    return (emulator_fingerprint(template._inner.emulator), template.input_names, template._keys, template._scaled)
+    return (emulator_fingerprint(template._inner.emulator), template.input_names, template._keys, template._scaled,
+            _representation_key(template.representation))
+
+
+def _representation_key(rep):
+    """What a mesh's representation-error floor compiles into the likelihood (None without one): a floored
+    and an unfloored model of the same emulator must not share a compiled program."""
+    if rep is None:
+        return None
+    import hashlib
+
+    cov = np.ascontiguousarray(np.asarray(rep.strain_cov, dtype=np.float64))
+    return (int(rep.n_pc), float(rep.lvv_rel_sd), hashlib.sha256(cov.tobytes()).hexdigest())
 
 
 def _cached_mcmc(key, factory) -> MCMC:
