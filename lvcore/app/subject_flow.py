@@ -313,6 +313,25 @@ class InferredGeometry:
                 "representation_error": self.representation_error}
 
 
+def _entered_fields(entered: Mapping[str, float | None], ranges: Mapping[str, tuple], *, unknown, outside) -> dict:
+    """Fields the user entered (0 or None: not given), each checked against its ``(lo, hi)`` range.
+
+    ``unknown(name)`` and ``outside(name, value, lo, hi, unit)`` make the :class:`DataError` messages; the unit (mL
+    or mm) is read from the field name's suffix.
+    """
+    import math
+
+    given = {k: (None if v is None or float(v) == 0.0 else float(v)) for k, v in dict(entered).items()}
+    for name, value in given.items():
+        if name not in ranges:
+            raise DataError(unknown(name))
+        lo, hi = ranges[name]
+        unit = {"ml": "mL", "mm": "mm"}[name.rsplit("_", 1)[-1]]
+        if value is not None and not (math.isfinite(value) and lo <= value <= hi):
+            raise DataError(outside(name, value, lo, hi, unit))
+    return given
+
+
 def inferred_measures(entered: Mapping[str, float | None], data_measures: Mapping[str, float] | None = None) -> dict:
     """The geometric measures of the no-mesh route: those entered (0 or None: not measured) and the data's columns.
 
@@ -325,21 +344,14 @@ def inferred_measures(entered: Mapping[str, float | None], data_measures: Mappin
         A measure outside its plausible range, or an entered measure that disagrees with the data's column,
         naming the field.
     """
-    from lvcore.inference.geometry_prior import check_measures
+    from lvcore.inference.geometry_prior import MEASURE_NAMES, MEASURE_RANGES, check_measures
 
-    import math
-
-    from lvcore.inference.geometry_prior import MEASURE_NAMES, MEASURE_RANGES
-
-    given = {k: (None if v is None or float(v) == 0.0 else float(v)) for k, v in dict(entered).items()}
-    for name, value in given.items():
-        if name not in MEASURE_NAMES:
-            raise DataError(f"unknown geometric measure '{name}'; use {', '.join(MEASURE_NAMES)}")
-        lo, hi = MEASURE_RANGES[name]
-        unit = {"ml": "mL", "mm": "mm"}[name.rsplit("_", 1)[-1]]
-        if value is not None and not (math.isfinite(value) and lo <= value <= hi):
-            raise DataError(f"'{MEASURE_LABELS[name]}' = {value:g} is outside the plausible range {lo:g}-{hi:g} "
-                            f"{unit}; enter it in {unit}, or 0 if not measured")
+    given = _entered_fields(
+        entered, MEASURE_RANGES,
+        unknown=lambda name: f"unknown geometric measure '{name}'; use {', '.join(MEASURE_NAMES)}",
+        outside=lambda name, value, lo, hi, unit: (f"'{MEASURE_LABELS[name]}' = {value:g} is outside the plausible "
+                                                   f"range {lo:g}-{hi:g} {unit}; enter it in {unit}, or 0 if not "
+                                                   "measured"))
     out = check_measures(data_measures or {}, "the measurements file's geometric columns")
     for name, value in given.items():
         if value is None:
@@ -372,15 +384,11 @@ def inferred_measure_sds(entered: Mapping[str, float | None], data_sds: Mapping[
     """
     from lvcore.inference.geometry_prior import MEASURE_SD_COLUMNS, MEASURE_SD_RANGES, check_measure_sds
 
-    given = {k: (None if v is None or float(v) == 0.0 else float(v)) for k, v in dict(entered).items()}
-    for name, value in given.items():
-        if name not in MEASURE_SD_RANGES:
-            raise DataError(f"unknown geometric measure '{name}'")
-        lo, hi = MEASURE_SD_RANGES[name]
-        unit = {"ml": "mL", "mm": "mm"}[name.rsplit("_", 1)[-1]]
-        if value is not None and not (np.isfinite(value) and lo <= value <= hi):
-            raise DataError(f"SD of '{MEASURE_LABELS[name]}' = {value:g} is outside {lo:g}-{hi:g} {unit}; enter the "
-                            f"measurement's standard deviation in {unit}, or 0 for the default")
+    given = _entered_fields(
+        entered, MEASURE_SD_RANGES, unknown=lambda name: f"unknown geometric measure '{name}'",
+        outside=lambda name, value, lo, hi, unit: (f"SD of '{MEASURE_LABELS[name]}' = {value:g} is outside "
+                                                   f"{lo:g}-{hi:g} {unit}; enter the measurement's standard "
+                                                   f"deviation in {unit}, or 0 for the default"))
     out = check_measure_sds(data_sds or {}, "the measurements file's geometric columns", by="column")
     sources = {k: f"data column {MEASURE_SD_COLUMNS[k]}" for k in out}
     for name, value in given.items():
