@@ -275,6 +275,24 @@ def test_scaled_law_is_exact_for_unit_factors():
         law.scale_vector({"b": 2.0})
 
 
+def _assert_closed_form_matches(model, F, Q, p, *, rtol_ad, check_stress_only_path=False):
+    """The closed-form stress and tangent at ``(F, Q, p)`` equal the automatic derivatives of ``psi`` (to
+    ``rtol_ad``) and the tangent equals central differences of the closed-form stress."""
+    P, A = model.first_piola_tangent(F, Q, p)
+    P_ad, A_ad = jax.grad(model.psi)(F, Q, p), jax.hessian(model.psi)(F, Q, p)
+    np.testing.assert_allclose(P, P_ad, rtol=rtol_ad, atol=1e-12 * float(jnp.abs(P_ad).max()))
+    np.testing.assert_allclose(A, A_ad, rtol=rtol_ad, atol=1e-12 * float(jnp.abs(A_ad).max()))
+    if check_stress_only_path:
+        np.testing.assert_allclose(model.first_piola(F, Q, p), P, rtol=1e-14, atol=1e-14 * float(jnp.abs(P).max()))
+    h = 1e-6
+    fd = np.zeros((3, 3, 3, 3))
+    for k in range(3):
+        for L in range(3):
+            d = np.zeros((3, 3)); d[k, L] = h
+            fd[:, :, k, L] = (np.asarray(model.first_piola(F + d, Q, p)) - np.asarray(model.first_piola(F - d, Q, p))) / (2 * h)
+    np.testing.assert_allclose(A, fd, rtol=1e-5, atol=1e-6 * float(np.abs(fd).max()))
+
+
 def _random_states(rng, n):
     """Deformation gradients (J > 0, fibres and sheets in tension and in compression) and orthonormal frames."""
     out = []
@@ -302,18 +320,7 @@ def test_ho_closed_form_stress_and_tangent_equal_autodiff_and_finite_differences
     rng = np.random.default_rng(7)
     switched = set()
     for F, Q, p in _random_states(rng, 12):
-        P, A = model.first_piola_tangent(F, Q, p)
-        P_ad, A_ad = jax.grad(model.psi)(F, Q, p), jax.hessian(model.psi)(F, Q, p)
-        np.testing.assert_allclose(P, P_ad, rtol=1e-12, atol=1e-12 * float(jnp.abs(P_ad).max()))
-        np.testing.assert_allclose(A, A_ad, rtol=1e-12, atol=1e-12 * float(jnp.abs(A_ad).max()))
-        np.testing.assert_allclose(model.first_piola(F, Q, p), P, rtol=1e-14, atol=1e-14 * float(jnp.abs(P).max()))
-        h = 1e-6
-        fd = np.zeros((3, 3, 3, 3))
-        for k in range(3):
-            for L in range(3):
-                d = np.zeros((3, 3)); d[k, L] = h
-                fd[:, :, k, L] = (np.asarray(model.first_piola(F + d, Q, p)) - np.asarray(model.first_piola(F - d, Q, p))) / (2 * h)
-        np.testing.assert_allclose(A, fd, rtol=1e-5, atol=1e-6 * float(np.abs(fd).max()))
+        _assert_closed_form_matches(model, F, Q, p, rtol_ad=1e-12, check_stress_only_path=True)
         C = F.T @ F
         switched.add((bool(Q[0] @ C @ Q[0] > 1), bool(Q[1] @ C @ Q[1] > 1)))
     assert len(switched) >= 3  # the fibre and sheet switches were met on and off
@@ -330,17 +337,7 @@ def test_isochoric_closed_forms_equal_autodiff_and_finite_differences(law):
     assert law.closed_form
     model = materials.ConstitutiveModel(law, materials.MixedPenalty(1e3))
     for F, Q, p in _random_states(np.random.default_rng(11), 6):
-        P, A = model.first_piola_tangent(F, Q, p)
-        P_ad, A_ad = jax.grad(model.psi)(F, Q, p), jax.hessian(model.psi)(F, Q, p)
-        np.testing.assert_allclose(P, P_ad, rtol=1e-11, atol=1e-12 * float(jnp.abs(P_ad).max()))
-        np.testing.assert_allclose(A, A_ad, rtol=1e-11, atol=1e-12 * float(jnp.abs(A_ad).max()))
-        h = 1e-6
-        fd = np.zeros((3, 3, 3, 3))
-        for k in range(3):
-            for L in range(3):
-                d = np.zeros((3, 3)); d[k, L] = h
-                fd[:, :, k, L] = (np.asarray(model.first_piola(F + d, Q, p)) - np.asarray(model.first_piola(F - d, Q, p))) / (2 * h)
-        np.testing.assert_allclose(A, fd, rtol=1e-5, atol=1e-6 * float(np.abs(fd).max()))
+        _assert_closed_form_matches(model, F, Q, p, rtol_ad=1e-11)
 
 
 def test_laws_without_closed_form_use_autodiff(monkeypatch):
