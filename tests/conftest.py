@@ -18,6 +18,29 @@ from lvcore.inference.samplers import use_host_devices  # noqa: E402
 use_host_devices(4)
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    """After each test module, let go of the XLA programs it compiled.
+
+    Every compiled CPU executable keeps a few executable memory mappings, and the kernel allows 65,530 per
+    process (``vm.max_map_count``). One pytest process compiles thousands of programs (app pages, samplers,
+    simulator kernels); kept to the end, they passed that limit and LLVM aborted the run (SIGABRT, CI exit
+    134, 2026-11-27). JAX's caches, the samplers and the verdict's best-fit programs are cleared here; the
+    persistent compilation cache (:mod:`lvcore.jax_cache`) makes a later module's recompile a disk load.
+    """
+    yield
+    import gc
+
+    import jax
+
+    from lvcore.inference import samplers, verdict
+
+    samplers.clear_sampler_cache()
+    verdict.clear_best_fit_programs()
+    jax.clear_caches()
+    gc.collect()
+
+
 # ----------------------------------------------------------------------------
 # Session-scoped fixtures: solved once per test run, shared by the modules that use them.
 # Each returns frozen/read-only data; tests must not modify what they get.

@@ -23,11 +23,13 @@ def test_warm_compiles_the_pages_default_sampler_and_best_fit():
     from lvcore.inference import samplers, verdict
 
     samplers.clear_sampler_cache()
-    verdict._BEST_FIT_PROGRAMS.clear()
+    verdict.clear_best_fit_programs()
     stages = warmup.warm(models=("iid",))
     assert set(stages) >= {"load", "iid", "best fit"}
-    keys = list(samplers._MCMC_CACHE)
+    keys = [k for k in samplers._MCMC_CACHE if k[:2] == ("nuts", "iid")]
     assert len(keys) == 1 and keys[0][:2] == ("nuts", "iid") and keys[0][3][0].num_warmup == samplers.INTERACTIVE.num_warmup
     compiled = samplers._MCMC_CACHE[keys[0]].__dict__["_lvcore_compiled"]
     assert len(compiled) == 1
-    assert len(verdict._BEST_FIT_PROGRAMS) == 1
+    # the best fit of the same forward model (its template key: emulator, inputs, conditions, scale) is kept;
+    # counted by key, not in total: a calibration thread an earlier app test started may add its own
+    assert [k for k in verdict._BEST_FIT_PROGRAMS if k[0] == keys[0][2]]

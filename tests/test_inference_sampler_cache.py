@@ -84,7 +84,7 @@ def test_best_fit_programs_serve_every_geometry_and_find_what_they_found_before(
     """The best fit is compiled once per emulator: a second geometry traces nothing; its result equals the
     one found with freshly compiled programs."""
     f1, f2 = _forwards()
-    verdict._BEST_FIT_PROGRAMS.clear()
+    verdict.clear_best_fit_programs()
     c1 = verdict.consistency_check(_y(f1), f1, sigma_v=5.0)
     traces = _Traces(monkeypatch)
     c2 = verdict.consistency_check(_y(f2, 0.0), f2, sigma_v=5.0)
@@ -92,7 +92,7 @@ def test_best_fit_programs_serve_every_geometry_and_find_what_they_found_before(
     assert list(c2.best_fit) == ["a", "b", "af", "bf"]  # the model's order
     np.testing.assert_allclose(c2.eta, np.asarray(f2({k: c2.best_fit[k] for k in THETA})), rtol=1e-10)
     assert c2.plausible
-    verdict._BEST_FIT_PROGRAMS.clear()
+    verdict.clear_best_fit_programs()
     again = verdict.consistency_check(_y(f1), f1, sigma_v=5.0)
     assert again.best_fit == c1.best_fit
     np.testing.assert_array_equal(again.p_values, c1.p_values)
@@ -107,7 +107,7 @@ def test_two_likelihoods_and_the_best_fit_in_threads_at_once_equal_them_one_by_o
     y = _y(f1)
     cfg = samplers.SamplerConfig(num_warmup=10, num_samples=10, num_chains=2, seed=4)
     samplers.clear_sampler_cache()
-    verdict._BEST_FIT_PROGRAMS.clear()
+    verdict.clear_best_fit_programs()
     out, errors = {}, []
 
     def job(name, fn):
@@ -126,6 +126,6 @@ def test_two_likelihoods_and_the_best_fit_in_threads_at_once_equal_them_one_by_o
         t.join()
     assert not errors, errors
     samplers.clear_sampler_cache()
-    verdict._BEST_FIT_PROGRAMS.clear()
+    verdict.clear_best_fit_programs()
     for name, fn in jobs.items():
         np.testing.assert_array_equal(fn(), out[name], err_msg=name)

@@ -33,6 +33,8 @@ results flagged" (docs/reliability.md), and lists the flags in
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -156,8 +158,18 @@ def _reference_model(y=None, *, forward, sigma_v, sigma_ref, infer_angles):
     numpyro.sample("strain_obs", strain_likelihood(eta[1:], sigma_ref ** 2, forward), obs=y[1:])
 
 
-#: Compiled best-fit programs kept in this process, per emulator and settings (:func:`_best_fit_programs`).
-_BEST_FIT_PROGRAMS: dict = {}
+#: Compiled best-fit programs kept in this process, per emulator and settings (:func:`_best_fit_programs`),
+#: least recently used first out: a long-running app server that meets many emulators keeps a bounded number
+#: of compiled programs (each holds executable memory mappings; the kernel allows 65,530 per process).
+BEST_FIT_CACHE_SIZE = 8
+_BEST_FIT_PROGRAMS: OrderedDict = OrderedDict()
+_BEST_FIT_LOCK = threading.Lock()
+
+
+def clear_best_fit_programs() -> None:
+    """Forget the compiled best-fit programs kept in this process (:data:`BEST_FIT_CACHE_SIZE`)."""
+    with _BEST_FIT_LOCK:
+        _BEST_FIT_PROGRAMS.clear()
 
 
 def _best_fit_programs(forward, sigma_v: float, sigma_ref: float, infer_angles: bool, n_starts: int):
@@ -189,8 +201,12 @@ def _best_fit_programs(forward, sigma_v: float, sigma_ref: float, infer_angles: 
     template, values = samplers.runtime_conditions(forward)
     tkey = samplers._template_key(template)
     key = None if tkey is None else (tkey, float(sigma_v), float(sigma_ref), bool(infer_angles), int(n_starts))
-    if key is not None and key in _BEST_FIT_PROGRAMS:
-        return _BEST_FIT_PROGRAMS[key], values
+    if key is not None:
+        with _BEST_FIT_LOCK:
+            kept = _BEST_FIT_PROGRAMS.get(key)
+            if kept is not None:
+                _BEST_FIT_PROGRAMS.move_to_end(key)
+                return kept, values
 
     def fwd(cond):
         return forward if values is None else template.bind(cond)
@@ -231,7 +247,10 @@ def _best_fit_programs(forward, sigma_v: float, sigma_ref: float, infer_angles: 
     programs = {"starts": starts, "value_and_grad": jax.jit(jax.value_and_grad(objective)), "final": final,
                 "order": order}
     if key is not None:
-        _BEST_FIT_PROGRAMS[key] = programs
+        with _BEST_FIT_LOCK:
+            _BEST_FIT_PROGRAMS[key] = programs
+            while len(_BEST_FIT_PROGRAMS) > BEST_FIT_CACHE_SIZE:
+                _BEST_FIT_PROGRAMS.popitem(last=False)
     return programs, values
 
 
