@@ -189,12 +189,11 @@ if prepared is not None:
         st.write("Geometric measures used: " + (", ".join(
             f"{k} {v:g} (SD {rec['measure_sd'][k]:g}, {rec['measure_sd_source'][k]}; in the likelihood "
             f"{rec['likelihood_sd'][k]:.3g})" for k, v in prepared.measures.items()) or "none"))
-        rep = rec["representation_error"]
-        st.caption("Representation-error floor: " + (
-            f"on ({rep.get('n_cases', '?')} SYNTHETIC cohort cases; strain sd RMS "
-            f"{rep.get('strain_sd_rms', float('nan')):.4f})" if rep else "off"))
+        st.caption(flow.floor_caption(rec["representation_error"]))
         for w in prepared.warnings:
             st.warning(w)
+    elif not is_subject_emu:
+        st.caption(flow.floor_caption(prepared.representation_error))
     if is_subject_emu:
         st.info(f"Subject emulator: the geometry it was built on ({Path(used_geometry.source).name}) is bound in, "
                 "as it is; no PC scores are used.")

@@ -95,6 +95,9 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     at.selectbox(key="my_emulator").select("chapter").run()
     assert not at.exception and not at.error, [e.value for e in at.error]
     assert any("cavity" in m.value for m in at.markdown)
+    # the example's mesh is seen through its projection: the floor, scaled to its own projection error
+    assert any(c.value.startswith("Representation-error floor: on") and "projection error" in c.value
+               for c in at.caption), [c.value for c in at.caption]
     at.number_input(key="my_chains").set_value(1)
     at.number_input(key="my_warmup").set_value(100)
     at.number_input(key="my_draws").set_value(100).run()
@@ -384,3 +387,13 @@ def test_my_subject_page_builds_and_uses_a_subject_emulator(tmp_path, monkeypatc
     summary = at.session_state["my_subject_run"].result["summary"]
     assert summary["geometry"]["kind"] == "subject-emulator" and summary["geometry"]["scores"] == []
     assert summary["emulator"] == label
+
+
+def test_floor_caption_says_off_the_cohort_floor_or_the_meshs_own():
+    assert flow.floor_caption(None) == "Representation-error floor: off"
+    rec = {"mode": "floor", "n_cases": 80, "strain_sd_rms": 0.0061, "strain_scale": 1.0, "projection_mse_cm2": None}
+    assert flow.floor_caption(rec) == "Representation-error floor: on (80 SYNTHETIC cohort cases; strain sd RMS 0.0061)"
+    mesh = {**rec, "strain_scale": 1.47, "projection_mse_cm2": 0.0137, "beyond_cohort": False}
+    assert "×1.47 of the cohort's mean strain covariance" in flow.floor_caption(mesh)
+    assert "0.0137 cm²" in flow.floor_caption(mesh) and "extrapolated" not in flow.floor_caption(mesh)
+    assert "extrapolated" in flow.floor_caption({**mesh, "beyond_cohort": True})

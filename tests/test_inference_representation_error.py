@@ -229,6 +229,95 @@ def test_calibrate_with_a_mesh_records_the_floor(tmp_path):
         rec = json.loads((out / "summary.json").read_text())[0]["geometry"]
         assert rec["kind"] == "template-mesh"
         if mode == "floor":
-            assert rec["representation_error"]["mode"] == "floor" and rec["representation_error"]["n_cases"] >= 30
+            rep = rec["representation_error"]
+            assert rep["mode"] == "floor" and rep["n_cases"] >= 30
+            # scaled to this mesh's own projection error (at the mean size), with the fit behind it
+            assert rep["projection_mse_cm2"] == pytest.approx(rec["projection_mse_cm2"] / rec["scale"] ** 2)
+            fit = rep["projection_fit"]
+            assert rep["strain_scale"] == pytest.approx(
+                (fit["intercept"] + fit["slope"] * rep["projection_mse_cm2"]) / fit["mean"])
         else:
             assert rec["representation_error"] is None
+
+
+def test_the_mesh_floor_scales_with_its_own_projection_error():
+    """projection_scaling_fit recovers a known linear growth of the strain error with the projection error;
+    for_projection gives 1 at the cohort's mean, grows with the error, and measures it at the mean size."""
+    from lvcore.inference.representation_error import load_representation_error, projection_scaling_fit
+
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0.001, 0.02, 4000)
+    c0, c1 = 1e-5, 2e-3
+    d = rng.normal(size=(4000, 24)) * np.sqrt(c0 + c1 * p)[:, None]
+    fit = projection_scaling_fit(p, d)
+    assert fit["intercept"] == pytest.approx(c0, rel=0.1) and fit["slope"] == pytest.approx(c1, rel=0.05)
+    assert fit["spearman_rho"] > 0.3 and fit["spearman_p"] < 1e-6 and fit["n"] == 4000
+    # no relation: the slope is (near) 0 and the fit says so
+    flat = projection_scaling_fit(p, rng.normal(size=(4000, 24)) * 0.005)
+    assert flat["slope"] * 0.02 < 0.1 * flat["intercept"] and flat["spearman_p"] > 1e-3
+    with pytest.raises(DataError, match="3 cases"):
+        projection_scaling_fit([0.1, 0.2], np.zeros((2, 24)))
+
+    rep = _rep()
+    rep = type(rep)(rep.n_pc, rep.strain_cov, rep.lvv_rel_sd, projection_fit={**fit, "mse_max": 0.02})
+    mean_p = (fit["mean"] - fit["intercept"]) / fit["slope"]
+    assert rep.for_projection(mean_p).strain_scale == pytest.approx(1.0)
+    lo, hi = rep.for_projection(0.002), rep.for_projection(0.02)
+    assert lo.strain_scale < 1 < hi.strain_scale
+    np.testing.assert_allclose(hi.effective_strain_cov, hi.strain_scale * rep.strain_cov)
+    assert hi.strain_rms == pytest.approx(np.sqrt(hi.strain_scale) * rep.strain_rms)
+    assert not hi.record()["beyond_cohort"] and rep.for_projection(0.05).record()["beyond_cohort"]
+    # a mesh 1.3x the mean size with the same shape error: the same factor (strains do not see size)
+    assert rep.for_projection(0.01 * 1.3 ** 2, 1.3).strain_scale == pytest.approx(rep.for_projection(0.01).strain_scale)
+    with pytest.raises(DataError, match="projection_mse_cm2"):
+        rep.for_projection(-1.0)
+    # an asset without per-case projection errors: the mean floor, unchanged
+    assert _rep().for_projection(0.01).strain_scale == 1.0
+    # the bundled asset carries the fit
+    assert load_representation_error(5).projection_fit["n"] >= 30
+
+
+def test_two_meshes_share_one_program_with_their_own_floors():
+    """The per-mesh factor is a run-time value: two meshes' floored forward models have the same template
+    key (one compiled sampler) and each bound model's likelihood uses its own strain_scale * Sigma_rep."""
+    import jax.numpy as jnp
+    from numpyro.infer.util import log_density
+    from scipy.stats import multivariate_normal, norm
+
+    from lvcore.emulator import load_emulator
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.geometry.scaling import ScaledForward
+    from lvcore.inference import verdict
+    from lvcore.inference.models import iid_model
+    from lvcore.inference.representation_error import given_geometry_floor, projection_scaling_fit
+    from lvcore.inference.samplers import _template_key, runtime_conditions
+
+    rng = np.random.default_rng(4)
+    p = rng.uniform(0.001, 0.02, 200)
+    fit = projection_scaling_fit(p, rng.normal(size=(200, 24)) * np.sqrt(1e-5 + 2e-3 * p)[:, None])
+    base_rep = _rep()
+    base_rep = type(base_rep)(5, base_rep.strain_cov, base_rep.lvv_rel_sd, projection_fit=fit)
+    h = np.array([0.3, -0.2, 0.1, 0.0, 0.4])
+    emu = load_emulator("chapter")
+    theta = {"a": 0.5, "b": 3.0, "af": 1.5, "bf": 5.0, "sigma_s2": 0.03 ** 2}
+    keys, dens = [], []
+    for mse in (0.002, 0.02):
+        base = ScaledForward(emulator_forward(emu, h), 1.0)
+        fw, rec = given_geometry_floor(base, "template-mesh", "floor", 5, representation=base_rep,
+                                       projection_mse_cm2=mse)
+        assert rec["strain_scale"] == pytest.approx(fw.representation.strain_scale)
+        template, values = runtime_conditions(fw)
+        keys.append(_template_key(template))
+        eta = np.asarray(base(theta))
+        y = eta + np.r_[6.0, np.full(24, 0.01)]
+        got = float(log_density(iid_model, (jnp.asarray(y),), {"forward": template.bind(values)}, theta)[0])
+        k = fw.representation.strain_scale
+        plain = float(log_density(iid_model, (jnp.asarray(y),), {"forward": base}, theta)[0])
+        want = (norm(eta[0], np.hypot(5.0, base_rep.lvv_rel_sd * eta[0])).logpdf(y[0]) - norm(eta[0], 5.0).logpdf(y[0])
+                + multivariate_normal(eta[1:], 0.03 ** 2 * np.eye(24) + k * base_rep.strain_cov).logpdf(y[1:])
+                - norm(eta[1:], 0.03).logpdf(y[1:]).sum())
+        assert got - plain == pytest.approx(want, rel=1e-8)
+        np.testing.assert_allclose(verdict.output_sds(eta, 5.0, 0.035, fw)[1:],
+                                   np.sqrt(0.035 ** 2 + k * np.diag(base_rep.strain_cov)))
+        dens.append(got)
+    assert keys[0] == keys[1] and dens[0] != dens[1]

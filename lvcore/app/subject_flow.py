@@ -229,10 +229,26 @@ def prepare(emulator, emulator_name: str, geometry, *, edp_mmhg: float | None = 
     if not bound:   # a mesh is seen through its projection: the CLI's representation-error floor
         from lvcore.inference.representation_error import given_geometry_floor
 
-        forward, floor = given_geometry_floor(forward, geometry.kind, representation_error, len(h))
+        forward, floor = given_geometry_floor(forward, geometry.kind, representation_error, len(h),
+                                              projection_mse_cm2=getattr(geometry, "projection_mse_cm2", None))
     geometry_warnings = list(subject_emulator_geometry(emulator).warnings) if bound else list(geometry.warnings)
     return Prepared(forward, emulator_name, cond, list(box), geometry_warnings + list(extrapolation),
                     representation_error=floor)
+
+
+def floor_caption(record: Mapping | None) -> str:
+    """One line on the representation-error floor a run used (its record, :func:`prepare` /
+    ``geometry.representation_error``): off, or its cases, strain sd and, for a mesh, its own factor."""
+    if not record:
+        return "Representation-error floor: off"
+    text = (f"Representation-error floor: on ({record.get('n_cases', '?')} SYNTHETIC cohort cases; strain sd RMS "
+            f"{record.get('strain_sd_rms', float('nan')):.4f}")
+    if record.get("projection_mse_cm2") is not None:
+        text += (f"; ×{record.get('strain_scale', 1.0):.2f} of the cohort's mean strain covariance for this mesh's "
+                 f"projection error {record['projection_mse_cm2']:.4f} cm² at the mean size")
+        if record.get("beyond_cohort"):
+            text += ", beyond every cohort case: the scaling is extrapolated"
+    return text + ")"
 
 
 def subject_emulator_geometry(emulator):

@@ -305,8 +305,10 @@ def run_calibrate(args) -> int:
             forward = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
                                                      alpha_endo=c["alpha_endo"], alpha_epi=c["alpha_epi"],
                                                      edp_mmhg=c["edp_mmhg"]), geo.scale)
-            # a mesh is seen through its 5-mode projection: the same representation-error floor as infer mode
-            forward, floor = given_geometry_floor(forward, geo.kind, args.representation_error, n_pc)
+            # a mesh is seen through its 5-mode projection: infer mode's representation-error floor, scaled to
+            # the mesh's own projection error (RepresentationError.for_projection)
+            forward, floor = given_geometry_floor(forward, geo.kind, args.representation_error, n_pc,
+                                                  projection_mse_cm2=geo.projection_mse_cm2)
             georec = {**geo.record(), "representation_error": floor}
         by_subject[r.subject] = (r, forward, c, box, w + extrap, georec)
     for w in dict.fromkeys(w for v in by_subject.values() for w in v[4]):

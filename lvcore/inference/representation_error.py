@@ -41,7 +41,13 @@ The asset is SYNTHETIC (a SYNTHETIC cohort and shape model), bundled as
 **With a mesh** (``--geometry FILE``, a template or volume mesh) the
 emulator runs at the mesh's size-normalised ``k``-mode projection: the same
 reconstruction, at a known ``(h, s)``, so the same error applies (the
-strains and the LVV; there are no geometric measures to widen).
+strains and the LVV; there are no geometric measures to widen). The strain
+floor is scaled to the mesh's own projection error
+(:meth:`RepresentationError.for_projection`): the asset's cases give how a
+shape's strain error grows with its projection error
+(:func:`projection_scaling_fit`), so a mesh the shape model reproduces well
+gets less floor than one it reproduces badly. The factor is a run-time value
+of the compiled samplers, so one program still serves every mesh.
 :func:`given_geometry_floor` wraps that forward model
 (:class:`FlooredForward`) so the models and the verdict use the same
 variances as in infer mode. PC scores (``--geometry scores.json``), the
@@ -52,7 +58,7 @@ last has the subject's own geometry bound in.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +96,15 @@ class RepresentationError:
         Shapes behind the estimate.
     source : str
         Where it comes from (asset path and its label).
+    projection_fit : dict
+        How the cases' strain error grows with their projection error (:func:`projection_scaling_fit`);
+        empty when the asset has no per-case projection errors.
+    strain_scale : float
+        Factor on ``strain_cov`` for one mesh (:meth:`for_projection`; 1 for the cohort's mean, and in infer
+        mode). Inside a compiled sampler it is a traced run-time value, so one program serves every mesh.
+    projection_mse_cm2 : float or None
+        The mesh's own projection error at the mean size (cm²) behind ``strain_scale`` (None: the cohort's
+        mean floor).
     """
 
     n_pc: int
@@ -98,6 +113,9 @@ class RepresentationError:
     measure_rel_sd: dict = field(default_factory=dict)
     n_cases: int = 0
     source: str = ""
+    projection_fit: dict = field(default_factory=dict)
+    strain_scale: Any = 1.0
+    projection_mse_cm2: float | None = None
 
     def __post_init__(self):
         cov = np.asarray(self.strain_cov, dtype=float)
@@ -111,22 +129,59 @@ class RepresentationError:
         object.__setattr__(self, "strain_cov", cov)
         object.__setattr__(self, "lvv_rel_sd", float(self.lvv_rel_sd))
         object.__setattr__(self, "measure_rel_sd", {k: float(v) for k, v in dict(self.measure_rel_sd).items()})
+        if isinstance(self.strain_scale, (int, float, np.floating, np.integer)):  # not a traced run-time value
+            if not (np.isfinite(self.strain_scale) and self.strain_scale > 0):
+                raise DataError(f"representation error: strain_scale must be finite and > 0, got {self.strain_scale}")
+            object.__setattr__(self, "strain_scale", float(self.strain_scale))
+
+    @property
+    def effective_strain_cov(self) -> np.ndarray:
+        """``strain_scale * strain_cov`` (strain²): the covariance added to ``sigma_S^2 I`` for this geometry."""
+        return float(self.strain_scale) * self.strain_cov
+
+    def for_projection(self, projection_mse_cm2: float, scale: float = 1.0) -> "RepresentationError":
+        """The floor of a mesh whose k-mode projection misses it by ``projection_mse_cm2``.
+
+        ``strain_cov`` is the cohort's mean second moment; a mesh far from the shape space gets more, one
+        close to it less: ``strain_scale = (c0 + c1 p) / mean`` with ``c0, c1`` of
+        :func:`projection_scaling_fit` (1 at the cohort's mean) and ``p = projection_mse_cm2 / scale**2``
+        the error at the shape model's mean size (strains do not change with size; the node distances do).
+        Without a fit (an asset with no per-case projection errors) the floor is returned unchanged.
+
+        Parameters
+        ----------
+        projection_mse_cm2 : float
+            Mean squared node distance (cm²) between the mesh and its reconstruction
+            (:func:`lvcore.geometry.scaling.size_normalised_scores`).
+        scale : float
+            The mesh's size factor ``s`` against the shape model's mean shape.
+        """
+        mse, s = float(projection_mse_cm2), float(scale)
+        if not (np.isfinite(mse) and mse >= 0 and np.isfinite(s) and s > 0):
+            raise DataError(f"representation error: projection_mse_cm2 must be finite and >= 0 and the scale "
+                            f"finite and > 0, got {mse} and {s}")
+        fit = self.projection_fit
+        if not fit:
+            return self
+        p = mse / s ** 2
+        factor = (fit["intercept"] + fit["slope"] * p) / fit["mean"]
+        return replace(self, strain_scale=float(factor), projection_mse_cm2=p)
 
     @property
     def strain_sd(self) -> np.ndarray:
-        """Per-segment sd of the strain error (strain)."""
-        return np.sqrt(np.diag(self.strain_cov))
+        """Per-segment sd of the strain error (strain), ``strain_scale`` included."""
+        return np.sqrt(np.diag(self.effective_strain_cov))
 
     @property
     def strain_rms(self) -> float:
-        """Root mean square over the 24 segments of the strain error sd (strain)."""
-        return float(np.sqrt(np.mean(np.diag(self.strain_cov))))
+        """Root mean square over the 24 segments of the strain error sd (strain), ``strain_scale`` included."""
+        return float(np.sqrt(np.mean(np.diag(self.effective_strain_cov))))
 
     def strain_covariance(self, sigma_s2):
-        """``sigma_s2 * I + strain_cov`` (JAX-traceable in ``sigma_s2``), the strain covariance of infer mode."""
+        """``sigma_s2 * I + strain_scale * strain_cov`` (JAX-traceable in ``sigma_s2`` and ``strain_scale``)."""
         import jax.numpy as jnp
 
-        return jnp.asarray(sigma_s2) * jnp.eye(24) + jnp.asarray(self.strain_cov)
+        return jnp.asarray(sigma_s2) * jnp.eye(24) + jnp.asarray(self.strain_scale) * jnp.asarray(self.strain_cov)
 
     def lvv_sd(self, sigma_v, eta0):
         """LVV sd (mL) with the floor: ``sqrt(sigma_v^2 + (lvv_rel_sd eta0)^2)`` (JAX-traceable)."""
@@ -144,7 +199,11 @@ class RepresentationError:
         return {"n_pc": self.n_pc, "source": self.source, "n_cases": self.n_cases,
                 "strain_sd_rms": self.strain_rms, "strain_sd_min": float(self.strain_sd.min()),
                 "strain_sd_max": float(self.strain_sd.max()), "lvv_rel_sd": self.lvv_rel_sd,
-                "measure_rel_sd": dict(self.measure_rel_sd)}
+                "measure_rel_sd": dict(self.measure_rel_sd), "strain_scale": float(self.strain_scale),
+                "projection_mse_cm2": self.projection_mse_cm2,
+                "projection_fit": {k: v for k, v in self.projection_fit.items()},
+                "beyond_cohort": bool(self.projection_fit and self.projection_mse_cm2 is not None
+                                      and self.projection_mse_cm2 > self.projection_fit["mse_max"])}
 
 
 def representation_error_stats(strain_deltas, lvv_rel_deltas, measure_rel_deltas: dict | None = None) -> dict:
@@ -184,6 +243,34 @@ def representation_error_stats(strain_deltas, lvv_rel_deltas, measure_rel_deltas
             "n_cases": int(d.shape[0]), "estimator": "sklearn.covariance.ledoit_wolf(assume_centered=True)"}
 
 
+def projection_scaling_fit(projection_mse_cm2, strain_deltas) -> dict:
+    """How a shape's strain representation error grows with its projection error (for :meth:`for_projection`).
+
+    Fits ``mean(d_i^2) = c0 + c1 p_i`` (non-negative least squares, :func:`scipy.optimize.nnls`) over the
+    cases ``i``, with ``d_i`` a case's 24 strain errors and ``p_i`` its projection error at the shape model's
+    mean size (cm², ``projection_mse_cm2 / scale**2``), and reports Spearman's rank correlation of the two
+    as the evidence for it.
+
+    Returns
+    -------
+    dict
+        ``intercept`` c0 and ``slope`` c1 (strain², strain²/cm²), ``mean`` (the cases' mean of
+        ``mean(d_i^2)``, the trace/24 of the mean floor), ``mse_min`` / ``mse_max`` (cm², the cases' range),
+        ``spearman_rho``, ``spearman_p`` and ``n``.
+    """
+    from scipy.optimize import nnls
+    from scipy.stats import spearmanr
+
+    p = np.asarray(projection_mse_cm2, dtype=float).reshape(-1)
+    s2 = np.mean(np.square(np.asarray(strain_deltas, dtype=float)), axis=1)
+    if p.shape[0] != s2.shape[0] or p.shape[0] < 3 or not np.all(np.isfinite(p)):
+        raise DataError(f"projection scaling fit: need >= 3 cases with finite projection errors, got {p.shape[0]}")
+    (c0, c1), _ = nnls(np.c_[np.ones_like(p), p], s2)
+    rho, pval = spearmanr(p, s2)
+    return {"intercept": float(c0), "slope": float(c1), "mean": float(s2.mean()), "mse_min": float(p.min()),
+            "mse_max": float(p.max()), "spearman_rho": float(rho), "spearman_p": float(pval), "n": int(p.shape[0])}
+
+
 def load_representation_error(n_pc: int = 5, path=None) -> RepresentationError:
     """The representation error of ``n_pc`` modes (default: the bundled SYNTHETIC asset).
 
@@ -202,9 +289,13 @@ def load_representation_error(n_pc: int = 5, path=None) -> RepresentationError:
     if int(meta["n_pc"]) != int(n_pc):
         raise DataError(f"{p.name} is for {meta['n_pc']} modes, the emulator uses {n_pc}")
     st = meta["stats"]
+    cases = [c for c in meta.get("cases", []) if "projection_mse_cm2" in c and "strain_delta" in c]
+    fit = (projection_scaling_fit([c["projection_mse_cm2"] / float(c.get("scale", 1.0)) ** 2 for c in cases],
+                                  [c["strain_delta"] for c in cases]) if len(cases) >= 3 else {})
     return RepresentationError(n_pc=int(meta["n_pc"]), strain_cov=np.asarray(st["strain_cov"], dtype=float),
                                lvv_rel_sd=float(st["lvv_rel_sd"]), measure_rel_sd=dict(st.get("measure_rel_sd", {})),
-                               n_cases=int(st["n_cases"]), source=f"{p.name} ({meta.get('label', '')})")
+                               n_cases=int(st["n_cases"]), source=f"{p.name} ({meta.get('label', '')})",
+                               projection_fit=fit)
 
 
 #: Geometry kinds (:class:`lvcore.inference.guards.GeometrySource`) that are a subject's mesh seen through its
@@ -245,7 +336,8 @@ class FlooredForward:
         return self.forward(params)
 
 
-def given_geometry_floor(forward, kind: str, mode: str = "floor", n_pc: int = 5, representation=None):
+def given_geometry_floor(forward, kind: str, mode: str = "floor", n_pc: int = 5, representation=None,
+                         projection_mse_cm2: float | None = None):
     """The representation-error floor of a given geometry (``--geometry FILE``; module docstring).
 
     Parameters
@@ -260,6 +352,10 @@ def given_geometry_floor(forward, kind: str, mode: str = "floor", n_pc: int = 5,
         Modes of the emulator's shape space (selects the bundled asset).
     representation : RepresentationError, optional
         Default :func:`load_representation_error` of ``n_pc``.
+    projection_mse_cm2 : float, optional
+        The mesh's own projection error (:attr:`lvcore.inference.guards.GeometrySource.projection_mse_cm2`;
+        taken to the mean size with ``forward.scale``): the floor is scaled to it
+        (:meth:`RepresentationError.for_projection`). None: the cohort's mean floor.
 
     Returns
     -------
@@ -273,8 +369,10 @@ def given_geometry_floor(forward, kind: str, mode: str = "floor", n_pc: int = 5,
     if mode == "off" or kind not in MESH_KINDS:
         return forward, None
     rep = load_representation_error(n_pc) if representation is None else representation
+    if projection_mse_cm2 is not None:
+        rep = rep.for_projection(projection_mse_cm2, float(getattr(forward, "scale", 1.0)))
     return FlooredForward(forward, rep), {"mode": "floor", **rep.record()}
 
 
 __all__ = ["FORMAT", "MEASURE_KEYS", "MESH_KINDS", "asset_file", "RepresentationError", "representation_error_stats",
-           "load_representation_error", "FlooredForward", "given_geometry_floor"]
+           "projection_scaling_fit", "load_representation_error", "FlooredForward", "given_geometry_floor"]

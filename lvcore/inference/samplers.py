@@ -326,7 +326,8 @@ def _template_key(template):
 
 def _representation_key(rep):
     """What a mesh's representation-error floor compiles into the likelihood (None without one): a floored
-    and an unfloored model of the same emulator must not share a compiled program."""
+    and an unfloored model of the same emulator must not share a compiled program. A mesh's own factor
+    (``strain_scale``) is not in it: that is a run-time value (:func:`runtime_conditions`)."""
     if rep is None:
         return None
     import hashlib
@@ -405,8 +406,8 @@ class ConditionedForward:
 
     def __init__(self, forward, inner, keys: tuple[str, ...], scaled: bool):
         self.forward, self._inner, self._keys, self._scaled = forward, inner, tuple(keys), bool(scaled)
-        # the shape model's representation error a mesh's forward model carries (a constant of the model,
-        # the same for every subject: lvcore.inference.representation_error.FlooredForward), or None
+        # the shape model's representation error a mesh's forward model carries (its covariance a constant of
+        # the model, its per-mesh factor a run-time value: lvcore.inference.representation_error.FlooredForward)
         self.representation = getattr(forward, "representation", None)
         self.input_names = tuple(forward.input_names)
         self.label = getattr(forward, "label", type(forward).__name__)
@@ -427,7 +428,12 @@ class _BoundConditions:
     def __init__(self, template: ConditionedForward, values):
         self._t, self._v = template, values
         self.input_names, self.label, self.traceable = template.input_names, template.label, True
-        self.representation = template.representation
+        rep = template.representation
+        if rep is not None and "floor_scale" in values:  # the mesh's own floor factor, a run-time value
+            from dataclasses import replace
+
+            rep = replace(rep, strain_scale=values["floor_scale"])
+        self.representation = rep
 
     @property
     def input_bounds(self):
@@ -454,16 +460,17 @@ def runtime_conditions(forward):
     :class:`lvcore.geometry.scaling.ScaledForward` around one (the scale
     becomes a value too), either possibly inside a
     :class:`lvcore.inference.representation_error.FlooredForward` (a mesh's
-    representation-error floor, carried by the template). Any other forward
+    representation-error floor, carried by the template; its per-mesh factor
+    ``strain_scale`` becomes a value). Any other forward
     model is returned unchanged, its constants compiled in as before.
     """
     from lvcore.emulator.forward import EmulatorForward
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.inference.representation_error import FlooredForward
 
-    inner, scale = forward, None
+    inner, scale, floor_scale = forward, None, None
     if type(inner) is FlooredForward:
-        inner = inner.forward
+        inner, floor_scale = inner.forward, inner.representation.strain_scale
     if type(inner) is ScaledForward:
         inner, scale = inner.forward, float(inner.scale)
     if type(inner) is not EmulatorForward:
@@ -472,6 +479,8 @@ def runtime_conditions(forward):
     values = {"conditions": jnp.asarray([inner.conditions[k] for k in keys], dtype=jnp.float64).reshape(len(keys))}
     if scale is not None:
         values["scale"] = jnp.asarray(scale, dtype=jnp.float64)
+    if floor_scale is not None:  # the mesh's representation-error factor (for_projection): one program for all
+        values["floor_scale"] = jnp.asarray(floor_scale, dtype=jnp.float64)
     return ConditionedForward(forward, inner, keys, scale is not None), values
 
 

@@ -305,7 +305,7 @@ def output_sds(eta, sigma_v: float, sigma_ref: float, forward=None) -> np.ndarra
     rep = representation_error(forward)
     if rep is None:
         return np.r_[float(sigma_v), np.full(24, float(sigma_ref))]
-    return np.r_[float(rep.lvv_sd(sigma_v, float(eta[0]))), np.sqrt(float(sigma_ref) ** 2 + np.diag(rep.strain_cov))]
+    return np.r_[float(rep.lvv_sd(sigma_v, float(eta[0]))), np.sqrt(float(sigma_ref) ** 2 + np.diag(rep.effective_strain_cov))]
 
 
 def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None, infer_angles: bool = False,
@@ -382,7 +382,7 @@ def posterior_misfit(result, forward=None, seed: int = 0) -> tuple[dict, list[st
     cov = float(np.median(np.asarray(post["sigma_s2"], float))) * np.eye(r.size)
     rep = representation_error(forward)
     if rep is not None:
-        cov = cov + rep.strain_cov
+        cov = cov + rep.effective_strain_cov
     lam, u = np.linalg.eigh(cov)
     w = u @ ((u.T @ r) / np.sqrt(np.maximum(lam, 1e-300)))
     moran_i, p = residual_structure(w, seed=seed)
