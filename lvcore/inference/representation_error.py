@@ -201,7 +201,7 @@ class RepresentationError:
                 "strain_sd_max": float(self.strain_sd.max()), "lvv_rel_sd": self.lvv_rel_sd,
                 "measure_rel_sd": dict(self.measure_rel_sd), "strain_scale": float(self.strain_scale),
                 "projection_mse_cm2": self.projection_mse_cm2,
-                "projection_fit": {k: v for k, v in self.projection_fit.items()},
+                "projection_fit": dict(self.projection_fit),
                 "beyond_cohort": bool(self.projection_fit and self.projection_mse_cm2 is not None
                                       and self.projection_mse_cm2 > self.projection_fit["mse_max"])}
 
