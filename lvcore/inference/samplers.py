@@ -27,7 +27,6 @@ import copy
 import hashlib
 import threading
 import time
-from collections import OrderedDict
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field, replace
 from functools import partial
@@ -43,6 +42,7 @@ from numpyro.infer import MCMC, NUTS
 from numpyro.infer.hmc import hmc
 from numpyro.infer.mcmc import MCMCKernel
 
+from lvcore.bounded_cache import BoundedCache
 from lvcore.conditions import SIGMA_V_ML
 from lvcore.inference import kernels, models
 from lvcore.outputs import N_OUTPUTS
@@ -284,8 +284,7 @@ def _mcmc(kernel, config: SamplerConfig, dynamic_args: bool = False) -> MCMC:
 #: Compiled samplers kept in this process (least recently used first out): an app that calibrates
 #: several subjects with one emulator traces and compiles each sampler once, not once per click.
 MCMC_CACHE_SIZE = 8
-_MCMC_CACHE: OrderedDict = OrderedDict()
-_MCMC_CACHE_LOCK = threading.Lock()
+_MCMC_CACHE: BoundedCache = BoundedCache(MCMC_CACHE_SIZE)
 
 
 def emulator_fingerprint(emulator) -> str:
@@ -345,15 +344,12 @@ def _cached_mcmc(key, factory) -> MCMC:
     """
     if key is None:
         return factory()
-    with _MCMC_CACHE_LOCK:
-        base = _MCMC_CACHE.get(key)
-        if base is None:
-            base = factory()
-            base.__dict__["_lvcore_compiled"] = {}
-            _MCMC_CACHE[key] = base
-            while len(_MCMC_CACHE) > MCMC_CACHE_SIZE:
-                _MCMC_CACHE.popitem(last=False)
-        _MCMC_CACHE.move_to_end(key)
+    def made():
+        base = factory()
+        base.__dict__["_lvcore_compiled"] = {}
+        return base
+
+    base = _MCMC_CACHE.get_or_create(key, made)
     mcmc = copy.copy(base)
     mcmc._collection_params = dict(base._collection_params)
     mcmc._warmup_state = None
@@ -372,8 +368,7 @@ def _trace_guard(mcmc: MCMC):
 
 def clear_sampler_cache() -> None:
     """Forget the compiled samplers kept in this process (:data:`MCMC_CACHE_SIZE`)."""
-    with _MCMC_CACHE_LOCK:
-        _MCMC_CACHE.clear()
+    _MCMC_CACHE.clear()
     _ETA_CACHE.clear()
 
 

@@ -33,12 +33,11 @@ results flagged" (docs/reliability.md), and lists the flags in
 from __future__ import annotations
 
 import math
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from lvcore.bounded_cache import BoundedCache
 from lvcore.outputs import ANGLE_NAMES, OUTPUT_COLUMNS, THETA_NAMES, is_pc_name
 
 #: p-value below which an output counts as not reached at the best fit.
@@ -162,14 +161,12 @@ def _reference_model(y=None, *, forward, sigma_v, sigma_ref, infer_angles):
 #: least recently used first out: a long-running app server that meets many emulators keeps a bounded number
 #: of compiled programs (each holds executable memory mappings; the kernel allows 65,530 per process).
 BEST_FIT_CACHE_SIZE = 8
-_BEST_FIT_PROGRAMS: OrderedDict = OrderedDict()
-_BEST_FIT_LOCK = threading.Lock()
+_BEST_FIT_PROGRAMS: BoundedCache = BoundedCache(BEST_FIT_CACHE_SIZE)
 
 
 def clear_best_fit_programs() -> None:
     """Forget the compiled best-fit programs kept in this process (:data:`BEST_FIT_CACHE_SIZE`)."""
-    with _BEST_FIT_LOCK:
-        _BEST_FIT_PROGRAMS.clear()
+    _BEST_FIT_PROGRAMS.clear()
 
 
 def _best_fit_programs(forward, sigma_v: float, sigma_ref: float, infer_angles: bool, n_starts: int):
@@ -201,12 +198,9 @@ def _best_fit_programs(forward, sigma_v: float, sigma_ref: float, infer_angles: 
     template, values = samplers.runtime_conditions(forward)
     tkey = samplers._template_key(template)
     key = None if tkey is None else (tkey, float(sigma_v), float(sigma_ref), bool(infer_angles), int(n_starts))
-    if key is not None:
-        with _BEST_FIT_LOCK:
-            kept = _BEST_FIT_PROGRAMS.get(key)
-            if kept is not None:
-                _BEST_FIT_PROGRAMS.move_to_end(key)
-                return kept, values
+    kept = None if key is None else _BEST_FIT_PROGRAMS.get(key)
+    if kept is not None:
+        return kept, values
 
     def fwd(cond):
         return forward if values is None else template.bind(cond)
@@ -247,10 +241,7 @@ def _best_fit_programs(forward, sigma_v: float, sigma_ref: float, infer_angles: 
     programs = {"starts": starts, "value_and_grad": jax.jit(jax.value_and_grad(objective)), "final": final,
                 "order": order}
     if key is not None:
-        with _BEST_FIT_LOCK:
-            _BEST_FIT_PROGRAMS[key] = programs
-            while len(_BEST_FIT_PROGRAMS) > BEST_FIT_CACHE_SIZE:
-                _BEST_FIT_PROGRAMS.popitem(last=False)
+        _BEST_FIT_PROGRAMS.put(key, programs)
     return programs, values
 
 

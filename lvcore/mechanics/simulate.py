@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import time
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -20,6 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from lvcore import limits, units
+from lvcore.bounded_cache import BoundedCache
 from lvcore.exceptions import CaseError, GeometryError, SolverError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
 from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables
@@ -190,7 +190,7 @@ class PreparedCase:
 
 #: Prepared cases kept per process (least recently used dropped first).
 PREPARED_CACHE_SIZE = 4
-_PREPARED: "OrderedDict[tuple, PreparedCase]" = OrderedDict()
+_PREPARED: "BoundedCache[PreparedCase]" = BoundedCache(PREPARED_CACHE_SIZE)
 
 
 def _prepare_key(case) -> tuple:
@@ -214,7 +214,6 @@ def prepare_case(case) -> PreparedCase:
     key = _prepare_key(case)
     hit = _PREPARED.get(key)
     if hit is not None:
-        _PREPARED.move_to_end(key)
         return hit
     mesh = build_mesh(case)
     system = build_system(case, mesh)
@@ -232,9 +231,7 @@ def prepare_case(case) -> PreparedCase:
         out_args = (jnp.asarray(mesh.nodes),) + _volume_args(mesh) + (
             jnp.asarray(op.connectivity), jnp.asarray(op.dNdX), jnp.asarray(op.e_c), jnp.asarray(op.weights))
     prep = PreparedCase(mesh, system, v_ref, elem_p, xi_p, out_args)
-    _PREPARED[key] = prep
-    while len(_PREPARED) > PREPARED_CACHE_SIZE:
-        _PREPARED.popitem(last=False)
+    _PREPARED.put(key, prep)
     return prep
 
 
