@@ -121,6 +121,10 @@ def register(subparsers) -> None:
                         f"{STRAIN_NOISE_RANGE[1]:g}] (default 0.035)")
     p.add_argument("--sampler", choices=("auto", "nuts", "hmc_gibbs"), default="auto",
                    help="auto: NUTS for volume/iid, HMC-within-Gibbs for discrepancy")
+    p.add_argument("--discrepancy-block", choices=("marginal", "chapter"), default="marginal",
+                   help="HMC-within-Gibbs block 4: marginal (the discrepancy integrated out of the NUTS block, then "
+                        "drawn exactly; default, fewer steps and divergences) or chapter (Algorithm 4 as written: NUTS "
+                        "over theta, the whitened discrepancy and v); the same posterior")
     p.add_argument("--chains", type=int, default=4,
                    help="MCMC chains, 1 to 64, run in parallel on up to 4 host devices (default 4)")
     p.add_argument("--warmup", type=int, default=1000,
@@ -269,7 +273,8 @@ def run_calibrate(args) -> int:
     else:
         geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
     warnings = [] if geo is None else list(geo.warnings)
-    config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
+    config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed,
+                           discrepancy_block=args.discrepancy_block)
     out = Path(args.out)
     by_subject = {}   # subject -> (row, forward, conditions, box, warnings, geometry record)
 

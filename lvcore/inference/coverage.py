@@ -114,7 +114,7 @@ def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.Sampler
 
 def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
     kernel = samplers.PolarGPGibbs(forward, None, sigma_v=sigma_v, target_accept_prob=config.target_accept_prob,
-                                   max_tree_depth=config.max_tree_depth)
+                                   max_tree_depth=config.max_tree_depth, block4=config.discrepancy_block)
     kw = lambda c: None if c is None else {"conditions": c}  # noqa: E731
     return (lambda key, y, c=None: kernel.init(key, config.num_warmup, None, (y,), kw(c)),
             lambda state, y, c=None: kernel.sample(state, (y,), kw(c)),

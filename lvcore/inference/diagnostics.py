@@ -203,6 +203,9 @@ def to_inference_data(run: samplers.SamplerRun, y, *, convergence: Convergence |
         "forward_model": forward_label,
         "sigma_v_ml": float(sigma_v),
     }
+    block4 = getattr(getattr(run.mcmc, "sampler", None), "block4", None)
+    if block4 is not None:  # which HMC-within-Gibbs block 4 drew the discrepancy (samplers.DISCREPANCY_BLOCKS)
+        attrs["discrepancy_block"] = block4
     if convergence is not None:
         attrs.update({f"convergence_{k}": (json.dumps(v) if isinstance(v, tuple) else v)
                       for k, v in asdict(convergence).items()})

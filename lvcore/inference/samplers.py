@@ -74,6 +74,9 @@ class SamplerConfig:
         (``benchmarks/bench_calibration.py --runs iid [--dense-mass]``).
     progress_bar : bool
         numpyro's text progress bar.
+    discrepancy_block : str
+        Block 4 of the discrepancy model's HMC-within-Gibbs, one of :data:`DISCREPANCY_BLOCKS`: ``"marginal"``
+        (b integrated out of the NUTS block, then drawn exactly) or ``"chapter"`` (Algorithm 4 as written).
     """
 
     num_warmup: int = 1000
@@ -85,6 +88,7 @@ class SamplerConfig:
     max_tree_depth: int = 10
     dense_mass: bool = False
     progress_bar: bool = False
+    discrepancy_block: str = "marginal"
 
 
 #: The app's default run: 4 chains x (250 warm-up + 500 draws). Chosen by measured ESS per CPU second
@@ -94,7 +98,8 @@ class SamplerConfig:
 #: nobody needs; 4 x (250 + 500) costs 18 CPU-s and still gives a worst theta ESS of 1,400 (all parameters,
 #: GP hyperparameters included: 395) with R-hat <= 1.01; 250 warm-up iterations gave the same ESS per draw as
 #: 500. The iid model (NUTS, ~1.2 CPU-ms per iteration) gets the same setting. Four chains keep R-hat
-#: meaningful; on 2 cores they run as 4 XLA host devices.
+#: meaningful; on 2 cores they run as 4 XLA host devices. (Those figures are the chapter's block 4; the
+#: marginal block, the default since, costs ~2.6 CPU-ms per chain iteration for the same minimum ESS.)
 INTERACTIVE = SamplerConfig(num_warmup=250, num_samples=500, num_chains=4)
 
 
@@ -552,8 +557,24 @@ class GibbsState(NamedTuple):
     rng_key: Any
 
 
+#: Block 4 of the discrepancy sampler: ``"marginal"`` integrates the discrepancy b out of the NUTS block and
+#: then draws it from its Gaussian full conditional; ``"chapter"`` is Algorithm 4 as written (NUTS over θ, the
+#: whitened b̃ and v). Both leave the same posterior invariant (``tests/test_inference_samplers.py`` compares
+#: them). On SYNTHETIC_HV2 at the app's 4 × (250 + 500), ``chapter`` emulator: marginal 7.7 CPU-s, 13 NUTS
+#: steps per block-4 draw, 1 divergent transition, minimum bulk ESS 554; chapter 18.5 CPU-s, 59 steps, 44
+#: divergent, minimum ESS 544 (docs/calibration.md, *Block 4, marginalised*).
+DISCREPANCY_BLOCKS = ("marginal", "chapter")
+
+
 class PolarGPGibbs(MCMCKernel):
     """HMC-within-Gibbs for the discrepancy model (iii), Algorithm 4 of the chapter.
+
+    Each sweep: (1) σ_S² from its conjugate inverse gamma given b; (2) NUTS on the GP hyperparameters given
+    b; (3) the Cholesky factor L of the new Gram matrix K; (4) with ``block4="marginal"`` (default) NUTS on
+    (θ, v) with b integrated out, ``y_S ~ N(η_S(θ) + v, K + σ_S² I)`` (a dense mass matrix: a handful of
+    dimensions), then b from its Gaussian full conditional by Matheron's rule; with ``block4="chapter"``
+    NUTS on (θ, b̃, v), ``b = L b̃``, as the chapter writes it. Steps (4) of either kind draw (θ, v, b) from
+    their joint conditional given σ_S² and the hyperparameters, so both samplers have the same posterior.
 
     Parameters
     ----------
@@ -570,6 +591,8 @@ class PolarGPGibbs(MCMCKernel):
         Diagonal jitter of the Gram matrix (strain²).
     target_accept_prob, max_tree_depth : float, int
         NUTS settings of both blocks.
+    block4 : str
+        One of :data:`DISCREPANCY_BLOCKS` (above).
 
     Sites in ``state.z``: theta (and angles), ``sigma_s2``, ``lam``, ``sigma1_sq``,
     ``sigma2_sq``, ``c``, ``tau``, ``disc_tilde`` (24, whitened), ``disc`` (24, the discrepancy b), ``v``.
@@ -578,7 +601,11 @@ class PolarGPGibbs(MCMCKernel):
     sample_field = "z"
 
     def __init__(self, forward, y=None, *, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
-                 nugget: float = kernels.DEFAULT_NUGGET, target_accept_prob: float = 0.8, max_tree_depth: int = 10):
+                 nugget: float = kernels.DEFAULT_NUGGET, target_accept_prob: float = 0.8, max_tree_depth: int = 10,
+                 block4: str = "marginal"):
+        if block4 not in DISCREPANCY_BLOCKS:
+            raise ValueError(f"block4 must be one of {DISCREPANCY_BLOCKS}, got {block4!r}")
+        self.block4 = block4
         self.forward = forward
         # the forward model's conditions are run-time values (runtime_conditions), not compiled in
         self._template, self.conditions = runtime_conditions(forward)
@@ -593,7 +620,8 @@ class PolarGPGibbs(MCMCKernel):
         self.hyper_priors = models.hyper_priors()
         self.v_prior = models.v_prior()
         self._hyper_init, self._hyper_sample = hmc(potential_fn_gen=self._hyper_potential_gen, algo="NUTS")
-        self._main_init, self._main_sample = hmc(potential_fn_gen=self._main_potential_gen, algo="NUTS")
+        self._main_gen = self._marginal_potential_gen if block4 == "marginal" else self._main_potential_gen
+        self._main_init, self._main_sample = hmc(potential_fn_gen=self._main_gen, algo="NUTS")
 
     # --- conditionals -------------------------------------------------------
     def _hyper_potential_gen(self, b, y=None):
@@ -623,6 +651,38 @@ class PolarGPGibbs(MCMCKernel):
             logp += -0.5 * u["disc_tilde"] @ u["disc_tilde"] + self.v_prior.log_prob(u["v"])
             return -(logl + logp)
         return potential
+
+    def _marginal_potential_gen(self, sigma_s2, chol, y, cond=None):
+        """Potential of the marginal block 4 over (theta, v) given sigma_S^2 and ``chol``, the Cholesky
+        factor of ``K + sigma_S^2 I`` (b integrated out; constants dropped)."""
+        forward = self._forward_at(cond)
+
+        def potential(u):
+            params, logp = _constrain(self.theta_priors, u)
+            eta = forward(params)
+            logl = dist.Normal(eta[0], self.sigma_v).log_prob(y[0])
+            alpha = solve_triangular(chol, y[1:] - eta[1:] - u["v"], lower=True)
+            logp += self.v_prior.log_prob(u["v"])
+            return -(logl - 0.5 * alpha @ alpha + logp)
+        return potential
+
+    def _block4_args(self, sigma_s2, chol_k, y, cond):
+        """The model arguments of block 4: ``chol_k`` (of K) for ``chapter``, that of ``K + σ_S² I`` for ``marginal``."""
+        if self.block4 == "chapter":
+            return (sigma_s2, chol_k, y, cond)
+        return (sigma_s2, jnp.linalg.cholesky(chol_k @ chol_k.T + sigma_s2 * jnp.eye(chol_k.shape[0])), y, cond)
+
+    def _discrepancy_draw(self, key, params, v, sigma_s2, chol_k, chol_t, y, cond=None):
+        """b from its full conditional ``N(K (K + σ²I)⁻¹ r, K - K (K + σ²I)⁻¹ K)``, r = y_S - η_S - v, by
+        Matheron's rule: ``b = b₀ + K (K + σ²I)⁻¹ (r - b₀ - e₀)``, b₀ ~ N(0, K), e₀ ~ N(0, σ²I).
+        ``chol_k``, ``chol_t``: Cholesky factors of K and of K + σ² I."""
+        k_b, k_e = jax.random.split(key)
+        n = chol_k.shape[0]
+        r = y[1:] - self._forward_at(cond)(params)[1:] - v
+        b0 = chol_k @ jax.random.normal(k_b, (n,))
+        e0 = jnp.sqrt(sigma_s2) * jax.random.normal(k_e, (n,))
+        w = solve_triangular(chol_t.T, solve_triangular(chol_t, r - b0 - e0, lower=True), lower=False)
+        return b0 + chol_k @ (chol_k.T @ w)
 
     def _sigma_s2_draw(self, key, params, b, v, y, cond=None):
         """Step 1: conjugate inverse-gamma draw of sigma_S^2."""
@@ -671,8 +731,12 @@ class PolarGPGibbs(MCMCKernel):
         common = dict(num_warmup=num_warmup, target_accept_prob=self.target_accept_prob,
                       max_tree_depth=self.max_tree_depth)
         hyper_state = self._hyper_init(u_hyper, model_args=(b,), rng_key=k_h, **common)
-        main_state = self._main_init({**u_theta, "disc_tilde": b_tilde, "v": v},
-                                     model_args=(sigma_s2, chol, y, cond), rng_key=k_m, **common)
+        if self.block4 == "chapter":
+            main_state = self._main_init({**u_theta, "disc_tilde": b_tilde, "v": v},
+                                         model_args=(sigma_s2, chol, y, cond), rng_key=k_m, **common)
+        else:
+            main_state = self._main_init({**u_theta, "v": v}, model_args=self._block4_args(sigma_s2, chol, y, cond),
+                                         rng_key=k_m, dense_mass=True, **common)
         z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": b, "v": v}
         return GibbsState(z, hyper_state, main_state, jnp.array(False), jnp.array(0), rng_key)
 
@@ -698,7 +762,11 @@ class PolarGPGibbs(MCMCKernel):
         return self._sample_one(state, y, cond)
 
     def _sample_one(self, state, y, cond=None):
-        rng_key, k_s = jax.random.split(state.rng_key)
+        if self.block4 == "chapter":  # the chapter's key stream, unchanged
+            rng_key, k_s = jax.random.split(state.rng_key)
+            k_b = None
+        else:
+            rng_key, k_s, k_b = jax.random.split(state.rng_key, 3)
         z = state.z
         params = {n: z[n] for n in self.theta_priors}
         b = z["disc"]
@@ -708,17 +776,25 @@ class PolarGPGibbs(MCMCKernel):
         hyper_state = self._refresh(state.hyper_state, self._hyper_potential_gen(b))
         hyper_state = self._hyper_sample(hyper_state, model_args=(b,))
         hyper, _ = _constrain(self.hyper_priors, hyper_state.z)
-        # 3. Cholesky of the new K; re-whiten so that b is unchanged.
+        # 3. Cholesky of the new K.
         chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
-        b_tilde = solve_triangular(chol, b, lower=True)
-        main_state = state.main_state._replace(z={**state.main_state.z, "disc_tilde": b_tilde})
-        main_state = self._refresh(main_state, self._main_potential_gen(sigma_s2, chol, y, cond))
-        # 4. NUTS on (theta, b_tilde, v) given sigma_S^2 and L.
-        main_state = self._main_sample(main_state, model_args=(sigma_s2, chol, y, cond))
+        args = self._block4_args(sigma_s2, chol, y, cond)
+        main_state = state.main_state
+        if self.block4 == "chapter":  # re-whiten so that b is unchanged
+            main_state = main_state._replace(z={**main_state.z, "disc_tilde": solve_triangular(chol, b, lower=True)})
+        main_state = self._refresh(main_state, self._main_gen(*args))
+        # 4. NUTS on (theta, b_tilde, v) given sigma_S^2 and L, or on (theta, v) with b integrated out and
+        #    then b from its Gaussian full conditional.
+        main_state = self._main_sample(main_state, model_args=args)
         params, _ = _constrain(self.theta_priors, main_state.z)
-        b_tilde = main_state.z["disc_tilde"]
-        z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": chol @ b_tilde,
-             "v": main_state.z["v"]}
+        v = main_state.z["v"]
+        if self.block4 == "chapter":
+            b_tilde = main_state.z["disc_tilde"]
+            b = chol @ b_tilde
+        else:
+            b = self._discrepancy_draw(k_b, params, v, sigma_s2, chol, args[1], y, cond)
+            b_tilde = solve_triangular(chol, b, lower=True)
+        z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": b, "v": v}
         diverging = jnp.logical_or(hyper_state.diverging, main_state.diverging)
         num_steps = hyper_state.num_steps + main_state.num_steps
         return GibbsState(z, hyper_state, main_state, diverging, num_steps, rng_key)
@@ -744,7 +820,8 @@ def run_hmc_gibbs(y, forward, config: SamplerConfig = SamplerConfig(), **model_k
     key = None if key is None else ("hmc_gibbs", key, _config_key(config, model_kwargs))
     # y (and the forward model's conditions, runtime_conditions) are arguments of the compiled sampler, as for NUTS
     mcmc = _cached_mcmc(key, lambda: _mcmc(PolarGPGibbs(forward, y, target_accept_prob=config.target_accept_prob,
-                                                        max_tree_depth=config.max_tree_depth, **model_kwargs),
+                                                        max_tree_depth=config.max_tree_depth,
+                                                        block4=config.discrepancy_block, **model_kwargs),
                                            config, dynamic_args=True))
     t0 = time.perf_counter()
     run_kwargs = dict(y=jnp.asarray(y, dtype=jnp.float64))
@@ -834,4 +911,5 @@ def precompile(model_name: str, y, forward, config: SamplerConfig = SamplerConfi
 __all__ = ["SamplerConfig", "SamplerRun", "PolarGPGibbs", "GibbsState", "run_nuts", "run_hmc_gibbs",
            "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap", "pmap_chains",
            "use_host_devices", "runtime_conditions", "ConditionedForward", "INTERACTIVE", "TRACE_LOCK", "compile_only",
-           "precompile", "clear_sampler_cache", "emulator_fingerprint", "MCMC_CACHE_SIZE"]
+           "precompile", "clear_sampler_cache", "emulator_fingerprint", "MCMC_CACHE_SIZE",
+           "DISCREPANCY_BLOCKS"]
