@@ -46,6 +46,8 @@ def main(argv=None) -> int:
                         "discrepancy at samplers.INTERACTIVE): the app's warm-up (trace, lower, compile or cache load: "
                         "lvcore.app.warmup) against a click (sampling and the verdict's best fit), one by one and in "
                         "threads as the page runs them; wall and process CPU seconds, ESS and R-hat per run")
+    p.add_argument("--discrepancy-block", default="marginal", choices=("marginal", "chapter"),
+                   help="HMC-within-Gibbs block 4 (samplers.DISCREPANCY_BLOCKS; default the app's, marginal)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if args.app:
@@ -80,7 +82,8 @@ def main(argv=None) -> int:
     disc = 0.03 * np.cos(x[:, 0] - 1.0) + 0.02 * (x[:, 1] - 1.5) / 1.5
     y = simulate_data(forward, theta, np.random.default_rng(0), discrepancy=disc)
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
-                                 chain_method=args.chain_method, dense_mass=args.dense_mass)
+                                 chain_method=args.chain_method, dense_mass=args.dense_mass,
+                                 discrepancy_block=args.discrepancy_block)
     if args.profile:
         return profile(args, forward, y, cfg, samplers, diagnostics)
     if args.sweep:
@@ -162,7 +165,7 @@ def app_profile(args) -> int:
     from lvcore.inference.data import read_measured_csv
     from lvcore.resources import bundled_volunteers, volunteer_files
 
-    cfg = dataclasses.replace(samplers.INTERACTIVE, num_chains=args.chains)
+    cfg = dataclasses.replace(samplers.INTERACTIVE, num_chains=args.chains, discrepancy_block=args.discrepancy_block)
     models = [m for m in args.runs.split(",") if m in ("volume", "iid", "discrepancy")] or ["iid", "discrepancy"]
     if args.runs == p_default_runs():
         models = ["iid", "discrepancy"]

@@ -129,3 +129,20 @@ def test_two_likelihoods_and_the_best_fit_in_threads_at_once_equal_them_one_by_o
     verdict.clear_best_fit_programs()
     for name, fn in jobs.items():
         np.testing.assert_array_equal(fn(), out[name], err_msg=name)
+
+
+def test_a_sampler_compiled_with_default_settings_serves_a_run_that_names_them():
+    """The app's warm-up compiles without model keyword arguments; calibrate() passes sigma_v and
+    infer_angles explicitly (sometimes as NumPy numbers). Both must find the same compiled sampler: before
+    this key, the click recompiled (first iid run 5.6 CPU-s against 2.6 after the fix, 2026-11-27)."""
+    import numpy as np
+
+    from lvcore.conditions import SIGMA_V_ML
+    from lvcore.inference import samplers
+
+    cfg = samplers.INTERACTIVE
+    warm = samplers._config_key(cfg, {})
+    assert samplers._config_key(cfg, {"sigma_v": SIGMA_V_ML, "infer_angles": False}) == warm
+    assert samplers._config_key(cfg, {"sigma_v": np.float64(SIGMA_V_ML), "infer_angles": np.bool_(False)}) == warm
+    assert samplers._config_key(cfg, {"sigma_v": 2 * SIGMA_V_ML}) != warm  # a different model still differs
+    assert samplers._config_key(cfg, {"infer_angles": True}) != warm

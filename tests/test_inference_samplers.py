@@ -195,8 +195,8 @@ def test_runtime_conditions_compile_one_program_for_every_geometry():
 def test_runtime_conditions_draw_what_compiled_in_conditions_draw(model_name, block, warmup, draws, rtol):
     """Run-time conditions give the chains that compiled-in conditions give, up to rounding, which the Gibbs
     sampler's two NUTS blocks per sweep amplify: the chapter's block 4, 5e-9 after 20 sweeps and above 1e-3
-    after 70; the marginal one (a dense mass matrix adapted from a handful of sweeps), 4e-9 after 7 sweeps,
-    growing about tenfold a sweep, and O(1) from the 13th (measured 2026-11-27)."""
+    after 70; the marginal one, 4e-9 after 7 sweeps, growing about tenfold a sweep, and O(1) from the 13th
+    (measured 2026-11-27)."""
     from lvcore.geometry.scaling import ScaledForward
 
     fwd = _chapter_forwards()[0]

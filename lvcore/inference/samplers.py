@@ -99,7 +99,7 @@ class SamplerConfig:
 #: GP hyperparameters included: 395) with R-hat <= 1.01; 250 warm-up iterations gave the same ESS per draw as
 #: 500. The iid model (NUTS, ~1.2 CPU-ms per iteration) gets the same setting. Four chains keep R-hat
 #: meaningful; on 2 cores they run as 4 XLA host devices. (Those figures are the chapter's block 4; the
-#: marginal block, the default since, costs ~2.6 CPU-ms per chain iteration for the same minimum ESS.)
+#: marginal block, the default since, costs ~2.3-3.1 CPU-ms per chain iteration for a larger minimum ESS.)
 INTERACTIVE = SamplerConfig(num_warmup=250, num_samples=500, num_chains=4)
 
 
@@ -377,9 +377,20 @@ def clear_sampler_cache() -> None:
     _ETA_CACHE.clear()
 
 
+#: The models' keyword arguments at their defaults: a sampler compiled without them (the app's warm-up) is the
+#: one a run that passes them explicitly (``calibrate``) needs.
+_MODEL_KWARG_DEFAULTS = {"sigma_v": SIGMA_V_ML, "infer_angles": False, "nugget": kernels.DEFAULT_NUGGET}
+
+
 def _config_key(config: SamplerConfig, model_kwargs: dict):
-    """The settings compiled into a sampler: everything but the seed (the PRNG key is an argument)."""
-    return (replace(config, seed=0), tuple(sorted((k, repr(v)) for k, v in model_kwargs.items())))
+    """The settings compiled into a sampler: everything but the seed (the PRNG key is an argument), and the
+    model's keyword arguments with their defaults filled in and numbers as Python numbers (``5.0`` and
+    ``np.float64(5.0)``, given or defaulted, compile the same model)."""
+    def canonical(v):
+        return repr(v.item() if isinstance(v, np.generic) else v)
+
+    kwargs = {**_MODEL_KWARG_DEFAULTS, **model_kwargs}
+    return (replace(config, seed=0), tuple(sorted((k, canonical(v)) for k, v in kwargs.items())))
 
 
 def _collect(mcmc: MCMC, stats_fields: dict) -> tuple[dict, dict]:
@@ -560,9 +571,11 @@ class GibbsState(NamedTuple):
 #: Block 4 of the discrepancy sampler: ``"marginal"`` integrates the discrepancy b out of the NUTS block and
 #: then draws it from its Gaussian full conditional; ``"chapter"`` is Algorithm 4 as written (NUTS over θ, the
 #: whitened b̃ and v). Both leave the same posterior invariant (``tests/test_inference_samplers.py`` compares
-#: them). On SYNTHETIC_HV2 at the app's 4 × (250 + 500), ``chapter`` emulator: marginal 7.7 CPU-s, 13 NUTS
-#: steps per block-4 draw, 1 divergent transition, minimum bulk ESS 554; chapter 18.5 CPU-s, 59 steps, 44
-#: divergent, minimum ESS 544 (docs/calibration.md, *Block 4, marginalised*).
+#: them). At the app's 4 × (250 + 500), ``chapter`` emulator, compiled, one core: SYNTHETIC_HV2 marginal
+#: 9.3 CPU-s, 26 NUTS steps per block-4 transition, 4 divergent, minimum bulk ESS 596; chapter 16.0 CPU-s,
+#: 59 steps, 44 divergent, 544. SYNTHETIC_HV1: 7.0 against 17.0 CPU-s, 2 against 20 divergent, ESS 695
+#: against 568 (docs/calibration.md, *Block 4, marginalised*). A dense mass matrix halved the steps on HV2
+#: but left HV1 at ESS 113 with 35 divergent transitions, so block 4's is diagonal.
 DISCREPANCY_BLOCKS = ("marginal", "chapter")
 
 
@@ -571,8 +584,8 @@ class PolarGPGibbs(MCMCKernel):
 
     Each sweep: (1) σ_S² from its conjugate inverse gamma given b; (2) NUTS on the GP hyperparameters given
     b; (3) the Cholesky factor L of the new Gram matrix K; (4) with ``block4="marginal"`` (default) NUTS on
-    (θ, v) with b integrated out, ``y_S ~ N(η_S(θ) + v, K + σ_S² I)`` (a dense mass matrix: a handful of
-    dimensions), then b from its Gaussian full conditional by Matheron's rule; with ``block4="chapter"``
+    (θ, v) with b integrated out, ``y_S ~ N(η_S(θ) + v, K + σ_S² I)``, then b from its Gaussian full
+    conditional by Matheron's rule; with ``block4="chapter"``
     NUTS on (θ, b̃, v), ``b = L b̃``, as the chapter writes it. Steps (4) of either kind draw (θ, v, b) from
     their joint conditional given σ_S² and the hyperparameters, so both samplers have the same posterior.
 
@@ -736,7 +749,7 @@ class PolarGPGibbs(MCMCKernel):
                                          model_args=(sigma_s2, chol, y, cond), rng_key=k_m, **common)
         else:
             main_state = self._main_init({**u_theta, "v": v}, model_args=self._block4_args(sigma_s2, chol, y, cond),
-                                         rng_key=k_m, dense_mass=True, **common)
+                                         rng_key=k_m, **common)
         z = {**params, **hyper, "sigma_s2": sigma_s2, "disc_tilde": b_tilde, "disc": b, "v": v}
         return GibbsState(z, hyper_state, main_state, jnp.array(False), jnp.array(0), rng_key)
 
