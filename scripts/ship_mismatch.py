@@ -41,8 +41,8 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 #: The shipped run's settings (see docs/studies.md for why these). ``check_*``: the convergence check, the doses
 #: that decide the verdicts (``SOURCE=D1,D2;SOURCE=D``; '' for none) refitted on the same data sets at a larger
 #: sampler budget (``lvcore.studies.mismatch.verdict_rows`` puts them in place of the main run's rows).
-SHIP = {"volunteers": "HV1,HV5", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40, "seed": 0,
-        "resolution": "default", "workers": 1,
+SHIP = {"volunteers": "HV1,HV2,HV3,HV4,HV5", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40,
+        "seed": 0, "resolution": "default", "workers": 1,
         "check_doses": "dispersion=0.2,0.333;heterogeneity=1.2;pericardium=0.3,0.2", "check_chains": 2, "check_warmup": 300,
         "check_samples": 300, "check_batch": 20}
 
