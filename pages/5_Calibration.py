@@ -290,7 +290,7 @@ if job is not None and job["done"]:
                 getattr(st, level)(f"{MODEL_LABELS[m]}: {text}")
             idatas = {MODEL_LABELS[m]: r.idata for m, r in results.items()}
             fig_pred = figs.predictive_density_figure(idatas, job["y"])
-            st.plotly_chart(fig_pred, width="stretch")
+            st.plotly_chart(fig_pred, width="stretch", key="cal_predictive")
             downloads = {"posterior_predictive.html": fig_pred}
             tabs = st.tabs([MODEL_LABELS[m] for m in results])
             for tab, (m, res) in zip(tabs, results.items()):
@@ -309,23 +309,26 @@ if job is not None and job["done"]:
                         st.plotly_chart(rfigs.posterior_prior_figure(
                             post, bounds, truth=truth, units=figs.UNITS,
                             title="Posterior (histogram) with the uniform prior (dotted)"
-                                  + (" and the hidden truth (red)" if truth else "")), width="stretch")
+                                  + (" and the hidden truth (red)" if truth else "")),
+                            width="stretch", key=f"cal_post_{m}")
                     st.caption(f"sampler {res.sampler}; {res.wall_s:.1f} s incl. compilation; "
                                f"min bulk ESS/s over θ {res.ess_per_s['min']:.1f}")
                     fig_pair = figs.pair_figure(res.idata, truth=truth)
-                    st.plotly_chart(fig_pair, width="stretch")
+                    st.plotly_chart(fig_pair, width="stretch", key=f"cal_pair_{m}")
                     names = [n for n in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "sigma_s2")
                              if n in res.idata.posterior]
                     fig_trace = figs.trace_figure(res.idata, names)
                     fig_rank = figs.rank_figure(res.idata, names)
                     t1, t2 = st.columns(2)
-                    t1.plotly_chart(fig_trace, width="stretch")
-                    t2.plotly_chart(fig_rank, width="stretch")
+                    # keyed per likelihood: two likelihoods' figures can be identical (one chain: the same
+                    # empty rank plot), and Streamlit refuses two elements with one auto-generated id
+                    t1.plotly_chart(fig_trace, width="stretch", key=f"cal_trace_{m}")
+                    t2.plotly_chart(fig_rank, width="stretch", key=f"cal_rank_{m}")
                     downloads.update({f"{m}_pair.html": fig_pair, f"{m}_trace.html": fig_trace,
                                       f"{m}_rank.html": fig_rank})
                     if m == "discrepancy":
                         fig_disc = figs.discrepancy_figure(res.idata)
-                        st.plotly_chart(fig_disc, width="stretch")
+                        st.plotly_chart(fig_disc, width="stretch", key=f"cal_disc_{m}")
                         downloads[f"{m}_discrepancy.html"] = fig_disc
                     st.download_button(f"InferenceData ({m}, netCDF)", partial(netcdf_bytes, res.idata),
                                        file_name=f"{cal.file_stem(job['subject'])}_{m}.nc", key=f"nc_{m}")
