@@ -113,6 +113,34 @@ def theta_design():
     return Design(get_space("material"), X, "custom", None)
 
 
+def test_predicted_state_is_exact_for_a_linear_solution_and_falls_back_to_the_nearest():
+    from lvcore.mechanics.forward import WarmState
+
+    rng = np.random.default_rng(1)
+    G = rng.normal(size=(3, 7))  # u(x) = u0 + x G for x in 3-D, u of 5 dofs + a (1, 2) pressure
+
+    def state(x, tangent=None):
+        y = np.ones(7) + x @ G
+        return WarmState(y[:5], y[5:].reshape(1, 2), tangent, ("values", tuple(x)))
+
+    X = rng.random((9, 3))
+    pool = [chains.Seed(x, state(x, tangent="newest" if i == 8 else None)) for i, x in enumerate(X)]
+    target = X[0] + 0.05  # inside the neighbours' cloud
+    nearest = pool[int(np.argmin(np.linalg.norm(X - target, axis=1)))].state
+    got = chains.predicted_state(target, pool)
+    want = state(target)
+    np.testing.assert_allclose(got.u, want.u, atol=1e-12)
+    np.testing.assert_allclose(got.p, want.p, atol=1e-12)
+    # the nearest state's parameters (for a continuation) and the newest factorised tangent (a chord start)
+    assert got.values == nearest.values and got.tangent == "newest"
+    # too few neighbours for a 3-D plane, a point beyond the cloud, states without arrays: the nearest as it is
+    assert chains.predicted_state(target, pool[:4]) is pool[int(np.argmin(np.linalg.norm(X[:4] - target, axis=1)))].state
+    far = X.mean(axis=0) + 10.0
+    assert chains.predicted_state(far, pool) is pool[int(np.argmin(np.linalg.norm(X - far, axis=1)))].state
+    assert chains.predicted_state(target, [chains.Seed(x, ("state", i)) for i, x in enumerate(X)])[0] == "state"
+    assert chains.predicted_state(target, []) is None
+
+
 def test_warm_chained_simulator_rows_equal_cold_ones(tmp_path, theta_design):
     """The real simulator (``fast`` mesh): a chained campaign gives the cold campaign's numbers within tolerance."""
     ex = _Inline(workers=1)
