@@ -149,9 +149,9 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     Each converged neighbour ``i`` gives ``(x_i, u_i)`` (scaled coordinates, solution); the least-squares
     plane ``u ≈ u_0 + G (x − x_0)`` through the nearest ``x_0`` predicts the solution at ``unit`` with an
     error of second order in the spacing ``h`` (the nearest state alone: first order). Newton then starts
-    closer and needs fewer chord iterations (``default`` mesh: 6.6 instead of 8.0 per warm solve). States other than a
-    :class:`~lvcore.mechanics.forward.WarmState` (arrays ``u`` and ``p``), or fewer than ``dimension + 2``
-    of them, give the nearest state unchanged.
+    closer and needs fewer chord iterations (``default`` mesh: 6.6 instead of 8.0 per warm solve). States
+    other than a :class:`~lvcore.mechanics.forward.WarmState` (arrays ``u`` and ``p``), or fewer than
+    ``dimension + 2`` of them, give the nearest state unchanged.
     """
     if not candidates:
         return None

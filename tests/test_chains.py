@@ -134,7 +134,8 @@ def test_predicted_state_is_exact_for_a_linear_solution_and_falls_back_to_the_ne
     # the nearest state's parameters (for a continuation) and the newest factorised tangent (a chord start)
     assert got.values == nearest.values and got.tangent == "newest"
     # too few neighbours for a 3-D plane, a point beyond the cloud, states without arrays: the nearest as it is
-    assert chains.predicted_state(target, pool[:4]) is pool[int(np.argmin(np.linalg.norm(X[:4] - target, axis=1)))].state
+    few = pool[:4]
+    assert chains.predicted_state(target, few) is few[int(np.argmin(np.linalg.norm(X[:4] - target, axis=1)))].state
     far = X.mean(axis=0) + 10.0
     assert chains.predicted_state(far, pool) is pool[int(np.argmin(np.linalg.norm(X - far, axis=1)))].state
     assert chains.predicted_state(target, [chains.Seed(x, ("state", i)) for i, x in enumerate(X)])[0] == "state"
