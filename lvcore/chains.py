@@ -151,7 +151,8 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     error of second order in the spacing ``h`` (the nearest state alone: first order). Newton then starts
     closer and needs fewer chord iterations (``default`` mesh: 6.6 instead of 8.0 per warm solve). States
     other than a :class:`~lvcore.mechanics.forward.WarmState` (arrays ``u`` and ``p``), or fewer than
-    ``dimension + 2`` of them, give the nearest state unchanged.
+    ``dimension + 2`` of them, or a point farther from the nearest than every fitted neighbour is (an
+    extrapolation), give the nearest state unchanged.
     """
     if not candidates:
         return None
