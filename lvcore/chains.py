@@ -134,8 +134,12 @@ def nearest_state(unit: np.ndarray, candidates: Sequence[Seed]):
     """The state of the candidate nearest ``unit``, or None when there is none."""
     if not candidates:
         return None
-    d = [float(np.sum((c.unit - unit) ** 2)) for c in candidates]
-    return candidates[int(np.argmin(d))].state
+    return candidates[int(_by_distance(unit, candidates)[0])].state
+
+
+def _by_distance(unit: np.ndarray, candidates: Sequence[Seed]) -> np.ndarray:
+    """Indices of ``candidates``, nearest ``unit`` first (ties in their given order)."""
+    return np.argsort([float(np.sum((c.unit - unit) ** 2)) for c in candidates], kind="stable")
 
 
 #: Converged neighbours the linear predictor fits (:func:`predicted_state`), at least; it uses
@@ -156,9 +160,8 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     """
     if not candidates:
         return None
-    d = np.array([float(np.sum((c.unit - unit) ** 2)) for c in candidates])
     dim = np.size(unit)
-    near = np.argsort(d)[:k or max(PREDICTOR_NEIGHBOURS, dim + 4)]
+    near = _by_distance(unit, candidates)[:k or max(PREDICTOR_NEIGHBOURS, dim + 4)]
     base = candidates[int(near[0])].state
     usable = [i for i in near if hasattr(candidates[i].state, "_replace") and hasattr(candidates[i].state, "u")]
     if len(usable) < dim + 2 or usable[0] != near[0]:
