@@ -363,7 +363,11 @@ def test_my_subject_page_builds_and_uses_a_subject_emulator(tmp_path, monkeypatc
     at = AppTest.from_file(str(PAGES_DIR / "8_My_subject.py"), default_timeout=180).run()
     at.selectbox(key="my_example").select(SUBJECT).run()
     assert not at.exception and not at.error, [e.value for e in at.error]
-    assert [at.number_input(key=f"my_build_{k}").value for k in ("train", "valid", "test")] == [800, 100, 100]
+    from lvcore.emulator.subject import SubjectDesign
+
+    d = SubjectDesign()  # the page's defaults are the CLI's
+    assert [at.number_input(key=f"my_build_{k}").value for k in ("train", "valid", "test")] == [d.n_train, d.n_valid,
+                                                                                                 d.n_test]
     at.number_input(key="my_build_train").set_value(8)
     at.number_input(key="my_build_valid").set_value(3)
     at.number_input(key="my_build_test").set_value(3).run()
@@ -374,7 +378,8 @@ def test_my_subject_page_builds_and_uses_a_subject_emulator(tmp_path, monkeypatc
     assert job.finished, f"the build is still running after 1500 s: {job.status()}"
     assert job.ok, job.error
     at.run()
-    assert any("held-out test (3 FE runs never used in training) LVV RMSE" in s.value for s in at.success)
+    assert any("held-out test (3 FE runs never used in training) LVV RMSE" in s.value
+               and "corrects the bundled `chapter` emulator" in s.value for s in at.success)
     label = next(o for o in at.selectbox(key="my_emulator").options if o.startswith("subject: "))
     at.selectbox(key="my_emulator").select(label)
     at.number_input(key="my_chains").set_value(1)

@@ -223,3 +223,77 @@ def test_lvv_weight_enters_the_loss_and_is_validated():
     assert np.isclose(output_weights(cfg)[0] / output_weights(cfg)[1], 2.0)
     assert np.isclose(output_weights(cfg, stage="lbfgs")[0] / output_weights(cfg, stage="lbfgs")[1], 10.0)
     assert np.isclose(output_weights(TrainingConfig(lvv_weight=3.0), stage="lbfgs")[0], 3.0 * 25 / 27)
+
+
+# ----- a prior mean the network corrects (subject emulators) -------------------------------------------------------
+def subject_truth(x, h1=0.7, scale=1.2):
+    """A 'subject' at h1 = 0.7 and size 1.2: the smooth function's shape, slightly different physics."""
+    x = np.atleast_2d(x)
+    y = truth(np.column_stack([x, np.full(len(x), h1)]))
+    y[:, 0] *= scale ** 3 * (1 + 0.03 * x[:, 0] / (1 + x[:, 0]))
+    y[:, 1:] += 0.002 * np.log(x[:, 1])[:, None]
+    return y
+
+
+def test_prior_mean_targets_invert_the_combination():
+    from lvcore.emulator.model import combine_with_prior, correction_targets
+
+    rng = np.random.default_rng(1)
+    y = np.column_stack([50 + 100 * rng.random(7), -0.2 * rng.random((7, 24))])
+    p = np.column_stack([50 + 100 * rng.random(7), -0.2 * rng.random((7, 24))])
+    np.testing.assert_allclose(combine_with_prior(correction_targets(y, p), p), y, rtol=1e-13)
+    np.testing.assert_allclose(np.asarray(combine_with_prior(jnp.asarray(correction_targets(y, p)), jnp.asarray(p))),
+                               y, rtol=1e-13)
+
+
+def test_a_prior_mean_lets_few_rows_learn_a_subject(tmp_path, trained):
+    import shutil
+
+    from lvcore.emulator.model import PriorMean, prior_outputs
+
+    prior_emu, _ = trained
+    prior = PriorMean(prior_emu, {"h1": 0.7}, 1.2)
+    rng = np.random.default_rng(5)
+    xt, xv, xs = draw(rng, 40)[:, :2], draw(rng, 40)[:, :2], draw(rng, 200)[:, :2]
+    cfg = TrainingConfig(architectures=((20, 20),), max_epochs=300, patience=100, batch_size=16, decay_epochs=100,
+                         lbfgs_iterations=200)
+    kw = dict(input_names=("a", "b"), name="subject", lower=LOWER[:2], upper=UPPER[:2], config=cfg, x_test=xs,
+              y_test=subject_truth(xs))
+    direct = train_emulator(xt, subject_truth(xt), xv, subject_truth(xv), **kw)
+    corrected = train_emulator(xt, subject_truth(xt), xv, subject_truth(xv), prior=prior, **kw)
+    # the prior is the smooth function at h1 = 0.7 with LVV x 1.2^3, as a PriorMean says
+    p = prior_outputs(prior, ("a", "b"), xs)
+    np.testing.assert_allclose(p[:, 0], np.asarray(prior_emu.apply(np.column_stack([xs, np.full(200, 0.7)])))[:, 0]
+                               * 1.2 ** 3, rtol=1e-12)
+    # metrics are of the full outputs, and the prior makes 40 rows enough
+    pred = np.asarray(corrected.predict(xs))
+    assert corrected.metadata["test"]["lvv_rmse_ml"] == pytest.approx(
+        float(np.sqrt(np.mean((pred[:, 0] - subject_truth(xs)[:, 0]) ** 2))), rel=1e-9)
+    assert corrected.metadata["test"]["lvv_rmse_ml"] < 0.3 * direct.metadata["test"]["lvv_rmse_ml"], \
+        (corrected.metadata["test"], direct.metadata["test"])
+    assert corrected.metadata["test"]["lvv_rmse_ml"] < 1.0  # LVV ~ 170-260 mL here
+    # gradients flow through the prior
+    g = jax.grad(lambda x: corrected.apply(x)[0])(jnp.array([1.0, 3.0]))
+    eps = 1e-6
+    fd = (np.asarray(corrected.apply(np.array([1.0 + eps, 3.0])))[0]
+          - np.asarray(corrected.apply(np.array([1.0 - eps, 3.0])))[0]) / (2 * eps)
+    assert float(g[0]) == pytest.approx(fd, rel=1e-5)
+    # saved with a copy of the prior: self-contained and relocatable
+    save_emulator(corrected, tmp_path / "emu")
+    assert (tmp_path / "emu" / "prior" / "network.npz").is_file()
+    shutil.copytree(tmp_path / "emu", tmp_path / "moved")
+    again = load_emulator(tmp_path / "moved")
+    assert again.prior is not None and again.prior.inputs == {"h1": 0.7} and again.prior.scale == 1.2
+    np.testing.assert_allclose(np.asarray(again.apply(xs)), np.asarray(corrected.apply(xs)), rtol=1e-12)
+    # a missing or escaping prior folder is a clear error
+    meta = json.loads((tmp_path / "moved" / "metadata.json").read_text())
+    meta["prior"]["directory"] = "../emu/prior"
+    (tmp_path / "moved" / "metadata.json").write_text(json.dumps(meta))
+    with pytest.raises(EmulatorError, match="subfolder"):
+        load_emulator(tmp_path / "moved")
+    shutil.rmtree(tmp_path / "emu" / "prior")
+    with pytest.raises(EmulatorError, match="prior mean's emulator folder"):
+        load_emulator(tmp_path / "emu")
+    # a prior that needs an input nobody gives is refused
+    with pytest.raises(EmulatorError, match="needs input 'h1'"):
+        train_emulator(xt, subject_truth(xt), xv, subject_truth(xv), prior=PriorMean(prior_emu, {}, 1.0), **kw)

@@ -42,6 +42,11 @@ def test_subject_emulator_reproduces_held_out_fe_runs(built):
     runs = meta["subject"]["runs"]
     assert runs["total"] == 36 and runs["converged"] == 36 and runs["n_test"] == 6 and runs["n_train"] == 24
     assert not (out / "fe_runs.npz").exists()
+    # the network corrects the bundled chapter emulator at the subject's size-normalised shape (a copy in out/prior)
+    prior = meta["subject"]["prior"]
+    assert prior["used"] and prior["name"] == "chapter" and set(prior["inputs"]) == {f"h{k}" for k in range(1, 6)}
+    assert emu.prior is not None and emu.prior.emulator.name == "chapter" and (out / "prior" / "network.npz").is_file()
+    assert emu.prior.scale == pytest.approx(prior["scale"]) and 0.5 < prior["scale"] < 1.8
     # held-out rows: never in the training or validation set
     with np.load(out / "training_data.npz") as z:
         seen = np.concatenate([z["train_inputs"], z["valid_inputs"]])
@@ -96,6 +101,26 @@ def test_calibrate_cli_with_a_subject_emulator_needs_no_geometry(built, tmp_path
     capsys.readouterr()
     rc = main(["calibrate", "--emulator", str(out), "--data", str(csv), "--geometry", "mean"])
     assert rc == 2 and "subject-specific" in capsys.readouterr().err
+
+
+def test_prior_mean_choice_matches_the_fe_runs_or_says_why():
+    from lvcore.emulator.subject import choose_prior
+
+    section = {"kind": "default"}
+    prior, rec = choose_prior(subject_space(("theta",)), section, "auto")
+    assert prior.emulator.name == "chapter" and rec["used"] and rec["scale"] > 0
+    # another base condition: no bundled emulator matches (the chapter emulator is sliding), and the record says why
+    prior, rec = choose_prior(subject_space(("theta",), base="clamped"), section, "auto")
+    if prior is None:
+        assert not rec["used"] and "base is sliding" in rec["rejected"]["chapter"]
+    else:
+        assert prior.emulator.base == "clamped"
+    assert choose_prior(subject_space(("theta",)), section, "none") == (None, {"used": False, "reason":
+                                                                             "not asked for (--prior none)"})
+    with pytest.raises(EmulatorError, match="cannot be the prior mean.*trained at edp = 8"):
+        choose_prior(subject_space(("theta",), edp=10.0), section, "chapter")
+    with pytest.raises(EmulatorError, match="does not take edp"):
+        choose_prior(subject_space(("theta", "edp")), section, "chapter")
 
 
 def test_build_cli_refuses_bad_options(tmp_path, capsys):

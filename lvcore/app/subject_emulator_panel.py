@@ -72,7 +72,7 @@ def show_summary(job) -> None:
     info = flow.held_out_summary(job.metadata)
     st.success(f"Subject emulator for {job.label} {job.status()}: held-out test ({info['n_test']} FE runs never "
                f"used in training) LVV RMSE {info['lvv_rmse_ml']:.3f} mL, strain RMSE {info['strain_rmse']:.4f}; "
-               f"{info['runs_converged']} of {info['runs_total']} FE runs converged.")
+               f"{info['runs_converged']} of {info['runs_total']} FE runs converged. {info['prior']}")
     if not info["within_targets"]:
         t = flow.HELD_OUT_TARGETS
         st.warning(f"The held-out accuracy misses the targets (LVV RMSE ≤ {t['lvv_rmse_ml']:g} mL, strain RMSE ≤ "

@@ -72,6 +72,10 @@ def register(subparsers) -> None:
     b.add_argument("--bound", action="append", default=[], metavar="NAME=LO,HI",
                    help="other bounds for a varied input, e.g. --bound a=0.3,3 (repeatable)")
     b.add_argument("--name", default=None, help="emulator name (default subject-<file stem>)")
+    b.add_argument("--prior", default="auto",
+                   help="the prior mean the network corrects: 'auto' (a bundled emulator over PC scores with the same "
+                        "base and conditions, at the subject's size-normalised shape and size; none if none matches), "
+                        "'none' (learn the whole map), or an emulator name or directory (default auto)")
     b.add_argument("--workers", type=int, default=2, help="FE worker processes, one continuation chain each")
     b.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the design and training, 0 to 2^32 - 1 (default 0)")
     from lvcore.emulator.subject import default_training_config
@@ -212,7 +216,7 @@ def _build(args) -> int:
         alpha_endo=CHAPTER_ANGLES[0] if args.alpha_endo is None else args.alpha_endo,
         alpha_epi=CHAPTER_ANGLES[1] if args.alpha_epi is None else args.alpha_epi,
         bounds=parse_bounds(args.bound), units=args.units, workers=args.workers, seed=args.seed,
-        config=training_config(args, seed=args.seed), name=args.name, log=print)
+        config=training_config(args, seed=args.seed), name=args.name, prior=args.prior, log=print)
     print(format_info(emu.metadata))
     return 0
 
@@ -237,6 +241,12 @@ def format_info(meta: dict) -> str:
         lines.append(f"  SUBJECT-SPECIFIC: geometry fixed ({sub.get('geometry_kind')} from {sub.get('geometry_source')}); "
                      f"{runs.get('converged')} of {runs.get('total')} FE runs converged; wall {secs.get('total')} s "
                      f"(simulations {secs.get('simulations')} s, training {secs.get('training')} s)")
+        prior = sub.get("prior") or {}
+        if prior.get("used"):
+            lines.append(f"  prior mean: '{prior.get('name')}' at the subject's shape (scale {prior.get('scale', 1):.3f}); "
+                         "the network learns the LVV ratio and strain differences to it")
+        elif prior:
+            lines.append(f"  prior mean: none ({prior.get('reason')})")
     lines.append(f"  network: {meta.get('input_names') and len(meta['input_names'])} -> {arch.get('hidden')} (tanh) -> 25")
     tr = meta.get("training", {})
     if tr:

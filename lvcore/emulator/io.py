@@ -21,6 +21,11 @@ An emulator directory holds
 ``validation.npz`` (optional)
     ``inputs``, ``outputs``, ``predictions`` of the validation (or test)
     set, for parity plots.
+``prior/`` (subject emulators with a prior mean only)
+    a copy of the emulator the network corrects (same layout), so the
+    directory stays self-contained; ``metadata.json``'s ``prior`` names it
+    and holds the fixed inputs and scale
+    (:class:`lvcore.emulator.model.PriorMean`).
 ``training_data.npz`` (optional, :func:`save_training_data`)
     the converged campaign rows behind the emulator: ``train_inputs``,
     ``train_outputs``, ``valid_*`` and ``test_*``.
@@ -53,6 +58,8 @@ ASSETS_DIR = asset_path("emulators")
 BELOW_SPEC_DIR = asset_path("emulators-below-spec")
 #: Where ``scripts/build_emulators.py`` puts below-spec emulators it builds (relative to the working directory).
 LOCAL_BELOW_SPEC_DIR = Path("build") / "emulators" / "below-spec"
+#: Subfolder of an emulator directory that holds its prior mean's emulator.
+PRIOR_DIR = "prior"
 REQUIRED_KEYS = ("format", "format_version", "name", "input_names", "bounds", "log_inputs",
                  "input_scaler", "output_scaler", "architecture")
 
@@ -149,6 +156,14 @@ def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict
         path = Path(str(sub["geometry"].get("path", "")))
         if path.is_absolute() and path.parent.resolve() == directory.resolve():  # keep the directory relocatable
             written["subject"] = {**sub, "geometry": {**sub["geometry"], "path": path.name}}
+    if emulator.prior is not None:
+        prior = emulator.prior
+        save_emulator(prior.emulator, directory / PRIOR_DIR)
+        meta["prior"] = written["prior"] = {
+            "directory": PRIOR_DIR, "name": prior.emulator.name, "inputs": dict(prior.inputs),
+            "scale": float(prior.scale),
+            "combine": "LVV = network ratio x prior LVV x scale^3; strains = network difference + prior strains",
+            "prior_training_set_hash": (prior.emulator.metadata.get("training") or {}).get("set_hash")}
     np.savez(directory / "network.npz", **to_arrays(emulator.network))
     (directory / "metadata.json").write_text(json.dumps(written, indent=2, sort_keys=True))
     emulator.metadata.update(meta)  # the in-memory emulator now shows what was saved
@@ -189,6 +204,7 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
         raise EmulatorError(f"'{net_path}' is not an emulator network: {str(err)[:200]}") from None
     names = tuple(meta["input_names"])
     _resolve_subject_geometry(meta, directory)
+    prior = _load_prior(meta, directory)
     try:
         return Emulator(
             name=str(meta["name"]),
@@ -205,9 +221,34 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
             metadata=meta,
             strict=strict,
             log_outputs=tuple(n in set(meta.get("log_outputs", [])) for n in OUTPUT_COLUMNS),
+            prior=prior,
         )
     except (KeyError, TypeError, ValueError) as err:
         raise EmulatorError(f"'{meta_path}' is malformed: {err!r}") from err
+
+
+def _load_prior(meta: dict, directory: Path):
+    """The :class:`~lvcore.emulator.model.PriorMean` recorded in ``meta`` (its emulator in ``directory/prior``), or None."""
+    rec = meta.get("prior")
+    if rec is None:
+        return None
+    from lvcore.emulator.model import PriorMean
+
+    where = f"'{directory}/metadata.json'"
+    if not isinstance(rec, dict) or not isinstance(rec.get("inputs"), dict):
+        raise EmulatorError(f"{where}: 'prior' must be an object with 'directory', 'inputs' and 'scale'")
+    folder = (directory / str(rec.get("directory", PRIOR_DIR))).resolve()
+    if folder == directory.resolve() or directory.resolve() not in folder.parents:
+        raise EmulatorError(f"{where}: the prior mean's emulator must lie in a subfolder of the emulator directory, "
+                            f"got {rec.get('directory')!r}")
+    if not folder.is_dir():
+        raise EmulatorError(f"{where}: the prior mean's emulator folder '{folder}' is missing; copy the whole "
+                            "emulator directory, or build it again")
+    try:
+        return PriorMean(load_emulator(folder), {str(k): float(v) for k, v in rec["inputs"].items()},
+                         float(rec.get("scale", 1.0)))
+    except (TypeError, ValueError) as err:
+        raise EmulatorError(f"{where}: its 'prior' record is malformed: {err}") from None
 
 
 def _resolve_subject_geometry(meta: dict, directory: Path) -> None:

@@ -45,6 +45,57 @@ class ExtrapolationWarning(UserWarning):
 
 
 @dataclass(frozen=True, eq=False)
+class PriorMean:
+    """A bundled emulator at one subject's shape: the baseline a subject emulator's network corrects.
+
+    A subject emulator with a prior mean predicts
+    ``LVV = r_V(x) * s^3 * LVV_prior`` and ``strain = r_S(x) + strain_prior``,
+    where the network gives the ratio ``r_V`` and the differences ``r_S``, and
+    the prior is ``emulator`` evaluated at the subject's inputs ``x`` and at
+    ``inputs`` for what the subject emulator does not vary (the PC scores of
+    the subject's size-normalised shape and fixed conditions). The correction
+    is smoother and smaller than the whole map, so fewer FE runs learn it
+    (:mod:`lvcore.emulator.subject`).
+
+    Parameters
+    ----------
+    emulator : Emulator
+        An emulator over PC scores (e.g. ``chapter``), with the same base
+        condition as the subject's FE runs.
+    inputs : dict
+        Values (physical units) of the prior's inputs that the subject
+        emulator does not take, e.g. ``{"h1": 0.3, ..., "h5": -1.2}``.
+    scale : float
+        Uniform size factor ``s`` of the subject relative to the shape with
+        those scores (:func:`lvcore.geometry.scaling.size_normalised_scores`).
+    """
+
+    emulator: "Emulator"
+    inputs: dict
+    scale: float = 1.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "inputs", {str(k): float(v) for k, v in self.inputs.items()})
+        object.__setattr__(self, "scale", float(self.scale))
+        if not (np.isfinite(self.scale) and self.scale > 0):
+            raise EmulatorError(f"prior mean: scale must be a positive number, got {self.scale}")
+
+    def columns(self, input_names) -> tuple:
+        """Per prior input: the column of ``input_names`` it is read from, or its fixed value (float)."""
+        names = tuple(input_names)
+        cols = []
+        for n in self.emulator.input_names:
+            if n in names:
+                cols.append(names.index(n))
+            elif n in self.inputs:
+                cols.append(float(self.inputs[n]))
+            else:
+                raise EmulatorError(f"prior mean '{self.emulator.name}' needs input '{n}', which the subject "
+                                    f"emulator neither takes ({list(names)}) nor fixes ({sorted(self.inputs)})")
+        return tuple(cols)
+
+
+@dataclass(frozen=True, eq=False)
 class Emulator:
     """A trained emulator; build with :func:`lvcore.emulator.training.train_emulator`
     or :func:`lvcore.emulator.io.load_emulator`.
@@ -74,6 +125,10 @@ class Emulator:
     log_outputs : tuple of bool
         Per output: the network predicts the standardised ``log`` of it
         (used for the LVV, which spans an order of magnitude).
+    prior : PriorMean, optional
+        A baseline the network corrects (subject emulators): the network's
+        LVV is a ratio to the prior's, its strains differences from the
+        prior's (:class:`PriorMean`).
     """
 
     name: str
@@ -90,6 +145,7 @@ class Emulator:
     metadata: dict = field(default_factory=dict)
     strict: bool = False
     log_outputs: tuple[bool, ...] = (False,) * N_OUTPUTS
+    prior: PriorMean | None = None
 
     def __post_init__(self):
         d = len(self.input_names)
@@ -110,6 +166,8 @@ class Emulator:
         n_in, n_out = self.network.in_size, self.network.out_size
         if (n_in, n_out) != (d, N_OUTPUTS):
             raise EmulatorError(f"emulator '{self.name}': network maps {n_in} -> {n_out}, expected {d} -> {N_OUTPUTS}")
+        if self.prior is not None:
+            self.prior.columns(self.input_names)  # raises if the prior needs an input nobody gives
         object.__setattr__(self, "_apply", jax.jit(_make_apply(self)))
 
     # ----- the pure function ------------------------------------------------
@@ -336,12 +394,53 @@ def _make_apply(emu: Emulator):
     y_mean, y_sd = jnp.asarray(emu.y_mean), jnp.asarray(emu.y_sd)
     log_out = jnp.asarray(np.asarray(emu.log_outputs, dtype=bool))
     net = emu.network
+    baseline = None if emu.prior is None else _prior_apply(emu.prior, emu.input_names)
+
     # log only where asked; the where-guard keeps gradients finite for linear inputs
     def apply(x):
         safe = jnp.where(log_mask, jnp.where(x > 0, x, 1.0), 1.0)
         z = jnp.where(log_mask, jnp.log(safe), x)
         z = jnp.where(log_mask & (x <= 0), jnp.nan, z)
         y = net((z - x_mean) / x_sd) * y_sd + y_mean
-        return jnp.where(log_out, jnp.exp(jnp.where(log_out, y, 0.0)), y)
+        y = jnp.where(log_out, jnp.exp(jnp.where(log_out, y, 0.0)), y)
+        if baseline is None:
+            return y
+        return combine_with_prior(y, baseline(x))
 
     return apply
+
+
+def combine_with_prior(correction, prior_outputs):
+    """Outputs from a network's correction and the prior mean's outputs (``(..., 25)`` each).
+
+    LVV: the correction is a ratio (``LVV = r_V * LVV_prior``); strains: differences (``r_S + strain_prior``).
+    NumPy or JAX arrays; differentiable.
+    """
+    xp = jnp if isinstance(correction, jax.Array) or isinstance(prior_outputs, jax.Array) else np
+    return xp.concatenate([correction[..., :1] * prior_outputs[..., :1],
+                           correction[..., 1:] + prior_outputs[..., 1:]], axis=-1)
+
+
+def correction_targets(outputs, prior_outputs) -> np.ndarray:
+    """The inverse of :func:`combine_with_prior`: the network's training targets (LVV ratio, strain differences)."""
+    y, p = np.asarray(outputs, dtype=float), np.asarray(prior_outputs, dtype=float)
+    return np.concatenate([y[..., :1] / p[..., :1], y[..., 1:] - p[..., 1:]], axis=-1)
+
+
+def prior_outputs(prior: PriorMean, input_names, x) -> np.ndarray:
+    """The prior mean's ``(n, 25)`` outputs (LVV at the subject's size) at inputs ``x`` ``(n, d)`` named ``input_names``."""
+    return np.asarray(_prior_apply(prior, tuple(input_names))(jnp.asarray(np.asarray(x, dtype=float))))
+
+
+def _prior_apply(prior: PriorMean, input_names):
+    """``x (..., d)`` of the subject emulator -> the prior's ``(..., 25)`` outputs at the subject's size."""
+    cols = prior.columns(input_names)
+    inner = prior.emulator.apply
+    s3 = float(prior.scale) ** 3
+
+    def baseline(x):
+        parts = [x[..., c] if isinstance(c, int) else jnp.full(x.shape[:-1], c, dtype=x.dtype) for c in cols]
+        y = inner(jnp.stack(parts, axis=-1))
+        return y.at[..., 0].multiply(s3)
+
+    return baseline

@@ -482,6 +482,130 @@ def _resume_rows(path, signature: str, x, outputs, converged, messages, seconds)
     return done
 
 
+# --------------------------------------------------------------------------- the prior mean
+#: ``prior`` choices of a build besides an emulator's name: pick a matching bundled one, or train on the whole map.
+PRIOR_CHOICES = ("auto", "none")
+
+
+def subject_template_nodes(section: Mapping) -> np.ndarray:
+    """Template node positions (mm) of a case ``geometry`` section (mesh, PC scores, ellipsoid or default)."""
+    from lvcore.core.space import build_case
+    from lvcore.geometry.template import DEFAULT_TEMPLATE
+    from lvcore.mechanics.case import Case
+
+    spec = Case.from_dict(build_case({n: 1.0 for n in THETA_NAMES}, geometry=dict(section),
+                                     resolution="coarse")).geometry
+    if spec.template_nodes is not None:
+        return np.asarray(spec.template_nodes, dtype=float)
+    if spec.ellipsoid is not None:
+        return np.asarray(spec.ellipsoid.nodes(DEFAULT_TEMPLATE), dtype=float)
+    raise GeometryError(f"geometry kind '{spec.kind}' has no LV template nodes")
+
+
+def _prior_mismatch(emu, space: ParameterSpace) -> str | None:
+    """Why ``emu`` cannot be the prior mean of a subject emulator over ``space`` (None: it can)."""
+    if emu.is_subject or emu.prior is not None:
+        return "it is itself a subject emulator"
+    if emu.base != space.base:
+        return f"its base is {emu.base}, the FE runs' is {space.base}"
+    for n, lo, hi in zip(space.names, space.lower, space.upper):
+        if n not in emu.input_names:
+            return f"it does not take {n}" + (f" (fixed at {emu.fixed[n]:g})" if n in emu.fixed else "")
+        i = emu.input_names.index(n)
+        tol = 1e-9 * (emu.upper[i] - emu.lower[i])
+        if lo < emu.lower[i] - tol or hi > emu.upper[i] + tol:
+            return f"{n}'s range [{lo:g}, {hi:g}] leaves its box [{emu.lower[i]:g}, {emu.upper[i]:g}]"
+    for k, v in space.fixed_dict().items():
+        if k in emu.fixed and abs(float(emu.fixed[k]) - float(v)) > 1e-9 * max(1.0, abs(float(v))):
+            return f"it was trained at {k} = {emu.fixed[k]:g}, the FE runs use {v:g}"
+        if k in emu.input_names:
+            i = emu.input_names.index(k)
+            if not emu.lower[i] <= float(v) <= emu.upper[i]:
+                return f"{k} = {v:g} is outside its box [{emu.lower[i]:g}, {emu.upper[i]:g}]"
+    others = [n for n in emu.input_names if n not in space.names and n not in space.fixed_dict()]
+    if any(not (n.startswith("h") and n[1:].isdigit()) for n in others):
+        return f"it takes inputs the subject emulator neither varies nor fixes: {others}"
+    return None
+
+
+def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
+    """The prior mean of a subject emulator over ``space`` on geometry ``section``.
+
+    The subject's template mesh is split into a size ``s`` and PC scores
+    ``h`` of its size-normalised shape
+    (:func:`lvcore.geometry.scaling.size_normalised_scores`); the prior is an
+    emulator over PC scores (``chapter``, ``angles``, or one on
+    ``$LVCORE_EMULATORS``) evaluated there, with LVV times ``s^3``. It must
+    match the FE runs: the same base condition, every varied input within its
+    box, the same fixed conditions. ``auto`` takes the matching emulator with
+    the fewest inputs; scores outside its box are clipped to it (recorded;
+    the network corrects the rest).
+
+    Parameters
+    ----------
+    choice : str
+        ``auto``, ``none``, or an emulator name or directory.
+
+    Returns
+    -------
+    (PriorMean or None, dict)
+        The prior (None for ``none`` or when no emulator matches under
+        ``auto``) and a JSON-ready record of the choice.
+
+    Raises
+    ------
+    EmulatorError
+        When a named emulator does not match (saying why).
+    """
+    from lvcore.emulator.io import available_emulators, load_emulator
+    from lvcore.emulator.model import PriorMean
+    from lvcore.geometry.scaling import size_normalised_scores
+
+    choice = str(choice or "auto").strip()
+    if choice == "none":
+        return None, {"used": False, "reason": "not asked for (--prior none)"}
+    names = available_emulators() if choice == "auto" else [choice]
+    rejected, candidates = {}, []
+    for name in names:
+        try:
+            emu = load_emulator(name)
+        except EmulatorError as err:
+            if choice != "auto":
+                raise
+            rejected[name] = str(err)
+            continue
+        why = _prior_mismatch(emu, space)
+        if why is None:
+            candidates.append(emu)
+        elif choice != "auto":
+            raise EmulatorError(f"--prior {choice}: cannot be the prior mean of this build: {why}; give another "
+                                f"emulator, 'auto' or 'none'")
+        else:
+            rejected[name] = why
+    if not candidates:
+        return None, {"used": False, "reason": "no emulator matches the FE runs", "rejected": rejected}
+    emu = min(candidates, key=lambda e: (len(e.input_names), e.name))
+    fixed = space.fixed_dict()
+    n_scores = sum(1 for n in emu.input_names if n not in space.names and n not in fixed)
+    split = size_normalised_scores(subject_template_nodes(section), max(n_scores, 1))
+    inputs, clipped = {}, []
+    for i, n in enumerate(emu.input_names):
+        if n in space.names:
+            continue
+        if n in fixed:
+            inputs[n] = float(fixed[n])
+            continue
+        k = int(n[1:]) - 1
+        h = float(split.h[k]) if k < len(split.h) else 0.0
+        inputs[n] = float(np.clip(h, emu.lower[i], emu.upper[i]))
+        if inputs[n] != h:
+            clipped.append(f"{n} {h:.3g} -> {inputs[n]:g}")
+    prior = PriorMean(emu, inputs, split.scale)
+    record = {"used": True, "name": emu.name, "inputs": inputs, "scale": float(split.scale),
+              "projection_mse_cm2": float(split.projection_mse_cm2), "clipped": clipped, "rejected": rejected}
+    return prior, record
+
+
 # --------------------------------------------------------------------------- the build
 def default_training_config(seed: int = 0):
     """The :class:`~lvcore.emulator.training.TrainingConfig` of subject emulators.
@@ -512,10 +636,15 @@ class SubjectDesign:
     method : str
         Design method of :func:`lvcore.campaigns.designs.unit_design`
         (``sobol``: scrambled Sobol; ``lhs``).
+
+    The defaults (512 + 50 + 100 runs) are sized for a build with a prior
+    mean (:func:`choose_prior`), whose network learns a small correction;
+    without one, the whole map needs more training runs for the same
+    accuracy (docs/campaigns_and_emulators.md).
     """
 
-    n_train: int = 800
-    n_valid: int = 100
+    n_train: int = 512
+    n_valid: int = 50
     n_test: int = 100
     method: str = "sobol"
 
@@ -556,7 +685,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                            base: str = "sliding", edp: float = CHAPTER_EDP, alpha_endo: float = CHAPTER_ANGLES[0],
                            alpha_epi: float = CHAPTER_ANGLES[1], bounds: Mapping | None = None, units: str = "mm",
                            workers: int = 2, seed: int = 0, config=None, name: str | None = None,
-                           log: Callable[[str], None] | None = None,
+                           prior: str = "auto", log: Callable[[str], None] | None = None,
                            progress: Callable[[int, int], None] | None = None,
                            stop: Callable[[], bool] | None = None):
     """Build, validate and save a subject-specific emulator (see the module docstring).
@@ -587,6 +716,11 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
         Default :func:`default_training_config`.
     name : str, optional
         Emulator name (default ``subject-<file stem>``).
+    prior : str
+        The prior mean the network corrects (:func:`choose_prior`): ``auto``
+        (a matching emulator over PC scores at the subject's projected shape
+        and size, or none), ``none`` (the network learns the whole map), or
+        an emulator name or directory. A copy of it is saved in ``out/prior``.
     log : callable, optional
         Progress lines.
     progress : callable, optional
@@ -630,6 +764,14 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     for w in geo.warnings:
         say(f"  warning: {w}")
 
+    prior_mean, prior_record = choose_prior(space, section, prior)
+    if prior_mean is None:
+        say(f"prior mean: none ({prior_record['reason']}); the network learns the whole map, which needs more "
+            f"training runs for the same accuracy (e.g. --n-train 800 or more; docs/campaigns_and_emulators.md)")
+    else:
+        say(f"prior mean: '{prior_record['name']}' at the subject's size-normalised shape "
+            f"(scale {prior_record['scale']:.3f}; {', '.join(f'{k} {v:.3g}' for k, v in prior_record['inputs'].items())}"
+            + (f"; clipped {', '.join(prior_record['clipped'])}" if prior_record["clipped"] else "") + ")")
     points, parts = design_rows(space, design, seed)
     say(f"design: {design.total} {design.method} points over {list(space.names)} "
         f"({design.n_train} train / {design.n_valid} validation / {design.n_test} held-out test), "
@@ -658,13 +800,13 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
               "forward": ["simulator"], "n_failed_excluded": n_failed}
     emu = train_emulator(*sets["train"], *sets["valid"], input_names=space.names, name=name, lower=space.lower,
                          upper=space.upper, fixed=space.fixed_dict(), config=cfg, x_test=sets["test"][0],
-                         y_test=sets["test"][1], source=source, log=log)
+                         y_test=sets["test"][1], source=source, log=log, prior=prior_mean)
     t_train = time.perf_counter() - t_train0
     emu.metadata["subject"] = {
         # save_emulator writes DIR/geometry.vtu's path relative to the directory
         "geometry": section, "geometry_source": geo.source, "geometry_kind": geo.kind, "geometry_record": geo.record,
         "geometry_warnings": list(geo.warnings), "inputs": list(groups), "design": design.method,
-        "seed": int(seed), "workers": int(workers),
+        "seed": int(seed), "workers": int(workers), "prior": prior_record,
         "runs": {"total": design.total, "converged": int(runs.converged.sum()), "failed": n_failed,
                  **{f"n_{k}": int(v[0].shape[0]) for k, v in sets.items()}},
         "seconds": {"geometry": round(t_geometry, 2), "simulations": round(runs.wall_s, 2),
@@ -687,6 +829,6 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
 
 
 __all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", "CHECKPOINT_ROWS", "RUNS_FILE",
-           "build_subject_emulator", "design_rows",
+           "build_subject_emulator", "design_rows", "choose_prior", "subject_template_nodes", "PRIOR_CHOICES",
            "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
            "default_training_config"]

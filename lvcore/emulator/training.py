@@ -35,7 +35,7 @@ import numpy as np
 import optax
 
 import lvcore
-from lvcore.emulator.model import LOG_INPUTS, Emulator
+from lvcore.emulator.model import LOG_INPUTS, Emulator, correction_targets, prior_outputs
 from lvcore.emulator.network import INIT_SD, MLP, WIDTHS, from_arrays, to_arrays
 from lvcore.exceptions import EmulatorError
 from lvcore.outputs import N_OUTPUTS
@@ -377,6 +377,7 @@ def train_emulator(
     source: dict | None = None,
     log: callable = None,
     workers: int = 1,
+    prior=None,
 ) -> Emulator:
     """Train an emulator and pick its architecture by validation MSE.
 
@@ -407,6 +408,11 @@ def train_emulator(
     workers : int
         Processes for the architecture search (see
         :func:`search_architectures`); the result does not depend on it.
+    prior : lvcore.emulator.model.PriorMean, optional
+        A baseline the network learns to correct: it is trained on the LVV
+        ratio and the strain differences to the prior's outputs
+        (:func:`~lvcore.emulator.model.correction_targets`); the emulator
+        returned adds them back, and its metrics are of the full outputs.
 
     Returns
     -------
@@ -424,6 +430,10 @@ def train_emulator(
             raise EmulatorError(f"{label} set contains NaN/inf (use only converged rows)")
         if x.shape[0] < 2:
             raise EmulatorError(f"{label} set needs at least 2 rows, got {x.shape[0]}")
+    y_train_full, y_valid_full = y_train, y_valid
+    if prior is not None:
+        y_train = correction_targets(y_train, prior_outputs(prior, names, x_train))
+        y_valid = correction_targets(y_valid, prior_outputs(prior, names, x_valid))
     log_inputs = tuple(n in LOG_INPUTS for n in names)
     tx = transform_inputs(x_train, log_inputs)
     x_mean, x_sd = tx.mean(axis=0), tx.std(axis=0)
@@ -452,7 +462,7 @@ def train_emulator(
     meta = {
         "architecture": {"hidden": list(best.hidden), "activation": "tanh", "init_sd": config.init_sd},
         "training": {
-            "set_hash": training_set_hash(x_train, y_train, names),
+            "set_hash": training_set_hash(x_train, y_train_full, names),
             "n_train": int(x_train.shape[0]),
             "n_valid": int(x_valid.shape[0]),
             "config": {**asdict(config), "architectures": [list(a) for a in config.architectures]},
@@ -468,7 +478,8 @@ def train_emulator(
     }
     emu = Emulator(name=name, input_names=names, lower=lower, upper=upper, log_inputs=log_inputs,
                    x_mean=x_mean, x_sd=x_sd, y_mean=y_mean, y_sd=y_sd, network=network,
-                   fixed=dict(fixed or {}), metadata=meta, log_outputs=log_outputs)
+                   fixed=dict(fixed or {}), metadata=meta, log_outputs=log_outputs, prior=prior)
+    y_valid = y_valid_full
     y_sd_phys = y_valid.std(axis=0)  # physical-unit scale for the standardised MSE in the report
     meta["validation"] = metrics(y_valid, np.asarray(emu.apply(x_valid)), y_sd_phys)
     if x_test is not None and y_test is not None and len(x_test):
