@@ -102,9 +102,9 @@ def parse_args(argv=None):
     p.add_argument("--seed", type=int, default=2026, help="design seed S (training S, validation S+1, test S+2)")
     p.add_argument("--resolution", choices=("fast", "default"), default=SPEC["resolution"])
     p.add_argument("--base", choices=("space", "sliding", "clamped"), default="space",
-                   help="LV base condition of the campaigns: the space's own (default; chapter sliding, angles "
-                        "clamped) or one for every emulator built (recorded in the designs and stores); "
-                        "issue 24 asks for the angles emulator with the sliding base")
+                   help="LV base condition of the campaigns: the space's own (default; sliding for both chapter "
+                        "and angles, as shipped) or one for every emulator built (recorded in the designs and "
+                        "stores)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=int, default=None,
                    help="local worker processes for the campaigns and the architecture search (default one per core)")

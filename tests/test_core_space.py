@@ -81,6 +81,7 @@ def test_the_chapter_space_builds_sliding_cases_and_old_descriptions_read_as_cla
     old = chapter.to_dict()
     del old["base"]  # stores written before the field existed
     assert ParameterSpace.from_dict(old).base == "clamped"
-    assert get_space("angles").case([1.0] * get_space("angles").dim)["boundary"] == {"base": "clamped"}
+    assert get_space("angles").case([1.0] * get_space("angles").dim)["boundary"] == {"base": "sliding"}
+    assert get_space("material").case([1.0] * get_space("material").dim)["boundary"] == {"base": "clamped"}
     with pytest.raises(Exception, match="base must be one of"):
         ParameterSpace("x", chapter.parameters, (), base="pinned")

@@ -89,16 +89,16 @@ def test_shipped_files_record_no_machine_paths():
 
 
 def test_base_option_sets_the_designs_base_condition(tmp_path):
-    """--base sliding records the sliding base in the angles designs (whose space is clamped), so the campaigns
-    run with it; the default keeps the space's own."""
+    """--base clamped records the clamped base in the angles designs (whose space is sliding, as shipped), so the
+    campaigns run with it; the default keeps the space's own."""
     from lvcore.campaigns.designs import load_design
 
     mod = _script()
     common = ["--emulators", "angles", "--n-train", "4", "--n-valid", "0", "--n-test", "0", "--steps", "design",
               "--no-progress"]
-    assert mod.main(common + ["--workdir", str(tmp_path / "s"), "--base", "sliding"]) == 0
-    d = load_design(tmp_path / "s" / "angles" / "train_design.csv")
-    assert d.space.base == "sliding" and d.space.name == "angles" and d.n == 4
-    assert all(c["boundary"]["base"] == "sliding" for c in d.cases("fast"))
-    assert mod.main(common + ["--workdir", str(tmp_path / "c")]) == 0
-    assert load_design(tmp_path / "c" / "angles" / "train_design.csv").space.base == "clamped"
+    assert mod.main(common + ["--workdir", str(tmp_path / "c"), "--base", "clamped"]) == 0
+    d = load_design(tmp_path / "c" / "angles" / "train_design.csv")
+    assert d.space.base == "clamped" and d.space.name == "angles" and d.n == 4
+    assert all(c["boundary"]["base"] == "clamped" for c in d.cases("fast"))
+    assert mod.main(common + ["--workdir", str(tmp_path / "s")]) == 0
+    assert load_design(tmp_path / "s" / "angles" / "train_design.csv").space.base == "sliding"

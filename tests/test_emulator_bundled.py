@@ -54,7 +54,7 @@ LIVE_POINTS = {  # physiological points inside each training box, off the design
     "chapter": ({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1},
                 "default", "sliding"),  # rebuilt 2026-11-25 on the converged mesh with the Glasgow models' base
     "angles": ({"a": 0.6, "b": 2.0, "af": 1.0, "bf": 3.6, "alpha_endo": -45.0, "alpha_epi": 70.0, "edp": 10.0,
-                "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1}, "default", "clamped"),
+                "h1": 0.5, "h2": -0.4, "h3": 0.3, "h4": -0.2, "h5": 0.1}, "default", "sliding"),  # rebuilt 2026-11-28, sliding
 }
 
 

@@ -115,6 +115,12 @@ def test_prior_mean_choice_matches_the_fe_runs_or_says_why():
         assert not rec["used"] and "base is sliding" in rec["rejected"]["chapter"]
     else:
         assert prior.emulator.base == "clamped"
+    # the EDP and the angles varied: the bundled angles emulator (sliding since its rebuild), its scores included
+    prior, rec = choose_prior(subject_space(("theta", "edp", "angles")), section, "auto")
+    assert prior.emulator.name == "angles" and set(rec["inputs"]) == {f"h{k}" for k in range(1, 6)}
+    # the EDP alone over Table 9.1's theta box: the angles emulator's b, bf start at 0.5, so no prior (said why)
+    prior, rec = choose_prior(subject_space(("theta", "edp")), section, "auto")
+    assert prior is None and "leaves its box" in rec["rejected"]["angles"]
     assert choose_prior(subject_space(("theta",)), section, "none") == (None, {"used": False, "reason":
                                                                              "not asked for (--prior none)"})
     with pytest.raises(EmulatorError, match="cannot be the prior mean.*trained at edp = 8"):

@@ -17,7 +17,7 @@ Named spaces (see :func:`get_space`):
     the chapter's emulator: ``material`` plus ``h1..h5`` uniform over
     +/- 2 score standard deviations of the bundled PCA shape model (its
     scores are standardised, so [-2, 2]; at +/- 3 corners the geometry
-    inverts), with a **sliding** base (every other space: clamped).
+    inverts), with a **sliding** base (as ``angles``; every other space: clamped).
 ``angles``
     ``chapter`` plus ``alpha_endo`` in [-90, 0]°, ``alpha_epi`` in [0, 90]°
     and ``edp`` in [6, 14] mmHg, all uniform, with ``b, bf`` in [0.5, 30]
@@ -125,9 +125,10 @@ def get_space(name: str, n_pcs: int | None = None, score_sd: Sequence[float] | N
         raise CampaignError(f"unknown parameter space '{name}'; choose one of {SPACE_NAMES}")
     if k:
         params = params + pc_parameters(k, score_sd)
-    # the chapter replication uses the sliding base of the Glasgow HO LV models (docs/simulator.md,
-    # "Base boundary condition"); every other space keeps the simulator's default, clamped
-    return ParameterSpace(name, params, fixed, base="sliding" if name == "chapter" else "clamped")
+    # the shipped emulators' spaces (chapter, angles) use the sliding base of the Glasgow HO LV models
+    # (docs/simulator.md, "Base boundary condition"; one base across the shipped emulators, issue 24); the
+    # others keep the simulator's default, clamped
+    return ParameterSpace(name, params, fixed, base="sliding" if name in ("chapter", "angles") else "clamped")
 
 
 SPACE_NAMES = ("material", "chapter", "angles", "bo4", "bo6")
