@@ -774,7 +774,7 @@ class SubjectBuild:
     out : path
         The emulator folder (:func:`build_dir`).
     design : lvcore.emulator.subject.SubjectDesign, optional
-        Run counts; default the CLI's (800 + 100 + 100).
+        Run counts; default the CLI's (``SubjectDesign()``: 512 + 50 + 100).
     units : str
         Units of a volume mesh.
     workers, seed, resolution

@@ -54,9 +54,9 @@ def register(subparsers) -> None:
 
     dd = SubjectDesign()  # one home of the default design (the app's build panel uses it too)
     b.add_argument("--n-train", type=int, default=dd.n_train,
-                   help=f"training FE runs (default {dd.n_train}). Fewer is faster and less accurate: on SYNTHETIC_HV3, "
-                        "--n-train 400 --n-valid 50 built in 143 s on 2 cores with a held-out LVV RMSE of 2.3 mL, "
-                        "the default in 351 s with 1.25 mL (BENCHMARKS.md row 44)")
+                   help=f"training FE runs (default {dd.n_train}, sized for a build with a prior mean: on SYNTHETIC_HV3 "
+                        "the default built in a median of 136 s on 2 cores with a held-out LVV RMSE of 0.30 mL, "
+                        "BENCHMARKS.md row 44); without a prior mean use 800 or more")
     b.add_argument("--n-valid", type=int, default=dd.n_valid,
                    help=f"validation FE runs: early stopping (default {dd.n_valid})")
     b.add_argument("--n-test", type=int, default=dd.n_test,

@@ -616,7 +616,9 @@ def default_training_config(seed: int = 0):
     100 rows of a SYNTHETIC_HV3 build it took 21 CPU-s and gave a held-out
     LVV RMSE of 0.763 mL and strain RMSE of 0.0008 (100 test runs), where
     1,500 Adam epochs + 3,000 L-BFGS iterations gave 0.855 mL / 0.0006 in
-    several times the CPU (docs/campaigns_and_emulators.md).
+    several times the CPU (docs/campaigns_and_emulators.md; those builds
+    had no prior mean). With a prior mean, 512 + 50 rows of SYNTHETIC_HV3 train
+    in about 15 s to a held-out LVV RMSE of 0.3 mL (BENCHMARKS.md row 44).
     """
     from lvcore.emulator.training import TrainingConfig
 
