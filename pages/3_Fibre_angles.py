@@ -139,9 +139,10 @@ def _grid_controls(n_min: int, n_max: int, n_default: int):
 def _live_map(theta, edp_mmhg, resolution) -> None:
     """The emulator's map and its grid/range sliders: moving them reruns only this fragment, not the page."""
     n, endo, epi = _grid_controls(5, 41, 21)
-    st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0), not the analytic "
-               "default LV; the mesh choice does not apply.")
     emu = _angles_emulator()  # cached resource: the emulator and its compiled prediction live across reruns
+    st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0) with the {emu.base} base "
+               "of its training simulations, not the analytic default LV with the simulator's clamped base; the "
+               "mesh choice does not apply.")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
