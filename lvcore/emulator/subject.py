@@ -22,9 +22,13 @@ geometry as it is, with no projection:
    as every chunk returns: a build that fails, is stopped or killed keeps
    them, and the next build of the same design resumes from them.
 4. The network is trained with :func:`lvcore.emulator.training.train_emulator`
-   (validation rows: early stopping and selection); the test rows, which the
-   training never sees, give the held-out LVV and strain RMSE recorded in the
-   metadata (``metadata["test"]``).
+   (validation rows: early stopping and selection) on the correction to a
+   prior mean where one matches (:func:`choose_prior`: a bundled emulator over
+   PC scores at the subject's size-normalised shape, LVV times ``s^3``; the
+   network learns the LVV ratio and the strain differences, so fewer runs
+   suffice); the test rows, which the training never sees, give the held-out
+   LVV and strain RMSE of the full outputs recorded in the metadata
+   (``metadata["test"]``).
 
 The emulator directory is an ordinary one (:mod:`lvcore.emulator.io`) with a
 ``subject`` section in ``metadata.json``: the geometry section (path relative
@@ -483,10 +487,6 @@ def _resume_rows(path, signature: str, x, outputs, converged, messages, seconds)
 
 
 # --------------------------------------------------------------------------- the prior mean
-#: ``prior`` choices of a build besides an emulator's name: pick a matching bundled one, or train on the whole map.
-PRIOR_CHOICES = ("auto", "none")
-
-
 def subject_template_nodes(section: Mapping) -> np.ndarray:
     """Template node positions (mm) of a case ``geometry`` section (mesh, PC scores, ellipsoid or default)."""
     from lvcore.core.space import build_case
@@ -831,6 +831,6 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
 
 
 __all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", "CHECKPOINT_ROWS", "RUNS_FILE",
-           "build_subject_emulator", "design_rows", "choose_prior", "subject_template_nodes", "PRIOR_CHOICES",
+           "build_subject_emulator", "design_rows", "choose_prior", "subject_template_nodes",
            "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
            "default_training_config"]
