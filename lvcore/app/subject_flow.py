@@ -738,6 +738,8 @@ def build_dir(geometry_bytes: bytes, stem: str, *, units: str = "mm", design=Non
 def held_out_summary(metadata: Mapping) -> dict:
     """The held-out test accuracy of a subject emulator (``metadata["test"]``: FE runs the training never saw),
     the run counts and wall time, and whether the accuracy meets :data:`HELD_OUT_TARGETS`."""
+    from lvcore.emulator.subject import describe_prior
+
     test = dict(metadata.get("test") or {})
     sub = dict(metadata.get("subject") or {})
     runs, secs = dict(sub.get("runs") or {}), dict(sub.get("seconds") or {})
@@ -745,18 +747,6 @@ def held_out_summary(metadata: Mapping) -> dict:
             "runs_converged": runs.get("converged"), "runs_total": runs.get("total"), "wall_s": secs.get("total"),
             "geometry_source": sub.get("geometry_source"), "prior": describe_prior(sub.get("prior")),
             "within_targets": bool(test) and all(float(test[k]) <= v for k, v in HELD_OUT_TARGETS.items())}
-
-
-def describe_prior(record) -> str:
-    """One line on a subject emulator's prior mean (``metadata["subject"]["prior"]``), for the page."""
-    rec = dict(record or {})
-    if rec.get("used"):
-        return (f"The network corrects the bundled `{rec.get('name')}` emulator at this geometry's size-normalised "
-                f"shape (scale {float(rec.get('scale', 1.0)):.3f}"
-                + (f"; scores clipped to its box: {', '.join(rec['clipped'])}" if rec.get("clipped") else "") + ").")
-    if rec:
-        return f"No prior mean: {rec.get('reason')}; the network learns the whole map."
-    return "Built before prior means were recorded: the network learns the whole map."
 
 
 class SubjectBuild:

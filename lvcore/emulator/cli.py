@@ -241,12 +241,9 @@ def format_info(meta: dict) -> str:
         lines.append(f"  SUBJECT-SPECIFIC: geometry fixed ({sub.get('geometry_kind')} from {sub.get('geometry_source')}); "
                      f"{runs.get('converged')} of {runs.get('total')} FE runs converged; wall {secs.get('total')} s "
                      f"(simulations {secs.get('simulations')} s, training {secs.get('training')} s)")
-        prior = sub.get("prior") or {}
-        if prior.get("used"):
-            lines.append(f"  prior mean: '{prior.get('name')}' at the subject's shape (scale {prior.get('scale', 1):.3f}); "
-                         "the network learns the LVV ratio and strain differences to it")
-        elif prior:
-            lines.append(f"  prior mean: none ({prior.get('reason')})")
+        from lvcore.emulator.subject import describe_prior
+
+        lines.append(f"  {describe_prior(sub.get('prior'))}")
     lines.append(f"  network: {meta.get('input_names') and len(meta['input_names'])} -> {arch.get('hidden')} (tanh) -> 25")
     tr = meta.get("training", {})
     if tr:

@@ -166,8 +166,7 @@ class Emulator:
         n_in, n_out = self.network.in_size, self.network.out_size
         if (n_in, n_out) != (d, N_OUTPUTS):
             raise EmulatorError(f"emulator '{self.name}': network maps {n_in} -> {n_out}, expected {d} -> {N_OUTPUTS}")
-        if self.prior is not None:
-            self.prior.columns(self.input_names)  # raises if the prior needs an input nobody gives
+        # _make_apply resolves the prior's columns now: a prior needing an input nobody gives raises here
         object.__setattr__(self, "_apply", jax.jit(_make_apply(self)))
 
     # ----- the pure function ------------------------------------------------

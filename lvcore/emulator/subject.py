@@ -508,24 +508,38 @@ def _prior_mismatch(emu, space: ParameterSpace) -> str | None:
         return "it is itself a subject emulator"
     if emu.base != space.base:
         return f"its base is {emu.base}, the FE runs' is {space.base}"
+    def inside(name, lo, hi) -> bool:  # [lo, hi] within the emulator's box of input `name` (Emulator.in_box's tolerance)
+        rows = np.tile(np.asarray(emu.lower, dtype=float), (2, 1))
+        rows[:, emu.input_names.index(name)] = (lo, hi)
+        return bool(emu.in_box(rows).all())
+
+    def box(name) -> str:
+        i = emu.input_names.index(name)
+        return f"[{emu.lower[i]:g}, {emu.upper[i]:g}]"
+
     for n, lo, hi in zip(space.names, space.lower, space.upper):
         if n not in emu.input_names:
             return f"it does not take {n}" + (f" (fixed at {emu.fixed[n]:g})" if n in emu.fixed else "")
-        i = emu.input_names.index(n)
-        tol = 1e-9 * (emu.upper[i] - emu.lower[i])
-        if lo < emu.lower[i] - tol or hi > emu.upper[i] + tol:
-            return f"{n}'s range [{lo:g}, {hi:g}] leaves its box [{emu.lower[i]:g}, {emu.upper[i]:g}]"
+        if not inside(n, lo, hi):
+            return f"{n}'s range [{lo:g}, {hi:g}] leaves its box {box(n)}"
     for k, v in space.fixed_dict().items():
         if k in emu.fixed and abs(float(emu.fixed[k]) - float(v)) > 1e-9 * max(1.0, abs(float(v))):
             return f"it was trained at {k} = {emu.fixed[k]:g}, the FE runs use {v:g}"
-        if k in emu.input_names:
-            i = emu.input_names.index(k)
-            if not emu.lower[i] <= float(v) <= emu.upper[i]:
-                return f"{k} = {v:g} is outside its box [{emu.lower[i]:g}, {emu.upper[i]:g}]"
-    others = [n for n in emu.input_names if n not in space.names and n not in space.fixed_dict()]
-    if any(not (n.startswith("h") and n[1:].isdigit()) for n in others):
-        return f"it takes inputs the subject emulator neither varies nor fixes: {others}"
+        if k in emu.input_names and not inside(k, v, v):
+            return f"{k} = {v:g} is outside its box {box(k)}"
+    if any(_score_index(n) is None for n in _score_inputs(emu, space)):
+        return f"it takes inputs the subject emulator neither varies nor fixes: {_score_inputs(emu, space)}"
     return None
+
+
+def _score_inputs(emu, space: ParameterSpace) -> list[str]:
+    """The emulator's inputs that the subject's space neither varies nor fixes (PC scores ``h1``, ``h2``, ...)."""
+    return [n for n in emu.input_names if n not in space.names and n not in space.fixed_dict()]
+
+
+def _score_index(name: str) -> int | None:
+    """0-based mode of a PC-score input name (``h3`` -> 2), or None for another name."""
+    return int(name[1:]) - 1 if name.startswith("h") and name[1:].isdigit() and int(name[1:]) > 0 else None
 
 
 def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
@@ -586,8 +600,8 @@ def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
         return None, {"used": False, "reason": "no emulator matches the FE runs", "rejected": rejected}
     emu = min(candidates, key=lambda e: (len(e.input_names), e.name))
     fixed = space.fixed_dict()
-    n_scores = sum(1 for n in emu.input_names if n not in space.names and n not in fixed)
-    split = size_normalised_scores(subject_template_nodes(section), max(n_scores, 1))
+    scores = _score_inputs(emu, space)
+    split = size_normalised_scores(subject_template_nodes(section), max([_score_index(n) + 1 for n in scores] or [1]))
     inputs, clipped = {}, []
     for i, n in enumerate(emu.input_names):
         if n in space.names:
@@ -595,8 +609,7 @@ def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
         if n in fixed:
             inputs[n] = float(fixed[n])
             continue
-        k = int(n[1:]) - 1
-        h = float(split.h[k]) if k < len(split.h) else 0.0
+        h = float(split.h[_score_index(n)])
         inputs[n] = float(np.clip(h, emu.lower[i], emu.upper[i]))
         if inputs[n] != h:
             clipped.append(f"{n} {h:.3g} -> {inputs[n]:g}")
@@ -604,6 +617,18 @@ def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
     record = {"used": True, "name": emu.name, "inputs": inputs, "scale": float(split.scale),
               "projection_mse_cm2": float(split.projection_mse_cm2), "clipped": clipped, "rejected": rejected}
     return prior, record
+
+
+def describe_prior(record) -> str:
+    """One sentence on a subject emulator's prior mean (``metadata["subject"]["prior"]``), for the app and the CLI."""
+    rec = dict(record or {})
+    if rec.get("used"):
+        return (f"The network corrects the bundled `{rec.get('name')}` emulator at this geometry's size-normalised "
+                f"shape (scale {float(rec.get('scale', 1.0)):.3f}"
+                + (f"; scores clipped to its box: {', '.join(rec['clipped'])}" if rec.get("clipped") else "") + ").")
+    if rec:
+        return f"No prior mean: {rec.get('reason')}; the network learns the whole map."
+    return "Built before prior means were recorded: the network learns the whole map."
 
 
 # --------------------------------------------------------------------------- the build
@@ -831,6 +856,6 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
 
 
 __all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", "CHECKPOINT_ROWS", "RUNS_FILE",
-           "build_subject_emulator", "design_rows", "choose_prior", "subject_template_nodes",
+           "build_subject_emulator", "design_rows", "choose_prior", "describe_prior", "subject_template_nodes",
            "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
            "default_training_config"]
