@@ -414,3 +414,53 @@ def test_fuzz_store_declared_rows_and_values(good_store, name, rows, state, valu
             pass
         if s is not None:  # the counts always add up; an inconsistent row is never converged
             assert s.converged + s.failed + s.pending + s.inconsistent == s.n
+
+
+# --------------------------------------------------------------------------- an emulator directory's prior record
+@pytest.fixture(scope="module")
+def prior_emulator_dir(tmp_path_factory):
+    """A subject-style emulator directory with a prior mean (UNTRAINED random networks: the reader only)."""
+    from lvcore.emulator.io import save_emulator
+    from lvcore.emulator.model import Emulator, PriorMean
+    from lvcore.emulator.network import MLP
+    from lvcore.outputs import THETA_NAMES, pc_names
+
+    def emulator(name, names, fixed, prior=None):
+        d = len(names)
+        lower = np.array([0.05, 0.1, 0.05, 0.1] + [-2.0] * (d - 4))
+        upper = np.array([10.0, 30.0, 10.0, 30.0] + [2.0] * (d - 4))
+        return Emulator(name=name, input_names=names, lower=lower, upper=upper,
+                        log_inputs=tuple(n in THETA_NAMES for n in names), x_mean=np.zeros(d), x_sd=np.ones(d),
+                        y_mean=np.r_[140.0, np.full(24, -0.15)], y_sd=np.r_[20.0, np.full(24, 0.03)],
+                        network=MLP(d, 25, (8, 8), seed=1), fixed=fixed,
+                        log_outputs=(True,) + (False,) * 24, prior=prior)
+
+    fixed = {"alpha_endo": -60.0, "alpha_epi": 60.0, "edp": 8.0}
+    prior = PriorMean(emulator("chapter", THETA_NAMES + pc_names(5), fixed), {f"h{k}": 0.1 * k for k in range(1, 6)},
+                      1.1)
+    out = tmp_path_factory.mktemp("prior") / "emu"
+    save_emulator(emulator("subject", THETA_NAMES, fixed, prior), out)
+    return out
+
+
+@FUZZ
+@given(data=st.data())
+def test_fuzz_emulator_prior_record(prior_emulator_dir, data):
+    import shutil
+
+    from lvcore.emulator.io import load_emulator
+
+    meta = json.loads((prior_emulator_dir / "metadata.json").read_text())
+    record = data.draw(mutated(meta["prior"]) | json_values)
+    with tempfile.TemporaryDirectory() as d:
+        copy_dir = Path(d) / "emu"
+        shutil.copytree(prior_emulator_dir, copy_dir)
+        (copy_dir / "metadata.json").write_text(_text({**meta, "prior": record}), encoding="utf-8")
+        try:
+            emu = load_emulator(copy_dir)
+        except LVCoreError:
+            return
+        if record is not None:  # loaded: the prior's inputs complete the subject's and its scale is usable
+            assert emu.prior is not None and emu.prior.scale > 0 and np.all(np.isfinite(list(emu.prior.inputs.values())))
+            # strains do not depend on the scale (LVV x scale^3 may overflow for an absurd recorded scale)
+            assert np.all(np.isfinite(np.asarray(emu.apply(np.array([0.7, 1.4, 1.1, 3.0])))[1:]))

@@ -235,20 +235,25 @@ def _load_prior(meta: dict, directory: Path):
     from lvcore.emulator.model import PriorMean
 
     where = f"'{directory}/metadata.json'"
-    if not isinstance(rec, dict) or not isinstance(rec.get("inputs"), dict):
-        raise EmulatorError(f"{where}: 'prior' must be an object with 'directory', 'inputs' and 'scale'")
-    folder = (directory / str(rec.get("directory", PRIOR_DIR))).resolve()
+    sub = rec.get("directory", PRIOR_DIR) if isinstance(rec, dict) else None
+    if not isinstance(rec, dict) or not isinstance(rec.get("inputs"), dict) or not isinstance(sub, str) \
+            or len(sub) > 255 or "\x00" in sub:
+        raise EmulatorError(f"{where}: 'prior' must be an object with 'directory' (a subfolder name), 'inputs' "
+                            "and 'scale'")
+    folder = (directory / sub).resolve()
     if folder == directory.resolve() or directory.resolve() not in folder.parents:
         raise EmulatorError(f"{where}: the prior mean's emulator must lie in a subfolder of the emulator directory, "
                             f"got {rec.get('directory')!r}")
     if not folder.is_dir():
         raise EmulatorError(f"{where}: the prior mean's emulator folder '{folder}' is missing; copy the whole "
                             "emulator directory, or build it again")
-    try:
-        return PriorMean(load_emulator(folder), {str(k): float(v) for k, v in rec["inputs"].items()},
-                         float(rec.get("scale", 1.0)))
-    except (TypeError, ValueError) as err:
-        raise EmulatorError(f"{where}: its 'prior' record is malformed: {err}") from None
+    numbers = {**{f"inputs.{k}": v for k, v in rec["inputs"].items()}, "scale": rec.get("scale", 1.0)}
+    bad = [k for k, v in numbers.items()
+           if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(float(v))]
+    if bad:
+        raise EmulatorError(f"{where}: the prior's {', '.join(bad[:3])} must be finite numbers")
+    return PriorMean(load_emulator(folder), {str(k): float(v) for k, v in rec["inputs"].items()},
+                     float(numbers["scale"]))
 
 
 def _resolve_subject_geometry(meta: dict, directory: Path) -> None:
