@@ -26,7 +26,9 @@ def test_symmetric_solve_definite_and_indefinite(shift):
     np.testing.assert_allclose(A @ x, b, rtol=0, atol=1e-9 * np.abs(b).max())
     if "cholmod" in linear.available_backends():
         assert f.backend == "cholmod"  # LDLT, no SuperLU fallback on the indefinite matrix
-        assert "cholmod_ldl" in cache
+        # a definite matrix gets the process's mode; an indefinite one the simplicial LDLT (LLT rejects it)
+        assert f.factorisation == (linear.cholmod_mode() if shift == 0 else "simplicial")
+        assert {"supernodal": "cholmod_ll", "simplicial": "cholmod_ldl"}[f.factorisation] in cache
         # a later factorisation of the same pattern does not change this one
         linear.factorize(A + sp.eye(A.shape[0]), symmetric=True, cache=cache)
         np.testing.assert_allclose(f.solve(b), x, rtol=1e-12)
@@ -46,3 +48,22 @@ def test_nonsymmetric_uses_superlu():
     f = linear.factorize(A, symmetric=False)
     assert f.backend == "superlu"
     np.testing.assert_allclose(f.solve(np.array([3.0, 3.0])), [1.0, 1.0])
+
+
+@pytest.mark.skipif("cholmod" not in linear.available_backends(), reason="CHOLMOD (scikit-sparse) not installed")
+@pytest.mark.parametrize("shift", [0.0, 2.5])
+def test_supernodal_and_simplicial_agree(monkeypatch, shift):
+    A = _spd_plus_shift(n=200, shift=shift, seed=3)
+    b = np.linspace(-1.0, 1.0, A.shape[0])
+    x = {}
+    for mode in ("supernodal", "simplicial"):
+        monkeypatch.setenv(linear.CHOLMOD_MODE_ENV, mode)
+        f = linear.factorize(A, symmetric=True, cache={})
+        assert f.backend == "cholmod"
+        assert f.factorisation == (mode if shift == 0 else "simplicial")
+        x[mode] = f.solve(b)
+        np.testing.assert_allclose(A @ x[mode], b, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(x["supernodal"], x["simplicial"], rtol=1e-9, atol=1e-12)
+    monkeypatch.setenv(linear.CHOLMOD_MODE_ENV, "fastest")
+    with pytest.raises(ValueError, match="supernodal"):
+        linear.cholmod_mode()

@@ -1,4 +1,4 @@
-"""Local executor: pool workers die with their driver, even when the driver is killed with SIGKILL."""
+"""Local executor: pool workers die with their driver (even when it is killed with SIGKILL) and are pinned one per core."""
 from __future__ import annotations
 
 import os
@@ -86,3 +86,26 @@ def test_watch_parent_exits_when_the_parent_changes():
     t0 = time.time()
     r = subprocess.run([sys.executable, "-c", code], env=env, timeout=60)
     assert r.returncode == 1 and time.time() - t0 < 25
+
+
+def _affinity_after(seconds):
+    time.sleep(seconds)
+    return sorted(os.sched_getaffinity(0))
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="needs Linux and two cores")
+def test_local_workers_are_pinned_one_per_core_unless_switched_off(monkeypatch):
+    from lvcore.parallel import PIN_ENV, LocalExecutor, worker_cores
+
+    cores = sorted(os.sched_getaffinity(0))
+    assert worker_cores(2) == cores[:2]
+    assert worker_cores(1) == [] and worker_cores(len(cores) + 1) == []  # one worker, or more than cores: free
+    with LocalExecutor(2) as ex:
+        # hold both workers busy at once so that each answers for itself
+        futs = [ex.submit(_affinity_after, 1.0) for _ in range(2)]
+        got = sorted(tuple(f.result()) for f in futs)
+    assert got == [(cores[0],), (cores[1],)]
+    assert "pinned" in ex.describe()
+    monkeypatch.setenv(PIN_ENV, "0")
+    assert worker_cores(2) == []
