@@ -243,6 +243,31 @@ def test_a_state_outside_0_1_2_is_reported_and_the_counts_add_up(tmp_path, value
     assert f"row 1: state value {value}" in s.format()
 
 
+def test_record_many_writes_a_batch_like_single_records_or_nothing(tmp_path):
+    design = make_design(get_space("material"), "lhs", 6, seed=0)
+    rows = [RowResult(4, np.arange(25.0) + 4, True, seconds=0.4, worker="w1", version="v"),
+            RowResult(1, np.arange(25.0) + 1, True, seconds=0.1, worker="w2", version="v"),
+            RowResult(2, np.full(25, np.nan), False, "line search failed", seconds=0.2, worker="w1", version="v")]
+    with CampaignStore.create(tmp_path / "one.h5", design, forward=DOUBLE, resolution="fast") as store:
+        for r in rows:
+            store.record(r)
+    with CampaignStore.create(tmp_path / "many.h5", design, forward=DOUBLE, resolution="fast") as store:
+        store.record_many(rows)  # unsorted rows: written in order
+        # a bad batch writes nothing: a committed row, a duplicate, a row outside the store, wrong outputs
+        for bad, match in (([RowResult(0, np.arange(25.0), True), rows[0]], "twice"),
+                           ([RowResult(0, np.arange(25.0), True), RowResult(0, np.arange(25.0), True)], "twice"),
+                           ([RowResult(0, np.arange(25.0), True), RowResult(6, np.arange(25.0), True)], "outside"),
+                           ([RowResult(0, np.arange(25.0), True), RowResult(3, np.arange(3.0), True)], "expected 25")):
+            with pytest.raises(CampaignError, match=match):
+                store.record_many(bad)
+            np.testing.assert_array_equal(store.pending_rows(), [0, 3, 5])
+    one, many = read_store(tmp_path / "one.h5"), read_store(tmp_path / "many.h5")
+    for field in ("outputs", "state", "seconds", "record_count"):
+        np.testing.assert_array_equal(getattr(one, field), getattr(many, field))
+    assert one.reasons == many.reasons and one.workers == many.workers and one.versions == many.versions
+    assert list(many.state) == [PENDING, CONVERGED, FAILED, PENDING, CONVERGED, PENDING]
+
+
 def test_converged_rows_with_nan_outputs_or_record_count_5_are_not_healthy(tmp_path):
     from lvcore.cli import main
 

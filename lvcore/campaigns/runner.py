@@ -158,11 +158,11 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
     bar = tqdm(total=rows.size, disable=not progress, file=sys.stderr, unit="run", desc="campaign")
     failed = 0
 
-    def record(result: RowResult) -> None:
+    def record(*results: RowResult) -> None:
         nonlocal failed
-        store.record(result, allow_rerecord=allow_rerecord)
-        failed += not result.converged
-        bar.update(1)
+        store.record_many(results, allow_rerecord=allow_rerecord)
+        failed += sum(not r.converged for r in results)
+        bar.update(len(results))
         bar.set_postfix(failed=failed)
 
     def died(err):  # infrastructure failure: the rows in flight stay pending
@@ -180,7 +180,7 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
 
             try:
                 return run_chains(executor, submit, U, workers=getattr(executor, "workers", 1), chunk=chunk,
-                                  on_rows=lambda out: [record(r.result) for r in out])
+                                  on_rows=lambda out: record(*(r.result for r in out)))
             except ChainTaskError as err:
                 raise died(err.__cause__ or err) from err
         futures = [executor.submit(execute_row, forward, int(i), row_inputs(design, int(i))) for i in rows]
