@@ -44,16 +44,16 @@ CHOLMOD_MODE_ENV = "LVCORE_CHOLMOD_MODE"
 OPTIMISED_BLAS = ("openblas", "libmkl", "libblis")
 
 
-def _blas_in_process() -> str:
-    """The file of the BLAS library mapped into this process (Linux ``/proc/self/maps``), or ''."""
+def _blas_in_process() -> tuple[str, ...]:
+    """The files of the system BLAS libraries mapped into this process (Linux ``/proc/self/maps``)."""
     try:
         with open("/proc/self/maps") as fh:
             paths = {line.split()[-1] for line in fh if "blas" in line.lower() and "/" in line}
     except OSError:  # not Linux: no way to tell, assume the reference BLAS
-        return ""
-    # numpy/scipy wheels carry their own OpenBLAS (scipy_openblas, numpy.libs); CHOLMOD uses the system's
-    system = sorted(p for p in paths if "site-packages" not in p and ".libs" not in p)
-    return system[0] if system else ""
+        return ()
+    # numpy/scipy wheels carry their own OpenBLAS (site-packages/numpy.libs, scipy_openblas); CHOLMOD
+    # links the system's libblas.so.3
+    return tuple(sorted(p for p in paths if not any(k in p for k in ("site-packages", "dist-packages", ".libs"))))
 
 
 _MODE: list[str] = []
@@ -73,8 +73,8 @@ def cholmod_mode() -> str:
     if want:
         raise ValueError(f"{CHOLMOD_MODE_ENV}={want!r}: use 'supernodal' or 'simplicial'")
     if not _MODE:
-        lib = _blas_in_process().lower()
-        _MODE.append("supernodal" if any(k in lib for k in OPTIMISED_BLAS) else "simplicial")
+        fast = any(k in path.lower() for path in _blas_in_process() for k in OPTIMISED_BLAS)
+        _MODE.append("supernodal" if fast else "simplicial")
     return _MODE[0]
 
 
