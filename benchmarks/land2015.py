@@ -117,7 +117,7 @@ def profile(specs, repeats: int, solvers) -> None:
                 ta, tf = [], []
                 for _ in range(max(3, repeats)):
                     t0 = time.perf_counter()
-                    f = analyze(A, mode="simplicial")
+                    f = analyze(A, mode=linear.cholmod_mode())  # the mode the solves used
                     ta.append(time.perf_counter() - t0)
                     t0 = time.perf_counter()
                     f.cholesky(A)
@@ -147,7 +147,8 @@ def profile(specs, repeats: int, solvers) -> None:
               f"{PULSE_RECORDED_S / m['total']:.0f}x |")
     print(f"\nvs pulse: {_pulse_note()}; the ratio is that time over lvcore's median total.")
     if sym:
-        print("\nCHOLMOD symbolic analysis (once per sparsity pattern, reused) vs numeric factorisation (each tangent):\n")
+        print(f"\nCHOLMOD ({linear.cholmod_mode()}) symbolic analysis (once per sparsity pattern, reused) vs numeric "
+              "factorisation (each tangent):\n")
         print("| resolution | dofs | analyse (ms) | factorise (ms) | tangents per solve | saved per solve (ms) |")
         print("|---|---|---|---|---|---|")
         for label, dofs, ta, tf, nt in sym:
