@@ -2,7 +2,8 @@
 
 The pattern (CSR over the free dofs) and the map from every element/face
 matrix entry to its CSR slot are computed once per mesh topology and
-boundary condition (NumPy); each assembly is then one ``segment_sum``.
+boundary condition (NumPy); each assembly is then one sparse product with the
+0/1 scatter matrix of :meth:`SparsityPattern.scatter`.
 """
 from __future__ import annotations
 
@@ -46,6 +47,17 @@ class SparsityPattern:
     @property
     def nnz(self) -> int:
         return int(self.indices.size)
+
+    def scatter(self, n_local: int) -> sp.csr_matrix:
+        """The (nnz, n_local) 0/1 matrix that sums the first ``n_local`` concatenated, raveled local
+        matrix entries into their CSR slots (``scatter(n) @ values``; built once, kept in :attr:`cache`)."""
+        key = ("scatter", int(n_local))
+        S = self.cache.get(key)
+        if S is None:
+            sel = self.keep < n_local
+            S = sp.csr_matrix((np.ones(int(sel.sum())), (self.dest[sel], self.keep[sel])), shape=(self.nnz, n_local))
+            self.cache[key] = S
+        return S
 
     def matrix(self, data) -> sp.csr_matrix:
         """The free-dof CSR matrix with slot values ``data``."""
