@@ -171,6 +171,14 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     :class:`~lvcore.mechanics.forward.WarmState` (arrays ``u`` and ``p``), fewer than ``d + 2`` of them,
     or a point farther from the nearest than every fitted neighbour is (an extrapolation) give the nearest
     state unchanged. ``k`` fixes the number of neighbours of the plane (and disables the quadratic).
+
+    The plane and the nearest state carry the newest factorised tangent (chord iterations on it: cheap
+    where neighbours are close, as in a sweep). The quadratic fit, used where a design fills the space
+    around the point, carries none: there the neighbours' parameters differ too much for a chord on
+    their tangent (1,000-point θ design, ``default`` mesh: it contracted well enough in 6 % of the warm
+    starts), and Newton's first iteration takes a fresh tangent at once (``--chain-profile 150``: 4.65
+    instead of 5.33 iterations, 5.70 instead of 6.40 residuals, 1.07 instead of 0.99 tangents per
+    solve; 5–6 % less time).
     """
     if not candidates:
         return None
@@ -201,9 +209,10 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
         delta = (step @ np.linalg.pinv(X, rcond=1e-6)) @ Y
     y = np.concatenate([base.u, np.ravel(base.p)]) + delta
     n = base.u.size
-    tangent = base.tangent
-    if not tangent:  # only the newest state keeps its factorised tangent: a chord start on it
-        tangent = next((c.state.tangent for c in reversed(candidates) if getattr(c.state, "tangent", None)), None)
+    tangent = None
+    if not quadratic:  # a sparse neighbourhood (a sweep): chord iterations on the newest factorised tangent
+        tangent = base.tangent or next((c.state.tangent for c in reversed(candidates)
+                                        if getattr(c.state, "tangent", None)), None)
     return base._replace(u=y[:n], p=y[n:].reshape(np.shape(base.p)), tangent=tangent)
 
 

@@ -150,21 +150,25 @@ def test_predicted_state_is_exact_for_a_quadratic_solution_given_enough_neighbou
     n_quad = 2 * (1 + d + d * (d + 1) // 2)  # 20 neighbours for a full quadratic in 3-D
     G, H = rng.normal(size=(d, 7)), rng.normal(size=(d, d, 7))
 
-    def state(x):  # u(x) = 1 + x G + x H x: a quadratic the plane cannot follow
+    def state(x, tangent=None):  # u(x) = 1 + x G + x H x: a quadratic the plane cannot follow
         y = np.ones(7) + x @ G + np.einsum("i,ijn,j->n", x, H, x)
-        return WarmState(y[:5], y[5:].reshape(1, 2), None, None)
+        return WarmState(y[:5], y[5:].reshape(1, 2), tangent, None)
 
     X = 0.2 * rng.random((n_quad + 5, d))
     target = X.mean(axis=0) + 0.01
     want = state(target)
-    got = chains.predicted_state(target, [chains.Seed(x, state(x)) for x in X])
+    got = chains.predicted_state(target, [chains.Seed(x, state(x, "newest" if i == len(X) - 1 else None))
+                                          for i, x in enumerate(X)])
     np.testing.assert_allclose(got.u, want.u, atol=1e-10)
     np.testing.assert_allclose(got.p, want.p, atol=1e-10)
+    assert got.tangent is None  # a design-filling neighbourhood: Newton takes a fresh tangent, no chord start
     # one neighbour short of the quadratic's: the plane, exact to first order only (error of order h²)
     near = np.argsort(np.linalg.norm(X - target, axis=1))[:n_quad - 1]
-    plane = chains.predicted_state(target, [chains.Seed(X[i], state(X[i])) for i in near])
+    plane = chains.predicted_state(target, [chains.Seed(X[i], state(X[i], "newest" if k == n_quad - 2 else None))
+                                            for k, i in enumerate(near)])
     err = np.abs(plane.u - want.u).max()
     assert 1e-6 < err < 0.2
+    assert plane.tangent == "newest"  # the plane keeps the chord start on the newest tangent
     # an explicit k asks for the plane
     fixed = chains.predicted_state(target, [chains.Seed(x, state(x)) for x in X], k=8)
     assert np.abs(fixed.u - want.u).max() > 1e-6
