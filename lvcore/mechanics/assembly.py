@@ -48,14 +48,15 @@ class SparsityPattern:
     def nnz(self) -> int:
         return int(self.indices.size)
 
-    def scatter(self, n_local: int) -> sp.csr_matrix:
-        """The (nnz, n_local) 0/1 matrix that sums the first ``n_local`` concatenated, raveled local
-        matrix entries into their CSR slots (``scatter(n) @ values``; built once, kept in :attr:`cache`)."""
-        key = ("scatter", int(n_local))
+    def scatter(self, start: int, stop: int) -> sp.csr_matrix:
+        """The (nnz, stop - start) 0/1 matrix that sums the concatenated, raveled local matrix entries
+        ``start:stop`` into their CSR slots (``scatter(a, b) @ values[a:b]``; built once, kept in :attr:`cache`)."""
+        key = ("scatter", int(start), int(stop))
         S = self.cache.get(key)
         if S is None:
-            sel = self.keep < n_local
-            S = sp.csr_matrix((np.ones(int(sel.sum())), (self.dest[sel], self.keep[sel])), shape=(self.nnz, n_local))
+            sel = (self.keep >= start) & (self.keep < stop)
+            S = sp.csr_matrix((np.ones(int(sel.sum())), (self.dest[sel], self.keep[sel] - start)),
+                              shape=(self.nnz, stop - start))
             self.cache[key] = S
         return S
 

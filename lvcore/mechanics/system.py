@@ -259,26 +259,15 @@ class DiscreteSystem:
                                     float(load_factor * self.pressure), self.model, self.data,
                                     potential=self.potential)
         K, Ks = np.asarray(K).ravel(), np.asarray(Ks).ravel()
-        kd = self.pattern.scatter(K.size) @ K + self._load_and_spring_scatter(K.size, Ks.size) @ Ks
-        if self.spring_K.size:
-            kd += self._spring_slots(K.size + Ks.size)
+        n_el, n_loaded = K.size, K.size + Ks.size
+        kd = self.pattern.scatter(0, n_el) @ K + self.pattern.scatter(n_el, n_loaded) @ Ks
+        if self.spring_K.size:  # the Robin spring's stiffness is constant: summed once per system
+            spring = self._shared.get("spring_slots")
+            if spring is None:
+                spring = self._shared["spring_slots"] = (self.pattern.scatter(n_loaded, n_loaded + self.spring_K.size)
+                                                         @ self.spring_K.ravel())
+            kd += spring
         return np.asarray(R)[self.free], self.pattern.matrix(kd), np.asarray(D), np.asarray(r_p)
-
-    def _load_and_spring_scatter(self, n_el: int, n_face: int):
-        """The columns of the pattern's scatter matrix of the load-face entries (after ``n_el`` element ones)."""
-        key = ("scatter_faces", n_el, n_face)
-        S = self.pattern.cache.get(key)
-        if S is None:
-            S = self.pattern.cache[key] = self.pattern.scatter(n_el + n_face)[:, n_el:].tocsr()
-        return S
-
-    def _spring_slots(self, n_before: int) -> np.ndarray:
-        """The Robin spring's (constant) stiffness summed into the pattern's slots, once per system."""
-        v = self._shared.get("spring_slots")
-        if v is None:
-            n_all = n_before + self.spring_K.size
-            v = self._shared["spring_slots"] = (self.pattern.scatter(n_all)[:, n_before:] @ self.spring_K.ravel())
-        return v
 
     def pressure_increment(self, du_free, D, r_p) -> np.ndarray:
         """Condensed pressure update ``κ M⁻¹ (r_p + D du_e)`` per element, (n_el, 4)."""
