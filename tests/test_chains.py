@@ -174,6 +174,27 @@ def test_predicted_state_is_exact_for_a_quadratic_solution_given_enough_neighbou
     assert np.abs(fixed.u - want.u).max() > 1e-6
 
 
+def test_spline_weights_interpolate_reproduce_quadratics_and_beat_the_least_squares_quadratic():
+    rng = np.random.default_rng(5)
+    d, m = 4, 30
+    Z = rng.uniform(-1, 1, (m, d))
+    for i in (0, 7, 29):  # through every node: the weights at a node pick that node
+        np.testing.assert_allclose(chains._spline_weights(Z, Z[i]), np.eye(m)[i], atol=1e-9)
+    z = np.array([0.1, -0.2, 0.05, 0.3])
+    w = chains._spline_weights(Z, z)
+    F = chains._quadratic_features(Z)
+    np.testing.assert_allclose(w @ F, chains._quadratic_features(z[None])[0], atol=1e-10)  # quadratics exact
+    # a smooth solution that is not a quadratic: the spline's error is well below the least-squares quadratic's
+    errs = []
+    for t in rng.uniform(-0.5, 0.5, (20, d)):
+        f = np.exp(0.8 * Z @ np.array([1.0, -0.5, 0.7, 0.3]))
+        want = np.exp(0.8 * t @ np.array([1.0, -0.5, 0.7, 0.3]))
+        ls = chains._quadratic_features(t[None])[0] @ np.linalg.pinv(F) @ f
+        errs.append((abs(chains._spline_weights(Z, t) @ f - want), abs(ls - want)))
+    spline, ls = np.median(np.array(errs), axis=0)
+    assert spline < 0.5 * ls
+
+
 def test_warm_chained_simulator_rows_equal_cold_ones(tmp_path, theta_design):
     """The real simulator (``fast`` mesh): a chained campaign gives the cold campaign's numbers within tolerance."""
     ex = _Inline(workers=1)

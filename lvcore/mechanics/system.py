@@ -277,8 +277,8 @@ class DiscreteSystem:
     def condensed(self, r_u, r_p, D) -> np.ndarray:
         """Condensed residual ``r_u + κ Dᵀ M⁻¹ r_p`` on the free dofs (D from a tangent call)."""
         q = float(self.kappa) * np.einsum("emn,en->em", self.Minv, r_p)
-        g = np.zeros(self.mesh.n_dofs)
-        np.add.at(g, self.edofs, np.einsum("emk,em->ek", D, q))
+        # bincount sums repeated dofs like np.add.at, ~10x faster (called once or twice per Newton iteration)
+        g = np.bincount(self.edofs.ravel(), weights=np.einsum("emk,em->ek", D, q).ravel(), minlength=self.mesh.n_dofs)
         return r_u + g[self.free]
 
     def residual_param_jacobian(self, u_free, p, load_factor: float = 1.0) -> np.ndarray:
