@@ -165,18 +165,32 @@ def _spline_weights(Z: np.ndarray, z: np.ndarray) -> np.ndarray:
     The spline is ``Σ c_i |x − Z_i|⁵`` plus a full quadratic, with the c orthogonal to the
     quadratics (the kernel is conditionally positive definite of order 3, so the system is
     non-singular when the points determine a quadratic); it interpolates every ``y_i`` and
-    reproduces quadratics exactly.
+    reproduces quadratics exactly. A point closer than ``1e-3`` (in the units of ``Z``) to an
+    earlier one (a repeated design point) gets weight zero: interpolating two states that differ
+    only by solver round-off through almost the same point would amplify that round-off.
     """
     m = Z.shape[0]
+    diff = Z[:, None, :] - Z[None, :, :]
+    R2 = np.einsum("ijk,ijk->ij", diff, diff)
+    keep = np.ones(m, dtype=bool)
+    if np.any(np.triu(R2 < 1e-6, k=1)):
+        for j in range(1, m):
+            keep[j] = not np.any(R2[j, :j][keep[:j]] < 1e-6)
+        Z, R2 = Z[keep], R2[np.ix_(keep, keep)]
+    n = Z.shape[0]
     P = _quadratic_features(Z)
-    M = np.zeros((m + P.shape[1],) * 2)
-    M[:m, :m] = np.linalg.norm(Z[:, None, :] - Z[None, :, :], axis=2) ** 5
-    M[:m, m:], M[m:, :m] = P, P.T
-    rhs = np.concatenate([np.linalg.norm(Z - z, axis=1) ** 5, _quadratic_features(z[None])[0]])
+    M = np.zeros((n + P.shape[1],) * 2)
+    M[:n, :n] = R2 * R2 * np.sqrt(R2)
+    M[:n, n:], M[n:, :n] = P, P.T
+    r2 = np.sum((Z - z) ** 2, axis=1)
+    rhs = np.concatenate([r2 * r2 * np.sqrt(r2), _quadratic_features(z[None])[0]])
     try:
-        return np.linalg.solve(M, rhs)[:m]
-    except np.linalg.LinAlgError:  # coincident points: the least-squares weights of the same system
-        return np.linalg.lstsq(M, rhs, rcond=None)[0][:m]
+        sol = np.linalg.solve(M, rhs)
+    except np.linalg.LinAlgError:  # too few distinct points for a quadratic: the least-squares solution
+        sol = np.linalg.lstsq(M, rhs, rcond=None)[0]
+    w = np.zeros(m)
+    w[keep] = sol[:n]
+    return w
 
 
 def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None = None):

@@ -193,6 +193,11 @@ def test_spline_weights_interpolate_reproduce_quadratics_and_beat_the_least_squa
         errs.append((abs(chains._spline_weights(Z, t) @ f - want), abs(ls - want)))
     spline, ls = np.median(np.array(errs), axis=0)
     assert spline < 0.5 * ls
+    # a repeated design point (states equal to round-off) is used once, not amplified
+    Zr = np.vstack([Z, Z[3] + 1e-12])
+    wr = chains._spline_weights(Zr, z)
+    assert wr[-1] == 0.0 and np.abs(wr).max() < 10
+    np.testing.assert_allclose(wr[:-1], w, atol=1e-12)
 
 
 def test_warm_chained_simulator_rows_equal_cold_ones(tmp_path, theta_design):
