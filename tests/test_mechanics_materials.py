@@ -332,12 +332,24 @@ def test_ho_closed_form_stress_and_tangent_equal_autodiff_and_finite_differences
     materials.NeoHookean.from_params({"mu": 1.5}),
 ])
 def test_isochoric_closed_forms_equal_autodiff_and_finite_differences(law):
-    """Guccione and neo-Hookean through the isochoric projection (``materials._isochoric``): stress and
-    tangent equal the automatic derivatives of ``W + p J`` to round-off and central differences."""
+    """Guccione (tangent in F-space, stress through the isochoric projection ``materials._isochoric``) and
+    neo-Hookean (both through it): stress and tangent equal the automatic derivatives of ``W + p J`` to
+    round-off and central differences."""
     assert law.closed_form
     model = materials.ConstitutiveModel(law, materials.MixedPenalty(1e3))
     for F, Q, p in _random_states(np.random.default_rng(11), 6):
         _assert_closed_form_matches(model, F, Q, p, rtol_ad=1e-11)
+
+
+def test_guccione_f_space_tangent_equals_the_pushed_forward_material_tangent():
+    """Guccione's hand-derived F-space tangent (``Guccione.piola_tangent``) equals the push-forward
+    ``δ_ik S_JL + F_iI F_kK ℂ_IJKL`` of its material-frame ``pk2_tangent`` (the generic path)."""
+    law = materials.Guccione.from_params({"C": 2.0, "bf": 8.0, "bt": 2.0, "bfs": 4.0})
+    for F, Q, _ in _random_states(np.random.default_rng(5), 6):
+        S, A = law.piola_tangent(jnp.asarray(F), jnp.asarray(Q))
+        S0, A0 = materials.MaterialLaw.piola_tangent(law, jnp.asarray(F), jnp.asarray(Q))
+        np.testing.assert_allclose(S, S0, rtol=1e-12, atol=1e-13 * float(jnp.abs(S0).max()))
+        np.testing.assert_allclose(A, A0, rtol=1e-11, atol=1e-12 * float(jnp.abs(A0).max()))
 
 
 def test_laws_without_closed_form_use_autodiff(monkeypatch):

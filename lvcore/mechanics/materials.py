@@ -470,6 +470,52 @@ class Guccione(MaterialLaw):
         CCbar = 2.0 * self.C * eQ * (jnp.einsum("IJ,KL->IJKL", T, T) + dT)
         return _isochoric(C, Sbar, CCbar)
 
+    def piola_tangent(self, F, frame):
+        """``(S, ∂²W/∂F∂F)`` in closed form: :meth:`pk2_tangent` and :func:`_isochoric` pushed forward by hand.
+
+        With ``v_a = F r_a`` (``r_a`` the frame rows), ``U = ∂T/∂C̄ : C = Rᵀ (β ∘ R C Rᵀ) R / 2``,
+        ``T̃ = T − (C:T)/3 C⁻¹`` and ``s̄ = I3^{-1/3} S̄ : C``, every term of ℂ becomes outer products in
+        F-space (``X ⊗ Y → (F X) ⊗ (F Y)``, ``F C⁻¹ = F⁻ᵀ``, ``C⁻¹ ⊙ C⁻¹ → (δ_ik C⁻¹_JL + F⁻ᵀ_iL F⁻ᵀ_kJ)/2``)::
+
+            ∂²W/∂F∂F = δ_ik S_JL + 2 C e^Q I3^{-2/3} [ (F T̃) ⊗ (F T̃) + 𝒯 − (F⁻ᵀ ⊗ F U + F U ⊗ F⁻ᵀ)/3
+                       + (C:U)/9 F⁻ᵀ ⊗ F⁻ᵀ ] + 2 s̄/3 [ (δ_ik C⁻¹_JL + F⁻ᵀ ⊠ F⁻ᵀ)/2 − F⁻ᵀ ⊗ F⁻ᵀ / 3 ]
+                       − 2/3 (F⁻ᵀ ⊗ F S + F S ⊗ F⁻ᵀ),
+
+        ``𝒯_iJkL = F_iI F_kK (∂T/∂C̄)_IJKL = Σ_ab β_ab [v_ai v_ak r_bJ r_bL + v_ai r_aL r_bJ v_bk] / 4``.
+        No 3⁴ × 3² contraction and no 3⁴ projection: the pointwise tangent of Land et al.'s problem 2
+        (1,944 points) ≈ 2× faster than pushing ℂ forward. Equal to the automatic derivatives to
+        round-off (``tests/test_mechanics_materials.py``).
+        """
+        bf, bt, bfs = self.b_f, self.b_t, self.b_fs
+        beta = jnp.array([[bf, bfs, bfs], [bfs, bt, bt], [bfs, bt, bt]])
+        C = right_cauchy_green(F)
+        i3 = det3(C)
+        j23 = i3 ** (-1.0 / 3.0)
+        Cinv = cofactor(C) / i3
+        Ep = frame @ (0.5 * (j23 * C - jnp.eye(3))) @ frame.T
+        eQ = jnp.exp(jnp.sum(beta * Ep * Ep))
+        T = frame.T @ (beta * Ep) @ frame
+        Sbar = self.C * eQ * T
+        sC = j23 * jnp.sum(Sbar * C)  # I3^{-1/3} S̄ : C
+        S = j23 * Sbar - (sC / 3.0) * Cinv
+        U = 0.5 * frame.T @ (beta * (frame @ C @ frame.T)) @ frame
+        FiT = F @ Cinv  # F⁻ᵀ
+        FTt = F @ T - (jnp.sum(C * T) / 3.0) * FiT  # F T̃
+        FU = F @ U
+        v = frame @ F.T  # rows v_a = F r_a
+        VV = v[:, :, None] * v[:, None, :]  # (a, i, k) v_ai v_ak
+        RR = frame[:, :, None] * frame[:, None, :]  # (b, J, L) r_bJ r_bL
+        VR = v[:, :, None] * frame[:, None, :]  # (a, i, L) v_ai r_aL
+        calT = 0.25 * (jnp.einsum("aik,aJL->iJkL", VV, jnp.einsum("ab,bJL->aJL", beta, RR))
+                       + jnp.einsum("aiL,akJ->iJkL", VR, jnp.einsum("ab,bkJ->akJ", beta, VR)))
+        iso = (_outer(FTt, FTt) + calT - (_outer(FiT, FU) + _outer(FU, FiT)) / 3.0
+               + (jnp.sum(C * U) / 9.0) * _outer(FiT, FiT))
+        FS = F @ S
+        A = ((2.0 * self.C * eQ * j23 * j23) * iso
+             + (2.0 * sC / 3.0) * (0.5 * (_delta_ik(Cinv) + _box(FiT, FiT)) - _outer(FiT, FiT) / 3.0)
+             - (2.0 / 3.0) * (_outer(FiT, FS) + _outer(FS, FiT)) + _delta_ik(S))
+        return S, A
+
 
 @_pytree
 @dataclass(frozen=True)
