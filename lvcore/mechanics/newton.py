@@ -127,7 +127,7 @@ def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
     best = None
     for _ in range(opts.max_line_search):
         ut, pt = u + alpha * du, p + alpha * dp
-        rut, rpt, mjt, _ = system.residual(ut, pt, lam)
+        rut, rpt, mjt, _ = system.residual(ut, pt, lam, energy=False)
         stats["residuals"] += 1
         if not (mjt > opts.min_jacobian and np.all(np.isfinite(rut)) and np.all(np.isfinite(rpt))):
             alpha = lo + 0.5 * (alpha - lo)
@@ -162,7 +162,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
     """
     r_u = r_p = None
     if reuse is not None:  # else the first iteration's tangent kernel gives the residuals
-        r_u, r_p, mj, _ = system.residual(u, p, lam)
+        r_u, r_p, mj, _ = system.residual(u, p, lam, energy=False)
         stats["residuals"] += 1
     last = reuse
     first = True  # the first accepted iteration of this load step decides a cut
@@ -288,7 +288,7 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
         if prev is not None and opts.predictor:
             c = (target - lam) / (lam - prev[0])
             u_try, p_try = u + c * (u - prev[1]), p + c * (p - prev[2])
-            if system.residual(u_try, p_try, target)[2] > opts.min_jacobian:
+            if system.residual(u_try, p_try, target, energy=False)[2] > opts.min_jacobian:
                 u_start, p_start = u_try, p_try
             stats["residuals"] += 1
         ok, u_new, p_new, reason, last = _newton_at(system, u_start, p_start, target, *tolerances(rtol),

@@ -45,12 +45,12 @@ def _elem_args(data, x, p):
     return (x[data["elements"]], p, data["dNdX"], data["wdet"], data["frames"], data["Minv"], data["scale"])
 
 
-def _map_elements(fn, data, x, p, model):
+def _map_elements(fn, data, x, p, model, **kw):
     P = data["P"]
 
     def one(args):
         *a, s = args
-        return fn(*a, P, model.scaled(s))
+        return fn(*a, P, model.scaled(s), **kw)
 
     return jax.lax.map(one, _elem_args(data, x, p), batch_size=min(data["elements"].shape[0], ELEMENT_BATCH))
 
@@ -73,10 +73,10 @@ def _external_stiffness(data, x, pressure, potential):
     return jax.vmap(jax.jacfwd(loads.follower_force), in_axes=(0, None))(xf, pressure).reshape(-1, 27, 27)
 
 
-@partial(jax.jit, static_argnames=("potential",))
-def _residual(u, p, pressure, model, data, potential):
+@partial(jax.jit, static_argnames=("potential", "energy"))
+def _residual(u, p, pressure, model, data, potential, energy=True):
     x = data["X"] + u.reshape(-1, 3)
-    r_u, r_p, mj, w = _map_elements(element_residual, data, x, p, model)
+    r_u, r_p, mj, w = _map_elements(element_residual, data, x, p, model, energy=energy)
     R = jnp.zeros_like(x).at[data["elements"]].add(r_u)
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
     R = R.at[data["spring_faces"]].add(_spring_forces(data, u))
@@ -245,13 +245,16 @@ class DiscreteSystem:
     def zero_pressure(self) -> np.ndarray:
         return np.zeros((self.mesh.n_elements, 4))
 
-    def residual(self, u_free, p, load_factor: float):
-        """Mixed residuals at (u, p): (r_u on free dofs, r_p (n_el, 4), min J, strain energy)."""
+    def residual(self, u_free, p, load_factor: float, energy: bool = True):
+        """Mixed residuals at (u, p): (r_u on free dofs, r_p (n_el, 4), min J, strain energy).
+
+        ``energy=False`` skips the strain energy (returned as None): Newton's calls, which do not use it.
+        """
         # NumPy arrays and a Python float go to the jitted kernel as they are (its C++ dispatch
         # transfers them; a jnp.asarray per argument costs more than a small residual)
         R, r_p, mj, w = _residual(self.full(u_free), np.asarray(p, dtype=float), float(load_factor * self.pressure),
-                                  self.model, self.data, potential=self.potential)
-        return np.asarray(R)[self.free], np.asarray(r_p), float(mj), float(w)
+                                  self.model, self.data, potential=self.potential, energy=energy)
+        return np.asarray(R)[self.free], np.asarray(r_p), float(mj), float(w) if energy else None
 
     def tangent(self, u_free, p, load_factor: float):
         """Condensed system: (rhs on free dofs, CSR tangent, D (n_el, 4, 81), r_p (n_el, 4))."""
