@@ -197,8 +197,8 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     """The nearest candidate's state with its solution moved by a local fit over the nearest neighbours.
 
     Each converged neighbour ``i`` gives ``(x_i, u_i)`` (scaled coordinates, solution). With at least
-    ``2 × (1 + d + d(d+1)/2)`` neighbours at hand (30 in 4-D; at most :data:`QUADRATIC_MAX_NEIGHBOURS`),
-    the polyharmonic spline through all of them (``r⁵`` plus a full quadratic, :func:`_spline_weights`)
+    ``2 × (1 + d + d(d+1)/2)`` neighbours at hand (30 in 4-D), the polyharmonic spline through the
+    nearest :data:`QUADRATIC_MAX_NEIGHBOURS` or fewer (``r⁵`` plus a full quadratic, :func:`_spline_weights`)
     predicts the solution at ``unit`` (exact for quadratics, like the least-squares quadratic it replaced,
     but interpolating the nearest states instead of averaging over farther ones); otherwise the
     least-squares plane through the nearest ``x_0`` over the nearest ``max(8, d + 4)`` (second order; the
@@ -210,11 +210,11 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     over 30). States other than a
     :class:`~lvcore.mechanics.forward.WarmState` (arrays ``u`` and ``p``), fewer than ``d + 2`` of them,
     or a point farther from the nearest than every fitted neighbour is (an extrapolation) give the nearest
-    state unchanged. ``k`` fixes the number of neighbours of the plane (and disables the quadratic).
+    state unchanged. ``k`` fixes the number of neighbours of the plane (and disables the spline).
 
     The plane and the nearest state carry the newest factorised tangent (chord iterations on it: cheap
-    where neighbours are close, as in a sweep). The quadratic fit, used where a design fills the space
-    around the point, carries none: there the neighbours' parameters differ too much for a chord on
+    where neighbours are close, as in a sweep). The spline (before it, a quadratic fit), used where a
+    design fills the space around the point, carries none: there the neighbours' parameters differ too much for a chord on
     their tangent (1,000-point θ design, ``default`` mesh: it contracted well enough in 6 % of the warm
     starts), and Newton's first iteration takes a fresh tangent at once (``--chain-profile 150``: 4.65
     instead of 5.33 iterations, 5.70 instead of 6.40 residuals, 1.07 instead of 0.99 tangents per
