@@ -448,21 +448,23 @@ class Guccione(MaterialLaw):
 
     closed_form: ClassVar[bool] = True
 
+    def _isochoric_stress(self, C, frame):
+        """``(β, I3^{-1/3}, e^Q, T, S̄)`` at ``C`` (see :meth:`pk2_tangent`; shared with :meth:`piola_tangent`)."""
+        bf, bt, bfs = self.b_f, self.b_t, self.b_fs
+        beta = jnp.array([[bf, bfs, bfs], [bfs, bt, bt], [bfs, bt, bt]])
+        j23 = det3(C) ** (-1.0 / 3.0)
+        Ep = frame @ (0.5 * (j23 * C - jnp.eye(3))) @ frame.T
+        eQ = jnp.exp(jnp.sum(beta * Ep * Ep))
+        T = frame.T @ (beta * Ep) @ frame
+        return beta, j23, eQ, T, self.C * eQ * T
+
     def pk2_tangent(self, C, frame, with_tangent: bool = True):
         """Closed form (see :meth:`MaterialLaw.pk2_tangent`): with ``Ē' = R Ē Rᵀ`` (R the frame rows),
         ``Q = Σ_ab β_ab Ē'_ab²`` (``β`` the exponents: ``b_f`` on 11, ``b_t`` on 22, 33, 23, ``b_fs`` on
         12, 13) and ``T = ∂Q/∂C̄ = Rᵀ (β ∘ Ē') R``: ``S̄ = C e^Q T``,
         ``ℂ̄ = 2 C e^Q (T ⊗ T + ∂T/∂C̄)``, ``(∂T/∂C̄)_IJKL = sym_KL Σ_ab β_ab R_aI R_bJ R_aK R_bL / 2``;
         then the isochoric projection (:func:`_isochoric`)."""
-        bf, bt, bfs = self.b_f, self.b_t, self.b_fs
-        beta = jnp.array([[bf, bfs, bfs], [bfs, bt, bt], [bfs, bt, bt]])
-        i3 = det3(C)
-        Cbar = i3 ** (-1.0 / 3.0) * C
-        Ep = frame @ (0.5 * (Cbar - jnp.eye(3))) @ frame.T
-        Q = jnp.sum(beta * Ep * Ep)
-        eQ = jnp.exp(Q)
-        T = frame.T @ (beta * Ep) @ frame
-        Sbar = self.C * eQ * T
+        beta, _, eQ, T, Sbar = self._isochoric_stress(C, frame)
         if not with_tangent:
             return _isochoric(C, Sbar, None)
         B = jnp.einsum("ab,aI,bJ,aK,bL->IJKL", beta, frame, frame, frame, frame)
@@ -486,16 +488,9 @@ class Guccione(MaterialLaw):
         (1,944 points) ≈ 1.6× faster than pushing ℂ forward (5.5 → 3.5 ms). Equal to the automatic derivatives to
         round-off (``tests/test_mechanics_materials.py``).
         """
-        bf, bt, bfs = self.b_f, self.b_t, self.b_fs
-        beta = jnp.array([[bf, bfs, bfs], [bfs, bt, bt], [bfs, bt, bt]])
         C = right_cauchy_green(F)
-        i3 = det3(C)
-        j23 = i3 ** (-1.0 / 3.0)
-        Cinv = cofactor(C) / i3
-        Ep = frame @ (0.5 * (j23 * C - jnp.eye(3))) @ frame.T
-        eQ = jnp.exp(jnp.sum(beta * Ep * Ep))
-        T = frame.T @ (beta * Ep) @ frame
-        Sbar = self.C * eQ * T
+        beta, j23, eQ, T, Sbar = self._isochoric_stress(C, frame)
+        Cinv = cofactor(C) / det3(C)
         sC = j23 * jnp.sum(Sbar * C)  # I3^{-1/3} S̄ : C
         S = j23 * Sbar - (sC / 3.0) * Cinv
         U = 0.5 * frame.T @ (beta * (frame @ C @ frame.T)) @ frame
@@ -508,11 +503,12 @@ class Guccione(MaterialLaw):
         VR = v[:, :, None] * frame[:, None, :]  # (a, i, L) v_ai r_aL
         calT = 0.25 * (jnp.einsum("aik,aJL->iJkL", VV, jnp.einsum("ab,bJL->aJL", beta, RR))
                        + jnp.einsum("aiL,akJ->iJkL", VR, jnp.einsum("ab,bkJ->akJ", beta, VR)))
+        FiT2 = _outer(FiT, FiT)
         iso = (_outer(FTt, FTt) + calT - (_outer(FiT, FU) + _outer(FU, FiT)) / 3.0
-               + (jnp.sum(C * U) / 9.0) * _outer(FiT, FiT))
+               + (jnp.sum(C * U) / 9.0) * FiT2)
         FS = F @ S
         A = ((2.0 * self.C * eQ * j23 * j23) * iso
-             + (2.0 * sC / 3.0) * (0.5 * (_delta_ik(Cinv) + _box(FiT, FiT)) - _outer(FiT, FiT) / 3.0)
+             + (2.0 * sC / 3.0) * (0.5 * (_delta_ik(Cinv) + _box(FiT, FiT)) - FiT2 / 3.0)
              - (2.0 / 3.0) * (_outer(FiT, FS) + _outer(FS, FiT)) + _delta_ik(S))
         return S, A
 
