@@ -23,11 +23,13 @@ substitutions, residual evaluations (line search), outputs and the rest, with
 the counts of Newton iterations, tangents (= factorisations), residuals and
 load steps; then the symbolic analysis of CHOLMOD (done once per sparsity
 pattern and reused by every factorisation) against a numeric factorisation.
-FEniCS pulse is not installed here, so the pulse column is the time recorded
-in issue 25 (pulse 2025.0.0 at ~30k dofs, matched accuracy, 36 s, measured in
-one window beside lvcore with SuperLU) and the table says so; with ``pulse``
-importable the harness says it is present but still uses the recorded number
-(the pulse problem set-up is not part of this repository).
+With ``--pulse-python PY`` (a Python with legacy dolfin and fenics-pulse: see
+``benchmarks/pulse_land2015.py`` for the set-up) FEniCS pulse solves problem 2
+here too, on lvcore's gmsh tetrahedral mesh of the benchmark geometry
+(``--pulse-mesh-mm``, 1.5 mm: ~32k P2/P1 dofs), between two rounds of lvcore's
+solves, and the ratio is measured in one window. Without it the pulse column
+is the time recorded in issue 25 (pulse 2025.0.0 at ~30k dofs, 36 s, measured
+in one window beside lvcore with SuperLU) and the table says so.
 """
 from __future__ import annotations
 
@@ -63,11 +65,74 @@ def _pulse_note() -> str:
         import pulse  # noqa: F401
     except ImportError:
         return PULSE_RECORDED_NOTE
-    return "pulse is importable, but this harness does not set the problem up in pulse: " + PULSE_RECORDED_NOTE
+    return "pulse is importable here, but --pulse-python was not given: " + PULSE_RECORDED_NOTE
 
 
-def profile(specs, repeats: int, solvers) -> None:
-    """The per-phase profile table of problem 2 (see the module docstring)."""
+def _lvcore_runs(case, repeats: int):
+    """``repeats`` warm solves of ``case``: the last result and each solve's phase times (s)."""
+    from lvcore.mechanics import simulate as sim
+
+    runs = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        r = sim.simulate(case)
+        total = time.perf_counter() - t0
+        tm = r.timings
+        newton_s = tm["seconds"]
+        runs.append({"total": total, "tangent": tm["t_tangent"], "factor": tm["t_factor"],
+                     "solve": tm["t_solve"], "residuals": tm["t_line"],
+                     "newton_other": newton_s - tm["t_tangent"] - tm["t_factor"] - tm["t_solve"] - tm["t_line"],
+                     "outside": total - newton_s})
+    return r, runs
+
+
+#: gmsh element size (mm) of pulse's tetrahedral mesh: 1.5 mm gives ~32,000 P2/P1 dofs, issue 25's "~30k".
+PULSE_MESH_MM = 1.5
+
+
+def _pulse_runs(python: str, size_mm: float, repeats: int) -> list[dict]:
+    """``repeats`` warm pulse solves of problem 2 (``benchmarks/pulse_land2015.py`` under ``python``).
+
+    The mesh is lvcore's gmsh mesh of the benchmark geometry at ``size_mm``; one
+    process solves ``repeats + 1`` times and the first solve (FFC form
+    compilation) is dropped.
+    """
+    import json
+    import subprocess
+    import tempfile
+    from pathlib import Path
+
+    import numpy as np
+
+    from lvcore.geometry.analytic import LAND_LV
+    from lvcore.geometry.meshing import ellipsoid_tet_mesh
+
+    with tempfile.TemporaryDirectory() as tmp:
+        mesh = ellipsoid_tet_mesh(LAND_LV, size_mm)
+        path = Path(tmp) / "land_problem2.npz"
+        np.savez(path, points=mesh.points, cells=mesh.cells[0].data)
+        script = Path(__file__).with_name("pulse_land2015.py")
+        out = subprocess.run([python, str(script), str(path), str(repeats + 1)], capture_output=True, text=True,
+                             env={**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
+    runs = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+    if out.returncode != 0 or len(runs) != repeats + 1:
+        raise RuntimeError(f"pulse run failed (exit {out.returncode}): {out.stderr[-2000:]}")
+    for r in runs:
+        r["size_mm"] = size_mm
+    print(f"  pulse: {[round(r['solve_s'], 2) for r in runs]} s (first includes compilation)", file=sys.stderr,
+          flush=True)
+    return runs[1:]
+
+
+def profile(specs, repeats: int, solvers, pulse: str | None = None, pulse_mesh_mm: float = PULSE_MESH_MM,
+            pulse_repeats: int = 2) -> None:
+    """The per-phase profile table of problem 2 (see the module docstring).
+
+    With ``pulse`` (a Python interpreter with legacy dolfin and fenics-pulse),
+    pulse solves problem 2 between two rounds of lvcore's solves of every row, and
+    the ratio is the median of those pulse solves over lvcore's median.
+    """
+    pulse_runs: list[dict] = []
     import datetime as dt
     import statistics
 
@@ -92,18 +157,11 @@ def profile(specs, repeats: int, solvers) -> None:
             t0 = time.perf_counter()
             sim.prepare_case(case)
             prep_cold = time.perf_counter() - t0
-            r = sim.simulate(case)  # compile
-            runs = []
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                r = sim.simulate(case)
-                total = time.perf_counter() - t0
-                tm = r.timings
-                newton_s = tm["seconds"]
-                runs.append({"total": total, "tangent": tm["t_tangent"], "factor": tm["t_factor"],
-                             "solve": tm["t_solve"], "residuals": tm["t_line"],
-                             "newton_other": newton_s - tm["t_tangent"] - tm["t_factor"] - tm["t_solve"] - tm["t_line"],
-                             "outside": total - newton_s})
+            sim.simulate(case)  # compile
+            r, runs = _lvcore_runs(case, repeats)
+            if pulse is not None:  # pulse between two rounds of lvcore solves: one window for both
+                pulse_runs.extend(_pulse_runs(pulse, pulse_mesh_mm, pulse_repeats))
+                runs += _lvcore_runs(case, repeats)[1]
             med = {k: statistics.median(x[k] for x in runs) for k in runs[0]}
             rows.append((resolution_label(spec), r.dofs, solver, r, prep_cold, med))
             print(f"  done {spec} {solver}: {med['total']:.3f} s", file=sys.stderr, flush=True)
@@ -128,6 +186,7 @@ def profile(specs, repeats: int, solvers) -> None:
                             r.timings["tangents"], ordering))
     os.environ.pop(linear.BACKEND_ENV, None)
     load1 = "/".join(f"{v:.1f}" for v in os.getloadavg())
+    pulse_s = statistics.median(r["solve_s"] for r in pulse_runs) if pulse_runs else PULSE_RECORDED_S
     print(f"Land 2015 problem 2 per-phase profile, {when}; load average (1/5/15 min) {load0} -> {load1}; "
           f"median of {repeats} warm solves; 2-core machine shared with other jobs: compare within the table.")
     print(f"Reference apex z: endo {P2_REF['endo']}, epi {P2_REF['epi']} mm.\n")
@@ -146,8 +205,19 @@ def profile(specs, repeats: int, solvers) -> None:
         print(f"| {label} | {dofs} | {solver} | {e:+.3f} | {p:+.3f} | {m['total']:.3f} | {pct('tangent')} | "
               f"{pct('factor')} | {pct('solve')} | {pct('residuals')} | {pct('newton_other')} | {pct('outside')} | "
               f"{r.newton_iterations} / {tm['tangents']} / {tm['residuals']} / {r.load_steps} | {prep_cold:.3f} | "
-              f"{PULSE_RECORDED_S / m['total']:.0f}x |")
-    print(f"\nvs pulse: {_pulse_note()}; the ratio is that time over lvcore's median total.")
+              f"{pulse_s / m['total']:.0f}x |")
+    if pulse_runs:
+        print(f"\nvs pulse: measured here, alternating with lvcore (pulse between two rounds of {repeats} lvcore "
+              f"solves per row): the ratio is pulse's median warm solve over lvcore's median total.\n")
+        print("| pulse solve | mesh (mm) | dofs | endo err (mm) | epi err (mm) | set-up (s) | solve (s) |")
+        print("|---|---|---|---|---|---|---|")
+        for i, pr in enumerate(pulse_runs):
+            print(f"| {i + 1} | {pr['size_mm']} | {pr['dofs']} | {pr['endo_apex_z'] - P2_REF['endo']:+.3f} | "
+                  f"{pr['epi_apex_z'] - P2_REF['epi']:+.3f} | {pr['setup_s']:.2f} | {pr['solve_s']:.2f} |")
+        print("\npulse 2025.0.0 (legacy dolfin 2019.2), its defaults (Taylor-Hood P2/P1, MUMPS, Newton tolerances "
+              "1e-5, quadrature degree 4) on straight-sided tetrahedra; its apex error on that mesh is in the table.")
+    else:
+        print(f"\nvs pulse: {_pulse_note()}; the ratio is that time over lvcore's median total.")
     if sym:
         print(f"\nCHOLMOD ({linear.cholmod_mode()}) symbolic analysis (once per sparsity pattern, reused) vs numeric "
               "factorisation (each tangent):\n")
@@ -168,9 +238,15 @@ def main(argv=None):
                     help="per-phase profile of problem 2 at these resolutions (NC,NL,NT[,GP]); no other table")
     ap.add_argument("--repeats", type=int, default=5, help="--profile: warm solves per configuration")
     ap.add_argument("--solvers", nargs="*", default=["cholmod", "superlu"], help="--profile: sparse solvers")
+    ap.add_argument("--pulse-python", default=None, metavar="PY",
+                    help="--profile: a Python with legacy dolfin and fenics-pulse; pulse then solves problem 2 here, "
+                         "alternating with lvcore (benchmarks/pulse_land2015.py says how to install it)")
+    ap.add_argument("--pulse-mesh-mm", type=float, default=PULSE_MESH_MM, help="--pulse-python: tetrahedron size (mm)")
+    ap.add_argument("--pulse-repeats", type=int, default=2, help="--pulse-python: warm pulse solves per row")
     a = ap.parse_args(argv)
     if a.profile is not None:
-        profile(a.profile or ["6,4+2+2+4,1,5", "6,4+2+2+4,1,3"], a.repeats, a.solvers)
+        profile(a.profile or ["6,4+2+2+4,1,5", "6,4+2+2+4,1,3"], a.repeats, a.solvers, a.pulse_python,
+                a.pulse_mesh_mm, a.pulse_repeats)
         return 0
     from lvcore.mechanics.linear import available_backends
 
