@@ -34,6 +34,26 @@ def test_symmetric_solve_definite_and_indefinite(shift):
         np.testing.assert_allclose(f.solve(b), x, rtol=1e-12)
 
 
+@pytest.mark.skipif("cholmod" not in linear.available_backends(), reason="CHOLMOD (scikit-sparse) not installed")
+@pytest.mark.parametrize("mode", ["supernodal", "simplicial"])
+def test_require_definite_refuses_an_indefinite_matrix_in_either_mode(monkeypatch, mode):
+    monkeypatch.setenv(linear.CHOLMOD_MODE_ENV, mode)
+    b = np.ones(60)
+    with pytest.raises(linear.NotPositiveDefinite, match="not positive definite"):
+        linear.factorize(_spd_plus_shift(shift=2.5), symmetric=True, cache={}, require_definite=True)
+    A = _spd_plus_shift()  # definite: factorised as usual
+    f = linear.factorize(A, symmetric=True, cache={}, require_definite=True)
+    assert f.factorisation == mode
+    np.testing.assert_allclose(A @ f.solve(b), b, atol=1e-9)
+
+
+def test_require_definite_is_ignored_by_superlu():
+    A = _spd_plus_shift(shift=2.5)
+    f = linear.factorize(A, backend="superlu", symmetric=True, require_definite=True)  # cannot tell: factorises
+    b = np.ones(A.shape[0])
+    np.testing.assert_allclose(A @ f.solve(b), b, atol=1e-9)
+
+
 def test_unstable_ldl_falls_back_to_pivoting():
     # [[0, 1], [1, 0]] has a zero leading pivot: LDLT without pivoting cannot factor it
     A = sp.csr_matrix(np.array([[1e-30, 1.0, 0.0], [1.0, 1e-30, 0.0], [0.0, 0.0, 2.0]]))

@@ -152,6 +152,10 @@ def _as_csc(K, symmetric):
     return sp.csc_matrix(K)
 
 
+class NotPositiveDefinite(ValueError):
+    """A factorisation asked for a positive definite matrix (``require_definite``) and found it indefinite."""
+
+
 class Factorization:
     """A factorised matrix; call :meth:`solve` (1-D or 2-D right-hand sides).
 
@@ -162,9 +166,14 @@ class Factorization:
     symmetric : whether K is symmetric.
     cache : optional dict owned by K's sparsity pattern; with CHOLMOD the
         symbolic analysis is stored there and reused for matrices of that pattern.
+    require_definite : with CHOLMOD, raise :class:`NotPositiveDefinite` for a symmetric
+        matrix that is not positive definite instead of factorising it with LDLᵀ (or
+        SuperLU): the caller has a better way on (Newton cuts the load step) and skips
+        the slower indefinite factorisation. SuperLU cannot tell and factorises.
     """
 
-    def __init__(self, K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None):
+    def __init__(self, K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None,
+                 require_definite: bool = False):
         self.backend = backend or default_backend()
         self._lu = None
         self._chol = None
@@ -178,10 +187,14 @@ class Factorization:
                     self._chol = _analysis(A, mode, cache).cholesky(A)  # a copy: stays valid after later ones
                     self.factorisation = mode
                     if mode == "simplicial":  # LDLᵀ without pivoting: its solves check their backward error
+                        if require_definite and not np.all(self._chol.D() > 0):
+                            raise NotPositiveDefinite("the matrix is not positive definite (LDLᵀ)")
                         self._norm_A = float(abs(A).sum(axis=0).max())  # = ‖A‖∞ for symmetric A
                     return
                 except CholmodNotPositiveDefiniteError:
                     # supernodal LLᵀ: not positive definite (LDLᵀ next); simplicial LDLᵀ: a zero pivot
+                    if require_definite:
+                        raise NotPositiveDefinite(f"the matrix is not positive definite ({mode} Cholesky)") from None
                     continue
         self._superlu()
 
@@ -212,6 +225,10 @@ class Factorization:
         return self._lu.solve(b)
 
 
-def factorize(K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None) -> Factorization:
-    """Factorise ``K`` with the fastest available backend (``symmetric=False``: SuperLU, partial pivoting)."""
-    return Factorization(K, backend, symmetric, cache)
+def factorize(K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None,
+              require_definite: bool = False) -> Factorization:
+    """Factorise ``K`` with the fastest available backend (``symmetric=False``: SuperLU, partial pivoting).
+
+    ``require_definite``: see :class:`Factorization`.
+    """
+    return Factorization(K, backend, symmetric, cache, require_definite)

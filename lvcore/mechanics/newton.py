@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lvcore.mechanics.linear import factorize
+from lvcore.mechanics.linear import NotPositiveDefinite, factorize
 
 _DEBUG = bool(os.environ.get("LVCORE_NEWTON_DEBUG"))
 
@@ -50,6 +50,14 @@ class NewtonOptions:
         for a fresh tangent instead of cutting the step unless ``cut_on_predictor``).
         Switched off for the rest of the solve after the first failed load step
         (on hard paths it could lead Newton astray: 2 of 256 sweep points failed).
+    cut_on_indefinite : a load step from a loaded state whose first fresh tangent is not positive
+        definite (the load stiffness of the larger pressure outweighs the material's) is cut at
+        once, before its indefinite factorisation (simplicial LDLᵀ, ~4× the supernodal LLᵀ) and
+        line search; CHOLMOD only (SuperLU cannot tell). Once per solve: where the equilibrium
+        path itself has indefinite tangents, later steps factorise them as before. Steps from
+        the unloaded state are exempt: there an indefinite tangent often still gives a good step
+        (the default LV's first step, damped to 0.51), while on Land problem 2 the one from a
+        loaded state was cut anyway (damped to 0.05).
     cold_fallback : with a warm start (``solve(initial=...)``) that does not
         converge, restart from zero load (True, the default) or return the
         failure at once (False: the caller has a cheaper way on, e.g. a
@@ -70,6 +78,7 @@ class NewtonOptions:
     reuse_ratio: float = 0.3
     chord_predictor: bool = True
     cut_on_predictor: bool = False
+    cut_on_indefinite: bool = True
     cold_fallback: bool = True
 
 
@@ -144,8 +153,10 @@ def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
     return (True,) + best
 
 
-def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reuse=None):
+def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reuse=None, lam_from=0.0):
     """Newton iterations at fixed load factor. Returns (ok, u, p, reason, last).
+
+    ``lam_from``: the load factor of the converged state the step starts from (0: unloaded).
 
     ``reuse``: optional ``(factorisation, D)`` of an earlier tangent (the last
     one of the previous load step) for the first iteration, a chord
@@ -187,12 +198,21 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
         t0 = time.perf_counter()
         try:
             if not chord:
-                fac = factorize(K, symmetric=system.potential, cache=system.pattern.cache)
+                # the first tangent of a load step that can be cut, from a loaded state, must be positive
+                # definite (see NewtonOptions.cut_on_indefinite): else the step is cut before the slower
+                # indefinite factorisation and its line search
+                fac = factorize(K, symmetric=system.potential, cache=system.pattern.cache,
+                                require_definite=first and can_cut and opts.cut_on_indefinite and lam_from > 0
+                                and not stats.get("indefinite_cuts"))
                 last = (fac, D)
                 t1 = time.perf_counter()
                 stats["t_factor"] += t1 - t0
                 t0 = t1
             du = -fac.solve(rhs)
+        except NotPositiveDefinite:
+            stats["t_factor"] += time.perf_counter() - t0
+            stats["indefinite_cuts"] = stats.get("indefinite_cuts", 0) + 1
+            return False, u, p, "load step too large (tangent not positive definite)", last
         except RuntimeError as exc:  # singular factor
             return False, u, p, f"linear solve failed: {exc}", last
         stats["t_solve"] += time.perf_counter() - t0
@@ -293,7 +313,7 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
             stats["residuals"] += 1
         ok, u_new, p_new, reason, last = _newton_at(system, u_start, p_start, target, *tolerances(rtol),
                                                     opts, stats, can_cut=step > 4 * opts.min_step,
-                                                    reuse=carry if predict else None)
+                                                    reuse=carry if predict else None, lam_from=lam)
         if ok:
             prev = (lam, u, p)
             u, p, lam = u_new, p_new, target
@@ -303,6 +323,8 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
                 step = min(1.0, step * opts.grow)
         else:
             last_reason = reason
+            if _DEBUG:
+                print(f"  cut at lam {target:.4f}: {reason}")
             predict = False  # a hard path: no chord predictor from here on (it can lead Newton astray)
             cuts += 1
             step *= 0.5
