@@ -6,22 +6,17 @@ answers like ``benchmarks/pulse_land2015.py``.
 """
 from __future__ import annotations
 
-import importlib.util
 import stat
 import sys
-from pathlib import Path
 
 import pytest
+from repo_scripts import load_script
 
 pytest.importorskip("gmsh")
 
 
 def _bench():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "land2015.py"
-    spec = importlib.util.spec_from_file_location("land2015_bench", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/land2015.py")
 
 
 def _stand_in(tmp_path, body: str) -> str:

@@ -9,21 +9,16 @@ theta lie in the 90 % intervals with a's q95/q05 < 20, or the run exits with
 """
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
+from repo_scripts import load_script
 
 pytestmark = pytest.mark.slow
 
 
 def _bench():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "real_data.py"
-    spec = importlib.util.spec_from_file_location("real_data_bench", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/real_data.py")
 
 
 def test_small_subject_is_covered_or_flagged(tmp_path):

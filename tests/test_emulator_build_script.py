@@ -1,20 +1,14 @@
 """scripts/build_emulators.py end to end on a tiny real campaign (FE simulator, fast mesh)."""
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
 from lvcore.campaigns.store import read_store
-
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "build_emulators.py"
+from repo_scripts import load_script
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("build_emulators", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("scripts/build_emulators.py")
 
 
 @pytest.mark.slow

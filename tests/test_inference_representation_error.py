@@ -1,7 +1,6 @@
 """The shape model's representation error: statistics, the bundled asset and the infer-mode likelihood."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -9,6 +8,7 @@ import numpy as np
 import pytest
 
 from lvcore.exceptions import DataError
+from repo_scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -121,11 +121,7 @@ def test_infer_mode_models_and_measures_use_the_floor():
 
 
 def _script():
-    path = ROOT / "scripts" / "build_representation_error.py"
-    spec = importlib.util.spec_from_file_location("build_representation_error", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("scripts/build_representation_error.py")
 
 
 @pytest.mark.slow

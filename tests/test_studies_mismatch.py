@@ -4,6 +4,7 @@ import pytest
 
 from lvcore.mechanics.case import Case
 from lvcore.studies import mismatch as mm
+from repo_scripts import load_script
 
 THETA = {"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}
 H = (0.5, -0.4, 0.3, -0.2, 0.1)
@@ -240,14 +241,7 @@ def test_verdict_rows_take_the_convergence_check_in_place_of_the_main_rows(misma
 
 
 def _ship_script():
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "scripts" / "ship_mismatch.py"
-    spec = importlib.util.spec_from_file_location("ship_mismatch", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("scripts/ship_mismatch.py")
 
 
 def test_carry_over_fills_only_not_fitted_doses_of_the_same_design(mismatch_result, tmp_path):
