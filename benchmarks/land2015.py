@@ -191,7 +191,8 @@ def profile(specs, repeats: int, solvers, pulse: str | None = None, pulse_mesh_m
     load1 = "/".join(f"{v:.1f}" for v in os.getloadavg())
     pulse_s = statistics.median(r["solve_s"] for r in pulse_runs) if pulse_runs else PULSE_RECORDED_S
     print(f"Land 2015 problem 2 per-phase profile, {when}; load average (1/5/15 min) {load0} -> {load1}; "
-          f"median of {repeats} warm solves; 2-core machine shared with other jobs: compare within the table.")
+          f"median of {2 * repeats if pulse_runs else repeats} warm solves (lvcore); 2-core machine shared with other "
+          "jobs: compare within the table.")
     print(f"Reference apex z: endo {P2_REF['endo']}, epi {P2_REF['epi']} mm.\n")
     print("| resolution | dofs | solver | endo err (mm) | epi err (mm) | total (s) | tangent assembly | numeric "
           "factorisation | back-subst. | residuals (line search) | Newton other | outside Newton (outputs, set-up) "
