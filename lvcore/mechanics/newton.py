@@ -130,6 +130,9 @@ def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
     directional derivative of the energy for a potential load): the full step is taken unless it overshoots the
     root by much (``g(1) > 0.5 |g(0)|``), in which case secant steps
     towards the root are taken.
+
+    Returns ``(found, alpha, u, p, r_u, r_p, min J, condensed residual with D)`` of the chosen state
+    (the last, for a chord iteration on the same D, is its right-hand side).
     """
     g0 = float(du @ rhs)
     alpha, lo, g_lo = 1.0, 0.0, g0
@@ -141,15 +144,16 @@ def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
         if not (mjt > opts.min_jacobian and np.all(np.isfinite(rut)) and np.all(np.isfinite(rpt))):
             alpha = lo + 0.5 * (alpha - lo)
             continue
-        best = (alpha, ut, pt, rut, rpt, mjt)
-        g = float(du @ system.condensed(rut, rpt, D))
+        condensed = system.condensed(rut, rpt, D)
+        best = (alpha, ut, pt, rut, rpt, mjt, condensed)
+        g = float(du @ condensed)
         if g0 >= 0 or g <= 0.5 * abs(g0):
             break
         # overshoot: secant root between lo (g_lo < 0) and alpha (g > 0)
         a_new = lo + (alpha - lo) * g_lo / (g_lo - g)
         alpha = float(np.clip(a_new, lo + 0.1 * (alpha - lo), lo + 0.9 * (alpha - lo)))
     if best is None:
-        return False, 0.0, u, p, None, None, 0.0
+        return False, 0.0, u, p, None, None, 0.0, None
     return (True,) + best
 
 
@@ -176,6 +180,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
         r_u, r_p, mj, _ = system.residual(u, p, lam, energy=False)
         stats["residuals"] += 1
     last = reuse
+    cond = None  # (D, r_u + κ Dᵀ M⁻¹ r_p) of the current state, from the line search that accepted it
     first = True  # the first accepted iteration of this load step decides a cut
     for it in range(opts.max_iterations):
         if r_u is not None and not (np.all(np.isfinite(r_u)) and np.all(np.isfinite(r_p))):
@@ -186,7 +191,8 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
         t0 = time.perf_counter()
         if chord:
             fac, D = reuse
-            rhs = system.condensed(r_u, r_p, D)
+            # the line search that accepted (u, p) condensed its residual with this D already
+            rhs = cond[1] if cond is not None and cond[0] is D else system.condensed(r_u, r_p, D)
         else:
             rhs, K, D, r_p = system.tangent(u, p, lam)
             stats["tangents"] += 1
@@ -221,7 +227,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
             return False, u, p, "non-finite Newton step", last
         dp = system.pressure_increment(du, D, r_p)
         t0 = time.perf_counter()
-        found, alpha, ut, pt, rut, rpt, mjt = _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats)
+        found, alpha, ut, pt, rut, rpt, mjt, cvec = _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats)
         stats["t_line"] += time.perf_counter() - t0
         if not found:
             if chord:  # retry from the same state with a fresh tangent
@@ -244,6 +250,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
         contracted = alpha == 1.0 and np.linalg.norm(rut) <= opts.reuse_ratio * np.linalg.norm(r_u)
         reuse = (fac, D) if contracted and opts.reuse_ratio > 0 else None
         u, p, r_u, r_p = ut, pt, rut, rpt
+        cond = (D, cvec)
         if np.linalg.norm(r_u) <= tol_u and np.max(np.abs(r_p)) <= tol_p:
             return True, u, p, "", last
     return False, u, p, f"no convergence in {opts.max_iterations} iterations", last

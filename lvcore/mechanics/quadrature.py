@@ -71,6 +71,30 @@ def p1_basis(xi: np.ndarray) -> np.ndarray:
     return np.concatenate([np.ones((xi.shape[0], 1)), xi], axis=1)
 
 
+def reference_jacobians(nodes: np.ndarray, elements: np.ndarray, order: int = 3, points=None):
+    """Reference shape gradients, inverse Jacobians and integration weights of the elements.
+
+    Parameters
+    ----------
+    nodes : (n_nodes, 3) reference positions (mm).
+    elements : (n_el, 27) connectivity.
+    order : Gauss points per direction.
+    points : optional (xi (q, 3), w (q,)) rule used instead of the Gauss rule.
+
+    Returns
+    -------
+    dNdxi : (n_q, 27, 3) shape-function gradients in reference coordinates (-), the same for every element.
+    Jinv : (n_el, n_q, 3, 3) inverse Jacobians ``Jinv[e, q, K, J] = ∂ξ_K/∂X_J`` (1/mm), so
+        ``∂N_a/∂X_J = Σ_K ∂N_a/∂ξ_K Jinv_KJ``.
+    wdet : (n_el, n_q) quadrature weight times det(dX/dxi) (mm³).
+    """
+    xi, w = gauss_hex(order) if points is None else points
+    _, dN = lagrange_q2_shape(xi, derivatives=True)  # (q, 27, 3)
+    X = nodes[elements]  # (e, 27, 3)
+    Jm = np.einsum("eai,qaj->eqij", X, dN, optimize=True)  # dX_i/dxi_j
+    return dN, np.linalg.inv(Jm), w[None, :] * np.linalg.det(Jm)
+
+
 def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3, points=None):
     """Shape-function gradients and integration weights in the reference configuration.
 
@@ -88,10 +112,6 @@ def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3,
     detJ : (n_el, n_q) det(dX/dxi), for checking element validity.
     """
     xi, w = gauss_hex(order) if points is None else points
-    _, dN = lagrange_q2_shape(xi, derivatives=True)  # (q, 27, 3)
-    X = nodes[elements]  # (e, 27, 3)
-    Jm = np.einsum("eai,qaj->eqij", X, dN, optimize=True)  # dX_i/dxi_j
-    det = np.linalg.det(Jm)
-    inv = np.linalg.inv(Jm)  # dxi_j/dX_i as inv[j, i]
+    dN, inv, wdet = reference_jacobians(nodes, elements, points=(xi, w))
     dNdX = np.matmul(dN[None], inv)  # sum_j dN[q, a, j] inv[e, q, j, i]; 3x faster than the plain einsum
-    return dNdX, w[None, :] * det, det
+    return dNdX, wdet, wdet / w[None, :]

@@ -31,7 +31,7 @@ from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern
 from lvcore.mechanics.element import element_residual, element_tangent
 from lvcore.mechanics.materials import ConstitutiveModel
 from lvcore.mechanics.mesh import FEMesh
-from lvcore.mechanics.quadrature import p1_basis, reference_gradients
+from lvcore.mechanics.quadrature import p1_basis, reference_jacobians
 
 #: Elements per batch in the element loops (lax.map); bounds peak memory. Small
 #: batches keep the per-element 81x81 tangents in cache: on the 2-core CPU
@@ -42,15 +42,15 @@ ELEMENT_BATCH = 8
 
 
 def _elem_args(data, x, p):
-    return (x[data["elements"]], p, data["dNdX"], data["wdet"], data["frames"], data["Minv"], data["scale"])
+    return (x[data["elements"]], p, data["Jinv"], data["wdet"], data["frames"], data["Minv"], data["scale"])
 
 
 def _map_elements(fn, data, x, p, model, **kw):
-    P = data["P"]
+    P, dNdxi = data["P"], data["dNdxi"]
 
     def one(args):
         *a, s = args
-        return fn(*a, P, model.scaled(s), **kw)
+        return fn(*a, P, dNdxi, model.scaled(s), **kw)
 
     return jax.lax.map(one, _elem_args(data, x, p), batch_size=min(data["elements"].shape[0], ELEMENT_BATCH))
 
@@ -154,7 +154,7 @@ class DiscreteSystem:
             raise ValueError(f"load surface {load_surface!r} not in mesh surfaces {sorted(mesh.surfaces)}")
         faces = np.ascontiguousarray(mesh.surfaces[load_surface], dtype=np.int64)
         xi, w = mesh.quadrature
-        dNdX, wdet, _ = reference_gradients(mesh.nodes, mesh.elements, points=(xi, w))
+        dNdxi, Jinv, wdet = reference_jacobians(mesh.nodes, mesh.elements, points=(xi, w))
         P = p1_basis(xi)
         M = np.einsum("eq,qm,qn->emn", wdet, P, P)
         elements = np.ascontiguousarray(mesh.elements, dtype=np.int64)
@@ -179,11 +179,11 @@ class DiscreteSystem:
         )
         self.spring_faces, self.spring_K = spring_faces, spring_K
         self.wdet = wdet
-        self.dNdX = dNdX
         self.data = {
             "X": jnp.asarray(mesh.nodes),
             "elements": jnp.asarray(elements),
-            "dNdX": jnp.asarray(dNdX),
+            "Jinv": jnp.asarray(Jinv),
+            "dNdxi": jnp.asarray(dNdxi),
             "wdet": jnp.asarray(wdet),
             "frames": jnp.asarray(frames),
             "Minv": jnp.asarray(np.linalg.inv(M)),
