@@ -117,3 +117,30 @@ def test_supernodal_ordering_keeps_a_banded_numbering_and_reorders_a_scrambled_o
         assert f.factorisation == "supernodal"
         ref = linear.factorize(A, backend="superlu", symmetric=True).solve(b)
         np.testing.assert_allclose(f.solve(b), ref, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", linear.available_backends())
+@pytest.mark.parametrize("shift", [0.0, 2.5])
+def test_upper_triangle_solves_like_the_whole_matrix(backend, shift):
+    # definite (LLT), indefinite (LDLT with its backward-error check on the whole matrix) and SuperLU
+    A = _spd_plus_shift(shift=shift)
+    b = np.arange(A.shape[0], dtype=float)
+    x = linear.factorize(A, backend=backend, symmetric=True, cache={}).solve(b)
+    f = linear.factorize(sp.triu(A).tocsr(), backend=backend, symmetric=True, cache={}, triangle=True)
+    np.testing.assert_allclose(f.solve(b), x, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(A @ f.solve(b), b, atol=1e-9 * np.abs(b).max())
+
+
+def test_upper_triangle_falls_back_to_pivoting_on_the_whole_matrix():
+    A = sp.csr_matrix(np.array([[1e-30, 1.0, 0.0], [1.0, 1e-30, 0.0], [0.0, 0.0, 2.0]]))
+    f = linear.factorize(sp.triu(A).tocsr(), symmetric=True, triangle=True)
+    np.testing.assert_allclose(f.solve(np.array([1.0, 2.0, 4.0])), [2.0, 1.0, 2.0], rtol=1e-12)
+    assert f.backend == "superlu"
+
+
+def test_upper_triangle_needs_a_symmetric_csr_matrix():
+    A = _spd_plus_shift()
+    with pytest.raises(ValueError, match="upper triangle of a symmetric matrix"):
+        linear.factorize(sp.triu(A).tocsc(), symmetric=True, triangle=True)
+    with pytest.raises(ValueError, match="upper triangle of a symmetric matrix"):
+        linear.factorize(sp.triu(A).tocsr(), symmetric=False, triangle=True)

@@ -113,7 +113,8 @@ def _factor_entries(A, ordering: str) -> int:
     """
     B = A.copy().tocsc()
     B.data = np.full(B.data.shape, -1.0)
-    B = B + sp.diags(np.asarray(abs(B).sum(axis=1)).ravel() + 1.0)
+    # row plus column sums: diagonally dominant whether A holds the whole pattern or one triangle of it
+    B = B + sp.diags(np.asarray(abs(B).sum(axis=1)).ravel() + np.asarray(abs(B).sum(axis=0)).ravel() + 1.0)
     return int(_cholmod_analyze(B, mode="supernodal", ordering_method=ordering).cholesky(B).L().nnz)
 
 
@@ -170,15 +171,22 @@ class Factorization:
         matrix that is not positive definite instead of factorising it with LDLᵀ (or
         SuperLU): the caller has a better way on (Newton cuts the load step) and skips
         the slower indefinite factorisation. SuperLU cannot tell and factorises.
+    triangle : K (CSR, symmetric) holds its upper triangle only
+        (:meth:`lvcore.mechanics.system.DiscreteSystem.tangent` with ``triangle=True``): CHOLMOD
+        reads nothing else; the whole matrix is formed only where a solve needs it (the
+        backward-error check of LDLᵀ, SuperLU).
     """
 
     def __init__(self, K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None,
-                 require_definite: bool = False):
+                 require_definite: bool = False, triangle: bool = False):
+        if triangle and not (symmetric and sp.isspmatrix_csr(K)):
+            raise ValueError("triangle=True takes the upper triangle of a symmetric matrix in CSR form")
         self.backend = backend or default_backend()
         self._lu = None
         self._chol = None
         self._symmetric = symmetric
-        self._A = A = _as_csc(K, symmetric)
+        self._A = A = _as_csc(K, symmetric)  # a CSR upper triangle read as CSC: the lower one
+        self._triangle = triangle
         self.shape = A.shape
         if self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
             modes = ("supernodal", "simplicial") if cholmod_mode() == "supernodal" else ("simplicial",)
@@ -189,7 +197,7 @@ class Factorization:
                     if mode == "simplicial":  # LDLᵀ without pivoting: its solves check their backward error
                         if require_definite and not np.all(self._chol.D() > 0):
                             raise NotPositiveDefinite("the matrix is not positive definite (LDLᵀ)")
-                        self._norm_A = float(abs(A).sum(axis=0).max())  # = ‖A‖∞ for symmetric A
+                        self._norm_A = float(abs(self._matrix()).sum(axis=0).max())  # = ‖A‖∞ for symmetric A
                     return
                 except CholmodNotPositiveDefiniteError:
                     # supernodal LLᵀ: not positive definite (LDLᵀ next); simplicial LDLᵀ: a zero pivot
@@ -201,12 +209,20 @@ class Factorization:
     #: CHOLMOD factorisation used ("supernodal" or "simplicial"; "" for SuperLU).
     factorisation: str = ""
 
+    def _matrix(self):
+        """The whole matrix (CSC), formed from its lower triangle on first use where only that was given."""
+        if self._triangle:
+            A = self._A
+            self._A = (A + A.T - sp.diags(A.diagonal())).tocsc()
+            self._triangle = False
+        return self._A
+
     def _superlu(self):
         self.backend = "superlu"
         self.factorisation = ""
         self._chol = None
         if self._symmetric:
-            self._lu = spla.splu(self._A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
+            self._lu = spla.splu(self._matrix(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
                                  options={"SymmetricMode": True})
         else:
             self._lu = spla.splu(self._A)
@@ -217,7 +233,7 @@ class Factorization:
             if self.factorisation == "supernodal":
                 # LLᵀ of a positive definite matrix is backward stable (no pivoting needed): no check
                 return x
-            r = self._A @ x - b
+            r = self._matrix() @ x - b
             denom = self._norm_A * np.max(np.abs(x)) + np.max(np.abs(b))
             if np.all(np.isfinite(x)) and np.max(np.abs(r)) <= BACKWARD_ERROR_TOL * denom:
                 return x
@@ -226,9 +242,9 @@ class Factorization:
 
 
 def factorize(K, backend: str | None = None, symmetric: bool = True, cache: dict | None = None,
-              require_definite: bool = False) -> Factorization:
+              require_definite: bool = False, triangle: bool = False) -> Factorization:
     """Factorise ``K`` with the fastest available backend (``symmetric=False``: SuperLU, partial pivoting).
 
-    ``require_definite``: see :class:`Factorization`.
+    ``require_definite``, ``triangle``: see :class:`Factorization`.
     """
-    return Factorization(K, backend, symmetric, cache, require_definite)
+    return Factorization(K, backend, symmetric, cache, require_definite, triangle)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lvcore.mechanics.linear import NotPositiveDefinite, factorize
+from lvcore.mechanics.linear import NotPositiveDefinite, default_backend, factorize
 
 _DEBUG = bool(os.environ.get("LVCORE_NEWTON_DEBUG"))
 
@@ -179,6 +179,8 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
     if reuse is not None:  # else the first iteration's tangent kernel gives the residuals
         r_u, r_p, mj, _ = system.residual(u, p, lam, energy=False)
         stats["residuals"] += 1
+    # a symmetric tangent goes to CHOLMOD as its upper triangle (half the entries to assemble)
+    triangle = system.potential and default_backend() == "cholmod"
     last = reuse
     cond = None  # (D, r_u + κ Dᵀ M⁻¹ r_p) of the current state, from the line search that accepted it
     first = True  # the first accepted iteration of this load step decides a cut
@@ -194,7 +196,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
             # the line search that accepted (u, p) condensed its residual with this D already
             rhs = cond[1] if cond is not None and cond[0] is D else system.condensed(r_u, r_p, D)
         else:
-            rhs, K, D, r_p = system.tangent(u, p, lam)
+            rhs, K, D, r_p = system.tangent(u, p, lam, triangle=triangle)
             stats["tangents"] += 1
             if r_u is None:  # r_u = rhs − κ Dᵀ M⁻¹ r_p (the condensed part taken off again)
                 r_u = rhs - system.condensed(np.zeros_like(rhs), r_p, D)
@@ -207,7 +209,8 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
                 # the first tangent of a load step that can be cut, from a loaded state, must be positive
                 # definite (see NewtonOptions.cut_on_indefinite): else the step is cut before the slower
                 # indefinite factorisation and its line search
-                fac = factorize(K, symmetric=system.potential, cache=system.pattern.cache,
+                fac = factorize(K, symmetric=system.potential, cache=system.tangent_pattern(triangle).cache,
+                                triangle=triangle,
                                 require_definite=first and can_cut and opts.cut_on_indefinite and lam_from > 0
                                 and not stats.get("indefinite_cuts"))
                 last = (fac, D)

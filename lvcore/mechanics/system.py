@@ -96,31 +96,45 @@ def _external_load(pressure, data, potential):
     return jnp.zeros_like(x).at[data["faces"]].add(_external_forces(data, x, pressure, potential))
 
 
-@partial(jax.jit, static_argnames=("potential",))
-def _tangent(u, p, pressure, model, data, potential):
+def _upper_triangle(M):
+    """The raveled upper triangles (row-major, ``np.triu_indices``) of square matrices (..., m, m)."""
+    i, j = np.triu_indices(M.shape[-1])
+    return M[..., i, j]
+
+
+def _element_tangent_triangle(*args):
+    rhs, K, D, r_p = element_tangent(*args)
+    return rhs, _upper_triangle(K), D, r_p
+
+
+@partial(jax.jit, static_argnames=("potential", "triangle"))
+def _tangent(u, p, pressure, model, data, potential, triangle=False):
     """Condensed residual, element tangents (n_el, 81, 81), load-face stiffnesses (f, 27, 27), D, r_p.
 
+    ``triangle``: the element and face matrices as their raveled upper triangles, (n_el, 3321) and
+    (f, 378) (a symmetric tangent; taken inside the element loop, so half the entries leave it).
     The sum into the sparse pattern is done outside (:meth:`DiscreteSystem.tangent`: a SciPy sparse
     product, ~4x faster on the CPU than XLA's ``segment_sum``).
     """
     x = data["X"] + u.reshape(-1, 3)
-    rhs, K, D, r_p = _map_elements(element_tangent, data, x, p, model)
+    rhs, K, D, r_p = _map_elements(_element_tangent_triangle if triangle else element_tangent, data, x, p, model)
     R = jnp.zeros_like(x).at[data["elements"]].add(rhs.reshape(-1, 27, 3))
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
     R = R.at[data["spring_faces"]].add(_spring_forces(data, u))
     Ks = -_external_stiffness(data, x, pressure, potential)
-    return R.ravel(), K, Ks, D, r_p
+    return R.ravel(), K, _upper_triangle(Ks) if triangle else Ks, D, r_p
 
 
-@lru_cache(maxsize=16)
-def _pattern_cached(key, n_dofs, fixed_bytes, el_bytes, el_shape, f_bytes, f_shape, s_bytes=b"", s_shape=(0, 9)):
+@lru_cache(maxsize=32)
+def _pattern_cached(key, n_dofs, fixed_bytes, el_bytes, el_shape, f_bytes, f_shape, s_bytes=b"", s_shape=(0, 9),
+                    triangle=False):
     fixed = np.frombuffer(fixed_bytes, dtype=np.int64)
     el = np.frombuffer(el_bytes, dtype=np.int64).reshape(el_shape)
     fa = np.frombuffer(f_bytes, dtype=np.int64).reshape(f_shape)
     blocks = [block_dofs(el), block_dofs(fa)]
     if s_shape[0]:
         blocks.append(block_dofs(np.frombuffer(s_bytes, dtype=np.int64).reshape(s_shape)))
-    return build_pattern(n_dofs, fixed, blocks)
+    return build_pattern(n_dofs, fixed, blocks, triangle)
 
 
 class DiscreteSystem:
@@ -172,11 +186,12 @@ class DiscreteSystem:
             spring_faces = np.ascontiguousarray(mesh.surfaces[surf], dtype=np.int64)
             spring_K = robin.face_stiffness(mesh.nodes[spring_faces], k, direction)
             self.spring = (surf, k, direction)
-        self.pattern: SparsityPattern = _pattern_cached(
-            (mesh.topology_key(), load_surface, None if self.spring is None else self.spring[0]), mesh.n_dofs,
-            fixed.tobytes(), elements.tobytes(), elements.shape, faces.tobytes(), faces.shape,
-            spring_faces.tobytes(), spring_faces.shape,
-        )
+        pattern_args = ((mesh.topology_key(), load_surface, None if self.spring is None else self.spring[0]),
+                        mesh.n_dofs, fixed.tobytes(), elements.tobytes(), elements.shape, faces.tobytes(), faces.shape,
+                        spring_faces.tobytes(), spring_faces.shape)
+        self.pattern: SparsityPattern = _pattern_cached(*pattern_args)
+        #: The upper-triangle pattern of a symmetric tangent (pressure potential), built on first use.
+        self._triangle_pattern = partial(_pattern_cached, *pattern_args, triangle=True) if self.potential else None
         self.spring_faces, self.spring_K = spring_faces, spring_K
         self.wdet = wdet
         self.data = {
@@ -256,21 +271,39 @@ class DiscreteSystem:
                                   self.model, self.data, potential=self.potential, energy=energy)
         return np.asarray(R)[self.free], np.asarray(r_p), float(mj), float(w) if energy else None
 
-    def tangent(self, u_free, p, load_factor: float):
-        """Condensed system: (rhs on free dofs, CSR tangent, D (n_el, 4, 81), r_p (n_el, 4))."""
+    def tangent_pattern(self, triangle: bool = False) -> SparsityPattern:
+        """The sparsity pattern of :meth:`tangent` (``triangle``: of its upper triangle; symmetric tangents only).
+
+        Its ``cache`` holds the solvers' symbolic analysis of matrices of that pattern.
+        """
+        if not triangle:
+            return self.pattern
+        if self._triangle_pattern is None:
+            raise ValueError("only a symmetric tangent (pressure potential) can be assembled as its upper triangle")
+        return self._triangle_pattern()
+
+    def tangent(self, u_free, p, load_factor: float, triangle: bool = False):
+        """Condensed system: (rhs on free dofs, CSR tangent, D (n_el, 4, 81), r_p (n_el, 4)).
+
+        ``triangle``: the CSR matrix holds the upper triangle of the (symmetric) tangent only, what
+        CHOLMOD reads (:func:`lvcore.mechanics.linear.factorize` with ``triangle=True``); half the
+        entries to sum. Symmetric tangents (pressure potential) only.
+        """
+        pattern = self.tangent_pattern(triangle)
         R, K, Ks, D, r_p = _tangent(self.full(u_free), np.asarray(p, dtype=float),
                                     float(load_factor * self.pressure), self.model, self.data,
-                                    potential=self.potential)
+                                    potential=self.potential, triangle=triangle)
         K, Ks = np.asarray(K).ravel(), np.asarray(Ks).ravel()
         n_el, n_loaded = K.size, K.size + Ks.size
-        kd = self.pattern.scatter(0, n_el) @ K + self.pattern.scatter(n_el, n_loaded) @ Ks
+        kd = pattern.scatter(0, n_el) @ K + pattern.scatter(n_el, n_loaded) @ Ks
         if self.spring_K.size:  # the Robin spring's stiffness is constant: summed once per system
-            spring = self._shared.get("spring_slots")
+            key = ("spring_slots", triangle)
+            spring = self._shared.get(key)
             if spring is None:
-                spring = self._shared["spring_slots"] = (self.pattern.scatter(n_loaded, n_loaded + self.spring_K.size)
-                                                         @ self.spring_K.ravel())
+                values = (_upper_triangle(self.spring_K) if triangle else self.spring_K).ravel()
+                spring = self._shared[key] = pattern.scatter(n_loaded, n_loaded + values.size) @ values
             kd += spring
-        return np.asarray(R)[self.free], self.pattern.matrix(kd), np.asarray(D), np.asarray(r_p)
+        return np.asarray(R)[self.free], pattern.matrix(kd), np.asarray(D), np.asarray(r_p)
 
     def pressure_increment(self, du_free, D, r_p) -> np.ndarray:
         """Condensed pressure update ``κ M⁻¹ (r_p + D du_e)`` per element, (n_el, 4)."""
