@@ -326,6 +326,27 @@ def test_ho_closed_form_stress_and_tangent_equal_autodiff_and_finite_differences
     assert len(switched) >= 3  # the fibre and sheet switches were met on and off
 
 
+def test_ho_tangent_at_the_reference_state_takes_the_tension_side_whatever_the_round_off():
+    """At F = I the fibre and sheet strains are 0 up to the round-off of F: the closed-form tangent must not
+    switch the fibre (sheet) stiffness on or off with that round-off (it decided a cut of the default LV's first
+    load step), and takes the tension side: the limit of the tangent at small stretches along the fibre."""
+    law = materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "as": 1.5, "bs": 3.0})
+    model = materials.ConstitutiveModel(law, materials.MixedPenalty(1e3))
+    Q, _ = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))
+    f0, s0 = Q[0], Q[1]
+    tangents = []
+    for eps in (1e-15, -1e-15):  # round-off along the fibre and the sheet, both signs
+        F = np.eye(3) + eps * (np.outer(f0, f0) + np.outer(s0, s0))
+        tangents.append(np.asarray(model.first_piola_tangent(jnp.asarray(F), jnp.asarray(Q), 0.0)[1]))
+    np.testing.assert_allclose(tangents[0], tangents[1], rtol=0, atol=1e-10 * np.abs(tangents[0]).max())
+    stretched = np.eye(3) + 1e-7 * (np.outer(f0, f0) + np.outer(s0, s0))  # just in tension: both terms on
+    A_t = np.asarray(model.first_piola_tangent(jnp.asarray(stretched), jnp.asarray(Q), 0.0)[1])
+    np.testing.assert_allclose(tangents[0], A_t, rtol=0, atol=1e-5 * np.abs(A_t).max())
+    compressed = np.eye(3) - 1e-7 * (np.outer(f0, f0) + np.outer(s0, s0))  # just in compression: both off
+    A_c = np.asarray(model.first_piola_tangent(jnp.asarray(compressed), jnp.asarray(Q), 0.0)[1])
+    assert np.abs(A_t - A_c).max() > 0.1 * law.a_f  # the switch is there: the two sides differ
+
+
 @pytest.mark.parametrize("law", [
     materials.Guccione.from_params({"C": 2.0, "bf": 8.0, "bt": 2.0, "bfs": 4.0}),
     materials.Guccione.from_params({"C": 10.0, "bf": 1.0, "bt": 1.0, "bfs": 1.0}),  # Land et al. problem 2
