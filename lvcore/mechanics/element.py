@@ -33,8 +33,8 @@ so ``∂N_a/∂X_J = ∂N_a/∂ξ_K Jinv_KJ`` is never formed: point tensors are
 mapped to ξ (``F = (x_eᵀ ∂N/∂ξ) Jinv``, stresses ``P Jinvᵀ``, tangents
 ``Jinv A Jinvᵀ`` on both gradient slots) and contracted with the shared
 gradients. Each element then reads 3.5× less data than with stored physical
-gradients (n_el, q, 27, 3); the residual kernel runs ~0.72× the time (default
-LV, 2-core machine, tangent unchanged: ``benchmarks/bench_campaign.py --chain-profile``).
+gradients (n_el, q, 27, 3); the residual kernel runs 0.72–0.76× the time (default
+LV, in-process A/B on the 2-core machine; the tangent kernel 0.97–1.0×: BENCHMARKS.md row 41).
 """
 from __future__ import annotations
 

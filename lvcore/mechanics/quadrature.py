@@ -98,12 +98,7 @@ def reference_jacobians(nodes: np.ndarray, elements: np.ndarray, order: int = 3,
 def reference_gradients(nodes: np.ndarray, elements: np.ndarray, order: int = 3, points=None):
     """Shape-function gradients and integration weights in the reference configuration.
 
-    Parameters
-    ----------
-    nodes : (n_nodes, 3) reference positions (mm).
-    elements : (n_el, 27) connectivity.
-    order : Gauss points per direction.
-    points : optional (xi (q, 3), w (q,)) rule used instead of the Gauss rule.
+    Parameters as :func:`reference_jacobians`.
 
     Returns
     -------
