@@ -79,6 +79,13 @@ class SparsityPattern:
         return sp.csr_matrix((np.asarray(data), self.indices, self.indptr), shape=(n, n))
 
 
+def upper_triangle(M):
+    """The raveled upper triangles of square matrices (..., m, m), in the order ``triangle`` patterns expect
+    (``np.triu_indices``, row-major); NumPy or JAX arrays."""
+    i, j = np.triu_indices(M.shape[-1])
+    return M[..., i, j]
+
+
 def build_pattern(n_dofs: int, fixed: np.ndarray, blocks: list[np.ndarray], triangle: bool = False) -> SparsityPattern:
     """Pattern of the stiffness assembled from dof ``blocks`` (each (n_b, m_b)).
 

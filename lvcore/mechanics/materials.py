@@ -41,7 +41,7 @@ from lvcore.mechanics.kinematics import cofactor, det3, green_strain, isochoric_
 _EPS = np.zeros((3, 3, 3))
 for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
     _EPS[_i, _j, _k], _EPS[_i, _k, _j] = 1.0, -1.0
-#: ``∂(cof F)_iJ/∂F_kL = ε_ikm ε_JLN F_mN`` as a (9, 81) matrix acting on ``F`` raveled (``mN`` -> ``iJkL``).
+
 #: Half-width of the reference state in the tension switches of the Holzapfel–Ogden tangent. At E_f = 0
 #: (I4s = 1) the energy's second derivative jumps from 0 (compression) to a_f (a_s); where the strain is
 #: within round-off of 0, as at every Gauss point of the unloaded state, the closed-form tangent takes the
@@ -51,6 +51,7 @@ for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
 #: 10.8 to 12.0 tangents each; with the tension side 6 and 9.7 (stresses and energy unchanged).
 REFERENCE_SWITCH_TOL = 1e-12
 
+#: ``∂(cof F)_iJ/∂F_kL = ε_ikm ε_JLN F_mN`` as a (9, 81) matrix acting on ``F`` raveled (``mN`` -> ``iJkL``).
 _COF_DERIVATIVE = np.einsum("ikm,JLN->mNiJkL", _EPS, _EPS).reshape(9, 81)
 
 

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore.mechanics import loads, robin
-from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern
+from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern, upper_triangle
 from lvcore.mechanics.element import element_residual, element_tangent
 from lvcore.mechanics.materials import ConstitutiveModel
 from lvcore.mechanics.mesh import FEMesh
@@ -96,15 +96,9 @@ def _external_load(pressure, data, potential):
     return jnp.zeros_like(x).at[data["faces"]].add(_external_forces(data, x, pressure, potential))
 
 
-def _upper_triangle(M):
-    """The raveled upper triangles (row-major, ``np.triu_indices``) of square matrices (..., m, m)."""
-    i, j = np.triu_indices(M.shape[-1])
-    return M[..., i, j]
-
-
 def _element_tangent_triangle(*args):
     rhs, K, D, r_p = element_tangent(*args)
-    return rhs, _upper_triangle(K), D, r_p
+    return rhs, upper_triangle(K), D, r_p
 
 
 @partial(jax.jit, static_argnames=("potential", "triangle"))
@@ -122,7 +116,7 @@ def _tangent(u, p, pressure, model, data, potential, triangle=False):
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
     R = R.at[data["spring_faces"]].add(_spring_forces(data, u))
     Ks = -_external_stiffness(data, x, pressure, potential)
-    return R.ravel(), K, _upper_triangle(Ks) if triangle else Ks, D, r_p
+    return R.ravel(), K, upper_triangle(Ks) if triangle else Ks, D, r_p
 
 
 @lru_cache(maxsize=32)
@@ -300,7 +294,7 @@ class DiscreteSystem:
             key = ("spring_slots", triangle)
             spring = self._shared.get(key)
             if spring is None:
-                values = (_upper_triangle(self.spring_K) if triangle else self.spring_K).ravel()
+                values = (upper_triangle(self.spring_K) if triangle else self.spring_K).ravel()
                 spring = self._shared[key] = pattern.scatter(n_loaded, n_loaded + values.size) @ values
             kd += spring
         return np.asarray(R)[self.free], pattern.matrix(kd), np.asarray(D), np.asarray(r_p)
