@@ -381,3 +381,30 @@ def test_laws_without_closed_form_use_autodiff(monkeypatch):
     P, A = model.first_piola_tangent(F, Q, p)
     np.testing.assert_array_equal(P, jax.grad(model.psi)(F, Q, p))
     np.testing.assert_array_equal(A, jax.hessian(model.psi)(F, Q, p))
+
+
+@pytest.mark.parametrize("law", [
+    materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}),
+    materials.HolzapfelOgden.from_params({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6, "as": 1.5, "bs": 3.0,
+                                          "afs": 0.8, "bfs": 4.0, "kappa": 0.15}),
+    materials.Guccione.from_params({"C": 2.0, "bf": 8.0, "bt": 2.0, "bfs": 4.0}),
+    materials.NeoHookean.from_params({"mu": 1.5}),
+])
+@pytest.mark.parametrize("closed_form", [True, False])
+def test_tangent_with_mapped_gradient_slots_equals_the_pulled_back_tangent(law, closed_form, monkeypatch):
+    """``first_piola_tangent(F, frame, p, G)`` (what the element kernels ask for, ``G = ∂ξ/∂X``) equals the
+    physical tangent with both gradient slots mapped, ``G_KJ A_iJkL G_ML``, to round-off: the laws map the
+    3×3 factors of their outer products and the pressure term its cofactors, never the 3⁴ tensor; the
+    stress is the physical one. Also through automatic differentiation (``closed_form`` off)."""
+    monkeypatch.setattr(type(law), "closed_form", closed_form)
+    model = materials.ConstitutiveModel(law, materials.MixedPenalty(1e3))
+    rng = np.random.default_rng(17)
+    for F, Q, p in _random_states(rng, 6):
+        G = rng.normal(size=(3, 3)) + 2.0 * np.eye(3)  # a distorted inverse Jacobian (1/mm)
+        P, A = (np.asarray(v) for v in model.first_piola_tangent(jnp.asarray(F), jnp.asarray(Q), p))
+        P_m, A_m = (np.asarray(v) for v in model.first_piola_tangent(jnp.asarray(F), jnp.asarray(Q), p,
+                                                                        jnp.asarray(G)))
+        want = np.einsum("KJ,iJkL,ML->iKkM", G, A, G)
+        np.testing.assert_array_equal(P_m, P)
+        np.testing.assert_allclose(A_m, want, rtol=1e-11, atol=1e-12 * np.abs(want).max())
+        np.testing.assert_array_equal(np.asarray(materials.pull_back(jnp.asarray(A), None)), A)

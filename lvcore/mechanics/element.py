@@ -31,10 +31,12 @@ gradients ``∂N_a/∂ξ_K`` at the points are the same for every element, and
 each element brings its inverse Jacobians ``Jinv_KJ = ∂ξ_K/∂X_J`` (q, 3, 3),
 so ``∂N_a/∂X_J = ∂N_a/∂ξ_K Jinv_KJ`` is never formed: point tensors are
 mapped to ξ (``F = (x_eᵀ ∂N/∂ξ) Jinv``, stresses ``P Jinvᵀ``, tangents
-``Jinv A Jinvᵀ`` on both gradient slots) and contracted with the shared
-gradients. Each element then reads 3.5× less data than with stored physical
-gradients (n_el, q, 27, 3); the residual kernel runs 0.72–0.76× the time (default
-LV, in-process A/B on the 2-core machine; the tangent kernel 0.97–1.0×: BENCHMARKS.md row 41).
+``Jinv A Jinvᵀ`` on both gradient slots, built so by the law from mapped 3×3
+factors) and contracted with the shared gradients. Each element then reads
+3.5× less data than with stored physical gradients (n_el, q, 27, 3); the
+residual kernel runs 0.72–0.76× the time (default LV, in-process A/B on the
+2-core machine), the tangent kernel 0.80× with the law's mapped factors instead
+of pulling the 3⁴ tensor back (BENCHMARKS.md row 41).
 """
 from __future__ import annotations
 
@@ -124,8 +126,10 @@ def material_stiffness(wG, A, dNdX):
 def element_tangent(x_e, p_e, Jinv, wdet, frames, Minv, P, dNdxi, model):
     """Condensed element system (arguments as :func:`element_residual`).
 
-    The pointwise tangent is mapped to reference coordinates on both gradient slots,
-    ``A'_iKkM = Σ_JL Jinv_KJ A_iJkL Jinv_ML``, and contracted with the shared ``∂N/∂ξ``.
+    The pointwise tangent comes from the model with both gradient slots in reference coordinates,
+    ``A'_iKkM = Σ_JL Jinv_KJ A_iJkL Jinv_ML`` (``first_piola_tangent(..., G=Jinv)``: the closed-form
+    laws map the 3×3 factors of their outer products, not the 3⁴ tensor; kernel 0.80× the time at the
+    default LV), and is contracted with the shared ``∂N/∂ξ``.
 
     Returns
     -------
@@ -136,11 +140,10 @@ def element_tangent(x_e, p_e, Jinv, wdet, frames, Minv, P, dNdxi, model):
     F = deformation_gradients(x_e, Jinv, dNdxi)
     J = det3(F)
     pq = P @ p_e
-    Pst, A = jax.vmap(model.first_piola_tangent)(F, frames, pq)  # (q, 3, 3), (q, 3, 3, 3, 3)
+    # the pointwise tangent with its gradient slots in ξ (q, i, K, k, M), built so by the law
+    Pst, A_ref = jax.vmap(model.first_piola_tangent)(F, frames, pq, Jinv)
     r_u = nodal_sum(wdet[:, None, None] * Pst, Jinv, dNdxi).reshape(81)
     r_p = P.T @ (wdet * (J - 1.0)) - jnp.linalg.solve(Minv, p_e) / kappa
-    A1 = sum(Jinv[:, None, :, J, None, None] * A[:, :, J, None, :, :] for J in range(3))  # (q, i, K, k, L)
-    A_ref = sum(A1[..., L, None] * Jinv[:, None, None, None, :, L] for L in range(3))  # (q, i, K, k, M)
     K = material_stiffness(wdet[:, None, None] * dNdxi, A_ref, dNdxi)
     cof = matmul3(cofactor(F), Jinv.swapaxes(1, 2))  # (q, i, K)
     D = jnp.einsum("q,qm,qiK,qaK->mai", wdet, P, cof, dNdxi).reshape(4, 81)
