@@ -32,6 +32,7 @@ does); others are evaluated point by point, cold, in the same order.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -152,10 +153,15 @@ PREDICTOR_NEIGHBOURS = 8
 QUADRATIC_MAX_NEIGHBOURS = 60
 
 
+@functools.lru_cache(maxsize=None)
+def _pairs(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(d)`` (kept: called for every warm start, ~0.1 ms each)."""
+    return np.triu_indices(d)
+
+
 def _quadratic_features(Z: np.ndarray) -> np.ndarray:
     """Rows ``(1, z_i, z_i z_j (i ≤ j))`` of a full quadratic in the columns of ``Z`` (m, d)."""
-    d = Z.shape[1]
-    i, j = np.triu_indices(d)
+    i, j = _pairs(Z.shape[1])
     return np.hstack([np.ones((Z.shape[0], 1)), Z, Z[:, i] * Z[:, j]])
 
 
@@ -170,20 +176,23 @@ def _spline_weights(Z: np.ndarray, z: np.ndarray) -> np.ndarray:
     only by solver round-off through almost the same point would amplify that round-off.
     """
     m = Z.shape[0]
-    diff = Z[:, None, :] - Z[None, :, :]
-    R2 = np.einsum("ijk,ijk->ij", diff, diff)
+    # squared distances between the points and to z, one array (the spline's kernel, r⁵, from them)
+    Zz = np.vstack([Z, z])
+    sq = np.einsum("ij,ij->i", Zz, Zz)
+    R2 = np.maximum(sq[:, None] + sq[None, :m] - 2.0 * (Zz @ Z.T), 0.0)  # (m + 1, m): the last row to z
+    R2, r2 = R2[:m], R2[m]
     keep = np.ones(m, dtype=bool)
     if np.any(np.triu(R2 < 1e-6, k=1)):
         for j in range(1, m):
             keep[j] = not np.any(R2[j, :j][keep[:j]] < 1e-6)
-        Z, R2 = Z[keep], R2[np.ix_(keep, keep)]
+        Z, R2, r2 = Z[keep], R2[np.ix_(keep, keep)], r2[keep]
+        Zz = np.vstack([Z, z])
     n = Z.shape[0]
-    P = _quadratic_features(Z)
+    P = _quadratic_features(Zz)  # the points' rows, then z's
     M = np.zeros((n + P.shape[1],) * 2)
     M[:n, :n] = R2 * R2 * np.sqrt(R2)
-    M[:n, n:], M[n:, :n] = P, P.T
-    r2 = np.sum((Z - z) ** 2, axis=1)
-    rhs = np.concatenate([r2 * r2 * np.sqrt(r2), _quadratic_features(z[None])[0]])
+    M[:n, n:], M[n:, :n] = P[:n], P[:n].T
+    rhs = np.concatenate([r2 * r2 * np.sqrt(r2), P[n]])
     try:
         sol = np.linalg.solve(M, rhs)
     except np.linalg.LinAlgError:  # too few distinct points for a quadratic: the least-squares solution
