@@ -33,12 +33,20 @@ from lvcore.mechanics.materials import ConstitutiveModel
 from lvcore.mechanics.mesh import FEMesh
 from lvcore.mechanics.quadrature import p1_basis, reference_jacobians
 
-#: Elements per batch in the element loops (lax.map); bounds peak memory. Small
-#: batches keep the per-element 81x81 tangents in cache: on the 2-core CPU
-#: machine 8 made the default-LV tangent ~2x faster than 48 (and 12,8,2 ~1.4x
-#: than 64). lax.map runs a remainder that does not fill a batch as one extra
-#: vectorised step.
+#: Elements per batch in the element loops (lax.map) of meshes larger than
+#: :data:`WHOLE_MESH_ELEMENTS`; bounds peak memory. Small batches keep the
+#: per-element 81x81 tangents in cache: on the 2-core CPU machine 8 made the
+#: tangent ~2x faster than 48 (and 12,8,2 ~1.4x than 64); at the ``accurate``
+#: LV mesh (288 elements) all elements at once take 2x as long as batches of 8.
+#: lax.map runs a remainder that does not fill a batch as one extra vectorised step.
 ELEMENT_BATCH = 8
+
+#: Meshes with at most this many elements go through the element kernels in one
+#: vectorised step, without the loop: the ``fast`` and ``default`` LV meshes (24,
+#: 36 elements), whose warm-chained solves were ~8 % faster so (session 35,
+#: BENCHMARKS section 41). Land problem 2 (72 elements) and larger meshes keep
+#: the batches.
+WHOLE_MESH_ELEMENTS = 64
 
 
 def _elem_args(data, x, p):
@@ -52,7 +60,10 @@ def _map_elements(fn, data, x, p, model, **kw):
         *a, s = args
         return fn(*a, P, dNdxi, model.scaled(s), **kw)
 
-    return jax.lax.map(one, _elem_args(data, x, p), batch_size=min(data["elements"].shape[0], ELEMENT_BATCH))
+    args = _elem_args(data, x, p)
+    if data["elements"].shape[0] <= WHOLE_MESH_ELEMENTS:
+        return jax.vmap(one)(args)
+    return jax.lax.map(one, args, batch_size=ELEMENT_BATCH)
 
 
 def _external_forces(data, x, pressure, potential):
