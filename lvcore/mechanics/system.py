@@ -43,9 +43,9 @@ ELEMENT_BATCH = 8
 
 #: Meshes with at most this many elements go through the element kernels in one
 #: vectorised step, without the loop: the ``fast`` and ``default`` LV meshes (24,
-#: 36 elements), whose warm-chained solves were ~8 % faster so (session 35,
-#: BENCHMARKS section 41). Land problem 2 (72 elements) and larger meshes keep
-#: the batches.
+#: 36 elements), whose warm-chained solves took 0.95–0.97x the time so (paired
+#: test, BENCHMARKS section 41). Land problem 2 (72 elements) and larger meshes
+#: keep the batches.
 WHOLE_MESH_ELEMENTS = 64
 
 
