@@ -107,22 +107,18 @@ def _external_load(pressure, data, potential):
     return jnp.zeros_like(x).at[data["faces"]].add(_external_forces(data, x, pressure, potential))
 
 
-def _element_tangent_triangle(*args):
-    rhs, K, D, r_p = element_tangent(*args)
-    return rhs, upper_triangle(K), D, r_p
-
-
 @partial(jax.jit, static_argnames=("potential", "triangle"))
 def _tangent(u, p, pressure, model, data, potential, triangle=False):
-    """Condensed residual, element tangents (n_el, 81, 81), load-face stiffnesses (f, 27, 27), D, r_p.
+    """Condensed residual, element tangents (n_el, 6, 27, 27), load-face stiffnesses (f, 27, 27), D, r_p.
 
-    ``triangle``: the element and face matrices as their raveled upper triangles, (n_el, 3321) and
-    (f, 378) (a symmetric tangent; taken inside the element loop, so half the entries leave it).
-    The sum into the sparse pattern is done outside (:meth:`DiscreteSystem.tangent`: a SciPy sparse
-    product, ~4x faster on the CPU than XLA's ``segment_sum``).
+    The element tangents come as their six node blocks (layout ``"node_blocks"`` of
+    :mod:`lvcore.mechanics.assembly`) either way; ``triangle``: the face matrices as their raveled
+    upper triangles (f, 378) (a symmetric tangent). The sum into the sparse pattern, where the
+    scatter map picks the upper triangle or mirrors the blocks, is done outside
+    (:meth:`DiscreteSystem.tangent`: a SciPy sparse product, ~4x faster on the CPU than XLA's ``segment_sum``).
     """
     x = data["X"] + u.reshape(-1, 3)
-    rhs, K, D, r_p = _map_elements(_element_tangent_triangle if triangle else element_tangent, data, x, p, model)
+    rhs, K, D, r_p = _map_elements(element_tangent, data, x, p, model)
     R = jnp.zeros_like(x).at[data["elements"]].add(rhs.reshape(-1, 27, 3))
     R = R.at[data["faces"]].add(-_external_forces(data, x, pressure, potential))
     R = R.at[data["spring_faces"]].add(_spring_forces(data, u))
@@ -136,7 +132,7 @@ def _pattern_cached(key, n_dofs, fixed_bytes, el_bytes, el_shape, f_bytes, f_sha
     fixed = np.frombuffer(fixed_bytes, dtype=np.int64)
     el = np.frombuffer(el_bytes, dtype=np.int64).reshape(el_shape)
     fa = np.frombuffer(f_bytes, dtype=np.int64).reshape(f_shape)
-    blocks = [block_dofs(el), block_dofs(fa)]
+    blocks = [(block_dofs(el), "node_blocks"), block_dofs(fa)]
     if s_shape[0]:
         blocks.append(block_dofs(np.frombuffer(s_bytes, dtype=np.int64).reshape(s_shape)))
     return build_pattern(n_dofs, fixed, blocks, triangle)
