@@ -35,6 +35,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from collections import abc
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
@@ -131,6 +132,86 @@ def continuation_order(U: np.ndarray, k: int = 10) -> np.ndarray:
     return np.asarray(order, dtype=np.int64)
 
 
+def _doubled(a: np.ndarray) -> np.ndarray:
+    return np.concatenate([a, np.zeros_like(a)])
+
+
+class SeedPool(abc.Sequence):
+    """Seeds (a sequence of :class:`Seed`) with their coordinates, and the solutions of their states, stacked.
+
+    What :func:`predicted_state` reads of a chain's converged states on every warm start: the
+    coordinates of all of them (distances) and the solutions ``u``, ``p`` of the nearest ~60
+    (the fit). Kept as rows of arrays grown in place (capacity doubled), those are one
+    vectorised distance and one row gather instead of a Python loop over the states and an
+    array built from ~60 separate ones (default LV, 1,000-point θ design: the predictor's
+    2.4 ms per warm start in a chain, half of it that gathering). A state has a solution when
+    it is a named tuple with arrays ``u`` and ``p`` (a :class:`~lvcore.mechanics.forward.WarmState`)
+    of the same shapes as the first such state's; others are offered as they are.
+    """
+
+    def __init__(self, seeds: Sequence[Seed] = ()):
+        self._seeds: list[Seed] = []
+        self._units = self._u = self._p = self._solved = None
+        self._p_shape = None
+        for seed in seeds:
+            self.append(seed)
+
+    def __len__(self) -> int:
+        return len(self._seeds)
+
+    def __getitem__(self, i):
+        return self._seeds[i]
+
+    def __setitem__(self, i: int, seed: Seed) -> None:
+        """Replace a seed by one of the same point and solution (e.g. its state without the factorised tangent)."""
+        self._seeds[i] = seed
+
+    def append(self, seed: Seed) -> None:
+        n = len(self._seeds)
+        unit = np.asarray(seed.unit, dtype=float).ravel()
+        st = seed.state
+        solved = hasattr(st, "_replace") and isinstance(getattr(st, "u", None), np.ndarray) \
+            and isinstance(getattr(st, "p", None), np.ndarray)
+        if self._units is None:
+            self._units, self._solved = np.zeros((8, unit.size)), np.zeros(8, bool)
+        if solved and self._u is None:
+            self._u, self._p = np.zeros((len(self._solved), st.u.size)), np.zeros((len(self._solved), st.p.size))
+            self._p_shape = np.shape(st.p)
+        solved = solved and st.u.size == self._u.shape[1] and np.shape(st.p) == self._p_shape
+        if n == len(self._solved):  # full: every array doubles (new rows zero)
+            self._units, self._solved = _doubled(self._units), _doubled(self._solved)
+            if self._u is not None:
+                self._u, self._p = _doubled(self._u), _doubled(self._p)
+        self._units[n], self._solved[n] = unit, solved
+        if solved:
+            self._u[n], self._p[n] = st.u.ravel(), np.ravel(st.p)
+        self._seeds.append(seed)
+
+    @property
+    def units(self) -> np.ndarray:
+        """(n, d) coordinates of the seeds."""
+        return self._units[:len(self._seeds)] if self._seeds else np.zeros((0, 0))
+
+    @property
+    def solved(self) -> np.ndarray:
+        """(n,) whether each seed's state has a solution ``u``, ``p`` the predictor can use."""
+        return self._solved[:len(self._seeds)] if self._seeds else np.zeros(0, bool)
+
+    def combine(self, rows, weights) -> tuple[np.ndarray, np.ndarray]:
+        """``Σ_j weights[j] u_{rows[j]}`` and the same of the raveled ``p``, over the given (solved) seeds.
+
+        Where the rows are most of the pool, one product with the whole stack (zero weights
+        elsewhere; the rows of seeds without a solution are zeros) reads less memory than
+        gathering them first (0.11 against 0.21 ms for 59 of 72 default-LV solutions, caches cold).
+        """
+        n = len(self._seeds)
+        if 2 * len(rows) >= n:
+            full = np.zeros(n)
+            full[rows] = weights
+            return full @ self._u[:n], full @ self._p[:n]
+        return weights @ self._u[rows], weights @ self._p[rows]
+
+
 def nearest_state(unit: np.ndarray, candidates: Sequence[Seed]):
     """The state of the candidate nearest ``unit``, or None when there is none."""
     if not candidates:
@@ -140,7 +221,10 @@ def nearest_state(unit: np.ndarray, candidates: Sequence[Seed]):
 
 def _by_distance(unit: np.ndarray, candidates: Sequence[Seed]) -> np.ndarray:
     """Indices of ``candidates``, nearest ``unit`` first (ties in their given order)."""
-    units = np.array([c.unit for c in candidates], dtype=float)
+    if isinstance(candidates, SeedPool):
+        units = candidates.units
+    else:
+        units = np.array([c.unit for c in candidates], dtype=float)
     return np.argsort(np.sum((units - unit) ** 2, axis=1), kind="stable")
 
 
@@ -231,18 +315,19 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     """
     if not candidates:
         return None
+    pool = candidates if isinstance(candidates, SeedPool) else SeedPool(candidates)
     dim = np.size(unit)
     n_quad = 2 * (1 + dim + dim * (dim + 1) // 2)
-    quadratic = k is None and n_quad <= min(len(candidates), QUADRATIC_MAX_NEIGHBOURS)
-    n_near = min(len(candidates), QUADRATIC_MAX_NEIGHBOURS) if quadratic else (k or max(PREDICTOR_NEIGHBOURS, dim + 4))
-    near = _by_distance(unit, candidates)[:n_near]
-    base = candidates[int(near[0])].state
-    usable = [i for i in near if hasattr(candidates[i].state, "_replace") and hasattr(candidates[i].state, "u")]
+    quadratic = k is None and n_quad <= min(len(pool), QUADRATIC_MAX_NEIGHBOURS)
+    n_near = min(len(pool), QUADRATIC_MAX_NEIGHBOURS) if quadratic else (k or max(PREDICTOR_NEIGHBOURS, dim + 4))
+    near = _by_distance(unit, pool)[:n_near]
+    base = pool[int(near[0])].state
+    usable = near[pool.solved[near]]
     if len(usable) < dim + 2 or usable[0] != near[0]:
         return base
     quadratic = quadratic and len(usable) == len(near)
-    X = np.array([candidates[i].unit for i in usable[1:]]) - candidates[usable[0]].unit  # (m, d)
-    step = np.asarray(unit, dtype=float) - candidates[usable[0]].unit
+    X = pool.units[usable[1:]] - pool.units[usable[0]]  # (m, d)
+    step = np.asarray(unit, dtype=float) - pool.units[usable[0]]
     radius = np.max(np.linalg.norm(X, axis=1))
     if np.linalg.norm(step) > radius:
         return base  # beyond the neighbours: an extrapolated fit can be worse than the nearest state
@@ -254,12 +339,12 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
         weights = _spline_weights(np.vstack([np.zeros(dim), X]) / radius, step / radius)[1:]
     else:
         weights = step @ np.linalg.pinv(X, rcond=1e-6)
-    states = [candidates[i].state for i in usable[1:]]
-    u = base.u + weights @ np.array([s.u for s in states]) - weights.sum() * base.u
-    p = np.ravel(base.p) + weights @ np.array([np.ravel(s.p) for s in states]) - weights.sum() * np.ravel(base.p)
+    du, dp = pool.combine(usable[1:], weights)
+    u = base.u + du - weights.sum() * base.u
+    p = np.ravel(base.p) + dp - weights.sum() * np.ravel(base.p)
     tangent = None
     if not quadratic:  # a sparse neighbourhood (a sweep): chord iterations on the newest factorised tangent
-        tangent = base.tangent or next((c.state.tangent for c in reversed(candidates)
+        tangent = base.tangent or next((c.state.tangent for c in reversed(pool)
                                         if getattr(c.state, "tangent", None)), None)
     return base._replace(u=u, p=p.reshape(np.shape(base.p)), tangent=tangent)
 
@@ -282,7 +367,7 @@ def solve_in_order(keys: Sequence[int], units: np.ndarray, seeds: Sequence[Seed]
         state; ``state`` is None when the point did not converge (it is then
         never used as a start).
     """
-    pool = list(seeds)
+    pool = SeedPool(seeds)
     out = []
     for key, u in zip(keys, np.asarray(units, dtype=float)):
         initial = predicted_state(u, pool)
@@ -453,4 +538,4 @@ def scaled_coordinates(names: Sequence[str], X: np.ndarray) -> np.ndarray:
 
 
 __all__ = ["continuation_order", "solve_in_order", "light_state", "run_chains", "plan_chains", "nearest_state",
-           "scaled_coordinates", "Seed", "ChainRow", "ChainStats", "ChainTaskError", "DEFAULT_CHUNK"]
+           "scaled_coordinates", "Seed", "SeedPool", "ChainRow", "ChainStats", "ChainTaskError", "DEFAULT_CHUNK"]

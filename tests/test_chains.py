@@ -250,3 +250,34 @@ def test_drive_reports_chain_statistics(tmp_path):
                        forward=campaign_double.DoubleForward(tuple(design.space.names)), progress=False, chunk=4)
         assert store.summary().converged == 30
     assert stats.chains >= 6 and stats.warm + stats.cold == 30 and stats.cold == 6
+
+
+def test_seed_pool_stacks_solutions_and_combines_them_like_the_states():
+    """Growth past its first capacity, seeds without a solution (or of another shape) among solved ones, and
+    both ways of combining (the whole stack, or a gather of a few rows) give what the states themselves give."""
+    from lvcore.mechanics.forward import WarmState
+
+    rng = np.random.default_rng(4)
+    seeds = []
+    for i in range(21):
+        if i % 5 == 3:
+            state = ("no solution", i)
+        elif i == 7:
+            state = WarmState(np.ones(3), np.ones((1, 2)))  # another shape: offered, never combined
+        else:
+            state = WarmState(rng.normal(size=6), rng.normal(size=(2, 2)))
+        seeds.append(chains.Seed(rng.random(2), state))
+    pool = chains.SeedPool(seeds[:4])
+    for s in seeds[4:]:
+        pool.append(s)
+    assert len(pool) == 21 and pool[5] is seeds[5] and list(pool) == seeds
+    np.testing.assert_array_equal(pool.units, np.array([s.unit for s in seeds]))
+    solved = [i for i in range(21) if i % 5 != 3 and i != 7]
+    np.testing.assert_array_equal(np.flatnonzero(pool.solved), solved)
+    for rows in (np.array(solved[:-1]), np.array(solved[2:5])):  # most of the pool, then a few rows
+        w = rng.normal(size=rows.size)
+        u, p = pool.combine(rows, w)
+        np.testing.assert_allclose(u, sum(wj * seeds[j].state.u for wj, j in zip(w, rows)), rtol=1e-13)
+        np.testing.assert_allclose(p, sum(wj * seeds[j].state.p.ravel() for wj, j in zip(w, rows)), rtol=1e-13)
+    pool[-1] = chains.Seed(seeds[-1].unit, chains.light_state(seeds[-1].state))
+    assert pool[-1].state.tangent is None and len(pool) == 21
