@@ -110,7 +110,7 @@ def node_blocks_matrix(Kb):
     Kb = np.asarray(Kb)
     block = {}
     for n, (i, k) in enumerate(NODE_BLOCK_PAIRS):
-        block[i, k], block[k, i] = Kb[n], Kb[n].T
+        block[k, i], block[i, k] = Kb[n].T, Kb[n]  # a diagonal block (i == k) as given, as assembled
     K = np.stack([np.stack([block[i, k] for k in range(3)], axis=-1) for i in range(3)], axis=1)  # (a, i, b, k)
     return K.reshape(3 * Kb.shape[-1], 3 * Kb.shape[-1])
 
