@@ -216,15 +216,11 @@ def nearest_state(unit: np.ndarray, candidates: Sequence[Seed]):
     """The state of the candidate nearest ``unit``, or None when there is none."""
     if not candidates:
         return None
-    return candidates[int(_by_distance(unit, candidates)[0])].state
+    return candidates[int(_by_distance(unit, np.array([c.unit for c in candidates], dtype=float))[0])].state
 
 
-def _by_distance(unit: np.ndarray, candidates: Sequence[Seed]) -> np.ndarray:
-    """Indices of ``candidates``, nearest ``unit`` first (ties in their given order)."""
-    if isinstance(candidates, SeedPool):
-        units = candidates.units
-    else:
-        units = np.array([c.unit for c in candidates], dtype=float)
+def _by_distance(unit: np.ndarray, units: np.ndarray) -> np.ndarray:
+    """Indices of the rows of ``units`` (n, d), nearest ``unit`` first (ties in their given order)."""
     return np.argsort(np.sum((units - unit) ** 2, axis=1), kind="stable")
 
 
@@ -320,7 +316,7 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     n_quad = 2 * (1 + dim + dim * (dim + 1) // 2)
     quadratic = k is None and n_quad <= min(len(pool), QUADRATIC_MAX_NEIGHBOURS)
     n_near = min(len(pool), QUADRATIC_MAX_NEIGHBOURS) if quadratic else (k or max(PREDICTOR_NEIGHBOURS, dim + 4))
-    near = _by_distance(unit, pool)[:n_near]
+    near = _by_distance(unit, pool.units)[:n_near]
     base = pool[int(near[0])].state
     usable = near[pool.solved[near]]
     if len(usable) < dim + 2 or usable[0] != near[0]:
