@@ -233,3 +233,15 @@ def test_walls_that_meet_over_part_of_the_ring():
     b = res.base
     assert b.walls_meet and b.rule == "wall thickness" and b.cut_depth_mm > 2.0
     assert abs(res.cavity_volume_ml / exact - 1) < 0.02, (res.cavity_volume_ml, exact)
+
+
+def test_an_endocardium_without_volume_is_refused_naming_it():
+    """SYNTHETIC: the endocardium flattened onto its base plane encloses 0 mL; it was a division by zero."""
+    import dataclasses
+
+    endo, epi = _surfaces(synthetic_surface_pair("flat", pose=False))
+    pts = endo.points.copy()
+    pts[:, 2] = pts[:, 2].max()
+    flat = dataclasses.replace(endo, points=pts, source="flat_endo.vtk")
+    with pytest.raises(GeometryError, match=r"'flat_endo.vtk' encloses no volume"):
+        analyse_base(flat, epi)

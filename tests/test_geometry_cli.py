@@ -47,3 +47,37 @@ def test_fitted_mesh_runs_in_the_simulator(tmp_path):
             "load": {"pressure": 8, "units": "mmHg"}}
     y = lvcore.simulate(case).outputs()
     assert len(y) == 25 and y[0] > 60.0 and np.all(np.asarray(y[1:]) < 0)
+
+
+def _zero_volume_mesh(path):
+    """SYNTHETIC: one degenerate tetrahedron (a, b, c, a) per boundary triangle of the default LV's hexahedra."""
+    import meshio
+
+    from lvcore.geometry.analytic import DEFAULT_LV
+    from lvcore.geometry.template import DEFAULT_TEMPLATE
+    from lvcore.geometry.volume_mesh import boundary_triangles
+
+    nodes = DEFAULT_LV.nodes(DEFAULT_TEMPLATE)
+    hexes = DEFAULT_TEMPLATE.elements[:, [0, 2, 8, 6, 18, 20, 26, 24]]
+    tri, _ = boundary_triangles(nodes, np.zeros((0, 4), np.int64), hexes)
+    meshio.write(path, meshio.Mesh(nodes, [("tetra", np.c_[tri, tri[:, 0]])]))
+    return path
+
+
+def test_fit_of_a_mesh_without_volume_is_refused_naming_the_file(tmp_path, capsys):
+    """Tetrahedra that all have zero volume were an internal error (ZeroDivisionError, exit 3)."""
+    import meshio
+
+    path = _zero_volume_mesh(tmp_path / "collapsed.vtu")
+    assert main(["geometry", "fit", "--mesh", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "has no volume" in err and "internal error" not in err
+    # a flat ring of 12 tetrahedra (every point on z = 0)
+    t = np.linspace(0.0, 2 * np.pi, 12, endpoint=False)
+    pts = np.concatenate([np.c_[r * np.cos(t), r * np.sin(t), 0 * t] for r in (20.0, 30.0)])
+    flat = tmp_path / "flat.vtu"
+    meshio.write(flat, meshio.Mesh(pts, [("tetra", [[i, (i + 1) % 12, 12 + i, 12 + (i + 1) % 12]
+                                                    for i in range(12)])]))
+    assert main(["geometry", "fit", "--mesh", str(flat)]) == 2
+    err = capsys.readouterr().err
+    assert str(flat) in err and "has no volume" in err

@@ -71,6 +71,8 @@ MAX_CUT_FRACTION = 0.25
 HOLE_FRACTION = 0.1
 #: Convergence of the apex/axis iteration (deg).
 AXIS_TOL_DEG = 0.5
+#: A mesh or endocardium enclosing less than this fraction of its largest extent cubed (mm³) has no volume (refused).
+ZERO_VOLUME_FRACTION = 1e-9
 
 
 @dataclass(frozen=True)
@@ -411,9 +413,11 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     Raises
     ------
     GeometryError
-        No base opening, a ``base_cut_mm`` above part of a ring or where the
-        walls meet, or a default cut that would remove too much (the message
-        names the cause and what to do).
+        No base opening, an endocardium that encloses no volume (below
+        :data:`ZERO_VOLUME_FRACTION` of its largest extent cubed, mm³), a
+        ``base_cut_mm`` above part of a ring or where the walls meet, or a
+        default cut that would remove too much (the message names the cause
+        and what to do).
     """
     if base_cut_mm is not None and not (np.isfinite(base_cut_mm) and base_cut_mm >= 0):
         raise GeometryError(f"base_cut_mm (--base-cut) = {base_cut_mm}: give a distance >= 0 mm below the base ring")
@@ -425,6 +429,12 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     if np.linalg.norm(np.ptp(base.points, axis=0)) < 5.0:
         raise GeometryError(f"the endocardial surface '{endo.source}' has only a tiny opening; it must be open at "
                             "the base")
+    full = closed_volume(endo.points, endo.triangles) / 1000.0
+    extent = float(np.ptp(endo.points, axis=0).max())
+    if not full * 1000.0 > ZERO_VOLUME_FRACTION * extent ** 3:
+        raise GeometryError(f"the endocardial surface '{endo.source}' encloses no volume ({full:.3g} mL once closed "
+                            "at its base opening): the mesh has no cavity volume; check that the file holds an LV "
+                            "whose endocardium is a 3-D cup, not a flattened or collapsed one")
     c = base.points.mean(axis=0)
     apex, a = find_axis(c, base.normal, epi.sample())
     n_plane = base.normal if base.normal @ a > 0 else -base.normal
@@ -468,7 +478,6 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
                 rule_depth = d
                 break
             d += 0.5
-    full = closed_volume(endo.points, endo.triangles) / 1000.0
     if base_cut_mm is not None:
         depth, rule = float(base_cut_mm), "base_cut_mm"
         if depth < ring_depth - RING_TOL_MM:
@@ -533,4 +542,4 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
 
 __all__ = ["BaseRing", "BaseCut", "boundary_loops", "surface_rings", "closed_volume", "volume_below_plane",
            "wall_thickness", "find_axis", "analyse_base", "RING_TOL_MM", "MEET_FRACTION", "USABLE_FRACTION",
-           "MAX_CUT_FRACTION", "HOLE_FRACTION"]
+           "MAX_CUT_FRACTION", "HOLE_FRACTION", "ZERO_VOLUME_FRACTION"]

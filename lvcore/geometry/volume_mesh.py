@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from lvcore.exceptions import GeometryError
+from lvcore.geometry.base_plane import ZERO_VOLUME_FRACTION
 from lvcore.geometry.io import check_extent_is_mm, read_meshio_file
 from lvcore.geometry.surfaces import LVSurface
 
@@ -353,11 +354,19 @@ def extract_lv_boundary(path_or_mesh, units: str = "mm") -> LVBoundary:
     Raises
     ------
     GeometryError
-        Unreadable file, no volume cells, no planar base, or a boundary that
-        does not split into exactly two surfaces once the base is removed.
+        Unreadable file, no volume cells, cells of zero total volume (below
+        :data:`~lvcore.geometry.base_plane.ZERO_VOLUME_FRACTION` of the
+        largest extent cubed, mm³), no planar base, or a boundary that does
+        not split into exactly two surfaces once the base is removed.
     """
     points, tets, hexes, source = read_volume_cells(path_or_mesh, units)
     tri, wall_mm3 = boundary_triangles(points, tets, hexes)
+    used = np.unique(np.concatenate([tets.ravel(), hexes.ravel()]))
+    if not wall_mm3 > ZERO_VOLUME_FRACTION * float(np.ptp(points[used], axis=0).max()) ** 3:
+        cells = " and ".join(f"{n} {name}" for n, name in ((len(tets), "tetrahedra"), (len(hexes), "hexahedra")) if n)
+        raise GeometryError(f"volume mesh '{source}' has no volume: its {cells} all have zero volume "
+                            f"(together {wall_mm3:.3g} mm³), so it has no wall and no cavity to fit; export the "
+                            "LV wall as 3-D cells (not flattened or collapsed ones)")
     try:
         parts = _split_flat_cap(points, tri, source)
     except GeometryError as flat_err:
