@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from lvcore.exceptions import GeometryError
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.contours import contours_from_dict
 from lvcore.geometry.fitting import fit_contours, fit_surfaces
@@ -139,3 +140,30 @@ def test_inverted_elements_are_the_last_guard_and_name_where():
         fit_surfaces(read_surface(endo, "endo"), read_surface(p.polydata("epi"), "epi"))
     msg = str(err.value)
     assert "outside the epicardium" in msg and "swapped" not in msg and "crossing" not in msg
+
+
+def test_a_septum_on_the_long_axis_is_refused_naming_the_file(tmp_path, capsys):
+    """SYNTHETIC: the bundled example contours with the septum landmark on the long axis (the basal centroid)."""
+    import json
+    from pathlib import Path
+
+    from lvcore.cli import main
+    from lvcore.geometry.contours import read_contours
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "contours" / "SYNTHETIC_example_contours.json"
+    data = json.loads(example.read_text())
+    data["landmarks"]["septum"] = [float(v) for v in read_contours(example).slices[0].endo.mean(axis=0)]
+    path = tmp_path / "septum_on_axis.json"
+    path.write_text(json.dumps(data))
+    assert main(["geometry", "fit", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"contour file '{path}'" in err and "landmarks.septum" in err and "long axis" in err
+    # surfaces: the message names both files
+    g = TruncatedEllipsoidLV(EllipsoidSurface(22.0, 60.0), EllipsoidSurface(31.0, 70.0), 8.0)
+    paths = []
+    for name, surf in (("endo", g.endo), ("epi", g.epi)):
+        p = tmp_path / f"{name}.stl"
+        ellipsoid_surface_mesh(surf, g.base_z).save(p)
+        paths.append(p)
+    with pytest.raises(GeometryError, match=rf"'{paths[0]}' \+ '{paths[1]}': the septum point .* long axis"):
+        fit_surfaces(*paths, septum=[0.0, 0.0, -20.0])

@@ -406,18 +406,32 @@ def _finish(nodes, endo_t, epi_t, frame: LVFrame, length: float, template, label
 MIN_SEPTUM_AXIS_DISTANCE_MM = 1.0
 
 
-def _x_axis(ez: np.ndarray, origin: np.ndarray, septum) -> np.ndarray:
+def _x_axis(ez: np.ndarray, origin: np.ndarray, septum, where: str = "septum landmark") -> np.ndarray:
+    """Unit x axis of the template frame (phi = 0): towards ``septum`` if given.
+
+    Parameters
+    ----------
+    ez : (3,) array
+        Unit long axis (apex -> base).
+    origin : (3,) array
+        A point on the long axis (mm).
+    septum : (3,) array or None
+        A point on the septal wall (mm, same coordinates as ``origin``).
+    where : str
+        What the septum point is and where it came from (the file), for the messages.
+    """
     if septum is not None:
         s = np.asarray(septum, float).reshape(-1)
         if s.shape != (3,) or not np.all(np.isfinite(s)):
-            raise GeometryError(f"septum landmark {np.array2string(s[:6], precision=3)} must be 3 finite "
+            raise GeometryError(f"{where} {np.array2string(s[:6], precision=3)} must be 3 finite "
                                 "coordinates (a point on the septal wall)")
         v = s - origin
         v = v - ez * (v @ ez)
         if not np.linalg.norm(v) >= MIN_SEPTUM_AXIS_DISTANCE_MM:
-            raise GeometryError(f"septum landmark {np.array2string(s, precision=2)} lies "
-                                f"{np.linalg.norm(v):.2g} mm from the LV's long axis, so it cannot fix the "
-                                "circumferential direction (phi = 0); give a point on the septal wall")
+            raise GeometryError(f"{where} {np.array2string(s, precision=2)} lies "
+                                f"{np.linalg.norm(v):.2g} mm from the LV's long axis (less than "
+                                f"{MIN_SEPTUM_AXIS_DISTANCE_MM:g} mm), so it cannot fix the circumferential direction "
+                                "(phi = 0); give a point on the septal wall")
         return v / np.linalg.norm(v)
     for ref in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
         v = ref - ez * (ref @ ez)
@@ -426,9 +440,9 @@ def _x_axis(ez: np.ndarray, origin: np.ndarray, septum) -> np.ndarray:
     raise AssertionError("unreachable")
 
 
-def _frame(origin, ez, septum, base_z) -> LVFrame:
+def _frame(origin, ez, septum, base_z, where: str = "septum landmark") -> LVFrame:
     ez = ez / np.linalg.norm(ez)
-    ex = _x_axis(ez, origin, septum)
+    ex = _x_axis(ez, origin, septum, where)
     ey = np.cross(ez, ex)
     return LVFrame(origin=np.asarray(origin, float), rotation=np.stack([ex, ey, ez]), base_z=float(base_z))
 
@@ -452,7 +466,9 @@ def frame_from_contours(stack: ContourStack, base_z: float = DEFAULT_BASE_Z) -> 
             else:
                 warn.append(f"the long-axis apex is {ang:.0f}° off the short-axis slice normal; using the slice "
                             "normal as the long axis (check the long-axis contours)")
-    return _frame(origin, ez, stack.septum, base_z), warn
+    where = (f"contour file '{stack.source}': landmarks.septum" if stack.source
+             else f"{stack.label}: landmarks.septum")
+    return _frame(origin, ez, stack.septum, base_z, where), warn
 
 
 def fit_contours(stack, template: LVTemplate = DEFAULT_TEMPLATE, base_z: float = DEFAULT_BASE_Z,
@@ -530,7 +546,8 @@ def fit_surfaces(endo, epi, template: LVTemplate = DEFAULT_TEMPLATE, base_z: flo
     epi_s = epi if isinstance(epi, LVSurface) else read_surface(epi, "epi", units)
     check_surface_pair(endo_s, epi_s)
     base = analyse_base(endo_s, epi_s, base_cut_mm)
-    frame = _frame(base.cut_origin, base.axis, septum, base_z)
+    frame = _frame(base.cut_origin, base.axis, septum, base_z,
+                   f"surfaces '{endo_s.source}' + '{epi_s.source}': the septum point (--septum)")
     endo_t = frame.to_template(endo_s.sample())
     epi_t = frame.to_template(epi_s.sample())
     ke = endo_t[:, 2] <= base_z + RING_TOL_MM
