@@ -21,6 +21,12 @@ def test_describe_lists_every_input():
     assert "a (kPa) 0.6" in text and "mesh fast" in text
 
 
+def test_describe_never_prints_python_literals():
+    """Issue 49: the Report page said "static PNG/SVG True"; booleans and None read as words."""
+    text = describe({"live calibration": True, "static": False, "subject": None, "pairs": (True, None)})
+    assert text == "live calibration yes; static no; subject –; pairs (yes, –)"
+
+
 def test_fibre_sweep_greys_out_after_a_sidebar_slider_moves(monkeypatch):
     import lvcore.studies.fibre_angles as fa
 

@@ -15,7 +15,9 @@ def test_report_page_is_in_the_navigation():
 
 def test_report_page_builds_a_zip(monkeypatch):
     from lvcore import report
+    from lvcore.report import export
 
+    monkeypatch.setattr(export, "static_export_problem", lambda: None)  # kaleido + Chromium found
     calls = []
 
     def fake_build(out, results_dir=None, *, calibration=True, formats=("png", "svg"), progress=None, **kw):
@@ -37,8 +39,109 @@ def test_report_page_builds_a_zip(monkeypatch):
     zipped = at.session_state["report"].result["zip"]
     assert zipped[:2] == b"PK"
     assert at.get("download_button")
+    assert any(c.value == "Computed with: live calibration no; figures PNG, SVG and HTML" for c in at.caption)
     at.checkbox[1].uncheck().run()  # static export off: the shown report is stale
     assert any("Inputs changed, re-run" in w.value for w in at.warning)
+
+
+def _page_text(at) -> str:
+    return "\n".join(str(getattr(e, "value", "")) + " " + str(getattr(e, "help", "") or "") + " "
+                     + str(getattr(e, "label", "") or "")
+                     for kind in ("caption", "warning", "error", "markdown", "checkbox", "text", "exception")
+                     for e in getattr(at, kind))
+
+
+def test_without_kaleido_static_export_is_not_offered_and_the_html_report_is_built(monkeypatch, tmp_path):
+    """Issue 49: with `pip install -e .` alone (no kaleido) the box was ticked, the page showed plotly's raw
+    RuntimeError ("Image export requires the Kaleido package...") and "static PNG/SVG True"."""
+    import io
+    import zipfile
+
+    import plotly.io as pio
+
+    from lvcore.report import export
+
+    problem = 'kaleido is not installed (pip install "lvcore[report]")'
+    monkeypatch.setattr(export, "static_export_problem", lambda: problem)
+
+    def plotly_without_kaleido(*a, **k):  # what plotly raises when it is asked anyway
+        raise RuntimeError("\nImage export requires the Kaleido package, v1.0.0 or greater,\nwhich can be installed "
+                           'using pip:\n\n    $ pip install --upgrade "kaleido>=1"\n')
+
+    monkeypatch.setattr(pio, "write_images", plotly_without_kaleido)
+    from lvcore.report import build as rb
+
+    monkeypatch.setattr(rb, "SECTIONS", tuple(s for s in rb.SECTIONS if s.study == "findings"))  # seconds, not minutes
+    at = AppTest.from_file(PAGE, default_timeout=300).run()
+    assert not at.exception, at.exception
+    static = at.checkbox[1]
+    assert static.value is False and static.disabled
+    assert 'pip install "lvcore[report]"' in static.help and "chromium" in static.help
+    at.checkbox[0].uncheck().run()
+    next(b for b in at.button if b.label == "Build report").click().run()
+    assert not at.exception, at.exception
+    assert not at.error, [e.value for e in at.error]
+    zipped = zipfile.ZipFile(io.BytesIO(at.session_state["report"].result["zip"]))
+    manifest = json.loads(zipped.read("lvcore-report/manifest.json"))
+    assert manifest["formats"] == [] and manifest["skipped_formats"] == []
+    drawn = [f for f in manifest["figures"] if f["status"] == "ok"]
+    assert drawn and all(f["html"] and f["png"] is None for f in drawn)
+    assert all(f"lvcore-report/{f['html']}" in zipped.namelist() for f in drawn)
+    text = _page_text(at)
+    for raw in ("RuntimeError", "Image export requires", ". It needs", "Traceback"):
+        assert raw not in text, raw
+    computed = next(c.value for c in at.caption if c.value.startswith("Computed with:"))
+    assert computed == "Computed with: live calibration no; figures HTML only"
+    assert not any(w in computed.split() for w in ("True", "False", "None"))
+
+
+def test_a_failed_static_export_is_said_in_words(monkeypatch):
+    """kaleido found but the export fails anyway: the page names what is missing, never the raw exception."""
+    from lvcore import report
+    from lvcore.report import export
+
+    monkeypatch.setattr(export, "static_export_problem", lambda: None)
+
+    def fake_build(out, results_dir=None, *, formats=("png", "svg"), **kw):
+        import plotly.graph_objects as go
+
+        Path(out).mkdir(parents=True, exist_ok=True)
+        monkeypatch.setattr(export, "static_export_problem",
+                            lambda: "no Chromium found (install Debian's chromium: apt-get install chromium)")
+        try:
+            export.export_static([go.Figure()], [Path(out) / "x.png"])
+        except export.StaticExportError as err:
+            manifest = {"figures": [], "formats": list(formats), "skipped_formats": list(formats),
+                        "static_export_error": str(err)}
+        (Path(out) / "manifest.json").write_text(json.dumps(manifest))
+        return manifest
+
+    monkeypatch.setattr(report, "build_report", fake_build)
+    at = AppTest.from_file(PAGE, default_timeout=60).run()
+    at.checkbox[0].uncheck().run()
+    next(b for b in at.button if b.label == "Build report").click().run()
+    assert not at.exception, at.exception
+    warning = next(w.value for w in at.warning if "figures" in w.value)
+    assert warning.startswith("No PNG or SVG figures: static export (PNG/SVG) not possible: no Chromium found")
+    assert "apt-get install chromium" in warning and ". ." not in warning and "Error" not in warning
+
+
+def test_an_unexpected_error_is_said_in_the_apps_words(monkeypatch):
+    from lvcore import report
+    from lvcore.report import export
+
+    monkeypatch.setattr(export, "static_export_problem", lambda: None)
+
+    def broken_build(*a, **k):
+        raise KeyError("internal detail")
+
+    monkeypatch.setattr(report, "build_report", broken_build)
+    at = AppTest.from_file(PAGE, default_timeout=60).run()
+    at.checkbox[0].uncheck().run()
+    next(b for b in at.button if b.label == "Build report").click().run()
+    assert not at.exception, at.exception
+    assert [e.value for e in at.error][0].startswith("Report failed: an unexpected error (KeyError)")
+    assert "internal detail" not in _page_text(at)
 
 
 def _figure_spec(html: str) -> dict:

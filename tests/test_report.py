@@ -112,6 +112,34 @@ def test_static_export_failure_is_a_clear_error(monkeypatch):
         export.export_static([go.Figure()], ["x.png"])
 
 
+def test_a_missing_exporter_is_named_before_chromium_starts(monkeypatch):
+    """Issue 49: no kaleido (or no Chromium) is said in words and what to install, not as plotly's RuntimeError."""
+    import importlib.metadata
+
+    import plotly.graph_objects as go
+    import plotly.io as pio
+
+    def never(*a, **k):
+        raise AssertionError("write_images must not be tried")
+
+    monkeypatch.setattr(pio, "write_images", never)
+    real_version = importlib.metadata.version
+
+    def version(name):
+        if name == "kaleido":
+            raise importlib.metadata.PackageNotFoundError(name)
+        return real_version(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", version)
+    assert export.static_export_problem() == 'kaleido is not installed (pip install "lvcore[report]")'
+    with pytest.raises(export.StaticExportError) as err:
+        export.export_static([go.Figure()], ["x.png"])
+    assert str(err.value) == 'static export (PNG/SVG) not possible: kaleido is not installed (pip install "lvcore[report]")'
+    monkeypatch.setattr(export, "_kaleido_problem", lambda: None)
+    monkeypatch.setattr(export, "find_chromium", lambda: None)
+    assert "apt-get install chromium" in export.static_export_problem()
+
+
 def test_cli_rejects_a_missing_results_folder(tmp_path, capsys):
     from lvcore.cli import main
 
@@ -282,8 +310,8 @@ def test_exported_titles_never_overlap_subplot_titles(report_items):
 
 
 def test_tables_fit_their_columns(report_items):
-    """Each column is as wide as its longest cell, and the figure as wide as its columns: nothing clipped."""
-    from lvcore.viz.report_figures import TABLE_CHAR_PX
+    """Each column is as wide as its longest line, and the figure as wide as its columns: nothing clipped."""
+    from lvcore.viz.report_figures import TABLE_CHAR_PX, TABLE_MAX_WIDTH_PX
 
     tables = {n: it.fig for n, it in report_items.items() if it.fig.data and it.fig.data[0].type == "table"}
     assert {"table9_2_bo_fixed_angles", "table_calibration_summary", "table9_4_operators_pca"} <= set(tables)
@@ -294,9 +322,11 @@ def test_tables_fit_their_columns(report_items):
         for k, w in enumerate(widths):
             import re
 
-            texts = [re.sub(r"<[^>]+>", "", str(v)) for v in [t.header.values[k], *t.cells.values[k]]]
+            texts = [re.sub(r"<[^>]+>", "", line) for v in [t.header.values[k], *t.cells.values[k]]
+                     for line in str(v).split("<br>")]
             assert w >= TABLE_CHAR_PX * max(len(x) for x in texts), (name, texts[0])
         assert fig.layout.width >= sum(widths), name
+    assert tables["table_findings"].layout.width <= TABLE_MAX_WIDTH_PX  # wrapped, not 2,986 px (issue 49)
 
 
 def test_source_lines_are_readable_text(tmp_path):

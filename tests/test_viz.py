@@ -230,8 +230,29 @@ def test_table_figure_is_as_wide_as_its_columns():
                        **{f"column {k}": [1.23456] for k in range(12)}})
     fig = table_figure(df, title="t")
     w = fig.data[0].columnwidth
-    assert w[0] >= TABLE_CHAR_PX * len(df["meaning"][0]) and fig.layout.width >= sum(w)
+    lines = fig.data[0].cells.values[0][0].split("<br>")
+    assert " ".join(lines) == df["meaning"][0]  # wrapped (13 columns would not fit), every word kept
+    assert w[0] >= TABLE_CHAR_PX * max(len(x) for x in lines) and fig.layout.width >= sum(w)
     assert fig.data[0].cells.fill.color == "white" and fig.data[0].cells.font.color  # explicit: no theme leak
+
+
+def test_a_wide_table_wraps_its_long_cells_instead_of_growing_wider():
+    """Issue 49: the findings table was 2,986 px wide (one 187-character cell on one line), its text tiny."""
+    import pandas as pd
+
+    from lvcore.viz.report_figures import TABLE_MAX_WIDTH_PX, table_figure
+
+    long = "pc5 no worse in 33 % [19, 47] of comparisons (18 cases; refuted); " * 3
+    df = pd.DataFrame({"finding": ["F1", "F5"], "ci": ["1.70× [1.66, 1.74]", long.strip()],
+                       "dose": ["heterogeneity 1.2 (strain RMS 0.048; sampler 2 × (300 + 300))", "n/a"]})
+    fig = table_figure(df, title="t")
+    assert fig.layout.width <= TABLE_MAX_WIDTH_PX
+    cell = fig.data[0].cells.values[1][1]
+    assert cell.count("<br>") >= 2 and cell.replace("<br>", " ") == long.strip()
+    assert list(fig.data[0].cells.values[0]) == ["F1", "F5"]  # short cells untouched
+    assert fig.layout.height > table_figure(df.iloc[:, :1], title="t").layout.height  # rows grow with the lines
+    narrow = pd.DataFrame({"a": [1.0], "b": ["short text"]})
+    assert list(table_figure(narrow, title="t").data[0].cells.values[1]) == ["short text"]  # fits: never wrapped
 
 
 def test_edpvr_figure_klotz_curve_and_band_order():

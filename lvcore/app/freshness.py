@@ -48,6 +48,11 @@ def changed_inputs(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
 
 
 def _fmt(v) -> str:
+    """A value as the user reads it: never Python's ``True``/``False``/``None``."""
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if v is None:
+        return "–"
     if isinstance(v, float):
         return f"{v:.4g}"
     if isinstance(v, (list, tuple)):

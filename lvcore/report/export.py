@@ -14,7 +14,6 @@ from pathlib import Path
 from lvcore.exceptions import LVCoreError
 
 
-
 class ReportError(LVCoreError):
     """The report could not be written (e.g. ``--from`` names no folder)."""
 
@@ -87,10 +86,72 @@ def write_data(data, base: Path) -> Path | None:
     return path
 
 
+#: What the static export (PNG/SVG) needs, as the app and the CLI tell the user.
+STATIC_EXPORT_NEEDS = ('kaleido (pip install "lvcore[report]") and a Chromium (Debian\'s chromium: '
+                       'apt-get install chromium)')
+
+
+def _kaleido_problem() -> str | None:
+    """Why kaleido cannot export here (plotly needs kaleido >= 1), in words; None when it can."""
+    import importlib
+    import importlib.metadata
+
+    try:
+        major = int(importlib.metadata.version("kaleido").split(".")[0])
+        importlib.import_module("kaleido")
+    except Exception:  # noqa: BLE001 - not installed or broken: either way there is no exporter
+        return 'kaleido is not installed (pip install "lvcore[report]")'
+    if major < 1:
+        return f'kaleido {importlib.metadata.version("kaleido")} is too old, plotly needs 1 or later ' \
+               '(pip install "lvcore[report]")'
+    return None
+
+
+def find_chromium() -> str | None:
+    """The Chromium kaleido would start: its own search (BROWSER_PATH, PATH, typical paths, a kaleido download)."""
+    import os
+    import shutil
+
+    try:
+        from choreographer.browsers.chromium import Chromium  # kaleido's browser driver
+
+        path = Chromium.find_browser(skip_local=False)
+    except Exception:  # noqa: BLE001 - choreographer moved its API: look where it looks (BROWSER_PATH, then PATH)
+        path = os.environ.get("BROWSER_PATH") or next(
+            (p for n in ("chromium", "chromium-browser", "google-chrome", "chrome") if (p := shutil.which(n))), None)
+    return str(path) if path and Path(path).is_file() else None
+
+
+def static_export_problem() -> str | None:
+    """Why the static export (PNG/SVG) cannot run here, in words; None when kaleido and a Chromium are found.
+
+    The Report page asks this before it offers static figures, and :func:`export_static`
+    before it starts Chromium, so a missing exporter is said plainly, never as kaleido's
+    or plotly's own exception.
+    """
+    problem = _kaleido_problem()
+    if problem is None and find_chromium() is None:
+        problem = ("no Chromium found, which kaleido needs to draw PNG/SVG "
+                   "(install Debian's chromium: apt-get install chromium)")
+    return problem
+
+
+def _one_line(err: BaseException, limit: int = 200) -> str:
+    text = " ".join(str(err).split()).rstrip(". ")
+    return f"{type(err).__name__}: {text[:limit] + ('…' if len(text) > limit else '')}"
+
+
 def export_static(figs: list, paths: list[Path]) -> None:
-    """PNG/SVG of every figure in one Chromium session (kaleido); :class:`StaticExportError` when that fails."""
+    """PNG/SVG of every figure in one Chromium session (kaleido); :class:`StaticExportError` when that fails.
+
+    The error's message is a sentence for the user: what is missing and how to install it
+    (:func:`static_export_problem`), or that kaleido failed with a one-line reason.
+    """
     if not figs:
         return
+    problem = static_export_problem()
+    if problem is not None:
+        raise StaticExportError(f"static export (PNG/SVG) not possible: {problem}")
     import plotly.io as pio
 
     from lvcore.viz.report_figures import EXPORT_WIDTH_PX
@@ -101,9 +162,8 @@ def export_static(figs: list, paths: list[Path]) -> None:
         pio.write_images(figs, [str(p) for p in paths], width=widths, height=heights)
     except Exception as err:  # kaleido raises its own types (ChromeNotFoundError, ...)
         raise StaticExportError(
-            f"static export (PNG/SVG) failed: {type(err).__name__}: {err}. It needs kaleido "
-            "(pip install 'lvcore[report]') and a Chromium: install Debian's chromium (apt-get install chromium)") \
-            from err
+            f"static export (PNG/SVG) failed in kaleido/Chromium ({_one_line(err)}); it needs "
+            f"{STATIC_EXPORT_NEEDS}") from err
 
 
 def index_html(manifest: dict) -> str:
@@ -170,5 +230,5 @@ def write_items(items: list[ReportItem], out: Path, formats: tuple[str, ...]) ->
     return entries, figs, static_paths
 
 
-__all__ = ["ReportError", "StaticExportError", "ReportItem", "plotly_template", "write_data", "export_static",
-           "index_html", "write_items"]
+__all__ = ["ReportError", "StaticExportError", "ReportItem", "STATIC_EXPORT_NEEDS", "plotly_template", "write_data",
+           "find_chromium", "static_export_problem", "export_static", "index_html", "write_items"]

@@ -140,15 +140,41 @@ def eta_band_grid(cases: Sequence[Mapping], models: Sequence[str], *, title: str
 
 #: Pixels per character and padding of table columns (plotly's default 12 px table font).
 TABLE_CHAR_PX, TABLE_PAD_PX = 7.5, 16
+#: A table wider than TABLE_MAX_WIDTH_PX wraps its longest cells (at spaces) onto more lines, never narrower than
+#: TABLE_MIN_WRAP characters a line; each extra line adds TABLE_LINE_PX to its row (issue 49: the findings
+#: table was 2,986 px wide, its text unreadable once the image was scaled to a page).
+TABLE_MAX_WIDTH_PX, TABLE_MIN_WRAP, TABLE_LINE_PX = EXPORT_WIDTH_PX, 24, 17
+
+
+def _wrap_limit(longest: Sequence[int]) -> int | None:
+    """Characters a line so the columns fit TABLE_MAX_WIDTH_PX (None: no wrapping needed); long columns shrink first."""
+    budget = (TABLE_MAX_WIDTH_PX - 40 - TABLE_PAD_PX * len(longest)) / TABLE_CHAR_PX
+    if sum(longest) <= budget:
+        return None
+    for limit in range(max(longest), TABLE_MIN_WRAP - 1, -1):
+        if sum(min(n, limit) for n in longest) <= budget:
+            return limit
+    return TABLE_MIN_WRAP
+
+
+def _wrap_cell(text: str, limit: int | None) -> list[str]:
+    import re
+    import textwrap
+
+    if limit is None or len(text) <= limit or re.search(_TAG, text):
+        return [text]
+    return textwrap.wrap(text, limit, break_long_words=False, break_on_hyphens=False) or [text]
 
 
 def table_figure(df: pd.DataFrame, *, title: str, float_format: str = ".4g", height: int | None = None,
                  bold: Sequence[tuple[int, str]] = ()) -> go.Figure:
     """A DataFrame drawn as a plotly table (for PNG/SVG export of the chapter's tables).
 
-    Each column is as wide as its longest cell or header (``columnwidth`` in
-    pixels) and ``layout.width`` is the sum, so nothing is clipped on the right:
-    the static export uses that width, and the HTML figure scrolls sideways.
+    Each column is as wide as its longest line (``columnwidth`` in pixels) and
+    ``layout.width`` is the sum, so nothing is clipped on the right: the static
+    export uses that width, and the HTML figure scrolls sideways. A table that
+    would be wider than :data:`TABLE_MAX_WIDTH_PX` wraps its longest cells onto
+    several lines (``<br>``) instead, and its rows grow to hold them.
 
     Parameters
     ----------
@@ -161,18 +187,30 @@ def table_figure(df: pd.DataFrame, *, title: str, float_format: str = ".4g", hei
         return "" if v is None else str(v)
 
     bold = set(bold)
-    cells, widths = [], []
+    texts = {col: [fmt(v) for v in df[col].tolist()] for col in df.columns}
+    limit = _wrap_limit([max([len(str(col)) + 1] + [len(t) + 1 for t in texts[col]]) for col in df.columns])
+    cells, widths, headers = [], [], []
+    row_lines, header_lines = [1] * len(df), 1
     for col in df.columns:
-        texts = [fmt(v) for v in df[col].tolist()]
-        cells.append([f"<b>{t}</b>" if (r, col) in bold else t for r, t in enumerate(texts)])
-        longest = max([len(str(col)) + 1] + [len(t) + (1 if (r, col) in bold else 0) for r, t in enumerate(texts)])
+        head = _wrap_cell(str(col), limit)
+        header_lines = max(header_lines, len(head))
+        headers.append("<br>".join(f"<b>{h}</b>" for h in head))
+        column, longest = [], max(len(h) + 1 for h in head)
+        for r, t in enumerate(texts[col]):
+            lines = _wrap_cell(t, limit)
+            row_lines[r] = max(row_lines[r], len(lines))
+            extra = 1 if (r, col) in bold else 0
+            longest = max([longest] + [len(x) + extra for x in lines])
+            column.append("<br>".join(f"<b>{x}</b>" if extra else x for x in lines))
+        cells.append(column)
         widths.append(int(np.ceil(TABLE_PAD_PX + TABLE_CHAR_PX * longest)))
     fig = go.Figure(go.Table(columnwidth=widths,
-                             header=dict(values=[f"<b>{c}</b>" for c in df.columns], fill_color="#e8ecf4",
+                             header=dict(values=headers, fill_color="#e8ecf4",
                                          font=dict(color="#2a3f5f"), align="center", line_color="#c8d0e0"),
                              cells=dict(values=cells, align="center", height=26, fill_color="white",
                                         font=dict(color="#2a3f5f"), line_color="#d8dee9")))
-    fig.update_layout(title=title, height=height or 110 + 32 * (len(df) + 1),
+    extra_lines = header_lines - 1 + sum(n - 1 for n in row_lines)
+    fig.update_layout(title=title, height=height or 110 + 32 * (len(df) + 1) + TABLE_LINE_PX * extra_lines,
                       width=max(700, sum(widths) + 40), margin=dict(l=10, r=10, t=60, b=10))
     return fig
 
