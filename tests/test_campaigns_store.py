@@ -243,6 +243,22 @@ def test_a_state_outside_0_1_2_is_reported_and_the_counts_add_up(tmp_path, value
     assert f"row 1: state value {value}" in s.format()
 
 
+@pytest.mark.parametrize("value", [1.5, 0.5, float("nan"), 2.0000001])
+def test_a_float_state_that_is_not_0_1_2_is_reported_and_the_counts_add_up(tmp_path, value):
+    """A state dataset stored as floats: 1.5 was cast to 1 by the check and counted by nobody (2 + 1 + 0 of 4)."""
+    def edit(f):
+        state = f["state"][...].astype(float)
+        state[1] = value
+        del f["state"]
+        f["state"] = state
+    path = _tampered_store(tmp_path, edit)
+    s = campaign_status(path)
+    assert s.converged + s.failed + s.pending + s.inconsistent == s.n == 4
+    assert s.inconsistent == 1 and s.converged == 2 and s.pending == 1
+    assert f"row 1: state value {value}" in s.format()
+    assert read_store(path).inconsistent.tolist() == [False, True, False, False]
+
+
 def test_record_many_writes_a_batch_like_single_records_or_nothing(tmp_path):
     design = make_design(get_space("material"), "lhs", 6, seed=0)
     rows = [RowResult(4, np.arange(25.0) + 4, True, seconds=0.4, worker="w1", version="v"),

@@ -100,6 +100,14 @@ class RowResult:
     worker: str = ""
 
 
+def _value(v) -> str:
+    """A stored number as a message shows it: ``7``, ``1.5``, ``nan`` (integral floats without ``.0``)."""
+    v = v.item() if isinstance(v, np.generic) else v
+    if isinstance(v, float) and np.isfinite(v) and v == int(v):
+        return str(int(v))
+    return str(v)[:40]
+
+
 @dataclass(frozen=True)
 class StoreContents:
     """Everything in a store, read into memory (see the module table)."""
@@ -137,7 +145,8 @@ class StoreContents:
     def check(self, limit: int | None = None) -> tuple[str, ...]:
         """One message per inconsistent row (the first ``limit`` rows), e.g. ``"row 3: state value 7 ..."``.
 
-        A row is inconsistent when its ``state`` is not 0/1/2; when it is
+        A row is inconsistent when its ``state`` is not exactly 0, 1 or 2 (7,
+        1.5 and NaN all are, whatever the dataset's type); when it is
         committed (converged or failed) but ``record_count`` is not 1; when it
         is converged with a NaN/inf output; or when its inputs are not finite or
         lie outside the store's parameter space. Such rows are excluded from
@@ -155,8 +164,9 @@ class StoreContents:
         return tuple(out)
 
     def _problem_masks(self):
-        state = np.asarray(self.state).astype(np.int64)
-        count = np.asarray(self.record_count).astype(np.int64)
+        # compared as stored, never cast to int first: a float state 1.5 (or a record_count 1.5) would become 1
+        state = np.asarray(self.state)
+        count = np.asarray(self.record_count)
         bad_state = ~np.isin(state, (PENDING, CONVERGED, FAILED))
         done = (state == CONVERGED) | (state == FAILED)
         bad_count = done & (count != 1)
@@ -167,8 +177,8 @@ class StoreContents:
         if finite_in.any():
             outside[finite_in] = ~self.space.contains(inputs[finite_in])
         reasons = (
-            (bad_state, lambda i: f"state value {state[i]} is none of 0 pending, 1 converged, 2 failed"),
-            (bad_count, lambda i: f"{STATE_NAMES.get(int(state[i]), '?')} but recorded {count[i]} times "
+            (bad_state, lambda i: f"state value {_value(state[i])} is none of 0 pending, 1 converged, 2 failed"),
+            (bad_count, lambda i: f"{STATE_NAMES.get(int(state[i]), '?')} but recorded {_value(count[i])} times "
                                   "(a committed row is recorded once)"),
             (nonfinite, lambda i: "converged but its outputs contain NaN or inf"),
             (outside, lambda i: "its inputs are not finite or lie outside the store's parameter space"),
