@@ -6,6 +6,7 @@ import argparse
 import importlib
 import sys
 import traceback
+import warnings
 
 #: Modules that contribute sub-commands, in the order of the data flow.
 COMMAND_MODULES = (
@@ -19,8 +20,39 @@ COMMAND_MODULES = (
     "lvcore.app.cli",           # lvcore app
 )
 
+#: The top-level command(s) each module of :data:`COMMAND_MODULES` adds (``tests/test_cli.py`` checks the
+#: two agree), so that a command imports only its own module: ``lvcore campaign status`` reads an HDF5 store
+#: without importing the studies (and with them ArviZ, numpyro and the report).
+COMMANDS = {
+    "simulate": "lvcore.mechanics.cli",
+    "geometry": "lvcore.geometry.cli",
+    "campaign": "lvcore.campaigns.cli",
+    "design": "lvcore.campaigns.cli",
+    "emulator": "lvcore.emulator.cli",
+    "calibrate": "lvcore.inference.cli",
+    "study": "lvcore.studies.cli",
+    "report": "lvcore.report.cli",
+    "app": "lvcore.app.cli",
+}
 
-def build_parser() -> argparse.ArgumentParser:
+#: Warnings from modules matching this (every module outside lvcore, e.g. ArviZ's "ArviZ is undergoing a major
+#: refactor" FutureWarning) are not shown by ``lvcore`` when their category is one of
+#: :data:`QUIET_CATEGORIES`: they speak to the developers of lvcore, not to its users.
+THIRD_PARTY_MODULES = r"(?!lvcore(\.|$)|__main__$)"
+#: Categories of third-party warnings that ``lvcore`` does not show (library deprecation chatter).
+QUIET_CATEGORIES = (FutureWarning, DeprecationWarning, PendingDeprecationWarning)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``lvcore`` parser.
+
+    Parameters
+    ----------
+    command : str, optional
+        A top-level command of :data:`COMMANDS`: register only the module that
+        adds it (what ``main`` does once the command line names one). Default:
+        every module, for ``lvcore --help`` and unknown commands.
+    """
     parser = argparse.ArgumentParser(
         prog="lvcore", description="LV Calibration Lab command line",
         epilog="exit codes: 0 success; 1 did not converge (solver or sampler); 2 bad input (the message names the "
@@ -28,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error print the full traceback (otherwise one line)")
     sub = parser.add_subparsers(dest="command", required=True)
-    for name in COMMAND_MODULES:
+    for name in ((COMMANDS[command],) if command in COMMANDS else COMMAND_MODULES):
         importlib.import_module(name).register(sub)
     for p in _all_parsers(parser):
         p.formatter_class = HelpFormatter
@@ -61,12 +93,21 @@ EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
 
 
 def main(argv=None) -> int:
+    """Run ``lvcore`` with ``argv`` (default ``sys.argv[1:]``) and return its exit code (docs/reliability.md)."""
+    with warnings.catch_warnings():
+        for category in QUIET_CATEGORIES:
+            warnings.filterwarnings("ignore", category=category, module=THIRD_PARTY_MODULES)
+        return _main(argv)
+
+
+def _main(argv) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     # --debug is global but accepted anywhere before a "--"
     cut = argv.index("--") if "--" in argv else len(argv)
     debug = "--debug" in argv[:cut]
     argv = [a for a in argv[:cut] if a != "--debug"] + argv[cut:]
-    parser = build_parser()
+    # the only global options are --debug (removed above) and -h, so a command is the first word
+    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
     args, extra = parser.parse_known_args(argv)
     if extra and not getattr(args, "passthrough", False):  # only `lvcore app` passes options on (to streamlit)
         parser.error(f"unrecognized arguments: {' '.join(extra)}")

@@ -344,3 +344,72 @@ def test_exit_codes_in_a_real_process(tmp_path):
                        env=env, timeout=120)
     assert r.returncode == 2, r.stderr
     assert "Traceback" not in r.stderr
+
+
+# --------------------------------------------------------------------------- no third-party warnings on a terminal
+def _fresh_env(tmp_path) -> dict:
+    """A process whose cache folder is new: ArviZ prints its "major refactor" FutureWarning once a day per cache."""
+    cache = tmp_path / "cache"
+    cache.mkdir(exist_ok=True)
+    return {**os.environ, "PYTHONPATH": str(ROOT), "XDG_CACHE_HOME": str(cache)}
+
+
+def _small_store(path: Path) -> Path:
+    """A 4-row store, 3 rows recorded by the TEST DOUBLE forward (tests/campaign_double.py)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    import campaign_double
+    from lvcore.campaigns.designs import make_design
+    from lvcore.campaigns.space import get_space
+    from lvcore.campaigns.store import CampaignStore, RowResult
+
+    design = make_design(get_space("material"), "lhs", 4, seed=0)
+    with CampaignStore.create(path, design, forward=campaign_double.NAME, resolution="fast") as store:
+        for i in range(3):
+            store.record(RowResult(i, campaign_double.closed_form(*design.points[i]), True, seconds=0.1,
+                                   worker="w"))
+    return path
+
+
+def test_commands_table_matches_the_modules():
+    """``COMMANDS`` (which module a command needs) is what each module of ``COMMAND_MODULES`` registers."""
+    for name in cli.COMMAND_MODULES:
+        assert _commands_of(importlib.import_module(name).register) == {
+            c for c, m in cli.COMMANDS.items() if m == name}, name
+
+
+def test_campaign_status_imports_no_arviz_and_prints_no_warning(tmp_path):
+    store = _small_store(tmp_path / "s.h5")
+    env = _fresh_env(tmp_path)
+    r = subprocess.run([sys.executable, "-m", "lvcore.cli", "campaign", "status", str(store)], capture_output=True,
+                       text=True, env=env, timeout=300)
+    assert r.returncode == 0 and "rows 4: converged 3" in r.stdout, r.stderr
+    assert "Warning" not in r.stderr and r.stderr.strip() == "", r.stderr
+    probe = ("import sys; from lvcore.cli import main; rc = main(['campaign', 'status', sys.argv[1]]); "
+             "print(sorted(m for m in ('arviz', 'numpyro', 'lvcore.studies._common') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", probe, str(store)], capture_output=True, text=True, env=env,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_help_and_simulate_print_no_third_party_warning(tmp_path):
+    """``lvcore --help`` imports every module (ArviZ too): its FutureWarning is not shown; nor on a simulation."""
+    env = _fresh_env(tmp_path)
+    for argv in (["--help"], ["study", "--help"], ["simulate", str(ROOT / "assets" / "cases" / "default_lv.json")]):
+        r = subprocess.run([sys.executable, "-m", "lvcore.cli", *argv], capture_output=True, text=True, env=env,
+                           timeout=600)
+        assert r.returncode == 0, r.stderr
+        assert "Warning" not in r.stderr, (argv, r.stderr)
+
+
+
+def test_the_warning_filter_spares_lvcore_and_is_undone(tmp_path, capsys):
+    import warnings
+
+    for module in ("arviz", "xarray.core.dataset", "numpyro.infer", "jax._src.xla_bridge"):
+        assert re.match(cli.THIRD_PARTY_MODULES, module), module
+    for module in ("lvcore", "lvcore.geometry.fitting", "__main__"):
+        assert not re.match(cli.THIRD_PARTY_MODULES, module), module
+    before = list(warnings.filters)
+    assert run(["campaign", "status", str(tmp_path / "missing.h5")], capsys)[0] == 2
+    assert list(warnings.filters) == before
