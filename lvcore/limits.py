@@ -86,6 +86,11 @@ MIN_WALL_ML = 0.1
 #: A loaded cavity more than this many times its reference volume is flagged in the
 #: result's ``warnings`` (a physiological passive LV stays well below it).
 PLAUSIBLE_MAX_STANDARDISED_LVV = 3.0
+#: A loaded cavity more than this many times its reference volume is flagged at *any* pressure
+#: (:data:`PLAUSIBLE_MAX_STANDARDISED_LVV` applies only at physiological pressures). Land et al.
+#: (2015)'s problem 2, a benchmark at 10 kPa, reaches 4.3; a flattened ellipsoid inflated from
+#: 2.6 to 187 mL (72 times) at 10 kPa is flagged.
+PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE = 5.0
 #: A loaded cavity above this volume (mL) is flagged in the result's ``warnings``.
 PLAUSIBLE_MAX_LVV_ML = 1000.0
 #: A fitted (unloaded) LV cavity above this volume (mL) gets a warning naming ``--units``

@@ -162,6 +162,29 @@ def test_land_problem2_benchmark_is_not_flagged():
     assert r.warnings == ()
 
 
+def test_a_cavity_inflated_more_than_5_times_is_flagged_at_any_pressure():
+    """The flattened ellipsoid of the report went from 2.6 to 187 mL (71.7 times) at 10 kPa without a word."""
+    from lvcore import limits
+    from lvcore.mechanics.simulate import plausibility_warnings
+
+    assert limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE == 5.0
+    (w,) = plausibility_warnings((2.6e3, 187e3), 187 / 2.6, 75.006)
+    assert w.startswith("implausible result: the cavity inflated to 71.9 times its reference volume (2.6 -> 187 mL) "
+                        "at 75 mmHg (10 kPa), more than 5 times at any pressure")
+    for p in (75.006, 1000.0, None):  # above the physiological range, unknown
+        assert len(plausibility_warnings((1e3, 5.01e3), 5.01, p)) == 1, p
+        assert plausibility_warnings((1e3, 4.99e3), 4.99, p) == (), p
+    # a real solve: Land et al. (2015) problem 2 ten times softer (C = 1 kPa) inflates 7 times at 10 kPa
+    from lvcore.mechanics.verification import problem2_case
+
+    case = problem2_case("fast")
+    case["material"]["C"] = 1.0
+    r = simulate(case)
+    assert r.converged and r.lvv_standardised > 5.0
+    (w,) = r.warnings
+    assert "times its reference volume" in w and "at 75 mmHg (10 kPa)" in w
+
+
 @pytest.mark.slow
 def test_softest_corner_at_30_mmhg_is_flagged_not_hidden():
     """The softest corner of the chapter's box at 30 mmHg inflates the LV to ~2 L: kept, but flagged."""

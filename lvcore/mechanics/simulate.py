@@ -56,7 +56,8 @@ class SimulationResult:
     elements: np.ndarray
     sensitivities: dict | None = None
     timings: dict = field(default_factory=dict)
-    #: Plausibility flags (e.g. a cavity more than 3 times its reference volume); the values are kept as computed.
+    #: Plausibility flags (e.g. a cavity more than 3 times its reference volume at a physiological pressure, or
+    #: more than 5 times at any pressure); the values are kept as computed.
     warnings: tuple[str, ...] = ()
     #: ``(free displacements, element pressures)`` of the converged solve: pass as ``simulate(..., initial=)``
     #: to warm-start a solve of the same mesh at nearby parameters.
@@ -380,8 +381,23 @@ def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None 
     (``standardised``) is judged only for an LV at a physiological pressure (``pressure_mmhg`` in
     :data:`lvcore.physiology.PHYSIOLOGICAL_EDP_RANGE_MMHG`): above
     :data:`lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV` it is "implausible", outside the typical range of
-    :func:`lvcore.physiology.typical_edv_ratio` "unusual". Benchmarks at other pressures (Land et al. 2015
-    problem 2 at 10 kPa) and ``pressure_mmhg=None`` (not an LV, or unknown) are not judged.
+    :func:`lvcore.physiology.typical_edv_ratio` "unusual". At any other pressure (or ``pressure_mmhg=None``,
+    unknown) only EDV/V₀ above :data:`lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE` (5) is
+    flagged, so benchmarks such as Land et al. (2015) problem 2 (10 kPa, EDV/V₀ 4.3) are not.
+
+    Parameters
+    ----------
+    volume_mm3 : (float, float) or None
+        Reference and loaded cavity volume (mm³); ``None`` when not an LV.
+    standardised : float or None
+        Loaded over reference cavity volume (EDV/V₀, dimensionless); ``None`` when not an LV.
+    pressure_mmhg : float, optional
+        The cavity pressure (mmHg); ``None`` when unknown.
+
+    Returns
+    -------
+    tuple of str
+        One sentence per flag (empty when nothing is flagged).
     """
     from lvcore import physiology
 
@@ -391,7 +407,19 @@ def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None 
         if lvv > limits.PLAUSIBLE_MAX_LVV_ML:
             out.append(f"implausible result: loaded cavity volume {lvv:.0f} mL exceeds "
                        f"{limits.PLAUSIBLE_MAX_LVV_ML:.0f} mL (check the stiffness parameters and the pressure units)")
-    if standardised is None or not physiology.is_physiological_pressure(pressure_mmhg):
+    if standardised is None:
+        return tuple(out)
+    if not physiology.is_physiological_pressure(pressure_mmhg):
+        if float(standardised) > limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE:
+            at = ("" if pressure_mmhg is None else
+                  f" at {float(pressure_mmhg):.3g} mmHg ({units.mmhg_to_kpa(float(pressure_mmhg)):.3g} kPa)")
+            vols = ("" if volume_mm3 is None or volume_mm3[1] is None else
+                    f" ({float(volume_mm3[0]) / units.MM3_PER_ML:.3g} -> {float(volume_mm3[1]) / units.MM3_PER_ML:.3g}"
+                    " mL)")
+            out.append(f"implausible result: the cavity inflated to {float(standardised):.3g} times its reference "
+                       f"volume{vols}{at}, more than {limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE:g} times "
+                       "at any pressure (lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE), so check the "
+                       "geometry, the stiffness parameters and the pressure units")
         return tuple(out)
     if float(standardised) > limits.PLAUSIBLE_MAX_STANDARDISED_LVV:
         out.append(f"implausible result: the cavity inflated to {float(standardised):.2f} times its reference "
