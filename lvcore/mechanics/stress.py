@@ -1,10 +1,11 @@
-"""Cauchy stress of the Holzapfel–Ogden law in a thin-wall (membrane) state: ``ho_fibre_stress``.
+"""Cauchy stress of the Holzapfel–Ogden law in a planar strip-biaxial state: ``ho_fibre_stress``.
 
-A derived quantity of calibrated stiffness draws: the fibre and cross-fibre
-stresses of the simulator's own Holzapfel–Ogden law
+A derived quantity of calibrated stiffness draws: the fibre and in-plane
+cross-fibre stresses of the simulator's own Holzapfel–Ogden law
 (:class:`lvcore.mechanics.materials.HolzapfelOgden`, the closed-form stress
 the finite elements use, with its tension-only fibre and sheet terms) at a
-given fibre stretch.
+given fibre stretch, with the in-plane cross-fibre direction held at stretch 1
+(the strip-biaxial state of myocardial biaxial testing).
 """
 from __future__ import annotations
 
@@ -32,8 +33,7 @@ def _membrane_stress(params, lam):
     """(σ_ff, σ_nn) (kPa) for parameter rows ``params`` (m, 9) (law keys order) and stretches ``lam`` (m,)."""
     def one(v, stretch):
         law = HolzapfelOgden.from_vector(v)
-        t = stretch ** -0.5
-        F = jnp.diag(jnp.stack([stretch, t, t]))
+        F = jnp.diag(jnp.stack([stretch, 1.0 / stretch, jnp.ones_like(stretch)]))  # strip biaxial, J = 1
         S, _ = law.pk2_tangent(right_cauchy_green(F), _FRAME, with_tangent=False)
         tau = F @ S @ F.T  # J = 1: the Cauchy stress less the hydrostatic pressure
         return tau[0, 0] - tau[1, 1], tau[2, 2] - tau[1, 1]  # the pressure makes σ along s0 (the wall normal) 0
@@ -42,22 +42,30 @@ def _membrane_stress(params, lam):
 
 
 def ho_fibre_stress(theta: Mapping[str, object], stretch, *, fixed: Mapping[str, float] | None = None):
-    """Fibre and in-plane cross-fibre Cauchy stress (kPa) of the HO law under isochoric fibre extension.
+    """Fibre and in-plane cross-fibre Cauchy stress (kPa) of the HO law in planar strip-biaxial extension.
 
     The deformation, in the simulator's fibre frame (f0 fibre, s0 sheet = the wall normal, transmural as in
     :mod:`lvcore.mechanics.fibres`, n0 = f0 × s0 the in-plane cross-fibre direction)::
 
-        F = diag(λ, λ^{-1/2}, λ^{-1/2})      (f0, s0, n0 components; J = 1)
+        F = diag(λ, 1/λ, 1)      (f0, s0, n0 components; J = 1)
 
-    an isochoric extension along the fibre with equal contraction across it. The hydrostatic pressure is fixed
-    by a traction-free wall normal, ``σ(s0, s0) = 0``; the Cauchy stress is
+    the fibre stretched to λ, the in-plane cross-fibre direction n0 held at stretch 1 (as the clamped cross-fibre
+    axis of a strip-biaxial test of myocardium) and the wall normal s0 contracting to 1/λ (incompressible). The
+    hydrostatic pressure is fixed by a traction-free wall normal, ``σ(s0, s0) = 0``; the Cauchy stress is
     ``σ = F S Fᵀ − p I`` with ``S = 2 ∂W/∂C`` the simulator's closed-form stress
-    (:meth:`HolzapfelOgden.pk2_tangent`: isotropic term in Ī1, fibre term only in tension, E_f > 0,
-    sheet term only for I4s > 1, fibre-sheet term in I8fs = 0 here). For λ ≥ 1 the sheet term is off
-    (I4s = 1/λ ≤ 1), so σ_ss = 0 and σ_ff = 2 W₁ (λ² − 1/λ) + 2 W₄ λ²
-    (``W₁ = a/2 e^{b(I1−3)}``, ``W₄ = a_f (λ² − 1) e^{b_f (λ² − 1)²}``); for λ < 1 the fibre term is off and the
-    stretched wall normal (I4s = 1/λ > 1) carries the sheet term, which the pressure takes
-    over.
+    (:meth:`HolzapfelOgden.pk2_tangent`: isotropic term in Ī1 (= I1 here), fibre term only in tension,
+    E_f > 0, sheet term only for I4s > 1, fibre-sheet term in I8fs = 0 here). With
+    ``W = a/(2b)(e^{b(I1−3)} − 1) + a_f/(2b_f)(e^{b_f(I4f−1)²} − 1)·[I4f > 1] + …`` (κ = 0), for λ ≥ 1
+    (``I1 = λ² + 1/λ² + 1``, ``I4f = λ²``; the sheet term is off since ``I4s = 1/λ² ≤ 1``, the fibre-sheet
+    term is zero)::
+
+        σ_ff = 2 W₁ (λ² − 1/λ²) + 2 W₄ λ²,      σ_nn = 2 W₁ (1 − 1/λ²),
+        W₁ = (a/2) e^{b(I1−3)},                 W₄ = a_f (λ² − 1) e^{b_f (λ² − 1)²},
+
+    so the cross-fibre stress is positive for λ > 1 and depends on a, b only. For λ < 1 the fibre term is off
+    and the stretched wall normal (I4s = 1/λ² > 1) carries the sheet term
+    ``W_s = a_s (I4s − 1) e^{b_s (I4s − 1)²}``, which the pressure takes over: both stresses gain ``−2 W_s/λ²``.
+    Along this path ``D = diag(1, −1, 0) λ̇/λ``, so ``dW/dλ = (σ_ff − σ_ss)/λ = σ_ff/λ``.
 
     Parameters
     ----------
@@ -72,10 +80,10 @@ def ho_fibre_stress(theta: Mapping[str, object], stretch, *, fixed: Mapping[str,
 
     Returns
     -------
-    sigma_ff, sigma_ss : arrays of the inputs' broadcast shape (0-d for scalars), kPa
-        The fibre stress σ(f0, f0) and the in-plane cross-fibre stress σ(n0, n0) (called ``sigma_ss``: the
-        second in-plane direction of the membrane; in the simulator's frame it is n0, since its sheet
-        direction s0 is the traction-free wall normal).
+    sigma_ff, sigma_nn : arrays of the inputs' broadcast shape (0-d for scalars), kPa
+        The fibre stress σ(f0, f0) and the in-plane cross-fibre stress σ(n0, n0) (the second in-plane
+        direction of the wall, held at stretch 1; the simulator's sheet direction s0 is the traction-free
+        wall normal).
 
     Raises
     ------
@@ -102,8 +110,8 @@ def ho_fibre_stress(theta: Mapping[str, object], stretch, *, fixed: Mapping[str,
     *values, lam = np.broadcast_arrays(*values, lam)
     shape = lam.shape
     params = np.stack([v.ravel() for v in values], axis=1)
-    s_ff, s_ss = _membrane_stress(params, lam.ravel())
-    return np.asarray(s_ff).reshape(shape), np.asarray(s_ss).reshape(shape)
+    s_ff, s_nn = _membrane_stress(params, lam.ravel())
+    return np.asarray(s_ff).reshape(shape), np.asarray(s_nn).reshape(shape)
 
 
 __all__ = ["ho_fibre_stress", "THETA_KEYS", "FIXED_DEFAULTS"]
