@@ -9,6 +9,9 @@ os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 # the app's background warm-up (lvcore.app.warmup) would compile the Calibration page's samplers in every
 # test process that starts the app; tests that want it call lvcore.app.warmup.warm themselves
 os.environ.setdefault("LVCORE_APP_WARMUP", "0")
+# `lvcore calibrate`'s derived quantities run the FE simulator for 100 posterior draws (about a minute); the
+# tests that check them (tests/test_inference_derived.py) ask for them with --derived-draws, the others skip them
+os.environ.setdefault("LVCORE_DERIVED_DRAWS", "0")
 
 import lvcore  # noqa: E402,F401  (turns on float64 before any test makes arrays)
 from lvcore.inference.samplers import use_host_devices  # noqa: E402

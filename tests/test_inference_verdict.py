@@ -40,16 +40,23 @@ def test_identifiability_flags():
                "b": rng.uniform(0.1, 30.0, 4000),                # the prior: nothing learned
                "af": rng.lognormal(np.log(1.5), 0.1, 4000),      # well identified
                "bf": rng.lognormal(np.log(5.0), 0.2, 4000)}
-    flags, table = verdict.identifiability_flags(samples, bounds)
-    text = " ".join(flags)
-    assert "a: posterior piled on the prior's lower bound" in text
-    assert "b: the 90 % interval" in text and "do not identify" in text
-    assert not any(f.startswith(("af:", "bf:")) for f in flags)
+    flags, table, notes = verdict.identifiability_flags(samples, bounds)
+    assert len(flags) == 1 and flags[0].startswith("a: posterior piled on the prior's lower bound"), flags
+    assert table["a"]["push_ratio_lower"] > verdict.PUSH_RATIO
+    # b follows its (uniform) prior to the upper bound: weak identification, a note and no flag
+    assert any(n.startswith("b: the 90 % interval") and "do not identify" in n for n in notes)
+    assert any(n.startswith("b: the posterior follows its prior to the upper bound") for n in notes)
+    assert 0.5 < table["b"]["push_ratio_upper"] < 1.5
+    assert not any(f.startswith(("af:", "bf:")) for f in flags + notes)
     assert table["af"]["width_vs_prior"] < 0.1
-    # a spread over more than a factor 20 (here 0.1 to 5 kPa) is flagged even if narrower than the prior
-    flags, _ = verdict.identifiability_flags({"a": np.exp(rng.uniform(np.log(0.1), np.log(5.0), 4000))},
-                                             {"a": (0.05, 10.0)})
-    assert any("spans a factor" in f for f in flags)
+    # a spread over more than a factor 20 (here 0.1 to 5 kPa) is weak identification: neither a flag nor a note
+    # on its own (the derived quantities report it, lvcore.inference.derived)
+    flags, _, notes = verdict.identifiability_flags({"a": np.exp(rng.uniform(np.log(0.1), np.log(5.0), 4000))},
+                                                    {"a": (0.05, 10.0)})
+    assert flags == [] and notes == []
+    # the rule is symmetric: the same pile mirrored onto the upper bound is flagged the same way
+    flags, table, _ = verdict.identifiability_flags({"b": 30.0 - 0.06 * rng.random(4000)}, {"b": (0.1, 30.0)})
+    assert len(flags) == 1 and "upper bound 30" in flags[0]
 
 
 def test_divergence_threshold():
@@ -131,10 +138,10 @@ def test_posterior_misfit_flags_structured_residuals_the_likelihood_calls_indepe
     assert v.plausible and v.flagged and v.flags == ["MISFIT: x"]
 
 
-def test_weak_identification_flag_is_one_rule_for_every_model():
-    """a's q95/q05 >= 20 ("not informative enough", docs/reliability.md) flags a run whichever model produced
-    the posterior: run_verdict gives the same IDENTIFIABILITY flags for the same draws of a volume, iid or
-    discrepancy run, and just below the threshold none of them is flagged."""
+def test_weak_identification_is_a_note_for_every_model_not_a_flag():
+    """Weak identification ("not informative enough": a's 90 % interval spanning a factor 25, or b following its
+    prior to a bound) is information, not a defect: run_verdict gives no flag and the same notes for the same
+    draws of a volume, iid or discrepancy run; a posterior pushed onto a bound is flagged (BOUND) for each."""
     from types import SimpleNamespace
 
     import arviz as az
@@ -142,24 +149,26 @@ def test_weak_identification_flag_is_one_rule_for_every_model():
     from lvcore.inference.diagnostics import Convergence
 
     bounds = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
-    rng = np.random.default_rng(7)
 
-    def run(model, a_lo, a_hi):
-        # log-uniform draws of a spanning q05..q95 = a_lo..a_hi; b, af, bf well identified
+    def run(model, pushed):
+        rng = np.random.default_rng(7)   # the same draws for every model
         u = rng.uniform(size=(2, 2000))
-        la, lb = np.log(a_lo), np.log(a_hi)
+        la, lb = np.log(0.1), np.log(2.5)
         a = np.exp(la + (lb - la) * (u - 0.05) / 0.9)
-        post = {"a": a, "b": rng.lognormal(np.log(3.0), 0.1, (2, 2000)),
-                "af": rng.lognormal(np.log(1.5), 0.1, (2, 2000)), "bf": rng.lognormal(np.log(5.0), 0.1, (2, 2000))}
+        b = 30.0 - 0.05 * rng.random((2, 2000)) if pushed else rng.uniform(0.1, 30.0, (2, 2000))
+        post = {"a": a, "b": b, "af": rng.lognormal(np.log(1.5), 0.1, (2, 2000)),
+                "bf": rng.lognormal(np.log(5.0), 0.1, (2, 2000))}
         res = SimpleNamespace(model=model, idata=az.from_dict(posterior=post),
                               convergence=Convergence(True, 1.0, 1000.0, 1000.0, 0, ()))
         return verdict.run_verdict(res, verdict.Consistency({}, np.zeros(25), np.ones(25)), bounds)
 
-    for lo, hi, flagged in ((0.1, 2.5, True), (0.1, 1.9, False)):   # factors 25 and 19
-        seen = {}
-        for model in ("volume", "iid", "discrepancy"):
-            rng = np.random.default_rng(7)   # the same draws for every model
-            v = run(model, lo, hi)
-            seen[model] = [f for f in v.flags if f.startswith("IDENTIFIABILITY")]
-        assert seen["volume"] == seen["iid"] == seen["discrepancy"], seen
-        assert any("spans a factor" in f for f in seen["iid"]) == flagged, seen
+    for pushed in (False, True):
+        seen = {m: run(m, pushed) for m in ("volume", "iid", "discrepancy")}
+        assert len({tuple(v.flags) for v in seen.values()}) == 1
+        assert len({tuple(v.notes) for v in seen.values()}) == 1
+        v = seen["iid"]
+        if pushed:
+            assert v.flagged and v.flags[0].startswith("BOUND: b: posterior piled on the prior's upper bound")
+        else:
+            assert not v.flagged, v.flags
+            assert any(n.startswith("b:") for n in v.notes) and v.record()["notes"] == list(v.notes)

@@ -133,6 +133,10 @@ def register(subparsers) -> None:
                    help="draws kept per chain after convergence, 1 to 1,000,000 (default 1000)")
     p.add_argument("--seed", type=cli_args.seed, default=0,
                    help="random seed of the sampler, an integer from 0 to 2^32 - 1 (default 0)")
+    p.add_argument("--derived-draws", type=int, default=None, metavar="N",
+                   help="posterior draws behind the derived quantities (EDPVR by the FE simulator, stress, the "
+                        "identified combination, contraction), 0 to skip them, at most 2,000 (default 100, or the "
+                        "environment's LVCORE_DERIVED_DRAWS)")
     p.add_argument("--subject", default=None, help="row to use (subject id); default: every row")
     p.add_argument("--out", type=cli_args.output_dir, default="calibration_out",
                    help="output folder, created if missing (default calibration_out)")
@@ -157,6 +161,9 @@ def check_options(args) -> None:
         raise DataError(f"--chains must be <= 64, got {args.chains}")
     if args.warmup > 1_000_000 or args.samples > 1_000_000:
         raise DataError("--warmup and --samples must be <= 1,000,000")
+    n_derived = getattr(args, "derived_draws", None)
+    if n_derived is not None and not 0 <= n_derived <= 2000:
+        raise DataError(f"--derived-draws must be 0 (skip) to 2,000 posterior draws, got {n_derived}")
     if not (math.isfinite(args.sigma_v) and args.sigma_v > 0):
         raise DataError(f"--sigma-v must be a positive number of mL, got {args.sigma_v}")
     lo, hi = SIGMA_V_RANGE_ML
@@ -201,7 +208,8 @@ def run_calibrate(args) -> int:
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.exceptions import DataError
     from lvcore.inference import calibrate as cal
-    from lvcore.inference import geometry_prior, guards, plausibility, verdict
+    from lvcore.inference import derived, geometry_prior, guards, plausibility, verdict
+    from lvcore.inference.models import lvv_sd
     from lvcore.inference.data import read_measurements
     from lvcore.inference.models import MODEL_NAMES
     from lvcore.inference.samplers import SamplerConfig
@@ -247,6 +255,8 @@ def run_calibrate(args) -> int:
     cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
     base = str(getattr(emulator, "base", "clamped"))
+    resolution = str(emulator.resolution)
+    n_derived = derived.default_draws() if args.derived_draws is None else int(args.derived_draws)
     cli_measures = geometry_prior.check_measures(
         {"reference_volume_ml": args.reference_volume, "wall_volume_ml": args.wall_volume,
          "long_axis_mm": args.long_axis}, "options")
@@ -329,8 +339,21 @@ def run_calibrate(args) -> int:
             consistency[item.subject] = verdict.consistency_check(r.y, forward, args.sigma_v, sigma_ref,
                                                                   infer_angles=infer, seed=args.seed)
         v = verdict.run_verdict(res, consistency[item.subject], verdict.checked_bounds(forward, infer), forward)
+        v = v.with_extra("EXTRAPOLATION", [e.split(": ", 1)[1] for e in w if e.startswith("EXTRAPOLATION: ")])
         check = plausibility.check_result(res, r.y, args.sigma_v, sigma_ref, seed=args.seed)
         out.mkdir(parents=True, exist_ok=True)
+        derived_rec = None
+        if n_derived:
+            derived_rec, draws = derived.derive(
+                res.idata, bounds={k: b for k, b in verdict.checked_bounds(forward, infer).items()
+                                   if k in derived.THETA_NAMES},
+                edp_mmhg=c["edp_mmhg"], angles=(c["alpha_endo"], c["alpha_epi"]) if not infer else (None, None),
+                base=base, resolution=resolution, measured_edv_ml=float(r.y[0]),
+                lvv_sd_ml=lambda v_ml, fw=forward: np.asarray(lvv_sd(v_ml, args.sigma_v, fw), float),
+                h=None if (inferred or subject) else geo.h, scale=1.0 if (inferred or subject) else geo.scale,
+                geometry=emulator.subject_geometry if subject else None, n_draws=n_derived)
+            draws.save(out / f"{cal.file_stem(item.subject)}_{item.model}_derived.npz")
+            v = v.with_extra("CONSISTENCY", derived.check_flags(derived_rec))
         ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"
         ppc_csv.write_text("output,p_value\n" + "".join(f"{k},{val:.6g}\n"
                                                         for k, val in check.record()["p_values"].items()))
@@ -355,7 +378,9 @@ def run_calibrate(args) -> int:
             "posterior_predictive": check.record(),
             "verdict": v.record(),
             "flags": v.flags,
-            "warnings": w + v.flags}
+            "notes": list(v.notes) + ([] if derived_rec is None else derived_rec["weakly_identified"]),
+            "derived": derived_rec,
+            "warnings": [x for x in w if not x.startswith("EXTRAPOLATION: ")] + v.flags}
         for f in v.flags:
             print(f"lvcore: warning: [{item.subject}/{item.model}] FLAGGED: {f}", file=sys.stderr)
         if not args.json:
@@ -363,6 +388,8 @@ def run_calibrate(args) -> int:
                   f"{base} base, EDP {c['edp_mmhg']:g} mmHg) ==")
             print(res.summary.to_string(float_format=lambda val: f"{val:.4g}"))
             print(res.convergence.message())
+            if derived_rec is not None:
+                print(derived.text_table(derived_rec))
             names = list(check.record()["p_values"])
             worst = np.argsort(v.consistency.p_values)[:3]
             print("best-fit p-values (smallest): "

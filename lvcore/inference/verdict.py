@@ -16,19 +16,22 @@ picked. It has three parts:
    checks of :mod:`lvcore.inference.plausibility` fire (mixed signs, no
    deformation). The same data and forward model give the same answer for
    every model: ``plausible`` is this check.
-2. **Identifiability** (:func:`identifiability_flags`), from the posterior:
-   mass piled on a prior bound (its q05 or q95 within :data:`BOUND_FRACTION`
-   of the prior's width from the bound; widths in log for a, b, af, bf and the
-   scale, whose priors span decades) and a 90 % interval of a, b, af, bf (or
-   the angles) no narrower than :data:`WIDTH_FRACTION` times the prior's 90 %
-   interval, both measured on the prior's own uniform scale (nothing learned),
-   and an ``a`` whose 90 % interval spans a factor :data:`MAX_A_RATIO` or more.
+2. **Bounds** (:func:`identifiability_flags`), from the posterior: mass
+   piled on a prior bound *that the data push against* (its q05 or q95
+   within :data:`BOUND_FRACTION` of the prior's width from the bound, widths
+   in log for a, b, af, bf and the scale, and the likelihood rising towards
+   the bound: :func:`_band_push`) is a defect (flag **BOUND**). Weak
+   identification is not: with one loaded state the data fix a combination
+   of a and b (docs/real_data.md), so a wide interval, or a posterior that
+   follows its prior to a bound, is a *note* reported with what is
+   identified (:mod:`lvcore.inference.derived`: the EDPVR, stress, the
+   ridge and each parameter's contraction).
 3. **Sampler health**: divergent transitions above :data:`MAX_DIVERGENT_FRACTION`
    of the kept draws, or a run that did not converge.
 
 Any flag makes the run *flagged*: ``lvcore calibrate`` exits with 4, "ran,
 results flagged" (docs/reliability.md), and lists the flags in
-``summary.json``.
+``summary.json``. Notes never change the exit code.
 """
 from __future__ import annotations
 
@@ -51,9 +54,12 @@ N_STARTS = 4
 BOUND_FRACTION = 0.02
 #: A 90 % interval at least this fraction of the prior's 90 % interval has learned nothing.
 WIDTH_FRACTION = 0.9
-#: The stiffness ``a`` is flagged as unidentified when its 90 % interval spans this factor or more
-#: (q95 / q05), the precision issue 24 asks of a useful estimate.
-MAX_A_RATIO = 20.0
+#: Each edge band of :func:`_band_push`, as a fraction of the prior's range (log range for log parameters).
+EDGE_BAND = 0.05
+#: Posterior mass in an edge band below which no bound is flagged.
+MIN_EDGE_MASS = 0.05
+#: Posterior-to-prior density ratio, edge band over adjacent band, from which the data push against a bound.
+PUSH_RATIO = 2.0
 #: Divergent transitions above this fraction of the kept draws flag the run (20 of 4 x 1000).
 MAX_DIVERGENT_FRACTION = 0.005
 #: Parameters whose widths are measured in log space.
@@ -394,8 +400,39 @@ def _width(lo, hi, log: bool) -> float:
     return math.log(hi / lo) if log else hi - lo
 
 
-def identifiability_flags(samples: dict, bounds: dict) -> tuple[list[str], dict]:
-    """Bound-piling and interval-width flags (module docstring, part 2).
+def _band_push(v: np.ndarray, lo: float, hi: float, log: bool, upper: bool) -> tuple[float, float]:
+    """Posterior mass in the edge band at a bound and the posterior-to-prior density ratio there against the
+    adjacent band (each band :data:`EDGE_BAND` of the range, on the log scale for log parameters).
+
+    The prior is uniform on the linear scale, so its mass in each band is exact. A ratio near 1 means the
+    posterior follows the prior towards the bound (nothing learned there); a ratio well above 1 means the
+    likelihood rises towards the bound: the data push against it.
+    """
+    f = np.log if log else (lambda x: x)
+    inv = np.exp if log else (lambda x: x)
+    a, b = f(lo), f(hi)
+    w = EDGE_BAND * (b - a)
+    if upper:
+        edge, adj = (inv(b - w), hi), (inv(b - 2 * w), inv(b - w))
+    else:
+        edge, adj = (lo, inv(a + w)), (inv(a + w), inv(a + 2 * w))
+    post = lambda band: float(np.mean((v >= band[0]) & (v <= band[1])))  # noqa: E731
+    prior = lambda band: (band[1] - band[0]) / (hi - lo)  # noqa: E731
+    m_edge, m_adj = post(edge), post(adj)
+    ratio = (m_edge / prior(edge)) / max(m_adj / prior(adj), 1e-12) if m_edge > 0 else 0.0
+    return m_edge, ratio
+
+
+def identifiability_flags(samples: dict, bounds: dict) -> tuple[list[str], dict, list[str]]:
+    """Bound flags (a defect) and identification notes (information) (module docstring, part 2).
+
+    A posterior is *piled on a bound the data push against* when its q05 (q95) lies within
+    :data:`BOUND_FRACTION` of the range from the lower (upper) bound, at least :data:`MIN_EDGE_MASS` of the draws
+    lie in the edge band, and the posterior-to-prior density ratio in the edge band is at least
+    :data:`PUSH_RATIO` times that of the adjacent band (:func:`_band_push`): the likelihood rises towards the
+    bound, so the bound, not the data, sets the estimate. A posterior that merely follows its prior to a
+    bound (an unidentified direction meeting the box) is not a defect: it is a note, as is a 90 % interval
+    at least :data:`WIDTH_FRACTION` of the prior's.
 
     Parameters
     ----------
@@ -407,10 +444,13 @@ def identifiability_flags(samples: dict, bounds: dict) -> tuple[list[str], dict]
     Returns
     -------
     flags : list of str
+        Defects: posterior mass piled on a bound the data push against.
     table : dict
-        Per parameter: q05, q95, prior bounds, distances to the bounds and the width ratio.
+        Per parameter: q05, q95, prior bounds, distances to the bounds, the width ratio and the edge-band numbers.
+    notes : list of str
+        Weak identification (information, no flag).
     """
-    flags, table = [], {}
+    flags, table, notes = [], {}, []
     for n, (lo, hi) in bounds.items():
         if n not in samples:
             continue
@@ -422,22 +462,27 @@ def identifiability_flags(samples: dict, bounds: dict) -> tuple[list[str], dict]
         d_hi = _width(min(q95, hi), hi, log) / w
         # widths on the prior's own (uniform, linear) scale: its 90 % interval is 0.9 (hi - lo)
         ratio = (q95 - q05) / (0.9 * (hi - lo))
+        m_lo, r_lo = _band_push(v, lo, hi, log, upper=False)
+        m_hi, r_hi = _band_push(v, lo, hi, log, upper=True)
         row = {"q05": q05, "q95": q95, "lower": float(lo), "upper": float(hi), "scale": "log" if log else "linear",
-               "q05_from_lower": d_lo, "q95_from_upper": d_hi, "width_vs_prior": ratio}
+               "q05_from_lower": d_lo, "q95_from_upper": d_hi, "width_vs_prior": ratio,
+               "edge_mass_lower": m_lo, "push_ratio_lower": r_lo, "edge_mass_upper": m_hi, "push_ratio_upper": r_hi}
         table[n] = row
-        if d_lo < BOUND_FRACTION:
-            flags.append(f"{n}: posterior piled on the prior's lower bound {lo:g} (q05 = {q05:.4g}); the data push "
-                         f"{n} below what the prior allows, or do not inform it")
-        if d_hi < BOUND_FRACTION:
-            flags.append(f"{n}: posterior piled on the prior's upper bound {hi:g} (q95 = {q95:.4g}); the data push "
-                         f"{n} above what the prior allows, or do not inform it")
-        if n == "a" and q05 > 0 and q95 / q05 >= MAX_A_RATIO:
-            flags.append(f"a: the 90 % interval [{q05:.3g}, {q95:.3g}] kPa spans a factor {q95 / q05:.0f} (>= "
-                         f"{MAX_A_RATIO:g}); the stiffness is not identified to a useful precision")
+        for side, d, m, r, bound, q in (("lower", d_lo, m_lo, r_lo, lo, q05), ("upper", d_hi, m_hi, r_hi, hi, q95)):
+            if d >= BOUND_FRACTION:
+                continue
+            if m >= MIN_EDGE_MASS and r >= PUSH_RATIO:
+                flags.append(f"{n}: posterior piled on the prior's {side} bound {bound:g} ({'q05' if side == 'lower' else 'q95'} = "
+                             f"{q:.4g}; {100 * m:.0f} % of the draws in the edge band, the likelihood {r:.1f}x higher "
+                             f"there than next to it): the data push {n} {'below' if side == 'lower' else 'above'} "
+                             "what the prior allows")
+            else:
+                notes.append(f"{n}: the posterior follows its prior to the {side} bound {bound:g}: the data do not "
+                             f"bound {n} on that side")
         if n in THETA_NAMES + ANGLE_NAMES and ratio >= WIDTH_FRACTION:
-            flags.append(f"{n}: the 90 % interval [{q05:.3g}, {q95:.3g}] is {100 * ratio:.0f} % of the prior's; the "
-                         "data do not identify it")
-    return flags, table
+            notes.append(f"{n}: the 90 % interval [{q05:.3g}, {q95:.3g}] is {100 * ratio:.0f} % of the prior's; the "
+                         "data do not identify it on its own")
+    return flags, table, notes
 
 
 def sampler_flags(convergence, n_draws: int) -> list[str]:
@@ -460,6 +505,7 @@ class Verdict:
     consistency : Consistency
         Shared by every model of a subject.
     identifiability : tuple of str
+        Defects: posterior mass piled on a bound the data push against (flag kind BOUND).
     sampler : tuple of str
     table : dict
         Per-parameter numbers behind the identifiability flags.
@@ -471,12 +517,23 @@ class Verdict:
     table: dict = field(default_factory=dict)
     misfit: tuple = ()
     structure: dict = field(default_factory=dict)
+    #: Information that is not a defect (weak identification), shown with the identified quantities.
+    notes: tuple = ()
+    #: Flags found outside this module (the EDPVR's consistency, extrapolation), by kind: ((kind, text), ...).
+    extra: tuple = ()
 
     @property
     def flags(self) -> list[str]:
         return ([f"CONSISTENCY: {f}" for f in self.consistency.flags]
                 + [f"MISFIT: {f}" for f in self.misfit]
-                + [f"IDENTIFIABILITY: {f}" for f in self.identifiability] + [f"SAMPLER: {f}" for f in self.sampler])
+                + [f"BOUND: {f}" for f in self.identifiability] + [f"SAMPLER: {f}" for f in self.sampler]
+                + [f"{kind}: {f}" for kind, f in self.extra])
+
+    def with_extra(self, kind: str, flags) -> "Verdict":
+        """This verdict with more flags of ``kind`` (e.g. ``CONSISTENCY`` from the EDPVR, ``EXTRAPOLATION``)."""
+        from dataclasses import replace
+
+        return replace(self, extra=tuple(self.extra) + tuple((kind, f) for f in flags))
 
     @property
     def plausible(self) -> bool:
@@ -488,11 +545,12 @@ class Verdict:
         return bool(self.flags)
 
     def record(self) -> dict:
-        return {"flagged": self.flagged, "plausible": self.plausible, "flags": self.flags,
+        return {"flagged": self.flagged, "plausible": self.plausible, "flags": self.flags, "notes": list(self.notes),
                 "consistency": self.consistency.record(), "identifiability": self.table,
                 "residual_structure": dict(self.structure),
                 "thresholds": {"alpha": ALPHA, "min_bad_strains": MIN_BAD_STRAINS, "bound_fraction": BOUND_FRACTION,
-                               "width_fraction": WIDTH_FRACTION, "max_a_ratio": MAX_A_RATIO,
+                               "width_fraction": WIDTH_FRACTION, "edge_band": EDGE_BAND,
+                               "min_edge_mass": MIN_EDGE_MASS, "push_ratio": PUSH_RATIO,
                                "max_divergent_fraction": MAX_DIVERGENT_FRACTION}}
 
 
@@ -501,11 +559,11 @@ def run_verdict(result, consistency: Consistency, bounds: dict, forward=None) ->
     (``forward``: the forward model that ran, for the representation error of :func:`posterior_misfit`)."""
     post = result.idata.posterior
     samples = {n: np.asarray(post[n]) for n in bounds if n in post}
-    ident, table = identifiability_flags(samples, bounds)
+    ident, table, notes = identifiability_flags(samples, bounds)
     n_draws = int(np.prod(np.asarray(post[next(iter(THETA_NAMES))]).shape[:2]))
     structure, misfit = posterior_misfit(result, forward)
     return Verdict(consistency, tuple(ident), tuple(sampler_flags(result.convergence, n_draws)), table,
-                   tuple(misfit), structure)
+                   tuple(misfit), structure, tuple(notes))
 
 
 def checked_bounds(forward, infer_angles: bool = False) -> dict:
@@ -517,7 +575,7 @@ def checked_bounds(forward, infer_angles: bool = False) -> dict:
     return {n: b for n, b in bounds.items() if n in THETA_NAMES + ANGLE_NAMES or is_pc_name(n) or n == "scale"}
 
 
-__all__ = ["ALPHA", "MIN_BAD_STRAINS", "N_STARTS", "BOUND_FRACTION", "WIDTH_FRACTION", "MAX_A_RATIO",
+__all__ = ["ALPHA", "MIN_BAD_STRAINS", "N_STARTS", "BOUND_FRACTION", "WIDTH_FRACTION", "EDGE_BAND", "MIN_EDGE_MASS", "PUSH_RATIO",
            "MAX_DIVERGENT_FRACTION",
            "N_PERMUTATIONS", "Consistency", "best_fit", "output_sds", "consistency_check", "posterior_misfit",
            "residual_structure", "identifiability_flags", "sampler_flags", "Verdict",
