@@ -55,8 +55,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """
     parser = argparse.ArgumentParser(
         prog="lvcore", description="LV Calibration Lab command line",
-        epilog="exit codes: 0 success; 1 did not converge (solver or sampler); 2 bad input (the message names the "
-               "file and field); 3 internal error (rerun with --debug for the traceback)")
+        epilog="exit codes: " + "; ".join(f"{code} {text}" for code, text in EXIT_CODES.items()))
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error print the full traceback (otherwise one line)")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -88,8 +87,18 @@ def _all_parsers(parser):
     return out
 
 
-#: Exit codes of ``lvcore`` (docs/reliability.md).
-EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+#: Exit codes of ``lvcore`` (docs/reliability.md). ``EXIT_FLAGGED`` is ``lvcore.inference.cli.EXIT_FLAGGED``.
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_FLAGGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
+#: What each exit code means, as ``lvcore --help`` lists them; README.md and docs/reliability.md list the same.
+EXIT_CODES = {
+    EXIT_OK: "success",
+    EXIT_NOT_CONVERGED: "did not converge (the solver, or a posterior that fails its R-hat/ESS checks)",
+    EXIT_BAD_INPUT: "bad input (the message names the file and the field)",
+    EXIT_INTERNAL: "internal error (a bug; rerun with --debug for the traceback)",
+    EXIT_FLAGGED: "ran, results flagged (`lvcore calibrate`: every posterior converged and was written, but the "
+                  "verdict flagged at least one run)",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
+}
 
 
 def main(argv=None) -> int:
@@ -136,7 +145,7 @@ def _main(argv) -> int:
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("lvcore: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     except Exception as err:  # noqa: BLE001 - the last line of defence: one line, exit 3
         return _internal(err, debug)
 

@@ -384,7 +384,9 @@ def test_campaign_status_imports_no_arviz_and_prints_no_warning(tmp_path):
                        text=True, env=env, timeout=300)
     assert r.returncode == 0 and "rows 4: converged 3" in r.stdout, r.stderr
     assert "Warning" not in r.stderr and r.stderr.strip() == "", r.stderr
-    probe = ("import sys; from lvcore.cli import main; rc = main(['campaign', 'status', sys.argv[1]]); "
+    # nor does the parser of `lvcore emulator train`, which reads stores too
+    probe = ("import sys; from lvcore.cli import build_parser, main; rc = main(['campaign', 'status', sys.argv[1]]); "
+             "build_parser('emulator'); "
              "print(sorted(m for m in ('arviz', 'numpyro', 'lvcore.studies._common') if m in sys.modules))")
     r = subprocess.run([sys.executable, "-c", probe, str(store)], capture_output=True, text=True, env=env,
                        timeout=300)
@@ -413,3 +415,85 @@ def test_the_warning_filter_spares_lvcore_and_is_undone(tmp_path, capsys):
     before = list(warnings.filters)
     assert run(["campaign", "status", str(tmp_path / "missing.h5")], capsys)[0] == 2
     assert list(warnings.filters) == before
+
+
+# --------------------------------------------------------------------------- texts a user reads (help, messages)
+def test_every_command_and_sub_command_has_a_description_of_its_own():
+    parsers = cli._all_parsers(cli.build_parser())
+    assert len(parsers) > 25
+    for p in parsers:
+        assert p.description and p.description.strip(), f"'{p.prog} --help' has no description"
+    # each of its own: no two commands share one
+    texts = [p.description for p in parsers]
+    assert len(set(texts)) == len(texts)
+
+
+def _exit_codes_listed(text: str) -> list[int]:
+    """The codes of an "exit codes: 0 ...; 1 ...; ..." list (lvcore --help, README.md)."""
+    return [int(m) for m in re.findall(r"(?:^|; )(\d+) ", " ".join(text.split()))]
+
+
+def test_exit_codes_0_to_4_are_listed_alike_in_help_readme_and_reliability(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    help_codes = _exit_codes_listed(out[out.index("exit codes:") + len("exit codes:"):])
+    assert help_codes == [0, 1, 2, 3, 4, 130] == list(cli.EXIT_CODES)
+    from lvcore.inference.cli import EXIT_FLAGGED
+
+    assert cli.EXIT_FLAGGED == EXIT_FLAGGED == 4
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    para = readme[readme.index("Exit codes of `lvcore`"):]
+    para = para[para.index(":") + 1:para.index("\n\n")]
+    assert _exit_codes_listed(para) == help_codes
+    reliability = (ROOT / "docs" / "reliability.md").read_text(encoding="utf-8")
+    table = reliability[reliability.index("## Exit codes of `lvcore`"):]
+    table = table[:table.index("\n\n", table.index("| code |"))]
+    assert list(dict.fromkeys(int(c) for c in re.findall(r"^\| (\d+) \|", table, re.MULTILINE))) == help_codes
+    for text in (out, readme, table):
+        assert "ran, results flagged" in " ".join(text.split())
+
+
+#: Files a user reads strings from: messages, help, captions, figure titles.
+USER_FACING = ("lvcore", "pages")
+#: Files with internal issue references that are owned elsewhere (lvcore/studies/ is off limits to the
+#: session that added this test): their help strings still say "issue 26"; see the xfail test below.
+ISSUE_REFERENCES_PENDING = ("lvcore/studies/bo_mismatch.py", "lvcore/studies/mismatch.py",
+                            "lvcore/studies/operators_realistic.py")
+
+
+def _user_visible_strings(path: Path):
+    """(line, text) of every string literal of ``path`` that is not a docstring or a bare string statement."""
+    import ast
+
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    skip = {id(node.value) for node in ast.walk(tree)
+            if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)}  # docstrings and the like
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
+            yield node.lineno, node.value
+
+
+def _issue_references(paths) -> list[str]:
+    pattern = re.compile(r"issue \d+", re.IGNORECASE)
+    return [f"{path.relative_to(ROOT)}:{line}: {text[:120]!r}" for path in paths
+            for line, text in _user_visible_strings(path) if pattern.search(text)]
+
+
+def test_no_internal_issue_references_in_user_visible_strings():
+    """Help strings, messages, captions and figure titles never say "issue 26" (comments and docstrings may)."""
+    paths = [p for root in USER_FACING for p in sorted((ROOT / root).rglob("*.py"))
+             if str(p.relative_to(ROOT)) not in ISSUE_REFERENCES_PENDING]
+    assert len(paths) > 100
+    assert _issue_references(paths) == []
+    # the check sees f-strings and help strings, not comments or docstrings
+    sample = ROOT / "lvcore" / "cli.py"
+    assert any("exit codes: " in text for _, text in _user_visible_strings(sample))
+    assert not any("The ``lvcore`` command" in text for _, text in _user_visible_strings(sample))
+
+
+@pytest.mark.xfail(strict=True, reason="the study modules' help strings still say 'issue 26' (lvcore/studies/ is "
+                                       "owned by another session); remove this marker and ISSUE_REFERENCES_PENDING "
+                                       "once they are rephrased")
+def test_no_internal_issue_references_in_the_study_help_strings():
+    assert _issue_references([ROOT / p for p in ISSUE_REFERENCES_PENDING]) == []

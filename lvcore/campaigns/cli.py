@@ -9,7 +9,10 @@ from lvcore.campaigns.runner import RESOLUTIONS
 
 def register(subparsers) -> None:
     # lvcore design METHOD --space NAME --n N --seed S --out design.csv
-    p = subparsers.add_parser("design", help="write a space-filling design (CSV) over a named parameter space")
+    p = subparsers.add_parser(
+        "design", help="write a space-filling design (CSV) over a named parameter space",
+        description="Write a Sobol, Latin-hypercube, random or exp-warped Latin-hypercube design over a named "
+                    "parameter space as CSV, the input of `lvcore campaign run`.")
     p.add_argument("method", choices=METHODS, help="sobol (scrambled), lhs, random, or exp (the chapter's exp-warped LHS)")
     p.add_argument("--space", required=True, choices=SPACE_NAMES, help="named parameter space (see lvcore.campaigns.space)")
     p.add_argument("--n", type=cli_args.int_in(1, limits.MAX_DESIGN_POINTS), required=True,
@@ -22,10 +25,16 @@ def register(subparsers) -> None:
                    help="output CSV file (its folders are created; an existing file is replaced)")
     p.set_defaults(func=_design)
 
-    c = subparsers.add_parser("campaign", help="run, resume or inspect a simulation campaign")
+    c = subparsers.add_parser(
+        "campaign", help="run, resume or inspect a simulation campaign",
+        description="Run a design through the forward model into a resumable HDF5 store, resume an interrupted "
+                    "one, or count the converged, failed and pending rows of a store.")
     sub = c.add_subparsers(dest="campaign_command", required=True)
 
-    run = sub.add_parser("run", help="run every row of a design; results go to an HDF5 store as they arrive")
+    run = sub.add_parser(
+        "run", help="run every row of a design; results go to an HDF5 store as they arrive",
+        description="Run every row of a design CSV on local workers or a Dask scheduler; each result is committed "
+                    "to a new HDF5 store as it arrives, so a campaign that is stopped can be resumed.")
     run.add_argument("design", help="design CSV written by `lvcore design`")
     run.add_argument("--out", type=cli_args.output_file, required=True,
                      help="HDF5 store to create (refused if it exists: use `lvcore campaign resume`)")
@@ -38,14 +47,20 @@ def register(subparsers) -> None:
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
 
-    res = sub.add_parser("resume", help="run the rows of a store that are not recorded yet")
+    res = sub.add_parser(
+        "resume", help="run the rows of a store that are not recorded yet",
+        description="Run the pending rows of an existing store (and the failed ones with --retry-failed); rows "
+                    "that fail the store check are listed and never run.")
     res.add_argument("store", help="HDF5 store written by `lvcore campaign run`")
     _add_executor_args(res)
     res.add_argument("--retry-failed", action="store_true", help="also run the failed rows again")
     res.add_argument("--no-progress", action="store_true", help="no progress bar")
     res.set_defaults(func=_resume)
 
-    st = sub.add_parser("status", help="counts of converged/failed/pending rows and failure reasons")
+    st = sub.add_parser(
+        "status", help="counts of converged/failed/pending rows and failure reasons",
+        description="Print how many rows of a store converged, failed or are pending, the failure reasons and the "
+                    "mean solve time; inconsistent rows are reported and left out of every count.")
     st.add_argument("store", help="HDF5 store")
     st.add_argument("--check", action="store_true",
                     help="list every inconsistent row (state not 0/1/2, record_count not 1, NaN outputs in a "

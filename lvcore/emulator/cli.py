@@ -13,10 +13,17 @@ from lvcore.exceptions import EmulatorError
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("emulator", help="train or inspect neural-network emulators")
+    p = subparsers.add_parser(
+        "emulator", help="train or inspect neural-network emulators",
+        description="Train a neural-network emulator on campaign stores, build one for a single subject's "
+                    "geometry from FE runs, or show an emulator's inputs and accuracy.")
     sub = p.add_subparsers(dest="emulator_command", required=True)
 
-    t = sub.add_parser("train", help="train an emulator on campaign store(s)")
+    t = sub.add_parser(
+        "train", help="train an emulator on campaign store(s)",
+        description="Train an MLP emulator of the 25 outputs on the converged, consistent rows of campaign "
+                    "store(s), choosing the architecture on validation data, and write network.npz and "
+                    "metadata.json.")
     t.add_argument("stores", nargs="+", help="training campaign store(s) (HDF5, same space)")
     t.add_argument("--out", type=cli_args.output_dir, required=True,
                    help="output directory (network.npz + metadata.json), created if missing")
@@ -83,7 +90,9 @@ def register(subparsers) -> None:
     add_training_arguments(b, default_training_config())
     b.set_defaults(func=_build, architectures="100x100")
 
-    i = sub.add_parser("info", help="show an emulator's inputs, box, architecture and accuracy")
+    i = sub.add_parser("info", help="show an emulator's inputs, box, architecture and accuracy",
+                       description="Show a bundled or saved emulator's inputs, input box, architecture and "
+                                   "validation and test accuracy.")
     i.add_argument("name", help="bundled name (e.g. chapter, angles) or directory")
     i.add_argument("--json", action="store_true", help="print the full metadata as JSON")
     i.set_defaults(func=_info)

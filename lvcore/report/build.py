@@ -72,7 +72,7 @@ SECTIONS = (
     Section("Figs 9.11-9.14 operator study", "operators",
             ("fig9_11_forward_strain_error", "fig9_12_parameter_error", "fig9_13_rss_surface",
              "fig9_14_output_error"), saved=True),
-    Section("Model-data mismatch dose-response (issue 26)", "mismatch",
+    Section("Model-data mismatch dose-response", "mismatch",
             ("fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s", "fig_mismatch_output_error",
              "table_mismatch_doses"), saved=True),
     Section("Findings F1-F6 with verdicts", "findings", ("table_findings",), saved=True),
