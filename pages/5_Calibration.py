@@ -207,6 +207,14 @@ if run_clicked:
     except LVCoreError as err:
         st.error(str(err))
         st.stop()
+    try:  # what the derived quantities (EDPVR, stress, ridge) need: the emulator's geometry, resolution and base
+        physiology_setup = physiology_panel.Setup.of(
+            emulator, forward, edp_mmhg=conditions["edp_mmhg"],
+            angles=(conditions["alpha_endo"], conditions["alpha_epi"]), measured_lvv_ml=float(data.y[0]),
+            h=h, scale=geo.scale if geo is not None else 1.0, infer_angles=angles == "infer")
+    except Exception as err:  # noqa: BLE001 - the calibration still runs; the panel says why it is missing
+        st.warning(f"The EDPVR and derived quantities will not be available ({type(err).__name__}: {err}).")
+        physiology_setup = None
     config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains))
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
@@ -215,7 +223,8 @@ if run_clicked:
            "infer": angles == "infer",
            "edp_mmhg": conditions["edp_mmhg"], "edp_source": guards.edp_source(data, None, emulator),
            "base": str(getattr(emulator, "base", "clamped")), "h": [float(v) for v in h],
-           "angles": (conditions["alpha_endo"], conditions["alpha_epi"])}
+           "angles": (conditions["alpha_endo"], conditions["alpha_epi"]),
+           "physiology": physiology_setup}
     st.session_state["calibration_job"] = job
     threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
                      daemon=True).start()
@@ -332,9 +341,8 @@ if job is not None and job["done"]:
                         downloads[f"{m}_discrepancy.html"] = fig_disc
                     st.download_button(f"InferenceData ({m}, netCDF)", partial(netcdf_bytes, res.idata),
                                        file_name=f"{cal.file_stem(job['subject'])}_{m}.nc", key=f"nc_{m}")
-            if job.get("h") is not None:
-                physiology_panel.show(idatas, h=job["h"], edp_mmhg=job["edp_mmhg"], angles=job["angles"],
-                                      measured_lvv_ml=float(job["y"][0]), subject=job["subject"], key="cal_edpvr")
+            if job.get("physiology") is not None:
+                physiology_panel.show(idatas, job["physiology"], subject=job["subject"], key="cal_edpvr")
             st.subheader("Export figures")
             for name, fig in downloads.items():
                 # written on the click (each HTML carries plotly.js, ~4 MB): not on every rerun

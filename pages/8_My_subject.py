@@ -223,8 +223,18 @@ if st.button("Run calibration", type="primary", key="my_run",
         if runs:
             summary = flow.summary_record(data.subject, data.y, used_geometry, prepared, runs, settings)
             figures = flow.figures(runs, data.y, prepared=prepared)
+            try:  # the derived quantities' setup: this emulator's geometry (scores and scale, its own mesh, or
+                # the posterior's with an inferred geometry), resolution and base
+                physiology_setup = physiology_panel.Setup.of(
+                    emulator, prepared.forward, edp_mmhg=prepared.conditions["edp_mmhg"],
+                    angles=(prepared.conditions["alpha_endo"], prepared.conditions["alpha_epi"]),
+                    measured_lvv_ml=float(data.lvv_ml), h=None if inferred else getattr(geometry, "h", None),
+                    scale=1.0 if inferred else float(getattr(geometry, "scale", 1.0)))
+            except Exception as err:  # noqa: BLE001 - the results stay; the panel says why it is missing
+                st.warning(f"The EDPVR and derived quantities will not be available ({type(err).__name__}: {err}).")
+                physiology_setup = None
             st.session_state["my_subject_run"] = freshness.Stored(
-                {"runs": runs, "summary": summary, "figures": figures,
+                {"runs": runs, "summary": summary, "figures": figures, "physiology": physiology_setup,
                  "zip": flow.bundle(summary, runs, figures)}, dict(settings))
             status.update(label="Calibration done", state="complete")
 
@@ -249,17 +259,9 @@ if stored is not None:
                 st.warning(w)
         for name, fig in stored.result["figures"].items():
             st.plotly_chart(fig, width="stretch", key=f"my_fig_{name}")
-        if summary["geometry"]["kind"] == "inferred":
-            st.caption("EDV/V₀ and the EDPVR need a known reference geometry: with the geometry inferred, see the "
-                       "implied reference cavity above.")
-        elif summary["geometry"]["kind"] == "subject-emulator":
-            st.caption("EDV/V₀ and the EDPVR are computed on the shape model's geometry (PC scores), not on a "
-                       "subject emulator's exact one; choose a shared emulator to see them.")
-        elif geometry is not None and prepared is not None and data is not None:
+        if stored.result.get("physiology") is not None:
             physiology_panel.show({MODEL_LABELS[r.model]: r.result.idata for r in stored.result["runs"]},
-                                  h=geometry.h, scale=float(geometry.scale), edp_mmhg=prepared.conditions["edp_mmhg"],
-                                  angles=(prepared.conditions["alpha_endo"], prepared.conditions["alpha_epi"]),
-                                  measured_lvv_ml=float(data.lvv_ml), subject=summary["subject"], key="my_edpvr")
+                                  stored.result["physiology"], subject=summary["subject"], key="my_edpvr")
         st.header("5 · Download")
         st.download_button("Download everything (zip: netCDF, figures, settings.json, summary.html)",
                            stored.result["zip"], file_name=f"{summary['subject']}_lvcore.zip",

@@ -1,26 +1,100 @@
-"""The physiology panel of the Calibration and My subject results: EDV/V₀ and the EDPVR on request.
+"""The physiology panel of the Calibration and My subject results: EDV/V₀ and the derived quantities on request.
 
-EDV/V₀: the posterior of the emulated end-diastolic volume (``eta[..., 0]``) over the model geometry's
-reference cavity V₀, with the measured LVV's ratio and the typical range (:mod:`lvcore.physiology`).
-EDPVR: the FE simulator (:func:`lvcore.mechanics.edpvr.simulate_edpvr`, fast mesh, one warm-started solve per
-pressure) for :data:`N_EDPVR_DRAWS` posterior draws, run when the user presses the button (the emulators
-are trained at 6–14 mmHg at most, so they cannot give 0–30 mmHg).
+EDV/V₀: the posterior of the emulated end-diastolic volume (``eta[..., 0]``) over the reference cavity V₀, with
+the measured LVV's ratio and the typical range (:mod:`lvcore.physiology`).
+EDPVR and the derived quantities: :func:`lvcore.inference.derived.derive`, exactly what ``lvcore calibrate``
+writes to summary.json (``derived``): the FE simulator on the calibration's own geometry (PC scores and scale,
+the posterior's own scores and scale when the geometry was inferred, or a subject emulator's mesh), base
+condition, fibre angles and the emulator's training resolution, for :func:`edpvr_draws` posterior draws, run
+when the user presses the button (the emulators are trained at 6–14 mmHg at most, so they cannot give 0–30 mmHg).
+Once computed, V₀ is the derived one (the FE reference cavity) everywhere in the panel.
 """
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
+import os
+from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from lvcore import physiology
 
-#: Posterior draws simulated for the EDPVR band.
-N_EDPVR_DRAWS = 8
-#: Mesh preset of the EDPVR solves.
-EDPVR_RESOLUTION = "fast"
+#: Posterior draws behind the EDPVR band and the derived quantities (a 90 % band from fewer is mostly noise).
+N_EDPVR_DRAWS = 100
+#: Environment variable that overrides :data:`N_EDPVR_DRAWS` (an integer 1-2000; tests use a handful).
+DRAWS_ENV = "LVCORE_EDPVR_DRAWS"
+#: Wall time to expect per 100 draws (s), said on the button.
+SECONDS_PER_100_DRAWS = 60
+
+
+def edpvr_draws() -> int:
+    """Posterior draws of the EDPVR: ``LVCORE_EDPVR_DRAWS`` when set (1-2000), else :data:`N_EDPVR_DRAWS`."""
+    raw = os.environ.get(DRAWS_ENV, "").strip()
+    if raw:
+        try:
+            n = int(raw)
+        except ValueError:
+            n = 0
+        if 1 <= n <= 2000:
+            return n
+    return int(N_EDPVR_DRAWS)
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What a calibration was run on, as :func:`lvcore.inference.derived.derive` needs it.
+
+    Attributes
+    ----------
+    edp_mmhg : float
+    angles : (float, float)
+        Fixed fibre angles (deg); inferred ones come from the posterior.
+    base, resolution : str
+        The emulator's base condition and training mesh resolution.
+    bounds : mapping
+        θ's prior bounds (for the contraction).
+    lvv_sd_ml : float or callable
+        The volume likelihood's sd (mL), or a function of the model's LVV.
+    measured_lvv_ml : float, optional
+    h : sequence of float, optional
+        PC scores of a given geometry (None with a subject emulator or an inferred geometry).
+    scale : float
+        The given geometry's scale (the subject is ``scale`` times the shape with scores ``h``).
+    geometry : mapping, optional
+        A subject emulator's geometry section (its mesh).
+    """
+
+    edp_mmhg: float
+    angles: tuple
+    base: str
+    resolution: str
+    bounds: Mapping
+    lvv_sd_ml: Any
+    measured_lvv_ml: float | None
+    h: Any = None
+    scale: float = 1.0
+    geometry: Mapping | None = None
+
+    @classmethod
+    def of(cls, emulator, forward, *, edp_mmhg: float, angles, measured_lvv_ml, h=None, scale: float = 1.0,
+           infer_angles: bool = False, sigma_v: float | None = None) -> "Setup":
+        """The setup of a calibration with ``emulator`` through ``forward`` (its bounds and volume sd)."""
+        from lvcore.conditions import SIGMA_V_ML
+        from lvcore.inference import verdict
+        from lvcore.inference.models import lvv_sd
+        from lvcore.outputs import THETA_NAMES
+
+        sv = SIGMA_V_ML if sigma_v is None else float(sigma_v)
+        subject = bool(getattr(emulator, "is_subject", False))
+        bounds = {k: b for k, b in verdict.checked_bounds(forward, infer_angles).items() if k in THETA_NAMES}
+        return cls(edp_mmhg=float(edp_mmhg), angles=tuple(float(a) for a in angles),
+                   base=str(getattr(emulator, "base", "clamped")), resolution=str(emulator.resolution),
+                   bounds=bounds, lvv_sd_ml=lambda v, fw=forward: np.asarray(lvv_sd(v, sv, fw), float),
+                   measured_lvv_ml=None if measured_lvv_ml is None else float(measured_lvv_ml),
+                   h=None if (subject or h is None) else [float(v) for v in np.asarray(h, float)],
+                   scale=1.0 if subject else float(scale),
+                   geometry=emulator.subject_geometry if subject else None)
 
 
 def reference_volume_ml(h, scale: float = 1.0) -> float:
@@ -29,6 +103,11 @@ def reference_volume_ml(h, scale: float = 1.0) -> float:
 
     info, _ = geometry_measures(SimpleNamespace(h=np.asarray(h, float), scale=float(scale)))
     return float(info["cavity_volume_ml"])
+
+
+def derived_v0_ml(record: Mapping) -> float:
+    """The derived V₀ (mL): the median FE cavity at 0 mmHg."""
+    return float(record["edpvr"][0]["median"])
 
 
 def ratio_table(idatas: Mapping[str, object], v0_ml: float, edp_mmhg: float, measured_lvv_ml: float | None):
@@ -45,83 +124,162 @@ def ratio_table(idatas: Mapping[str, object], v0_ml: float, edp_mmhg: float, mea
     return rows
 
 
-def posterior_thetas(idata, n: int = N_EDPVR_DRAWS) -> tuple[list[dict], list[tuple[float, float]] | None]:
-    """``n`` evenly spaced posterior draws of θ (and of the fibre angles when they were inferred)."""
-    post = idata.posterior
-    flat = {k: np.asarray(post[k]).reshape(-1) for k in ("a", "b", "af", "bf", "alpha_endo", "alpha_epi") if k in post}
-    idx = np.linspace(0, len(flat["a"]) - 1, n).round().astype(int)
-    thetas = [{k: float(flat[k][i]) for k in ("a", "b", "af", "bf")} for i in idx]
-    angles = ([(float(flat["alpha_endo"][i]), float(flat["alpha_epi"][i])) for i in idx]
-              if "alpha_endo" in flat else None)
-    return thetas, angles
+def run_edpvr(idata, setup: Setup, *, n_draws: int | None = None,
+              progress: Callable[[int, int], None] | None = None) -> dict:
+    """The derived record (:func:`lvcore.inference.derived.derive`) of one posterior: EDPVR, its check against the
+    measured point, stress, ridge, contraction. ``n_draws`` defaults to :func:`edpvr_draws`."""
+    from lvcore.inference import derived
+
+    record, _ = derived.derive(idata, bounds=setup.bounds, edp_mmhg=setup.edp_mmhg, angles=setup.angles,
+                               base=setup.base, resolution=setup.resolution, measured_edv_ml=setup.measured_lvv_ml,
+                               lvv_sd_ml=setup.lvv_sd_ml, h=setup.h, scale=setup.scale, geometry=setup.geometry,
+                               n_draws=edpvr_draws() if n_draws is None else int(n_draws), progress=progress)
+    return record
 
 
-def run_edpvr(idata, h, scale: float, angles: tuple[float, float], progress=None) -> "lvcore.mechanics.edpvr.EDPVR":
-    """The FE EDPVR of :data:`N_EDPVR_DRAWS` posterior draws on the emulator's geometry (``h``, ``scale``)."""
-    from lvcore.app.subject_flow import geometry_nodes
-    from lvcore.mechanics import edpvr
-
-    thetas, draw_angles = posterior_thetas(idata)
-    with tempfile.TemporaryDirectory() as d:
-        if abs(float(scale) - 1.0) < 1e-12:
-            geometry = {"kind": "pca", "scores": [float(v) for v in np.asarray(h, float)]}
-        else:  # a scaled shape: the template nodes as a mesh file
-            path = Path(d) / "geometry.npy"
-            np.save(path, geometry_nodes(SimpleNamespace(h=np.asarray(h, float), scale=float(scale))))
-            geometry = {"kind": "mesh", "path": str(path)}
-        if draw_angles is None:
-            return edpvr.simulate_edpvr(thetas, geometry, angles=angles, resolution=EDPVR_RESOLUTION,
-                                             progress=progress)
-        curves = [edpvr.simulate_edpvr([t], geometry, angles=a, resolution=EDPVR_RESOLUTION)
-                  for t, a in zip(thetas, draw_angles)]
-    return edpvr.EDPVR(curves[0].pressures_mmhg, np.vstack([c.volumes_ml for c in curves]), curves[0].v0_ml,
-                            sum(c.n_failed for c in curves), EDPVR_RESOLUTION)
+def _q(q: Mapping, unit: str = "", digits: int = 1) -> str:
+    if q.get("median") is None:
+        return "n/a"
+    return f"{q['median']:.{digits}f}{unit} (90 %: {q['q05']:.{digits}f}–{q['q95']:.{digits}f})"
 
 
-def show(idatas: Mapping[str, object], *, h, scale: float = 1.0, edp_mmhg: float, angles: tuple[float, float],
-         measured_lvv_ml: float | None, subject: str, key: str) -> None:
-    """Render the panel: the EDV/V₀ table and the EDPVR button/figure (state kept under ``key``)."""
+def edpvr_rows(record: Mapping) -> list[dict]:
+    """The EDPVR as table rows: pressure, median and 90 % interval of the cavity volume."""
+    return [{"pressure (mmHg)": f"{r['pressure_mmhg']:g}" + (" (V₀)" if r["pressure_mmhg"] == 0 else ""),
+             "cavity volume median (mL)": None if r["median"] is None else round(r["median"], 1),
+             "90% interval (mL)": "n/a" if r["median"] is None else f"{r['q05']:.1f}–{r['q95']:.1f}"}
+            for r in record["edpvr"]]
+
+
+def contraction_rows(record: Mapping) -> list[dict]:
+    """Per parameter: the contraction and what it means in words."""
+    from lvcore.inference.derived import WEAK_CONTRACTION
+    from lvcore.viz.inference_figures import display_name
+
+    return [{"parameter": display_name(n), "contraction": round(c, 2),
+             "meaning": (f"weakly identified (< {WEAK_CONTRACTION:g}): the data say little about it on its own"
+                         if c < WEAK_CONTRACTION else "identified by the data")}
+            for n, c in record["contraction"].items()]
+
+
+def check_text(record: Mapping) -> tuple[str, str]:
+    """``(level, text)`` of the measured point against the EDPVR: ``success`` inside the 99 % predictive interval,
+    ``error`` with the CONSISTENCY flag text outside it, ``info`` without a measurement."""
+    from lvcore.inference.derived import check_flags
+
+    c = record["edpvr_check"]
+    if "measured_edv_ml" not in c:
+        return "info", "No measured EDV: the EDPVR is not checked against a measurement."
+    flags = check_flags(record)
+    if flags:
+        return "error", "CONSISTENCY: " + "; ".join(flags)
+    lo, hi = c["predictive_99"]
+    return "success", (f"The measured point lies inside the band: EDV {c['measured_edv_ml']:.1f} mL at "
+                       f"{c['edp_mmhg']:g} mmHg is inside the EDPVR's 99 % predictive interval [{lo:.1f}, {hi:.1f}] mL.")
+
+
+def summary_lines(record: Mapping) -> list[str]:
+    """The derived quantities in words (markdown bullets): the identified combination, the stress, the offset."""
+    rg, st_, c = record["ridge"], record["stress"], record["edpvr_check"]
+    ab, best = rg["a_b"], rg["best"]
+    lines = [f"**Identified combination** (matrix pair): {ab['text']} = {ab['median']:.2f} (90 % width a factor "
+             f"{ab['width90_factor']:.2f}); best-determined over all four: {best['text']} = {best['median']:.2f} "
+             f"(90 % width a factor {best['width90_factor']:.2f}). corr(log a, log b) "
+             f"{rg['correlation_log_a_log_b']:+.2f}."]
+    fs = st_["fixed_stretch"]
+    lines.append(f"**Cauchy stress at fibre stretch {fs['stretch']:.2f}**: fibre {_q(fs['fibre_kpa'], ' kPa', 2)}; "
+                 f"cross-fibre {_q(fs['cross_fibre_kpa'], ' kPa', 2)}.")
+    if "end_diastolic" in st_:
+        e = st_["end_diastolic"]
+        lines.append(f"**At the mean end-diastolic fibre stretch** {_q(e['stretch'], '', 3)}: fibre "
+                     f"{_q(e['fibre_kpa'], ' kPa', 2)}; cross-fibre {_q(e['cross_fibre_kpa'], ' kPa', 2)}.")
+    lines.append(f"**Emulator-to-FE offset** at {c['edp_mmhg']:g} mmHg (FE volume − emulated volume, same draws): "
+                 f"{_q(c['emulator_to_fe_offset_ml'], ' mL')}; {c['source']}.")
+    return lines
+
+
+def _button_label(n: int) -> str:
+    minutes = max(1, round(n * SECONDS_PER_100_DRAWS / 100 / 60))
+    return (f"Compute the EDPVR and derived quantities (FE, {n} posterior draws, 0–30 mmHg; about "
+            f"{minutes} minute{'s' if minutes > 1 else ''})")
+
+
+def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) -> None:
+    """Render the panel: the EDV/V₀ table, the button, and the stored derived record (kept under ``key``)."""
     import streamlit as st
 
-    from lvcore.viz.figures import edpvr_figure
+    from lvcore.viz.figures import derived_edpvr_figure
 
-    st.subheader("Physiology: EDV/V₀ and the EDPVR")
-    v0 = reference_volume_ml(h, scale)
-    typical = physiology.typical_edv_ratio(edp_mmhg)
-    st.caption(f"EDP assumed: {edp_mmhg:g} mmHg. V₀ = {v0:.1f} mL, the reference (stress-free) cavity of the model "
-               f"geometry; EDV from the posterior of the emulated LVV. {typical.text()}.")
-    rows = ratio_table(idatas, v0, edp_mmhg, measured_lvv_ml)
-    if rows:
-        st.dataframe(rows, width="stretch", hide_index=True)
-        for row in rows:
-            note = physiology.edv_ratio_note(row["EDV/V₀ median"], edp_mmhg)
-            if note:
-                st.warning(f"{row['likelihood']}: {note}")
-    label = st.selectbox("EDPVR from the posterior of", list(idatas), key=f"{key}_model")
-    if st.button(f"Simulate the EDPVR (FE, {N_EDPVR_DRAWS} posterior draws, {EDPVR_RESOLUTION} mesh, 0–30 mmHg)",
-                 key=f"{key}_run"):
-        bar = st.progress(0.0, text="Simulating the EDPVR…")
-        try:
-            curve = run_edpvr(idatas[label], h, scale, angles,
-                              progress=lambda done, total: bar.progress(done / total, text=f"EDPVR: {done}/{total} solves"))
-        except ValueError as err:
-            st.error(f"EDPVR: {err}")
-            curve = None
-        bar.empty()
-        st.session_state[key] = (label, curve) if curve is not None else None
+    st.subheader("Physiology: EDV/V₀, the EDPVR and what the data identify")
+    label = st.selectbox("From the posterior of", list(idatas), key=f"{key}_model")
     stored = st.session_state.get(key)
-    if stored:
-        label, curve = stored
-        if curve.n_failed:
-            st.warning(f"EDPVR: {curve.n_failed} solves did not converge; their curves stop early.")
-        fig = edpvr_figure(curve.pressures_mmhg, curve.volumes_ml, curve.v0_ml,
-                           measured=None if measured_lvv_ml is None else (measured_lvv_ml, edp_mmhg),
-                           subtitle=f"{subject}, {label}; FE simulator ({curve.resolution} mesh), "
-                                    f"{curve.volumes_ml.shape[0]} posterior draws; V₀ = {curve.v0_ml:.1f} mL")
-        st.plotly_chart(fig, width="stretch", key=f"{key}_fig")
-        st.caption("The normal curve (Klotz et al. 2006: EDP = 27.78 · EDVn^2.76, EDVn = (V − V₀)/(V₃₀ − V₀)) is "
-                   "drawn through the model's V₀ and the measured (EDV, EDP).")
+    if stored and (stored.get("label") not in idatas or stored.get("idata") is not idatas[stored["label"]]):
+        stored = None  # another calibration since: not this posterior's record
+    record = stored["record"] if stored else None
+    typical = physiology.typical_edv_ratio(setup.edp_mmhg)
+    if record is not None:
+        v0, v0_text = derived_v0_ml(record), "the FE reference (stress-free) cavity of the EDPVR below"
+    elif setup.h is not None:
+        try:
+            v0 = reference_volume_ml(setup.h, setup.scale)
+        except Exception as err:  # noqa: BLE001 - shown in words
+            st.warning(f"The reference cavity V₀ could not be computed ({type(err).__name__}: {err}).")
+            v0 = None
+        v0_text = "the reference cavity of the model geometry (the EDPVR below replaces it by its FE V₀)"
+    else:
+        v0, v0_text = None, ""
+    if v0 is not None:
+        st.caption(f"EDP assumed: {setup.edp_mmhg:g} mmHg. V₀ = {v0:.1f} mL, {v0_text}; EDV from the posterior of "
+                   f"the emulated LVV. {typical.text()}.")
+        rows = ratio_table(idatas, v0, setup.edp_mmhg, setup.measured_lvv_ml)
+        if rows:
+            st.dataframe(rows, width="stretch", hide_index=True)
+            for row in rows:
+                note = physiology.edv_ratio_note(row["EDV/V₀ median"], setup.edp_mmhg)
+                if note:
+                    st.warning(f"{row['likelihood']}: {note}")
+    else:
+        st.caption(f"EDP assumed: {setup.edp_mmhg:g} mmHg. The geometry is not a fixed set of PC scores: V₀ and "
+                   f"EDV/V₀ come with the EDPVR below. {typical.text()}.")
+    n = edpvr_draws()
+    if st.button(_button_label(n), key=f"{key}_run"):
+        bar = st.progress(0.0, text=f"EDPVR: FE solves for {n} posterior draws…")
+        try:
+            record = run_edpvr(idatas[label], setup, n_draws=n,
+                               progress=lambda done, total: bar.progress(
+                                   min(1.0, done / total), text=f"EDPVR: {done}/{total} FE solves"))
+        except Exception as err:  # noqa: BLE001 - a page shows errors in words, never a traceback
+            st.error(f"The EDPVR could not be computed: {type(err).__name__}: {err}")
+            record = None
+        bar.empty()
+        st.session_state[key] = None if record is None else {"label": label, "idata": idatas[label],
+                                                              "record": record}
+        if record is not None:
+            st.rerun()  # the EDV/V₀ table above switches to the derived V₀
+    if record is None:
+        return
+    shown = st.session_state[key]["label"]
+    v0 = derived_v0_ml(record)
+    c = record["edpvr_check"]
+    failed = int(c.get("n_failed_solves", 0))
+    if failed:
+        st.warning(f"EDPVR: {failed} FE solves did not converge; their points are left out of the band.")
+    fig = derived_edpvr_figure(record, subtitle=f"{subject}, {shown}; {record['n_draws']} posterior draws, "
+                                                f"{setup.resolution} mesh, {setup.base} base; V₀ = {v0:.1f} mL")
+    st.plotly_chart(fig, width="stretch", key=f"{key}_fig")
+    st.caption("Band: equal-tailed 90 % posterior interval of the FE cavity volume (0 mmHg is V₀). The normal "
+               "curve (Klotz et al. 2006: EDP = 27.78 · EDVn^2.76, EDVn = (V − V₀)/(V₃₀ − V₀)) is drawn through "
+               "the derived V₀ and the measured (EDV, EDP); the red bar is the 99 % posterior predictive interval "
+               "of the volume at the EDP.")
+    level, text = check_text(record)
+    getattr(st, level)(text)
+    st.dataframe(edpvr_rows(record), width="stretch", hide_index=True)
+    st.markdown("\n".join(f"- {line}" for line in summary_lines(record)))
+    st.markdown("**Contraction** (1 − posterior/prior variance of log θ: 1 pinned by the data, 0 nothing learned)")
+    st.dataframe(contraction_rows(record), width="stretch", hide_index=True)
+    for note in record["weakly_identified"]:
+        st.info(f"Note: {note}")
 
 
-__all__ = ["N_EDPVR_DRAWS", "EDPVR_RESOLUTION", "reference_volume_ml", "ratio_table", "posterior_thetas", "run_edpvr",
-           "show"]
+__all__ = ["N_EDPVR_DRAWS", "DRAWS_ENV", "edpvr_draws", "Setup", "reference_volume_ml", "derived_v0_ml",
+           "ratio_table", "run_edpvr", "edpvr_rows", "contraction_rows", "check_text", "summary_lines", "show"]

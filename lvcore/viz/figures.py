@@ -327,3 +327,56 @@ def edpvr_figure(pressures_mmhg, volumes_ml, v0_ml: float, *, measured: tuple[fl
                       xaxis_title="cavity volume (mL)", yaxis_title="pressure (mmHg)",
                       yaxis=dict(range=[0, 31]), margin=dict(t=80), legend=dict(orientation="h", y=-0.2))
     return fig
+
+
+def derived_edpvr_figure(record: Mapping, *, title: str = "End-diastolic pressure–volume relation (EDPVR)",
+                         subtitle: str = "", height: int = 480) -> go.Figure:
+    """The EDPVR of a calibration's derived record (``lvcore.inference.derived.derive``) as one figure.
+
+    The posterior 90 % band (q05 → q95) with its median from ``record["edpvr"]`` (0 mmHg is V₀, so the band
+    starts at the derived reference cavity), the measured (EDV, EDP) with the 99 % posterior predictive interval
+    of the FE volume at the EDP drawn as a horizontal error bar (``record["edpvr_check"]["predictive_99"]``),
+    and the normal Klotz et al. (2006) curve through the derived V₀ and the measured point
+    (``edpvr_check["klotz"]``).
+
+    Traces: "posterior 90% band", "posterior median", "99% predictive interval at the EDP", "measured (EDV, EDP)",
+    "Klotz et al. 2006 normal".
+    """
+    from lvcore import physiology
+
+    rows = [r for r in record["edpvr"] if r.get("median") is not None]
+    p = np.array([r["pressure_mmhg"] for r in rows], float)
+    lo, mid, hi = (np.array([r[k] for r in rows], float) for k in ("q05", "median", "q95"))
+    n = record.get("n_draws")
+    fig = go.Figure()
+    fig.add_trace(go.Scatter(x=np.concatenate([lo, hi[::-1]]), y=np.concatenate([p, p[::-1]]), fill="toself",
+                             mode="lines", line=dict(width=0), fillcolor="rgba(99,110,250,0.25)",
+                             name="posterior 90% band" + (f" ({n} draws)" if n else ""), hoverinfo="skip"))
+    fig.add_trace(go.Scatter(x=mid, y=p, mode="lines+markers", line=dict(color=SERIES_COLOURS[0]),
+                             name="posterior median",
+                             hovertemplate="%{y:g} mmHg: %{x:.1f} mL<extra>posterior median</extra>"))
+    check = record.get("edpvr_check") or {}
+    if "measured_edv_ml" in check:
+        edp, edv = float(check["edp_mmhg"]), float(check["measured_edv_ml"])
+        plo, phi = (float(v) for v in check["predictive_99"])
+        fig.add_trace(go.Scatter(x=[plo, phi], y=[edp, edp], mode="lines+markers",
+                                 line=dict(color=SERIES_COLOURS[1], width=2),
+                                 marker=dict(symbol="line-ns-open", size=14, color=SERIES_COLOURS[1]),
+                                 name="99% predictive interval at the EDP",
+                                 hovertemplate=f"99% predictive interval at {edp:g} mmHg: "
+                                               f"{plo:.1f}–{phi:.1f} mL<extra></extra>"))
+        fig.add_trace(go.Scatter(x=[edv], y=[edp], mode="markers", name="measured (EDV, EDP)",
+                                 marker=dict(color=SERIES_COLOURS[1], size=12, symbol="x"),
+                                 hovertemplate=f"measured: {edv:.1f} mL at {edp:g} mmHg<extra></extra>"))
+    klotz = check.get("klotz")
+    if klotz:
+        pk = np.linspace(0.0, 30.0, 61)
+        fig.add_trace(go.Scatter(x=physiology.klotz_volume(pk, klotz["v0_ml"], klotz["v30_ml"]), y=pk, mode="lines",
+                                 line=dict(color="black", dash="dash"), name="Klotz et al. 2006 normal"))
+    # the title and its subtitle above the plot, the legend below the axis title: nothing overlaps
+    fig.update_layout(title=dict(text=title + (f"<br><sup>{subtitle}</sup>" if subtitle else ""), y=0.97,
+                                 yanchor="top"),
+                      height=height, xaxis_title="cavity volume (mL)", yaxis_title="pressure (mmHg)",
+                      yaxis=dict(range=[0, 31]), margin=dict(t=90, b=40),
+                      legend=dict(orientation="h", y=-0.18, yanchor="top", x=0, xanchor="left"))
+    return fig
