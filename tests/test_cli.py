@@ -251,7 +251,8 @@ def _fake_calibration(monkeypatch):
     names = ("a", "b", "af", "bf", "h1", "h2", "h3", "h4", "h5")  # the 'chapter' emulator's inputs and box
     emulator = SimpleNamespace(name="chapter", input_names=names, lower=np.r_[0.05, 0.1, 0.05, 0.1, [-2.0] * 5],
                                upper=np.r_[10.0, 30.0, 10.0, 30.0, [2.0] * 5],
-                               fixed={"alpha_endo": -60.0, "alpha_epi": 60.0, "edp": 8.0})
+                               fixed={"alpha_endo": -60.0, "alpha_epi": 60.0, "edp": 8.0},
+                               resolution="default")
     monkeypatch.setattr(cal, "calibrate", fake)
     # the verdict's best fit needs a real forward model: a clean verdict instead (lvcore.inference.verdict)
     from lvcore.inference import verdict
