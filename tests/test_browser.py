@@ -377,3 +377,45 @@ def test_my_subject_without_a_mesh(app, chromium, tmp_path):
         assert "inferred (no mesh)" in z.read("summary.html").decode()
     assert not js_errors, js_errors[:3]
     ctx.close()
+
+
+def test_calibration_edpvr_panel(monkeypatch):
+    """Calibrate a bundled volunteer on the Calibration page, press the EDPVR button (6 draws through
+    LVCORE_EDPVR_DRAWS, on a server of its own started with it): the derived EDPVR figure is drawn, the measured
+    point lies inside the band, and there is no error or exception box; screenshots of the page and the panel's
+    figure go to build/screenshots/."""
+    from playwright.sync_api import sync_playwright
+
+    _require_browser()
+    monkeypatch.setenv("LVCORE_EDPVR_DRAWS", "6")
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    with drv.StreamlitServer(app=ROOT / "app.py", log=ROOT / "build" / "streamlit_browser_edpvr.log") as server, \
+            sync_playwright() as p:
+        browser = drv.launch(p)
+        js_errors: list = []
+        ctx, page = _new_page(browser, js_errors)
+        page.goto(server.url)
+        drv.wait_idle(page)
+        links = dict(drv.page_links(page))
+        page.goto(links["Calibration"])
+        drv.wait_idle(page)
+        _run_small_calibration(page)
+        button = page.get_by_role("button", name=re.compile("Compute the EDPVR"))
+        button.wait_for(timeout=300_000)
+        assert "6 posterior draws" in button.inner_text()
+        button.click()
+        inside = page.get_by_text("The measured point lies inside the band", exact=False)
+        inside.wait_for(timeout=300_000)
+        drv.wait_idle(page)
+        page.screenshot(path=str(SHOTS / "calibration_edpvr.png"), full_page=True)
+        figure = page.locator("[data-testid=stPlotlyChart]").last
+        figure.scroll_into_view_if_needed()
+        figure.screenshot(path=str(SHOTS / "calibration_edpvr_figure.png"))
+        assert "V₀ =" in figure.inner_text() and "Klotz" in figure.inner_text()
+        assert not drv.exceptions(page), drv.exceptions(page)
+        errors = page.locator("[data-testid=stAlertContentError]").all_inner_texts()
+        assert not errors, errors
+        assert page.get_by_text("Identified combination", exact=False).count() >= 1
+        assert not js_errors, js_errors[:3]
+        ctx.close()
+        browser.close()
