@@ -382,8 +382,8 @@ def test_my_subject_without_a_mesh(app, chromium, tmp_path):
 def test_calibration_edpvr_panel(monkeypatch):
     """Calibrate a bundled volunteer on the Calibration page, press the EDPVR button (6 draws through
     LVCORE_EDPVR_DRAWS, on a server of its own started with it): the derived EDPVR figure is drawn, the measured
-    point lies inside the band, and there is no error or exception box; screenshots of the page and the panel's
-    figure go to build/screenshots/."""
+    point lies inside the band, and there is no error or exception box; screenshots of the panel and its figure
+    go to build/screenshots/."""
     from playwright.sync_api import sync_playwright
 
     _require_browser()
@@ -399,7 +399,7 @@ def test_calibration_edpvr_panel(monkeypatch):
         links = dict(drv.page_links(page))
         page.goto(links["Calibration"])
         drv.wait_idle(page)
-        _run_small_calibration(page)
+        _run_small_calibration(page, warmup=50, draws=100)
         button = page.get_by_role("button", name=re.compile("Compute the EDPVR"))
         button.wait_for(timeout=300_000)
         assert "6 posterior draws" in button.inner_text()
@@ -407,7 +407,10 @@ def test_calibration_edpvr_panel(monkeypatch):
         inside = page.get_by_text("The measured point lies inside the band", exact=False)
         inside.wait_for(timeout=300_000)
         drv.wait_idle(page)
-        page.screenshot(path=str(SHOTS / "calibration_edpvr.png"), full_page=True)
+        page.get_by_text("Physiology: EDV/V₀", exact=False).scroll_into_view_if_needed()
+        page.screenshot(path=str(SHOTS / "calibration_edpvr_top.png"))
+        page.get_by_text("Contraction", exact=False).first.scroll_into_view_if_needed()
+        page.screenshot(path=str(SHOTS / "calibration_edpvr_bottom.png"))
         figure = page.locator("[data-testid=stPlotlyChart]").last
         figure.scroll_into_view_if_needed()
         figure.screenshot(path=str(SHOTS / "calibration_edpvr_figure.png"))

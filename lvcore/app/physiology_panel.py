@@ -277,8 +277,12 @@ def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) 
     st.markdown("\n".join(f"- {line}" for line in summary_lines(record)))
     st.markdown("**Contraction** (1 − posterior/prior variance of log θ: 1 pinned by the data, 0 nothing learned)")
     st.dataframe(contraction_rows(record), width="stretch", hide_index=True)
-    for note in record["weakly_identified"]:
-        st.info(f"Note: {note}")
+    import re
+
+    from lvcore.viz.inference_figures import display_name
+
+    for note in record["weakly_identified"]:  # a_f, b_f as on the sliders
+        st.info("Note: " + re.sub(r"\b(af|bf)\b", lambda m: display_name(m.group(1)), note))
 
 
 __all__ = ["N_EDPVR_DRAWS", "DRAWS_ENV", "edpvr_draws", "Setup", "reference_volume_ml", "derived_v0_ml",

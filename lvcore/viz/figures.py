@@ -377,6 +377,6 @@ def derived_edpvr_figure(record: Mapping, *, title: str = "End-diastolic pressur
     fig.update_layout(title=dict(text=title + (f"<br><sup>{subtitle}</sup>" if subtitle else ""), y=0.97,
                                  yanchor="top"),
                       height=height, xaxis_title="cavity volume (mL)", yaxis_title="pressure (mmHg)",
-                      yaxis=dict(range=[0, 31]), margin=dict(t=90, b=40),
+                      yaxis=dict(range=[0, 31]), margin=dict(t=70, b=40),
                       legend=dict(orientation="h", y=-0.18, yanchor="top", x=0, xanchor="left"))
     return fig
