@@ -1,0 +1,87 @@
+"""Derived quantities on every bundled SYNTHETIC volunteer: is the measured point inside the EDPVR's band, and
+what do the derived quantities cost next to the sampling?
+
+    python benchmarks/bench_derived.py                       # 8 volunteers, iid, 2 chains, 100 derived draws
+    python benchmarks/bench_derived.py --volunteers SYNTHETIC_HV2 --repeats 3
+
+For each volunteer ``lvcore calibrate --volunteer NAME --model iid --chains 2 --derived-draws N`` runs in this
+process (the sampler compiled once); the table gives the sampling wall time, the derived quantities' wall time
+(the FE load path of N posterior draws at 0-30 mmHg and the data's EDP, the stress, the ridge), their ratio, the
+measured EDV against the 99 % predictive interval of the FE volume at the EDP, the emulator-to-FE offset and the
+exit code. The linear solver and the machine's load are printed with the table.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+
+def run_one(name: str, draws: int, out: Path) -> dict:
+    import contextlib
+    import io
+
+    from lvcore.cli import main
+
+    t0 = time.perf_counter()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        code = main(["calibrate", "--volunteer", name, "--model", "iid", "--chains", "2", "--derived-draws",
+                     str(draws), "--out", str(out), "--json"])
+    wall = time.perf_counter() - t0
+    (rec,) = json.loads((out / "summary.json").read_text())
+    d = rec["derived"]
+    c = d["edpvr_check"]
+    return {"volunteer": name, "exit": code, "wall_s": wall, "sampling_s": rec["wall_s"],
+            "derived_s": d["seconds"]["total"], "fe_s": d["seconds"]["fe"], "n_draws": d["n_draws"],
+            "measured": c["measured_edv_ml"], "band": c["predictive_99"], "inside": c["inside"],
+            "offset": c["emulator_to_fe_offset_ml"]["median"], "flags": rec["flags"],
+            "v20": [r for r in d["edpvr"] if r["pressure_mmhg"] == 20][0]}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--volunteers", nargs="*", default=None, help="names (default: every bundled volunteer)")
+    p.add_argument("--draws", type=int, default=100, help="--derived-draws (default 100)")
+    p.add_argument("--repeats", type=int, default=1)
+    p.add_argument("--json", default=None, help="also write the rows to this file")
+    args = p.parse_args(argv)
+
+    from lvcore.mechanics.linear import cholmod_mode, default_backend
+    from lvcore.resources import bundled_volunteers
+
+    names = args.volunteers or list(bundled_volunteers())
+    print(f"# {time.strftime('%Y-%m-%d %H:%M')} {platform.node()} {os.cpu_count()} cores, load "
+          f"{os.getloadavg()[0]:.2f}, linear solver {default_backend()} ({cholmod_mode() if default_backend() == 'cholmod' else '-'}), iid, 2 chains x (1000 + 1000), "
+          f"{args.draws} derived draws", flush=True)
+    print("| volunteer | exit | sampling (s) | derived (s) | derived / sampling | measured EDV (mL) | "
+          "99 % predictive at EDP (mL) | inside | emulator-to-FE offset (mL) | V20 median [90 %] (mL) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in names:
+            for k in range(args.repeats):
+                r = run_one(name, args.draws, Path(tmp) / f"{name}_{k}")
+                rows.append(r)
+                v = r["v20"]
+                print(f"| {name} | {r['exit']} | {r['sampling_s']:.1f} | {r['derived_s']:.1f} | "
+                      f"{r['derived_s'] / r['sampling_s']:.1f} | {r['measured']:.1f} | {r['band'][0]:.1f}-"
+                      f"{r['band'][1]:.1f} | {'yes' if r['inside'] else 'NO'} | {r['offset']:+.2f} | "
+                      f"{v['median']:.1f} [{v['q05']:.1f}, {v['q95']:.1f}] |", flush=True)
+    inside = sum(r["inside"] for r in rows)
+    print(f"\nmeasured point inside the 99 % predictive band: {inside}/{len(rows)}; exit 4: "
+          f"{sum(r['exit'] == 4 for r in rows)} ({sorted({f.split(':')[0] for r in rows for f in r['flags']})})")
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
