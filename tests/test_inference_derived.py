@@ -124,3 +124,11 @@ def test_calibrate_reports_derived_quantities_and_exits_0_on_weak_identification
     assert rc == (4 if rec["flags"] else 0)
     npz = np.load(out / "SYNTHETIC-HV2_iid_derived.npz")
     assert npz["edpvr_ml"].shape == (12, 7) and npz["theta_a"].shape == (12,)
+
+
+@pytest.mark.parametrize("value", ["30,20", "0,10", "10,40", "ten"])
+def test_derived_pressures_option_is_checked(tmp_path, value):
+    from lvcore.cli import main
+
+    assert main(["calibrate", "--volunteer", "SYNTHETIC_HV2", "--derived-pressures", value,
+                 "--out", str(tmp_path / "o")]) == 2

@@ -137,6 +137,9 @@ def register(subparsers) -> None:
                    help="posterior draws behind the derived quantities (EDPVR by the FE simulator, stress, the "
                         "identified combination, contraction), 0 to skip them, at most 2,000 (default 100, or the "
                         "environment's LVCORE_DERIVED_DRAWS)")
+    p.add_argument("--derived-pressures", default=None, metavar="P1,P2,...",
+                   help="pressures (mmHg, increasing, in (0, 30]) of the derived EDPVR besides 0 mmHg (default "
+                        "5,10,15,20,25,30; fewer pressures cost fewer FE solves, e.g. 20,30 in a study)")
     p.add_argument("--subject", default=None, help="row to use (subject id); default: every row")
     p.add_argument("--out", type=cli_args.output_dir, default="calibration_out",
                    help="output folder, created if missing (default calibration_out)")
@@ -161,6 +164,15 @@ def check_options(args) -> None:
         raise DataError(f"--chains must be <= 64, got {args.chains}")
     if args.warmup > 1_000_000 or args.samples > 1_000_000:
         raise DataError("--warmup and --samples must be <= 1,000,000")
+    raw = getattr(args, "derived_pressures", None)
+    if raw is not None:
+        try:
+            ps = [float(x) for x in str(raw).split(",") if x.strip()]
+        except ValueError:
+            raise DataError(f"--derived-pressures {raw!r}: give comma-separated pressures in mmHg, e.g. 20,30") from None
+        if not ps or any(not (0 < x <= 30) for x in ps) or any(b <= a for a, b in zip(ps, ps[1:])):
+            raise DataError(f"--derived-pressures {raw!r}: pressures must increase within (0, 30] mmHg")
+        args.derived_pressures = tuple(ps)
     n_derived = getattr(args, "derived_draws", None)
     if n_derived is not None and not 0 <= n_derived <= 2000:
         raise DataError(f"--derived-draws must be 0 (skip) to 2,000 posterior draws, got {n_derived}")
@@ -351,7 +363,8 @@ def run_calibrate(args) -> int:
                 base=base, resolution=resolution, measured_edv_ml=float(r.y[0]),
                 lvv_sd_ml=lambda v_ml, fw=forward: np.asarray(lvv_sd(v_ml, args.sigma_v, fw), float),
                 h=None if (inferred or subject) else geo.h, scale=1.0 if (inferred or subject) else geo.scale,
-                geometry=emulator.subject_geometry if subject else None, n_draws=n_derived)
+                geometry=emulator.subject_geometry if subject else None, n_draws=n_derived,
+                pressures_mmhg=getattr(args, "derived_pressures", None) or derived.EDPVR_PRESSURES_MMHG)
             draws.save(out / f"{cal.file_stem(item.subject)}_{item.model}_derived.npz")
             v = v.with_extra("CONSISTENCY", derived.check_flags(derived_rec))
         ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"
@@ -392,8 +405,11 @@ def run_calibrate(args) -> int:
                 print(derived.text_table(derived_rec))
             names = list(check.record()["p_values"])
             worst = np.argsort(v.consistency.p_values)[:3]
-            print("best-fit p-values (smallest): "
-                  + ", ".join(f"{names[i]} {v.consistency.p_values[i]:.2g}" for i in worst)
+            print("fit check: the best-fitting model against the data, the 3 outputs it misses most with their "
+                  "p-value (the chance of missing by at least this much if the model and the noise were right; "
+                  f"below {verdict.ALPHA:g} an output is not reached, and the LVV or {verdict.MIN_BAD_STRAINS}+ "
+                  "strains not reached make the data inconsistent):\n  "
+                  + ", ".join(f"{names[i]} p = {v.consistency.p_values[i]:.2g}" for i in worst)
                   + ("" if v.plausible else "  -> IMPLAUSIBLE, see warnings")
                   + (f"; {len(v.flags)} flag(s): exit code 4" if v.flagged else ""))
 

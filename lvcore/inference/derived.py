@@ -463,7 +463,8 @@ def predictive_interval(volumes_ml: np.ndarray, sd_ml, level: float = 0.99, seed
 
 def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float, angles: tuple[float, float],
            base: str, resolution: str, measured_edv_ml: float | None, lvv_sd_ml, h=None, scale: float = 1.0,
-           geometry: Mapping | None = None, n_draws: int = N_DERIVED_DRAWS, progress=None) -> tuple[dict, DerivedDraws]:
+           geometry: Mapping | None = None, n_draws: int = N_DERIVED_DRAWS, progress=None,
+           pressures_mmhg: Sequence[float] = EDPVR_PRESSURES_MMHG) -> tuple[dict, DerivedDraws]:
     """Every derived quantity of one calibration (module docstring) and the per-draw values behind them.
 
     Parameters
@@ -482,6 +483,8 @@ def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float,
     geometry : a fixed geometry section (subject emulator).
     n_draws : int
         Posterior draws behind the EDPVR and the stress (>= 100 for a 90 % band worth reading).
+    pressures_mmhg : sequence of float
+        The EDPVR's pressures besides 0 mmHg (default :data:`EDPVR_PRESSURES_MMHG`).
 
     Returns
     -------
@@ -497,7 +500,7 @@ def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float,
     samples = {n: np.asarray(post[n]) for n in THETA_NAMES}
     draws, idx = posterior_draws(idata, n_draws, h=h, scale=scale)
     path = fe_load_path(draws, edp_mmhg=edp_mmhg, angles=angles, base=base, resolution=resolution,
-                        geometry=geometry, progress=progress)
+                        geometry=geometry, progress=progress, pressures_mmhg=pressures_mmhg)
     eta0 = np.asarray(post["eta"]).reshape(-1, np.asarray(post["eta"]).shape[-1])[idx, 0] if "eta" in post else \
         np.full(idx.size, np.nan)
     offset = path.volume_at_edp_ml - eta0
