@@ -283,7 +283,8 @@ def subject_rows(sims: list[dict], data_source: str = "fe", emulator: str = "cha
 
 
 def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, emulator: str, tag: str = "",
-                  geometry: str = "infer", representation_error: str = "floor", derived_draws: int = 100) -> list[dict]:
+                  geometry: str = "infer", representation_error: str = "floor", derived_draws: int = 100,
+                  derived_pressures: str = "5,10,15,20,25,30") -> list[dict]:
     """Calibrate each case through the CLI (in-process, so the sampler is compiled once).
 
     ``geometry="infer"``: ``--geometry infer`` with the reference volume as a data column;
@@ -317,7 +318,8 @@ def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, e
         t0 = time.perf_counter()
         code = main(["calibrate", "--data", str(csv), *geo, "--emulator", emulator,
                      "--model", "iid", "--chains", str(chains), "--warmup", str(warmup), "--samples", str(samples),
-                     "--derived-draws", str(derived_draws), "--out", str(d / "out"), "--json"])
+                     "--derived-draws", str(derived_draws), "--derived-pressures", derived_pressures,
+                     "--out", str(d / "out"), "--json"])
         wall = time.perf_counter() - t0
         rec = json.loads((d / "out" / "summary.json").read_text())[0] if (d / "out" / "summary.json").is_file() else {}
         truth = dict(zip(("a", "b", "af", "bf"), row["theta"]))
@@ -471,6 +473,8 @@ def main(argv=None) -> int:
     p.add_argument("--tag", default="", help="results_<tag>.json and runs/<tag>/ (default: results.json, runs/)")
     p.add_argument("--derived-draws", type=int, default=100,
                    help="posterior draws behind each case's derived EDPVR (V20, V30; lvcore calibrate's option)")
+    p.add_argument("--derived-pressures", default="5,10,15,20,25,30",
+                   help="the derived EDPVR's pressures (lvcore calibrate's option; 20,30 is enough for the criterion)")
     args = p.parse_args(argv)
     work = Path(args.workdir)
     steps = args.steps.split(",")
@@ -527,7 +531,7 @@ def main(argv=None) -> int:
             order = args.only.split(",")   # in the order given
             rows = sorted((r for r in rows if r["subject"] in order), key=lambda r: order.index(r["subject"]))
         results = calibrate_all(rows, work, args.chains, args.warmup, args.samples, args.emulator, args.tag,
-                                args.geometry, args.representation_error, args.derived_draws)
+                                args.geometry, args.representation_error, args.derived_draws, args.derived_pressures)
         print(table(results))
     return 0
 
