@@ -12,7 +12,7 @@ import streamlit as st
 
 from lvcore.exceptions import LVCoreError
 from lvcore.studies import (bo_fibres, bo_mismatch, fibre_discrepancy, findings, geometry_operators, mismatch,
-                            operators, operators_realistic, results)
+                            operators, operators_realistic, results, sbc)
 
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
@@ -69,9 +69,9 @@ def verdict_section(study: str, module, key: str, heading: str) -> None:
         show(module, res, tables=["verdicts"])
 
 
-tab_bo, tab_ops, tab_fd, tab_geo, tab_mm, tab_run = st.tabs(
+tab_bo, tab_ops, tab_fd, tab_geo, tab_mm, tab_sbc, tab_run = st.tabs(
     ["Fibre-angle BO (Tables 9.2/9.3)", "Operators (Figs 9.11–9.14)", "Fibre discrepancy (Figs 9.6–9.9)",
-     "Operators, geometry (Table 9.4)", "Mismatch dose–response and findings", "Run a small study"])
+     "Operators, geometry (Table 9.4)", "Mismatch dose–response and findings", "SBC", "Run a small study"])
 
 with tab_bo:
     res = load("bo-fibres", bo_fibres, "bo_src")
@@ -137,6 +137,18 @@ with tab_mm:
         st.subheader("Dose–response")
         show(mismatch, res, figures=["fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s",
                                      "fig_mismatch_output_error"], tables=["table_mismatch_doses"])
+
+with tab_sbc:
+    st.write("Simulation-based calibration of `lvcore calibrate` (mesh and `--geometry infer`) on SYNTHETIC "
+             "subjects drawn from the prior, with the truth by the FE simulator: if the pipeline is calibrated, the "
+             "truth's rank among the posterior draws is uniform (`lvcore study sbc --help`).")
+    res = load("sbc", sbc, "sbc_src")
+    if res is not None:
+        st.caption(sbc.source_line(res))
+        if not res.get("complete", True):
+            st.warning(f"Incomplete run: {res['n_subjects']} of {res.get('n_subjects_planned')} subjects; the "
+                       "coverage CIs say how little so few subjects can show.")
+        show(sbc, res, figures=["fig_sbc_coverage", "fig_sbc_rank_histograms"], tables=["table_sbc_summary", "runs"])
 
 with tab_run:
     st.write("Start a small run (fast mesh) in the background; the page stays usable while it runs and its "

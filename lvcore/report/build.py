@@ -20,7 +20,8 @@ run on SYNTHETIC-HV3; Figs 9.6–9.9, Tables 9.2/9.3 and Figs 9.11–9.14 from
 saved study results (``--from RESULTS`` first, then the bundled ones); the
 mismatch dose–response and the findings table (F1, F2, F3, F5, F6 with
 verdicts) from the shipped ``mismatch.json`` (with ``operators.json`` and
-``bo_fibres.json``); all listed
+``bo_fibres.json``); the simulation-based calibration of the pipeline
+(rank histograms, coverage) from the shipped ``sbc.json``; all listed
 as missing with the command that makes them when absent.
 """
 from __future__ import annotations
@@ -76,6 +77,8 @@ SECTIONS = (
             ("fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s", "fig_mismatch_output_error",
              "table_mismatch_doses"), saved=True),
     Section("Findings F1-F6 with verdicts", "findings", ("table_findings",), saved=True),
+    Section("Simulation-based calibration of the pipeline", "sbc",
+            ("fig_sbc_rank_histograms", "fig_sbc_coverage", "table_sbc_summary"), saved=True),
 )
 #: Every figure/table the report produces, in order (the manifest lists each, present or missing).
 FIGURE_NAMES = tuple(n for s in SECTIONS for n in s.names)

@@ -12,6 +12,7 @@ STUDY_MODULES = (
     "lvcore.studies.mismatch",             # lvcore study mismatch
     "lvcore.studies.operators_realistic",  # lvcore study operators-realistic
     "lvcore.studies.bo_mismatch",          # lvcore study bo-mismatch
+    "lvcore.studies.sbc",                  # lvcore study sbc
 )
 
 

@@ -8,7 +8,7 @@ Each study module owns its results (``load(folder)``, ``tables(result)``,
 * :func:`find_result` looks a result file up in a given folder, then in the bundled one;
 * :func:`result_sources` lists folders holding ``bo_fibres.json``,
   ``operators.json``, ``fibre_discrepancy.json``, ``operators_realistic.json``,
-  ``bo_mismatch.json`` or ``mismatch.json`` (the app's Studies page);
+  ``bo_mismatch.json``, ``mismatch.json`` or ``sbc.json`` (the app's Studies page);
 * :func:`read_json` is the reader the study modules' ``load`` use;
 * :class:`BackgroundRun` starts ``lvcore study ...`` in a subprocess and
   reports its progress from the files it writes, so a page is never blocked.
@@ -29,7 +29,7 @@ from lvcore.exceptions import LVCoreError
 RESULT_FILES = {"bo-fibres": "bo_fibres.json", "operators": "operators.json",
                 "fibre-discrepancy": "fibre_discrepancy.json",
                 "operators-realistic": "operators_realistic.json", "bo-mismatch": "bo_mismatch.json",
-                "mismatch": "mismatch.json"}
+                "mismatch": "mismatch.json", "sbc": "sbc.json"}
 
 
 def bundled_studies_dir() -> Path:

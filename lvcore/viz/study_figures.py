@@ -1,4 +1,4 @@
-"""Figures of the optimisation studies (bo-fibres, operators) from their saved results (plotly).
+"""Figures of the optimisation studies (bo-fibres, operators) and of SBC from their saved results (plotly).
 
 Every function takes the plain data the studies write (``bo_fibres.json``
 entries, ``operators.json`` fits, ``rss_surfaces.json`` records) and returns
@@ -204,7 +204,8 @@ def dose_response_figure(rows: Sequence[dict], *, title: str, xaxis_title: str, 
     return fig
 
 
-__all__ = ["residual_figure", "convergence_figure", "bo_error_bars", "surface_figure", "dose_response_figure"]
+__all__ = ["residual_figure", "convergence_figure", "bo_error_bars", "surface_figure", "dose_response_figure",
+           "sbc_rank_histogram_figure", "sbc_coverage_figure"]
 
 
 def ci_dots(rows: Sequence[dict], *, title: str, reference: float | None = None, percent: bool = True):
@@ -229,4 +230,110 @@ def ci_dots(rows: Sequence[dict], *, title: str, reference: float | None = None,
         fig.add_hline(y=reference * scale, line_dash="dot", line_color="grey")
     fig.update_layout(title=title, scattermode="group", height=440, margin=dict(l=60, r=20, t=90, b=40),
                       yaxis_title="share (%)" if percent else "value")
+    return fig
+
+
+# --------------------------------------------------------------------------- simulation-based calibration (sbc)
+#: Route order and colours of the SBC figures.
+SBC_ROUTES = ("mesh", "infer")
+
+
+def sbc_rank_histogram_figure(rows: Sequence[dict], *, title: str, labels: dict | None = None, n_cols: int = 4):
+    """Rank histograms of SBC, one panel per (route, quantity), each with the band of uniform ranks (plotly).
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        One per bin: ``route``, ``quantity``, ``bin`` (1-based), ``count``, ``expected`` and ``band_lo`` /
+        ``band_hi`` (the range of the bin's count under uniform ranks).
+    labels : dict, optional
+        Display names of the quantities.
+    """
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    labels = labels or {}
+    routes = [r for r in SBC_ROUTES if any(x["route"] == r for x in rows)] + sorted(
+        {x["route"] for x in rows} - set(SBC_ROUTES))
+    quantities = list(dict.fromkeys(x["quantity"] for x in rows))
+    panels = [(r, q) for r in routes for q in quantities]
+    n_rows = max(1, -(-len(panels) // n_cols))
+    fig = make_subplots(rows=n_rows, cols=n_cols, subplot_titles=[f"{r}: {labels.get(q, q)}" for r, q in panels],
+                        horizontal_spacing=0.05, vertical_spacing=0.32 / max(1, n_rows - 1) if n_rows > 1 else 0.1)
+    for k, (route, q) in enumerate(panels):
+        rr, cc = divmod(k, n_cols)
+        sub = sorted((x for x in rows if x["route"] == route and x["quantity"] == q), key=lambda x: x["bin"])
+        if not sub:
+            continue
+        n_bins = len(sub)
+        edges = np.arange(n_bins + 1) / n_bins
+        # the band: a step shape between the lower and upper ends of each bin's range
+        xs = np.repeat(edges, 2)[1:-1].tolist()
+        lo = np.repeat([x["band_lo"] for x in sub], 2).tolist()
+        hi = np.repeat([x["band_hi"] for x in sub], 2).tolist()
+        fig.add_trace(go.Scatter(x=xs + xs[::-1], y=hi + lo[::-1], fill="toself", fillcolor="rgba(128,128,128,0.25)",
+                                 line=dict(width=0), hoverinfo="skip", name="uniform ranks: range of a bin's count",
+                                 legendgroup="band", showlegend=k == 0), row=rr + 1, col=cc + 1)
+        fig.add_trace(go.Bar(x=(edges[:-1] + 0.5 / n_bins).tolist(), y=[x["count"] for x in sub], width=0.9 / n_bins,
+                             marker_color=SERIES_COLOURS[routes.index(route) % len(SERIES_COLOURS)],
+                             name=f"route {route}", legendgroup=route,
+                             showlegend=quantities.index(q) == 0,
+                             hovertemplate="%{y} subjects<extra>" + f"{route}: {labels.get(q, q)}" + "</extra>"),
+                      row=rr + 1, col=cc + 1)
+        fig.add_trace(go.Scatter(x=xs, y=np.repeat([x["expected"] for x in sub], 2).tolist(), mode="lines",
+                                 line=dict(color="black", dash="dot", width=1), name="expected (uniform ranks)",
+                                 legendgroup="expected", showlegend=k == 0, hoverinfo="skip"),
+                      row=rr + 1, col=cc + 1)
+        fig.update_xaxes(range=[0, 1], row=rr + 1, col=cc + 1)
+    for rr in range(n_rows):
+        fig.update_yaxes(title_text="subjects", rangemode="tozero", row=rr + 1, col=1)
+    for cc in range(n_cols):
+        fig.update_xaxes(title_text="(rank + ½)/(L + 1)", row=n_rows, col=cc + 1)
+    fig.update_layout(title=title, height=230 * n_rows + 220, bargap=0.05, margin=dict(l=60, r=20, t=130, b=80),
+                      legend=dict(orientation="h", y=-0.08, yanchor="top"))
+    return fig
+
+
+def sbc_coverage_figure(rows: Sequence[dict], *, title: str, labels: dict | None = None):
+    """SBC coverage per quantity with its CI, one colour per route, one panel per level (plotly).
+
+    ``rows``: dicts with ``route``, ``quantity``, ``level`` (percent), ``coverage``, ``lo``, ``hi`` (CI ends) and
+    ``nominal_at_L`` (the coverage of a calibrated posterior with the same number of draws; dotted marks).
+    """
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    labels = labels or {}
+    levels = sorted({int(r["level"]) for r in rows}, reverse=True)
+    routes = [r for r in SBC_ROUTES if any(x["route"] == r for x in rows)] + sorted(
+        {x["route"] for x in rows} - set(SBC_ROUTES))
+    fig = make_subplots(rows=1, cols=max(1, len(levels)), subplot_titles=[f"central {lv} % interval" for lv in levels],
+                        horizontal_spacing=0.08)
+    for j, level in enumerate(levels):
+        for k, route in enumerate(routes):
+            sub = [r for r in rows if r["route"] == route and int(r["level"]) == level and r["coverage"] is not None]
+            if not sub:
+                continue
+            y = np.array([r["coverage"] for r in sub], float) * 100
+            lo = np.array([r["lo"] if r["lo"] is not None else r["coverage"] for r in sub], float) * 100
+            hi = np.array([r["hi"] if r["hi"] is not None else r["coverage"] for r in sub], float) * 100
+            x = [labels.get(r["quantity"], r["quantity"]) for r in sub]
+            colour = SERIES_COLOURS[k % len(SERIES_COLOURS)]
+            fig.add_trace(go.Scatter(x=x, y=y, mode="markers", name=f"route {route}", legendgroup=route,
+                                     showlegend=j == 0, marker=dict(size=10, color=colour),
+                                     error_y=dict(type="data", symmetric=False, array=hi - y, arrayminus=y - lo),
+                                     text=[f"n = {r['n']}" for r in sub],
+                                     hovertemplate="%{x}: %{y:.0f} % (%{text})<extra>" + route + "</extra>"),
+                          row=1, col=j + 1)
+            nominal = [r.get("nominal_at_L") for r in sub]
+            if all(v is not None for v in nominal):
+                fig.add_trace(go.Scatter(x=x, y=np.array(nominal, float) * 100, mode="markers",
+                                         marker=dict(symbol="line-ew-open", size=16, color=colour),
+                                         name="calibrated, same L", legendgroup="nominal",
+                                         showlegend=j == 0 and k == 0, hoverinfo="skip"), row=1, col=j + 1)
+        fig.add_hline(y=level, line=dict(color="grey", dash="dot", width=1), row=1, col=j + 1)
+        fig.update_yaxes(title_text="coverage (%)", range=[0, 102], row=1, col=j + 1)
+        fig.update_xaxes(title_text="quantity", row=1, col=j + 1)
+    fig.update_layout(title=title, scattermode="group", height=470, margin=dict(l=60, r=20, t=120, b=60),
+                      legend=dict(orientation="h", y=-0.2, yanchor="top"))
     return fig
