@@ -457,10 +457,6 @@ def test_exit_codes_0_to_4_are_listed_alike_in_help_readme_and_reliability(capsy
 
 #: Files a user reads strings from: messages, help, captions, figure titles.
 USER_FACING = ("lvcore", "pages")
-#: Files with internal issue references that are owned elsewhere (lvcore/studies/ is off limits to the
-#: session that added this test): their help strings still say "issue 26"; see the xfail test below.
-ISSUE_REFERENCES_PENDING = ("lvcore/studies/bo_mismatch.py", "lvcore/studies/mismatch.py",
-                            "lvcore/studies/operators_realistic.py")
 
 
 def _user_visible_strings(path: Path):
@@ -483,18 +479,11 @@ def _issue_references(paths) -> list[str]:
 
 def test_no_internal_issue_references_in_user_visible_strings():
     """Help strings, messages, captions and figure titles never say "issue 26" (comments and docstrings may)."""
-    paths = [p for root in USER_FACING for p in sorted((ROOT / root).rglob("*.py"))
-             if str(p.relative_to(ROOT)) not in ISSUE_REFERENCES_PENDING]
+    paths = [p for root in USER_FACING for p in sorted((ROOT / root).rglob("*.py"))]
+    assert any(p.parent.name == "studies" for p in paths)   # the study modules' help strings too
     assert len(paths) > 100
     assert _issue_references(paths) == []
     # the check sees f-strings and help strings, not comments or docstrings
     sample = ROOT / "lvcore" / "cli.py"
     assert any("exit codes: " in text for _, text in _user_visible_strings(sample))
     assert not any("The ``lvcore`` command" in text for _, text in _user_visible_strings(sample))
-
-
-@pytest.mark.xfail(strict=True, reason="the study modules' help strings still say 'issue 26' (lvcore/studies/ is "
-                                       "owned by another session); remove this marker and ISSUE_REFERENCES_PENDING "
-                                       "once they are rephrased")
-def test_no_internal_issue_references_in_the_study_help_strings():
-    assert _issue_references([ROOT / p for p in ISSUE_REFERENCES_PENDING]) == []

@@ -435,8 +435,8 @@ def markdown_table(result: dict) -> str:
 # ----------------------------------------------------------------------------- CLI
 def add_study_parser(study_subparsers) -> None:
     """``lvcore study bo-mismatch``."""
-    p = study_subparsers.add_parser("bo-mismatch", help="issue 26 item 3: F6 as a real test — BO with fixed vs free "
-                                                        "fibre angles on data with a known mismatch (SYNTHETIC)")
+    p = study_subparsers.add_parser("bo-mismatch", help="finding F6 as a real test: BO with fixed vs free fibre "
+                                                        "angles on data with a known mismatch (SYNTHETIC)")
     p.add_argument("--volunteers", default=",".join(DEFAULT_VOLUNTEERS),
                    help=f"comma-separated bundled volunteers (default {','.join(DEFAULT_VOLUNTEERS)})")
     p.add_argument("--kinds", default=",".join(KINDS), help=f"mismatch kinds (default {','.join(KINDS)})")

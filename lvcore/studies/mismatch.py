@@ -811,7 +811,7 @@ def docs_markdown(result: dict) -> str:
 # ----------------------------------------------------------------------------
 def add_study_parser(study_subparsers) -> None:
     """``lvcore study mismatch``."""
-    p = study_subparsers.add_parser("mismatch", help="model-data mismatch dose-response (issue 26): sigma_S "
+    p = study_subparsers.add_parser("mismatch", help="model-data mismatch as a dose-response: sigma_S "
                                                      "inflation, output error and theta coverage per likelihood")
     p.add_argument("--out", default="study_mismatch", help="output (and resume) folder")
     p.add_argument("--sources", default=",".join(SOURCES), help=f"comma-separated, from {','.join(SOURCES)}")

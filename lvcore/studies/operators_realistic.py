@@ -393,8 +393,8 @@ def add_study_parser(study_subparsers) -> None:
     from lvcore.geometry import operator_model as om
 
     p = study_subparsers.add_parser(
-        "operators-realistic", help="issue 26 item 4: F4/F5 with realistic imitation operators (whole-slice choices, "
-                                    "trabeculae, breath-hold shifts) on 20+ SYNTHETIC patients, bootstrap CIs")
+        "operators-realistic", help="findings F4/F5 with realistic imitation operators (whole-slice "
+                                    "choices, trabeculae, breath-hold shifts) on 20+ SYNTHETIC patients, bootstrap CIs")
     p.add_argument("--patients", type=cli_args.int_in(2, 200), default=om.DEFAULT_PATIENTS,
                    help=f"SYNTHETIC patients to draw (default {om.DEFAULT_PATIENTS})")
     p.add_argument("--seed", type=cli_args.seed, default=om.DEFAULT_SEED,
