@@ -193,7 +193,27 @@ def _fake_calibration():
             "summary": summary, "wall_s": 0.0,
             "status": "converged: max R-hat 1.007 (<= 1.05), min bulk ESS 826 (>= 100), 0 divergent, 1 round(s); "
                       "0 divergent transitions (fake run for a figure test)",
-            "config": {"num_warmup": 5, "num_samples": 100, "num_chains": 4}}
+            "config": {"num_warmup": 5, "num_samples": 100, "num_chains": 4}, "derived": _fake_derived()}
+
+
+def _fake_derived():
+    """A derived record (lvcore.inference.derived.derive) as plain data: the shapes and keys, made-up numbers."""
+    q = lambda lo, m, hi: {"q05": lo, "median": m, "q95": hi}  # noqa: E731
+    edpvr = [{"pressure_mmhg": p, **q(v - 2 * k, v, v + 3 * k)}
+             for k, (p, v) in enumerate(zip((0, 5, 10, 15, 20, 25, 30), (84.0, 133, 146, 153, 158, 162, 165)))]
+    comb = {"coefficients": {"log_a": 1.0, "log_b": 0.97}, "text": "log_a + 0.97 log_b", "median": 0.63,
+            "q05": -1.14, "q95": 1.79, "width90_log": 2.93, "width90_factor": 18.7, "sd_log": 0.9}
+    return {"edpvr": edpvr, "n_draws": 100,
+            "edpvr_check": {"edp_mmhg": 8.0, "measured_edv_ml": 145.8, "predictive_99": [125.2, 160.2], "inside": True,
+                            "emulator_to_fe_offset_ml": q(-0.26, -0.03, 0.16),
+                            "klotz": {"v0_ml": 84.0, "v30_ml": 181.1,
+                                      "volumes_ml": [84.0, 136.1, 151.0, 161.6, 170.2, 177.5, 183.9]}},
+            "stress": {"fixed_stretch": {"stretch": 1.1, "fibre_kpa": q(0.8, 1.7, 2.9),
+                                         "cross_fibre_kpa": q(0.02, 0.1, 0.47)},
+                       "end_diastolic": {"stretch": q(1.128, 1.138, 1.152), "fibre_kpa": q(3.0, 5.1, 6.6),
+                                         "cross_fibre_kpa": q(0.03, 0.16, 0.64), "n_draws": 100}},
+            "ridge": {"a_b": comb, "best": comb, "least": comb, "correlation_log_a_log_b": -0.6},
+            "contraction": {"a": -0.2, "b": -0.2, "af": 0.39, "bf": 0.67}, "weakly_identified": []}
 
 
 @pytest.fixture(scope="module")

@@ -549,7 +549,7 @@ def check_flags(record: Mapping) -> list[str]:
 
 __all__ = ["EDPVR_PRESSURES_MMHG", "N_DERIVED_DRAWS", "default_draws", "FIXED_FIBRE_STRETCH", "WEAK_CONTRACTION", "LoadPath",
            "DerivedDraws", "log_uniform_moments", "contraction", "ridge", "fe_load_path", "stress_summary",
-           "quantiles", "posterior_draws", "thinned_indices", "predictive_interval", "derive", "check_flags", "text_table"]
+           "quantiles", "posterior_draws", "thinned_indices", "predictive_interval", "derive", "check_flags", "text_table", "summary_rows"]
 
 
 def text_table(record: Mapping) -> str:
@@ -590,3 +590,30 @@ def _q(q: Mapping, digits: int = 2) -> str:
     if q.get("median") is None:
         return "n/a"
     return f"{q['median']:.{digits}f} [{q['q05']:.{digits}f}, {q['q95']:.{digits}f}]"
+
+
+def summary_rows(record: Mapping) -> list[dict]:
+    """The derived quantities as table rows: ``quantity``, ``unit``, ``median``, ``q05``, ``q95`` (equal-tailed 90 %),
+    for a report table or a download (the EDPVR's pressures, the stress, the identified combinations)."""
+    rows = [{"quantity": f"V at {r['pressure_mmhg']:g} mmHg" + (" (V₀)" if r["pressure_mmhg"] == 0 else ""),
+             "unit": "mL", "median": r["median"], "q05": r["q05"], "q95": r["q95"]} for r in record["edpvr"]]
+    st = record["stress"]
+    for key, label in (("fixed_stretch", f"at fibre stretch {FIXED_FIBRE_STRETCH:.2f}"),
+                       ("end_diastolic", "at the mean end-diastolic fibre stretch")):
+        if key not in st:
+            continue
+        if key == "end_diastolic":
+            rows.append({"quantity": "mean end-diastolic fibre stretch", "unit": "-", **_qrow(st[key]["stretch"])})
+        rows.append({"quantity": f"fibre stress {label}", "unit": "kPa", **_qrow(st[key]["fibre_kpa"])})
+        rows.append({"quantity": f"cross-fibre stress {label}", "unit": "kPa", **_qrow(st[key]["cross_fibre_kpa"])})
+    for key, label in (("a_b", "matrix pair"), ("best", "best-determined combination")):
+        e = record["ridge"][key]
+        rows.append({"quantity": f"{label}: {e['text']}", "unit": "log", "median": e["median"], "q05": e["q05"],
+                     "q95": e["q95"]})
+    rows += [{"quantity": f"contraction of log {k}", "unit": "-", "median": v, "q05": None, "q95": None}
+             for k, v in record["contraction"].items()]
+    return rows
+
+
+def _qrow(q: Mapping) -> dict:
+    return {"median": q.get("median"), "q05": q.get("q05"), "q95": q.get("q95")}

@@ -20,16 +20,20 @@ DEFAULT_SUBJECT = "SYNTHETIC-HV3"
 #: Seconds the calibration adds to ``lvcore report`` (JAX compilation included): the range measured on the
 #: 2-core development machine, ``timings_s["calibration posterior"]`` of the manifest (docs/report.md, Appendix: measured runs).
 TYPICAL_SECONDS = (20, 45)
+#: Posterior draws behind the derived quantities (:mod:`lvcore.inference.derived`: the FE EDPVR, stress, ridge).
+DERIVED_DRAWS = 100
 #: Figures and tables :func:`figures` draws (for the default subject), with their titles.
 TITLES = {"fig_calibration_posterior": f"Calibration posterior of θ, {DEFAULT_SUBJECT} (prior and truth shown)",
-          "table_calibration_summary": f"Calibration summary, {DEFAULT_SUBJECT}"}
+          "table_calibration_summary": f"Calibration summary, {DEFAULT_SUBJECT}",
+          "fig_calibration_edpvr": f"EDPVR of the posterior, {DEFAULT_SUBJECT} (FE simulator, measured point, Klotz curve)",
+          "table_calibration_derived": f"What the data identify, {DEFAULT_SUBJECT}: EDPVR, stress, combinations"}
 #: Why the figures can be absent.
 MISSING = dict.fromkeys(TITLES, "the `chapter` emulator is not installed; build it with python "
                                 "scripts/build_emulators.py --emulators chapter")
 
 
 def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_samples: int = 500,
-            num_chains: int = 4, seed: int = 0) -> dict | None:
+            num_chains: int = 4, seed: int = 0, derived_draws: int | None = None) -> dict | None:
     """Run the calibration; None when the ``chapter`` emulator is not installed.
 
     Returns
@@ -37,7 +41,9 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
     dict
         ``subject``, ``draws`` {θ name: (n,) array}, ``bounds`` {name: (lo, hi)} of the
         uniform prior, ``truth`` {name: value} or None, ``summary`` (DataFrame with
-        ``parameter`` and ``truth``), ``status`` (convergence text), ``wall_s`` and ``config``.
+        ``parameter`` and ``truth``), ``status`` (convergence text), ``wall_s``, ``config`` and ``derived``
+        (:func:`lvcore.inference.derived.derive`'s record with ``derived_draws`` posterior draws, default
+        :data:`DERIVED_DRAWS`; None with 0).
     """
     from lvcore.emulator.io import available_emulators
 
@@ -58,6 +64,18 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
     forward = ScaledForward(load_emulator_forward("chapter", geo.h), geo.scale)
     config = SamplerConfig(num_warmup=num_warmup, num_samples=num_samples, num_chains=num_chains, seed=seed)
     res = calibrate(row.y, forward, "iid", config=config, max_rounds=1)
+    n_derived = DERIVED_DRAWS if derived_draws is None else int(derived_draws)
+    derived_rec = None
+    if n_derived:
+        from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_V_ML
+        from lvcore.inference import derived
+
+        emu = forward.forward.emulator if hasattr(forward.forward, "emulator") else None
+        derived_rec, _ = derived.derive(
+            res.idata, bounds={n: b for n, b in models.prior_bounds(forward=forward).items() if n in THETA_NAMES},
+            edp_mmhg=CHAPTER_EDP, angles=CHAPTER_ANGLES, base=str(getattr(emu, "base", "sliding")),
+            resolution=str(getattr(emu, "resolution", "default")), measured_edv_ml=float(row.y[0]),
+            lvv_sd_ml=SIGMA_V_ML, h=geo.h, scale=geo.scale, n_draws=n_derived)
     truth = volunteer_truth(row.subject)  # the hidden truth scores the fit; it never enters it
     truth = {n: truth[n] for n in THETA_NAMES if n in truth} if truth else None
     stats = res.idata.sample_stats
@@ -68,7 +86,8 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
     return {"subject": row.subject, "draws": {n: np.asarray(res.idata.posterior[n]).reshape(-1) for n in THETA_NAMES},
             "bounds": models.prior_bounds(forward=forward), "truth": truth, "summary": summary,
             "status": f"{res.convergence.message()}; {n_div} divergent transitions", "wall_s": res.wall_s,
-            "config": {"num_warmup": num_warmup, "num_samples": num_samples, "num_chains": num_chains}}
+            "config": {"num_warmup": num_warmup, "num_samples": num_samples, "num_chains": num_chains},
+            "derived": derived_rec}
 
 
 def source_line(result: dict) -> str:
@@ -81,8 +100,14 @@ def tables(result: dict) -> dict:
     import pandas as pd
 
     draws = result["draws"]
-    return {"fig_calibration_posterior": pd.DataFrame({n: d[:: max(1, d.size // 1000)] for n, d in draws.items()}),
-            "table_calibration_summary": result["summary"]}
+    out = {"fig_calibration_posterior": pd.DataFrame({n: d[:: max(1, d.size // 1000)] for n, d in draws.items()}),
+           "table_calibration_summary": result["summary"]}
+    if result.get("derived"):
+        from lvcore.inference.derived import summary_rows
+
+        out["fig_calibration_edpvr"] = pd.DataFrame(result["derived"]["edpvr"])
+        out["table_calibration_derived"] = pd.DataFrame(summary_rows(result["derived"]))
+    return out
 
 
 def captions(result: dict) -> dict:
@@ -96,12 +121,24 @@ def figures(result: dict) -> dict:
 
     c = result["config"]
     subject = result["subject"]
-    return {
+    out = {
         "fig_calibration_posterior": posterior_prior_figure(
             result["draws"], result["bounds"], truth=result["truth"], units=UNITS,
-            title=f"Calibration — {subject} (SYNTHETIC volunteer), iid model, `chapter` emulator, "
+            title=f"Calibration — {subject} (SYNTHETIC volunteer), iid model, chapter emulator, "
                   f"{c['num_chains']}×({c['num_warmup']}+{c['num_samples']}) NUTS: posterior, uniform prior "
                   "(dotted), hidden truth (red)"),
         "table_calibration_summary": table_figure(
             result["summary"], title=f"Calibration summary — {subject} (SYNTHETIC), iid model: {result['status']}"),
     }
+    d = result.get("derived")
+    if d:
+        from lvcore.viz.figures import derived_edpvr_figure
+
+        data = tables(result)["table_calibration_derived"].round(4).astype(object).where(lambda t: t.notna(), "")
+        out["fig_calibration_edpvr"] = derived_edpvr_figure(
+            d, title=f"EDPVR — {subject} (SYNTHETIC volunteer), posterior of the iid calibration",
+            subtitle=f"FE simulator, {d['n_draws']} posterior draws; 90 % band, measured point with its 99 % "
+                     "predictive interval, Klotz et al. (2006) curve")
+        out["table_calibration_derived"] = table_figure(
+            data, title=f"What the data identify — {subject} (SYNTHETIC): medians and equal-tailed 90 % intervals")
+    return out
