@@ -346,3 +346,13 @@ def test_mismatch_fields_parse_and_default_to_todays_model():
     assert c.boundary.epicardial_spring == 0.2 and c.boundary.spring_direction == "full"
     # the Python constructor and explicit κ = 0 give the same case as leaving it out
     assert Case.from_dict(copy.deepcopy(HO) | {"material": {**HO["material"], "kappa": 0}}) == plain
+
+
+def test_note_is_a_remark_for_the_reader_and_changes_nothing():
+    """``note`` (a string, e.g. why the bundled default_lv.json has its θ) is accepted and ignored by the simulation."""
+    with_note = Case.from_dict({**copy.deepcopy(HO), "note": "a typical healthy LV"})
+    assert with_note == Case.from_dict(copy.deepcopy(HO)) and "note" not in with_note.to_dict()
+    for bad in (3, ["x"], "x" * 4001):
+        with pytest.raises(CaseError) as err:
+            Case.from_dict({**copy.deepcopy(HO), "note": bad})
+        assert err.value.field == "note"

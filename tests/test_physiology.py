@@ -42,6 +42,28 @@ def test_edv_ratio_note_speaks_only_where_unusual_and_physiological():
     assert ph.edv_ratio_note(4.31, None) is None
 
 
+def test_edv_ratio_note_has_a_tolerance_and_says_why_in_both_directions():
+    """A ratio just outside the band (1.65 against 1.66-1.99 at 8 mmHg) is within the ratio's own 2 % uncertainty:
+    no note; beyond it the note says which way the model errs: above, soft/thin inflates more; below, stiff inflates
+    less."""
+    r = ph.typical_edv_ratio(8.0)
+    tol = ph.EDV_RATIO_NOTE_TOLERANCE
+    assert tol == 0.02
+    assert round(r.low, 2) == 1.66 and round(r.high, 2) == 1.99
+    assert ph.edv_ratio_note(1.65, 8.0) is None and ph.edv_ratio_note(2.0, 8.0) is None
+    assert ph.edv_ratio_note(r.low / (1 + tol) * 1.0001, 8.0) is None
+    assert ph.edv_ratio_note(r.high * (1 + tol) * 0.9999, 8.0) is None
+    above = ph.edv_ratio_note(r.high * (1 + tol) * 1.001, 8.0)
+    below = ph.edv_ratio_note(r.low / (1 + tol) * 0.999, 8.0)
+    assert above and below
+    assert "is above the typical" in above and "soft or thin-walled model inflates more than a normal LV" in above
+    assert "stiff" not in above and "inflates less" not in above
+    assert "is below the typical" in below and "stiff or thick-walled model inflates less than a normal LV" in below
+    assert "soft" not in below and "inflates more" not in below
+    for note in (above, below):
+        assert note.startswith("unusual result: EDV/V₀ = ") and "2 % uncertainty" in note
+
+
 def test_posterior_edv_ratio():
     draws = np.random.default_rng(0).normal(150.0, 5.0, size=(4, 500))
     post = ph.posterior_edv_ratio(draws, 80.0, 8.0, measured_lvv_ml=152.0)

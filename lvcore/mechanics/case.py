@@ -381,11 +381,17 @@ def _resolve(path_value, where: str, base_dir: Path | None, suffixes=()) -> Path
 # ----------------------------------------------------------------------------
 # parsing
 # ----------------------------------------------------------------------------
-_TOP = ("geometry", "material", "fibres", "load", "boundary", "probes", "outputs")
+_TOP = ("geometry", "material", "fibres", "load", "boundary", "probes", "outputs", "note")
+#: Longest ``note`` (characters): a human-readable remark on the case, ignored by the simulator.
+MAX_NOTE_CHARS = 4000
 
 
 def _parse_case(d: Mapping, base_dir: Path | None) -> Case:
     _check_keys(d, "", _TOP, required=("geometry", "material", "load"))
+    note = d.get("note", "")
+    if not isinstance(note, str) or len(note) > MAX_NOTE_CHARS:
+        raise CaseError("note", f"a remark for the reader: a string of at most {MAX_NOTE_CHARS} characters, got "
+                                f"{_short(note, 40) if not isinstance(note, str) else f'{len(note)} characters'}")
     geometry = _parse_geometry(d["geometry"], base_dir)
     material, regional = _parse_material(d["material"], geometry)
     fibres = _parse_fibres(d.get("fibres", {}))

@@ -381,7 +381,8 @@ def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None 
     (``standardised``) is judged only for an LV at a physiological pressure (``pressure_mmhg`` in
     :data:`lvcore.physiology.PHYSIOLOGICAL_EDP_RANGE_MMHG`): above
     :data:`lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV` it is "implausible", outside the typical range of
-    :func:`lvcore.physiology.typical_edv_ratio` "unusual". At any other pressure (or ``pressure_mmhg=None``,
+    :func:`lvcore.physiology.typical_edv_ratio` by more than its own uncertainty
+    (:data:`lvcore.physiology.EDV_RATIO_NOTE_TOLERANCE`, 2 %) "unusual". At any other pressure (or ``pressure_mmhg=None``,
     unknown) only EDV/V₀ above :data:`lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE` (5) is
     flagged, so benchmarks such as Land et al. (2015) problem 2 (10 kPa, EDV/V₀ 4.3) are not.
 

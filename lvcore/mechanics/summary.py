@@ -13,10 +13,10 @@ def format_summary(result) -> str:
              f"{d['seconds']:.2f} s"]
     vol = d.get("cavity_volume_ml")
     if vol:
-        lines.append(f"cavity volume: reference {vol['reference']:.3f} mL"
-                     + (f", loaded (LVV) {vol['loaded']:.3f} mL" if vol.get("loaded") is not None else ""))
-    if d.get("lvv_standardised") is not None:
-        lines.append(f"standardised LVV (EDV / V_early): {d['lvv_standardised']:.4f}")
+        lines.append(f"cavity volume: V₀ (reference, stress-free) {vol['reference']:.3f} mL"
+                     + (f", EDV (loaded, LVV) {vol['loaded']:.3f} mL" if vol.get("loaded") is not None else ""))
+    if d.get("lvv_standardised") is not None:  # one name for this ratio everywhere: EDV/V₀
+        lines.append(f"EDV/V₀ (loaded over reference cavity volume): {d['lvv_standardised']:.4f}")
     if d.get("apex"):
         for name, pos in d["apex"].items():
             lines.append(f"{name} apex (deformed): ({pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}) mm")
