@@ -122,7 +122,15 @@ with left:
 with right:
     st.subheader("Volumes and fit residuals")
     # one column per operator: the narrow column holds the table whole, without clipping the right-hand columns
-    st.dataframe(pd.DataFrame(rows).set_index("operator").T, width="stretch")
+    volumes = pd.DataFrame(rows).set_index("operator").T
+    uncut = volumes.isna().all(axis=1)  # e.g. the base-cut rows of contour stacks: no cut was made
+    volumes = volumes[~uncut]
+    if volumes.isna().any().any():  # a value for some operators only: say "–", never None
+        volumes = volumes.astype(object).map(lambda v: "–" if pd.isna(v) else f"{v:g}")
+    st.dataframe(volumes, width="stretch")
+    if uncut.any():
+        st.caption(f"Not shown ({', '.join(uncut.index[uncut])}): no base cut was made for these geometries (a cut "
+                   "applies to endo/epi surfaces and volume meshes; contour stacks end at their basal slice).")
     if len(names) > 1:
         mse = pd.DataFrame([[node_mse_cm2(geoms[a], geoms[b]) for b in names] for a in names], index=names,
                            columns=names).round(4)
@@ -137,9 +145,11 @@ if len(names) > 1:
     a = c1.selectbox("Geometry", names, index=0)
     b = c2.selectbox("compared with", names, index=1)
     d = np.linalg.norm(geoms[a] - geoms[b], axis=1)
-    m1, m2, m3 = st.columns(3)
+    m0, m1, m2, m3 = st.columns(4)  # one number per metric: "0.0357 cm² = 1.89 mm RMS" was cut off in one
     mse_ab = node_mse_cm2(geoms[a], geoms[b])
-    m1.metric("node MSE (cm²) and RMS distance (mm)", f"{mse_ab:.4f} cm² = {units.rms_mm_from_mse_cm2(mse_ab):.2f} mm RMS")
+    m0.metric("node MSE (cm²)", f"{mse_ab:.4f}", help="Mean squared node distance, the chapter's unit.")
+    m1.metric("RMS node distance (mm)", f"{units.rms_mm_from_mse_cm2(mse_ab):.2f}",
+              help="The root of the node MSE in mm: 10·√MSE (0.01 cm² = 1 mm RMS).")
     m2.metric("mean distance (mm)", f"{d.mean():.2f}")
     m3.metric("max distance (mm)", f"{d.max():.2f}")
     st.image(_distance(geoms[a], geoms[b], f"{a} coloured by distance to {b}"))

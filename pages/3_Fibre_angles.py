@@ -10,7 +10,7 @@ import pandas as pd
 import streamlit as st
 
 from lvcore.app import freshness
-from lvcore.app.controls import shared_inputs
+from lvcore.app.controls import disabled_hint, shared_inputs, why_disabled
 from lvcore.app.live_chart import live_plotly_chart
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
@@ -167,7 +167,11 @@ def _live_map(theta, edp_mmhg, resolution) -> None:
     busy = job is not None and not job["done"]
     inputs = {"a (kPa)": theta["a"], "b (–)": theta["b"], "a_f (kPa)": theta["af"], "b_f (–)": theta["bf"],
               "EDP (mmHg)": edp_mmhg, "mesh": resolution, "point (α_endo, α_epi)": (pe, pp)}
-    if v3.button("Verify with the FE simulator", disabled=busy):
+    blocked = why_disabled((busy, "a verification is running; its result appears below when it is done."))
+    clicked = v3.button("Verify with the FE simulator", disabled=blocked is not None,
+                        help=blocked or "One finite-element solve at this point, in the background.")
+    disabled_hint(blocked, v3)
+    if clicked:
         job = {"done": False, "t0": time.perf_counter(), "point": (pe, pp), "inputs": inputs, "error": None}
         st.session_state["angle_verify"] = job
         threading.Thread(target=_verify_worker, args=(job, (pe, pp), dict(theta), edp_mmhg, resolution),

@@ -6,7 +6,8 @@ import pandas as pd
 import plotly.graph_objects as go
 import streamlit as st
 
-from lvcore.app.controls import input_label, log_options, shared_inputs, shared_start
+from lvcore.app.controls import (chosen_index, conditions_text, disabled_hint, input_label, log_options,
+                                   remember_choice, shared_inputs, shared_start, why_disabled)
 
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
@@ -45,9 +46,9 @@ if not choices:
     st.stop()
 
 shared = shared_inputs()
-_shared_emu = shared.get("emulator")
-label = st.selectbox("Emulator", list(choices), index=list(choices).index(_shared_emu) if _shared_emu in choices else 0,
-                     help="Defaults to the shared sidebar's emulator.")
+label = st.selectbox("Emulator", list(choices), index=chosen_index("emulator", choices),
+                     help="Starts at the emulator last chosen on the Emulator, Calibration or My subject page.")
+remember_choice("emulator", label)
 try:
     emu = _load(choices[label])
 except LVCoreError as err:
@@ -77,7 +78,13 @@ with st.expander("Inputs and training box"):
         "scale": ["log" if f else "linear" for f in emu.log_inputs],
     }), hide_index=True)
     if emu.fixed:
-        st.write("Fixed during training:", emu.fixed)
+        fixed = dict(emu.fixed)
+        if {"edp", "alpha_endo", "alpha_epi"} <= set(fixed):  # in words, with where the angles come from
+            st.write("Fixed during training: " + conditions_text(fixed["edp"], (fixed["alpha_endo"],
+                                                                               fixed["alpha_epi"]), emu) + ".")
+        else:
+            st.write("Fixed during training: " + ", ".join(f"{input_label(k)} {float(v):g}" for k, v in fixed.items())
+                     + ".")
     st.caption(f"Resolution: {source.get('resolution', '?')} (mesh preset `{emu.resolution}`); base: **{emu.base}**; simulator versions: {source.get('simulator_versions', '?')}; "
                f"training-set hash {str(tr.get('set_hash', ''))[:16]}")
 
@@ -142,8 +149,12 @@ x = np.r_[x, scale]
 st.write(f"Emulator: LVV **{y_emu[0]:.1f} mL**, mean strain **{y_emu[1:].mean():.4f}** (instant).")
 
 space_dict = source.get("space")
-run = st.button("Run the simulator at this point", disabled=space_dict is None,
-                help="one finite-element solve at the resolution and base condition the emulator was trained on")
+blocked = why_disabled((space_dict is None, "this emulator's metadata does not record the campaign space it was "
+                                            "trained on, so its inputs cannot be turned into a simulation."))
+run = st.button("Run the simulator at this point", disabled=blocked is not None,
+                help=blocked or "one finite-element solve at the resolution and base condition the emulator was "
+                                "trained on")
+disabled_hint(blocked)
 if run:
     res = None
     try:

@@ -12,7 +12,9 @@ import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
 from lvcore.app import freshness, physiology_panel
-from lvcore.app.controls import shared_inputs
+from lvcore.app.tables import summary_view
+from lvcore.app.controls import (DEFAULT_SUBJECT, chosen_index, conditions_text, disabled_hint, remember_choice,
+                                   shared_inputs, why_disabled)
 from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.forward import emulator_forward
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
@@ -58,8 +60,7 @@ def _emulator(path: str):
     return load_emulator(path)
 
 
-shared = shared_inputs(theta=False, edp=False)  # subject and emulator are its defaults; it reads no θ, no EDP
-shared_subject, shared_emu = shared.get("subject"), shared.get("emulator")
+shared_inputs(theta=False, edp=False)  # it reads no θ, no EDP: the sidebar shows no shared inputs here
 
 # ----------------------------------------------------------------------------- data
 left, right = st.columns(2)
@@ -74,8 +75,10 @@ with left:
         if not names:
             st.warning("No bundled volunteers in assets/volunteers; upload data instead.")
         else:
-            name = st.selectbox("Volunteer", names, index=names.index(shared_subject) if shared_subject in names else 0,
-                                help="Defaults to the shared sidebar's subject.")
+            name = st.selectbox("Volunteer", names, index=chosen_index("subject", names),
+                                help=f"Bundled SYNTHETIC volunteers (default {DEFAULT_SUBJECT}: its PC scores lie "
+                                     "inside the default emulator's box).")
+            remember_choice("subject", name)
             try:
                 vol = volunteer_files(name)
                 data = read_measured_csv(vol.measured)[0]
@@ -114,9 +117,10 @@ with left:
 
 with right:
     st.subheader("Model")
-    emu_label = st.selectbox("Emulator", list(choices),
-                             index=list(choices).index(shared_emu) if shared_emu in choices else 0,
-                             help="Defaults to the shared sidebar's emulator.")
+    emu_label = st.selectbox("Emulator", list(choices), index=chosen_index("emulator", choices),
+                             help="Starts at the emulator last chosen on the Emulator, Calibration or My subject "
+                                  "page (first: the one lvcore calibrate uses).")
+    remember_choice("emulator", emu_label)
     models = st.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid", "discrepancy"],
                             format_func=MODEL_LABELS.get,
                             help="Parameters reported:\n\n" + "\n\n".join(
@@ -189,8 +193,13 @@ def _worker(job: dict, y, forward, models, config, infer):
               + ", ".join(f"{k} {a:.1f}-{b:.1f} s" for k, (a, b) in timings.items()), file=sys.stderr, flush=True)
 
 
-run_clicked = st.button("Run calibration", type="primary",
-                        disabled=data is None or h is None or not models or (job is not None and not job["done"]))
+blocked = why_disabled(
+    (data is None, "no measurements yet: choose a bundled volunteer or upload a measured CSV (LVV + 24 strains)."),
+    (h is None, "no geometry yet: upload the subject's PC scores or template mesh too (the emulator needs its shape)."),
+    (not models, "no likelihood chosen: pick at least one under Likelihood(s)."),
+    (job is not None and not job["done"], "a calibration is running; its results appear below when it is done."))
+run_clicked = st.button("Run calibration", type="primary", disabled=blocked is not None, help=blocked)
+disabled_hint(blocked)
 if run_clicked:
     try:
         emulator = _emulator(choices[emu_label])
@@ -290,8 +299,12 @@ if job is not None and job["done"]:
             if job["synthetic"]:
                 st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
                                                   "never enters the fit)." if truth else ""))
-            st.caption(f"EDP {job.get('edp_mmhg', SIMULATOR_DEFAULT_EDP_MMHG):g} mmHg ({job.get('edp_source', 'default')}); "
-                       f"{job.get('base', 'clamped')} base (the emulator's simulations)")
+            st.caption("Conditions used: " + conditions_text(
+                job.get("edp_mmhg", SIMULATOR_DEFAULT_EDP_MMHG), job.get("angles", SIMULATOR_DEFAULT_ANGLES),
+                _emulator(choices[job["emulator"]]) if job["emulator"] in choices else None,
+                infer_angles=job.get("infer", False))
+                + f" (EDP: {job.get('edp_source', 'default')}); {job.get('base', 'clamped')} base (the emulator's "
+                  "simulations)")
             verdicts = _verdicts(job, results)
             for m, res in results.items():
                 v = verdicts.get(m)
@@ -308,10 +321,16 @@ if job is not None and job["done"]:
                     # a short meaning fits its column (the full text is in the list above the run button)
                     table.insert(0, "meaning", [parameter_meaning(n) for n in table.index])
                     if truth:
-                        table.insert(1, "truth (SYNTHETIC)", [truth.get(str(n)) for n in table.index])
+                        table.insert(1, "truth (SYNTHETIC)", [f"{truth[str(n)]:.4g}" if truth.get(str(n)) is not None
+                                                              else "–" for n in table.index])
                     table.index = [display_name(n) for n in table.index]  # a_f, b_f as on the sliders
+                    table, config = summary_view(st, table)  # headers in words, help, no None/NaN
                     st.dataframe(table, width="stretch",
-                                 column_config={"meaning": st.column_config.TextColumn(width="large")})
+                                 column_config={"meaning": st.column_config.TextColumn(width="large"),
+                                                "truth (SYNTHETIC)": st.column_config.TextColumn(
+                                                    help="The hidden truth of the SYNTHETIC volunteer; – where it "
+                                                         "has none (noise and discrepancy parameters)."),
+                                                **config})
                     bounds = job.get("bounds") or {}
                     post = {n: np.asarray(res.idata.posterior[n]).reshape(-1) for n in bounds if n in res.idata.posterior}
                     if post:

@@ -13,6 +13,10 @@ import streamlit as st
 from lvcore.exceptions import LVCoreError
 from lvcore.studies import (bo_fibres, bo_mismatch, fibre_discrepancy, findings, geometry_operators, mismatch,
                             operators, operators_realistic, results, sbc)
+from lvcore.viz.report_figures import wrap_title
+
+#: Characters per title line of a figure on this page (a page-wide figure at a 1400-px window holds ~100).
+APP_TITLE_CHARS = 80
 
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
@@ -52,8 +56,9 @@ def show(module, result, figures=None, tables=()) -> None:
     figs = module.figures(result)
     tabs = module.tables(result)
     for name in figures or figs:
-        if name in figs:
-            st.plotly_chart(figs[name], width="stretch", key=f"{module.__name__}.{name}")
+        if name in figs:  # a long title (e.g. "... (REDUCED budget; ...)") wraps instead of running off the figure
+            st.plotly_chart(wrap_title(figs[name], width=APP_TITLE_CHARS), width="stretch",
+                            key=f"{module.__name__}.{name}")
     for name in tables:
         if name in tabs:
             st.caption(module.TITLES.get(name, name.replace("_", " ")))
@@ -103,7 +108,7 @@ with tab_ops:
         if res.get("surfaces"):
             labels = [f"{s['patient']} main {s['main_operator']} test {s['test_geometry']}" for s in res["surfaces"]]
             i = st.selectbox("Loss surface (Fig 9.13) of fit", range(len(labels)), format_func=labels.__getitem__)
-            st.plotly_chart(operators.surface_figure(res, i), width="stretch")
+            st.plotly_chart(wrap_title(operators.surface_figure(res, i), width=APP_TITLE_CHARS), width="stretch")
     verdict_section("operators-realistic", operators_realistic, "opr_src",
                     "F4/F5 with realistic operators (whole slices, trabeculae, breath-hold shifts)")
 

@@ -7,10 +7,12 @@ import streamlit as st
 
 from lvcore.units import rms_mm_from_mse_cm2
 from lvcore.app import freshness, physiology_panel, subject_emulator_panel, subject_flow as flow
-from lvcore.app.controls import shared_inputs
+from lvcore.app.tables import number_column, summary_view
+from lvcore.app.controls import chosen_index, conditions_text, disabled_hint, remember_choice, shared_inputs, why_disabled
 from lvcore.conditions import SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
+from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS
 from lvcore.inference.samplers import SamplerConfig
 from lvcore.viz.inference_figures import display_name
@@ -29,7 +31,7 @@ def _emulator(name: str):
 
 
 uploads = session_uploads()
-shared = shared_inputs(theta=False, edp=False)  # this page has its own EDP (step 3), as lvcore calibrate --edp
+shared_inputs(theta=False, edp=False)  # own EDP (step 3, as lvcore calibrate --edp): no shared inputs in sidebar
 
 # ----------------------------------------------------------------------------- 1. geometry
 NO_MESH = "No mesh: infer it from CMR measures"
@@ -142,10 +144,10 @@ st.header("3 · Model")
 subject_emus = subject_emulator_panel.built_emulators()  # built in this session on a loaded geometry
 names = available_emulators() + list(subject_emus)
 m1, m2, m3 = st.columns(3)
-emu_name = m1.selectbox("Emulator", names, index=names.index(shared["emulator"]) if shared.get("emulator") in names
-                        else 0, key="my_emulator",
+emu_name = m1.selectbox("Emulator", names, index=chosen_index("emulator", names), key="my_emulator",
                         help="A shared emulator of the shape model's PC scores, or a subject emulator built below "
                              "(its geometry is bound in).")
+remember_choice("emulator", emu_name)
 edp = m2.number_input("EDP (mmHg)", min_value=0.0, max_value=40.0, value=float(SIMULATOR_DEFAULT_EDP_MMHG),
                       step=0.5, key="my_edp", help="lvcore calibrate --edp; a fixed-EDP emulator takes only its own.")
 models = m3.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid"], format_func=MODEL_LABELS.get,
@@ -197,8 +199,9 @@ if prepared is not None:
     if is_subject_emu:
         st.info(f"Subject emulator: the geometry it was built on ({Path(used_geometry.source).name}) is bound in, "
                 "as it is; no PC scores are used.")
-    st.caption(f"Conditions used: EDP {prepared.conditions['edp_mmhg']:.2f} mmHg, fibre angles "
-               f"{prepared.conditions['alpha_endo']:.0f}° / {prepared.conditions['alpha_epi']:.0f}°.")
+    st.caption("Conditions used: " + conditions_text(
+        prepared.conditions["edp_mmhg"], (prepared.conditions["alpha_endo"], prepared.conditions["alpha_epi"]),
+        emulator) + ".")
 if not inferred and geometry_file is not None:
     with st.expander("Build a subject emulator for this geometry (optional, minutes)",
                      expanded=st.session_state.get("my_build_job") is not None):
@@ -210,8 +213,15 @@ settings = {"geometry": "infer" if inferred else geometry_name, "units": units,
             "reference_volume_ml": ref_volume or None, "measures": measures,
             "subject": None if data is None else data.subject, "emulator": emu_name, "edp_mmhg": float(edp),
             "models": list(models), "chains": int(chains), "warmup": int(warmup), "draws": int(draws)}
-if st.button("Run calibration", type="primary", key="my_run",
-             disabled=prepared is None or data is None or not models):
+blocked = why_disabled(
+    (data is None, "no measurements yet: upload LVV + 24 strains in step 2 (or pick a bundled example in step 1)."),
+    (prepared is None and (inferred or geometry is not None),
+     "the model is not ready: see the message in steps 1–3 (e.g. an EDP the emulator does not take)."),
+    (prepared is None, "no geometry yet: upload a mesh or PC scores in step 1, or choose \"No mesh: infer it\"."),
+    (not models, "no likelihood chosen: pick at least one in step 3."))
+clicked = st.button("Run calibration", type="primary", key="my_run", disabled=blocked is not None, help=blocked)
+disabled_hint(blocked)
+if clicked:
     with st.status("Calibrating…", expanded=True) as status:
         config = SamplerConfig(num_warmup=int(warmup), num_samples=int(draws), num_chains=int(chains))
         try:
@@ -243,17 +253,21 @@ if stored is not None:
     with freshness.shown(stored, settings, "my subject"):
         summary = stored.result["summary"]
         for run in stored.result["runs"]:
-            record = summary["models"][run.model]  # the banner of summary_record: convergence and bound flags
-            getattr(st, "success" if record["converged_cleanly"] else "warning")(
-                f"{MODEL_LABELS[run.model]}: {record['convergence']}")
-            for flag in run.check.flags:
-                st.warning(f"{MODEL_LABELS[run.model]}: flagged: {flag}")
-            st.dataframe(run.result.summary.rename(index=display_name), width="stretch")
+            record = summary["models"][run.model]
+            # one banner per likelihood: its convergence and each of the verdict's flags, once
+            level, text = banner_status(run.result.convergence, flags=run.check.flags)
+            getattr(st, level)(f"{MODEL_LABELS[run.model]}: {text}")
+            shown, config = summary_view(st, run.result.summary.rename(index=display_name))
+            st.dataframe(shown, width="stretch", column_config=config)
             if "geometry_posterior" in record:
                 st.markdown(f"**Inferred geometry, {MODEL_LABELS[run.model]}**: posterior of the PC scores h, the "
-                            "scale s and the implied measures (5–95 %), against what was measured")
-                st.dataframe(flow.geometry_posterior_rows(record["geometry_posterior"]), width="stretch",
-                             hide_index=True)
+                            "scale s and the implied measures (median and 90 % equal-tailed interval), against what "
+                            "was measured")
+                geo_rows = [{**row, "measured": "not measured" if row["measured"] is None else f"{row['measured']:.4g}"}
+                            for row in flow.geometry_posterior_rows(record["geometry_posterior"])]
+                st.dataframe(geo_rows, width="stretch", hide_index=True, column_config={
+                    "5 %": number_column(st, "q05"), "95 %": number_column(st, "q95"),
+                    "median": number_column(st, "median")})
         for w in summary["warnings"]:
             if summary["geometry"]["kind"] == "inferred":
                 st.warning(w)

@@ -25,6 +25,8 @@ def test_describe_never_prints_python_literals():
     """Issue 49: the Report page said "static PNG/SVG True"; booleans and None read as words."""
     text = describe({"live calibration": True, "static": False, "subject": None, "pairs": (True, None)})
     assert text == "live calibration yes; static no; subject –; pairs (yes, –)"
+    assert describe({"reference_volume_ml": None, "measures": {}, "models": []}) == (
+        "reference_volume_ml –; measures none; models none")  # no None, no {} in a settings line
 
 
 def test_fibre_sweep_greys_out_after_a_sidebar_slider_moves(monkeypatch):

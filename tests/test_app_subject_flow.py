@@ -80,6 +80,8 @@ def test_flow_end_to_end_gives_a_complete_bundle(uploads):
         assert json.loads(z.read("settings.json")) == settings
         page = z.read("summary.html").decode()
         assert "SYNTHETIC" in page and "EDP 8.00 mmHg" in page
+        assert "q05 (90 % equal-tailed interval)" in page and "hdi" not in page
+        assert "null" not in page and ">None<" not in page  # settings in words
         assert json.loads(z.read("summary.json"))["models"]["iid"]["posterior"]["a"]["mean"] > 0
 
 
@@ -108,7 +110,21 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     # physiology: the posterior EDV/V0 with its typical range and the assumed EDP (issue 27, item 2)
     assert any("EDP assumed: 8 mmHg" in c.value and "typical EDV/V₀" in c.value for c in at.caption)
     assert any("EDV/V₀ median" in d.value.columns for d in at.dataframe)
-    assert any(b.label.startswith("Simulate the EDPVR") for b in at.button)
+    assert any(b.label.startswith("Compute the EDPVR") for b in at.button)
+    # the conditions are the emulator's own, with the reason (the Simulator's default angles differ)
+    (cond,) = [c.value for c in at.caption if c.value.startswith("Conditions used:")]
+    assert "fibre angles -60° / 60°, the 'chapter' emulator's own: it was trained at these angles" in cond
+    assert "the Simulator's default is -60° / 90°" in cond
+    # the posterior table: the 90 % equal-tailed interval in its headers, help on each ArviZ diagnostic, no None
+    (summary,) = [d for d in at.dataframe if "r_hat" in d.value.columns]
+    config = json.loads(summary.proto.columns)
+    assert config["q05"]["label"] == "q05 (90 % equal-tailed interval)" and "hdi_5%" not in summary.value.columns
+    assert all(config[c]["help"] for c in ("mcse_mean", "ess_bulk", "ess_tail", "r_hat"))
+    for d in at.dataframe:
+        assert not d.value.isna().any().any() and "None" not in d.value.astype(str).to_numpy(), d.value
+    # each flag once, in the app's words: the banners name no CLI exit code; "Computed with" has no None
+    assert not any("exit code" in a.value or "CLI" in a.value for a in list(at.warning) + list(at.success))
+    assert not any("None" in c.value for c in at.caption)
     # a wrong EDP for the fixed-EDP chapter emulator is refused with a message naming the EDP
     at.selectbox(key="my_emulator").select("chapter")
     at.number_input(key="my_edp").set_value(12.0).run()

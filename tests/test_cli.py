@@ -487,3 +487,67 @@ def test_no_internal_issue_references_in_user_visible_strings():
     sample = ROOT / "lvcore" / "cli.py"
     assert any("exit codes: " in text for _, text in _user_visible_strings(sample))
     assert not any("The ``lvcore`` command" in text for _, text in _user_visible_strings(sample))
+
+
+def test_the_bundled_default_case_is_a_typical_heart(capsys):
+    """``lvcore simulate assets/cases/default_lv.json`` at its typical healthy θ (conditions.SIMULATOR_DEFAULT_THETA):
+    EDV/V₀ inside the typical band at 8 mmHg (measured: 159.1 mL on 86.1 mL, 1.85), no "unusual result" warning,
+    one name for the ratio (EDV/V₀, not "standardised LVV" or V_early), and the case says why in its note."""
+    from lvcore import conditions, physiology
+
+    path = ROOT / "assets" / "cases" / "default_lv.json"
+    d = json.loads(path.read_text())
+    assert {k: d["material"][k] for k in ("a", "b", "af", "bf")} == conditions.SIMULATOR_DEFAULT_THETA
+    assert "typical" in d["note"] and "Klotz" in d["note"]
+    rc, out, err = run(["simulate", str(path)], capsys)
+    assert rc == 0, err
+    assert "WARNING" not in out and "unusual" not in out + err
+    assert "standardised" not in out and "V_early" not in out
+    (line,) = [ln for ln in out.splitlines() if ln.startswith("EDV/V₀")]
+    ratio = float(line.split(":")[-1])
+    typical = physiology.typical_edv_ratio(8.0)
+    assert typical.low <= ratio <= typical.high
+    assert ratio == pytest.approx(1.848, abs=0.005)
+    assert "EDV (loaded, LVV) 159.1" in out
+    rc, out, _ = run(["simulate", str(path), "--json"], capsys)
+    summary = json.loads(out)
+    assert rc == 0 and summary["warnings"] == [] and summary["cavity_volume_ml"]["loaded"] == pytest.approx(159.1, abs=0.1)
+
+
+def test_calibrate_prints_the_equal_tailed_interval_and_the_fit_check_in_words(tmp_path, capsys, monkeypatch):
+    """The printed posterior table has the 90 % equal-tailed interval (q05, q95: the verdict's convention), not ArviZ's
+    HDI, and says so in its header; the best fit's p-values are explained in words."""
+    import dataclasses
+
+    from lvcore.inference import calibrate as cal
+    from lvcore.inference import diagnostics, verdict
+
+    _fake_calibration(monkeypatch)
+    rng = np.random.default_rng(0)
+    draws = {"a": rng.lognormal(0.0, 1.0, (2, 400))}
+    table = diagnostics.summary_table(draws)
+    real_fake = cal.calibrate
+
+    def fake(y, fwd, model, **kw):
+        return dataclasses.replace(real_fake(y, fwd, model, **kw), summary=table)
+
+    monkeypatch.setattr(cal, "calibrate", fake)
+    p = np.ones(25)
+    p[10] = 0.014  # strain_10
+    monkeypatch.setattr(verdict, "consistency_check", lambda y, *a, **k: verdict.Consistency(
+        {}, np.asarray(y, float), p))
+    csv = measured_csv(tmp_path / "m.csv", ["S1"])
+    scores = tmp_path / "h.json"
+    scores.write_text('{"h": [0, 0, 0, 0, 0]}')
+    rc, out, err = run(["calibrate", "--data", str(csv), "--geometry", str(scores), "--out", str(tmp_path / "o"),
+                        "--derived-draws", "0"], capsys)
+    assert rc == 0, err
+    assert "q05–q95 = 90 % equal-tailed interval" in out and "hdi" not in out.lower()
+    assert list(table.columns[:5]) == ["mean", "sd", "median", "q05", "q95"]
+    flat = draws["a"].reshape(-1)
+    assert table.loc["a", "q05"] == pytest.approx(np.quantile(flat, 0.05))
+    assert table.loc["a", "q95"] == pytest.approx(np.quantile(flat, 0.95))
+    assert "best-fit p-values (smallest)" not in out
+    assert "fit check: the best-fitting model against the data" in out and "strain_10 p = 0.014" in out
+    assert "the chance of missing by at least this much if the model and the noise were right" in out
+    assert "below 0.01 an output is not reached" in out

@@ -20,14 +20,18 @@ def test_geometry_page_bundled_patient():
     # the volumes table sits in the narrow right-hand column: one column per operator, so none is clipped
     volumes = at.dataframe[0].value
     assert list(volumes.columns) == ["op1", "op2", "op3"] and "cavity volume (mL)" in volumes.index
+    # no None in a table: the base-cut rows of contour stacks (no cut made) are left out, and the caption says why
+    assert not volumes.isna().any().any() and "base cut (mm below the base)" not in volumes.index
+    assert any(c.value.startswith("Not shown (base cut") and "no base cut was made" in c.value for c in at.caption)
     at.selectbox[0].set_value("SYNTHETIC-P02").run()
     assert not at.exception, at.exception
     assert any("node MSE" in m.label for m in at.metric)
     # MSE in cm² beside distances in mm: the MSE states its RMS distance in mm too (issue 27)
-    (mse,) = [m for m in at.metric if "node MSE" in m.label]
-    value, rms = mse.value.split(" cm² = ")
-    assert rms.endswith(" mm RMS") and float(rms.split()[0]) == __import__("pytest").approx(
-        10 * float(value) ** 0.5, abs=0.006)
+    # one number per metric (the combined "0.0357 cm² = 1.89 mm RMS" was cut off on the page)
+    (mse,) = [m for m in at.metric if m.label == "node MSE (cm²)"]
+    (rms,) = [m for m in at.metric if m.label == "RMS node distance (mm)"]
+    assert float(rms.value) == __import__("pytest").approx(10 * float(mse.value) ** 0.5, abs=0.006)
+    assert all(len(m.value) <= 8 for m in at.metric), [m.value for m in at.metric]
     assert any("10·√MSE mm" in c.value for c in at.caption)
 
 

@@ -42,4 +42,5 @@ def test_banner_lists_the_verdicts_flags():
     conv = Convergence(True, 1.001, 2000.0, 2000.0, 0, ())
     assert banner_status(conv)[0] == "success"
     level, text = banner_status(conv, flags=["IDENTIFIABILITY: a: posterior piled on the prior's lower bound 0.05"])
-    assert level == "warning" and "exit code 4" in text and "lower bound 0.05" in text
+    assert level == "warning" and "flagged (1): IDENTIFIABILITY: a: posterior piled" in text and "lower bound 0.05" in text
+    assert "CLI" not in text and "exit code" not in text  # the app's own words

@@ -277,3 +277,29 @@ def test_edpvr_figure_klotz_curve_and_band_order():
     np.testing.assert_allclose(by[:5], [0, *p])
     assert lo[0] == med[0] == hi[0] == v0
     assert "SYNTHETIC-HV1" in fig.layout.title.text
+
+
+def test_strain_map_labels_fit_their_columns_and_the_colour_bar_title_clears_its_ticks():
+    """The sector labels ran together at a half-page width ("60–120°120–180°…"): each line of a tick is short now;
+    the colour bar's title sits beside the bar (above it, it overlapped the top tick label)."""
+    import re
+
+    for fig in (figures.strain_heatmap(_ramp()), ):
+        ticks = list(fig.data[0].x)
+        assert len(ticks) == 6 and ticks[2].startswith("S3")
+        assert max(len(line) for t in ticks for line in re.split("<br>", t)) <= 5, ticks
+        assert "degrees" in fig.layout.xaxis.title.text  # the unit of the angular ranges
+    for colorbar in (figures.strain_heatmap(_ramp()).data[0].colorbar, figures.strain_bullseye(_ramp()).data[0].marker.colorbar):
+        assert colorbar.title.text == "E_cc (-)" and colorbar.title.side == "right"
+
+
+def test_no_markdown_backticks_in_figure_titles():
+    from lvcore.viz.report_figures import posterior_prior_figure, wrap_title
+
+    assert figures.plain_text("iid model, `chapter` emulator<br><sup>x</sup>") == "iid model, chapter emulator<br><sup>x</sup>"
+    fig = posterior_prior_figure({"a": np.ones(10)}, {"a": (0.05, 10.0)}, title="`chapter` emulator")
+    assert fig.layout.title.text == "chapter emulator"
+    fig = figures.contour([0, 1], [0, 1], np.zeros((2, 2)), title="EDV, `angles` emulator")
+    assert "`" not in fig.layout.title.text
+    fig.update_layout(title="a long title with a `chapter` emulator")
+    assert "`" not in wrap_title(fig).layout.title.text

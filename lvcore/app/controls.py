@@ -28,26 +28,35 @@ THETA_HELP = {
 }
 
 
-def log_options(lo: float, hi: float, keep: float, n: int = 41) -> list[float]:
-    """Log-spaced slider stops (3 significant digits) between ``lo`` and ``hi`` that include ``keep``."""
-    values = {float(f"{v:.3g}") for v in np.geomspace(lo, hi, n)} | {float(keep)}
+def log_options(lo: float, hi: float, keep, n: int = 41) -> list[float]:
+    """Log-spaced slider stops (3 significant digits) between ``lo`` and ``hi`` that include ``keep`` (a value or
+    several)."""
+    kept = {float(k) for k in (keep if np.ndim(keep) else [keep])}
+    values = {float(f"{v:.3g}") for v in np.geomspace(lo, hi, n)} | kept
     return sorted(values)
 
 
-def theta_slider(name: str, value: float | None = None, *, key: str | None = None, container=None) -> float:
-    """A log-scaled select slider for θ component ``name`` (a, b, af, bf) with its unit in the label."""
+def theta_slider(name: str, value: float | None = None, *, key: str | None = None, container=None,
+                 default: float | None = None) -> float:
+    """A log-scaled select slider for θ component ``name`` (a, b, af, bf) with its unit in the label.
+
+    ``default`` is the starting value and a stop of the slider (default the chapter's θ̃; the Simulator page passes
+    :data:`lvcore.conditions.SIMULATOR_DEFAULT_THETA`); θ̃ is always a stop too. The stops depend only on these, so
+    they are the same on every rerun."""
     import streamlit as st
 
     lo, hi = THETA_RANGES[name]
     where = container if container is not None else st
+    start = float(conditions.THETA_TILDE[name] if default is None else default)
+    stops = (start, float(conditions.THETA_TILDE[name]))  # θ̃ is a stop on every θ slider
     if value is None and key is not None and key in st.session_state:
         # the value lives in the widget's state: fixed options and no default, so the widget keeps its identity
         # (a default or options that change between reruns make Streamlit remount it and drop a key press)
-        options = log_options(lo, hi, float(conditions.THETA_TILDE[name]))
+        options = log_options(lo, hi, stops)
         return where.select_slider(THETA_LABELS[name], options=options, key=key, help=THETA_HELP[name])
-    value = float(conditions.THETA_TILDE[name] if value is None else value)
-    return where.select_slider(THETA_LABELS[name], options=log_options(lo, hi, value), value=value, key=key,
-                               help=THETA_HELP[name])
+    value = start if value is None else float(value)
+    return where.select_slider(THETA_LABELS[name], options=log_options(lo, hi, (value, stops[1])), value=value,
+                               key=key, help=THETA_HELP[name])
 
 
 def input_label(name: str) -> str:
@@ -65,6 +74,49 @@ def input_label(name: str) -> str:
 
 
 
+def conditions_text(edp_mmhg: float, angles, emulator, *, infer_angles: bool = False) -> str:
+    """The conditions a calibration or an emulator uses, with where each comes from, in one sentence.
+
+    The emulator's own fixed training conditions win, and are said to be its own: the ``chapter`` emulator was
+    trained at fibre angles −60° / 60° (:data:`lvcore.conditions.CHAPTER_ANGLES`), while the simulator's default
+    (Simulator page, case files) is −60° / 90° (:data:`lvcore.conditions.SIMULATOR_DEFAULT_ANGLES`); an emulator with
+    angle inputs gets the simulator's default unless the angles are inferred.
+    """
+    fixed = dict(getattr(emulator, "fixed", None) or {})
+    name = getattr(emulator, "name", None)
+    who = f"the '{name}' emulator" if name else "the emulator"
+    sim = conditions.SIMULATOR_DEFAULT_ANGLES
+    sim_text = f"{sim[0]:.0f}° / {sim[1]:.0f}°"
+    if infer_angles:
+        angle_text = "fibre angles inferred (α_endo in −90°…0°, α_epi in 0°…90°)"
+    elif "alpha_endo" in fixed and "alpha_epi" in fixed:
+        a = (float(fixed["alpha_endo"]), float(fixed["alpha_epi"]))
+        chapter = " (the chapter's conditions)" if a == tuple(conditions.CHAPTER_ANGLES) else ""
+        angle_text = (f"fibre angles {a[0]:.0f}° / {a[1]:.0f}°, {who}'s own: it was trained at these angles{chapter} "
+                      f"and takes no others (the Simulator's default is {sim_text})")
+    else:
+        a = tuple(float(v) for v in angles)
+        angle_text = (f"fibre angles {a[0]:.0f}° / {a[1]:.0f}°"
+                      + (f", the simulator's default ({who} takes the angles as inputs)" if a == tuple(sim) else ""))
+    edp_text = f"EDP {float(edp_mmhg):g} mmHg" + (f", {who}'s training EDP" if "edp" in fixed else "")
+    return f"{edp_text}; {angle_text}"
+
+
+def why_disabled(*checks: tuple[bool, str]) -> str | None:
+    """The reason a button is greyed out: the text of the first ``(blocked, text)`` pair whose ``blocked`` is true,
+    else ``None`` (the button is enabled). Pages pass it as the button's ``help`` and show it under the button
+    (:func:`disabled_hint`), so a greyed-out button always says why."""
+    return next((text for blocked, text in checks if blocked), None)
+
+
+def disabled_hint(reason: str | None, container=None) -> None:
+    """Under a greyed-out button: why it is disabled (nothing when ``reason`` is ``None``)."""
+    import streamlit as st
+
+    if reason:
+        (container if container is not None else st).caption(f"Disabled: {reason}")
+
+
 # ----------------------------------------------------------------------------- the shared sidebar
 #: session_state key of the values of the shared sidebar (a plain dict, read by every page).
 SHARED = "shared_inputs"
@@ -78,68 +130,79 @@ EDP_KEY = "shared_edp"
 EDP_RANGE = (2.0, 30.0)
 
 
+#: session_state keys of the subject and the emulator last chosen on any page (each page has its own selector; the
+#: next page's selector starts at the same choice).
+_CHOSEN = {"subject": "_chosen_subject", "emulator": "_chosen_emulator"}
+
+
 def _shared_defaults() -> dict:
     return {"theta": dict(conditions.THETA_TILDE), "edp_mmhg": float(conditions.SIMULATOR_DEFAULT_EDP_MMHG),
-            "subject": None, "emulator": None}
+            "subject": DEFAULT_SUBJECT, "emulator": DEFAULT_EMULATOR}
+
+
+def chosen_index(kind: str, options, fallback: str | None = None) -> int:
+    """Index in ``options`` of the ``kind`` ("subject" or "emulator") last chosen on any page, else of ``fallback``
+    (default :data:`DEFAULT_SUBJECT` / the CLI's default emulator), else 0: the start of a page's own selector."""
+    import streamlit as st
+
+    options = list(options)
+    for name in (st.session_state.get(_CHOSEN[kind]), fallback, _shared_defaults()[kind]):
+        if name in options:
+            return options.index(name)
+    return 0
+
+
+def remember_choice(kind: str, name) -> None:
+    """Remember the ``kind`` ("subject" or "emulator") chosen on a page, so the next page's selector starts there."""
+    import streamlit as st
+
+    if name is not None:
+        st.session_state[_CHOSEN[kind]] = name
+        if SHARED in st.session_state:
+            st.session_state[SHARED][kind] = name
 
 
 def shared_sidebar(theta: bool = True, edp: bool = True) -> dict:
-    """Render the sidebar shared by every page and return its values (also in ``st.session_state[SHARED]``).
+    """Render the sidebar's shared inputs and return the shared values (also in ``st.session_state[SHARED]``).
 
-    Subject (a bundled SYNTHETIC volunteer), emulator, θ (log-scaled, with units) and EDP. The entry script
-    (:mod:`lvcore.app.main`) renders it before the page runs, so the values and the widgets' state are the
-    same on every page. ``theta=False`` (a page that does not read θ) hides the θ sliders, ``edp=False`` (a page
-    that does not read the sidebar's EDP) the EDP slider; their values are kept and come back with the sliders.
-    Each slider has fixed options and no default once its value is in the widget state (a default or options that
-    change between reruns make Streamlit remount the widget and drop a key press).
+    θ (log-scaled, with units) and the EDP, shown only on a page that reads them (``theta`` / ``edp``; the Emulator
+    and Fibre angles pages): elsewhere the sidebar shows no shared inputs at all, and the values are kept and come
+    back with the sliders. The subject and the emulator are chosen on the pages that use them (one selector each,
+    on the page); the values hold the last choice (:func:`remember_choice`). The entry script
+    (:mod:`lvcore.app.main`) renders it before the page runs, so the values and the widgets' state are the same on
+    every page. Each slider has fixed options and no default once its value is in the widget state (a default or
+    options that change between reruns make Streamlit remount the widget and drop a key press).
     """
     import streamlit as st
 
-    from lvcore.emulator.io import available_emulators
-    from lvcore.resources import bundled_volunteers
-
     values = _shared_defaults()
-    with st.sidebar:
-        st.header("Shared inputs")
-        subjects = bundled_volunteers()
-        if subjects:
-            values["subject"] = st.selectbox("Subject (SYNTHETIC volunteer)", subjects, key="shared_subject",
-                                             index=subjects.index(DEFAULT_SUBJECT) if DEFAULT_SUBJECT in subjects
-                                             else 0,
-                                             help="Used by Calibration; bundled SYNTHETIC volunteers "
-                                                  f"(default {DEFAULT_SUBJECT}, inside the emulator's box).")
-        emulators = available_emulators()
-        if emulators:
-            values["emulator"] = st.selectbox("Emulator", emulators, key="shared_emulator",
-                                              index=emulators.index(DEFAULT_EMULATOR) if DEFAULT_EMULATOR in emulators
-                                              else 0,
-                                              help="Default emulator of the Emulator and Calibration pages "
-                                                   f"(default {DEFAULT_EMULATOR}, as for lvcore calibrate).")
-        saved = dict(st.session_state.get(_THETA) or values["theta"])
-        if theta:
-            for name in ("a", "b", "af", "bf"):
-                key = f"shared_{name}"
-                if key not in st.session_state:  # first shown, or shown again after a page that hid it
-                    lo, hi = THETA_RANGES[name]
-                    grid = np.asarray(log_options(lo, hi, float(conditions.THETA_TILDE[name])))
-                    st.session_state[key] = float(grid[np.argmin(np.abs(np.log(grid / float(saved[name]))))])
-                values["theta"][name] = theta_slider(name, key=key)
-            st.session_state[_THETA] = dict(values["theta"])
-        else:
-            values["theta"] = saved
-        saved_edp = float(st.session_state.get(_EDP, values["edp_mmhg"]))
-        if edp:
-            if EDP_KEY not in st.session_state:  # first shown, or shown again after a page that hid it
-                st.session_state[EDP_KEY] = saved_edp
-            values["edp_mmhg"] = float(st.slider("EDP (mmHg)", EDP_RANGE[0], EDP_RANGE[1], step=0.5, key=EDP_KEY,
-                                                 help="End-diastolic pressure of the Emulator and Fibre angles pages."))
-            st.session_state[_EDP] = values["edp_mmhg"]
-        else:
-            values["edp_mmhg"] = saved_edp
-        hidden = [what for what, shown in (("θ (a, b, a_f, b_f)", theta), ("EDP", edp)) if not shown]
-        if hidden:
-            st.caption(f"{' and '.join(hidden)}: not used on this page; set {'them' if len(hidden) > 1 else 'it'} "
-                       "on the Emulator or Fibre angles page.")
+    for kind, key in _CHOSEN.items():
+        if st.session_state.get(key) is not None:
+            values[kind] = st.session_state[key]
+    saved = dict(st.session_state.get(_THETA) or values["theta"])
+    saved_edp = float(st.session_state.get(_EDP, values["edp_mmhg"]))
+    values["theta"], values["edp_mmhg"] = saved, saved_edp
+    if theta or edp:
+        with st.sidebar:
+            st.header("Shared inputs")
+            st.caption("Shared by the Emulator and Fibre angles pages.")
+            if theta:
+                values["theta"] = {}
+                for name in ("a", "b", "af", "bf"):
+                    key = f"shared_{name}"
+                    if key not in st.session_state:  # first shown, or shown again after a page that hid it
+                        lo, hi = THETA_RANGES[name]
+                        grid = np.asarray(log_options(lo, hi, float(conditions.THETA_TILDE[name])))
+                        st.session_state[key] = float(grid[np.argmin(np.abs(np.log(grid / float(saved[name]))))])
+                    values["theta"][name] = theta_slider(name, key=key)
+                st.session_state[_THETA] = dict(values["theta"])
+            if edp:
+                if EDP_KEY not in st.session_state:  # first shown, or shown again after a page that hid it
+                    st.session_state[EDP_KEY] = saved_edp
+                values["edp_mmhg"] = float(st.slider("EDP (mmHg)", EDP_RANGE[0], EDP_RANGE[1], step=0.5, key=EDP_KEY,
+                                                     help="End-diastolic pressure of the Emulator and Fibre angles "
+                                                          "pages."))
+                st.session_state[_EDP] = values["edp_mmhg"]
     st.session_state[SHARED] = values
     return values
 
@@ -173,5 +236,5 @@ def shared_inputs(theta: bool = True, edp: bool = True) -> dict:
 
 
 __all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label", "SHARED",
-           "EDP_KEY", "EDP_RANGE",
+           "EDP_KEY", "EDP_RANGE", "DEFAULT_SUBJECT", "chosen_index", "remember_choice", "why_disabled", "disabled_hint", "conditions_text",
            "shared_sidebar", "render_shared_sidebar", "shared_inputs", "shared_start"]

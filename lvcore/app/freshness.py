@@ -48,13 +48,16 @@ def changed_inputs(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[str]:
 
 
 def _fmt(v) -> str:
-    """A value as the user reads it: never Python's ``True``/``False``/``None``."""
+    """A value as the user reads it: never Python's ``True``/``False``/``None`` (yes, no, –), nor an empty ``{}``/``[]``
+    (none)."""
     if isinstance(v, bool):
         return "yes" if v else "no"
     if v is None:
         return "–"
     if isinstance(v, float):
         return f"{v:.4g}"
+    if isinstance(v, (list, tuple, Mapping)) and not len(v):
+        return "none"
     if isinstance(v, (list, tuple)):
         return "(" + ", ".join(_fmt(x) for x in v) + ")" if len(v) <= 6 else f"{len(v)} values"
     if isinstance(v, Mapping):
@@ -101,4 +104,9 @@ def shown(stored: Stored, current: Mapping[str, Any], key: str) -> Iterator[bool
         yield not changed
 
 
-__all__ = ["Stored", "STALE_OPACITY", "changed_inputs", "describe", "remember", "recall", "shown"]
+def readable(v) -> str:
+    """One value as the user reads it (as in :func:`describe`): yes/no, – for no value, none for an empty set."""
+    return _fmt(v)
+
+
+__all__ = ["Stored", "STALE_OPACITY", "changed_inputs", "describe", "readable", "remember", "recall", "shown"]

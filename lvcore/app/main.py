@@ -16,12 +16,28 @@ import streamlit as st  # noqa: E402
 from lvcore.app import PAGES  # noqa: E402
 
 
+#: Internal name (never a URL) of the home page's entry at the root URL; its own URL path is served by a hidden alias.
+HOME_AT_ROOT = "home-at-root"
+
+
+def navigation_pages(st) -> list:
+    """The ``st.Page`` list of :data:`lvcore.app.PAGES`: every page at ``/<url_path>``, the home page also at ``/``.
+
+    Streamlit serves the default page only at the root URL (it ignores the default page's ``url_path``), so typing
+    ``/simulator`` would say "Page not found". The home page is therefore listed twice: once as the visible default
+    (at ``/``, highlighted in the sidebar) and once, hidden from the sidebar, at its own URL path.
+    """
+    home, *others = PAGES
+    pages = [st.Page(home.path, title=home.title, icon=home.icon, url_path=HOME_AT_ROOT, default=True)]
+    pages += [st.Page(p.path, title=p.title, icon=p.icon, url_path=p.url_path) for p in others]
+    pages.append(st.Page(home.path, title=home.title, icon=home.icon, url_path=home.url_path, visibility="hidden"))
+    return pages
+
+
 def main() -> None:
     """Build the navigation and run the page the user is on."""
     st.set_page_config(page_title="LV Calibration Lab", page_icon="🫀", layout="wide")
-    pages = [st.Page(p.path, title=p.title, icon=p.icon, url_path=p.url_path, default=(k == 0))
-             for k, p in enumerate(PAGES)]
-    pg = st.navigation(pages)
+    pg = st.navigation(navigation_pages(st))
     from lvcore.app import warmup
 
     warmup.start()  # once per server process: the Calibration page's samplers and best fit, compiled in the background

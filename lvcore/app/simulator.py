@@ -80,19 +80,29 @@ st.caption(
     "Inflates the default LV (a mildly elliptical, tapered truncated ellipsoid of physiological size; not patient "
     "data) from its "
     "early-diastolic reference geometry to the end-diastolic pressure (EDP). Outputs: the end-diastolic cavity "
-    "volume LVV and 24 regional circumferential Green strains (end diastole as reference, negative in filling)."
+    "volume LVV and 24 regional circumferential Green strains (end diastole as reference, negative in filling). "
+    "The sliders start at a typical healthy stiffness (see *Explain the numbers*)."
 )
 
 with st.expander("Explain the numbers"):
+    _d = conditions.SIMULATOR_DEFAULT_THETA
+    _c = conditions.THETA_TILDE
     st.markdown(
-        "- **EDV / V_early ≈ 2.1 at 8 mmHg with the chapter θ** (a = 0.60 kPa, b = 1.30, a_f = 1.00 kPa, b_f = 3.60). "
-        "V_early is the cavity of the *unloaded, stress-free* reference geometry (about 85 mL for the default LV), "
-        "not an early-diastolic volume measured under pressure. The Holzapfel–Ogden law is soft at small stretch "
-        "(its exponentials only stiffen once the tissue is stretched), the wall is thin (9–10 mm for a 24 mm "
-        "cavity radius), and the model has no residual stress, pericardium or active tension; so 8 mmHg "
-        "(1.07 kPa) roughly doubles the passive cavity. The same simulator generates the emulators and the "
-        "SYNTHETIC data, so the calibration is consistent with it; the ratio is a property of this model, "
-        "not a claim about real ventricles.\n"
+        f"- **Why these starting values: a typical healthy LV.** The sliders start at a = {_d['a']:.2f} kPa, "
+        f"b = {_d['b']:.2f}, a_f = {_d['af']:.2f} kPa, b_f = {_d['bf']:.2f}: the healthy-volunteer Holzapfel–Ogden "
+        "values of the Glasgow LV models that go with the fixed sheet terms below (Gao et al. 2017, after Gao et al. "
+        "2015), as in `assets/cases/default_lv.json`. At 8 mmHg they fill the default LV from V₀ ≈ 86 mL to about "
+        "159 mL, **EDV/V₀ ≈ 1.85**, inside the typical 1.66–1.99 of a normal LV (Klotz et al. 2006, shown under the "
+        "metrics).\n"
+        "- **V₀** is the cavity of the *unloaded, stress-free* reference geometry, not an early-diastolic volume "
+        "measured under pressure, so EDV/V₀ is the whole passive filling from zero stress.\n"
+        f"- **The chapter's θ̃** (a = {_c['a']:.2f} kPa, b = {_c['b']:.2f}, a_f = {_c['af']:.2f} kPa, "
+        f"b_f = {_c['bf']:.2f}), the truth of the SYNTHETIC studies and the starting point of the Emulator and Fibre "
+        "angles pages, has a 3× softer fibre term and fills the same LV to about 185 mL, EDV/V₀ ≈ 2.14, above the "
+        "typical range: the Holzapfel–Ogden law is soft at small stretch, the wall is thin (9–10 mm for a 24 mm "
+        "cavity radius) and the model has no residual stress, pericardium or active tension, so a soft θ roughly "
+        "doubles the passive cavity. An EDV/V₀ more than 2 % outside the typical range is flagged under the metrics "
+        "(above: the model inflates more than a normal LV, soft or thin-walled; below: less, stiff or thick-walled).\n"
         "- **Sector-to-sector strain differences on the default LV.** The default LV is not axisymmetric: its "
         "cross-section is mildly elliptical (endocardial short radii 24.0 and 21.5 mm, epicardial 33.5 and "
         "31.0 mm) and it tapers to the apex, the base is clamped, and the rule-based fibres wind helically "
@@ -106,11 +116,11 @@ with st.form("simulator"):
     with c1:
         st.markdown("**Material (Holzapfel–Ogden)**")
         for name in ("a", "b"):
-            theta[name] = theta_slider(name, key=name)
+            theta[name] = theta_slider(name, key=name, default=conditions.SIMULATOR_DEFAULT_THETA[name])
     with c2:
         st.markdown("**Material, fibre terms**")
         for name in ("af", "bf"):
-            theta[name] = theta_slider(name, key=name)
+            theta[name] = theta_slider(name, key=name, default=conditions.SIMULATOR_DEFAULT_THETA[name])
         st.caption("Fixed: a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58 (Gao et al. 2017).")
     with c3:
         st.markdown("**Conditions**")
@@ -153,7 +163,7 @@ def show_simulator_result(case: Case, case_json: str, sim: dict) -> None:
     m1.metric("LVV (end diastole)", f"{vol['loaded']:.1f} mL")
     m2.metric("V₀ (reference cavity)", f"{vol['reference']:.1f} mL")
     typical = physiology.typical_edv_ratio(units.kpa_to_mmhg(case.load.pressure_kpa))
-    m3.metric("EDV / V₀", f"{summary['lvv_standardised']:.3f}",
+    m3.metric("EDV/V₀", f"{summary['lvv_standardised']:.3f}",
               help="End-diastolic over reference (stress-free) cavity volume; " + typical.text() + ".")
     m4.metric("Mean E_cc", f"{np.mean(summary['strains']):.3f}")
     st.caption(f"EDV/V₀ = {summary['lvv_standardised']:.2f}; {typical.text()}.")

@@ -113,7 +113,13 @@ def show(geometry_file, geometry_bytes: bytes, label: str, *, units: str = "mm",
     out = flow.build_dir(geometry_bytes, label, units=units, design=design)
     job = st.session_state.get(f"{key}_job")
     busy = job is not None and job.running
-    if st.button(f"Build a subject emulator ({design.total:,} FE runs)", disabled=busy, key=f"{key}_start"):
+    from lvcore.app.controls import disabled_hint, why_disabled
+
+    blocked = why_disabled((busy, "a build is running: wait for it, or stop it below."))
+    clicked = st.button(f"Build a subject emulator ({design.total:,} FE runs)", disabled=blocked is not None,
+                        key=f"{key}_start", help=blocked)
+    disabled_hint(blocked)
+    if clicked:
         job = flow.SubjectBuild(geometry_file, out, design=design, units=units, label=label).start()
         st.session_state[f"{key}_job"] = job
         busy = job.running

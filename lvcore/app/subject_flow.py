@@ -608,7 +608,8 @@ def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence
 
     models = {}
     for run in runs:
-        level, text = banner_status(run.result.convergence, flags=bound_flags(run, prepared))
+        # the convergence alone (the flags are listed once, under "flags"); the app's banner adds them (banner_status)
+        level, text = banner_status(run.result.convergence)
         table = run.result.summary
         models[run.model] = {
             "convergence": text, "converged_cleanly": level == "success",
@@ -641,7 +642,9 @@ def summary_html(summary: Mapping) -> str:
             rows.append(f"<tr><td>{esc(model)}</td><td>{esc(name)}</td>{cells}</tr>")
     first = next(iter(summary["models"].values()), {"posterior": {}})
     columns = next(iter(first["posterior"].values()), {})
-    head = "".join(f"<th>{esc(c)}</th>" for c in columns)
+    from lvcore.app.tables import SUMMARY_COLUMNS  # q05/q95: "q05 (90 % equal-tailed interval)", as in the app
+
+    head = "".join(f"<th>{esc(SUMMARY_COLUMNS.get(c, (c,))[0])}</th>" for c in columns)
     flags = [f"<li><b>{esc(m)}</b>: {esc(f)}</li>" for m, r in summary["models"].items() for f in r["flags"]]
     flags += [f"<li>{esc(w)}</li>" for w in summary["warnings"]]
     conv = "".join(f"<li><b>{esc(m)}</b>: {esc(r['convergence'])}</li>" for m, r in summary["models"].items())
@@ -657,7 +660,8 @@ def summary_html(summary: Mapping) -> str:
                                 f"<td>{'' if row['measured'] is None else format(row['measured'], '.4g')}</td></tr>")
         geometry_text = (f"<p>Geometry: inferred (no mesh): PC scores h and scale s sampled with &theta; "
                          f"(lvcore calibrate --geometry infer); geometric measures given: {esc(given)}.</p>"
-                         "<table><tr><th>likelihood</th><th>quantity</th><th>median</th><th>5 %</th><th>95 %</th>"
+                         "<table><tr><th>likelihood</th><th>quantity</th><th>median</th><th>q05 (90 % equal-tailed "
+                         "interval)</th><th>q95 (90 % equal-tailed interval)</th>"
                          f"<th>measured</th></tr>{''.join(geo_rows)}</table>")
     elif geo["kind"] == "subject-emulator":
         geometry_text = (f"<p>Geometry: bound into the subject-specific emulator, built on "
@@ -667,6 +671,10 @@ def summary_html(summary: Mapping) -> str:
                          f"{esc(', '.join(f'{v:.2f}' for v in geo['scores']))}; scale s = {geo['scale']:.3f} "
                          "(emulated LVV &times; s&sup3;).</p>")
     label = " (SYNTHETIC data: generated, not a real subject)" if summary["synthetic"] else ""
+    from lvcore.app.freshness import readable  # yes/no, – and none: never null/None/{} (settings.json keeps JSON)
+
+    settings_rows = "".join(f"<tr><td>{esc(str(k))}</td><td>{esc(readable(v))}</td></tr>"
+                            for k, v in summary["settings"].items())
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>{esc(summary['subject'])}: calibration</title>
 <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #bbb;padding:2px 6px;text-align:right}}td:first-child,td:nth-child(2){{text-align:left}}</style>
@@ -681,7 +689,7 @@ td,th{{border:1px solid #bbb;padding:2px 6px;text-align:right}}td:first-child,td
 <ul>{''.join(flags) or '<li>no warnings</li>'}</ul>
 <h2>Convergence</h2><ul>{conv}</ul>
 <h2>Posterior</h2><table><tr><th>likelihood</th><th>parameter</th>{head}</tr>{''.join(rows)}</table>
-<h2>Settings</h2><pre>{esc(json.dumps(summary['settings'], indent=1))}</pre>
+<h2>Settings</h2><table>{settings_rows}</table>
 </body></html>"""
 
 

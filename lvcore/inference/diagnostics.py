@@ -77,15 +77,39 @@ class Convergence:
         return msg
 
 
+#: Columns of the posterior summary that give the 90 % equal-tailed interval (the 5 % and 95 % quantiles of the
+#: pooled draws): the interval of the verdict, the derived quantities and ``result_record`` (q05, q95), one
+#: convention everywhere (not ArviZ's highest-density interval).
+INTERVAL_COLUMNS = ("q05", "q95")
+#: What the two columns are, in words (table headers, the CLI's printed table).
+INTERVAL_TEXT = "90 % equal-tailed interval"
+
+
+def equal_tailed_summary(data, var_names=None) -> pd.DataFrame:
+    """ArviZ's summary of ``data`` (InferenceData) with its HDI columns replaced by the 90 % equal-tailed interval:
+    mean, sd, median, q05, q95 (quantiles of the pooled chains and draws), MCSE of mean and sd, bulk and tail ESS,
+    R-hat. Unrounded."""
+    table = az.summary(data, var_names=var_names, hdi_prob=0.9, round_to="none")
+    table = table.drop(columns=[c for c in table.columns if str(c).startswith("hdi_")])
+    post = data.posterior
+    q = {n: np.quantile(np.asarray(post[n]).reshape(-1), [0.5, 0.05, 0.95]) for n in table.index}
+    at = list(table.columns).index("sd") + 1 if "sd" in table.columns else 0
+    for k, col in enumerate(("median",) + INTERVAL_COLUMNS):
+        table.insert(at + k, col, [float(q[n][k]) for n in table.index])
+    table.columns.name = f"{'–'.join(INTERVAL_COLUMNS)} = {INTERVAL_TEXT}"  # the header of a printed table
+    return table
+
+
 def summary_table(samples: dict, var_names=None) -> pd.DataFrame:
-    """ArviZ summary (mean, sd, HDI 90%, MCSE, ESS bulk/tail, R-hat) of scalar parameters.
+    """Posterior summary of scalar parameters: mean, sd, median, the 90 % equal-tailed interval (q05, q95), MCSE,
+    ESS bulk/tail, R-hat (:func:`equal_tailed_summary`).
 
     Unrounded (``round_to="none"``): ArviZ's default of 2 decimals turns a
     strain variance sigma_s2 of order 1e-4 into 0.0.
     """
     var_names = monitored_names(samples) if var_names is None else list(var_names)
     data = az.from_dict(posterior={n: np.asarray(samples[n]) for n in var_names})
-    return az.summary(data, hdi_prob=0.9, round_to="none")
+    return equal_tailed_summary(data)
 
 
 def n_chains(run: samplers.SamplerRun) -> int:
@@ -252,7 +276,7 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN, flags=()) 
     smallest bulk and tail ESS, so a user never has to trust a colour.
     ``flags`` are the verdict's (:mod:`lvcore.inference.verdict`, posterior
     mass on a prior bound included): any flag makes the banner amber and is
-    listed, as ``lvcore calibrate`` exits with 4 for them.
+    listed here, once, in the app's words (the page shows no other copy).
 
     Returns
     -------
@@ -267,7 +291,7 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN, flags=()) 
     if not conv.min_ess_bulk >= ess_min:
         problems.append(f"bulk ESS {conv.min_ess_bulk:.0f} < {ess_min:.0f}")
     if flags:
-        problems.append(f"results flagged (the CLI's exit code 4): {'; '.join(flags)}")
+        problems.append(f"flagged ({len(flags)}): {'; '.join(flags)}")
     numbers = (f"divergences {conv.n_divergent}, max R-hat {conv.max_rhat:.3f}, min bulk ESS "
                f"{conv.min_ess_bulk:.0f}, min tail ESS {conv.min_ess_tail:.0f}, {conv.rounds} round(s)")
     if problems:
@@ -275,6 +299,6 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN, flags=()) 
     return "success", "Converged: " + numbers
 
 
-__all__ = ["Convergence", "BANNER_ESS_MIN", "banner_status", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table", "netcdf_bytes",
+__all__ = ["INTERVAL_COLUMNS", "INTERVAL_TEXT", "equal_tailed_summary", "Convergence", "BANNER_ESS_MIN", "banner_status", "DEFAULT_RHAT_MAX", "DEFAULT_ESS_MIN", "monitored_names", "summary_table", "netcdf_bytes",
            "check_convergence", "sample_until_converged", "ess_per_second", "posterior_predictive", "to_inference_data",
            "save_netcdf"]

@@ -19,9 +19,21 @@ from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES, strain_vector, strains_by_
 #: Sector labels: "S1 (0–60°)" ... "S6 (300–360°)".
 SECTOR_NAMES = tuple(f"S{k + 1} ({60 * k}–{60 * (k + 1)}°)" for k in range(N_SECTORS))
 #: Two-line sector tick labels for plots.
-_SECTOR_TICKS = tuple(f"S{k + 1}<br>{60 * k}–{60 * (k + 1)}°" for k in range(N_SECTORS))
+#: Sector tick labels: the name over the angular range, each on its own line (one line ran together at the width of a
+#: half-page column: "60–120°120–180°…"); the unit (°) is in the axis title.
+_SECTOR_TICKS = tuple(f"S{k + 1}<br>{60 * k}–<br>{60 * (k + 1)}" for k in range(N_SECTORS))
+#: The colour bar's title beside the bar, read bottom to top (above the bar it overlapped the top tick label).
+_COLORBAR_ECC = {"title": {"text": "E_cc (-)", "side": "right"}}
 #: Colour sequence for series (plotly's default qualitative palette).
 SERIES_COLOURS = ("#636EFA", "#EF553B", "#00CC96", "#AB63FA", "#FFA15A", "#19D3F3", "#FF6692", "#B6E880")
+
+
+def plain_text(text: str | None) -> str:
+    """A figure text without Markdown code marks: Plotly shows a backtick as it is ("`chapter` emulator"), so
+    ```x``` becomes x. Plotly's own tags (``<br>``, ``<sup>``) are kept."""
+    import re
+
+    return re.sub(r"`+([^`]*)`+", r"\1", text or "")
 
 
 def strain_heatmap(strains, *, title: str = "Circumferential strain E_cc", zmin: float | None = None,
@@ -48,11 +60,12 @@ def strain_heatmap(strains, *, title: str = "Circumferential strain E_cc", zmin:
             xgap=2, ygap=2,
             customdata=names, texttemplate="%{z:" + text_format + "}",
             hovertemplate="%{customdata}<br>%{y}, %{x}<br>E_cc = %{z:.4f}<extra></extra>",
-            colorbar={"title": "E_cc (-)"},
+            colorbar=_COLORBAR_ECC,
         )
     )
     fig.update_yaxes(autorange="reversed", title="level (base → apex)")
-    fig.update_xaxes(title="sector (counter-clockwise from +x, seen from the base)", tickangle=0)
+    fig.update_xaxes(title="sector, degrees counter-clockwise from +x (seen from the base)", tickangle=0,
+                     tickfont=dict(size=11))
     fig.update_layout(title=title, height=height, margin=dict(l=10, r=10, t=50, b=10))
     return fig
 
@@ -102,7 +115,7 @@ def strain_bullseye(strains, *, title: str = "Circumferential strain (bull's eye
         go.Barpolar(
             r=np.ones(N_REGIONS), base=(N_LEVELS - 1 - level).astype(float), theta=60.0 * sector + 30.0,
             width=np.full(N_REGIONS, 60.0), marker=dict(color=grid.ravel(), colorscale=colorscale, cmin=zmin,
-                                                        cmax=zmax, colorbar={"title": "E_cc (-)"},
+                                                        cmax=zmax, colorbar=_COLORBAR_ECC,
                                                         line=dict(color="white", width=1)),
             customdata=np.stack([np.asarray(STRAIN_NAMES), grid.ravel()], axis=1),
             hovertemplate="%{customdata[0]}: %{customdata[1]:.4f}<extra></extra>",
@@ -242,7 +255,7 @@ def contour(x, y, z, *, title: str = "", xaxis_title: str = "", yaxis_title: str
         fig.add_scatter(x=np.asarray(px, float), y=np.asarray(py, float), mode="markers", name=label,
                         marker=dict(symbol=symbols[n % len(symbols)], size=10, color="white",
                                     line=dict(color="black", width=1)))
-    fig.update_layout(title=title, xaxis_title=xaxis_title, yaxis_title=yaxis_title, height=height,
+    fig.update_layout(title=plain_text(title), xaxis_title=xaxis_title, yaxis_title=yaxis_title, height=height,
                       margin=dict(l=10, r=10, t=50, b=10), legend=dict(orientation="h", y=-0.2))
     if log_x:
         fig.update_xaxes(type="log")

@@ -101,10 +101,18 @@ def rank_figure(idata, var_names=None, *, bins: int = 20, height_per_var: int = 
 
 
 def diagnostics_table(idata, var_names=None) -> pd.DataFrame:
-    """ArviZ summary (mean, sd, 90% HDI, ESS bulk/tail, R-hat) of scalar parameters."""
+    """ArviZ summary of scalar parameters with the 90 % equal-tailed interval (q05, q95: the 5 % and 95 % quantiles
+    of the pooled draws, the convention of lvcore.inference.diagnostics.summary_table and the verdict) in place of
+    ArviZ's HDI: mean, sd, median, q05, q95, MCSE, ESS bulk/tail, R-hat."""
     import arviz as az
 
-    return az.summary(idata, var_names=_scalar_vars(idata, var_names), hdi_prob=0.9)
+    table = az.summary(idata, var_names=_scalar_vars(idata, var_names), hdi_prob=0.9)
+    table = table.drop(columns=[c for c in table.columns if str(c).startswith("hdi_")])
+    at = list(table.columns).index("sd") + 1
+    for k, (col, p) in enumerate((("median", 0.5), ("q05", 0.05), ("q95", 0.95))):
+        table.insert(at + k, col, [float(np.quantile(np.asarray(idata.posterior[n]).reshape(-1), p))
+                                   for n in table.index])
+    return table
 
 
 def pair_figure(idata, var_names=THETA_NAMES, *, max_points: int = 1500, truth: Mapping | None = None) -> go.Figure:

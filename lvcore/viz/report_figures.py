@@ -16,7 +16,7 @@ from plotly.subplots import make_subplots
 
 from lvcore.geometry.template import N_REGIONS, N_SECTORS
 from lvcore.outputs import LEVEL_NAMES
-from lvcore.viz.figures import SERIES_COLOURS
+from lvcore.viz.figures import SERIES_COLOURS, plain_text
 
 #: Region tick labels "basal S1" ... for 24-strain line plots (r = 6 * level + sector).
 REGION_TICKS = tuple(f"{LEVEL_NAMES[r // N_SECTORS]} S{r % N_SECTORS + 1}" for r in range(N_REGIONS))
@@ -48,7 +48,8 @@ def _visible_len(line: str) -> int:
 
 
 def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
-    """Break a long title into lines of at most ``width`` characters and anchor it at the top of the figure.
+    """Break a long title into lines of at most ``width`` characters and anchor it at the top of the figure; Markdown
+    code marks (backticks, which Plotly shows as they are) are dropped.
 
     Static exports do not wrap titles. Each ``<br>``-separated part is wrapped
     on its own; the title is pinned to the top of the figure (``yanchor="top"``)
@@ -58,7 +59,7 @@ def wrap_title(fig: go.Figure, width: int = 105) -> go.Figure:
     import re
     import textwrap
 
-    text = fig.layout.title.text or ""
+    text = plain_text(fig.layout.title.text)  # no literal Markdown backticks in a title
     if not text:
         return fig
     # never wider than the figure itself (tables set their own, narrower width)
@@ -331,7 +332,7 @@ def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping
     if truth:
         fig.add_scatter(x=[None], y=[None], mode="lines", line=dict(color="red", dash="dash"), name="truth (SYNTHETIC)")
     fig.update_yaxes(title_text="density", col=1)
-    fig.update_layout(title=title, height=height, bargap=0.02, margin=dict(l=50, r=20, t=80, b=40),
+    fig.update_layout(title=plain_text(title), height=height, bargap=0.02, margin=dict(l=50, r=20, t=80, b=40),
                       legend=dict(orientation="h", y=-0.2))
     return fig
 
