@@ -263,7 +263,9 @@ if stored is not None:
                 st.markdown(f"**Inferred geometry, {MODEL_LABELS[run.model]}**: posterior of the PC scores h, the "
                             "scale s and the implied measures (median and 90 % equal-tailed interval), against what "
                             "was measured")
-                geo_rows = [{**row, "measured": "not measured" if row["measured"] is None else f"{row['measured']:.4g}"}
+                # "measured" in words: a value, "not measured" for a measure left out, "–" for h and s (no measure)
+                geo_rows = [{**row, "measured": f"{row['measured']:.4g}" if row["measured"] is not None
+                             else "not measured" if row["quantity"].startswith("implied") else "–"}
                             for row in flow.geometry_posterior_rows(record["geometry_posterior"])]
                 st.dataframe(geo_rows, width="stretch", hide_index=True, column_config={
                     "5 %": number_column(st, "q05"), "95 %": number_column(st, "q95"),

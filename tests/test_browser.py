@@ -422,3 +422,88 @@ def test_calibration_edpvr_panel(monkeypatch):
         assert not js_errors, js_errors[:3]
         ctx.close()
         browser.close()
+
+
+def _no_error_box(page, where: str) -> None:
+    """Neither an exception nor an error box (st.error) on the page."""
+    assert not drv.exceptions(page), f"{where}: {drv.exceptions(page)}"
+    errors = page.locator("[data-testid=stAlertContentError]").all_inner_texts()
+    assert not errors, f"{where}: error box {errors}"
+
+
+def test_my_subject_both_routes_end_to_end_without_an_error_box(tmp_path):
+    """The My subject flow in a real browser, as short as the page allows (1 chain, 50 + 50 draws), on the packaged
+    entry (``lvcore app``): typed at its own URL (/my-subject), no shared inputs in its sidebar, the greyed-out
+    "Run calibration" says why; the mesh route (upload a volume mesh and measurements, calibrate, download the zip)
+    and the "No mesh: infer" route (measurements and the reference volume), failing on any error box or exception
+    at every step."""
+    import zipfile
+
+    from playwright.sync_api import sync_playwright
+
+    from lvcore.app import ENTRY
+    from lvcore.app import subject_flow as flow
+    from lvcore.inference import guards
+    from lvcore.resources import volunteer_files
+
+    _require_browser()
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    files = volunteer_files("SYNTHETIC_HV3")
+    ref = round(flow.geometry_measures(guards.resolve_geometry(files.geometry, n_pc=5))[0]["cavity_volume_ml"])
+    with drv.StreamlitServer(app=ENTRY, log=ROOT / "build" / "streamlit_browser_my_subject.log") as server, \
+            sync_playwright() as p:
+        browser = drv.launch(p)
+        js_errors: list = []
+        ctx, page = _new_page(browser, js_errors)
+        for route in ("mesh", "infer"):
+            page.goto(f"{server.url}/my-subject")  # its own URL path (a new session each time)
+            drv.wait_idle(page)
+            assert page.get_by_text("Page not found").count() == 0
+            assert page.locator("h1").first.inner_text() == "My subject"
+            assert page.locator("[data-testid=stSidebar]").get_by_text("Shared inputs").count() == 0
+            button = page.get_by_role("button", name="Run calibration")
+            assert button.is_disabled() and page.get_by_text("Disabled: no measurements yet").count() == 1
+            if route == "infer":
+                page.get_by_text("No mesh: infer it from CMR measures", exact=True).click()
+                drv.wait_rerun(page)
+            uploads = page.locator("[data-testid=stFileUploader] input[type=file]")
+            if route == "mesh":
+                uploads.nth(0).set_input_files(str(files.geometry))
+                drv.wait_rerun(page)
+                _no_error_box(page, "mesh uploaded")
+                uploads.nth(1).set_input_files(str(files.measured))
+            else:
+                uploads.nth(0).set_input_files(str(files.measured))
+                drv.wait_rerun(page)
+                _number_input(page, "Reference (early-diastolic) cavity volume, mL (optional, 0 = not measured)",
+                              ref)
+            drv.wait_rerun(page)
+            _no_error_box(page, f"{route}: inputs given")
+            assert page.get_by_text("Conditions used:", exact=False).count() == 1
+            for label, value in (("chains", 1), ("warm-up", 50), ("draws kept", 50)):
+                _number_input(page, label, value)
+            assert button.is_enabled() and page.get_by_text("Disabled:", exact=False).count() == 0
+            button.click()
+            download = page.get_by_role("button", name=re.compile("Download everything"))
+            download.wait_for(timeout=600_000)
+            drv.wait_idle(page)
+            page.set_viewport_size({"width": 1400, "height": 4200})  # the main area scrolls inside: a tall window
+            page.wait_for_timeout(800)
+            page.screenshot(path=str(SHOTS / f"my_subject_{route}_done.png"))
+            page.set_viewport_size({"width": 1400, "height": 1000})
+            _no_error_box(page, f"{route}: results")
+            text = page.locator("[data-testid=stMain]").inner_text()
+            assert "None" not in text and "exit code" not in text, route
+            assert page.get_by_text("90 % equal-tailed interval", exact=False).count() >= 1 or route == "mesh"
+            with page.expect_download() as info:
+                download.click()
+            target = tmp_path / f"{route}.zip"
+            info.value.save_as(target)
+            with zipfile.ZipFile(target) as z:
+                assert {"settings.json", "summary.json", "summary.html"} <= set(z.namelist())
+                html = z.read("summary.html").decode()
+                assert "90 % equal-tailed interval" in html and ">None<" not in html and "null" not in html
+            _no_error_box(page, f"{route}: downloaded")
+        assert not js_errors, js_errors[:3]
+        ctx.close()
+        browser.close()

@@ -44,3 +44,19 @@ def test_banner_lists_the_verdicts_flags():
     level, text = banner_status(conv, flags=["IDENTIFIABILITY: a: posterior piled on the prior's lower bound 0.05"])
     assert level == "warning" and "flagged (1): IDENTIFIABILITY: a: posterior piled" in text and "lower bound 0.05" in text
     assert "CLI" not in text and "exit code" not in text  # the app's own words
+
+
+def test_each_flag_once_the_sampler_flags_are_the_banners_own_findings():
+    """The verdict's SAMPLER flags restate the banner's convergence and divergence findings: the banner says each
+    once (a single chain: R-hat n/a, not nan)."""
+    from lvcore.inference import verdict
+
+    conv = _conv(converged=False, max_rhat=float("nan"), failing=("a", "R-hat needs >= 2 chains"), n_divergent=30)
+    flags = ["BOUND: af: posterior piled on the prior's lower bound 0.05"]
+    flags += [f"SAMPLER: {f}" for f in verdict.sampler_flags(conv, 100)]
+    assert len(flags) == 3
+    level, text = banner_status(conv, flags=flags)
+    assert level == "warning" and text.count("not converged") == 1 and text.count("divergent") == 1
+    assert "30 divergent transitions in 100 draws" in text and "flagged (3): BOUND: af" in text
+    assert "SAMPLER (the sampler problems above)" in text and "NOT CONVERGED" not in text
+    assert "nan" not in text and "max R-hat n/a (needs ≥ 2 chains)" in text

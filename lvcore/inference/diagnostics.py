@@ -283,16 +283,23 @@ def banner_status(conv: Convergence, ess_min: float = BANNER_ESS_MIN, flags=()) 
     level : {"success", "warning"}
     text : str
     """
+    flags = list(flags)
+    # the verdict's SAMPLER flags restate this banner's own convergence and divergence findings: said once, here
+    sampler = [f for f in flags if f.startswith("SAMPLER: ")]
+    others = [f for f in flags if not f.startswith("SAMPLER: ")]
     problems = []
     if not conv.converged:
         problems.append("not converged" + (f" ({', '.join(conv.failing)})" if conv.failing else ""))
     if conv.n_divergent > 0:
-        problems.append(f"{conv.n_divergent} divergent transition{'s' if conv.n_divergent != 1 else ''}")
+        many = next((f[len("SAMPLER: "):] for f in sampler if "divergent transitions in" in f), None)
+        problems.append(many or f"{conv.n_divergent} divergent transition{'s' if conv.n_divergent != 1 else ''}")
     if not conv.min_ess_bulk >= ess_min:
         problems.append(f"bulk ESS {conv.min_ess_bulk:.0f} < {ess_min:.0f}")
     if flags:
-        problems.append(f"flagged ({len(flags)}): {'; '.join(flags)}")
-    numbers = (f"divergences {conv.n_divergent}, max R-hat {conv.max_rhat:.3f}, min bulk ESS "
+        listed = others + (["SAMPLER (the sampler problems above)"] if sampler else [])
+        problems.append(f"flagged ({len(flags)}): {'; '.join(listed)}")
+    rhat = f"{conv.max_rhat:.3f}" if np.isfinite(conv.max_rhat) else "n/a (needs ≥ 2 chains)"
+    numbers = (f"divergences {conv.n_divergent}, max R-hat {rhat}, min bulk ESS "
                f"{conv.min_ess_bulk:.0f}, min tail ESS {conv.min_ess_tail:.0f}, {conv.rounds} round(s)")
     if problems:
         return "warning", "Treat with care: " + "; ".join(problems) + ". " + numbers
