@@ -5,7 +5,7 @@ Usage::
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
         python benchmarks/bench_simulator.py [--resolutions PRESET|NC,NL,NT[,GP] ...] [--repeats 5] [--processes]
 
-Prints markdown tables: per resolution the dofs, LVV, EDV/V_early, mean
+Prints markdown tables: per resolution the dofs, LVV, EDV/V₀, mean
 strain, the largest relative output change against the finest resolution,
 Newton iterations (chord iterations included), tangents (= factorisations),
 load steps, compile+first-solve time and median warm solve time (of a new
@@ -142,7 +142,7 @@ def main(argv=None):
           f"the resolutions; linear solver {solver}; {os.cpu_count()} CPUs; median of {a.repeats} solves")
     print(f"Default LV, HO theta=(0.60,1.30,1.00,3.60), 8 mmHg, angles (-60,+90); linear solver {solver}")
     print("CPU shared with other jobs: compare ratios within this table.\n")
-    print("| resolution | dofs | LVV (mL) | EDV/V_early | mean strain | max rel. change vs finest (LVV; strains) "
+    print("| resolution | dofs | LVV (mL) | EDV/V₀ | mean strain | max rel. change vs finest (LVV; strains) "
           "| Newton its | tangents | steps | first solve incl. compile (s) | median solve, new case (s) "
           "| median repeated solve, prepared case cached (s) | measured (UTC) | load before | solver |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
