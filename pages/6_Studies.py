@@ -10,6 +10,7 @@ from pathlib import Path
 
 import streamlit as st
 
+from lvcore.app.tables import no_missing
 from lvcore.exceptions import LVCoreError
 from lvcore.studies import (bo_fibres, bo_mismatch, fibre_discrepancy, findings, geometry_operators, mismatch,
                             operators, operators_realistic, results, sbc)
@@ -62,7 +63,7 @@ def show(module, result, figures=None, tables=()) -> None:
     for name in tables:
         if name in tabs:
             st.caption(module.TITLES.get(name, name.replace("_", " ")))
-            st.dataframe(tabs[name].round(4), hide_index=True, width="stretch")
+            st.dataframe(no_missing(tabs[name].round(4)), hide_index=True, width="stretch")  # "–", never None
 
 
 def verdict_section(study: str, module, key: str, heading: str) -> None:

@@ -225,7 +225,7 @@ def test_case_runner_reports_bad_cases():
     assert not at.exception and "not valid JSON" in at.error[0].value
 
 
-def test_studies_page_figure_titles_wrap_instead_of_running_off():
+def test_studies_page_titles_wrap_and_tables_have_no_none():
     """A long study title ("F6 test: ... (SYNTHETIC; 20 + 40 evaluations (REDUCED budget; the chapter used ...))")
     was cut off at the figure's edge: every figure title on the Studies page is wrapped to lines of at most 80
     visible characters, and none has literal Markdown backticks."""
@@ -242,6 +242,8 @@ def test_studies_page_figure_titles_wrap_instead_of_running_off():
         lines = [re.sub(r"</?[a-zA-Z][^<>]*>", "", part) for part in t.split("<br>") if "<sup>" not in part]
         assert all(len(line) <= 80 for line in lines), t
         assert "`" not in t, t
+    for d in at.dataframe:  # no None/NaN in a table (e.g. the fibre-discrepancy table's σ_S of a model without one)
+        assert not d.value.isna().any().any() and not (d.value.astype(str) == "None").any().any(), d.value
 
 
 def test_a_greyed_out_button_says_why():

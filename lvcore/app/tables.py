@@ -69,5 +69,17 @@ def summary_view(st, table):
     return frame, config
 
 
+def no_missing(frame, fill: str = "–"):
+    """A copy of ``frame`` for display whose missing cells read ``fill`` (a column with any is shown as text, its
+    numbers with 4 significant digits), never None or NaN."""
+    import pandas as pd
+
+    out = frame.copy()
+    for col in out.columns:
+        if out[col].isna().any():
+            out[col] = [fill if pd.isna(v) else (f"{v:.4g}" if isinstance(v, float) else str(v)) for v in out[col]]
+    return out
+
+
 __all__ = ["INTERVAL_TEXT", "SUMMARY_COLUMNS", "MISSING_TEXT", "number_column", "summary_column_config",
-           "summary_view"]
+           "summary_view", "no_missing"]
