@@ -297,8 +297,9 @@ if job is not None and job["done"]:
                 st.warning(message)
             truth = volunteer_truth(job["subject"]) if job["synthetic"] else None
             if job["synthetic"]:
-                st.caption("⚠ SYNTHETIC data." + (" Red dashed lines: the hidden generating value (display only; it "
-                                                  "never enters the fit)." if truth else ""))
+                st.caption("⚠ SYNTHETIC data." + (" The hidden generating value (display only; it never enters the "
+                                                  "fit): red dashed lines in the histograms, red crosses in the pair "
+                                                  "plot, and the truth column of the table." if truth else ""))
             st.caption("Conditions used: " + conditions_text(
                 job.get("edp_mmhg", SIMULATOR_DEFAULT_EDP_MMHG), job.get("angles", SIMULATOR_DEFAULT_ANGLES),
                 _emulator(choices[job["emulator"]]) if job["emulator"] in choices else None,
