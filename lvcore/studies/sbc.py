@@ -467,7 +467,8 @@ def add_study_parser(study_subparsers) -> None:
                    help=f"subjects of the whole study (default {DEFAULT_N_SUBJECTS})")
     p.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the subjects and noise (default 0)")
     p.add_argument("--piece", default=None, metavar="K/N",
-                   help="run the K-th of N near-equal parts of the subjects (e.g. 1/2 and 2/2 in two processes)")
+                   help="run the K-th of N near-equal parts of the subjects (e.g. 1/2 and 2/2 in two processes; "
+                        "default: all of them, or --start/--stop)")
     p.add_argument("--start", type=cli_args.int_in(0), default=None, help="first subject index (default 0)")
     p.add_argument("--stop", type=cli_args.int_in(0), default=None,
                    help="one past the last subject index (default --n-subjects)")
