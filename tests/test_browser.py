@@ -379,19 +379,18 @@ def test_my_subject_without_a_mesh(app, chromium, tmp_path):
     ctx.close()
 
 
-def test_calibration_edpvr_panel(monkeypatch):
+def test_calibration_edpvr_panel(chromium, monkeypatch):
     """Calibrate a bundled volunteer on the Calibration page, press the EDPVR button (6 draws through
     LVCORE_EDPVR_DRAWS, on a server of its own started with it): the derived EDPVR figure is drawn, the measured
     point lies inside the band, and there is no error or exception box; screenshots of the panel and its figure
     go to build/screenshots/."""
-    from playwright.sync_api import sync_playwright
-
     _require_browser()
     monkeypatch.setenv("LVCORE_EDPVR_DRAWS", "6")
     SHOTS.mkdir(parents=True, exist_ok=True)
-    with drv.StreamlitServer(app=ROOT / "app.py", log=ROOT / "build" / "streamlit_browser_edpvr.log") as server, \
-            sync_playwright() as p:
-        browser = drv.launch(p)
+    # its own server (started with the variable); the module's browser: a second sync_playwright() in this
+    # thread while the chromium fixture's is running fails ("Sync API inside the asyncio loop")
+    with drv.StreamlitServer(app=ROOT / "app.py", log=ROOT / "build" / "streamlit_browser_edpvr.log") as server:
+        browser = chromium
         js_errors: list = []
         ctx, page = _new_page(browser, js_errors)
         page.goto(server.url)
@@ -421,7 +420,6 @@ def test_calibration_edpvr_panel(monkeypatch):
         assert page.get_by_text("Identified combination", exact=False).count() >= 1
         assert not js_errors, js_errors[:3]
         ctx.close()
-        browser.close()
 
 
 def _no_error_box(page, where: str) -> None:
@@ -431,15 +429,13 @@ def _no_error_box(page, where: str) -> None:
     assert not errors, f"{where}: error box {errors}"
 
 
-def test_my_subject_both_routes_end_to_end_without_an_error_box(tmp_path):
+def test_my_subject_both_routes_end_to_end_without_an_error_box(chromium, tmp_path, monkeypatch):
     """The My subject flow in a real browser, as short as the page allows (1 chain, 50 + 50 draws), on the packaged
     entry (``lvcore app``): typed at its own URL (/my-subject), no shared inputs in its sidebar, the greyed-out
-    "Run calibration" says why; the mesh route (upload a volume mesh and measurements, calibrate, download the zip)
-    and the "No mesh: infer" route (measurements and the reference volume), failing on any error box or exception
-    at every step."""
+    "Run calibration" says why; the mesh route (upload a volume mesh and measurements, calibrate, the EDPVR and
+    derived quantities, download the zip) and the "No mesh: infer" route (measurements and the reference volume),
+    failing on any exception at every step and on any error box but the EDPVR's own CONSISTENCY verdict."""
     import zipfile
-
-    from playwright.sync_api import sync_playwright
 
     from lvcore.app import ENTRY
     from lvcore.app import subject_flow as flow
@@ -447,15 +443,15 @@ def test_my_subject_both_routes_end_to_end_without_an_error_box(tmp_path):
     from lvcore.resources import volunteer_files
 
     _require_browser()
+    monkeypatch.setenv("LVCORE_EDPVR_DRAWS", "4")   # the server inherits it: 4 FE draws keep the EDPVR step short
     SHOTS.mkdir(parents=True, exist_ok=True)
     files = volunteer_files("SYNTHETIC_HV3")
     ref = round(flow.geometry_measures(guards.resolve_geometry(files.geometry, n_pc=5))[0]["cavity_volume_ml"])
-    with drv.StreamlitServer(app=ENTRY, log=ROOT / "build" / "streamlit_browser_my_subject.log") as server, \
-            sync_playwright() as p:
-        browser = drv.launch(p)
+    with drv.StreamlitServer(app=ENTRY, log=ROOT / "build" / "streamlit_browser_my_subject.log") as server:
+        browser = chromium   # the module's browser (see test_calibration_edpvr_panel)
         js_errors: list = []
-        ctx, page = _new_page(browser, js_errors)
         for route in ("mesh", "infer"):
+            ctx, page = _new_page(browser, js_errors)   # a fresh context per route: the first one is closed below
             page.goto(f"{server.url}/my-subject")  # its own URL path (a new session each time)
             drv.wait_idle(page)
             assert page.get_by_text("Page not found").count() == 0
@@ -495,6 +491,18 @@ def test_my_subject_both_routes_end_to_end_without_an_error_box(tmp_path):
             text = page.locator("[data-testid=stMain]").inner_text()
             assert "None" not in text and "exit code" not in text, route
             assert page.get_by_text("90 % equal-tailed interval", exact=False).count() >= 1 or route == "mesh"
+            edpvr = page.get_by_role("button", name=re.compile("Compute the EDPVR"))
+            edpvr.wait_for(timeout=60_000)
+            assert "4 posterior draws" in edpvr.inner_text()
+            edpvr.click()
+            done = page.get_by_text(re.compile("The measured point lies inside the band|CONSISTENCY: the EDPVR"))
+            done.first.wait_for(timeout=600_000)
+            drv.wait_idle(page)
+            assert not drv.exceptions(page), f"{route}: EDPVR: {drv.exceptions(page)}"
+            errors = [e for e in page.locator("[data-testid=stAlertContentError]").all_inner_texts()
+                      if not e.startswith("CONSISTENCY: the EDPVR")]
+            assert not errors, f"{route}: EDPVR: error box {errors}"
+            assert page.get_by_text("Identified combination", exact=False).count() >= 1, route
             with page.expect_download() as info:
                 download.click()
             target = tmp_path / f"{route}.zip"
@@ -504,6 +512,5 @@ def test_my_subject_both_routes_end_to_end_without_an_error_box(tmp_path):
                 html = z.read("summary.html").decode()
                 assert "90 % equal-tailed interval" in html and ">None<" not in html and "null" not in html
             _no_error_box(page, f"{route}: downloaded")
+            ctx.close()
         assert not js_errors, js_errors[:3]
-        ctx.close()
-        browser.close()

@@ -27,6 +27,32 @@ def setup_process(num_chains: int = APP_CHAINS) -> None:
     from lvcore.inference.samplers import use_host_devices
 
     use_host_devices(num_chains)
+    serialise_ast_parse()
 
 
-__all__ = ["APP_CHAINS", "THREAD_VARIABLES", "setup_process"]
+def serialise_ast_parse() -> None:
+    """Let one thread at a time turn source into an AST (``ast.parse``) in this process.
+
+    CPython 3.11 keeps the AST converter's recursion depth per interpreter, not per thread, so two threads
+    parsing at once can fail with ``SystemError: AST constructor recursion depth mismatch``. In the app server
+    Streamlit parses page scripts on one session's thread while another session's script runs; seen
+    2026-12-02 in the My subject browser test, where it stopped the whole server. Idempotent.
+    """
+    import ast
+    import threading
+
+    if getattr(ast.parse, "_lvcore_serialised", False):
+        return
+    lock = threading.RLock()
+    original = ast.parse
+
+    def parse(*args, **kwargs):
+        with lock:
+            return original(*args, **kwargs)
+
+    parse.__doc__ = original.__doc__
+    parse._lvcore_serialised = True
+    ast.parse = parse
+
+
+__all__ = ["APP_CHAINS", "THREAD_VARIABLES", "setup_process", "serialise_ast_parse"]
