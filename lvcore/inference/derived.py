@@ -253,6 +253,7 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     from lvcore import chains, units
     from lvcore.core.space import build_case
     from lvcore.exceptions import LVCoreError
+    from lvcore.mechanics.fibre_stretch import mean_fibre_stretch
     from lvcore.mechanics.forward import _as_warm, case_values, warm_continuation
     from lvcore.mechanics.simulate import simulate
 
@@ -297,7 +298,7 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
             return None, None
         lam = float("nan")
         if fibre_stretch and abs(float(X[key, len(names) - 1]) - edp) < 1e-12:
-            lam = _mean_fibre_stretch(case, res)
+            lam = float(mean_fibre_stretch(case, res))
         out = (res.cavity_volume_mm3[0] / units.MM3_PER_ML, res.cavity_volume_mm3[1] / units.MM3_PER_ML, lam)
         return out, _as_warm(res, case_values(case))
 
@@ -320,15 +321,6 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     k_edp = int(np.flatnonzero(np.isclose(levels, edp))[0])
     return LoadPath(np.r_[0.0, p], volumes, edp, vols[:, k_edp], stretch, failed, resolution, base,
                     time.perf_counter() - t0)
-
-
-def _mean_fibre_stretch(case, result) -> float:
-    """The wall's volume-weighted mean fibre stretch of a converged solve (NaN when not available)."""
-    try:
-        from lvcore.mechanics.fibre_stretch import mean_fibre_stretch
-    except ImportError:  # pragma: no cover - older mechanics
-        return float("nan")
-    return float(mean_fibre_stretch(case, result))
 
 
 # --------------------------------------------------------------------------- stress
