@@ -14,8 +14,8 @@ Typical EDV/V₀: ``1 / (0.6 − 0.006 · EDP)`` from that estimate (1.81 at 8 m
 (the paper gives the relation, not a population range), so it is a screening range, not a
 diagnosis. All volumes in mL, pressures in mmHg.
 
-Pure functions only: the simulated EDPVR of θ draws and a shape's reference volume are in
-:mod:`lvcore.mechanics.edpvr` (they run the simulator, a layer above this module).
+Pure functions only: the simulated EDPVR of posterior draws is in :mod:`lvcore.inference.derived` and a
+shape's reference volume in :mod:`lvcore.mechanics.edpvr` (they run the simulator, layers above this module).
 """
 from __future__ import annotations
 

@@ -3,7 +3,6 @@ import numpy as np
 import pytest
 
 from lvcore import physiology as ph
-from lvcore.mechanics.edpvr import simulate_edpvr
 
 
 def test_klotz_curve_matches_the_formula():
@@ -74,13 +73,3 @@ def test_posterior_edv_ratio():
         ph.edv_ratio(100.0, 0.0)
 
 
-def test_simulated_edpvr_increases_and_starts_at_the_reference_cavity():
-    thetas = [{"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}, {"a": 1.2, "b": 1.3, "af": 2.0, "bf": 3.6}]
-    curve = simulate_edpvr(thetas, {"kind": "default"}, pressures_mmhg=(4.0, 12.0, 30.0), resolution="fast")
-    assert curve.n_failed == 0 and curve.volumes_ml.shape == (2, 3)
-    assert np.all(np.diff(curve.volumes_ml, axis=1) > 0) and np.all(curve.volumes_ml > curve.v0_ml)
-    assert np.all(curve.volumes_ml[1] < curve.volumes_ml[0])  # stiffer draw, smaller volumes
-    lo, mid, hi = curve.band()
-    assert np.all(lo <= mid) and np.all(mid <= hi)
-    with pytest.raises(ValueError):
-        simulate_edpvr(thetas, {"kind": "default"}, pressures_mmhg=(10.0, 5.0))

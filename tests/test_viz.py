@@ -255,30 +255,6 @@ def test_a_wide_table_wraps_its_long_cells_instead_of_growing_wider():
     assert list(table_figure(narrow, title="t").data[0].cells.values[1]) == ["short text"]  # fits: never wrapped
 
 
-def test_edpvr_figure_klotz_curve_and_band_order():
-    from lvcore.viz.figures import edpvr_figure
-
-    p = np.array([4.0, 8.0, 16.0, 30.0])
-    rng = np.random.default_rng(1)
-    vols = 90 + np.cumsum(rng.uniform(5, 30, (8, 4)), axis=1)
-    v0 = 80.0
-    fig = edpvr_figure(p, vols, v0, measured=(150.0, 8.0), subtitle="SYNTHETIC-HV1")
-    traces = {t.name.split(" (")[0]: t for t in fig.data}
-    klotz = traces["Klotz et al. 2006 normal"]
-    x, y = np.asarray(klotz.x), np.asarray(klotz.y)
-    v30 = v0 + (150.0 - v0) / (8.0 / 27.78) ** (1 / 2.76)  # the normal curve through (V0, 0) and (150 mL, 8 mmHg)
-    np.testing.assert_allclose(y, 27.78 * ((x - v0) / (v30 - v0)) ** 2.76, rtol=1e-10, atol=1e-10)
-    assert y[0] == 0 and y[-1] == 30 and x[0] == v0
-    band = traces["posterior 90% band"]
-    bx, by = np.asarray(band.x), np.asarray(band.y)
-    lo, hi = bx[:5], bx[5:][::-1]
-    med = np.asarray(traces["posterior median"].x)
-    assert np.all(lo <= med + 1e-12) and np.all(med <= hi + 1e-12) and np.any(lo < hi)
-    np.testing.assert_allclose(by[:5], [0, *p])
-    assert lo[0] == med[0] == hi[0] == v0
-    assert "SYNTHETIC-HV1" in fig.layout.title.text
-
-
 def test_strain_map_labels_fit_their_columns_and_the_colour_bar_title_clears_its_ticks():
     """The sector labels ran together at a half-page width ("60–120°120–180°…"): each line of a tick is short now;
     the colour bar's title sits beside the bar (above it, it overlapped the top tick label)."""

@@ -297,51 +297,6 @@ def map_pair(x, y, z_left, z_right, *, titles: tuple[str, str] = ("", ""), color
     return fig
 
 
-def edpvr_figure(pressures_mmhg, volumes_ml, v0_ml: float, *, measured: tuple[float, float] | None = None,
-                 title: str = "End-diastolic pressure–volume relation (EDPVR)", subtitle: str = "",
-                 height: int = 440) -> go.Figure:
-    """The model's EDPVR with a posterior band against the Klotz et al. (2006) normal curve.
-
-    Parameters
-    ----------
-    pressures_mmhg : (n,) increasing pressures (mmHg, > 0).
-    volumes_ml : (k, n) cavity volumes (mL) of k posterior draws (NaN where a solve failed).
-    v0_ml : the model's reference (stress-free) cavity volume (mL), the curves' 0 mmHg point.
-    measured : optional (EDV mL, EDP mmHg) of the subject; the normal Klotz curve (EDP = 27.78 · EDVn^2.76,
-        EDVn = (V − V0)/(V30 − V0)) is drawn through V0 and this point. Without it, through V0 and the band's
-        median at the highest pressure.
-
-    Traces: "posterior 90% band" (polygon, volumes q05 → q95), "posterior median", "Klotz et al. 2006 normal",
-    "measured" (marker).
-    """
-    from lvcore import physiology
-
-    p = np.concatenate([[0.0], np.asarray(pressures_mmhg, float)])
-    vols = np.asarray(volumes_ml, float)
-    lo, mid, hi = np.nanquantile(vols, (0.05, 0.5, 0.95), axis=0)
-    lo, mid, hi = (np.concatenate([[v0_ml], q]) for q in (lo, mid, hi))
-    fig = go.Figure()
-    fig.add_trace(go.Scatter(x=np.concatenate([lo, hi[::-1]]), y=np.concatenate([p, p[::-1]]), fill="toself",
-                             mode="lines", line=dict(width=0), fillcolor="rgba(99,110,250,0.25)",
-                             name=f"posterior 90% band ({vols.shape[0]} draws)", hoverinfo="skip"))
-    fig.add_trace(go.Scatter(x=mid, y=p, mode="lines+markers", line=dict(color=SERIES_COLOURS[0]),
-                             name="posterior median"))
-    if measured is not None and measured[1] > 0:
-        v30 = physiology.klotz_v30(measured[0], measured[1], v0_ml)
-    else:
-        v30 = physiology.klotz_v30(float(mid[-1]), float(p[-1]), v0_ml)
-    pk = np.linspace(0.0, 30.0, 61)
-    fig.add_trace(go.Scatter(x=physiology.klotz_volume(pk, v0_ml, v30), y=pk, mode="lines",
-                             line=dict(color="black", dash="dash"), name="Klotz et al. 2006 normal"))
-    if measured is not None:
-        fig.add_trace(go.Scatter(x=[measured[0]], y=[measured[1]], mode="markers", name="measured (EDV, EDP)",
-                                 marker=dict(color=SERIES_COLOURS[1], size=11, symbol="x")))
-    fig.update_layout(title=dict(text=title + (f"<br><sup>{subtitle}</sup>" if subtitle else "")), height=height,
-                      xaxis_title="cavity volume (mL)", yaxis_title="pressure (mmHg)",
-                      yaxis=dict(range=[0, 31]), margin=dict(t=80), legend=dict(orientation="h", y=-0.2))
-    return fig
-
-
 def derived_edpvr_figure(record: Mapping, *, title: str = "End-diastolic pressure–volume relation (EDPVR)",
                          subtitle: str = "", height: int = 480) -> go.Figure:
     """The EDPVR of a calibration's derived record (``lvcore.inference.derived.derive``) as one figure.
