@@ -138,9 +138,9 @@ def run_edpvr(idata, setup: Setup, *, n_draws: int | None = None,
 
 
 def _q(q: Mapping, unit: str = "", digits: int = 1) -> str:
-    if q.get("median") is None:
-        return "n/a"
-    return f"{q['median']:.{digits}f}{unit} (90 %: {q['q05']:.{digits}f}–{q['q95']:.{digits}f})"
+    from lvcore.inference.derived import format_interval
+
+    return format_interval(q, digits, unit)
 
 
 def edpvr_rows(record: Mapping) -> list[dict]:
@@ -179,7 +179,8 @@ def check_text(record: Mapping) -> tuple[str, str]:
 
 
 def summary_lines(record: Mapping) -> list[str]:
-    """The derived quantities in words (markdown bullets): the identified combination, the stress, the offset."""
+    """The derived quantities in words (markdown bullets, each "median [equal-tailed 90 % interval]"): the identified
+    combination, the stress, the emulator-to-FE offset."""
     rg, st_, c = record["ridge"], record["stress"], record["edpvr_check"]
     ab, best = rg["a_b"], rg["best"]
     lines = [f"**Identified combination** (matrix pair): {ab['text']} = {ab['median']:.2f} (90 % width a factor "

@@ -578,10 +578,15 @@ def text_table(record: Mapping) -> str:
     return "\n".join(lines)
 
 
-def _q(q: Mapping, digits: int = 2) -> str:
+def format_interval(q: Mapping, digits: int = 2, unit: str = "") -> str:
+    """``"median unit [q05, q95]"`` of a quantile record (equal-tailed 90 %), or ``"n/a"`` when it has no median;
+    the one formatting of a derived quantity used by the CLI's table and the app's panel."""
     if q.get("median") is None:
         return "n/a"
-    return f"{q['median']:.{digits}f} [{q['q05']:.{digits}f}, {q['q95']:.{digits}f}]"
+    return f"{q['median']:.{digits}f}{unit} [{q['q05']:.{digits}f}, {q['q95']:.{digits}f}]"
+
+
+_q = format_interval
 
 
 def summary_rows(record: Mapping) -> list[dict]:
