@@ -1,4 +1,4 @@
-"""Compare two ``lvcore report`` folders item by item from their manifest.json (issue 23's before/after check).
+"""Compare two ``lvcore report`` folders item by item from their manifest.json (a refactor's before/after check).
 
 For every item: present in both, same status, and the same data (CSV: the
 same values column by column, compared by position when the headers were

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Run the model–data mismatch dose–response study (issue 26) and ship its results for the app and the report.
+"""Run the model–data mismatch dose–response study and ship its results for the app and the report.
 
 Runs ``lvcore study mismatch`` (:func:`lvcore.studies.mismatch.run_study`,
 resumable: a rerun with the same ``--work`` skips every recorded simulation

@@ -471,8 +471,12 @@ def _user_visible_strings(path: Path):
             yield node.lineno, node.value
 
 
+#: An internal issue reference: "issue 26", "issues 24 and 25", "issue-13-shaped", "issue #7".
+ISSUE_REFERENCE = re.compile(r"\bissues?[ -]#?\d+", re.IGNORECASE)
+
+
 def _issue_references(paths) -> list[str]:
-    pattern = re.compile(r"issue \d+", re.IGNORECASE)
+    pattern = ISSUE_REFERENCE
     return [f"{path.relative_to(ROOT)}:{line}: {text[:120]!r}" for path in paths
             for line, text in _user_visible_strings(path) if pattern.search(text)]
 
@@ -487,6 +491,25 @@ def test_no_internal_issue_references_in_user_visible_strings():
     sample = ROOT / "lvcore" / "cli.py"
     assert any("exit codes: " in text for _, text in _user_visible_strings(sample))
     assert not any("The ``lvcore`` command" in text for _, text in _user_visible_strings(sample))
+
+
+def test_no_internal_issue_references_in_the_docs_or_script_help():
+    """The README and docs/*.md a user reads, and the scripts' help (their module docstrings are argparse
+    descriptions), never point at an internal issue number: each says what it means."""
+    texts = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    assert len(texts) >= 5
+    found = [f"{p.relative_to(ROOT)}:{n}: {line.strip()[:120]}" for p in texts
+             for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if ISSUE_REFERENCE.search(line)]
+    scripts = [p for p in sorted((ROOT / "scripts").glob("*.py")) if "__doc__" in p.read_text(encoding="utf-8")]
+    assert scripts
+    for p in scripts:
+        import ast
+
+        doc = ast.get_docstring(ast.parse(p.read_text(encoding="utf-8"))) or ""
+        found += [f"{p.relative_to(ROOT)} (docstring, its --help): {m.group(0)}" for m in ISSUE_REFERENCE.finditer(doc)]
+    assert found == []
+    assert ISSUE_REFERENCE.search("the issue-13-shaped files") and ISSUE_REFERENCE.search("(Issue 26 item 4)")
+    assert not ISSUE_REFERENCE.search("no issues found in 26 files")
 
 
 def test_the_bundled_default_case_is_a_typical_heart(capsys):
