@@ -20,18 +20,86 @@ def test_symmetric_solve_definite_and_indefinite(shift):
     eig = np.linalg.eigvalsh(A.toarray())
     assert (eig.min() < 0) == (shift > 0)  # the shifted matrix really is indefinite
     b = np.arange(A.shape[0], dtype=float)
-    cache = {}
-    f = linear.factorize(A, symmetric=True, cache=cache)
-    x = f.solve(b)
-    np.testing.assert_allclose(A @ x, b, rtol=0, atol=1e-9 * np.abs(b).max())
+    f = linear.factorize(A, symmetric=True, cache={})  # the fastest backend here
+    np.testing.assert_allclose(A @ f.solve(b), b, rtol=0, atol=1e-9 * np.abs(b).max())
     if "cholmod" in linear.available_backends():
+        cache = {}
+        f = linear.factorize(A, backend="cholmod", symmetric=True, cache=cache)
+        x = f.solve(b)
+        np.testing.assert_allclose(A @ x, b, rtol=0, atol=1e-9 * np.abs(b).max())
         assert f.backend == "cholmod"  # LDLT, no SuperLU fallback on the indefinite matrix
         # a definite matrix gets the process's mode; an indefinite one the simplicial LDLT (LLT rejects it)
         assert f.factorisation == (linear.cholmod_mode() if shift == 0 else "simplicial")
         assert {"supernodal": "cholmod_ll", "simplicial": "cholmod_ldl"}[f.factorisation] in cache
         # a later factorisation of the same pattern does not change this one
-        linear.factorize(A + sp.eye(A.shape[0]), symmetric=True, cache=cache)
+        linear.factorize(A + sp.eye(A.shape[0]), backend="cholmod", symmetric=True, cache=cache)
         np.testing.assert_allclose(f.solve(b), x, rtol=1e-12)
+
+
+needs_pardiso = pytest.mark.skipif("pardiso" not in linear.available_backends(),
+                                   reason="PARDISO (py-mkl-pardiso) not installed: no wheel for this platform")
+
+
+@needs_pardiso
+def test_pardiso_factors_stay_valid_and_share_one_analysis_per_pattern():
+    A = _spd_plus_shift(n=200, seed=3)
+    b = np.linspace(-1.0, 1.0, A.shape[0])
+    ref = linear.factorize(A, backend="superlu", symmetric=True).solve(b)
+    cache = {}
+    f = linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True)
+    assert (f.backend, f.factorisation) == ("pardiso", "supernodal")
+    x = f.solve(b)
+    np.testing.assert_allclose(x, ref, rtol=1e-10, atol=1e-12)
+    # a second live factorisation of the same pattern takes a second solver: the first one's factor is kept
+    A2 = (A + 3.0 * sp.eye(A.shape[0])).tocsr()
+    g = linear.factorize(sp.triu(A2).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True)
+    np.testing.assert_allclose(A2 @ g.solve(b), b, atol=1e-10)
+    np.testing.assert_array_equal(f.solve(b), x)
+    assert cache["pardiso"] == []  # both solvers in use
+    solver = g._pardiso
+    del g  # dropped: its solver goes back to the pool, analysed, and is taken by the next factorisation
+    assert cache["pardiso"] == [solver]
+    h = linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True)
+    assert h._pardiso is solver
+    np.testing.assert_array_equal(h.solve(b), x)  # the same analysis and values: the same bits
+    # 2-D right-hand sides (the sensitivities' dR columns), also non-contiguous ones
+    B = np.asfortranarray(np.stack([b, 2.0 * b, -b], axis=1))
+    np.testing.assert_allclose(h.solve(B), np.stack([x, 2.0 * x, -x], axis=1), rtol=1e-12, atol=1e-14)
+
+
+@needs_pardiso
+def test_pardiso_sends_an_indefinite_matrix_to_superlu_or_refuses_it():
+    A = _spd_plus_shift(shift=2.5)
+    b = np.arange(A.shape[0], dtype=float)
+    cache = {}
+    f = linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True)
+    assert f.backend == "superlu"  # the LLT refused it (a negative pivot)
+    np.testing.assert_allclose(A @ f.solve(b), b, atol=1e-9 * np.abs(b).max())
+    with pytest.raises(linear.NotPositiveDefinite, match="not positive definite"):
+        linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True,
+                         require_definite=True)
+    # the failed factorisations left the pool's analysis usable: a definite matrix of the pattern after them
+    D = _spd_plus_shift()
+    g = linear.factorize(sp.triu(D).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True)
+    assert g.backend == "pardiso" and len(cache["pardiso"]) == 0
+    np.testing.assert_allclose(D @ g.solve(b), b, atol=1e-9 * np.abs(b).max())
+    # a non-positive diagonal entry (or one not stored) cannot be definite: refused before PARDISO
+    Z = sp.csr_matrix(np.array([[0.0, 1.0], [1.0, 2.0]]))
+    with pytest.raises(linear.NotPositiveDefinite):
+        linear.factorize(Z, backend="pardiso", symmetric=True, require_definite=True)
+    np.testing.assert_allclose(linear.factorize(Z, backend="pardiso", symmetric=True).solve(np.array([1.0, 4.0])),
+                               [2.0, 1.0], rtol=1e-12)
+
+
+def test_backends_without_pardiso(monkeypatch):
+    monkeypatch.setattr(linear, "_PARDISO", [None])  # as on a platform without its wheel
+    assert "pardiso" not in linear.available_backends()
+    assert linear.available_backends()[-1] == "superlu"
+    monkeypatch.setenv(linear.BACKEND_ENV, "pardiso")
+    with pytest.raises(ValueError, match="py-mkl-pardiso"):
+        linear.default_backend()
+    monkeypatch.setenv(linear.BACKEND_ENV, "superlu")
+    assert linear.default_backend() == "superlu"
 
 
 @pytest.mark.skipif("cholmod" not in linear.available_backends(), reason="CHOLMOD (scikit-sparse) not installed")
@@ -40,9 +108,10 @@ def test_require_definite_refuses_an_indefinite_matrix_in_either_mode(monkeypatc
     monkeypatch.setenv(linear.CHOLMOD_MODE_ENV, mode)
     b = np.ones(60)
     with pytest.raises(linear.NotPositiveDefinite, match="not positive definite"):
-        linear.factorize(_spd_plus_shift(shift=2.5), symmetric=True, cache={}, require_definite=True)
+        linear.factorize(_spd_plus_shift(shift=2.5), backend="cholmod", symmetric=True, cache={},
+                         require_definite=True)
     A = _spd_plus_shift()  # definite: factorised as usual
-    f = linear.factorize(A, symmetric=True, cache={}, require_definite=True)
+    f = linear.factorize(A, backend="cholmod", symmetric=True, cache={}, require_definite=True)
     assert f.factorisation == mode
     np.testing.assert_allclose(A @ f.solve(b), b, atol=1e-9)
 
@@ -78,7 +147,7 @@ def test_supernodal_and_simplicial_agree(monkeypatch, shift):
     x = {}
     for mode in ("supernodal", "simplicial"):
         monkeypatch.setenv(linear.CHOLMOD_MODE_ENV, mode)
-        f = linear.factorize(A, symmetric=True, cache={})
+        f = linear.factorize(A, backend="cholmod", symmetric=True, cache={})
         assert f.backend == "cholmod"
         assert f.factorisation == (mode if shift == 0 else "simplicial")
         x[mode] = f.solve(b)
@@ -113,7 +182,7 @@ def test_supernodal_ordering_keeps_a_banded_numbering_and_reorders_a_scrambled_o
     monkeypatch.setenv(linear.CHOLMOD_MODE_ENV, "supernodal")
     b = np.linspace(-1.0, 1.0, banded.shape[0])
     for A in (banded, scrambled):
-        f = linear.factorize(A, symmetric=True, cache={})
+        f = linear.factorize(A, backend="cholmod", symmetric=True, cache={})
         assert f.factorisation == "supernodal"
         ref = linear.factorize(A, backend="superlu", symmetric=True).solve(b)
         np.testing.assert_allclose(f.solve(b), ref, rtol=1e-10, atol=1e-12)

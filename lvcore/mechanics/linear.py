@@ -1,22 +1,28 @@
 """Sparse direct solves of the tangent.
 
-* Symmetric tangents (pressure potential on the LV): CHOLMOD (scikit-sparse,
-  optional) with the symbolic analysis done once per sparsity pattern and
-  reused. Where CHOLMOD is linked to an optimised BLAS (OpenBLAS, MKL, BLIS:
-  :func:`cholmod_mode`), a supernodal LLᵀ first (its dense blocks go to BLAS:
-  ~2× faster than simplicial at the default LV resolution); a matrix it
-  rejects (not positive definite: the indefinite tangents met away from
-  equilibrium) and every matrix with the reference BLAS get the simplicial
-  LDLᵀ, which factors indefinite matrices too (negative entries in D). LDLᵀ
-  does not pivot, so every solve checks its normwise backward error
-  ``‖Kx − b‖∞ / (‖K‖∞‖x‖∞ + ‖b‖∞)``; above :data:`BACKWARD_ERROR_TOL` (or
-  without CHOLMOD) SciPy's SuperLU with a symmetric ordering and threshold
-  pivoting is used instead.
+* Symmetric tangents (pressure potential on the LV), fastest available first:
+
+  - oneMKL PARDISO (``py-mkl-pardiso``, a regular dependency on Linux x86_64 and Windows: MKL is linked
+    into its wheel, no system package): supernodal LLᵀ of the upper triangle, the symbolic analysis done
+    once per sparsity pattern (a small pool of analysed solvers kept in the pattern's cache, so every
+    factorisation stays valid while later ones are made). A matrix that is not positive definite
+    (the indefinite tangents met away from equilibrium) is refused by the LLᵀ (zero or negative
+    pivot) and goes to SuperLU. On the default LV's tangents 3–4× less CPU per factorisation than
+    CHOLMOD supernodal with OpenBLAS (``benchmarks/bench_sparse_solvers.py``, BENCHMARKS.md).
+  - CHOLMOD (scikit-sparse, optional: ``lvcore[fast]`` plus the system's SuiteSparse) with the symbolic
+    analysis done once per sparsity pattern and reused. Where CHOLMOD is linked to an optimised BLAS
+    (OpenBLAS, MKL, BLIS: :func:`cholmod_mode`), a supernodal LLᵀ first (its dense blocks go to BLAS:
+    ~2× faster than simplicial at the default LV resolution); a matrix it rejects (not positive
+    definite) and every matrix with the reference BLAS get the simplicial LDLᵀ, which factors
+    indefinite matrices too (negative entries in D). LDLᵀ does not pivot, so every solve checks its
+    normwise backward error ``‖Kx − b‖∞ / (‖K‖∞‖x‖∞ + ‖b‖∞)``; above :data:`BACKWARD_ERROR_TOL`
+    SuperLU is used instead.
+  - SciPy's SuperLU with a symmetric ordering and threshold pivoting: the fallback for indefinite
+    matrices, and the only backend where neither of the above is installed.
 * Non-symmetric tangents (follower pressure on an open face): SuperLU with
   partial pivoting.
 
-Install CHOLMOD with ``apt-get install -y libsuitesparse-dev libopenblas0-serial`` and
-``pip install scikit-sparse==0.4.16``; without it everything still works, slower.
+``$LVCORE_SPARSE_SOLVER`` (``pardiso``, ``cholmod`` or ``superlu``) picks one, e.g. to compare them.
 """
 from __future__ import annotations
 
@@ -26,17 +32,32 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-try:  # optional, faster
+import weakref
+
+try:  # optional
     from sksparse.cholmod import CholmodNotPositiveDefiniteError, analyze as _cholmod_analyze
 except Exception:  # pragma: no cover - depends on the environment
     _cholmod_analyze = None
     CholmodNotPositiveDefiniteError = Exception
 
+_PARDISO: list = []  # [module or None], imported on first use (a 70 MB library: not at import time)
+
+
+def _pardiso():
+    """The ``pymklpardiso`` module, or None where it is not installed (or does not load)."""
+    if not _PARDISO:
+        try:
+            import pymklpardiso
+        except Exception:  # pragma: no cover - depends on the environment (no wheel for this platform)
+            pymklpardiso = None
+        _PARDISO.append(pymklpardiso)
+    return _PARDISO[0]
+
 #: Largest accepted normwise backward error of an LDLᵀ solve (a stable solve gives ~1e-16).
 BACKWARD_ERROR_TOL = 1e-10
 
 
-#: Environment variable naming the backend to use (``cholmod`` or ``superlu``), e.g. to compare them.
+#: Environment variable naming the backend to use (``pardiso``, ``cholmod`` or ``superlu``), e.g. to compare them.
 BACKEND_ENV = "LVCORE_SPARSE_SOLVER"
 #: Environment variable forcing CHOLMOD's factorisation (``supernodal`` or ``simplicial``), e.g. to compare them.
 CHOLMOD_MODE_ENV = "LVCORE_CHOLMOD_MODE"
@@ -80,7 +101,12 @@ def cholmod_mode() -> str:
 
 def available_backends() -> tuple[str, ...]:
     """Names of the usable backends, fastest first."""
-    return (("cholmod",) if _cholmod_analyze is not None else ()) + ("superlu",)
+    return ((("pardiso",) if _pardiso() is not None else ()) + (("cholmod",) if _cholmod_analyze is not None else ())
+            + ("superlu",))
+
+
+#: Backends that read a symmetric matrix's upper triangle only (CSR): the tangent is assembled as that.
+TRIANGLE_BACKENDS = ("pardiso", "cholmod")
 
 
 def default_backend() -> str:
@@ -96,7 +122,9 @@ def default_backend() -> str:
         return available_backends()[0]
     if want not in available_backends():
         raise ValueError(f"{BACKEND_ENV}={want!r}: available sparse solvers here are {list(available_backends())}"
-                         + (" (CHOLMOD needs scikit-sparse: pip install 'lvcore[fast]')" if want == "cholmod" else ""))
+                         + (" (CHOLMOD needs scikit-sparse: pip install 'lvcore[fast]')" if want == "cholmod" else "")
+                         + (" (PARDISO needs py-mkl-pardiso, a wheel for Linux x86_64 and Windows only)"
+                            if want == "pardiso" else ""))
     return want
 
 
@@ -146,6 +174,37 @@ def _analysis(A, mode: str, cache: dict | None):
     return f
 
 
+def _definite_like(U):
+    """A positive definite (diagonally dominant) matrix with the sparsity pattern of the upper triangle ``U`` (CSR)."""
+    B = sp.csr_matrix((-np.ones_like(U.data), U.indices, U.indptr), shape=U.shape)
+    B.setdiag(np.asarray(abs(B).sum(axis=1)).ravel() + np.asarray(abs(B).sum(axis=0)).ravel() + 1.0)
+    return B
+
+
+def _pardiso_solver(U, cache: dict | None):
+    """A PARDISO solver analysed for ``U``'s pattern (upper triangle, CSR, sorted): an idle one of ``cache``'s pool.
+
+    PARDISO keeps one factor per solver, so each :class:`Factorization` holds its own solver and gives it
+    back to the pool when it is garbage collected; the symbolic analysis (minimum-degree ordering,
+    ``iparm[1] = 0``: fewer operations than METIS at these sizes) is done when a solver is made,
+    on a positive definite matrix of the pattern.
+    """
+    pool = cache.setdefault("pardiso", []) if cache is not None else []
+    try:
+        return pool.pop(), pool
+    except IndexError:
+        pm = _pardiso()
+        return pm.PardisoSolver(_definite_like(U), pm.MTYPE_REAL_SYM_POSDEF, iparms={1: 0}), pool
+
+
+def _upper_csr(K, triangle: bool):
+    """The upper triangle of symmetric ``K`` as CSR with sorted column indices (what PARDISO reads)."""
+    U = K if triangle else sp.triu(K, format="csr")
+    if not U.has_sorted_indices:
+        U = U.sorted_indices()
+    return U
+
+
 def _as_csc(K, symmetric):
     if symmetric and sp.isspmatrix_csr(K):
         # a symmetric CSR matrix read as CSC is the same matrix: no conversion
@@ -163,17 +222,17 @@ class Factorization:
     Parameters
     ----------
     K : sparse matrix.
-    backend : "cholmod" or "superlu" (default: the fastest available).
+    backend : "pardiso", "cholmod" or "superlu" (default: the fastest available).
     symmetric : whether K is symmetric.
-    cache : optional dict owned by K's sparsity pattern; with CHOLMOD the
-        symbolic analysis is stored there and reused for matrices of that pattern.
-    require_definite : with CHOLMOD, raise :class:`NotPositiveDefinite` for a symmetric
+    cache : optional dict owned by K's sparsity pattern; with PARDISO (a pool of analysed
+        solvers) and CHOLMOD the symbolic analysis is stored there and reused for matrices of that pattern.
+    require_definite : with PARDISO or CHOLMOD, raise :class:`NotPositiveDefinite` for a symmetric
         matrix that is not positive definite instead of factorising it with LDLᵀ (or
         SuperLU): the caller has a better way on (Newton cuts the load step) and skips
         the slower indefinite factorisation. SuperLU cannot tell and factorises.
     triangle : K (CSR, symmetric) holds its upper triangle only
-        (:meth:`lvcore.mechanics.system.DiscreteSystem.tangent` with ``triangle=True``): CHOLMOD
-        reads nothing else; the whole matrix is formed only where a solve needs it (the
+        (:meth:`lvcore.mechanics.system.DiscreteSystem.tangent` with ``triangle=True``): PARDISO and
+        CHOLMOD read nothing else; the whole matrix is formed only where a solve needs it (the
         backward-error check of LDLᵀ, SuperLU).
     """
 
@@ -184,11 +243,31 @@ class Factorization:
         self.backend = backend or default_backend()
         self._lu = None
         self._chol = None
+        self._pardiso = None
         self._symmetric = symmetric
         self._A = A = _as_csc(K, symmetric)  # a CSR upper triangle read as CSC: the lower one
         self._triangle = triangle
         self.shape = A.shape
-        if self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
+        if self.backend == "pardiso" and symmetric and _pardiso() is not None:
+            U = _upper_csr(K, triangle)
+            # a positive definite matrix has a positive diagonal (also: every diagonal entry stored, as the
+            # pool's analysis assumes); anything else is indefinite or singular
+            definite = bool(np.all(U.diagonal() > 0))
+            if definite:
+                solver, pool = _pardiso_solver(U, cache)
+                try:
+                    solver.refactor(U.data)
+                except RuntimeError as exc:  # "zero pivot": the LLᵀ met a pivot ≤ 0
+                    pool.append(solver)  # a failed numeric factorisation leaves the analysis usable
+                    definite = "pivot" not in str(exc)  # another failure: SuperLU, whatever require_definite
+                else:
+                    self._pardiso = solver
+                    self.factorisation = "supernodal"
+                    weakref.finalize(self, pool.append, solver)  # back to the pool when this one is dropped
+                    return
+            if not definite and require_definite:
+                raise NotPositiveDefinite("the matrix is not positive definite (PARDISO Cholesky)")
+        elif self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
             modes = ("supernodal", "simplicial") if cholmod_mode() == "supernodal" else ("simplicial",)
             for mode in modes:
                 try:
@@ -206,7 +285,7 @@ class Factorization:
                     continue
         self._superlu()
 
-    #: CHOLMOD factorisation used ("supernodal" or "simplicial"; "" for SuperLU).
+    #: Factorisation used: "supernodal" (PARDISO's or CHOLMOD's LLᵀ), "simplicial" (CHOLMOD's LDLᵀ) or "" (SuperLU).
     factorisation: str = ""
 
     def _matrix(self):
@@ -228,6 +307,9 @@ class Factorization:
             self._lu = spla.splu(self._A)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        if self._pardiso is not None:
+            # LLᵀ of a positive definite matrix is backward stable (no pivoting needed): no check
+            return self._pardiso.solve(np.ascontiguousarray(b, dtype=np.float64))
         if self._chol is not None:
             x = self._chol(b)
             if self.factorisation == "supernodal":

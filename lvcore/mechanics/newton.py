@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lvcore.mechanics.linear import NotPositiveDefinite, default_backend, factorize
+from lvcore.mechanics.linear import TRIANGLE_BACKENDS, NotPositiveDefinite, default_backend, factorize
 
 _DEBUG = bool(os.environ.get("LVCORE_NEWTON_DEBUG"))
 
@@ -179,8 +179,8 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
     if reuse is not None:  # else the first iteration's tangent kernel gives the residuals
         r_u, r_p, mj, _ = system.residual(u, p, lam, energy=False)
         stats["residuals"] += 1
-    # a symmetric tangent goes to CHOLMOD as its upper triangle (half the entries to assemble)
-    triangle = system.potential and default_backend() == "cholmod"
+    # a symmetric tangent goes to PARDISO or CHOLMOD as its upper triangle (half the entries to assemble)
+    triangle = system.potential and default_backend() in TRIANGLE_BACKENDS
     last = reuse
     cond = None  # (D, r_u + κ Dᵀ M⁻¹ r_p) of the current state, from the line search that accepted it
     first = True  # the first accepted iteration of this load step decides a cut
