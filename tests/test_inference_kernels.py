@@ -83,3 +83,32 @@ def test_kernel_values_by_hand():
     t = np.pi / 3 / c
     expected = 0.3 * (1 + tau * t) * (1 - t) ** tau + 0.2 * np.exp(-0.5 / lam**2)
     assert k[0, 7] == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("c", [0.2, 1.0, 2.0, np.pi])
+@pytest.mark.parametrize("tau", [4.0, 10.0])
+@pytest.mark.parametrize("lam", [0.5, 1.0, 2.0])
+def test_product_kernel_is_full_rank_where_the_additive_one_has_rank_9(c, tau, lam):
+    """The product (sector × level) kernel's Gram on the 6 × 4 grid is the Kronecker product of the level and
+    sector Grams (exactly, by hand), hence of full rank 24; the additive kernel's has rank 9 at the same
+    hyperparameters, so it cannot represent a sector × level interaction."""
+    h = _hyper(c, tau, lam, s1=2.0)
+    k = np.asarray(kernels.gram(h, nugget=0.0, kind="product"))
+    gam = np.arange(6) * np.pi / 3
+    d = np.arccos(np.clip(np.cos(gam[:, None] - gam[None, :]), -1, 1))
+    r = d / c
+    w = (1 + tau * r) * np.clip(1 - r, 0, None) ** tau
+    z = np.arange(4.0)
+    kz = np.exp(-0.5 * ((z[:, None] - z[None, :]) / lam) ** 2)
+    np.testing.assert_allclose(k, 2.0 * np.kron(kz, w), rtol=1e-12, atol=1e-14)  # region r = 6 * level + sector
+    ev = np.linalg.eigvalsh(k)
+    assert ev.min() > 0 and np.linalg.matrix_rank(k, tol=1e-12 * ev.max()) == 24
+    k_add = np.asarray(kernels.gram(h, nugget=0.0))
+    assert np.linalg.matrix_rank(k_add, tol=1e-9 * np.abs(np.linalg.eigvalsh(k_add)).max()) == 9
+    # a sector × level interaction (zero row and column means) lies in the product kernel's span only
+    u = np.outer([1.0, -1.0, 1.0, -1.0], np.cos(2 * gam)).ravel()
+    for kk, inside in ((k, True), (k_add, False)):
+        coef, *_ = np.linalg.lstsq(kk, u, rcond=1e-12)
+        assert (np.linalg.norm(kk @ coef - u) < 1e-6 * np.linalg.norm(u)) == inside
+    with pytest.raises(ValueError, match="kernel kind"):
+        kernels.gram(h, kind="sum")

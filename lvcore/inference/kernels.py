@@ -28,6 +28,22 @@ function of :math:`z` alone, its Gram matrix on the 6 x 4 grid has rank at most
 positive semi-definite, not definite, so :func:`gram` adds a small absolute
 nugget (default 1e-8, i.e. a standard deviation of 1e-4 in strain units, far
 below MRI strain noise of about 0.03) before any Cholesky factorisation.
+
+A variant beside it, the **product** (sector × level) kernel
+:func:`polar_product_kernel`,
+
+.. math::
+
+    k((\gamma, z), (\gamma', z')) = \sigma^2 W_c(d(\gamma, \gamma'); c, \tau)\, k_z(z, z'; \lambda),
+
+has on the grid the Gram matrix :math:`\sigma^2 K_z \otimes W` (levels × sectors),
+of full rank 24 whenever :math:`W` (6 × 6, positive definite for
+:math:`\tau \ge 4`, :math:`0 < c \le \pi`) and :math:`K_z` (4 × 4, distinct
+levels) are: it can represent a sector × level interaction, which the
+additive kernel cannot. ``gram(hyper, kind="product")`` builds it (``hyper``:
+``sigma1_sq`` is its variance σ², ``sigma2_sq`` is not used). The
+likelihoods and samplers use the chapter's additive kernel; the product
+kernel is not wired into them.
 """
 from __future__ import annotations
 
@@ -106,24 +122,62 @@ def polar_kernel(x1, x2, *, sigma1_sq, sigma2_sq, c, tau, lengthscale):
     return sigma1_sq * wendland_polar(d, c, tau) + sigma2_sq * kz
 
 
-def gram(hyper, x=None, nugget: float = DEFAULT_NUGGET):
+def polar_product_kernel(x1, x2, *, sigma_sq, c, tau, lengthscale):
+    r"""Product (sector × level) polar kernel :math:`\sigma^2 W_c(d)\, k_z` between point sets.
+
+    Parameters
+    ----------
+    x1, x2 : array_like, shape (n, 2) and (m, 2)
+        Points ``(gamma [rad], z [level])``.
+    sigma_sq : float
+        Signal variance (strain²).
+    c, tau : float
+        Wendland support (rad) and exponent.
+    lengthscale : float
+        SE length scale in z (levels).
+
+    Returns
+    -------
+    jax.Array, shape (n, m)
+    """
+    x1 = jnp.asarray(x1)
+    x2 = jnp.asarray(x2)
+    d = geodesic_distance(x1[:, None, 0], x2[None, :, 0])
+    kz = squared_exponential(x1[:, None, 1], x2[None, :, 1], lengthscale)
+    return sigma_sq * wendland_polar(d, c, tau) * kz
+
+
+#: Kernel forms :func:`gram` builds: the chapter's additive one and the product variant.
+KERNEL_KINDS = ("additive", "product")
+
+
+def gram(hyper, x=None, nugget: float = DEFAULT_NUGGET, kind: str = "additive"):
     """Gram matrix on the strain grid plus ``nugget * I`` (strain²), shape (24, 24).
 
     Parameters
     ----------
     hyper : mapping
-        Keys ``sigma1_sq, sigma2_sq, c, tau, lam`` (lam = SE length scale in levels).
+        Keys ``sigma1_sq, sigma2_sq, c, tau, lam`` (lam = SE length scale in levels); the product kernel uses
+        ``sigma1_sq`` as its variance and ignores ``sigma2_sq``.
     x : array_like, optional
         Points; default :func:`strain_grid`.
     nugget : float
         Absolute diagonal jitter (strain²); see the module docstring for why.
+    kind : {"additive", "product"}
+        The chapter's additive kernel (default) or the product variant.
     """
+    if kind not in KERNEL_KINDS:
+        raise ValueError(f"kernel kind must be one of {KERNEL_KINDS}, got {kind!r}")
     x = strain_grid() if x is None else x
-    k = polar_kernel(
-        x, x,
-        sigma1_sq=hyper["sigma1_sq"], sigma2_sq=hyper["sigma2_sq"],
-        c=hyper["c"], tau=hyper["tau"], lengthscale=hyper["lam"],
-    )
+    if kind == "product":
+        k = polar_product_kernel(x, x, sigma_sq=hyper["sigma1_sq"], c=hyper["c"], tau=hyper["tau"],
+                                 lengthscale=hyper["lam"])
+    else:
+        k = polar_kernel(
+            x, x,
+            sigma1_sq=hyper["sigma1_sq"], sigma2_sq=hyper["sigma2_sq"],
+            c=hyper["c"], tau=hyper["tau"], lengthscale=hyper["lam"],
+        )
     return k + nugget * jnp.eye(k.shape[0])
 
 
@@ -134,6 +188,6 @@ def gram_cholesky(hyper, x=None, nugget: float = DEFAULT_NUGGET):
 
 __all__ = [
     "DEFAULT_NUGGET", "strain_grid", "geodesic_distance", "wendland_polar",
-    "squared_exponential", "polar_kernel", "gram", "gram_cholesky",
+    "squared_exponential", "polar_kernel", "polar_product_kernel", "KERNEL_KINDS", "gram", "gram_cholesky",
     "N_LEVELS",
 ]
