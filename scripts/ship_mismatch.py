@@ -57,14 +57,16 @@ def replace_block(text: str, begin: str, end: str, body: str, path) -> str:
 
 
 def update_docs(path: Path, dest: Path) -> None:
-    """Rewrite docs/studies.md's mismatch and findings blocks from the shipped JSON in ``dest``'s folder."""
+    """Rewrite docs/studies.md's mismatch block and the findings prose and table blocks from the shipped JSON in
+    ``dest``'s folder."""
     from lvcore.studies import findings, mismatch
 
     shipped = mismatch.load(dest.parent)
     text = path.read_text()
     text = replace_block(text, mismatch.DOCS_BEGIN, mismatch.DOCS_END, mismatch.docs_markdown(shipped), path)
-    text = replace_block(text, findings.DOCS_BEGIN, findings.DOCS_END,
-                         findings.docs_markdown(findings.load(dest.parent)), path)
+    found = findings.load(dest.parent)
+    text = replace_block(text, findings.PROSE_BEGIN, findings.PROSE_END, findings.prose_markdown(found), path)
+    text = replace_block(text, findings.DOCS_BEGIN, findings.DOCS_END, findings.docs_markdown(found), path)
     path.write_text(text)
 
 

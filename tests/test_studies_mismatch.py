@@ -122,7 +122,9 @@ def test_measured_doses_are_the_strain_rms_over_volunteers():
             "B__sheet__2": {"converged": True, "outputs": (nom + np.r_[0.0, np.full(24, 0.04)]).tolist()},
             "A__sheet__4": {"converged": False, "reason": "diverged"}, "B__sheet__4": {"converged": False}}
     m = mm.measured_doses(sims, vols, {"sheet": (2.0, 4.0)})
+    by = m[("sheet", 2.0)].pop("by_volunteer")
     assert m[("sheet", 2.0)] == pytest.approx({"mean": 0.03, "min": 0.02, "max": 0.04, "n": 2, "failed": 0})
+    assert by == pytest.approx({"A": 0.02, "B": 0.04})  # each volunteer's own size (the cluster bootstrap's unit)
     assert m[("sheet", 4.0)]["n"] == 0 and m[("sheet", 4.0)]["failed"] == 2 and m[("sheet", 4.0)]["mean"] is None
 
 
@@ -199,14 +201,8 @@ def test_shipped_results_docs_and_locator():
     rows = fd.verdicts(fd.load(folder))
     assert {r["verdict"] for r in rows} <= set(fd.VERDICTS)
     assert [r["finding"].split(" ")[0] for r in rows][:3] == ["F1", "F2", "F3"]
-    # F5 / F6: the realistic studies' own verdicts decide where they are shipped; the first studies stay beside them
-    from lvcore.studies import bo_mismatch, operators_realistic
-
-    for name, mod, key in (("F5", operators_realistic, "F5"), ("F6", bo_mismatch, "F6")):
-        path = results.find_result(mod.RESULT_FILE)
-        if path is not None:
-            assert next(r for r in rows if r["finding"] == name)["verdict"] == mod.load(path.parent)["verdicts"][key]["verdict"]
-            assert any(r["finding"].startswith(f"{name} (") for r in rows)
+    # F5 / F6: one row per study (their fits re-judged by the findings' rule: tests/test_studies_findings_stats.py)
+    assert any(r["finding"].startswith("F5 (") for r in rows) and any(r["finding"].startswith("F6 (") for r in rows)
     assert set(mm.figures(shipped)) == set(mm.TITLES)
 
 

@@ -77,7 +77,7 @@ SECTIONS = (
     Section("Model-data mismatch dose-response", "mismatch",
             ("fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s", "fig_mismatch_output_error",
              "table_mismatch_doses"), saved=True),
-    Section("Findings F1-F6 with verdicts", "findings", ("table_findings",), saved=True),
+    Section("Findings F1-F6 with verdicts", "findings", ("table_findings", "table_findings_doses"), saved=True),
     Section("Simulation-based calibration of the pipeline", "sbc",
             ("fig_sbc_rank_histograms", "fig_sbc_coverage", "table_sbc_summary"), saved=True),
 )

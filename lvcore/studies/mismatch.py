@@ -362,6 +362,7 @@ def summarise(fits_by_dose: dict, rms_by_dose: dict) -> list[dict]:
                            "share_rhat_over_1_05": (float(np.mean(np.asarray(rhat) > 1.05)) if rhat else None)}
         if diag:
             row["diagnostics"] = diag
+        row["per_volunteer"] = per_volunteer_values(per_vol, rms_by_dose[(source, dose)].get("by_volunteer"))
         gap = row["output_error_gap"]
         row["f1"] = bool(row["iid_sigma_s_inflation"]["value"] >= F1_INFLATION
                          and row["iid_sigma_s_inflation"]["ci"][0] > F1_CI_FLOOR)
@@ -369,6 +370,34 @@ def summarise(fits_by_dose: dict, rms_by_dose: dict) -> list[dict]:
         rows.append(row)
     rows.sort(key=lambda r: (SOURCES.index(r["source"]) if r["source"] in SOURCES else 99, r["dose"]))
     return rows
+
+
+#: Per-data-set metrics shipped per volunteer (``row["per_volunteer"]``), rounded to this many significant digits.
+PER_VOLUNTEER_DIGITS = 5
+
+
+def _sig(values, digits: int = PER_VOLUNTEER_DIGITS) -> list:
+    return [None if not np.isfinite(v) else float(f"{v:.{digits}g}") for v in np.asarray(values, dtype=float)]
+
+
+def per_volunteer_values(per_vol: dict, rms_by_volunteer: dict | None = None) -> dict:
+    """Each volunteer's per-data-set values at one dose, for a cluster bootstrap over volunteers.
+
+    The volunteer is the independent unit: its noise seeds share one mismatch pattern, so a CI that resamples
+    data sets covers the measurement noise around a few fixed patterns only. Per volunteer: ``strain_rms`` (the
+    dose's size on that volunteer, when known), and per data set (lists over the noise seeds, same order):
+    ``iid_sigma_s`` and ``discrepancy_sigma_s`` (posterior medians), ``output_error`` per likelihood, and
+    ``max_rhat`` per likelihood (the largest split R-hat over θ and σ_S²; with one chain, of its two halves).
+    """
+    out = {}
+    for vol, rec in sorted(per_vol.items()):
+        v = {"strain_rms": (rms_by_volunteer or {}).get(vol),
+             "iid_sigma_s": _sig(rec["iid"].get("sigma_s", [])),
+             "discrepancy_sigma_s": _sig(rec["discrepancy"].get("sigma_s", [])),
+             "output_error": {m: _sig(rec[m].get("output_error", [])) for m in MODELS},
+             "max_rhat": {m: _sig(rec[m]["max_rhat"]) for m in MODELS if rec[m].get("max_rhat") is not None}}
+        out[vol] = v
+    return out
 
 
 def appearance(rows: list[dict]) -> dict:
@@ -412,19 +441,22 @@ def strain_rms(z, nominal) -> float:
 
 
 def measured_doses(sims: dict, volunteers, plan: dict) -> dict:
-    """``(source, dose) -> {"mean", "min", "max", "n", "failed"}`` of the strain RMS over the volunteers."""
+    """``(source, dose) -> {"mean", "min", "max", "n", "failed", "by_volunteer"}`` of the strain RMS over the
+    volunteers (``by_volunteer``: volunteer name -> its strain RMS)."""
     out = {}
     for source, ds in plan.items():
         for dose in ds:
-            vals, failed = [], 0
+            vals, names, failed = [], [], 0
             for v in volunteers:
                 nom, rec = sims.get(_key(v.name, None, 0.0)), sims.get(_key(v.name, source, dose))
                 if nom and rec and nom["converged"] and rec["converged"]:
                     vals.append(strain_rms(rec["outputs"], nom["outputs"]))
+                    names.append(v.name)
                 else:
                     failed += 1
             out[(source, dose)] = ({"mean": float(np.mean(vals)), "min": float(np.min(vals)),
-                                    "max": float(np.max(vals)), "n": len(vals), "failed": failed} if vals
+                                    "max": float(np.max(vals)), "n": len(vals), "failed": failed,
+                                    "by_volunteer": dict(zip(names, map(float, vals)))} if vals
                                    else {"mean": None, "min": None, "max": None, "n": 0, "failed": failed})
     return out
 
@@ -899,5 +931,5 @@ def _cli(args) -> int:
 
 
 __all__ = ["SOURCES", "DEFAULT_DOSES", "mismatch_case", "bundled_volunteers", "simulate_all", "fit_datasets", "run_study",
-           "summarise", "appearance", "measured_doses", "strain_rms", "RESULT_FILE", "COMMAND", "TITLES", "load",
+           "summarise", "per_volunteer_values", "appearance", "measured_doses", "strain_rms", "RESULT_FILE", "COMMAND", "TITLES", "load",
            "source_line", "tables", "figures", "docs_markdown", "DOCS_BEGIN", "DOCS_END"]
