@@ -92,7 +92,9 @@ PHYSIOLOGICAL_RANGES = {
                      "benchmark (Proc R Soc A 471:20150641, problems 2-3), sliding in Dalton et al. 2022"},
     "sheet": {"max": None, "range": "none cited (a null control)", "cite": None},
     "dispersion": {"max": None, "range": "none cited", "cite": None},
-    "heterogeneity": {"max": None, "range": "none cited", "cite": None},
+    "heterogeneity": {"max": None, "range": "none cited: regional differences are reported (Novak et al. 1994, "
+                                            "J Biomech 27:403, canine: inner and outer LV free wall stiffer than the "
+                                            "mid-wall) but no spread that fixes a log-sd", "cite": None},
     "pericardium": {"max": None, "range": "none cited", "cite": None},
 }
 
