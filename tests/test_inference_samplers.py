@@ -247,9 +247,8 @@ def test_runtime_conditions_draw_what_compiled_in_conditions_draw(model_name, bl
     assert "conditions" in new.run_kwargs and "conditions" not in old.run_kwargs
     assert_same_chains(new.samples["a"], old.samples["a"])
     assert_same_chains(new.samples["eta"], old.samples["eta"], atol=1e-9)
-    # the other geometry's conditions; a fresh sampler, because a cached one run a second time with
-    # chain_method="vectorized" fails in numpyro's vmap (rank-0 argument; a sampler-cache bug, seen 2026-12-02)
-    samplers.clear_sampler_cache()
+    # the other geometry's conditions, through the sampler cache (a second vectorized run of one cached
+    # configuration: compiled_samplers._cached_mcmc gives it a fresh kernel)
     wrong = samplers.run_model(model_name, y, other, cfg)
     assert early_difference(wrong.samples["eta"], new.samples["eta"]) > 100 * TIGHT_RTOL
 
