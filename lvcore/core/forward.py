@@ -127,6 +127,22 @@ class Forward(Protocol):
     input_bounds : mapping
         Box in which the forward model is valid (an emulator's training box),
         name -> (lower, upper); empty where unrestricted.
+
+    Examples
+    --------
+    Any object with these members is a forward model; the SYNTHETIC analytic stand-in (tests only) is one, and a
+    traceable one:
+
+    >>> from lvcore.core.forward import Forward, TraceableForward
+    >>> from lvcore.testing.analytic import AnalyticForward
+    >>> model = AnalyticForward()
+    >>> isinstance(model, Forward), isinstance(model, TraceableForward)
+    (True, True)
+    >>> y = model({"a": 0.6, "b": 5.0, "af": 1.5, "bf": 5.0})     # its reference θ
+    >>> y.shape, round(float(y[0]), 6)                            # 25 outputs; LVV 140 mL
+    ((25,), 140.0)
+    >>> model.evaluate({"a": [0.6, 1.2], "b": 5.0, "af": 1.5, "bf": 5.0}).outputs.shape
+    (2, 25)
     """
 
     input_names: tuple[str, ...]

@@ -152,6 +152,20 @@ def load_emulator_forward(name: str, h, **kwargs) -> EmulatorForward:
 
     Never substitutes a stand-in: a missing emulator is an :class:`EmulatorError`
     telling how to build it. ``kwargs`` go to :func:`emulator_forward`.
+
+    Examples
+    --------
+    A :class:`lvcore.core.forward.Forward` of the mean shape (all five PC scores 0): θ in, 25 outputs out.
+
+    >>> from lvcore.emulator.forward import load_emulator_forward
+    >>> forward = load_emulator_forward("chapter", [0.0, 0.0, 0.0, 0.0, 0.0])
+    >>> forward.input_names
+    ('a', 'b', 'af', 'bf')
+    >>> forward({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}).shape
+    (25,)
+    >>> batch = forward.evaluate({"a": [0.6, 1.2], "b": 1.3, "af": 1.0, "bf": 3.6})
+    >>> batch.outputs.shape                      # one row per point
+    (2, 25)
     """
     try:
         emulator = load_emulator(name)

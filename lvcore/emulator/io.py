@@ -179,6 +179,17 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
     ------
     EmulatorError
         If it cannot be found or its files are malformed.
+
+    Examples
+    --------
+    >>> from lvcore.emulator.io import load_emulator
+    >>> emulator = load_emulator("chapter")      # bundled, SYNTHETIC-trained
+    >>> emulator.input_names                     # θ (kPa, -, kPa, -) and five PC scores of the shape model
+    ('a', 'b', 'af', 'bf', 'h1', 'h2', 'h3', 'h4', 'h5')
+    >>> load_emulator("no-such-emulator")
+    Traceback (most recent call last):
+    ...
+    lvcore.exceptions.EmulatorError: ...
     """
     directory = resolve_emulator_dir(name_or_path)
     meta_path, net_path = directory / "metadata.json", directory / "network.npz"

@@ -354,6 +354,17 @@ class Emulator:
         padded to a few row counts (:func:`padded_rows`) and the padding is cut
         off again, so a live view whose grid size changes compiles a handful of
         times, not once per size.
+
+        Examples
+        --------
+        >>> from lvcore.emulator.io import load_emulator
+        >>> emulator = load_emulator("chapter")
+        >>> y = emulator.predict(a=0.6, b=1.3, af=1.0, bf=3.6, h1=0, h2=0, h3=0, h4=0, h5=0)
+        >>> y.shape                                  # [LVV (mL), 24 strains]
+        (25,)
+        >>> stiffer = emulator.predict(a=1.2, b=1.3, af=1.0, bf=3.6, h1=0, h2=0, h3=0, h4=0, h5=0)
+        >>> bool(stiffer[0] < y[0])                  # a stiffer matrix inflates less
+        True
         """
         mapping = named if x is None else x
         given_fixed = {k: v for k, v in mapping.items() if k in self.fixed} if isinstance(mapping, Mapping) else {}

@@ -240,7 +240,18 @@ MISSING = {"fig9_7_sigma_s": "the results hold no σ_S draws (older study output
 
 
 def load(folder) -> dict:
-    """``fibre_discrepancy.json`` of a result folder (or the bundled one), with ``folder``."""
+    """``fibre_discrepancy.json`` of a result folder (or the bundled one), with ``folder``.
+
+    Examples
+    --------
+    The bundled (SYNTHETIC) result:
+
+    >>> from lvcore.studies import fibre_discrepancy
+    >>> from lvcore.studies.results import bundled_studies_dir
+    >>> result = fibre_discrepancy.load(bundled_studies_dir())
+    >>> len(result["sets"])                      # the chapter's 12 fibre-angle sets
+    12
+    """
     from lvcore.studies.results import read_result
 
     return read_result(folder, RESULT_FILE)

@@ -546,6 +546,16 @@ def load(folder) -> dict:
         ``surfaces``: loss surfaces grouped by fit (each ``patient``, ``main_operator``,
         ``test_geometry``, ``method``, ``theta_hat``, ``pairs``), from the surface files
         when present, else regrouped from the flat ``rss_surfaces``; and ``folder``.
+
+    Examples
+    --------
+    The bundled (SYNTHETIC) result:
+
+    >>> from lvcore.studies import operators
+    >>> from lvcore.studies.results import bundled_studies_dir
+    >>> result = operators.load(bundled_studies_dir())
+    >>> sorted(k for k in result if k != "folder")
+    ['findings', 'fits', 'meta', 'rss_surfaces', 'surfaces']
     """
     from lvcore.studies.results import read_json
 

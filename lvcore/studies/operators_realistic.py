@@ -276,7 +276,20 @@ def run_study(n_patients: int | None = None, seed: int | None = None, *, out, wo
 
 # ----------------------------------------------------------------------------- results interface
 def load(folder) -> dict:
-    """The results of an ``operators-realistic`` ``--out`` folder (or the bundled one): the JSON plus ``folder``."""
+    """The results of an ``operators-realistic`` ``--out`` folder (or the bundled one): the JSON plus ``folder``.
+
+    Examples
+    --------
+    The bundled (SYNTHETIC) result:
+
+    >>> from lvcore.studies import operators_realistic
+    >>> from lvcore.studies.results import bundled_studies_dir
+    >>> result = operators_realistic.load(bundled_studies_dir())
+    >>> result["meta"]["operators"]              # doctest: +ELLIPSIS
+    [...]
+    >>> len(result["fits"]) == result["meta"]["n_fits"]
+    True
+    """
     from lvcore.studies.results import read_result
 
     return read_result(folder, RESULT_FILE)

@@ -332,7 +332,20 @@ MISSING: dict = {}
 
 
 def load(folder) -> dict:
-    """``sbc.json`` of a result folder (or the bundled one), with ``folder``."""
+    """``sbc.json`` of a result folder (or the bundled one), with ``folder``.
+
+    Examples
+    --------
+    The bundled (SYNTHETIC) result:
+
+    >>> from lvcore.studies import sbc
+    >>> from lvcore.studies.results import bundled_studies_dir
+    >>> result = sbc.load(bundled_studies_dir())
+    >>> sorted(result["routes"])                 # each subject calibrated with its mesh and with --geometry infer
+    ['infer', 'mesh']
+    >>> 0 < result["n_subjects"] <= result["n_subjects_planned"]
+    True
+    """
     from lvcore.studies.results import read_result
 
     return read_result(folder, RESULT_FILE)
