@@ -18,6 +18,19 @@ from lvcore.viz.report_figures import wrap_title
 
 #: Characters per title line of a figure on this page (a page-wide figure at a 1400-px window holds ~100).
 APP_TITLE_CHARS = 80
+#: A table with a text cell longer than this (a verdict's note) and at most WRAP_MAX_ROWS rows is shown as a static
+#: table whose cells wrap; a data frame widget would cut the text at its column's width.
+WRAP_CHARS, WRAP_MAX_ROWS = 60, 40
+
+
+def table(frame) -> None:
+    """``frame`` with '–' for a missing value; wrapped when a text cell is long (see :data:`WRAP_CHARS`)."""
+    frame = no_missing(frame)
+    longest = max((len(v) for c in frame.columns for v in frame[c] if isinstance(v, str)), default=0)
+    if longest > WRAP_CHARS and len(frame) <= WRAP_MAX_ROWS:
+        st.table(frame, hide_index=True)
+    else:
+        st.dataframe(frame, hide_index=True, width="stretch")
 
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
@@ -63,11 +76,11 @@ def show(module, result, figures=None, tables=()) -> None:
     for name in tables:
         if name in tabs:
             st.caption(module.TITLES.get(name, name.replace("_", " ")))
-            st.dataframe(no_missing(tabs[name].round(4)), hide_index=True, width="stretch")  # "–", never None
+            table(tabs[name].round(4))  # "–", never None; a verdict's note in full
 
 
 def verdict_section(study: str, module, key: str, heading: str) -> None:
-    """A study whose findings are verdicts with CIs (issue 26): its source, verdict table and figures."""
+    """A study whose findings are verdicts with CIs: its source, verdict table and figures."""
     st.subheader(heading)
     res = load(study, module, key)
     if res is not None:
@@ -136,7 +149,7 @@ with tab_mm:
         try:
             fres = findings.load(res["folder"])
             st.subheader("The chapter's findings: verdicts")
-            st.dataframe(findings.tables(fres)["table_findings"], hide_index=True, width="stretch")
+            table(findings.tables(fres)["table_findings"])
             st.caption(findings.source_line(fres))
         except (LVCoreError, KeyError, TypeError, ValueError, FileNotFoundError) as err:
             st.error(f"cannot compute the findings table: {err}")

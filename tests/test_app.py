@@ -242,8 +242,12 @@ def test_studies_page_titles_wrap_and_tables_have_no_none():
         lines = [re.sub(r"</?[a-zA-Z][^<>]*>", "", part) for part in t.split("<br>") if "<sup>" not in part]
         assert all(len(line) <= 80 for line in lines), t
         assert "`" not in t, t
-    for d in at.dataframe:  # no None/NaN in a table (e.g. the fibre-discrepancy table's σ_S of a model without one)
+    for d in [*at.dataframe, *at.table]:  # no None/NaN in a table (e.g. the fibre-discrepancy table's σ_S)
         assert not d.value.isna().any().any() and not (d.value.astype(str) == "None").any().any(), d.value
+    # the verdict tables' notes in full: shown as tables whose cells wrap, not cut at a data frame's column width
+    notes = [t.value for t in at.table if "note" in t.value.columns]
+    assert len(notes) >= 2, [list(t.value.columns) for t in at.table]  # F6 (bo-mismatch) and F4/F5 (operators)
+    assert not [d.value.columns for d in at.dataframe if "note" in d.value.columns]
 
 
 def test_a_greyed_out_button_says_why():

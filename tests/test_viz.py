@@ -279,3 +279,56 @@ def test_no_markdown_backticks_in_figure_titles():
     assert "`" not in fig.layout.title.text
     fig.update_layout(title="a long title with a `chapter` emulator")
     assert "`" not in wrap_title(fig).layout.title.text
+
+
+def test_common_objective_panels_show_different_quantities():
+    """The F6 comparison: left, the common-scale objective at each mode's optimum (and, only where a run reached a
+    lower common-scale value elsewhere, that value as a diamond); right, 100 (1 − free / fixed). Two panels of the
+    optimum's value and of the lowest reached drew the same bars twice when, as in every bundled run, they agree."""
+    import pandas as pd
+
+    from lvcore.viz.study_figures import common_objective_bars
+
+    rows = pd.DataFrame([
+        {"subject": "HV1 angles", "mode": "fixed", "objective_common_at_best": 20.0, "objective_common_min": 20.0},
+        {"subject": "HV1 angles", "mode": "free", "objective_common_at_best": 15.0, "objective_common_min": 15.0},
+        {"subject": "HV2 base", "mode": "fixed", "objective_common_at_best": 10.0, "objective_common_min": 10.0},
+        {"subject": "HV2 base", "mode": "free", "objective_common_at_best": 12.0, "objective_common_min": 12.0}])
+    fig = common_objective_bars(rows)
+    bars = {t.name: list(t.y) for t in fig.data if t.type == "bar" and t.xaxis == "x"}
+    assert bars == {"fixed angles": [20.0, 10.0], "free angles": [15.0, 12.0]}
+    (change,) = [t for t in fig.data if t.xaxis == "x2"]
+    assert list(change.x) == ["HV1 angles", "HV2 base"] and list(change.y) == pytest.approx([25.0, -20.0])
+    assert not [t for t in fig.data if t.type == "scatter"]  # nothing lower elsewhere: no diamonds ...
+    assert "no run reached a lower" in fig.layout.annotations[0].text  # ... and the panel says so
+    rows.loc[1, "objective_common_min"] = 14.0  # HV1 free reached 14 elsewhere on the common scale
+    fig = common_objective_bars(rows)
+    (diamond,) = [t for t in fig.data if t.type == "scatter"]
+    assert list(diamond.x) == ["HV1 angles"] and list(diamond.y) == [14.0] and "free" in diamond.name
+    assert "no run reached" not in fig.layout.annotations[0].text
+
+
+def test_truth_marks_are_drawn_as_the_calibration_caption_says():
+    """The Calibration page's caption promises the hidden truth of a SYNTHETIC volunteer as "red dashed lines in the
+    histograms, red crosses in the pair plot": the posterior histograms mark it with red dashed vertical lines and
+    the pair plot with red x markers (it once promised dashed lines where crosses were drawn)."""
+    from pathlib import Path
+
+    import arviz as az
+
+    from lvcore.app import PAGES_DIR
+    from lvcore.viz.inference_figures import pair_figure
+    from lvcore.viz.report_figures import posterior_prior_figure
+
+    page = " ".join((Path(PAGES_DIR) / "5_Calibration.py").read_text(encoding="utf-8").split())
+    assert 'red dashed lines in the histograms, red crosses in the pair " "plot' in page
+    truth = {"a": 0.5, "b": 5.0}
+    rng = np.random.default_rng(0)
+    draws = {n: rng.normal(v, 0.1 * v, 200) for n, v in truth.items()}
+    hist = posterior_prior_figure(draws, {"a": (0.1, 1.0), "b": (1.0, 10.0)}, truth=truth, title="posterior")
+    lines = [s for s in hist.layout.shapes if s.type == "line" and s.x0 == s.x1]
+    assert sorted(s.x0 for s in lines) == [0.5, 5.0]
+    assert all(s.line.color == "red" and s.line.dash == "dash" for s in lines)
+    idata = az.from_dict(posterior={n: v.reshape(1, -1) for n, v in draws.items()})
+    (mark,) = [t for t in pair_figure(idata, var_names=("a", "b"), truth=truth).data if t.name == "truth"]
+    assert mark.marker.color == "red" and mark.marker.symbol == "x"

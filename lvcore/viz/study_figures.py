@@ -102,6 +102,49 @@ def bo_error_bars(rows):
     return fig
 
 
+def common_objective_bars(rows, *, same_tol: float = 1e-9):
+    """The F6 test's comparison on one objective scale, fixed vs free angles, per volunteer and mismatch kind.
+
+    Left: the common-scale objective (the chapter's standardised RSS with one standardisation for both modes) at
+    each mode's BO optimum, bars fixed vs free; where the lowest common-scale value a run reached is lower than at
+    its optimum (the BO minimised its own standardisation), it is marked as a diamond, else the panel's title says
+    that the two are the same in every run. Right: the change with free angles, 100 (1 − free / fixed) % per
+    volunteer and kind (> 0: free angles reach a lower objective).
+
+    ``rows``: a DataFrame with ``subject``, ``mode``, ``objective_common_at_best``, ``objective_common_min``.
+    """
+    from plotly.subplots import make_subplots
+
+    at_best = rows.pivot(index="subject", columns="mode", values="objective_common_at_best")
+    lowest = rows.pivot(index="subject", columns="mode", values="objective_common_min")
+    order = list(dict.fromkeys(rows["subject"]))
+    at_best, lowest = at_best.loc[order], lowest.loc[order]
+    lower = (lowest < at_best * (1.0 - same_tol)).to_numpy()
+    left = "common-scale objective at each mode's optimum (-)"
+    if not lower.any():
+        left += "<br>(no run reached a lower common-scale value elsewhere)"
+    change = 100.0 * (1.0 - at_best["free"] / at_best["fixed"])
+    fig = make_subplots(rows=1, cols=2, column_widths=[0.6, 0.4], horizontal_spacing=0.1,
+                        subplot_titles=[left, "change with free angles: 100 (1 − free / fixed) (%)"])
+    for k, mode in enumerate(BO_MODES):
+        fig.add_bar(x=order, y=at_best[mode], name=f"{mode} angles", legendgroup=mode, offsetgroup=mode,
+                    marker_color=SERIES_COLOURS[k], row=1, col=1)
+        if lower[:, k].any():
+            idx = np.flatnonzero(lower[:, k])
+            fig.add_scatter(x=[order[i] for i in idx], y=lowest[mode].to_numpy()[idx], mode="markers",
+                            marker=dict(symbol="diamond", size=9, color=SERIES_COLOURS[k],
+                                        line=dict(color="black", width=1)),
+                            name=f"{mode}: lowest common-scale value reached", row=1, col=1)
+    fig.add_bar(x=order, y=change, name="free lower (> 0) or higher (< 0)", showlegend=False,
+                marker_color=[SERIES_COLOURS[1] if c > 0 else SERIES_COLOURS[0] for c in change], row=1, col=2)
+    fig.add_hline(y=0, line=dict(color="grey", width=1), row=1, col=2)
+    fig.update_yaxes(title_text="objective (-)", rangemode="tozero", row=1, col=1)
+    fig.update_yaxes(title_text="lower with free angles (%)", row=1, col=2)
+    fig.update_xaxes(title_text="volunteer and mismatch kind")
+    fig.update_layout(barmode="group", height=460, margin=dict(l=60, r=20, t=110, b=40))
+    return fig
+
+
 def surface_figure(surface: dict, theta_true: Sequence[float], *, title: str):
     """Contours of the loss over the parameter pairs of one fit (Fig 9.13), θ̂ and the truth θ̃ marked.
 
