@@ -41,6 +41,8 @@ def main() -> None:
     from lvcore.app import warmup
 
     warmup.start()  # once per server process: the Calibration page's samplers and best fit, compiled in the background
+    if warmup.note():  # it did less than asked: memory is short on this server
+        st.sidebar.caption(warmup.note())
     from lvcore.app.controls import render_shared_sidebar
 
     page = next((p for p in PAGES if p.title == pg.title), None)

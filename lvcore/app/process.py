@@ -16,13 +16,18 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 
 def setup_process(num_chains: int = APP_CHAINS) -> None:
     """Pin BLAS/OpenMP to one thread, render VTK off-screen with EGL, and give each calibration chain an XLA
-    host device (:func:`lvcore.inference.samplers.use_host_devices`).
+    host device (:func:`lvcore.inference.samplers.use_host_devices`). Under an address-space limit
+    (``ulimit -v``) it also drops the reservations that hold no data (:func:`lvcore.app.memory.economise`).
 
     Values already set in the environment are kept. Has an effect only before numpy and JAX start, so the
     entry script calls it first.
     """
     for var in THREAD_VARIABLES:
         os.environ.setdefault(var, "1")
+    from lvcore.app import memory
+
+    if memory.address_space_limit() != float("inf"):
+        memory.economise()
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     from lvcore.inference.samplers import use_host_devices
 

@@ -15,6 +15,19 @@ subject of that emulator; the samplers are kept in the process
 :mod:`lvcore.inference.verdict`.
 
 ``LVCORE_APP_WARMUP=0`` turns it off (the test suite does).
+
+Memory (:mod:`lvcore.app.memory`): the warm-up adds address space to the
+server process (measured 2026-12-02 on the 2-core machine, persistent cache
+warm: the data, emulator and iid sampler with the best fit +0.45 GB, the
+discrepancy sampler +0.3 GB). Before loading and before each likelihood it
+checks the room left (:func:`lvcore.app.memory.headroom_bytes`: under an
+address-space limit, ``ulimit -v``, the room under it; else the memory
+available) and stops, with a note the app shows in the sidebar
+(:func:`note`), when less than :data:`STAGE_BYTES` plus
+:data:`RESERVE_BYTES` (kept for the users' own simulations) is left: under a
+tight limit the warm-up does less, or nothing, and the first calibration
+compiles on the click instead. A failure inside the warm-up (a Python
+exception, ``MemoryError`` included) only ends the warm-up.
 """
 from __future__ import annotations
 
@@ -22,15 +35,36 @@ import os
 import threading
 import time
 
+from lvcore.app import memory
+
 #: The environment variable that turns the warm-up off (``0``).
 ENV = "LVCORE_APP_WARMUP"
 #: Likelihoods warmed: the Calibration page's default selection.
 MODELS = ("iid", "discrepancy")
+#: Address space one warm-up stage may add (bytes): the data, emulator, iid sampler and best fit took 0.45 GB,
+#: the discrepancy sampler 0.3 GB (2-core machine, 2026-12-02), rounded up.
+STAGE_BYTES = 0.5 * memory.GiB
+#: Room kept for the users' own work while the warm-up runs (bytes): the Simulator page's first ``fast``
+#: simulation (its FE kernels compiled) took 0.45 GB of address space, an ``accurate`` one 0.3 GB more.
+RESERVE_BYTES = 1.0 * memory.GiB
 
 _started = False
 _lock = threading.Lock()
-#: What the warm-up did: ``state`` (``running``, ``done``, ``failed``, ``off``), per-stage wall seconds, error.
-STATUS: dict = {"state": "not started", "stages": {}, "error": None}
+#: What the warm-up did: ``state`` (``running``, ``done``, ``partial``, ``skipped``, ``failed``, ``off``),
+#: per-stage wall seconds, error, and ``note`` (for the user, when it did less than asked; else None).
+STATUS: dict = {"state": "not started", "stages": {}, "error": None, "note": None}
+
+
+class ShortOfMemory(RuntimeError):
+    """Too little memory is left for the next warm-up stage (the warm-up stops; the app carries on)."""
+
+
+def check_room(stage: str, need: float = STAGE_BYTES, reserve: float = RESERVE_BYTES) -> None:
+    """Raise :class:`ShortOfMemory` unless ``need + reserve`` bytes are left (:func:`lvcore.app.memory.state`)."""
+    mem = memory.state()
+    if mem.headroom < need + reserve:
+        raise ShortOfMemory(f"{stage}: {mem.headroom / memory.GiB:.1f} GB left, the warm-up keeps "
+                            f"{(need + reserve) / memory.GiB:.1f} GB for itself and the users ({mem.text()})")
 
 
 def enabled() -> bool:
@@ -38,7 +72,7 @@ def enabled() -> bool:
     return os.environ.get(ENV, "1").strip().lower() not in ("0", "off", "false", "no")
 
 
-def warm(subject: str | None = None, emulator: str | None = None, models=MODELS) -> dict:
+def warm(subject: str | None = None, emulator: str | None = None, models=MODELS, room=None) -> dict:
     """Compile the page's default calibration (samplers and best fit) in this process; returns stage wall times (s).
 
     Parameters
@@ -49,7 +83,22 @@ def warm(subject: str | None = None, emulator: str | None = None, models=MODELS)
         Emulator name (default: the shared sidebar's emulator).
     models : sequence of str
         Likelihoods to compile.
+    room : callable, optional
+        ``room(stage)`` is called before loading and before each likelihood and may raise (e.g.
+        :func:`check_room`, as :func:`start` passes it) to stop the warm-up; the stages done so far are kept
+        and their times are in the exception's ``stages`` attribute.
     """
+    stages = {}
+    room = room or (lambda stage: None)
+    try:
+        _warm(subject, emulator, models, room, stages)
+    except Exception as err:
+        err.stages = stages  # what was done before the stop (shown in STATUS)
+        raise
+    return stages
+
+
+def _warm(subject, emulator, models, room, stages) -> None:
     from lvcore.app.controls import DEFAULT_SUBJECT
     from lvcore.conditions import SIGMA_V_ML, SIMULATOR_DEFAULT_EDP_MMHG
     from lvcore.emulator.forward import emulator_forward
@@ -60,14 +109,14 @@ def warm(subject: str | None = None, emulator: str | None = None, models=MODELS)
     from lvcore.inference.data import read_measured_csv
     from lvcore.resources import bundled_volunteers, volunteer_files
 
-    stages = {}
+    room("load")
     t0 = time.perf_counter()
     names = bundled_volunteers()
     emulators = available_emulators()
     subject = subject or (DEFAULT_SUBJECT if DEFAULT_SUBJECT in names else (names[0] if names else None))
     emulator = emulator or (DEFAULT_EMULATOR if DEFAULT_EMULATOR in emulators else (emulators[0] if emulators else None))
     if subject is None or emulator is None:
-        return stages
+        return
     vol = volunteer_files(subject)
     data = read_measured_csv(vol.measured)[0]
     geo = guards.resolve_geometry(str(vol.geometry))
@@ -77,15 +126,16 @@ def warm(subject: str | None = None, emulator: str | None = None, models=MODELS)
     edp = guards.subject_edp(data, conditions, emu, emulator, None)
     forward = ScaledForward(emulator_forward(emu, geo.h, name=emulator, edp_mmhg=edp), geo.scale)
     stages["load"] = time.perf_counter() - t0
-    for m in models:
+    for k, m in enumerate(models):
+        room(m)
         stages[m] = samplers.precompile(m, data.y, forward, samplers.INTERACTIVE)
-    t1 = time.perf_counter()
-    verdict.consistency_check(data.y, forward, SIGMA_V_ML)
-    stages["best fit"] = time.perf_counter() - t1
+        if k == 0:  # the best fit after the first likelihood: a click on the default selection finds both
+            t1 = time.perf_counter()
+            verdict.consistency_check(data.y, forward, SIGMA_V_ML)
+            stages["best fit"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     from lvcore.viz import inference_figures, report_figures  # noqa: F401 - the results' imports
     stages["imports"] = time.perf_counter() - t1
-    return stages
 
 
 def _run() -> None:
@@ -94,13 +144,27 @@ def _run() -> None:
     STATUS["state"] = "running"
     t0 = time.perf_counter()
     try:
-        STATUS["stages"] = warm()
+        STATUS["stages"] = warm(room=check_room)
         STATUS["state"] = "done"
+    except ShortOfMemory as err:
+        STATUS["stages"] = getattr(err, "stages", {})
+        STATUS["state"] = "partial" if any(m in STATUS["stages"] for m in MODELS) else "skipped"
+        STATUS["error"] = str(err)
+        STATUS["note"] = ("Memory is short on this server, so the calibration samplers were "
+                          + ("only partly " if STATUS["state"] == "partial" else "not ")
+                          + "prepared in advance: a first calibration compiles them on the click (slower).")
     except Exception as err:  # noqa: BLE001 - an optimisation only: the page compiles on the click instead
+        STATUS["stages"] = getattr(err, "stages", {})
         STATUS["state"], STATUS["error"] = "failed", f"{type(err).__name__}: {err}"
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in STATUS["stages"].items())
     print(f"lvcore app warm-up {STATUS['state']} in {time.perf_counter() - t0:.1f} s ({stages})"
-          + (f": {STATUS['error']}" if STATUS["error"] else ""), file=sys.stderr, flush=True)
+          + (f": {STATUS['error']}" if STATUS["error"] else "") + f"; memory: {memory.state().text()}",
+          file=sys.stderr, flush=True)
+
+
+def note() -> str | None:
+    """A line for the user when the warm-up did less than asked because memory was short; else None."""
+    return STATUS.get("note")
 
 
 def start() -> bool:
@@ -117,4 +181,5 @@ def start() -> bool:
         return True
 
 
-__all__ = ["ENV", "MODELS", "STATUS", "enabled", "warm", "start"]
+__all__ = ["ENV", "MODELS", "STAGE_BYTES", "RESERVE_BYTES", "STATUS", "ShortOfMemory", "enabled", "check_room",
+           "warm", "note", "start"]
