@@ -29,7 +29,12 @@ Backends (each skipped if its package is missing):
 * ``mumps``: MUMPS through python-mumps (symmetric), analysis once, numeric factorisation per tangent
   (the only python-mumps wheel on PyPI for Python 3.11, 0.0.2, is built against NumPy 1 and fails to load).
 
-The default solve, the campaign and Land problem 2 end to end are measured by ``bench_simulator.py``,
+Then (``--whole N``, default 4) whole solves of each case, the simulator's backend switched by
+``$LVCORE_SPARSE_SOLVER`` between the solves (backends taking turns, each solve a new case: the
+per-process cache of prepared cases cleared), median wall and CPU seconds of this process per solve:
+CPU time is what a loaded shared machine distorts least.
+
+The default solve, the campaign and Land problem 2 end to end are also measured by ``bench_simulator.py``,
 ``bench_campaign.py`` and ``land2015.py``, which state the backend the simulator used
 (:func:`lvcore.mechanics.linear.default_backend`).
 """
@@ -238,6 +243,31 @@ def compare(tangents, names, repeats):
             for n, t in totals.items()}
 
 
+def whole_solves(case, names, repeats):
+    """{backend: (median wall s, median CPU s)} of whole solves of ``case``, backends taking turns."""
+    from lvcore.mechanics import linear
+    from lvcore.mechanics import simulate as sim
+
+    names = [n for n in names if n in linear.available_backends()]
+    sim.simulate(case)  # compile
+    wall, cpu = {n: [] for n in names}, {n: [] for n in names}
+    old = os.environ.get(linear.BACKEND_ENV)
+    try:
+        for _ in range(repeats):
+            for n in names:
+                os.environ[linear.BACKEND_ENV] = n
+                sim._PREPARED.clear()
+                c0, w0 = time.process_time(), time.perf_counter()
+                sim.simulate(case)
+                wall[n].append(time.perf_counter() - w0)
+                cpu[n].append(time.process_time() - c0)
+    finally:
+        os.environ.pop(linear.BACKEND_ENV, None)
+        if old is not None:
+            os.environ[linear.BACKEND_ENV] = old
+    return {n: (statistics.median(wall[n]), statistics.median(cpu[n])) for n in names}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=7, help="timed rounds per backend (default: 7)")
@@ -245,6 +275,8 @@ def main(argv=None) -> int:
                     help="which problems' tangents (default: default land2)")
     ap.add_argument("--backends", nargs="+", default=list(DEFAULT_BACKENDS), choices=list(BACKENDS),
                     help=f"backends to compare, each skipped if not installed (default: {' '.join(DEFAULT_BACKENDS)})")
+    ap.add_argument("--whole", type=int, default=4,
+                    help="whole solves per backend, the simulator's backends taking turns (default: 4; 0: none)")
     args = ap.parse_args(argv)
     from lvcore.mechanics.case import Case
     from lvcore.mechanics.linear import default_backend
@@ -262,6 +294,13 @@ def main(argv=None) -> int:
         for name, (tot, per, diff, fb) in sorted(res.items(), key=lambda kv: kv[1][0]):
             print(f"| {cname} | {tangents[0][0].shape[0]} | {len(tangents)} | {name} | {fb} | {1e3 * tot:.1f} "
                   f"| {per:.2f} | {diff:.1e} | {load} |", flush=True)
+    if args.whole:
+        print("\n| case | simulator backend | whole solve, wall s (median) | whole solve, CPU s (median) | load before |")
+        print("|---|---|---|---|---|")
+        for cname in args.cases:
+            load = _load()
+            for name, (w, c) in whole_solves(cases[cname](), ("pardiso", "cholmod", "superlu"), args.whole).items():
+                print(f"| {cname} | {name} | {w:.3f} | {c:.3f} | {load} |", flush=True)
     return 0
 
 

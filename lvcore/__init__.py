@@ -2,19 +2,17 @@
 
 Importing :mod:`lvcore` switches JAX to float64 (the simulator needs it) before
 any array is created, and turns on JAX's persistent compilation cache
-(:mod:`lvcore.jax_cache`; ``LVCORE_JAX_CACHE=off`` disables it).
+(:mod:`lvcore.jax_cache`; ``LVCORE_JAX_CACHE=off`` disables it). It does not
+import JAX itself (``lvcore --help`` and commands that never compute start in a
+fraction of a second): where JAX is not imported yet, both settings go into the
+environment variables JAX reads when it is imported (``JAX_ENABLE_X64``,
+``JAX_COMPILATION_CACHE_DIR``, ...), which worker processes inherit too.
 """
 from __future__ import annotations
 
-import os
+from lvcore.jax_cache import enable_compilation_cache, enable_x64
 
-os.environ.setdefault("JAX_ENABLE_X64", "1")
-import jax  # noqa: E402
-
-jax.config.update("jax_enable_x64", True)
-
-from lvcore.jax_cache import enable_compilation_cache  # noqa: E402
-
+enable_x64()
 enable_compilation_cache()
 
 __version__ = "0.2.0"

@@ -35,6 +35,21 @@ COMMANDS = {
     "app": "lvcore.app.cli",
 }
 
+#: ``lvcore --help``'s line for each command, in the order the modules register them: the top-level help
+#: (and the error for a missing or unknown command) is built from these without importing any command module,
+#: so it takes a fraction of a second (``tests/test_cli_startup.py`` checks them against each module's own).
+COMMAND_HELP = {
+    "simulate": "run one forward simulation of a case file",
+    "geometry": "fit segmentations to the LV template, inspect meshes, PCA",
+    "design": "write a space-filling design (CSV) over a named parameter space",
+    "campaign": "run, resume or inspect a simulation campaign",
+    "emulator": "train or inspect neural-network emulators",
+    "calibrate": "infer theta = (a, b, af, bf) from measured LVV + 24 strains",
+    "study": "run one of the chapter's studies",
+    "report": "regenerate the chapter's figures and tables (PNG, SVG, HTML, data, index.html, manifest.json)",
+    "app": "start the Streamlit app (streamlit run on the packaged entry script)",
+}
+
 #: Warnings from modules matching this (every module outside lvcore, e.g. ArviZ's "ArviZ is undergoing a major
 #: refactor" FutureWarning) are not shown by ``lvcore`` when their category is one of
 #: :data:`QUIET_CATEGORIES`: they speak to the developers of lvcore, not to its users.
@@ -43,7 +58,7 @@ THIRD_PARTY_MODULES = r"(?!lvcore(\.|$)|__main__$)"
 QUIET_CATEGORIES = (FutureWarning, DeprecationWarning, PendingDeprecationWarning)
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None, *, commands_only: bool = False) -> argparse.ArgumentParser:
     """The ``lvcore`` parser.
 
     Parameters
@@ -51,7 +66,12 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     command : str, optional
         A top-level command of :data:`COMMANDS`: register only the module that
         adds it (what ``main`` does once the command line names one). Default:
-        every module, for ``lvcore --help`` and unknown commands.
+        every module.
+    commands_only : bool
+        Without ``command``: the top level only, each command with its line of
+        :data:`COMMAND_HELP` and no options of its own, importing no command
+        module (what ``main`` uses for ``lvcore --help`` and a missing or
+        unknown command; the same help text as the full parser's).
     """
     parser = argparse.ArgumentParser(
         prog="lvcore", description="LV Calibration Lab command line",
@@ -59,8 +79,12 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error print the full traceback (otherwise one line)")
     sub = parser.add_subparsers(dest="command", required=True)
-    for name in ((COMMANDS[command],) if command in COMMANDS else COMMAND_MODULES):
-        importlib.import_module(name).register(sub)
+    if commands_only and command not in COMMANDS:
+        for name, text in COMMAND_HELP.items():
+            sub.add_parser(name, help=text)
+    else:
+        for name in ((COMMANDS[command],) if command in COMMANDS else COMMAND_MODULES):
+            importlib.import_module(name).register(sub)
     for p in _all_parsers(parser):
         p.formatter_class = HelpFormatter
     return parser
@@ -116,7 +140,8 @@ def _main(argv) -> int:
     debug = "--debug" in argv[:cut]
     argv = [a for a in argv[:cut] if a != "--debug"] + argv[cut:]
     # the only global options are --debug (removed above) and -h, so a command is the first word
-    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
+    # no command (lvcore --help) or an unknown one: the top level alone, no command module imported
+    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None, commands_only=True)
     args, extra = parser.parse_known_args(argv)
     if extra and not getattr(args, "passthrough", False):  # only `lvcore app` passes options on (to streamlit)
         parser.error(f"unrecognized arguments: {' '.join(extra)}")

@@ -9,16 +9,35 @@ imported.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
-
-import jax
 
 #: Where compiled programs go unless ``LVCORE_JAX_CACHE`` says otherwise.
 DEFAULT_JAX_CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "lvcore" / "jax"
+#: Smallest compile time (s) of a program that is written to the cache. Zero: every program, also the many
+#: small kernels of a solve that compile in well under a second each but add up to seconds per process
+#: (a second ``lvcore campaign run`` and every campaign worker load them instead).
+MIN_COMPILE_TIME_S = 0.0
+
+
+def _set(option: str, value) -> None:
+    """Set JAX's config ``option`` now if JAX is imported, else through the environment variable JAX reads."""
+    if "jax" in sys.modules:
+        sys.modules["jax"].config.update(option, value)
+    else:
+        os.environ[option.upper()] = str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def enable_x64() -> None:
+    """Switch JAX to float64 (the simulator needs it), without importing JAX where it is not imported yet."""
+    _set("jax_enable_x64", True)
 
 
 def enable_compilation_cache(path: str | os.PathLike | None = None) -> str | None:
     """Turn on JAX's persistent compilation cache.
+
+    Does not import JAX: where it is not imported yet the settings go into the environment
+    variables it reads on import (and that child processes inherit).
 
     Parameters
     ----------
@@ -37,9 +56,9 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> str | Non
         return None
     try:
         Path(path).mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", path)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+        _set("jax_compilation_cache_dir", path)
+        _set("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_TIME_S)
+        _set("jax_persistent_cache_min_entry_size_bytes", 0)
     except Exception:  # noqa: BLE001 - read-only home etc.: the cache is an optimisation only
         return None
     return path

@@ -1,0 +1,105 @@
+"""Start-up: ``lvcore --help`` and a 16-row campaign end to end, first and second run.
+
+Usage::
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_startup.py [--repeats 3] [--rows 16] [--lvcore PATH]
+
+Runs the ``lvcore`` console script (``--lvcore``, default: the one beside this Python) as a user does and
+prints a markdown table of wall and CPU time (user + system, the command and every process it started:
+campaign workers included), median of ``--repeats``:
+
+* ``lvcore --help``: the first call of this benchmark, and then the median of the further calls;
+* ``lvcore campaign run`` of a ``--rows``-row Sobol design over the ``material`` space (``default`` mesh,
+  default workers: one per core), **first run**: JAX's persistent compilation cache empty (a new
+  ``LVCORE_JAX_CACHE`` folder per repeat), so every program is traced and compiled; **second run**: the
+  same command again with the cache the first run filled (what every later campaign of a user gets).
+
+Every row states the sparse solver the simulator uses here and the load average before it (``uptime``):
+the machine is shared, so compare rows of one run.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+
+def _load() -> str:
+    return "/".join(f"{v:.1f}" for v in os.getloadavg())
+
+
+def timed(cmd: list[str], env: dict | None = None) -> tuple[float, float]:
+    """(wall s, CPU s of the command and its children) of one run of ``cmd``; raises if it fails."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, **(env or {})})
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if out.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({out.returncode}): {out.stderr[-2000:]}")
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def _solver() -> str:
+    out = subprocess.run([sys.executable, "-c", "from lvcore.mechanics.linear import default_backend as d; print(d())"],
+                         capture_output=True, text=True)
+    return out.stdout.strip() or "?"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeats", type=int, default=3, help="runs per row, median reported (default: 3)")
+    ap.add_argument("--rows", type=int, default=16, help="design rows of the campaign (default: 16)")
+    ap.add_argument("--lvcore", default=str(Path(sys.executable).with_name("lvcore")),
+                    help="the lvcore console script to time (default: the one beside this Python)")
+    args = ap.parse_args(argv)
+    exe = args.lvcore
+    solver = _solver()
+    rows = []
+
+    def row(what, samples, load):
+        walls, cpus = zip(*samples)
+        rows.append(f"| {what} | {statistics.median(walls):.2f} | {statistics.median(cpus):.2f} | "
+                    f"{', '.join(f'{w:.2f}' for w in walls)} | {solver} | {load} |")
+        print(rows[-1], file=sys.stderr, flush=True)
+
+    load = _load()
+    first = timed([exe, "--help"])
+    row("`lvcore --help`, first call", [first], load)
+    load = _load()
+    row("`lvcore --help`, later calls", [timed([exe, "--help"]) for _ in range(max(args.repeats, 3))], load)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        design = tmp / "design.csv"
+        timed([exe, "design", "sobol", "--space", "material", "--n", str(args.rows), "--seed", "1",
+               "--out", str(design)])
+        first_runs, second_runs, loads = [], [], []
+        for k in range(args.repeats):  # first and second runs alternate, so a drift of the load hits both
+            cache = {"LVCORE_JAX_CACHE": str(tmp / f"cache{k}")}
+            loads.append(_load())
+            first_runs.append(timed([exe, "campaign", "run", str(design), "--out", str(tmp / f"a{k}.h5"),
+                                     "--no-progress"], cache))
+            second_runs.append(timed([exe, "campaign", "run", str(design), "--out", str(tmp / f"b{k}.h5"),
+                                      "--no-progress"], cache))
+        row(f"{args.rows}-row campaign, first run (empty compilation cache)", first_runs, " → ".join(loads))
+        row(f"{args.rows}-row campaign, second run (the cache the first filled)", second_runs, " → ".join(loads))
+
+    print(f"lvcore: {exe}; python {sys.version.split()[0]}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
+    print("| what | wall s (median) | CPU s, all processes (median) | wall s, each run | sparse solver | load before |")
+    print("|---|---|---|---|---|---|")
+    print("\n".join(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
