@@ -7,8 +7,8 @@ from streamlit.testing.v1 import AppTest
 from lvcore import conditions
 from lvcore.app import APP_DIR, PAGES_DIR, ENTRY, PAGES  # noqa: E402
 
-#: The checkout's shim (`streamlit run app.py`): it runs the packaged entry, whose default page is the Simulator.
-APP = str(Path(__file__).resolve().parents[1] / "app.py")
+#: The packaged entry (``lvcore app``; ``streamlit run app.py`` serves it too), whose default page is the Simulator.
+APP = str(ENTRY)
 
 
 def test_navigation_lists_every_page_script_by_name():
@@ -43,6 +43,21 @@ def test_every_page_has_a_url_path_the_home_page_too():
     for p in PAGES:
         assert served[p.url_path][0] == p.title and served[p.url_path][3] == str(p.path)
         assert p.url_path and "/" not in p.url_path
+
+
+def test_streamlit_run_app_py_serves_the_packaged_entry():
+    """`streamlit run app.py` (the README's command) finds the ASGI app in app.py and serves the packaged entry, the
+    script `lvcore app` runs: app.py itself is no page script beside the checkout's pages/ folder, whose own page list
+    said "Page not found" on the first visit to /simulator of a fresh server (tests/test_browser.py checks every URL
+    path in a browser)."""
+    import runpy
+
+    from streamlit.web.server.app_discovery import discover_asgi_app
+
+    shim = Path(__file__).resolve().parents[1] / "app.py"
+    found = discover_asgi_app(shim)
+    assert found.is_asgi_app and found.import_string == "app:app", found
+    assert Path(runpy.run_path(str(shim))["app"].script_path) == ENTRY
 
 
 def test_lvcore_app_runs_streamlit_on_the_packaged_entry(monkeypatch):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from streamlit.testing.v1 import AppTest
 
-from lvcore.app import PAGES_DIR
+from lvcore.app import ENTRY, PAGES_DIR
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -198,7 +198,7 @@ def test_case_box_applies_the_case_file_limits(tmp_path):
     (tmp_path / "m.npz").write_bytes(hf.npz_of({"mean": hf.npy_header(hf.HUGE_SHAPE)}))
     pca_case = json.dumps({"geometry": {"kind": "pca", "scores": [0.0], "model": str(tmp_path / "m.npz")},
                            "material": {"law": "neo-hookean", "mu": 1}, "load": {"pressure": 1, "units": "kPa"}})
-    at = AppTest.from_file(str(ROOT / "app.py"), default_timeout=180).run()  # the entry; its home page has the box
+    at = AppTest.from_file(str(ENTRY), default_timeout=180).run()  # the entry; its home page has the box
     runner_key = "FormSubmitter:case_runner-Run case"
     for text, fragment in (
         (pca_case, "MAX_ARRAY_BYTES"),

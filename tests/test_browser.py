@@ -70,6 +70,34 @@ def _new_page(chromium, errors: list):
     return ctx, page
 
 
+def test_every_page_opens_at_its_url_path_on_a_fresh_server(app, chromium):
+    """Every page typed at its URL path (the home page at / and at /simulator too), each in a fresh browser context
+    (a new session): its own title, no "Page not found", no exception and no error box. First in this module, so the
+    first visit of all goes to a fresh server at /simulator: Streamlit used to run that first session inside the page
+    list of the ``pages/`` folder beside app.py, which knew none of the app's URL paths."""
+    from lvcore.app import PAGES
+
+    js_errors: list = []
+    home, *others = PAGES
+    urls = [(home.url_path, home), ("", home)] + [(p.url_path, p) for p in others]
+    for path, expected in urls:
+        ctx, page = _new_page(chromium, js_errors)
+        page.goto(f"{app.url}/{path}")
+        drv.wait_idle(page, timeout_s=600)  # a first visit compiles the page's imports (minutes on a loaded machine)
+        where = f"/{path} ({expected.title})"
+        body = page.locator("body").inner_text()
+        assert "Page not found" not in body, f"{where}: {body[body.index('Page not found'):][:200]!r}"
+        assert page.url.rstrip("/") == f"{app.url}/{path}".rstrip("/"), f"{where}: went to {page.url}"
+        _no_error_box(page, where)
+        current = page.locator("[data-testid=stSidebarNav] a[aria-current=page], [data-testid=stSidebarNavLink]"
+                               "[aria-current=page]")
+        if current.count():  # the sidebar marks the page shown (the hidden /simulator alias marks none)
+            assert expected.title in current.first.inner_text(), f"{where}: sidebar shows {current.first.inner_text()}"
+        assert page.locator("h1").count() >= 1, f"{where}: no title"
+        ctx.close()
+    assert not js_errors, f"JavaScript errors in the page: {js_errors[:3]}"
+
+
 def test_every_page_renders_and_survives_a_slider(app, chromium):
     SHOTS.mkdir(parents=True, exist_ok=True)
     js_errors: list = []

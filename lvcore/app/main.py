@@ -1,7 +1,7 @@
 """LV Calibration Lab: the Streamlit entry script.
 
 Started by ``lvcore app`` (``streamlit run`` on this file) or, in a checkout,
-by ``streamlit run app.py`` (a shim that calls :func:`main`). It only sets up
+by ``streamlit run app.py`` (a shim whose ASGI app serves this script). It only sets up
 the process and the navigation; the pages are listed in
 :data:`lvcore.app.PAGES`.
 """
