@@ -53,3 +53,25 @@ def test_dated_run_logs_sit_in_one_appendix_at_the_end():
         above = [h for h in text[: text.index("## Appendix: measured runs")].splitlines()
                  if h.startswith("#") and (date.search(h) or h.lstrip("#").strip().lower().startswith("measured ("))]
         assert not above, f"docs/{name}: dated run-log sections above the appendix: {above}"
+
+
+def test_every_doc_states_the_strain_reference_as_the_code_computes_it():
+    """lvcore's strains are circumferential Green strain with end diastole as the reference, (1/λ² − 1)/2
+    (lvcore.mechanics.kinematics.circumferential_green_strain): no doc may call the strain's reference early
+    diastole (the *geometry*'s reference is early-diastolic, which is another thing)."""
+    import numpy as np
+
+    from lvcore.mechanics.kinematics import circumferential_green_strain
+
+    lam = 1.1  # a filling stretch: with end diastole as the reference the strain is negative, (1/λ² − 1)/2
+    F = np.diag([lam, 1.0, 1.0])
+    assert float(circumferential_green_strain(F, np.array([1.0, 0.0, 0.0]))) == \
+        __import__("pytest").approx(0.5 * (1 / lam**2 - 1))
+    bad = re.compile(r"strain[^.|]{0,80}?early[- ]diastol\w*\s+reference|early[- ]diastol\w*\s+reference[^.|]{0,30}?"
+                     r"negative in filling", re.IGNORECASE | re.DOTALL)
+    for path in [*DOCS.glob("*.md"), ROOT / "README.md"]:
+        text = path.read_text()
+        hits = [m.group(0) for m in bad.finditer(text) if "convert" not in text[max(0, m.start() - 60):m.end()]]
+        assert not hits, f"{path.name} calls the strain's reference early diastole: {hits}"
+    for name in ("real_data.md", "simulator.md"):
+        assert "end diastole as the reference" in (DOCS / name).read_text(), name
