@@ -53,6 +53,8 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> str | Non
     """
     path = str(path or os.environ.get("LVCORE_JAX_CACHE") or DEFAULT_JAX_CACHE)
     if path.lower() == "off":
+        if "jax" not in sys.modules:  # nor the cache a parent process that imported lvcore passed on
+            os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
         return None
     try:
         Path(path).mkdir(parents=True, exist_ok=True)

@@ -74,3 +74,5 @@ def test_importing_lvcore_sets_float64_and_the_compilation_cache_before_or_after
 def test_the_cache_can_be_switched_off(tmp_path):
     code = "import lvcore, jax, json; print(json.dumps(jax.config.jax_compilation_cache_dir))"
     assert json.loads(_python(code, LVCORE_JAX_CACHE="off")) is None
+    # also where the parent process (an lvcore with the cache on) passed its cache folder on
+    assert json.loads(_python(code, LVCORE_JAX_CACHE="off", JAX_COMPILATION_CACHE_DIR=str(tmp_path))) is None
