@@ -197,6 +197,57 @@ def test_fuzz_measured_bytes(content):
     _check(_read_measured, content, ".csv")
 
 
+# several loaded states of one subject (rows with one subject ID, each with its edp_mmhg; strains optional)
+STATES_HEADER = "subject,edp_mmhg,lvv_ml," + ",".join(f"strain_{k:02d}" for k in range(1, 25))
+STATE_ROWS = ("S1,8,150," + ",".join(["-0.15"] * 24), "S1,20,190," + "," * 23, "S1,14,170," + ",".join(["-0.12"] * 24))
+
+
+def _read_any(p):
+    from lvcore.inference.data import read_measurements
+
+    read_measurements(p)
+
+
+@FUZZ
+@given(st.lists(st.tuples(st.integers(0, 3), st.integers(0, 26), cells | st.sampled_from(["8", "20", "-3"])),
+                min_size=1, max_size=5))
+def test_fuzz_loaded_state_cells(edits):
+    rows = [STATES_HEADER.split(",")] + [r.split(",") for r in STATE_ROWS]
+    for r, c, v in edits:
+        rows[r][min(c, len(rows[r]) - 1)] = v
+    _check(_read_any, "\n".join(",".join(r) for r in rows) + "\n", ".csv")
+
+
+STATES_JSON = [{"subject": "S1", "edp_mmhg": 8, "lvv_ml": 150, "strains": [-0.15] * 24},
+               {"subject": "S1", "edp_mmhg": 20, "lvv_ml": 190}]
+
+
+@FUZZ
+@given(mutated(STATES_JSON).map(_text) | st.lists(mutated(STATES_JSON[1]), max_size=4).map(_text))
+def test_fuzz_loaded_state_json(content):
+    _check(_read_any, content, ".json")
+
+
+@FUZZ
+@given(st.lists(st.sampled_from(["S1", "S2", ""]), min_size=1, max_size=4),
+       st.lists(st.sampled_from([8.0, 20.0, float("nan"), 0.0, 1e9, -1.0]), min_size=1, max_size=4),
+       st.lists(st.sampled_from([150.0, float("nan"), 1.5, 0.0]), min_size=1, max_size=4), st.booleans())
+def test_fuzz_loaded_state_mat(subjects, edps, lvvs, blank_strains):
+    from scipy.io import savemat
+
+    n = len(lvvs)
+    strains = np.full((n, 24), np.nan if blank_strains else -0.15)
+    strains[0] = -0.15
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "states.mat"
+        savemat(p, {"subject": np.array((subjects * n)[:n], dtype=object), "edp_mmhg": np.asarray(edps),
+                    "lvv_ml": np.asarray(lvvs), "strains": strains})
+        try:
+            _read_any(p)
+        except LVCoreError:
+            pass
+
+
 # --------------------------------------------------------------------------- geometry scores
 def _read_scores(p):
     from lvcore.inference.calibrate import read_pc_scores

@@ -22,6 +22,7 @@ from lvcore.exceptions import GeometryError
 from lvcore.geometry.scores import read_pc_scores, read_scale  # noqa: F401 - the calibration's geometry inputs
 from lvcore.inference import diagnostics, models, samplers
 from lvcore.inference.data import validate_measurements
+from lvcore.inference.loaded_states import has_extra_terms
 
 #: Number format of the summary CSV: 6 significant digits, so sigma_s2 ~ 1e-4 is not rounded to 0.0.
 SUMMARY_FLOAT_FORMAT = "%.6g"
@@ -87,6 +88,12 @@ def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig 
         # the blocked sampler's conditionals cover theta, the GP and b only; the sampled geometry needs joint NUTS
         if sampler == "hmc_gibbs":
             raise ValueError("--sampler hmc_gibbs cannot sample an inferred geometry (--geometry infer); "
+                             "use --sampler auto or nuts (joint NUTS)")
+        sampler = "nuts"
+    if has_extra_terms(forward) and model == "discrepancy":
+        # likewise for further loaded states and the Klotz prior (lvcore.inference.loaded_states)
+        if sampler == "hmc_gibbs":
+            raise ValueError("--sampler hmc_gibbs cannot use several loaded states or --prior klotz; "
                              "use --sampler auto or nuts (joint NUTS)")
         sampler = "nuts"
     kwargs = {"sigma_v": sigma_v, "infer_angles": infer_angles}

@@ -49,7 +49,8 @@ def register(subparsers) -> None:
     )
     p.add_argument("--data",
                    help="measured data: CSV (lvv_ml, strain_01..strain_24 or aha_01..aha_16; optional subject "
-                        "column), JSON or MATLAB .mat (see docs/calibration.md); default: none, give it or --volunteer")
+                        "column; several rows of one subject with their own edp_mmhg are its loaded states), JSON or "
+                        "MATLAB .mat (see docs/calibration.md); default: none, give it or --volunteer")
     p.add_argument("--segments", choices=("lvcore", "aha"), default=None,
                    help="segment convention of the strains (default: what the file says, else lvcore)")
     p.add_argument("--segment-offset", type=float, default=None, metavar="DEG",
@@ -113,6 +114,11 @@ def register(subparsers) -> None:
                    help="end-diastolic pressure (mmHg, 2-40) for emulators that take it (default: the data's "
                         "edp_mmhg column, else 8); an error with emulators trained at a fixed EDP (e.g. 'chapter', "
                         "8 mmHg)")
+    p.add_argument("--prior", choices=("none", "klotz"), default="none",
+                   help="'klotz': the Klotz et al. (2006) normalised EDPVR as a soft constraint on the model's volumes "
+                        "at 20 and 30 mmHg, predicted from the EDV at the measured EDP and the reference volume V0 "
+                        "(needs an emulator whose EDP input covers 20-30 mmHg, e.g. a subject emulator built with "
+                        "--inputs theta,edp --bound edp=6,30; docs/calibration.md); default none")
     p.add_argument("--sigma-v", type=float, default=SIGMA_V_ML,
                    help=f"LVV noise sd (mL), fixed, in [{SIGMA_V_RANGE_ML[0]:g}, {SIGMA_V_RANGE_ML[1]:g}] "
                         f"(default {SIGMA_V_ML:g})")
@@ -300,6 +306,14 @@ def run_calibrate(args) -> int:
     out = Path(args.out)
     by_subject = {}   # subject -> (row, forward, conditions, box, warnings, geometry record)
 
+    from lvcore.inference import loaded_states as ls
+
+    for r in rows:
+        if r.states:
+            ls.check_edp_input(emulator, name, f"{r.source and Path(r.source).name or 'the data'}: subject "
+                                               f"'{r.subject}' has {r.n_states} loaded states, which")
+    if args.prior == "klotz":
+        ls.check_klotz_pressures(emulator, name)
     for r in rows:
         edp = guards.subject_edp(r, cond, emulator, name, args.edp)
         c = {**cond, "edp_mmhg": edp}
@@ -307,13 +321,20 @@ def run_calibrate(args) -> int:
         if inferred:
             measures = _subject_measures(r, cli_measures)
             sds = _subject_measure_sds(r, cli_sds, measures)
-            forward = geometry_prior.inferred_geometry_forward(
-                emulator, name=name, measures=measures, infer_angles=infer, alpha_endo=c["alpha_endo"],
-                alpha_epi=c["alpha_epi"], edp_mmhg=c["edp_mmhg"], measure_sd=sds, representation=representation)
-            fixed = {k: v for k, v in guards.fixed_inputs(np.zeros(n_pc), c, emulator, infer).items()
-                     if not is_pc_name(k)}
-            box, extrap = guards.check_inputs_in_box(fixed, emulator, args.allow_extrapolation,
-                                                     what=f"subject {r.subject}: the conditions")
+
+            def at(p, measures=measures, sds=sds, c=c):
+                return geometry_prior.inferred_geometry_forward(
+                    emulator, name=name, measures=measures, infer_angles=infer, alpha_endo=c["alpha_endo"],
+                    alpha_epi=c["alpha_epi"], edp_mmhg=p, measure_sd=sds, representation=representation)
+
+            def box_at(p, c=c, r=r):
+                fixed = {k: v for k, v in guards.fixed_inputs(np.zeros(n_pc), {**c, "edp_mmhg": p}, emulator,
+                                                               infer).items() if not is_pc_name(k)}
+                return guards.check_inputs_in_box(fixed, emulator, args.allow_extrapolation,
+                                                  what=f"subject {r.subject}: the conditions")
+
+            forward = at(c["edp_mmhg"])
+            box, extrap = box_at(c["edp_mmhg"])
             if not measures:
                 w.append(geometry_prior.NO_MEASURE_WARNING)
             georec = {"kind": "inferred", "source": "infer", "measures": measures,
@@ -325,18 +346,38 @@ def run_calibrate(args) -> int:
                       "representation_error": (None if representation is None else
                                                {"mode": "floor", **representation.record()})}
         else:
-            box, extrap = guards.check_inputs_in_box(guards.fixed_inputs(geo.h, c, emulator, infer), emulator,
-                                                     args.allow_extrapolation,
-                                                     what=f"{geometry_option}: the PC scores (or conditions)")
-            # the subject is geo.scale times the shape with scores geo.h: emulated LVV x scale^3 (lvcore.geometry.scaling)
-            forward = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
-                                                     alpha_endo=c["alpha_endo"], alpha_epi=c["alpha_epi"],
-                                                     edp_mmhg=c["edp_mmhg"]), geo.scale)
-            # a mesh is seen through its 5-mode projection: infer mode's representation-error floor, scaled to
-            # the mesh's own projection error (RepresentationError.for_projection)
-            forward, floor = given_geometry_floor(forward, geo.kind, args.representation_error, n_pc,
-                                                  projection_mse_cm2=geo.projection_mse_cm2)
+            def box_at(p, c=c):
+                return guards.check_inputs_in_box(guards.fixed_inputs(geo.h, {**c, "edp_mmhg": p}, emulator, infer),
+                                                  emulator, args.allow_extrapolation,
+                                                  what=f"{geometry_option}: the PC scores (or conditions)")
+
+            def floored_at(p, c=c):
+                # the subject is geo.scale times the shape with scores geo.h: emulated LVV x scale^3
+                # (lvcore.geometry.scaling); a mesh is seen through its 5-mode projection: infer mode's
+                # representation-error floor, scaled to the mesh's own projection error (RepresentationError.for_projection)
+                fw = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
+                                                    alpha_endo=c["alpha_endo"], alpha_epi=c["alpha_epi"],
+                                                    edp_mmhg=p), geo.scale)
+                return given_geometry_floor(fw, geo.kind, args.representation_error, n_pc,
+                                            projection_mse_cm2=geo.projection_mse_cm2)
+
+            def at(p, floored_at=floored_at):
+                return floored_at(p)[0]
+
+            box, extrap = box_at(c["edp_mmhg"])
+            forward, floor = floored_at(c["edp_mmhg"])
             georec = {**geo.record(), "representation_error": floor}
+        if r.states or args.prior == "klotz":
+            terms = []
+            for st in r.states:
+                _b, e = box_at(st.edp_mmhg)
+                extrap = extrap + [x for x in e if x not in extrap]
+                terms.append(ls.StateTerm(at(st.edp_mmhg), np.asarray(st.y, float), float(st.edp_mmhg)))
+            klotz = None
+            if args.prior == "klotz":
+                klotz = _klotz_prior(ls, forward, at, c["edp_mmhg"], inferred=inferred, subject=subject,
+                                     emulator=emulator, geo=geo, resolution=resolution)
+            forward = ls.LoadedStatesForward(forward, tuple(terms), klotz)
         by_subject[r.subject] = (r, forward, c, box, w + extrap, georec)
     for w in dict.fromkeys(w for v in by_subject.values() for w in v[4]):
         print(f"lvcore: warning: {w}", file=sys.stderr)
@@ -393,6 +434,7 @@ def run_calibrate(args) -> int:
             "flags": v.flags,
             "notes": list(v.notes) + ([] if derived_rec is None else derived_rec["weakly_identified"]),
             "derived": derived_rec,
+            **_states_records(r, forward, res),
             "warnings": [x for x in w if not x.startswith("EXTRAPOLATION: ")] + v.flags}
         for f in v.flags:
             print(f"lvcore: warning: [{item.subject}/{item.model}] FLAGGED: {f}", file=sys.stderr)
@@ -469,3 +511,58 @@ def _subject_measures(row, cli_measures: dict) -> dict:
         out[k] = v
     return out
 
+
+
+def _klotz_prior(ls, forward, at, edp_mmhg: float, *, inferred: bool, subject: bool, emulator, geo, resolution: str):
+    """The Klotz prior of one subject (:class:`lvcore.inference.loaded_states.KlotzPrior`): the forward model at
+    20 and 30 mmHg and V0, the geometry's reference cavity (inferred: from the sampled scores and scale)."""
+    import jax.numpy as jnp
+
+    from lvcore.inference.geometry_prior import SCALE_NAME
+
+    fws = tuple(at(p) for p in ls.KLOTZ_PRESSURES_MMHG)
+    if inferred:
+        def v0_fn(params, fw=forward):
+            return fw.shape(jnp.stack([params[n] for n in fw.pc_names]), params[SCALE_NAME])["reference_volume_ml"]
+
+        return ls.KlotzPrior(fws, edp_mmhg, v0_fn=v0_fn)
+    if subject:
+        section = dict(emulator.subject_geometry)
+        v0 = ls.reference_volume_ml(section)
+    else:
+        v0 = ls.reference_volume_ml({"kind": "pca", "scores": [float(h) for h in geo.h], "resolution": resolution}) \
+            * float(geo.scale) ** 3
+    return ls.KlotzPrior(fws, edp_mmhg, v0_ml=v0)
+
+
+def _quantile_record(x) -> dict:
+    import numpy as np
+
+    x = np.asarray(x, float).reshape(-1)
+    return {"median": float(np.median(x)), "q05": float(np.quantile(x, 0.05)), "q95": float(np.quantile(x, 0.95))}
+
+
+def _states_records(row, forward, res) -> dict:
+    """summary.json's ``loaded_states`` (every state, measured and posterior LVV) and ``prior`` (--prior klotz)."""
+    import numpy as np
+
+    out = {}
+    post = res.idata.posterior
+    states = getattr(forward, "states", ())
+    if states:
+        eta = np.asarray(post["eta_states"])
+        rows = [{"edp_mmhg": float(row.edp_mmhg), "lvv_ml": float(row.y[0]), "strains": True, "primary": True,
+                 "posterior_lvv_ml": _quantile_record(np.asarray(post["eta"])[..., 0])}]
+        rows += [{"edp_mmhg": float(st.edp_mmhg), "lvv_ml": float(st.y[0]), "strains": bool(st.has_strains),
+                  "primary": False, "posterior_lvv_ml": _quantile_record(eta[..., k, 0])}
+                 for k, st in enumerate(states)]
+        out["loaded_states"] = sorted(rows, key=lambda d: d["edp_mmhg"])
+    klotz = getattr(forward, "klotz", None)
+    if klotz is not None:
+        v0 = np.asarray(post["klotz_v0"]).reshape(-1)
+        rec = klotz.record(measured_edv_ml=float(row.y[0]), v0_ml=float(np.median(v0)))
+        vols = np.asarray(post["klotz_volumes"])
+        rec["posterior_ml"] = {f"V{p:g}": _quantile_record(vols[..., i]) for i, p in enumerate(klotz.pressures_mmhg)}
+        rec["posterior_ml"]["V0"] = _quantile_record(v0)
+        out["prior"] = rec
+    return out

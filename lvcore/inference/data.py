@@ -22,9 +22,22 @@ MATLAB (``.mat``, read with :func:`scipy.io.loadmat`)
 Strains in AHA segments (or lvcore sectors rotated by an offset) are mapped
 onto lvcore's 6 x 4 grid with :mod:`lvcore.inference.segments`.
 
+Several loaded states per subject
+    Rows (CSV lines, JSON objects, .mat rows) with the same ``subject`` are the
+    subject's loaded states: each has its own ``edp_mmhg`` and ``lvv_ml``, and
+    strains or none (blank CSV cells, a JSON object without ``strains``, a row of
+    NaN in .mat: that state then informs through its volume only). Every state
+    needs its pressure, no two states of a subject may share one, at least one
+    state needs strains, and the geometric measures (a subject has one geometry)
+    must agree where they are repeated. The state with strains at the lowest
+    pressure is the subject's primary one (:attr:`MeasuredData.y`); the others
+    are :attr:`MeasuredData.states` (:class:`LoadedState`).
+
 Validation raises :class:`lvcore.exceptions.DataError` with what to fix:
 wrong column count, missing values, strains with the wrong sign convention
-or in percent, and volumes in the wrong unit (m³, mm³, litres).
+or in percent, volumes in the wrong unit (m³, mm³, litres), and for several
+loaded states a state without ``edp_mmhg`` or two states at one pressure
+(naming the row and the column).
 """
 from __future__ import annotations
 
@@ -51,6 +64,40 @@ OPTIONAL_COLUMNS = ("edp_mmhg", "reference_volume_ml", "wall_volume_ml", "long_a
                     "wall_volume_ml_sd", "long_axis_mm_sd")
 
 
+#: Most loaded states one subject may have (each adds an emulator evaluation to every sampler step).
+MAX_LOADED_STATES = 10
+#: Two loaded states of one subject closer than this in pressure (mmHg) are the same state given twice.
+DUPLICATE_EDP_TOL_MMHG = 1e-6
+
+
+@dataclass(frozen=True)
+class LoadedState:
+    """One further loaded state of a subject (beyond its primary one, :attr:`MeasuredData.y`).
+
+    Attributes
+    ----------
+    edp_mmhg : float
+        The state's end-diastolic (filling) pressure (mmHg).
+    y : ndarray, shape (25,)
+        ``[LVV (mL), strain_01 .. strain_24]``; the strains are NaN when the state has none (volume only).
+    where : str
+        The file row it came from (for messages).
+    """
+
+    edp_mmhg: float
+    y: np.ndarray
+    where: str = ""
+
+    @property
+    def lvv_ml(self) -> float:
+        return float(self.y[0])
+
+    @property
+    def has_strains(self) -> bool:
+        """True when the state's 24 strains were measured."""
+        return bool(np.all(np.isfinite(self.y[1:])))
+
+
 @dataclass(frozen=True)
 class MeasuredData:
     """One subject's measurements.
@@ -68,6 +115,9 @@ class MeasuredData:
     extras : dict
         The optional per-subject values of :data:`OPTIONAL_COLUMNS` that were given
         (``edp_mmhg``, ``reference_volume_ml``, ``wall_volume_ml``, ``long_axis_mm``).
+    states : tuple of LoadedState
+        The subject's other loaded states, by increasing pressure (empty for one state); ``y`` and
+        ``extras["edp_mmhg"]`` are the primary state's (the lowest pressure with strains).
     """
 
     y: np.ndarray
@@ -75,6 +125,17 @@ class MeasuredData:
     source: str = ""
     synthetic: bool = False
     extras: dict = field(default_factory=dict)
+    states: tuple = ()
+
+    @property
+    def n_states(self) -> int:
+        """Number of loaded states (1 + the further ones)."""
+        return 1 + len(self.states)
+
+    def all_states(self) -> list[LoadedState]:
+        """Every loaded state, the primary one included, by increasing pressure."""
+        primary = LoadedState(float(self.edp_mmhg) if self.edp_mmhg is not None else float("nan"), self.y, "primary")
+        return sorted((primary,) + tuple(self.states), key=lambda st: st.edp_mmhg)
 
     @property
     def edp_mmhg(self) -> float | None:
@@ -100,6 +161,32 @@ class MeasuredData:
         return self.y[1:]
 
 
+def check_volume(lvv, where: str = "measurements") -> float:
+    """Check one LV volume (mL): finite, positive, in mL (not m³, litres or mm³), plausible; return it.
+
+    Raises
+    ------
+    DataError
+        With the problem and the fix.
+    """
+    lvv = float(lvv)
+    if not np.isfinite(lvv):
+        raise DataError(f"{where}: missing or non-finite values in lvv_ml; fill them in or drop the row")
+    if lvv <= 0:
+        raise DataError(f"{where}: lvv_ml = {lvv:g} must be a positive volume in mL")
+    if lvv < 1e-3:
+        raise DataError(f"{where}: lvv_ml = {lvv:g} looks like cubic metres; multiply by 1e6 to give mL")
+    if lvv < 2.0:
+        raise DataError(f"{where}: lvv_ml = {lvv:g} looks like litres; multiply by 1000 to give mL")
+    if lvv > 1e4:
+        raise DataError(f"{where}: lvv_ml = {lvv:g} looks like mm³; divide by 1000 to give mL")
+    if not LVV_RANGE_ML[0] <= lvv <= LVV_RANGE_ML[1]:
+        raise DataError(
+            f"{where}: lvv_ml = {lvv:g} is outside the plausible range {LVV_RANGE_ML} mL; check the unit (mL)"
+        )
+    return lvv
+
+
 def validate_measurements(y, where: str = "measurements") -> np.ndarray:
     """Check one row ``[LVV (mL), 24 strains]`` and return it as float64.
 
@@ -119,19 +206,7 @@ def validate_measurements(y, where: str = "measurements") -> np.ndarray:
     bad = [OUTPUT_COLUMNS[i] for i in np.flatnonzero(~np.isfinite(arr))]
     if bad:
         raise DataError(f"{where}: missing or non-finite values in {', '.join(bad)}; fill them in or drop the row")
-    lvv = arr[0]
-    if lvv <= 0:
-        raise DataError(f"{where}: lvv_ml = {lvv:g} must be a positive volume in mL")
-    if lvv < 1e-3:
-        raise DataError(f"{where}: lvv_ml = {lvv:g} looks like cubic metres; multiply by 1e6 to give mL")
-    if lvv < 2.0:
-        raise DataError(f"{where}: lvv_ml = {lvv:g} looks like litres; multiply by 1000 to give mL")
-    if lvv > 1e4:
-        raise DataError(f"{where}: lvv_ml = {lvv:g} looks like mm³; divide by 1000 to give mL")
-    if not LVV_RANGE_ML[0] <= lvv <= LVV_RANGE_ML[1]:
-        raise DataError(
-            f"{where}: lvv_ml = {lvv:g} is outside the plausible range {LVV_RANGE_ML} mL; check the unit (mL)"
-        )
+    check_volume(arr[0], where)
     strains = arr[1:]
     if np.max(np.abs(strains)) > 1.0:
         raise DataError(
@@ -194,6 +269,95 @@ def _is_number(s) -> bool:
         return False
 
 
+@dataclass(frozen=True)
+class _Pending:
+    """One validated file row before the rows of a subject are joined into its loaded states."""
+
+    subject: str
+    y: np.ndarray
+    has_strains: bool
+    extras: dict
+    where: str
+    source: str
+    no_strain_message: str = ""
+
+
+def _pending_row(values, subject, where: str, source: str, extras: dict | None,
+                 no_strain_message: str = "") -> _Pending:
+    """Validate one row ``[LVV, 24 strains]``: a row whose strains are all empty (NaN) is a volume-only
+    loaded state (allowed only beside another state of the subject, :func:`_join_states`)."""
+    arr = np.asarray(values, dtype=float).reshape(-1)
+    if arr.size == N_OUTPUTS and np.all(np.isnan(arr[1:])):
+        check_volume(arr[0], where)
+        y, has = arr, False
+    else:
+        y, has = validate_measurements(arr, where=where), True
+    return _Pending(str(subject), y, has, check_extras(extras or {}, where), where, source, no_strain_message)
+
+
+def _join_states(rows: list[_Pending], name: str) -> list[MeasuredData]:
+    """One :class:`MeasuredData` per subject: rows with the same subject are its loaded states.
+
+    Raises
+    ------
+    DataError
+        Naming the row and the column: a state without ``edp_mmhg``, two states at one pressure, a subject
+        whose states all lack strains, geometric measures that differ between a subject's rows, more than
+        :data:`MAX_LOADED_STATES` states; a single row without strains.
+    """
+    groups: dict[str, list[_Pending]] = {}
+    for r in rows:
+        groups.setdefault(r.subject, []).append(r)
+    out = []
+    for subject, rs in groups.items():
+        shown = subject[:80]
+        if len(rs) == 1:
+            r = rs[0]
+            if not r.has_strains:
+                if r.no_strain_message:
+                    raise DataError(r.no_strain_message)
+                validate_measurements(r.y, r.where)  # raises: names the empty strain columns
+            out.append(MeasuredData(y=r.y, subject=subject, source=r.source, extras=r.extras))
+            continue
+        if len(rs) > MAX_LOADED_STATES:
+            raise DataError(f"{name}: subject '{shown}' has {len(rs)} rows (loaded states); at most "
+                            f"{MAX_LOADED_STATES} are allowed (lvcore.inference.data.MAX_LOADED_STATES)")
+        seen: dict[float, str] = {}
+        for r in rs:
+            edp = r.extras.get("edp_mmhg")
+            if edp is None:
+                raise DataError(f"{r.where}: column edp_mmhg is missing or empty, but subject '{shown}' has {len(rs)} "
+                                "rows: rows with one subject ID are its loaded states and each needs its end-diastolic "
+                                "pressure in mmHg (give edp_mmhg on every row, or give the rows different subject IDs)")
+            same = next((w for p, w in seen.items() if abs(p - edp) <= DUPLICATE_EDP_TOL_MMHG), None)
+            if same is not None:
+                raise DataError(f"{r.where}: column edp_mmhg = {edp:g} mmHg repeats the pressure of {same} for subject "
+                                f"'{shown}'; each loaded state needs its own pressure (drop the repeated measurement "
+                                "or average the two into one row)")
+            seen[edp] = r.where
+        merged: dict[str, tuple[float, str]] = {}
+        for r in rs:
+            for k, v in r.extras.items():
+                if k == "edp_mmhg":
+                    continue
+                if k in merged and abs(merged[k][0] - v) > 1e-9:
+                    raise DataError(f"{r.where}: column {k} = {v:g} differs from {merged[k][1]} ({merged[k][0]:g}) for "
+                                    f"subject '{shown}'; a subject has one geometry: give its measures on one row, or "
+                                    "the same on every row")
+                merged.setdefault(k, (v, r.where))
+        with_strains = [r for r in rs if r.has_strains]
+        if not with_strains:
+            raise DataError(f"{rs[0].where}: none of the {len(rs)} loaded states of subject '{shown}' has strains; "
+                            "give the strains of at least one state")
+        primary = min(with_strains, key=lambda r: r.extras["edp_mmhg"])
+        states = tuple(LoadedState(float(r.extras["edp_mmhg"]), r.y, r.where)
+                       for r in sorted(rs, key=lambda r: r.extras["edp_mmhg"]) if r is not primary)
+        extras = {k: v for k, (v, _) in merged.items()}
+        extras["edp_mmhg"] = float(primary.extras["edp_mmhg"])
+        out.append(MeasuredData(y=primary.y, subject=subject, source=primary.source, extras=extras, states=states))
+    return out
+
+
 def read_measured_csv(path) -> list[MeasuredData]:
     """Read and validate a measured-data CSV (see module docstring); one :class:`MeasuredData` per row."""
     path = Path(path)
@@ -239,24 +403,18 @@ def read_measured_csv(path) -> list[MeasuredData]:
             )
     if body.empty:
         raise DataError(f"{path.name}: header but no data rows")
-    out = []
-    seen: dict[str, int] = {}
+    pending = []
     for i, (_, row) in enumerate(body.iterrows()):
         line = i + (2 if has_header else 1)
         subject = str(row.iloc[subject_col]).strip() if subject_col is not None else f"row{i + 1}"
-        if subject in seen:
-            raise DataError(f"{path.name}: subject '{subject[:80]}' appears on line {seen[subject]} and line {line}; "
-                            "subject IDs must be unique (rename or drop one of the rows)")
-        seen[subject] = line
         values = pd.to_numeric(row.iloc[data_cols], errors="coerce").to_numpy(dtype=float)
         nonnum = [OUTPUT_COLUMNS[j] for j, v in enumerate(row.iloc[data_cols])
                   if not _is_number(v) and str(v).strip().lower() not in ("", "nan")]
         if nonnum:
             raise DataError(f"{path.name} line {line}: non-numeric values in {', '.join(nonnum)}")
-        y = validate_measurements(values, where=f"{path.name} line {line}")
-        extras = check_extras({name: row.iloc[i] for i, name in extra_cols.items()}, f"{path.name} line {line}")
-        out.append(MeasuredData(y=y, subject=subject, source=str(path), extras=extras))
-    return out
+        pending.append(_pending_row(values, subject, f"{path.name} line {line}", str(path),
+                                    {name: row.iloc[i] for i, name in extra_cols.items()}))
+    return _join_states(pending, path.name)
 
 
 # --------------------------------------------------------------------------- any format, any segment convention
@@ -277,7 +435,7 @@ def _resolve_convention(file_value, cli_value, where: str) -> str:
 
 
 def _row(lvv, strains, subject, where: str, convention: str, offset_deg: float, source: str,
-         extras: dict | None = None) -> MeasuredData:
+         extras: dict | None = None) -> _Pending:
     from lvcore.inference.segments import N_AHA, to_lvcore
 
     try:
@@ -288,20 +446,30 @@ def _row(lvv, strains, subject, where: str, convention: str, offset_deg: float, 
     if np.size(lvv) != 1:
         raise DataError(f"{where}: lvv_ml must be one number per subject, got {np.size(lvv)}")
     expected = {"lvcore": (N_OUTPUTS - 1,), "aha": (N_AHA, N_AHA + 1)}[convention]
+    if st.size == 0:  # a loaded state measured by its volume only (a JSON object without strains)
+        return _pending_row(np.r_[lv, np.full(N_OUTPUTS - 1, np.nan)], subject, where, source, extras,
+                            f"{where}: missing 'strains' (a list) or the keys {', '.join(_strain_keys(convention)[:4])}...")
     if st.size not in expected:
         raise DataError(f"{where}: {st.size} strains for '{convention}' segments; expected "
                         f"{' or '.join(str(e) for e in expected)}"
                         + (" (use --segments aha for AHA 16-segment data)" if st.size in (N_AHA, N_AHA + 1) else "")
                         + (" (use --segments lvcore for lvcore's 24 regions)" if st.size == N_OUTPUTS - 1 else ""))
+    if st.size and np.all(np.isnan(st)):  # a loaded state measured by its volume only
+        return _pending_row(np.r_[lv, np.full(N_OUTPUTS - 1, np.nan)], subject, where, source, extras,
+                            f"{where}: missing or non-finite strains; fill them in or drop the subject")
     if not np.all(np.isfinite(st)):
         raise DataError(f"{where}: missing or non-finite strains; fill them in or drop the subject")
-    y = validate_measurements(np.r_[lv, to_lvcore(st, convention, offset_deg)], where=where)
-    return MeasuredData(y=y, subject=str(subject), source=source, extras=check_extras(extras or {}, where))
+    return _pending_row(np.r_[lv, to_lvcore(st, convention, offset_deg)], subject, where, source, extras)
+
+
+def _strain_keys(convention: str) -> tuple:
+    """The per-segment strain keys (JSON) or columns (CSV) of a segment convention."""
+    from lvcore.inference.segments import AHA_COLUMNS
+
+    return tuple(OUTPUT_COLUMNS[1:]) if convention == "lvcore" else tuple(AHA_COLUMNS)
 
 
 def _read_json(path: Path, segments, offset_deg) -> list[MeasuredData]:
-    from lvcore.inference.segments import AHA_COLUMNS
-
     obj = limits.read_json_file(path, limits.MAX_MEASURED_BYTES, "measured-data file", DataError)
     if isinstance(obj, dict) and "subjects" in obj:
         obj = obj["subjects"]
@@ -323,14 +491,19 @@ def _read_json(path: Path, segments, offset_deg) -> list[MeasuredData]:
         if "strains" in it:
             st = it["strains"]
         else:
-            keys = OUTPUT_COLUMNS[1:] if conv == "lvcore" else AHA_COLUMNS
+            keys = _strain_keys(conv)
             missing = [k for k in keys if k not in it]
-            if missing:
+            if len(missing) == len(keys):
+                st = []  # no strains: a volume-only loaded state (refused for a subject's only state)
+            elif missing:
                 raise DataError(f"{where}: missing 'strains' (a list) or the keys {', '.join(missing[:4])}...")
-            st = [it[k] for k in keys]
+            else:
+                st = [it[k] for k in keys]
+        if st is None:
+            st = []
         out.append(_row(it["lvv_ml"], st, it.get("subject", f"row{i + 1}"), where, conv, off, str(path),
                         {k: it[k] for k in OPTIONAL_COLUMNS if k in it}))
-    return out
+    return _join_states(out, path.name)
 
 
 def _mat_string(v) -> str | None:
@@ -394,9 +567,9 @@ def _read_mat(path: Path, segments, offset_deg) -> list[MeasuredData]:
             if vals.size not in (1, n):
                 raise DataError(f"{path.name}: '{k}' has {vals.size} values but 'lvv_ml' has {n}; give one per subject")
             extras[k] = np.broadcast_to(vals, (n,))
-    return [_row(lvv[i], st[i], subjects[i], f"{path.name} subject {subjects[i]}", conv, off, str(path),
-                 {k: float(v[i]) for k, v in extras.items()})
-            for i in range(n)]
+    return _join_states([_row(lvv[i], st[i], subjects[i], f"{path.name} row {i + 1} (subject {subjects[i]})", conv,
+                              off, str(path), {k: float(v[i]) for k, v in extras.items()})
+                         for i in range(n)], path.name)
 
 
 def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
@@ -416,8 +589,11 @@ def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
             return rows
         from lvcore.inference.segments import rotate_lvcore
 
-        return [MeasuredData(y=np.r_[r.y[0], rotate_lvcore(r.y[1:], off)], subject=r.subject, source=r.source,
-                             extras=r.extras)
+        def rot(y):
+            return np.r_[y[0], rotate_lvcore(y[1:], off)] if np.all(np.isfinite(y[1:])) else y
+
+        return [MeasuredData(y=rot(r.y), subject=r.subject, source=r.source, extras=r.extras,
+                             states=tuple(LoadedState(s.edp_mmhg, rot(s.y), s.where) for s in r.states))
                 for r in rows]
     if not is_aha:
         raise DataError(f"{path.name}: --segments aha needs columns lvv_ml, aha_01 .. aha_16 (aha_17 optional)")
@@ -440,7 +616,7 @@ def _read_csv_any(path: Path, segments, offset_deg) -> list[MeasuredData]:
         name = str(row[subj]) if subj else f"row{i + 1}"
         out.append(_row(lvv, vals, name, f"{path.name} line {i + 2}", "aha", off, str(path),
                         {k: row[k] for k in OPTIONAL_COLUMNS if k in df.columns}))
-    return out
+    return _join_states(out, path.name)
 
 
 def read_measurements(path, segments: str | None = None, offset_deg: float | None = None) -> list[MeasuredData]:
@@ -476,14 +652,19 @@ def read_measurements(path, segments: str | None = None, offset_deg: float | Non
 
 
 def write_measured_csv(path, rows: list[MeasuredData]) -> Path:
-    """Write measurements in the layout :func:`read_measured_csv` reads (with a subject column)."""
+    """Write measurements in the layout :func:`read_measured_csv` reads (with a subject column; one row per
+    loaded state, with an ``edp_mmhg`` column when any row has a pressure)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    df = pd.DataFrame([r.y for r in rows], columns=list(OUTPUT_COLUMNS))
-    df.insert(0, "subject", [r.subject or f"row{i + 1}" for i, r in enumerate(rows)])
+    states = [(r.subject or f"row{i + 1}", s.edp_mmhg if r.states else r.edp_mmhg, s.y)
+              for i, r in enumerate(rows) for s in (r.all_states() if r.states else [LoadedState(0.0, r.y)])]
+    df = pd.DataFrame([y for *_, y in states], columns=list(OUTPUT_COLUMNS))
+    df.insert(0, "subject", [s for s, *_ in states])
+    if any(e is not None for _, e, _ in states):
+        df.insert(1, "edp_mmhg", [e for _, e, _ in states])
     df.to_csv(path, index=False, float_format="%.8g")
     return path
 
 
-__all__ = ["MeasuredData", "OPTIONAL_COLUMNS", "check_extras", "validate_measurements", "read_measured_csv", "read_measurements", "write_measured_csv",
+__all__ = ["MeasuredData", "LoadedState", "MAX_LOADED_STATES", "check_volume", "OPTIONAL_COLUMNS", "check_extras", "validate_measurements", "read_measured_csv", "read_measurements", "write_measured_csv",
            "LVV_RANGE_ML", "MEASUREMENT_SUFFIXES"]

@@ -19,6 +19,10 @@ Models
     ``v ~ N(0, 0.05^2)``, ``lambda ~ Gamma(2, 2)``,
     ``sigma_1^2, sigma_2^2 ~ IG(0.001, 0.001)``, ``c ~ U(0, pi)``, ``tau ~ U(4, 10)``.
 
+A forward model that carries further likelihood terms (several loaded states of the subject, the
+Klotz EDPVR prior: :class:`lvcore.inference.loaded_states.LoadedStatesForward`) adds them to
+each model through :func:`extra_terms`; the volume-only model reads only the states' volumes.
+
 With ``infer_angles=True`` the fibre angles get uniform priors
 ``alpha_endo ~ U(-90, 0)``, ``alpha_epi ~ U(0, 90)`` (degrees) and are passed
 to the forward model (which must accept them).
@@ -161,12 +165,21 @@ def _volume_term(eta0, y, sigma_v, forward=None):
     numpyro.sample("lvv_obs", dist.Normal(eta0, lvv_sd(eta0, sigma_v, forward)), obs=None if y is None else y[0])
 
 
+def extra_terms(forward, params, eta, sigma_v, sigma_s2=None, strain_offset=0.0) -> None:
+    """The forward model's further likelihood terms, if it carries any (``forward.likelihood_terms``: further
+    loaded states, the Klotz prior; :mod:`lvcore.inference.loaded_states`); nothing otherwise."""
+    terms = getattr(forward, "likelihood_terms", None)
+    if terms is not None:
+        terms(params, eta, sigma_v=sigma_v, sigma_s2=sigma_s2, strain_offset=strain_offset)
+
+
 def volume_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False):
     """Model (i): LVV only, ``y0 ~ N(eta0(theta), sigma_v^2)``; strains are ignored."""
     _check_y(y)
     params = _sample_params(infer_angles, forward)
     eta = numpyro.deterministic("eta", forward(params))
     _volume_term(eta[0], y, sigma_v, forward)
+    extra_terms(forward, params, eta, sigma_v)
 
 
 def iid_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False):
@@ -177,6 +190,7 @@ def iid_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: boo
     eta = numpyro.deterministic("eta", forward(params))
     _volume_term(eta[0], y, sigma_v, forward)
     numpyro.sample("strain_obs", strain_likelihood(eta[1:], sigma_s2, forward), obs=None if y is None else y[1:])
+    extra_terms(forward, params, eta, sigma_v, sigma_s2)
 
 
 def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
@@ -199,6 +213,7 @@ def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_ang
     _volume_term(eta[0], y, sigma_v, forward)
     numpyro.sample("strain_obs", strain_likelihood(eta[1:] + b + v, sigma_s2, forward),
                    obs=None if y is None else y[1:])
+    extra_terms(forward, params, eta, sigma_v, sigma_s2, b + v)
 
 
 MODELS = {"volume": volume_model, "iid": iid_model, "discrepancy": discrepancy_model}
@@ -249,5 +264,5 @@ __all__ = [
     "parameter_meaning", "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model", "representation_error", "lvv_sd",
-    "strain_likelihood",
+    "strain_likelihood", "extra_terms",
 ]
