@@ -8,7 +8,8 @@ Modules, in the order data flow through them: :mod:`~lvcore.inference.data`
 InferenceData), :mod:`~lvcore.inference.calibrate` (one calibration end to
 end, and every subject x model), :mod:`~lvcore.inference.coverage`
 (credible-interval coverage check); around them :mod:`~lvcore.inference.segments`
-(AHA <-> lvcore strain segments), :mod:`~lvcore.inference.guards` (what
+(AHA <-> lvcore strain segments), :mod:`~lvcore.inference.loaded_states` (further
+loaded states of a subject and the Klotz EDPVR prior), :mod:`~lvcore.inference.guards` (what
 ``lvcore calibrate`` refuses) and :mod:`~lvcore.inference.plausibility`
 (posterior-predictive check of the data). One calibration is
 ``lvcore.inference.calibrate.calibrate`` (the name ``calibrate`` here is the
@@ -25,7 +26,8 @@ _EXPORTS = {
     "write_result": "calibrate",
     "CoverageResult": "coverage", "coverage_study": "coverage", "simulate_data": "coverage",
     "MeasuredData": "data", "read_measured_csv": "data", "read_measurements": "data",
-    "validate_measurements": "data", "write_measured_csv": "data",
+    "validate_measurements": "data", "write_measured_csv": "data", "LoadedState": "data",
+    "LoadedStatesForward": "loaded_states", "StateTerm": "loaded_states", "KlotzPrior": "loaded_states",
     "aha_to_lvcore": "segments", "lvcore_to_aha": "segments", "to_lvcore": "segments",
     "GeometrySource": "guards", "resolve_geometry": "guards", "check_conditions": "guards",
     "check_inputs_in_box": "guards",
