@@ -16,6 +16,7 @@ MODULES = (
     "lvcore.emulator.io",
     "lvcore.emulator.model",
     "lvcore.emulator.forward",
+    "lvcore.inference.calibrate",
     "lvcore.studies.sbc",
     "lvcore.studies.fibre_discrepancy",
     "lvcore.studies.operators",
