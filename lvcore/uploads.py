@@ -118,10 +118,13 @@ class UploadSession:
         self.cleanup()
 
 
-def _display(name: str) -> str:
+def display_name(name: str) -> str:
     """The user's file name as shown in messages (no folders, printable, at most 80 characters)."""
     base = re.split(r"[\\/]", str(name))[-1]
     return "".join(c if c.isprintable() else "?" for c in base)[:80] or "upload"
+
+
+_display = display_name
 
 
 def session_uploads(state=None, key: str = "_lvcore_uploads") -> UploadSession:
@@ -174,4 +177,5 @@ def fit_segmentation(kind: str, files) -> dict:
 UPLOAD_UNITS = "the file's units (uploads here are read as mm: convert the file to mm)"
 
 
-__all__ = ["MAX_UPLOAD_MB", "UploadError", "UploadSession", "session_uploads", "safe_name", "fit_segmentation"]
+__all__ = ["MAX_UPLOAD_MB", "UploadError", "UploadSession", "session_uploads", "safe_name", "display_name",
+           "fit_segmentation"]

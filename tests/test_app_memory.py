@@ -117,6 +117,21 @@ def test_setup_process_economises_only_under_a_cap():
         assert _result(_child(code, cap=None, env=env))["pool"] is None
 
 
+def test_lvcore_app_starts_the_server_with_fewer_arenas_under_a_cap():
+    """glibc reads MALLOC_ARENA_MAX at process start, so `lvcore app` sets it for the server it becomes (the
+    arenas of Streamlit's own threads are made before the entry script's mallopt); a user's value is kept."""
+    code = """
+        import json
+        from lvcore.app import memory
+        print("RESULT " + json.dumps([memory.launch_environment({}), memory.launch_environment({"MALLOC_ARENA_MAX": "4"})]))
+    """
+    lean, kept = _result(_child(code))
+    assert lean == {"MALLOC_ARENA_MAX": "2", "ARROW_DEFAULT_MEMORY_POOL": "system"}
+    assert kept["MALLOC_ARENA_MAX"] == "4"
+    if resource.getrlimit(resource.RLIMIT_AS)[0] == resource.RLIM_INFINITY:
+        assert memory.launch_environment({}) == {}
+
+
 # --------------------------------------------------------------------------- the warm-up's memory gate
 def _short(headroom_gib: float):
     gib = memory.GiB

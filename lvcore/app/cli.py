@@ -35,7 +35,10 @@ def streamlit_command(port: int | None = None, extra=()) -> list[str]:
 
 
 def run_app(args) -> int:
+    from lvcore.app.memory import launch_environment
+
     cmd = streamlit_command(args.port, getattr(args, "extra", ()))
+    os.environ.update(launch_environment())  # under ulimit -v: fewer malloc arenas, Arrow's system allocator
     sys.stdout.flush()
     if os.name != "posix":  # pragma: no cover (Windows)
         return subprocess.call(cmd)

@@ -7,8 +7,8 @@ memory!``; ``std::bad_alloc``) aborts the whole server, every user's session
 with it. Python cannot catch that, so the app keeps its *address space*, not
 only its resident memory, well below the limit:
 
-* :func:`economise` (called by :func:`lvcore.app.process.setup_process` when a
-  limit is set) drops the two largest reservations that hold no data: glibc's
+* :func:`launch_environment` (``lvcore app``) and :func:`economise` (called by
+  :func:`lvcore.app.process.setup_process` when a limit is set) drop the two largest reservations that hold no data: glibc's
   per-thread malloc arenas (64 MB each, up to 8 per core; capped at
   :data:`LEAN_MALLOC_ARENAS`) and the 1 GB that Arrow's mimalloc pool reserves
   on the first table Streamlit sends (Arrow's ``system`` pool instead).
@@ -148,6 +148,20 @@ def headroom_bytes() -> float:
     return state().headroom
 
 
+def launch_environment(env=None, arenas: int = LEAN_MALLOC_ARENAS) -> dict:
+    """The environment to start the app server in: under an address-space limit, ``MALLOC_ARENA_MAX`` and Arrow's
+    ``system`` pool are set (values already there are kept). ``lvcore app`` uses it.
+
+    glibc reads ``MALLOC_ARENA_MAX`` when the process starts, so it also caps the arenas of the threads Streamlit
+    starts before the entry script runs, which :func:`economise` (``mallopt``, later) cannot take back.
+    """
+    env = dict(os.environ if env is None else env)
+    if address_space_limit() != float("inf"):
+        env.setdefault("MALLOC_ARENA_MAX", str(int(arenas)))
+        env.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
+    return env
+
+
 def economise(arenas: int = LEAN_MALLOC_ARENAS) -> list[str]:
     """Drop the address-space reservations that hold no data; returns what was changed (for the log).
 
@@ -178,4 +192,4 @@ def economise(arenas: int = LEAN_MALLOC_ARENAS) -> list[str]:
 
 
 __all__ = ["LEAN_MALLOC_ARENAS", "MemoryState", "address_space_limit", "available_bytes", "state",
-           "headroom_bytes", "economise"]
+           "headroom_bytes", "launch_environment", "economise"]
