@@ -218,7 +218,7 @@ def test_a_short_run_records_every_state(tmp_path, geometry):
 
     p = _csv(tmp_path, [f"S1,8,150,{STRAINS},75", f"S1,12,165,{BLANK},"], header=HEADER + ",reference_volume_ml")
     code = main(["calibrate", "--data", str(p), "--geometry", geometry, "--emulator", "angles", "--chains", "2",
-                 "--warmup", "30", "--samples", "30", "--derived-draws", "0", "--out", str(tmp_path / "o")]
+                 "--warmup", "15", "--samples", "15", "--derived-draws", "0", "--out", str(tmp_path / "o")]
                 + (["--geometry-units", "mm"] if geometry == "mean" else []))
     assert code in (0, 1, 4)
     (rec,) = json.loads((tmp_path / "o" / "summary.json").read_text())
