@@ -36,7 +36,7 @@ import functools
 import math
 import time
 from collections import abc
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -58,21 +58,31 @@ class ChainTaskError(RuntimeError):
 
 @dataclass(frozen=True)
 class Seed:
-    """A converged state offered as a warm start: its scaled coordinates and the solver state."""
+    """A converged state offered as a warm start: its scaled coordinates, the solver state and (optionally)
+    the key of the point it was solved for (reported as :attr:`ChainRow.seed` of the rows it starts)."""
 
     unit: np.ndarray
     state: Any
+    key: int | None = None
 
 
 @dataclass(frozen=True)
 class ChainRow:
-    """One solved point of a task: its key (row index), scaled coordinates, result and state (None if failed)."""
+    """One solved point of a task: its key (row index), scaled coordinates, result and state (None if failed).
+
+    ``warm``: it was started from a converged state; ``seed``: the key of that state's point (the nearest
+    of the predictor's neighbours; None when cold or the seed had no key). ``chain`` and ``position``: the
+    chain of :func:`run_chains` that solved it and its place in that chain (-1 outside ``run_chains``).
+    """
 
     key: int
     unit: np.ndarray
     result: Any
     state: Any = None
     warm: bool = False
+    seed: int | None = None
+    chain: int = -1
+    position: int = -1
 
 
 def continuation_order(U: np.ndarray, k: int = 10) -> np.ndarray:
@@ -309,24 +319,30 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     instead of 5.33 iterations, 5.70 instead of 6.40 residuals, 1.07 instead of 0.99 tangents per
     solve; 5–6 % less time).
     """
+    return _predicted(unit, candidates, k)[0]
+
+
+def _predicted(unit: np.ndarray, candidates: Sequence[Seed], k: int | None = None):
+    """:func:`predicted_state` and the index (into ``candidates``) of the nearest candidate, its base (None: none)."""
     if not candidates:
-        return None
+        return None, None
     pool = candidates if isinstance(candidates, SeedPool) else SeedPool(candidates)
     dim = np.size(unit)
     n_quad = 2 * (1 + dim + dim * (dim + 1) // 2)
     quadratic = k is None and n_quad <= min(len(pool), QUADRATIC_MAX_NEIGHBOURS)
     n_near = min(len(pool), QUADRATIC_MAX_NEIGHBOURS) if quadratic else (k or max(PREDICTOR_NEIGHBOURS, dim + 4))
     near = _by_distance(unit, pool.units)[:n_near]
-    base = pool[int(near[0])].state
+    nearest = int(near[0])
+    base = pool[nearest].state
     usable = near[pool.solved[near]]
     if len(usable) < dim + 2 or usable[0] != near[0]:
-        return base
+        return base, nearest
     quadratic = quadratic and len(usable) == len(near)
     X = pool.units[usable[1:]] - pool.units[usable[0]]  # (m, d)
     step = np.asarray(unit, dtype=float) - pool.units[usable[0]]
     radius = np.max(np.linalg.norm(X, axis=1))
     if np.linalg.norm(step) > radius:
-        return base  # beyond the neighbours: an extrapolated fit can be worse than the nearest state
+        return base, nearest  # beyond the neighbours: an extrapolated fit can be worse than the nearest state
     # the fit evaluated at ``unit`` is a fixed combination of the neighbours' offsets from the nearest
     # state, Σ_j w_j (y_j − y_0): its weights come from the small design matrix (the pseudo-inverse of the
     # plane's, the spline's system), applied to the states without forming the offsets (~1.6 ms less per
@@ -342,11 +358,11 @@ def predicted_state(unit: np.ndarray, candidates: Sequence[Seed], k: int | None 
     if not quadratic:  # a sparse neighbourhood (a sweep): chord iterations on the newest factorised tangent
         tangent = base.tangent or next((c.state.tangent for c in reversed(pool)
                                         if getattr(c.state, "tangent", None)), None)
-    return base._replace(u=u, p=p.reshape(np.shape(base.p)), tangent=tangent)
+    return base._replace(u=u, p=p.reshape(np.shape(base.p)), tangent=tangent), nearest
 
 
 def solve_in_order(keys: Sequence[int], units: np.ndarray, seeds: Sequence[Seed],
-                   solve: Callable[[int, Any], tuple[Any, Any]]) -> list[ChainRow]:
+                   solve: Callable[..., tuple[Any, Any]], *, pass_seed: bool = False) -> list[ChainRow]:
     """Solve ``keys`` in the given order, each warm-started from the nearest converged state so far
     (moved by the linear predictor of :func:`predicted_state` where the states allow it).
 
@@ -362,20 +378,23 @@ def solve_in_order(keys: Sequence[int], units: np.ndarray, seeds: Sequence[Seed]
         ``solve(key, initial) -> (result, state)``; ``initial`` is None (cold) or a
         state; ``state`` is None when the point did not converge (it is then
         never used as a start).
+    pass_seed : bool
+        Call ``solve(key, initial, seed)`` instead, ``seed`` the key of the state ``initial`` was
+        predicted from (:attr:`ChainRow.seed`; None when cold or the seed has no key).
     """
     pool = SeedPool(seeds)
     out = []
     for key, u in zip(keys, np.asarray(units, dtype=float)):
-        initial = predicted_state(u, pool)
-        result, state = solve(int(key), initial)
+        initial, nearest = _predicted(u, pool)
+        seed = None if initial is None or nearest is None else pool[nearest].key
+        result, state = solve(int(key), initial, seed) if pass_seed else solve(int(key), initial)
         if state is not None:
             if pool:  # only the newest state keeps its factorised tangent (they are large)
-                pool[-1] = Seed(pool[-1].unit, light_state(pool[-1].state))
-            pool.append(Seed(u, state))
-        out.append(ChainRow(int(key), u, result, state, initial is not None))
+                pool[-1] = replace(pool[-1], state=light_state(pool[-1].state))
+            pool.append(Seed(u, state, int(key)))
+        out.append(ChainRow(int(key), u, result, state, initial is not None, seed))
     # the caller keeps these states: only the last one keeps its tangent
-    return [r if i == len(out) - 1 else ChainRow(r.key, r.unit, r.result, light_state(r.state), r.warm)
-            for i, r in enumerate(out)]
+    return [r if i == len(out) - 1 else replace(r, state=light_state(r.state)) for i, r in enumerate(out)]
 
 
 def light_state(state):
@@ -391,9 +410,12 @@ def light_state(state):
 @dataclass
 class _Chain:
     rows: list[int]                 # positions (into the batch) still to submit, in order
+    index: int = 0                  # the chain's number in this run (a split-off chain gets the next one)
+    taken: int = 0                  # points submitted so far: the place in the chain of the next one
 
     def take(self, n: int) -> list[int]:
         head, self.rows = self.rows[:n], self.rows[n:]
+        self.taken += len(head)
         return head
 
 
@@ -419,7 +441,8 @@ def plan_chains(U: np.ndarray, workers: int) -> list[list[int]]:
 
 def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U: np.ndarray, *,
                workers: int, on_rows: Callable[[list[ChainRow]], None], chunk: int = DEFAULT_CHUNK,
-               seeds: Sequence[Seed] = (), kept_states: int = DEFAULT_KEPT_STATES) -> ChainStats:
+               seeds: Sequence[Seed] = (), kept_states: int = DEFAULT_KEPT_STATES,
+               on_returned: Callable[[list[ChainRow]], None] | None = None) -> ChainStats:
     """Run the points of ``U`` as continuation chains on ``executor``.
 
     Parameters
@@ -442,6 +465,9 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
         States known before the run (e.g. from earlier batches).
     kept_states : int
         Converged states the driver keeps to seed chunks.
+    on_returned : callable, optional
+        Receives every returned chunk's rows before the chain's next chunk is submitted (quick
+        bookkeeping that the next chunk's submission reads; recording belongs in ``on_rows``).
 
     Raises
     ------
@@ -453,7 +479,7 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
     stats = ChainStats()
     if U.shape[0] == 0:
         return stats
-    chains = [_Chain(c) for c in plan_chains(U, workers)]
+    chains = [_Chain(c, i) for i, c in enumerate(plan_chains(U, workers))]
     stats.chains = len(chains)
     kept: list[Seed] = list(seeds)[-kept_states:]
     chunk = max(1, int(chunk))
@@ -465,30 +491,34 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
         d = np.min(np.linalg.norm(cu[:, None, :] - U[positions][None, :, :], axis=2), axis=1)
         return [kept[i] for i in np.argsort(d)[:SEEDS_PER_CHUNK]]
 
-    inflight: dict[Any, _Chain] = {}
+    inflight: dict[Any, tuple[_Chain, int]] = {}
 
     def launch(ch: _Chain) -> None:
+        first = ch.taken
         positions = ch.take(chunk)
-        inflight[submit_chunk(positions, seeds_for(positions))] = ch
+        inflight[submit_chunk(positions, seeds_for(positions))] = (ch, first)
         stats.chunks += 1
 
     for ch in chains:
         launch(ch)
     while inflight:
         fut = next(iter(executor.as_completed(list(inflight))))
-        ch = inflight.pop(fut)
+        ch, first = inflight.pop(fut)
         try:
             rows = fut.result()
         except Exception as err:  # a dead worker or a broken pool: the chunks in flight are lost
             raise ChainTaskError(f"{type(err).__name__}: {err}") from err
+        rows = [replace(r, chain=ch.index, position=first + j) for j, r in enumerate(rows)]
+        if on_returned is not None:
+            on_returned(rows)
         for r in rows:
             if r.state is not None:
-                kept.append(Seed(U[r.key], r.state))
+                kept.append(Seed(U[r.key], r.state, r.key))
             stats.warm += bool(r.warm)
             stats.cold += not r.warm
         del kept[:-kept_states]
         for i in range(max(0, len(kept) - len(rows) - 8), max(0, len(kept) - 8)):  # few tangents kept in memory
-            kept[i] = Seed(kept[i].unit, light_state(kept[i].state))
+            kept[i] = replace(kept[i], state=light_state(kept[i].state))
         if ch.rows:
             launch(ch)
         else:
@@ -496,7 +526,7 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
             longest = max(chains, key=lambda c: len(c.rows))
             if len(longest.rows) >= 2 * chunk:
                 half = len(longest.rows) // 2
-                new = _Chain(longest.rows[half:])
+                new = _Chain(longest.rows[half:], len(chains))
                 longest.rows = longest.rows[:half]
                 chains.append(new)
                 stats.splits += 1

@@ -349,3 +349,82 @@ def test_a_store_declaring_a_billion_rows_is_refused_before_reading(tmp_path):
     assert p.stat().st_size < 100_000
     with pytest.raises(CampaignError, match="1,000,000,000 rows"):
         campaign_status(p)
+
+
+def _version_1(path):
+    """Turn a store into the layout of format version 1 (no provenance datasets)."""
+    import h5py
+
+    from lvcore.campaigns.store import PROVENANCE
+
+    with h5py.File(path, "r+") as f:
+        for key in PROVENANCE:
+            del f[key]
+        f.attrs["format_version"] = 1
+
+
+def test_a_version_1_store_is_read_and_migrated_to_version_2_on_resume(tmp_path):
+    design = make_design(get_space("material"), "sobol", 8, seed=5)
+    path = tmp_path / "s.h5"
+    with CampaignStore.create(path, design, forward=DOUBLE, resolution="fast") as store:
+        for i in range(3):
+            store.record(RowResult(i, closed_form(*design.points[i]), True, seconds=0.1, worker="w"))
+    _version_1(path)
+    old = read_store(path)  # read as it is: provenance "not recorded"
+    assert old.attrs["format_version"] == 1 and np.all(old.run == -1) and np.all(old.seed_row == -1)
+    assert campaign_status(path).converged == 3
+    resume_campaign(path, executor=InlineExecutor(), progress=False)
+    new = read_store(path)
+    assert new.attrs["format_version"] == 2 and new.attrs["migrated_from_version"] == 1
+    assert np.all(new.state == CONVERGED)
+    np.testing.assert_array_equal(new.outputs[:3], old.outputs[:3])
+    np.testing.assert_array_equal(new.finished_at[:3], old.finished_at[:3])
+    # the rows of the version-1 run keep "not recorded"; the resume is run 1, chained
+    np.testing.assert_array_equal(new.run, [-1] * 3 + [1] * 5)
+    assert np.all(new.chain[3:] >= 0) and np.all(new.chain[:3] == -1)
+    assert not (tmp_path / "s.h5.migrating").exists()
+
+
+def test_a_store_of_a_newer_format_version_is_refused_with_a_message(tmp_path):
+    import h5py
+
+    design = make_design(get_space("material"), "sobol", 4, seed=5)
+    path = tmp_path / "s.h5"
+    CampaignStore.create(path, design, forward=DOUBLE, resolution="fast").close()
+    with h5py.File(path, "r+") as f:
+        f.attrs["format_version"] = 3
+    with pytest.raises(CampaignError, match="format version 3 is newer than this lvcore"):
+        read_store(path)
+    with h5py.File(path, "r+") as f:
+        f.attrs["format_version"] = "two"
+    with pytest.raises(CampaignError, match="'format_version' is 'two'"):
+        read_store(path)
+
+
+def test_a_chained_run_records_its_order_and_seeds(tmp_path):
+    from lvcore.campaigns.store import START_COLD, START_WARM
+
+    design = make_design(get_space("material"), "sobol", 30, seed=1)
+    path = tmp_path / "s.h5"
+
+    class TwoWorkers(InlineExecutor):
+        workers = 2
+
+    run_campaign(design, path, executor=TwoWorkers(), forward=DOUBLE, progress=False)
+    s = read_store(path)
+    assert np.all(s.run == 0) and set(s.chain.tolist()) == {0, 1, 2, 3}  # two chains per worker
+    # each chain's places are 0..len-1, and its first row (no seeds yet) is cold, the others warm from a row
+    # solved before them
+    for ch in range(4):
+        rows = np.flatnonzero(s.chain == ch)
+        assert sorted(s.chain_position[rows].tolist()) == list(range(rows.size))
+    first = s.chain_position == 0
+    assert np.all(s.start[first] == START_COLD) and np.all(s.seed_row[first] == -1)
+    assert np.all(s.start[~first] == START_WARM)
+    rank = {int(i): n for n, i in enumerate(s.solve_order())}
+    for i in np.flatnonzero(~first):
+        j = int(s.seed_row[i])
+        assert 0 <= j < 30 and j != i
+        if s.chain[j] == s.chain[i]:
+            assert rank[j] < rank[i]
+    assert "warm-started 26, re-solved cold 0" in campaign_status(path).format()

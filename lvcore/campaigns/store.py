@@ -19,7 +19,25 @@ dataset                   dtype          meaning
 ``record_count``          (n,) i4        1 once the row is committed (also when a failed row
                                          is run again); anything else is reported by
                                          ``StoreContents.check``
+``run``                   (n,) i2        the run that recorded the row: 0 ``campaign run``,
+                                         k the k-th ``campaign resume``; -1 pending
+``chain``                 (n,) i4        the continuation chain of the row in its run
+                                         (:mod:`lvcore.chains`); -1 solved on its own (cold)
+``chain_position``        (n,) i4        its place in that chain (0 first): with ``run`` and
+                                         ``chain``, the order the rows were solved in
+``seed_row``              (n,) i8        the row whose converged state warm-started this one
+                                         (the nearest of the predictor's neighbours); -1 none
+``start``                 (n,) i1        0 cold, 1 warm from ``seed_row``, 2 warm start
+                                         discarded and re-solved cold (its converged state
+                                         was not a stable equilibrium: see
+                                         :func:`lvcore.campaigns.runner.execute_warm_row`)
 ========================  =============  =======================================
+
+The last five datasets came with format version 2. A version-1 store is read as
+it is (those fields read -1, ``start`` 0: not recorded); opening one for writing
+(``campaign resume``) first migrates it to version 2 in a copy that replaces the
+file only once complete (the rows already recorded keep "not recorded"). A
+store of a newer version than this lvcore knows is refused with a message.
 
 File attributes: ``format`` (``"lvcore-campaign"``), ``format_version``,
 ``space`` (JSON), ``input_names``, ``output_names``, ``design_method``,
@@ -58,8 +76,14 @@ from lvcore.exceptions import CampaignError
 from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
 
 FORMAT = "lvcore-campaign"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 PENDING, CONVERGED, FAILED = 0, 1, 2
+#: ``start`` codes: how a row's recorded solve began.
+START_COLD, START_WARM, START_RESOLVED = 0, 1, 2
+START_NAMES = {START_COLD: "cold", START_WARM: "warm", START_RESOLVED: "re-solved cold"}
+#: Datasets added by format version 2, with their dtype and the value of a row without them.
+PROVENANCE = {"run": ("i2", -1), "chain": ("i4", -1), "chain_position": ("i4", -1), "seed_row": ("i8", -1),
+              "start": ("i1", START_COLD)}
 STATE_NAMES = {PENDING: "pending", CONVERGED: "converged", FAILED: "failed"}
 REASON_LEN, VERSION_LEN, WORKER_LEN = 256, 32, 64
 
@@ -89,6 +113,15 @@ class RowResult:
         ``lvcore.__version__`` in the worker.
     worker : str
         ``host:pid`` of the worker.
+    chain, chain_position : int
+        The continuation chain of the row and its place in it (-1: solved on its own).
+    seed_row : int
+        The store row whose converged state warm-started this one (-1: none).
+    start : int
+        :data:`START_COLD`, :data:`START_WARM` or :data:`START_RESOLVED` (a warm result discarded
+        for a cold solve).
+    resolve_reason : str
+        Why a warm-started row was solved again cold (not stored; the driver passes it on to the chains).
     """
 
     index: int
@@ -98,6 +131,11 @@ class RowResult:
     seconds: float = float("nan")
     version: str = lvcore.__version__
     worker: str = ""
+    chain: int = -1
+    chain_position: int = -1
+    seed_row: int = -1
+    start: int = START_COLD
+    resolve_reason: str = ""
 
 
 def _value(v) -> str:
@@ -123,6 +161,22 @@ class StoreContents:
     finished_at: np.ndarray
     record_count: np.ndarray
     attrs: dict
+    #: Provenance (format version 2; -1 / 0 where not recorded): see the module table.
+    run: np.ndarray | None = None
+    chain: np.ndarray | None = None
+    chain_position: np.ndarray | None = None
+    seed_row: np.ndarray | None = None
+    start: np.ndarray | None = None
+
+    def solve_order(self) -> np.ndarray:
+        """Committed rows in the order they were solved: by run, chain and place in the chain (rows without
+        provenance last, by index)."""
+        done = np.flatnonzero(self.state != PENDING)
+        if self.run is None:
+            return done
+        known = done[self.run[done] >= 0]
+        key = np.lexsort((self.chain_position[known], self.chain[known], self.run[known]))
+        return np.concatenate([known[key], done[self.run[done] < 0]])
 
     @property
     def converged(self) -> np.ndarray:
@@ -203,6 +257,9 @@ class StoreSummary:
     forward: str
     inconsistent: int = 0
     problems: tuple[str, ...] = ()
+    #: Committed rows started warm / re-solved cold after a discarded warm start (format version 2 stores).
+    warm: int = 0
+    resolved: int = 0
 
     def format(self, all_problems: bool = False) -> str:
         """Human-readable summary; the inconsistent rows are listed (the first 10 unless ``all_problems``)."""
@@ -220,6 +277,9 @@ class StoreSummary:
             lines += [f"    {p}" for p in shown]
             if len(shown) < self.inconsistent:
                 lines.append(f"    ... and {self.inconsistent - len(shown)} more (lvcore campaign status --check)")
+        if self.warm or self.resolved:
+            lines.append(f"  warm-started {self.warm}, re-solved cold {self.resolved} (a warm start that reached an "
+                         "unstable equilibrium)")
         if np.isfinite(self.mean_seconds):
             lines.append(f"  mean solve time {self.mean_seconds:.3f} s")
         if self.versions:
@@ -250,6 +310,7 @@ class CampaignStore:
         self.path = Path(path)
         self._h5 = h5
         self._lock_fd = lock_fd
+        self._run: int | None = None  # the number of this writing session's run (set on the first record)
 
     # ----- life cycle -------------------------------------------------------
     @classmethod
@@ -294,6 +355,7 @@ class CampaignStore:
                 f.create_dataset("worker", data=np.zeros(n, dtype=f"S{WORKER_LEN}"))
                 f.create_dataset("finished_at", data=np.full(n, np.nan))
                 f.create_dataset("record_count", data=np.zeros(n, dtype="i4"))
+                _add_provenance(f, n)
             os.replace(tmp, path)
         except BaseException:
             tmp.unlink(missing_ok=True)
@@ -308,6 +370,12 @@ class CampaignStore:
 
         path = limits.check_regular_file(path, float("inf"), "store", CampaignError)
         lock_fd = cls._lock(path) if mode == "r+" else None
+        if mode == "r+":
+            try:
+                _migrate(path)
+            except BaseException:
+                cls._unlock(lock_fd)
+                raise
         try:
             h5 = h5py.File(path, mode, locking=False) if mode == "r" else h5py.File(path, mode)
         except (OSError, RuntimeError, ValueError) as err:
@@ -455,6 +523,13 @@ class CampaignStore:
         # a committed row is recorded exactly once: a row left half-written by a killed run, or a failed
         # row run again, is committed anew (record_count 1); any other value means the store was edited
         f["record_count"][sel] = np.ones(len(rows), dtype="i4")
+        if "start" in f:  # provenance (format version 2)
+            if self._run is None:
+                runs = f["run"][...][state != PENDING]
+                self._run = int(runs.max()) + 1 if runs.size and runs.max() >= 0 else int(bool(runs.size))
+            f["run"][sel] = np.full(len(rows), self._run, dtype="i2")
+            for key in ("chain", "chain_position", "seed_row", "start"):
+                f[key][sel] = np.array([int(getattr(r[4], key)) for r in rows], dtype=f[key].dtype)
         f.flush()
         f["state"][sel] = np.array([CONVERGED if r[2] else FAILED for r in rows], dtype=f["state"].dtype)  # the commit
         f.flush()
@@ -481,6 +556,8 @@ class CampaignStore:
             finished_at=f["finished_at"][...],
             record_count=f["record_count"][...],
             attrs=self.attrs,
+            **{k: (f[k][...] if k in f else np.full(f["state"].shape[0], fill, dtype=dt))
+               for k, (dt, fill) in PROVENANCE.items()},
         )
 
     def summary(self) -> StoreSummary:
@@ -505,6 +582,8 @@ class CampaignStore:
             forward=str(c.attrs.get("forward", "")),
             inconsistent=int(c.inconsistent.sum()),
             problems=c.check(limit=1000),
+            warm=int(np.sum(done & (c.start == START_WARM))),
+            resolved=int(np.sum(done & (c.start == START_RESOLVED))),
         )
 
 
@@ -518,6 +597,53 @@ _DATASETS = {"inputs": None, "outputs": (N_OUTPUTS,), "state": (), "seconds": ()
              "worker": (), "finished_at": (), "record_count": ()}
 
 
+def _format_version(h5: h5py.File):
+    """The store's ``format_version`` as an int (1 where missing), or its raw value when it is not an integer."""
+    v = h5.attrs.get("format_version", 1)
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+        return v
+    return int(v)
+
+
+def _add_provenance(f: h5py.File, n: int) -> None:
+    """Create the version-2 datasets (every row "not recorded") and set ``format_version`` to 2."""
+    for key, (dtype, fill) in PROVENANCE.items():
+        f.create_dataset(key, data=np.full(n, fill, dtype=dtype))
+    f.attrs["format_version"] = FORMAT_VERSION
+
+
+def _migrate(path: Path) -> None:
+    """Bring a version-1 store up to version 2 before it is written (the caller holds its lock).
+
+    The new datasets are added to a copy, which replaces the store only once it is complete and
+    flushed: a process killed meanwhile leaves the version-1 store as it was (and a stale copy,
+    replaced next time). Anything that is not a readable version-1 store is left to :meth:`open`.
+    """
+    try:
+        with h5py.File(path, "r") as h5:
+            if _layout_problem(h5) is not None or _format_version(h5) != 1 or "start" in h5:
+                return
+            n = int(h5["state"].shape[0])
+    except (OSError, RuntimeError, ValueError, KeyError):
+        return
+    tmp = path.with_name(path.name + ".migrating")
+    try:
+        import shutil
+
+        shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "r+") as f:
+            _add_provenance(f, n)
+            f.attrs["migrated_from_version"] = 1
+            f.attrs["migrated_at"] = time.time()
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise CampaignError(f"store '{path}' has format version 1 and could not be migrated to version "
+                            f"{FORMAT_VERSION} for writing ({err}); it is unchanged and can still be read") from None
+
+
 def _layout_problem(h5: h5py.File) -> str | None:
     """What is wrong with the layout of an opened store, or None if it is a store (format, attributes, datasets)."""
     fmt = h5.attrs.get("format")
@@ -525,6 +651,12 @@ def _layout_problem(h5: h5py.File) -> str | None:
         fmt = fmt.decode("utf-8", "replace")
     if fmt != FORMAT:
         return f"format attribute {str(fmt)[:60]!r}, expected {FORMAT!r}"
+    version = _format_version(h5)
+    if not isinstance(version, int) or version < 1:
+        return f"attribute 'format_version' is {str(version)[:60]!r}, not a version number (1 or {FORMAT_VERSION})"
+    if version > FORMAT_VERSION:
+        return (f"its format version {version} is newer than this lvcore ({lvcore.__version__}) reads "
+                f"(up to {FORMAT_VERSION}); upgrade lvcore to read it")
     for key in ("space", "design_seed", "design_method"):
         if key not in h5.attrs:
             return f"attribute '{key}' is missing"
@@ -552,6 +684,12 @@ def _layout_problem(h5: h5py.File) -> str | None:
         expect = (n, len(space.names)) if name == "inputs" else (n,) + tail
         if shape != expect:
             return f"dataset '{name}' has shape {shape}, expected {expect}"
+    if version >= 2:
+        for name in PROVENANCE:
+            if name not in h5 or not isinstance(h5[name], h5py.Dataset):
+                return f"dataset '{name}' is missing (format version {version})"
+            if h5[name].shape != (n,):
+                return f"dataset '{name}' has shape {h5[name].shape}, expected {(n,)}"
     return None
 
 

@@ -18,7 +18,9 @@ states whose smallest pointwise J is below ``min_jacobian`` are rejected.
 from __future__ import annotations
 
 import os
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -121,6 +123,41 @@ class NewtonResult:
     tangent: Tangent = field(default_factory=Tangent)
 
 
+def tangent_definite(tangent) -> bool | None:
+    """Whether a factorised tangent (a :class:`Tangent`, or a factorisation) was positive definite.
+
+    True when PARDISO's or CHOLMOD's Cholesky (LLᵀ) succeeded on it; False when the backend asked for
+    one (PARDISO, CHOLMOD supernodal) had to fall back to an indefinite factorisation (CHOLMOD's
+    LDLᵀ, SuperLU), or an LDLᵀ has a pivot ≤ 0 (CHOLMOD's simplicial one; SuperLU's LU where it kept
+    to diagonal pivots, a symmetric permutation, is one too); None when it cannot tell (SuperLU that
+    pivoted off the diagonal, no tangent). At a converged state (its last tangent is taken within a few Newton iterations of
+    it) an indefinite tangent means an unstable equilibrium: under the same pressure a nearby state
+    of lower energy exists, and Newton from another start can converge to another equilibrium.
+    """
+    fac = getattr(tangent, "factorization", tangent)
+    if fac is None:
+        return None
+    kind = getattr(fac, "factorisation", None)
+    if kind == "supernodal":
+        return True
+    requested = getattr(fac, "requested_backend", None)
+    if kind == "simplicial":
+        chol = getattr(fac, "_chol", None)
+        try:
+            return bool(np.all(chol.D() > 0))
+        except Exception:  # noqa: BLE001 - no D (not an LDLᵀ): cannot tell
+            return None
+    if requested in ("pardiso", "cholmod"):
+        return False
+    lu = getattr(fac, "_lu", None)
+    try:  # SuperLU that kept to the diagonal (symmetric permutation): LU = LDLᵀ, the signs of diag(U) are the inertia
+        if lu is not None and np.array_equal(lu.perm_r, lu.perm_c):
+            return bool(np.all(lu.U.diagonal() > 0))
+    except Exception:  # noqa: BLE001 - a factorisation without these attributes: cannot tell
+        pass
+    return None
+
+
 def _line_search(system, u, p, du, dp, rhs, D, lam, opts, stats):
     """Step length along (du, dp).
 
@@ -180,7 +217,8 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
         r_u, r_p, mj, _ = system.residual(u, p, lam, energy=False)
         stats["residuals"] += 1
     # a symmetric tangent goes to PARDISO or CHOLMOD as its upper triangle (half the entries to assemble)
-    triangle = system.potential and default_backend() in TRIANGLE_BACKENDS
+    backend = default_backend()
+    triangle = system.potential and backend in TRIANGLE_BACKENDS
     last = reuse
     cond = None  # (D, r_u + κ Dᵀ M⁻¹ r_p) of the current state, from the line search that accepted it
     first = True  # the first accepted iteration of this load step decides a cut
@@ -213,6 +251,7 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
                                 triangle=triangle,
                                 require_definite=first and can_cut and opts.cut_on_indefinite and lam_from > 0
                                 and not stats.get("indefinite_cuts"))
+                fac.requested_backend = backend  # a fallback to SuperLU rewrites fac.backend (tangent_definite)
                 last = (fac, D)
                 t1 = time.perf_counter()
                 stats["t_factor"] += t1 - t0
@@ -250,6 +289,8 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
             print(f"  it {it} lam {lam:.4f} |r_u| {np.linalg.norm(r_u):.3e} -> {np.linalg.norm(rut):.3e} alpha {alpha:g} "
                   f"|r_p| {np.abs(rpt).max():.2e} minJ {mjt:.3f}{' chord' if chord else ''}")
         first = False
+        if alpha < 1.0:
+            stats["damped"] = stats.get("damped", 0) + 1
         contracted = alpha == 1.0 and np.linalg.norm(rut) <= opts.reuse_ratio * np.linalg.norm(r_u)
         reuse = (fac, D) if contracted and opts.reuse_ratio > 0 else None
         u, p, r_u, r_p = ut, pt, rut, rpt
@@ -259,7 +300,75 @@ def _newton_at(system, u, p, lam, tol_u, tol_p, opts, stats, can_cut=False, reus
     return False, u, p, f"no convergence in {opts.max_iterations} iterations", last
 
 
+@dataclass(frozen=True)
+class SolveRecord:
+    """What one :func:`solve` call did, as :func:`recorded_solves` collects it.
+
+    Attributes
+    ----------
+    warm : bool
+        A warm start was tried (``initial`` of the right shapes).
+    warm_converged : bool
+        ... and converged at full load (the result is the warm start's, not the load stepping's).
+    converged : bool
+    iterations, tangents, load_steps, cuts, damped : int
+        Newton iterations, fresh tangents, load steps, step cuts, and accepted Newton steps the line
+        search damped (α < 1).
+    definite : bool or None
+        :func:`tangent_definite` of the last tangent (None: cannot tell, or none).
+    jump : float
+        ‖u − u₀‖ / ‖u‖ from the warm start's state to the converged one (NaN unless ``warm_converged``).
+    """
+
+    warm: bool
+    warm_converged: bool
+    converged: bool
+    iterations: int
+    tangents: int
+    load_steps: int
+    cuts: int
+    damped: int
+    definite: bool | None
+    jump: float
+
+
+_RECORDS = threading.local()
+
+
+@contextmanager
+def recorded_solves():
+    """Collect a :class:`SolveRecord` of every :func:`solve` in this thread inside the block (a list).
+
+    For a caller that reaches Newton through other layers (a forward model's warm start, its
+    continuation and cold fallback) and wants to judge the path its result took.
+    """
+    log: list[SolveRecord] = []
+    stack = getattr(_RECORDS, "stack", None)
+    if stack is None:
+        stack = _RECORDS.stack = []
+    stack.append(log)
+    try:
+        yield log
+    finally:
+        stack.remove(log)
+
+
 def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = None) -> NewtonResult:
+    """Drive ``system`` to full load (see :func:`_solve`); recorded by :func:`recorded_solves`."""
+    res = _solve(system, opts, initial)
+    stack = getattr(_RECORDS, "stack", None)
+    if stack:
+        t = res.timings
+        rec = SolveRecord("warm_start" in t, bool(t.get("warm_start")), bool(res.converged), int(res.iterations),
+                          int(t.get("tangents", 0)), int(res.load_steps), int(res.cuts), int(t.get("damped", 0)),
+                          tangent_definite(res.tangent) if res.converged else None,
+                          float(t.get("warm_jump", float("nan"))))
+        for log in stack:
+            log.append(rec)
+    return res
+
+
+def _solve(system, opts: NewtonOptions | None = None, initial: tuple | None = None) -> NewtonResult:
     """Drive ``system`` (a :class:`~lvcore.mechanics.system.DiscreteSystem`) to full load.
 
     Convergence: ``||r_u|| <= rtol ||f_ext||`` (the external load vector at full
@@ -297,6 +406,8 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
             stats["reused_tangent"] = reuse is not None
             ok, u_w, p_w, _, last = _newton_at(system, u0, p0, 1.0, *tolerances(opts.rtol), opts, stats, reuse=reuse)
             stats["warm_start"] = bool(ok)
+            if ok:  # how far Newton went from the given state (relative displacement)
+                stats["warm_jump"] = float(np.linalg.norm(u_w - u0) / max(np.linalg.norm(u_w), 1e-300))
             if ok:
                 stats["seconds"] = time.perf_counter() - t_start
                 return NewtonResult(True, "converged (warm start)", u_w, p_w, 1.0, stats["iterations"], 1, 0, stats,
@@ -345,3 +456,8 @@ def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = Non
     stats["seconds"] = time.perf_counter() - t_start
     return NewtonResult(True, "converged", u, p, 1.0, stats["iterations"], steps, cuts, stats,
                         Tangent(*carry) if carry else Tangent())
+
+
+solve.__doc__ = _solve.__doc__ + """
+    Every call is recorded (a :class:`SolveRecord`) by the enclosing :func:`recorded_solves` blocks of its thread.
+    """
