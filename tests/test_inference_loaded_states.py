@@ -227,3 +227,19 @@ def test_a_short_run_records_every_state(tmp_path, geometry):
         [(8.0, 150.0, True, True), (12.0, 165.0, False, False)]
     assert all(s["posterior_lvv_ml"]["q05"] <= s["posterior_lvv_ml"]["q95"] for s in states)
     assert rec["edp_mmhg"] == 8.0 and "prior" not in rec
+
+
+def test_the_printed_lines_name_every_state_and_the_prior():
+    from lvcore.inference.cli import _states_text
+
+    q = {"median": 160.0, "q05": 150.0, "q95": 170.0}
+    rec = {"loaded_states": [{"edp_mmhg": 8.0, "lvv_ml": 150.0, "strains": True, "primary": True, "posterior_lvv_ml": q},
+                             {"edp_mmhg": 20.0, "lvv_ml": 190.0, "strains": False, "primary": False,
+                              "posterior_lvv_ml": q}],
+           "prior": {"reference": "Klotz et al. (2006), Am J Physiol Heart Circ Physiol 291:H403-H412",
+                     "posterior_ml": {"V20": q, "V30": q, "V0": q}}}
+    states, prior = _states_text(rec)
+    assert "8 mmHg 150.0 mL (primary) -> 160.0 [150.0, 170.0] mL" in states
+    assert "20 mmHg 190.0 mL (volume only) -> 160.0" in states
+    assert prior.startswith("prior: Klotz et al. (2006)") and "V30 160.0 [150.0, 170.0] mL" in prior
+    assert _states_text({}) == []

@@ -443,6 +443,8 @@ def run_calibrate(args) -> int:
                   f"{base} base, EDP {c['edp_mmhg']:g} mmHg) ==")
             print(res.summary.to_string(float_format=lambda val: f"{val:.4g}"))
             print(res.convergence.message())
+            for line in _states_text(extra[(item.subject, item.model)]):
+                print(line)
             if derived_rec is not None:
                 print(derived.text_table(derived_rec))
             names = list(check.record()["p_values"])
@@ -566,3 +568,18 @@ def _states_records(row, forward, res) -> dict:
         rec["posterior_ml"]["V0"] = _quantile_record(v0)
         out["prior"] = rec
     return out
+
+
+def _states_text(rec: dict) -> list[str]:
+    """The printed lines of the loaded states and the Klotz prior (from :func:`_states_records`)."""
+    lines = []
+    if rec.get("loaded_states"):
+        lines.append("loaded states (measured LVV; posterior LVV median [90 %]): " + "; ".join(
+            f"{s['edp_mmhg']:g} mmHg {s['lvv_ml']:.1f} mL{'' if s['strains'] else ' (volume only)'}"
+            f"{' (primary)' if s['primary'] else ''} -> {s['posterior_lvv_ml']['median']:.1f} "
+            f"[{s['posterior_lvv_ml']['q05']:.1f}, {s['posterior_lvv_ml']['q95']:.1f}] mL" for s in rec["loaded_states"]))
+    prior = rec.get("prior")
+    if prior:
+        lines.append(f"prior: {prior['reference']} EDPVR; posterior " + ", ".join(
+            f"{k} {q['median']:.1f} [{q['q05']:.1f}, {q['q95']:.1f}] mL" for k, q in prior["posterior_ml"].items()))
+    return lines
