@@ -22,23 +22,30 @@ from lvcore.inference.samplers import use_host_devices  # noqa: E402
 use_host_devices(4)
 
 
-#: Test files that take longest (CPU seconds, BENCHMARKS.md "Test suite time"), run first; the rest keep their
-#: order. With ``-n 2`` (README) pytest-xdist hands out whole files in this order (``--dist loadfile
-#: --no-loadscope-reorder`` in pyproject.toml), so the long ones do not start last on one worker while the other
-#: idles. Only the order changes: no test depends on it.
+#: Test files that take longest, run first; the rest keep their order. Measured (BENCHMARKS.md "Test suite time",
+#: CPU s, 2026-12-02): the browser file (its server and Chromium besides), loaded states 96, CLI 75, real-data
+#: benchmark 64, emulator build script 43, emulator model 40, inference CLI 30, report page 26, physiology 23;
+#: the NUTS, study, verification and My-subject files were not reached there and are placed by their runs (NUTS
+#: fits, mini studies, FE benchmarks). With ``-n 2`` (README) pytest-xdist hands out whole files in this order
+#: (``--dist loadfile --no-loadscope-reorder`` in pyproject.toml), so a long file does not start last on one worker
+#: while the other idles. Only the order changes: no test depends on it.
 LONGEST_FIRST = (
     "test_browser.py",
     "test_inference_samplers.py",
     "test_app_subject_flow.py",
-    "test_emulator_build_script.py",
+    "test_inference_loaded_states.py",
+    "test_cli.py",
+    "test_benchmarks_real_data.py",
     "test_studies_mismatch.py",
     "test_studies_fibre_discrepancy.py",
+    "test_emulator_build_script.py",
+    "test_emulator_model.py",
     "test_mechanics_verification.py",
     "test_app_uploads.py",
-    "test_app_physiology.py",
+    "test_inference_cli.py",
     "test_report.py",
-    "test_cli.py",
     "test_app_report_page.py",
+    "test_app_physiology.py",
     "test_mechanics_materials.py",
 )
 
