@@ -309,7 +309,8 @@ def test_fuzz_store_bytes(content):
 
 STORE_EDITS = ["del_attr", "set_attr", "del_dataset", "replace_dataset"]
 STORE_KEYS = ["format", "space", "design_seed", "design_method", "resolution", "forward", "inputs", "outputs",
-              "state", "seconds", "reason", "version", "worker", "finished_at", "record_count"]
+              "state", "seconds", "reason", "version", "worker", "finished_at", "record_count",
+              "format_version", "run", "chain", "chain_position", "seed_row", "start"]  # format version 2
 
 
 @FEW

@@ -690,6 +690,8 @@ def _layout_problem(h5: h5py.File) -> str | None:
                 return f"dataset '{name}' is missing (format version {version})"
             if h5[name].shape != (n,):
                 return f"dataset '{name}' has shape {h5[name].shape}, expected {(n,)}"
+            if not np.issubdtype(h5[name].dtype, np.integer):
+                return f"dataset '{name}' holds {h5[name].dtype}, expected integers"
     return None
 
 
