@@ -11,7 +11,8 @@ symmetric path assembles it) with the right-hand side of its first solve. Then, 
 this environment, each tangent is factorised and solved ``--repeats`` times, the backends taking turns
 within each repeat (so a drift of the shared machine's load hits all alike); the symbolic analysis is
 done once per sparsity pattern beforehand, as in the simulator. Prints per case and backend the median
-(over repeats) of the summed factor + solve time over all tangents, per tangent, and the largest
+(over repeats) of the summed factor + solve wall time over all tangents, the CPU time per tangent
+(what a loaded shared machine distorts least), and the largest
 relative difference of the solutions from SuperLU's (‖x − x_SuperLU‖∞ / ‖x_SuperLU‖∞).
 
 Backends (each skipped if its package is missing):
@@ -212,7 +213,8 @@ def _load() -> str:
 
 
 def compare(tangents, names, repeats):
-    """{backend: (median total s, median per tangent ms, max relative difference from SuperLU)}."""
+    """{backend: (median wall s of all tangents, median CPU ms per tangent, max relative difference from SuperLU,
+    tangents sent to SuperLU)}."""
     ready = {}
     for name in names:
         try:
@@ -224,11 +226,12 @@ def compare(tangents, names, repeats):
         ready[name] = (states[0], run)
     ref = [BACKENDS["superlu"]()[1](None, U, b) for U, b in tangents]
     totals = {n: [] for n in ready}
+    cpus = {n: [] for n in ready}
     diffs = {n: 0.0 for n in ready}
     fallbacks = {n: 0 for n in ready}
     for _ in range(repeats):
         for name, (state, run) in ready.items():
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             xs = []
             for U, b in tangents:
                 try:
@@ -237,10 +240,11 @@ def compare(tangents, names, repeats):
                     fallbacks[name] += 1
                     xs.append(BACKENDS["superlu"]()[1](None, U, b))
             totals[name].append(time.perf_counter() - t0)
+            cpus[name].append(time.process_time() - c0)
             for x, r in zip(xs, ref):
                 diffs[name] = max(diffs[name], float(np.max(np.abs(np.asarray(x).ravel() - r)) / np.max(np.abs(r))))
-    return {n: (statistics.median(t), 1e3 * statistics.median(t) / len(tangents), diffs[n], fallbacks[n] // repeats)
-            for n, t in totals.items()}
+    return {n: (statistics.median(t), 1e3 * statistics.median(cpus[n]) / len(tangents), diffs[n],
+                fallbacks[n] // repeats) for n, t in totals.items()}
 
 
 def whole_solves(case, names, repeats):
@@ -285,7 +289,7 @@ def main(argv=None) -> int:
     cases = {"default": lambda: Case.default_lv(), "land2": lambda: Case.from_dict(problem2_case("6,4+2+2+4,1,5"))}
     print(f"simulator's own backend while recording: {default_backend()}; python {sys.version.split()[0]}")
     print("| case | dofs | tangents | backend | of which to SuperLU (indefinite) | factor + solve, all tangents "
-          "(ms, median) | per tangent (ms) | max rel. diff from SuperLU | load before |")
+          "(wall ms, median) | per tangent (CPU ms, median) | max rel. diff from SuperLU | load before |")
     print("|---|---|---|---|---|---|---|---|---|")
     for cname in args.cases:
         tangents = record(cases[cname]())
