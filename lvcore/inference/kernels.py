@@ -97,6 +97,15 @@ def squared_exponential(z1, z2, lengthscale):
     return jnp.exp(-0.5 * (dz / lengthscale) ** 2)
 
 
+def _sector_and_level_factors(x1, x2, c, tau, lengthscale):
+    """The two factors of the polar kernels between point sets ``(gamma [rad], z [level])``: the Wendland
+    function of the geodesic sector distance and the squared exponential in level, each shape (n, m)."""
+    x1 = jnp.asarray(x1)
+    x2 = jnp.asarray(x2)
+    d = geodesic_distance(x1[:, None, 0], x2[None, :, 0])
+    return wendland_polar(d, c, tau), squared_exponential(x1[:, None, 1], x2[None, :, 1], lengthscale)
+
+
 def polar_kernel(x1, x2, *, sigma1_sq, sigma2_sq, c, tau, lengthscale):
     r"""Additive polar kernel :math:`\sigma_1^2 W_c(d) + \sigma_2^2 k_z` between point sets.
 
@@ -115,11 +124,8 @@ def polar_kernel(x1, x2, *, sigma1_sq, sigma2_sq, c, tau, lengthscale):
     -------
     jax.Array, shape (n, m)
     """
-    x1 = jnp.asarray(x1)
-    x2 = jnp.asarray(x2)
-    d = geodesic_distance(x1[:, None, 0], x2[None, :, 0])
-    kz = squared_exponential(x1[:, None, 1], x2[None, :, 1], lengthscale)
-    return sigma1_sq * wendland_polar(d, c, tau) + sigma2_sq * kz
+    w, kz = _sector_and_level_factors(x1, x2, c, tau, lengthscale)
+    return sigma1_sq * w + sigma2_sq * kz
 
 
 def polar_product_kernel(x1, x2, *, sigma_sq, c, tau, lengthscale):
@@ -140,11 +146,8 @@ def polar_product_kernel(x1, x2, *, sigma_sq, c, tau, lengthscale):
     -------
     jax.Array, shape (n, m)
     """
-    x1 = jnp.asarray(x1)
-    x2 = jnp.asarray(x2)
-    d = geodesic_distance(x1[:, None, 0], x2[None, :, 0])
-    kz = squared_exponential(x1[:, None, 1], x2[None, :, 1], lengthscale)
-    return sigma_sq * wendland_polar(d, c, tau) * kz
+    w, kz = _sector_and_level_factors(x1, x2, c, tau, lengthscale)
+    return sigma_sq * w * kz
 
 
 #: Kernel forms :func:`gram` builds: the chapter's additive one and the product variant.
