@@ -359,18 +359,22 @@ def estimate_memory_bytes(n_elements: int, gauss_points_per_element: int = 27) -
     return float(n_elements) * BYTES_PER_ELEMENT * max(1.0, gauss_points_per_element / 27.0)
 
 
-def available_memory_bytes() -> float:
-    """Memory this process can still get (bytes): the kernel's ``MemAvailable``, and the room left under
-    an address-space limit (``ulimit -v``, ``RLIMIT_AS``) if one is set; ``inf`` where neither is known."""
-    room = float("inf")
+def mem_available_bytes() -> float:
+    """The kernel's ``MemAvailable`` (bytes): memory it can give without swapping; ``inf`` where unknown."""
     try:
         with open("/proc/meminfo") as f:
             for line in f:
                 if line.startswith("MemAvailable:"):
-                    room = float(line.split()[1]) * 1024.0
-                    break
+                    return float(line.split()[1]) * 1024.0
     except (OSError, ValueError, IndexError):  # pragma: no cover - non-Linux
         pass
+    return float("inf")
+
+
+def available_memory_bytes() -> float:
+    """Memory this process can still get (bytes): the kernel's ``MemAvailable``, and the room left under
+    an address-space limit (``ulimit -v``, ``RLIMIT_AS``) if one is set; ``inf`` where neither is known."""
+    room = mem_available_bytes()
     try:
         import resource
 
@@ -434,4 +438,5 @@ def check_mesh_size(counts, kind: str = "lv", gauss_points_per_element: int = 27
 __all__ = [name for name in dir() if name.isupper()] + [
     "LimitError", "check_regular_file", "read_regular_file", "read_text_file", "loads_json", "read_json_file",
     "lv_mesh_size", "box_mesh_size", "estimate_memory_bytes", "memory_budget_bytes", "check_mesh_size",
+    "mem_available_bytes", "available_memory_bytes",
 ]

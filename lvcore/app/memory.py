@@ -112,15 +112,9 @@ def _read_number(path) -> float:
 def available_bytes() -> float:
     """Memory the kernel can still give this process (bytes): ``MemAvailable``, and the room under a cgroup v2
     ``memory.max`` when the process runs in a memory-limited cgroup; ``inf`` where neither is known."""
-    room = float("inf")
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    room = float(line.split()[1]) * 1024.0
-                    break
-    except (OSError, ValueError, IndexError):  # pragma: no cover - non-Linux
-        pass
+    from lvcore.limits import mem_available_bytes
+
+    room = mem_available_bytes()
     try:
         with open("/proc/self/cgroup") as f:
             rel = next((ln.split(":", 2)[2].strip() for ln in f if ln.startswith("0::")), None)
