@@ -326,8 +326,9 @@ def _join_states(rows: list[_Pending], name: str) -> list[MeasuredData]:
         for r in rs:
             edp = r.extras.get("edp_mmhg")
             if edp is None:
+                rows = "; ".join(x.where for x in rs)
                 raise DataError(f"{r.where}: column edp_mmhg is missing or empty, but subject '{shown}' has {len(rs)} "
-                                "rows: rows with one subject ID are its loaded states and each needs its end-diastolic "
+                                f"rows ({rows}): rows with one subject ID are its loaded states and each needs its end-diastolic "
                                 "pressure in mmHg (give edp_mmhg on every row, or give the rows different subject IDs)")
             same = next((w for p, w in seen.items() if abs(p - edp) <= DUPLICATE_EDP_TOL_MMHG), None)
             if same is not None:
