@@ -3,7 +3,7 @@
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_campaign.py --chains [--rows 1000] [--cold-rows 100]
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_campaign.py [--rows 24] [--resolution fast]   # 1 vs 2 workers
 
-``--chains`` (issue 25): one seeded θ design (``--box moderate``: a, af in
+``--chains``: one seeded θ design (``--box moderate``: a, af in
 [0.3, 1.5] kPa, b, bf in [1, 5], log-uniform; ``--box material``: the whole
 ``material`` space) on the ``default`` mesh, through the same code path as
 ``lvcore campaign run`` (rows recorded in an HDF5 store as they arrive), in one
@@ -22,7 +22,7 @@ within one run.
 Without ``--chains``: the older 1 vs 2 workers comparison (cold rows; best of
 ``--repeats`` alternating runs).
 
-``--chain-profile N`` (issue 25): where the time of a warm-chained solve goes.
+``--chain-profile N``: where the time of a warm-chained solve goes.
 The first N points of the same design's continuation order are solved in this
 process, one chain (:func:`lvcore.chains.solve_in_order`, each point warm-started
 from the nearest converged one, as a campaign worker does), after one
@@ -204,7 +204,7 @@ def throughput(workers: int, design: Design, forward: str, resolution: str) -> t
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--chains", action="store_true", help="warm-chained vs cold (issue 25); else 1 vs 2 workers")
+    p.add_argument("--chains", action="store_true", help="warm-chained vs cold; else 1 vs 2 workers")
     p.add_argument("--chain-profile", type=int, default=0, metavar="N",
                    help="per-solve counts and time split of one warm chain of N points in this process")
     p.add_argument("--rows", type=int, default=None, help="design rows (default 1000 with --chains, else 24)")

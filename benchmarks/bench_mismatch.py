@@ -1,4 +1,4 @@
-"""CPU cost and ESS of the mismatch study's calibrations, per batch size and sampler budget (issue 26).
+"""CPU cost and ESS of the mismatch study's calibrations, per batch size and sampler budget.
 
     OMP_NUM_THREADS=1 nice python benchmarks/bench_mismatch.py [--batch 20,40] [--budgets 1x150+150,2x300+300]
         [--models volume,iid,discrepancy] [--repeats 1]

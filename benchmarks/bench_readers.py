@@ -1,9 +1,9 @@
-"""Cost of the hostile-file defences (issue 28): header checks and the forked, memory-capped reader.
+"""Cost of the hostile-file defences: header checks and the forked, memory-capped reader.
 
 For an open SYNTHETIC ellipsoidal surface (STL, about 12,000 triangles, written here) and the same
 shape as a volumetric tet mesh (VTU), times
 
-* ``in-process``: the reader as before issue 28 (``lvcore.geometry.surfaces._read_surface`` /
+* ``in-process``: the reader as before those defences (``lvcore.geometry.surfaces._read_surface`` /
   ``meshio.read``) in this process;
 * ``header check``: :func:`lvcore.headers.check_mesh_header` alone;
 * ``checked + child``: the public reader (``read_surface`` / ``read_meshio_file``): size and header

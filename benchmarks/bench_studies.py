@@ -1,4 +1,4 @@
-"""Wall time of the optimisation studies on small budgets (issue 13's speed targets).
+"""Wall time of the optimisation studies on small budgets (the studies' speed targets in BENCHMARKS.md).
 
     OMP_NUM_THREADS=1 python benchmarks/bench_studies.py bo [--initial 30] [--iterations 30] [--workers 2]
     OMP_NUM_THREADS=1 python benchmarks/bench_studies.py operators [--patients SYNTHETIC-P01] [--workers 2]

@@ -1,4 +1,4 @@
-"""Held-out accuracy of a subject emulator against the number of training FE runs (issue 25).
+"""Held-out accuracy of a subject emulator against the number of training FE runs.
 
     nice -n 15 python benchmarks/emulator_ntrain_study.py simulate --work DIR [--subject GEOMETRY]
     nice -n 15 python benchmarks/emulator_ntrain_study.py train --work DIR --n-train 256 384 512

@@ -11,7 +11,7 @@ pasted into docs/simulator.md. Reference values: problem 1 tip z in
 endocardial apex z = -26.612 mm, epicardial apex z = -28.279 mm, cavity
 volume 10734 mm³.
 
-Per-phase profile of problem 2 (issue 25)::
+Per-phase profile of problem 2::
 
     python benchmarks/land2015.py --profile 6,4+2+2+4,1,5 6,4+2+2+4,1,3 [--repeats 5] [--solvers cholmod superlu]
 
@@ -27,9 +27,9 @@ With ``--pulse-python PY`` (a Python with legacy dolfin and fenics-pulse: see
 ``benchmarks/pulse_land2015.py`` for the set-up) FEniCS pulse solves problem 2
 here too, on lvcore's gmsh tetrahedral mesh of the benchmark geometry
 (``--pulse-mesh-mm``, 1.25 mm: 49k P2/P1 dofs, apex errors within 0.02–0.03 mm, the
-matched accuracy of issue 25), between two rounds of lvcore's
+matched accuracy recorded in BENCHMARKS.md), between two rounds of lvcore's
 solves, and the ratio is measured in one window. Without it the pulse column
-is the time recorded in issue 25 (pulse 2025.0.0 at ~30k dofs, 36 s, measured
+is the time recorded in BENCHMARKS.md (pulse 2025.0.0 at ~30k dofs, 36 s, measured
 in one window beside lvcore with SuperLU) and the table says so.
 """
 from __future__ import annotations
@@ -58,7 +58,7 @@ def _timed(case):
 
 #: FEniCS pulse 2025.0.0 on Land problem 2 at matched accuracy (~30k dofs), from issue 25 (measured side by side).
 PULSE_RECORDED_S = 36.0
-PULSE_RECORDED_NOTE = "pulse 2025.0.0, ~30k dofs, 36 s (recorded in issue 25; pulse is not installed here)"
+PULSE_RECORDED_NOTE = "pulse 2025.0.0, ~30k dofs, 36 s (recorded in BENCHMARKS.md; pulse is not installed here)"
 
 
 def _pulse_note() -> str:

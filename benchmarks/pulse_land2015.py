@@ -1,4 +1,4 @@
-"""Land et al. (2015) problem 2 in FEniCS pulse (legacy dolfin), for the side-by-side ratio of issue 25.
+"""Land et al. (2015) problem 2 in FEniCS pulse (legacy dolfin), for the side-by-side ratio in BENCHMARKS.md.
 
 Not part of lvcore and not run by the tests: it runs under a Python that has
 legacy FEniCS (dolfin 2019.2) and ``fenics-pulse``, which lvcore's environment

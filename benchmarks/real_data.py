@@ -351,7 +351,7 @@ def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, e
 
 
 def table(results: list[dict]) -> str:
-    """The Markdown table of BENCHMARKS.md and the criterion lines (issue 45's verdict).
+    """The Markdown table of BENCHMARKS.md and the criterion lines (the verdict that flags defects only).
 
     A case is *right* when all four true theta and its true V20 lie in their 90 % intervals; every case that
     is not right must be flagged (exit 4), and no case may exit 4 on weak identification alone (the verdict no

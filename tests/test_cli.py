@@ -502,11 +502,20 @@ def test_no_internal_issue_references_in_the_docs_or_script_help():
              for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if ISSUE_REFERENCE.search(line)]
     scripts = [p for p in sorted((ROOT / "scripts").glob("*.py")) if "__doc__" in p.read_text(encoding="utf-8")]
     assert scripts
-    for p in scripts:
-        import ast
+    import ast
 
+    for p in scripts:
         doc = ast.get_docstring(ast.parse(p.read_text(encoding="utf-8"))) or ""
         found += [f"{p.relative_to(ROOT)} (docstring, its --help): {m.group(0)}" for m in ISSUE_REFERENCE.finditer(doc)]
+    # the benchmark scripts' help and printed text: their string literals (docstrings, help=, printed notes),
+    # not their comments
+    benchmarks = sorted((ROOT / "benchmarks").glob("*.py"))
+    assert benchmarks
+    for p in benchmarks:
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                found += [f"{p.relative_to(ROOT)}:{node.lineno} (string): {m.group(0)}"
+                          for m in ISSUE_REFERENCE.finditer(node.value)]
     assert found == []
     assert ISSUE_REFERENCE.search("the issue-13-shaped files") and ISSUE_REFERENCE.search("(Issue 26 item 4)")
     assert not ISSUE_REFERENCE.search("no issues found in 26 files")
