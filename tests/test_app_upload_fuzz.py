@@ -29,6 +29,7 @@ import numpy as np
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_fuzz_readers import _paths
 
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = Path(__file__).resolve().parent
@@ -87,15 +88,6 @@ def corrupted(draw, seed: bytes):
     return bytes(data)
 
 
-def _paths(obj, prefix=()):
-    out = [prefix]
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            out += _paths(v, prefix + (k,))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj[:4]):
-            out += _paths(v, prefix + (i,))
-    return out
 
 
 @st.composite
@@ -103,7 +95,7 @@ def mutated(draw, doc):
     """``doc`` (JSON) with one field, list item or the whole replaced by a random JSON value, as bytes."""
     import copy
 
-    paths = _paths(doc)
+    paths = _paths(doc, max_items=4)
     path = paths[draw(st.integers(0, len(paths) - 1))]
     value = draw(json_values)
     if not path:

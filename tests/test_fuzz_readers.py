@@ -37,15 +37,15 @@ json_values = st.recursive(json_scalars, lambda c: st.lists(c, max_size=5) | st.
                            max_leaves=20)
 
 
-def _paths(obj, prefix=()):
-    """Every path (tuple of keys/indices) into a JSON document."""
+def _paths(obj, prefix=(), max_items=6):
+    """Every path (tuple of keys/indices) into a JSON document, through the first ``max_items`` of each list."""
     out = [prefix]
     if isinstance(obj, dict):
         for k, v in obj.items():
-            out += _paths(v, prefix + (k,))
+            out += _paths(v, prefix + (k,), max_items)
     elif isinstance(obj, list):
-        for i, v in enumerate(obj[:6]):
-            out += _paths(v, prefix + (i,))
+        for i, v in enumerate(obj[:max_items]):
+            out += _paths(v, prefix + (i,), max_items)
     return out
 
 
