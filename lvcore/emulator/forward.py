@@ -157,11 +157,12 @@ def load_emulator_forward(name: str, h, **kwargs) -> EmulatorForward:
     --------
     A :class:`lvcore.core.forward.Forward` of the mean shape (all five PC scores 0): θ in, 25 outputs out.
 
+    >>> from lvcore.conditions import THETA_TILDE
     >>> from lvcore.emulator.forward import load_emulator_forward
     >>> forward = load_emulator_forward("chapter", [0.0, 0.0, 0.0, 0.0, 0.0])
     >>> forward.input_names
     ('a', 'b', 'af', 'bf')
-    >>> forward({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}).shape
+    >>> forward(THETA_TILDE).shape
     (25,)
     >>> batch = forward.evaluate({"a": [0.6, 1.2], "b": 1.3, "af": 1.0, "bf": 3.6})
     >>> batch.outputs.shape                      # one row per point
