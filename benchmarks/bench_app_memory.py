@@ -29,6 +29,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from lvcore.parallel import pin_threads  # noqa: E402
+
 
 def _status(pid: int) -> dict:
     out = {}
@@ -41,9 +43,7 @@ def _status(pid: int) -> dict:
 
 
 def _server(port: int, cap_kib: int, log: Path):
-    env = {**os.environ, "LVCORE_APP_WARMUP": "1"}
-    for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        env.setdefault(v, "1")
+    env = pin_threads({**os.environ, "LVCORE_APP_WARMUP": "1"})
     cmd = " ".join(shlex.quote(c) for c in [sys.executable, "-m", "streamlit", "run", str(REPO / "app.py"),
                                              "--server.headless", "true", "--server.address", "127.0.0.1",
                                              "--server.port", str(port), "--browser.gatherUsageStats", "false",

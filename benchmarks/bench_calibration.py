@@ -18,8 +18,9 @@ import os
 import sys
 import time
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
+from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+
+pin_threads()  # before numpy is imported
 
 
 def main(argv=None) -> int:
@@ -155,14 +156,12 @@ def app_profile(args) -> int:
     import lvcore  # noqa: F401
     from lvcore.app import warmup
     from lvcore.app.controls import DEFAULT_SUBJECT
-    from lvcore.conditions import SIGMA_V_ML, SIMULATOR_DEFAULT_EDP_MMHG
-    from lvcore.emulator.forward import emulator_forward
     from lvcore.emulator.io import load_emulator
-    from lvcore.geometry.scaling import ScaledForward
     from lvcore.inference import calibrate as cal
-    from lvcore.inference import guards, samplers, verdict
+    from lvcore.inference import guards, samplers
     from lvcore.inference.cli import DEFAULT_EMULATOR
     from lvcore.inference.data import read_measured_csv
+    from lvcore.inference.request import build_request
     from lvcore.resources import bundled_volunteers, volunteer_files
 
     cfg = dataclasses.replace(samplers.INTERACTIVE, num_chains=args.chains, discrepancy_block=args.discrepancy_block)
@@ -176,20 +175,18 @@ def app_profile(args) -> int:
     stage(f"warm-up: {', '.join(models)} samplers + best fit (compile)", wall, cpu)
     emu = load_emulator(DEFAULT_EMULATOR)
 
-    def forward_of(name):
+    def request_of(name):   # the Calibration page's request (lvcore.inference.request)
         vol = volunteer_files(name)
         data = read_measured_csv(vol.measured)[0]
-        geo = guards.resolve_geometry(str(vol.geometry))
-        cond = {"edp_mmhg": SIMULATOR_DEFAULT_EDP_MMHG, **guards.check_conditions(emu)}
-        edp = guards.subject_edp(data, cond, emu, DEFAULT_EMULATOR, None)
-        return data, ScaledForward(emulator_forward(emu, geo.h, name=DEFAULT_EMULATOR, edp_mmhg=edp), geo.scale)
+        return build_request(emu, DEFAULT_EMULATOR, guards.resolve_geometry(str(vol.geometry)), row=data,
+                             allow_extrapolation=True)
 
     subjects = [DEFAULT_SUBJECT] + [n for n in bundled_volunteers() if n != DEFAULT_SUBJECT][:1]
     rows = []
     for name in subjects:
-        data, fwd = forward_of(name)
-        tasks = {m: (lambda m=m: cal.calibrate(data.y, fwd, m, config=cfg)) for m in models}
-        tasks["best fit"] = lambda: verdict.consistency_check(data.y, fwd, SIGMA_V_ML)
+        request = request_of(name)
+        tasks = {m: (lambda m=m: cal.calibrate(request.y, request.forward, m, config=cfg)) for m in models}
+        tasks["best fit"] = request.consistency
         for label, task in tasks.items():
             res, wall, cpu = _timed(task)
             stage(f"{name}: {label} alone", wall, cpu)

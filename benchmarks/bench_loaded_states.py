@@ -33,8 +33,9 @@ import sys
 import time
 from pathlib import Path
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
+from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+
+pin_threads()  # before numpy is imported
 
 ROOT = Path(__file__).resolve().parents[1]
 SIGMA_V_ML, SIGMA_S = 5.0, 0.03

@@ -39,8 +39,9 @@ import os
 import sys
 import time
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
+from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+
+pin_threads()  # before numpy is imported
 
 from lvcore.mechanics.verification import P1_TIP_POINT, P1_TIP_Z_RANGE_MM, P2_REF, problem1_case, problem2_case  # noqa: E402
 
@@ -116,7 +117,7 @@ def _pulse_runs(python: str, size_mm: float, repeats: int) -> list[dict]:
         np.savez(path, points=mesh.points, cells=mesh.cells[0].data)
         script = Path(__file__).with_name("pulse_land2015.py")
         out = subprocess.run([python, str(script), str(path), str(repeats + 1)], capture_output=True, text=True,
-                             env={**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
+                             env=pin_threads(dict(os.environ), force=True))
     runs = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
     if out.returncode != 0 or len(runs) != repeats + 1:
         raise RuntimeError(f"pulse run failed (exit {out.returncode}): {out.stderr[-2000:]}")

@@ -13,9 +13,14 @@ Both executors expose the same small interface:
 :class:`LocalExecutor` (the default) is a
 :class:`concurrent.futures.ProcessPoolExecutor` with one worker process per
 core, started with ``spawn`` (forking a process that has imported JAX is
-unsafe). Workers inherit ``OMP_NUM_THREADS=1`` etc. so that numpy's BLAS does
-not fight XLA, and share JAX's persistent compilation cache so only the first
-worker compiles.
+unsafe). Workers inherit one BLAS/OpenMP thread (:func:`pin_threads`) so that
+numpy's BLAS does not fight XLA, and share JAX's persistent compilation cache
+so only the first worker compiles.
+
+:func:`pin_threads` is the one place that sets the thread variables: every
+entry point (the app, the test suite, the benchmark and build scripts, the
+servers and children they start) calls it. This module imports neither numpy
+nor JAX, so a script can call it before its own ``import numpy``.
 
 :class:`DaskExecutor` submits to a ``distributed`` scheduler given as
 ``tcp://HOST:PORT``, or to a :class:`distributed.LocalCluster` it starts
@@ -28,12 +33,58 @@ import multiprocessing as mp
 import os
 import threading
 import time
+from collections.abc import MutableMapping
 
 from lvcore.exceptions import CampaignError
 
-#: Environment set in worker processes (before they import numpy).
-WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "JAX_ENABLE_X64": "1"}
-#: Default location of JAX's persistent compilation cache for workers.
+#: The environment variables that set how many threads numpy's BLAS (OpenBLAS, MKL, BLIS, Accelerate), OpenMP and
+#: numexpr start. Read once, when those libraries load: set them before ``import numpy`` (:func:`pin_threads`).
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
+                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+def pin_threads(env: MutableMapping[str, str] | None = None, *, threads: int = 1,
+                force: bool = False) -> MutableMapping[str, str]:
+    """Pin BLAS/OpenMP to ``threads`` threads: numpy's BLAS must not fight XLA's threads on a small machine.
+
+    Sets every :data:`THREAD_VARIABLES` entry in ``env``. Has an effect on this process only before numpy (and
+    SciPy, JAX) are imported, so a script calls it first; this module imports neither.
+
+    Parameters
+    ----------
+    env : mutable mapping, optional
+        The environment to set: ``os.environ`` (default), or a copy handed to a child process
+        (``subprocess.run(..., env=pin_threads(dict(os.environ)))``).
+    threads : int
+        Threads per library (default 1).
+    force : bool
+        Overwrite values already set (default False: a value the user set, e.g. ``OMP_NUM_THREADS=4``, is kept).
+
+    Returns
+    -------
+    mutable mapping
+        ``env`` itself, for use in an expression.
+
+    Examples
+    --------
+    >>> env = pin_threads({"OMP_NUM_THREADS": "4"})
+    >>> env["OMP_NUM_THREADS"], env["OPENBLAS_NUM_THREADS"]
+    ('4', '1')
+    >>> pin_threads({"OMP_NUM_THREADS": "4"}, force=True)["OMP_NUM_THREADS"]
+    '1'
+    """
+    if int(threads) < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
+    env = os.environ if env is None else env
+    for var in THREAD_VARIABLES:
+        if force or var not in env:
+            env[var] = str(int(threads))
+    return env
+
+
+#: Environment set in worker processes (before they import numpy): one thread per library (:func:`pin_threads`)
+#: and float64.
+WORKER_ENV = {**dict.fromkeys(THREAD_VARIABLES, "1"), "JAX_ENABLE_X64": "1"}
 
 
 def default_workers() -> int:

@@ -25,14 +25,13 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
+from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+
+pin_threads()  # before numpy is imported
 
 import numpy as np  # noqa: E402
 

@@ -22,13 +22,13 @@ what is finished; ``--skip-operators`` / ``--skip-bo`` run one study only.
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import sys
 from pathlib import Path
 
-for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_k, "1")
+from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+
+pin_threads()  # before numpy is imported
 
 #: Study sub-folder of --work -> files copied into the bundled studies folder.
 FILES = {"operators-realistic": ("operators_realistic.json", "operators_realistic_fits.csv"),

@@ -24,16 +24,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
-from lvcore.studies._common import round_floats
+from lvcore.parallel import pin_threads
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
+pin_threads()  # before numpy is imported (lvcore.studies imports it)
+
+from lvcore.studies._common import round_floats  # noqa: E402
 
 
 def thin_result(result: dict, keep: int = 250) -> dict:

@@ -32,11 +32,11 @@ import sys
 import time
 from pathlib import Path
 
-from lvcore.studies._common import round_floats
+from lvcore.parallel import pin_threads
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
+pin_threads()  # before numpy is imported (lvcore.studies imports it)
+
+from lvcore.studies._common import round_floats  # noqa: E402
 
 #: The shipped run's settings (see docs/studies.md for why these). ``check_*``: the convergence check, the doses
 #: that decide the verdicts (``SOURCE=D1,D2;SOURCE=D``; '' for none) refitted on the same data sets at a larger

@@ -17,13 +17,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import sys
 from pathlib import Path
 
-for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_k, "1")
+from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+
+pin_threads()  # before numpy is imported
 
 #: Source file in the run's folder -> name in the bundled (flat) studies folder, where reports look for them.
 BO_FILES = {"bo_fibres.json": "bo_fibres.json", "bo_fibres_meta.json": "bo_fibres_meta.json",

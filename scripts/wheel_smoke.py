@@ -81,6 +81,9 @@ out["pages"] = len(PAGES)
 print(json.dumps(out))
 """
 
+#: The thread variables as the installed package sets them (lvcore.parallel.pin_threads), printed as JSON.
+PIN_THREADS = "import json; from lvcore.parallel import pin_threads; print(json.dumps(dict(pin_threads({}, force=True))))"
+
 
 def free_port() -> int:
     with socket.socket() as s:
@@ -154,8 +157,7 @@ def main(argv=None) -> int:
         (work / "run").mkdir()
         env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV",
                                                                  "LVCORE_EMULATORS")}
-        env.update(OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1", MPLBACKEND="Agg",
-                   VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow", PIP_DISABLE_PIP_VERSION_CHECK="1")
+        env.update(MPLBACKEND="Agg", VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow", PIP_DISABLE_PIP_VERSION_CHECK="1")
         if not args.warm_jax_cache:
             env["LVCORE_JAX_CACHE"] = str(work / "jax-cache")
         smoke = Smoke(work, env)
@@ -168,6 +170,9 @@ def main(argv=None) -> int:
         (wheel,) = (src / "dist").glob("lvcore-*.whl")
         smoke.times["wheel MB"] = wheel.stat().st_size / 1e6
         smoke.step("install wheel", [py, "-m", "pip", "install", "-q", "--no-compile", wheel])  # no .pyc: faster
+        # the installed package's own thread pinning (one BLAS/OpenMP thread) for every later step
+        out = smoke.step("pin threads", [py, "-c", PIN_THREADS])
+        env.update(json.loads(out.strip().splitlines()[-1]))
         out = smoke.step("simulate pca + emulators", [py, "-c", SIMULATE_AND_EMULATE])
         print("    " + out.strip().splitlines()[-1])
         smoke.step("calibrate", [bin_ / "lvcore", "calibrate", "--volunteer", "SYNTHETIC_HV3", "--model", "iid",

@@ -3,9 +3,9 @@ from pathlib import Path
 
 import pytest
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
+from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+
+pin_threads()  # before numpy is imported
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 # the app's background warm-up (lvcore.app.warmup) would compile the Calibration page's samplers in every
 # test process that starts the app; tests that want it call lvcore.app.warmup.warm themselves

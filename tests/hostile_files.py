@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lvcore.parallel import pin_threads
+
 ROOT = Path(__file__).resolve().parents[1]
 #: Address-space cap of :func:`run_limited` (KiB for ``ulimit -v``): about 2 GB.
 LIMIT_KB = 2_000_000
@@ -66,8 +68,8 @@ HUGE_SHAPE = (100_000, 50_000)
 
 def run_limited(code: str, limit_kb: int = LIMIT_KB, timeout: float = 240.0) -> subprocess.CompletedProcess:
     """Run ``python -c code`` under ``ulimit -v limit_kb`` with this checkout first on the path."""
-    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
-               OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", JAX_PLATFORMS="cpu")
+    env = pin_threads(dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+                           JAX_PLATFORMS="cpu"), force=True)
     script = f"ulimit -v {int(limit_kb)}; exec \"$0\" -c \"$1\""
     return subprocess.run(["bash", "-c", script, sys.executable, code], capture_output=True, text=True,
                           timeout=timeout, env=env, cwd=str(ROOT))

@@ -3,17 +3,21 @@ from __future__ import annotations
 
 import os
 
+import pytest
+
 from lvcore.app import process
+from lvcore.parallel import THREAD_VARIABLES
 
 
 def test_setup_process_pins_threads_without_overriding_the_environment(monkeypatch):
     calls = []
     monkeypatch.setattr("lvcore.inference.samplers.use_host_devices", lambda n: calls.append(n))
-    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
-    monkeypatch.setenv("OMP_NUM_THREADS", "3")  # set by the user: kept
+    omp, blas = THREAD_VARIABLES[:2]
+    monkeypatch.delenv(blas, raising=False)
+    monkeypatch.setenv(omp, "3")  # set by the user: kept
     monkeypatch.delenv("VTK_DEFAULT_OPENGL_WINDOW", raising=False)
     process.setup_process()
-    assert os.environ["OPENBLAS_NUM_THREADS"] == "1" and os.environ["OMP_NUM_THREADS"] == "3"
+    assert os.environ[blas] == "1" and os.environ[omp] == "3"
     assert os.environ["VTK_DEFAULT_OPENGL_WINDOW"] == "vtkEGLRenderWindow"
     assert calls == [process.APP_CHAINS]
 
@@ -54,3 +58,8 @@ def test_ast_parse_is_serialised_across_threads(monkeypatch):
         t.join()
     assert not errors, errors[:2]
     assert isinstance(ast.parse("a = 1"), ast.Module)
+
+
+def test_the_thread_variables_moved_to_lvcore_parallel():
+    with pytest.warns(DeprecationWarning, match="lvcore.parallel.THREAD_VARIABLES"):
+        assert process.THREAD_VARIABLES == THREAD_VARIABLES

@@ -109,3 +109,46 @@ def test_local_workers_are_pinned_one_per_core_unless_switched_off(monkeypatch):
     assert "pinned" in ex.describe()
     monkeypatch.setenv(PIN_ENV, "0")
     assert worker_cores(2) == []
+
+
+def test_pin_threads_fills_in_every_thread_variable_and_keeps_what_is_set():
+    from lvcore.parallel import THREAD_VARIABLES, WORKER_ENV, pin_threads
+
+    env = {THREAD_VARIABLES[0]: "4", "OTHER": "x"}
+    assert pin_threads(env) is env  # the mapping itself, for use in an expression
+    assert env == {**dict.fromkeys(THREAD_VARIABLES, "1"), THREAD_VARIABLES[0]: "4", "OTHER": "x"}
+    assert pin_threads(env, threads=2, force=True) == {**dict.fromkeys(THREAD_VARIABLES, "2"), "OTHER": "x"}
+    assert {k: WORKER_ENV[k] for k in THREAD_VARIABLES} == dict.fromkeys(THREAD_VARIABLES, "1")
+    with pytest.raises(ValueError, match="threads must be >= 1"):
+        pin_threads({}, threads=0)
+
+
+PIN_THEN_NUMPY = r"""
+import sys
+from lvcore.parallel import pin_threads
+assert "numpy" not in sys.modules and "jax" not in sys.modules, "lvcore.parallel must not import numpy or JAX"
+pin_threads()
+import numpy, threadpoolctl
+print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
+"""
+
+
+def test_pin_threads_before_numpy_gives_numpy_one_blas_thread():
+    """In a fresh process with no thread variables: imported first, pin_threads leaves numpy's BLAS one thread
+    (unpinned, OpenBLAS starts one per core: the check fails on a machine with more than one core)."""
+    pytest.importorskip("threadpoolctl")
+    from lvcore.parallel import THREAD_VARIABLES
+
+    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+    out = subprocess.run([sys.executable, "-c", PIN_THEN_NUMPY], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-1] == "[1]"
+
+
+def test_the_docstring_examples_run():
+    import doctest
+
+    import lvcore.parallel
+
+    result = doctest.testmod(lvcore.parallel)
+    assert result.attempted >= 3 and result.failed == 0

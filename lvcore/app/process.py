@@ -8,22 +8,22 @@ from __future__ import annotations
 
 import os
 
+from lvcore._exports import moved_names
+from lvcore.parallel import pin_threads
+
 #: Chains a calibration from the app runs; each gets its own XLA host device.
 APP_CHAINS = 4
-#: One BLAS/OpenMP thread: numpy's BLAS must not fight XLA's threads on a small machine.
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def setup_process(num_chains: int = APP_CHAINS) -> None:
-    """Pin BLAS/OpenMP to one thread, render VTK off-screen with EGL, and give each calibration chain an XLA
+    """Pin BLAS/OpenMP to one thread (:func:`lvcore.parallel.pin_threads`), render VTK off-screen with EGL, and give each calibration chain an XLA
     host device (:func:`lvcore.inference.samplers.use_host_devices`). Under an address-space limit
     (``ulimit -v``) it also drops the reservations that hold no data (:func:`lvcore.app.memory.economise`).
 
     Values already set in the environment are kept. Has an effect only before numpy and JAX start, so the
     entry script calls it first.
     """
-    for var in THREAD_VARIABLES:
-        os.environ.setdefault(var, "1")
+    pin_threads()
     from lvcore.app import memory
 
     if memory.address_space_limit() != float("inf"):
@@ -60,4 +60,6 @@ def serialise_ast_parse() -> None:
     ast.parse = parse
 
 
-__all__ = ["APP_CHAINS", "THREAD_VARIABLES", "setup_process", "serialise_ast_parse"]
+__getattr__ = moved_names(__name__, {"THREAD_VARIABLES": "lvcore.parallel:THREAD_VARIABLES"})
+
+__all__ = ["APP_CHAINS", "setup_process", "serialise_ast_parse"]

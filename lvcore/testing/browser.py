@@ -22,6 +22,8 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+from lvcore.parallel import pin_threads
+
 #: Debian's Chromium (the only browser used; never ``playwright install``).
 CHROMIUM = "/usr/bin/chromium"
 #: Flags for a headless Chromium in a container without a GPU or network.
@@ -84,9 +86,7 @@ class StreamlitServer:
 
     def __enter__(self) -> "StreamlitServer":
         self.log.parent.mkdir(parents=True, exist_ok=True)
-        env = dict(os.environ)
-        for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            env.setdefault(v, "1")
+        env = pin_threads(dict(os.environ))
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(repo_root()), env.get("PYTHONPATH", "")]))
         cmd = [sys.executable, "-m", "streamlit", "run", str(self.app), "--server.headless", "true",
                "--server.address", "127.0.0.1", "--server.port", str(self.port),
