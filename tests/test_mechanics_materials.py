@@ -366,7 +366,7 @@ def test_ho_tangent_at_the_reference_state_takes_the_tension_side_whatever_the_r
     materials.NeoHookean.from_params({"mu": 1.5}),
 ])
 def test_isochoric_closed_forms_equal_autodiff_and_finite_differences(law):
-    """Guccione (tangent in F-space, stress through the isochoric projection ``materials._isochoric``) and
+    """Guccione (tangent in F-space, stress through the isochoric projection ``tensor_forms.isochoric_split``) and
     neo-Hookean (both through it): stress and tangent equal the automatic derivatives of ``W + p J`` to
     round-off and central differences."""
     assert law.closed_form

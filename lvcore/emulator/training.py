@@ -422,18 +422,71 @@ def train_emulator(
     names = tuple(input_names)
     x_train, y_train = np.asarray(x_train, float), np.asarray(y_train, float)
     x_valid, y_valid = np.asarray(x_valid, float), np.asarray(y_valid, float)
-    d = len(names)
-    for label, x, y in (("training", x_train, y_train), ("validation", x_valid, y_valid)):
+    _check_sets(len(names), {"training": (x_train, y_train), "validation": (x_valid, y_valid)})
+    targets, targets_valid = y_train, y_valid
+    if prior is not None:
+        targets = correction_targets(y_train, prior_outputs(prior, names, x_train))
+        targets_valid = correction_targets(y_valid, prior_outputs(prior, names, x_valid))
+    z = _standardise(names, x_train, targets, x_valid, targets_valid, config)
+    fits = search_architectures(z.zx, z.zy, z.zx_valid, z.zy_valid, config, workers=workers, log=log)
+    best = min(fits, key=lambda f: f.valid_mse)
+    network, refinement = best.network, None
+    if config.lbfgs_iterations > 0:
+        network, refinement = refine_lbfgs(best.network, z.zx, z.zy, z.zx_valid, z.zy_valid, config)
+        if log:
+            log(f"  L-BFGS refinement of {best.hidden}: validation MSE {refinement['valid_before']:.3e} -> "
+                f"{refinement['valid_after']:.3e} in {refinement['iterations']} iterations, {refinement['seconds']:.1f} s")
+
+    lower = np.asarray(lower if lower is not None else np.minimum(x_train.min(0), x_valid.min(0)), float)
+    upper = np.asarray(upper if upper is not None else np.maximum(x_train.max(0), x_valid.max(0)), float)
+    meta = _training_metadata(fits, best, refinement, config, training_set_hash(x_train, y_train, names),
+                              n_train=int(x_train.shape[0]), n_valid=int(x_valid.shape[0]), source=source)
+    emu = Emulator(name=name, input_names=names, lower=lower, upper=upper, log_inputs=z.log_inputs,
+                   x_mean=z.x_mean, x_sd=z.x_sd, y_mean=z.y_mean, y_sd=z.y_sd, network=network,
+                   fixed=dict(fixed or {}), metadata=meta, log_outputs=z.log_outputs, prior=prior)
+    y_sd_phys = y_valid.std(axis=0)  # physical-unit scale for the standardised MSE in the report
+    meta["validation"] = metrics(y_valid, np.asarray(emu.apply(x_valid)), y_sd_phys)
+    if x_test is not None and y_test is not None and len(x_test):
+        meta["test"] = metrics(y_test, np.asarray(emu.apply(np.asarray(x_test, float))), y_sd_phys)
+    return emu
+
+
+def _check_sets(d: int, sets: dict) -> None:
+    """Refuse a ``{label: (inputs, outputs)}`` set of the wrong shape, with NaN/inf, or of fewer than 2 rows."""
+    for label, (x, y) in sets.items():
         if x.ndim != 2 or x.shape[1] != d or y.shape != (x.shape[0], N_OUTPUTS):
             raise EmulatorError(f"{label} set must be inputs (n, {d}) and outputs (n, {N_OUTPUTS}); got {x.shape}, {y.shape}")
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
             raise EmulatorError(f"{label} set contains NaN/inf (use only converged rows)")
         if x.shape[0] < 2:
             raise EmulatorError(f"{label} set needs at least 2 rows, got {x.shape[0]}")
-    y_train_full, y_valid_full = y_train, y_valid
-    if prior is not None:
-        y_train = correction_targets(y_train, prior_outputs(prior, names, x_train))
-        y_valid = correction_targets(y_valid, prior_outputs(prior, names, x_valid))
+
+
+@dataclass(frozen=True)
+class _Standardised:
+    """The training and validation sets transformed (log inputs/LVV) and standardised, with the scaling used."""
+
+    log_inputs: tuple[bool, ...]
+    log_outputs: tuple[bool, ...]
+    x_mean: np.ndarray
+    x_sd: np.ndarray
+    y_mean: np.ndarray
+    y_sd: np.ndarray
+    zx: np.ndarray
+    zy: np.ndarray
+    zx_valid: np.ndarray
+    zy_valid: np.ndarray
+
+
+def _standardise(names: tuple[str, ...], x_train: np.ndarray, y_train: np.ndarray, x_valid: np.ndarray,
+                 y_valid: np.ndarray, config: TrainingConfig) -> _Standardised:
+    """Transform and standardise the network's inputs and targets by the training set's mean and SD.
+
+    Raises
+    ------
+    EmulatorError
+        An input constant over the training set; ``log_lvv`` with a non-positive volume target.
+    """
     log_inputs = tuple(n in LOG_INPUTS for n in names)
     tx = transform_inputs(x_train, log_inputs)
     x_mean, x_sd = tx.mean(axis=0), tx.std(axis=0)
@@ -445,26 +498,20 @@ def train_emulator(
     ty, tyv = _transform_outputs(y_train, log_outputs), _transform_outputs(y_valid, log_outputs)
     y_mean, y_sd = ty.mean(axis=0), ty.std(axis=0)
     y_sd = np.where(y_sd > 0, y_sd, 1.0)
-    zx, zy = (tx - x_mean) / x_sd, (ty - y_mean) / y_sd
-    zxv, zyv = (transform_inputs(x_valid, log_inputs) - x_mean) / x_sd, (tyv - y_mean) / y_sd
+    return _Standardised(log_inputs, log_outputs, x_mean, x_sd, y_mean, y_sd, (tx - x_mean) / x_sd,
+                         (ty - y_mean) / y_sd, (transform_inputs(x_valid, log_inputs) - x_mean) / x_sd,
+                         (tyv - y_mean) / y_sd)
 
-    fits = search_architectures(zx, zy, zxv, zyv, config, workers=workers, log=log)
-    best = min(fits, key=lambda f: f.valid_mse)
-    network, refinement = best.network, None
-    if config.lbfgs_iterations > 0:
-        network, refinement = refine_lbfgs(best.network, zx, zy, zxv, zyv, config)
-        if log:
-            log(f"  L-BFGS refinement of {best.hidden}: validation MSE {refinement['valid_before']:.3e} -> "
-                f"{refinement['valid_after']:.3e} in {refinement['iterations']} iterations, {refinement['seconds']:.1f} s")
 
-    lower = np.asarray(lower if lower is not None else np.minimum(x_train.min(0), x_valid.min(0)), float)
-    upper = np.asarray(upper if upper is not None else np.maximum(x_train.max(0), x_valid.max(0)), float)
-    meta = {
+def _training_metadata(fits, best: FitResult, refinement, config: TrainingConfig, set_hash: str, *, n_train: int,
+                       n_valid: int, source) -> dict:
+    """The emulator's ``metadata`` before validation: architecture, training record, provenance."""
+    return {
         "architecture": {"hidden": list(best.hidden), "activation": "tanh", "init_sd": config.init_sd},
         "training": {
-            "set_hash": training_set_hash(x_train, y_train_full, names),
-            "n_train": int(x_train.shape[0]),
-            "n_valid": int(x_valid.shape[0]),
+            "set_hash": set_hash,
+            "n_train": n_train,
+            "n_valid": n_valid,
             "config": {**asdict(config), "architectures": [list(a) for a in config.architectures]},
             "best_epoch": best.best_epoch,
             "epochs_run": best.epochs,
@@ -476,15 +523,6 @@ def train_emulator(
         "source": dict(source or {}),
         "lvcore_version": lvcore.__version__,
     }
-    emu = Emulator(name=name, input_names=names, lower=lower, upper=upper, log_inputs=log_inputs,
-                   x_mean=x_mean, x_sd=x_sd, y_mean=y_mean, y_sd=y_sd, network=network,
-                   fixed=dict(fixed or {}), metadata=meta, log_outputs=log_outputs, prior=prior)
-    y_valid = y_valid_full
-    y_sd_phys = y_valid.std(axis=0)  # physical-unit scale for the standardised MSE in the report
-    meta["validation"] = metrics(y_valid, np.asarray(emu.apply(x_valid)), y_sd_phys)
-    if x_test is not None and y_test is not None and len(x_test):
-        meta["test"] = metrics(y_test, np.asarray(emu.apply(np.asarray(x_test, float))), y_sd_phys)
-    return emu
 
 
 # ----- from campaign stores ---------------------------------------------------

@@ -422,6 +422,52 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     if base_cut_mm is not None and not (np.isfinite(base_cut_mm) and base_cut_mm >= 0):
         raise GeometryError(f"base_cut_mm (--base-cut) = {base_cut_mm}: give a distance >= 0 mm below the base ring")
     endo_rings, epi_rings = surface_rings(endo), surface_rings(epi)
+    base, full = _open_base(endo, endo_rings)
+    c = base.points.mean(axis=0)
+    apex, a = find_axis(c, base.normal, epi.sample())
+    n_plane = base.normal if base.normal @ a > 0 else -base.normal
+    obliq = float(np.degrees(np.arccos(np.clip(n_plane @ a, -1.0, 1.0))))
+    length = float((c - apex) @ a)
+    rings = [_replace(r, depth_mm=float(np.max(-(r.points - c) @ a)), normal=r.normal * np.sign(r.normal @ a or 1.0))
+             for r in endo_rings + epi_rings]
+    # small holes (defects of the mesh) are bridged by the fit and do not move the cut
+    hole_max = HOLE_FRACTION * base.perimeter_mm
+    holes = [r for r in rings if not r.is_base and r.perimeter_mm < hole_max]
+    rings_cut = [r for r in rings if r.is_base or r.perimeter_mm >= hole_max]
+    ring_depth = max(0.0, max(r.depth_mm for r in rings_cut))
+    wall = _wall_profile(endo, epi, base, c, a, length)
+    deepest = max(rings_cut, key=lambda r: (round(r.depth_mm, 1), r.surface == "endo", r.is_base))
+    kind = "endocardium" if deepest.surface == "endo" else "epicardium"
+    max_cut = MAX_CUT_FRACTION * length
+    rule_depth = _rule_depth(wall, ring_depth, max_cut) if wall.meet else 0.0
+    if base_cut_mm is not None:
+        depth, rule = _given_cut(float(base_cut_mm), wall, ring_depth, rule_depth, deepest, kind)
+    else:
+        depth, rule = _default_cut(wall, ring_depth, rule_depth, max_cut)
+    origin = c - depth * a
+    kept = volume_below_plane(endo.points, endo.triangles, origin, a) / 1000.0
+    removed = full - kept
+    if base_cut_mm is None and depth > max_cut:
+        what = ("base ring" if deepest.is_base else f"extra opening (perimeter {deepest.perimeter_mm:.0f} mm)")
+        raise GeometryError(
+            f"the {kind}'s {what} reaches {ring_depth:.1f} mm below the base ring's centre (an opening for the "
+            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness "
+            f"{deepest.unevenness_mm:.1f} mm): "
+            f"cutting below it would remove {removed:.1f} mL ({100 * removed / full:.0f} %) of the cavity. "
+            f"Close the opening in the segmentation (cap the outflow tract at the valve plane), or accept the cut "
+            f"with --base-cut {np.ceil(ring_depth * 10) / 10:g} (base_cut_mm=)")
+    msgs = _messages(wall, obliq, base, holes, [r for r in rings_cut if not r.is_base], depth, rule, removed, full)
+    return BaseCut(rings=tuple(rings), plane_origin=base.centroid, plane_normal=n_plane,
+                   unevenness_mm=base.unevenness_mm, obliquity_deg=obliq, apex=apex, axis=a, ring_centroid=c,
+                   ring_depth_mm=ring_depth, wall_at_ring_mm=wall.at_ring, wall_typical_mm=wall.typical,
+                   walls_meet=bool(wall.meet), cut_depth_mm=float(depth), cut_origin=origin, cut_normal=a, rule=rule,
+                   wall_at_cut_mm=wall.below(max(depth, 0.0)), cavity_full_ml=full, cavity_kept_ml=kept,
+                   cavity_removed_ml=removed, length_mm=length, messages=tuple(msgs))
+
+
+def _open_base(endo, endo_rings: list[BaseRing]) -> tuple[BaseRing, float]:
+    """The endocardium's base ring and its cavity volume closed there (mL); refused when it has no base opening
+    or encloses no volume."""
     if not endo_rings:
         raise GeometryError(f"endocardial surface '{endo.source}' is closed; cut it at the base so it is open there "
                             "(its boundary loop defines the base plane)")
@@ -435,94 +481,111 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
         raise GeometryError(f"the endocardial surface '{endo.source}' encloses no volume ({full:.3g} mL once closed "
                             "at its base opening): the mesh has no cavity volume; check that the file holds an LV "
                             "whose endocardium is a 3-D cup, not a flattened or collapsed one")
-    c = base.points.mean(axis=0)
-    apex, a = find_axis(c, base.normal, epi.sample())
-    n_plane = base.normal if base.normal @ a > 0 else -base.normal
-    obliq = float(np.degrees(np.arccos(np.clip(n_plane @ a, -1.0, 1.0))))
-    length = float((c - apex) @ a)
-    rings = [_replace(r, depth_mm=float(np.max(-(r.points - c) @ a)), normal=r.normal * np.sign(r.normal @ a or 1.0))
-             for r in endo_rings + epi_rings]
-    # small holes (defects of the mesh) are bridged by the fit and do not move the cut
-    hole_max = HOLE_FRACTION * base.perimeter_mm
-    holes = [r for r in rings if not r.is_base and r.perimeter_mm < hole_max]
-    rings_cut = [r for r in rings if r.is_base or r.perimeter_mm >= hole_max]
-    ring_depth = max(0.0, max(r.depth_mm for r in rings_cut))
+    return base, full
 
-    # wall thickness
-    ev = endo.points
-    h = -(ev - c) @ a
-    thick = wall_thickness(ev, epi)
+
+@dataclass(frozen=True)
+class _WallProfile:
+    """Wall thickness at the endocardial nodes by depth below the base level (mm).
+
+    Attributes
+    ----------
+    h, thick : ndarray
+        Depth of each endocardial node below the ring centre along the axis, and the wall thickness there (mm).
+    typical, at_ring : float
+        Median thickness over 20–60 % of the length, and the 10th percentile at the base ring (mm).
+    band : float
+        Depth band over which :meth:`below` takes its percentile (mm).
+    """
+
+    h: np.ndarray
+    thick: np.ndarray
+    typical: float
+    at_ring: float
+    band: float
+
+    @property
+    def meet(self) -> bool:
+        """Whether the endocardium and epicardium (nearly) meet at the base ring."""
+        return self.at_ring < MEET_FRACTION * self.typical
+
+    @property
+    def meet_text(self) -> str:
+        return (f"the endocardium and epicardium meet at the base (wall thickness {self.at_ring:.1f} mm at the ring)"
+                if self.at_ring < 0.5 else
+                f"the wall thins to {self.at_ring:.1f} mm at the base ring (typical {self.typical:.1f} mm)")
+
+    def below(self, d: float) -> float:
+        """10th-percentile wall thickness in the band ``d`` to ``d + band`` mm below the ring (NaN: too few nodes)."""
+        sel = (self.h >= d) & (self.h <= d + self.band)
+        return float(np.percentile(self.thick[sel], 10)) if sel.sum() >= 8 else float("nan")
+
+
+def _wall_profile(endo, epi, base: BaseRing, c: np.ndarray, a: np.ndarray, length: float) -> _WallProfile:
+    h = -(endo.points - c) @ a
+    thick = wall_thickness(endo.points, epi)
     mid = (h > 0.2 * length) & (h < 0.6 * length)
     t_typ = float(np.median(thick[mid])) if mid.sum() >= 10 else float(np.median(thick))
     t_ring = float(np.percentile(wall_thickness(base.points, epi), 10))
-    meet = t_ring < MEET_FRACTION * t_typ
-    band = max(2.0, 2.0 * _median_edge(endo))
+    return _WallProfile(h, thick, t_typ, t_ring, max(2.0, 2.0 * _median_edge(endo)))
 
-    def wall_below(d):
-        sel = (h >= d) & (h <= d + band)
-        return float(np.percentile(thick[sel], 10)) if sel.sum() >= 8 else float("nan")
 
-    msgs = []
-    deepest = max(rings_cut, key=lambda r: (round(r.depth_mm, 1), r.surface == "endo", r.is_base))
-    kind = "endocardium" if deepest.surface == "endo" else "epicardium"
-    max_cut = MAX_CUT_FRACTION * length
-    meet_text = (f"the endocardium and epicardium meet at the base (wall thickness {t_ring:.1f} mm at the ring)"
-                 if t_ring < 0.5 else f"the wall thins to {t_ring:.1f} mm at the base ring (typical {t_typ:.1f} mm)")
-    rule_depth = 0.0
-    if meet:
-        d = ring_depth
-        rule_depth = float("nan")
-        while d <= max(max_cut, ring_depth) + 1e-9:
-            w = wall_below(d)
-            if np.isfinite(w) and w >= USABLE_FRACTION * t_typ:
-                rule_depth = d
-                break
-            d += 0.5
-    if base_cut_mm is not None:
-        depth, rule = float(base_cut_mm), "base_cut_mm"
-        if depth < ring_depth - RING_TOL_MM:
-            raise GeometryError(
-                f"base_cut_mm (--base-cut) = {depth:g} mm lies above part of the base: the {kind}'s "
-                f"{'base ring' if deepest.is_base else 'extra opening'} reaches {ring_depth:.1f} mm below the ring "
-                f"centre; give at least {np.ceil(ring_depth * 10) / 10:g} mm so the wall below the cut is complete")
-        if meet:
-            w = wall_below(max(depth, 0.0))
-            if not (np.isfinite(w) and w >= MEET_FRACTION * t_typ):
-                hint = (f"use at least {rule_depth:.1f} mm (where the wall first reaches "
-                        f"{USABLE_FRACTION * t_typ:.1f} mm) or leave it out" if np.isfinite(rule_depth)
-                        else "cut lower")
-                raise GeometryError(f"{meet_text}; a cut {depth:g} mm below the ring leaves a wall only "
-                                    f"{0.0 if not np.isfinite(w) else w:.1f} mm thick there: {hint}")
-    else:
-        if meet and not np.isfinite(rule_depth):
-            raise GeometryError(
-                f"{meet_text}, and the wall stays thinner than {USABLE_FRACTION * t_typ:.1f} mm "
-                f"({USABLE_FRACTION:.0%} of its typical {t_typ:.1f} mm) down to {max_cut:.0f} mm below the ring; "
-                "check that the surfaces are the endocardium and epicardium of one LV, or give the cut with "
-                "--base-cut MM (base_cut_mm=)")
-        flat_depth = ring_depth if ring_depth > RING_TOL_MM else 0.0
-        depth = max(flat_depth, rule_depth)
-        rule = ("wall thickness" if meet and rule_depth >= flat_depth and rule_depth > 0
-                else "below the ring" if flat_depth > 0 else "flat base")
-    origin = c - depth * a
-    kept = volume_below_plane(endo.points, endo.triangles, origin, a) / 1000.0
-    removed = full - kept
-    if base_cut_mm is None and depth > max_cut:
-        what = ("base ring" if deepest.is_base else f"extra opening (perimeter {deepest.perimeter_mm:.0f} mm)")
+def _rule_depth(wall: _WallProfile, ring_depth: float, max_cut: float) -> float:
+    """The first depth (0.5 mm steps from the ring's) where the wall reaches :data:`USABLE_FRACTION` of its
+    typical thickness; NaN when it does not above the deepest cut allowed."""
+    d = ring_depth
+    while d <= max(max_cut, ring_depth) + 1e-9:
+        w = wall.below(d)
+        if np.isfinite(w) and w >= USABLE_FRACTION * wall.typical:
+            return d
+        d += 0.5
+    return float("nan")
+
+
+def _given_cut(depth: float, wall: _WallProfile, ring_depth: float, rule_depth: float, deepest: BaseRing,
+               kind: str) -> tuple[float, str]:
+    """``base_cut_mm`` as given, refused above part of a ring or where the wall is too thin."""
+    if depth < ring_depth - RING_TOL_MM:
         raise GeometryError(
-            f"the {kind}'s {what} reaches {ring_depth:.1f} mm below the base ring's centre (an opening for the "
-            f"outflow tract, a notch in the wall, or a strongly oblique base; unevenness "
-            f"{deepest.unevenness_mm:.1f} mm): "
-            f"cutting below it would remove {removed:.1f} mL ({100 * removed / full:.0f} %) of the cavity. "
-            f"Close the opening in the segmentation (cap the outflow tract at the valve plane), or accept the cut "
-            f"with --base-cut {np.ceil(ring_depth * 10) / 10:g} (base_cut_mm=)")
-    if meet:
-        msgs.append(meet_text)
+            f"base_cut_mm (--base-cut) = {depth:g} mm lies above part of the base: the {kind}'s "
+            f"{'base ring' if deepest.is_base else 'extra opening'} reaches {ring_depth:.1f} mm below the ring "
+            f"centre; give at least {np.ceil(ring_depth * 10) / 10:g} mm so the wall below the cut is complete")
+    if wall.meet:
+        w = wall.below(max(depth, 0.0))
+        if not (np.isfinite(w) and w >= MEET_FRACTION * wall.typical):
+            hint = (f"use at least {rule_depth:.1f} mm (where the wall first reaches "
+                    f"{USABLE_FRACTION * wall.typical:.1f} mm) or leave it out" if np.isfinite(rule_depth)
+                    else "cut lower")
+            raise GeometryError(f"{wall.meet_text}; a cut {depth:g} mm below the ring leaves a wall only "
+                                f"{0.0 if not np.isfinite(w) else w:.1f} mm thick there: {hint}")
+    return depth, "base_cut_mm"
+
+
+def _default_cut(wall: _WallProfile, ring_depth: float, rule_depth: float, max_cut: float) -> tuple[float, str]:
+    """The default cut's depth (mm) and the rule that set it (module docstring)."""
+    if wall.meet and not np.isfinite(rule_depth):
+        raise GeometryError(
+            f"{wall.meet_text}, and the wall stays thinner than {USABLE_FRACTION * wall.typical:.1f} mm "
+            f"({USABLE_FRACTION:.0%} of its typical {wall.typical:.1f} mm) down to {max_cut:.0f} mm below the ring; "
+            "check that the surfaces are the endocardium and epicardium of one LV, or give the cut with "
+            "--base-cut MM (base_cut_mm=)")
+    flat_depth = ring_depth if ring_depth > RING_TOL_MM else 0.0
+    depth = max(flat_depth, rule_depth)
+    rule = ("wall thickness" if wall.meet and rule_depth >= flat_depth and rule_depth > 0
+            else "below the ring" if flat_depth > 0 else "flat base")
+    return depth, rule
+
+
+def _messages(wall: _WallProfile, obliq: float, base: BaseRing, holes: list, extra: list, depth: float, rule: str,
+              removed: float, full: float) -> list[str]:
+    """The notes of :attr:`BaseCut.messages`: thin wall, oblique or uneven base, holes, extra openings, the cut."""
+    msgs = []
+    if wall.meet:
+        msgs.append(wall.meet_text)
     if obliq > 5.0:
         msgs.append(f"the base plane is oblique ({obliq:.1f}° to the long axis)")
     if base.unevenness_mm > 2 * RING_TOL_MM:
         msgs.append(f"the endocardial base ring is uneven ({base.unevenness_mm:.1f} mm peak to peak about its plane)")
-    extra = [r for r in rings_cut if not r.is_base]
     if holes:
         msgs.append(f"{len(holes)} small hole(s) in the surfaces (perimeter up to "
                     f"{max(r.perimeter_mm for r in holes):.1f} mm) bridged by the fit; fill them for a clean surface")
@@ -532,12 +595,7 @@ def analyse_base(endo, epi, base_cut_mm: float | None = None) -> BaseCut:
     if depth > 0:
         msgs.append(f"cut both surfaces {depth:.1f} mm below the base ring's centre ({rule}); "
                     f"{removed:.2f} mL of the {full:.1f} mL cavity removed")
-    return BaseCut(rings=tuple(rings), plane_origin=base.centroid, plane_normal=n_plane,
-                   unevenness_mm=base.unevenness_mm, obliquity_deg=obliq, apex=apex, axis=a, ring_centroid=c,
-                   ring_depth_mm=ring_depth, wall_at_ring_mm=t_ring, wall_typical_mm=t_typ, walls_meet=bool(meet),
-                   cut_depth_mm=float(depth), cut_origin=origin, cut_normal=a, rule=rule,
-                   wall_at_cut_mm=wall_below(max(depth, 0.0)), cavity_full_ml=full, cavity_kept_ml=kept,
-                   cavity_removed_ml=removed, length_mm=length, messages=tuple(msgs))
+    return msgs
 
 
 __all__ = ["BaseRing", "BaseCut", "boundary_loops", "surface_rings", "closed_volume", "volume_below_plane",

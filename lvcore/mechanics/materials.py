@@ -35,12 +35,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore import conditions, units
+from lvcore.mechanics import tensor_forms as tf
 from lvcore.mechanics.kinematics import cofactor, det3, green_strain, isochoric_i1, right_cauchy_green
-
-#: Levi-Civita symbol: ``∂²J/∂F_iJ ∂F_kL = ε_ikm ε_JLN F_mN`` (the second derivative of a determinant).
-_EPS = np.zeros((3, 3, 3))
-for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-    _EPS[_i, _j, _k], _EPS[_i, _k, _j] = 1.0, -1.0
+from lvcore.mechanics.tensor_forms import pull_back
 
 #: Half-width of the reference state in the tension switches of the Holzapfel–Ogden tangent. At E_f = 0
 #: (I4s = 1) the energy's second derivative jumps from 0 (compression) to a_f (a_s); where the strain is
@@ -50,53 +47,6 @@ for _i, _j, _k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
 #: moved the default LV solve from 7 to 11 tangents (a cut load step) and 40 cold rows of a θ design from
 #: 10.8 to 12.0 tangents each; with the tension side 6 and 9.7 (stresses and energy unchanged).
 REFERENCE_SWITCH_TOL = 1e-12
-
-#: ``∂(cof F)_iJ/∂F_kL = ε_ikm ε_JLN F_mN`` as a (9, 81) matrix acting on ``F`` raveled (``mN`` -> ``iJkL``).
-_COF_DERIVATIVE = np.einsum("ikm,JLN->mNiJkL", _EPS, _EPS).reshape(9, 81)
-
-
-def _outer(X, Y):
-    """``(X ⊗ Y)_iJkL = X_iJ Y_kL`` of two 3×3 arrays."""
-    return X[:, :, None, None] * Y[None, None, :, :]
-
-
-def _box(X, Y):
-    """``(X ⊠ Y)_iJkL = X_iL Y_kJ`` of two 3×3 arrays."""
-    return X[:, None, None, :] * Y.T[None, :, :, None]
-
-
-def _delta_ik(S):
-    """``δ_ik S_JL`` (3, 3, 3, 3)."""
-    return jnp.eye(3)[:, None, :, None] * S[None, :, None, :]
-
-
-# Pointwise tangents with their gradient slots in other coordinates. The element kernels contract a
-# tangent with shape-function gradients in the element's reference coordinates ξ, so they want
-# ``A'_iKkM = G_KJ A_iJkL G_ML`` with ``G = ∂ξ/∂X`` (the inverse Jacobian at the point). A tangent built
-# from the forms ``X ⊗ Y``, ``X ⊠ Y`` and ``δ_ik B_JL`` maps factor by factor: ``X ⊗ Y -> (X Gᵀ) ⊗ (Y Gᵀ)``,
-# ``X ⊠ Y -> (X Gᵀ) ⊠ (Y Gᵀ)``, ``δ_ik B -> δ_ik (G B Gᵀ)``: a few 3×3 products instead of the 3⁴ pull-back
-# (the default LV tangent kernel 0.80× the time).
-
-def _slot(X, G):
-    """``X_iJ G_KJ`` (i, K): a gradient slot of an outer-product factor mapped by ``G`` (None: ``X``)."""
-    return X if G is None else X @ G.T
-
-
-def _slots(B, G):
-    """``G B Gᵀ``: both gradient slots of the ``B`` in ``δ_ik B_JL`` mapped by ``G`` (None: ``B``)."""
-    return B if G is None else G @ B @ G.T
-
-
-def pull_back(A, G):
-    """``A'_iKkM = G_KJ A_iJkL G_ML``: both gradient slots of a pointwise tangent (3, 3, 3, 3) mapped by
-    ``G`` (3, 3), e.g. ``∂ξ/∂X`` to the element's reference coordinates; None: ``A``. The general way, for
-    tangents not built from outer products (automatic derivatives, :meth:`MaterialLaw.piola_tangent`).
-    """
-    if G is None:
-        return A
-    # sums over J and L as broadcast products (XLA fuses them; faster than its dot for these sizes)
-    A1 = sum(G[None, :, J, None, None] * A[:, J, None, :, :] for J in range(3))  # (i, K, k, L)
-    return sum(A1[..., L, None] * G[None, None, None, :, L] for L in range(3))  # (i, K, k, M)
 
 
 def _expm1_over(a, b, x):
@@ -110,29 +60,6 @@ def _pytree(cls):
         cls, data_fields=[f.name for f in dataclasses.fields(cls)], meta_fields=[])
 
 
-def _isochoric(C, Sbar, CCbar):
-    """Stress and elasticity tensor of ``W(C) = Ŵ(C̄)``, ``C̄ = I3^{-1/3} C`` (``I3 = det C``), from
-    ``S̄ = 2 ∂Ŵ/∂C̄`` and ``ℂ̄ = 4 ∂²Ŵ/∂C̄∂C̄`` (Holzapfel 2000, eqs. 6.88 and 6.168)::
-
-        S = I3^{-1/3} Dev S̄,  Dev X = X − (X : C)/3 C⁻¹,
-        ℂ = ℙ : (I3^{-2/3} ℂ̄) : ℙᵀ + 2/3 (I3^{-1/3} S̄ : C) ℙ̃ − 2/3 (C⁻¹ ⊗ S + S ⊗ C⁻¹),
-
-    with ``ℙ = 𝕀 − C⁻¹ ⊗ C / 3`` and ``ℙ̃ = C⁻¹ ⊙ C⁻¹ − C⁻¹ ⊗ C⁻¹ / 3``. ``CCbar`` None: stress only.
-    """
-    i3 = det3(C)
-    Cinv = cofactor(C) / i3  # C symmetric: cof C = det C · C⁻¹
-    j23 = i3 ** (-1.0 / 3.0)
-    S = j23 * (Sbar - (jnp.sum(Sbar * C) / 3.0) * Cinv)
-    if CCbar is None:
-        return S, None
-    Y = (j23 * j23) * CCbar
-    Y = Y - jnp.einsum("IJ,KL->IJKL", Cinv, jnp.einsum("AB,ABKL->KL", C, Y)) / 3.0
-    Y = Y - jnp.einsum("IJ,KL->IJKL", jnp.einsum("IJAB,AB->IJ", Y, C), Cinv) / 3.0
-    CsC = 0.5 * (jnp.einsum("IK,JL->IJKL", Cinv, Cinv) + jnp.einsum("IL,JK->IJKL", Cinv, Cinv))
-    Pt = CsC - jnp.einsum("IJ,KL->IJKL", Cinv, Cinv) / 3.0
-    CC = (Y + (2.0 / 3.0) * j23 * jnp.sum(Sbar * C) * Pt
-          - (2.0 / 3.0) * (jnp.einsum("IJ,KL->IJKL", Cinv, S) + jnp.einsum("IJ,KL->IJKL", S, Cinv)))
-    return S, CC
 
 
 class MaterialLaw:
@@ -274,7 +201,7 @@ class MaterialLaw:
         (:func:`pull_back`; e.g. ``G = ∂ξ/∂X``, the element's reference coordinates).
         """
         S, Cm = self.pk2_tangent(right_cauchy_green(F), frame, with_tangent=True)
-        return S, pull_back(_delta_ik(S) + jnp.einsum("iI,kK,IJKL->iJkL", F, F, Cm), G)
+        return S, pull_back(tf.delta_ik(S) + jnp.einsum("iI,kK,IJKL->iJkL", F, F, Cm), G)
 
 
 @_pytree
@@ -439,14 +366,14 @@ class HolzapfelOgden(MaterialLaw):
         """
         t = self._derivatives(right_cauchy_green(F), frame)
         S, Cinv, i1 = t["S"], t["Cinv"], t["i1"]
-        FiT = _slot(F @ Cinv, G)  # F⁻ᵀ
-        Fm = _slot(F, G)
+        FiT = tf.slot(F @ Cinv, G)  # F⁻ᵀ
+        Fm = tf.slot(F, G)
         g = 4.0 * t["g_iso"] * t["j23"]
-        FdI, FH, Fss, Ffs = (_slot(F @ t[k], G) for k in ("dI1b", "H", "ss", "fs"))
-        A = (4.0 * (t["d2_iso"] * _outer(FdI, FdI) + t["d2_f"] * _outer(FH, FH) + t["d2_s"] * _outer(Fss, Fss)
-                    + t["d2_fs"] * _outer(Ffs, Ffs))
-             - (g / 3.0) * (_outer(Fm, FiT) + _outer(FiT, Fm)) + (g * i1 / 9.0) * _outer(FiT, FiT)
-             + (g * i1 / 6.0) * _box(FiT, FiT) + _delta_ik(_slots(S + (g * i1 / 6.0) * Cinv, G)))
+        FdI, FH, Fss, Ffs = (tf.slot(F @ t[k], G) for k in ("dI1b", "H", "ss", "fs"))
+        A = (4.0 * (t["d2_iso"] * tf.outer(FdI, FdI) + t["d2_f"] * tf.outer(FH, FH) + t["d2_s"] * tf.outer(Fss, Fss)
+                    + t["d2_fs"] * tf.outer(Ffs, Ffs))
+             - (g / 3.0) * (tf.outer(Fm, FiT) + tf.outer(FiT, Fm)) + (g * i1 / 9.0) * tf.outer(FiT, FiT)
+             + (g * i1 / 6.0) * tf.box(FiT, FiT) + tf.delta_ik(tf.slots(S + (g * i1 / 6.0) * Cinv, G)))
         return S, A
 
 
@@ -511,17 +438,18 @@ class Guccione(MaterialLaw):
         ``Q = Σ_ab β_ab Ē'_ab²`` (``β`` the exponents: ``b_f`` on 11, ``b_t`` on 22, 33, 23, ``b_fs`` on
         12, 13) and ``T = ∂Q/∂C̄ = Rᵀ (β ∘ Ē') R``: ``S̄ = C e^Q T``,
         ``ℂ̄ = 2 C e^Q (T ⊗ T + ∂T/∂C̄)``, ``(∂T/∂C̄)_IJKL = sym_KL Σ_ab β_ab R_aI R_bJ R_aK R_bL / 2``;
-        then the isochoric projection (:func:`_isochoric`)."""
+        then the isochoric projection (:func:`~lvcore.mechanics.tensor_forms.isochoric_split`)."""
         beta, _, eQ, T, Sbar = self._isochoric_stress(C, frame)
         if not with_tangent:
-            return _isochoric(C, Sbar, None)
+            return tf.isochoric_split(C, Sbar, None)
         B = jnp.einsum("ab,aI,bJ,aK,bL->IJKL", beta, frame, frame, frame, frame)
         dT = 0.25 * (B + jnp.swapaxes(B, 2, 3))
         CCbar = 2.0 * self.C * eQ * (jnp.einsum("IJ,KL->IJKL", T, T) + dT)
-        return _isochoric(C, Sbar, CCbar)
+        return tf.isochoric_split(C, Sbar, CCbar)
 
     def piola_tangent(self, F, frame, G=None):
-        """``(S, ∂²W/∂F∂F)`` in closed form: :meth:`pk2_tangent` and :func:`_isochoric` pushed forward by hand.
+        """``(S, ∂²W/∂F∂F)`` in closed form: :meth:`pk2_tangent` and
+        :func:`~lvcore.mechanics.tensor_forms.isochoric_split` pushed forward by hand.
 
         With ``v_a = F r_a`` (``r_a`` the frame rows), ``U = ∂T/∂C̄ : C = Rᵀ (β ∘ R C Rᵀ) R / 2``,
         ``T̃ = T − (C:T)/3 C⁻¹`` and ``s̄ = I3^{-1/3} S̄ : C``, every term of ℂ becomes outer products in
@@ -546,23 +474,23 @@ class Guccione(MaterialLaw):
         S = j23 * Sbar - (sC / 3.0) * Cinv
         U = 0.5 * frame.T @ (beta * (frame @ C @ frame.T)) @ frame
         FiT = F @ Cinv  # F⁻ᵀ
-        FTt = _slot(F @ T - (jnp.sum(C * T) / 3.0) * FiT, G)  # F T̃
-        FU = _slot(F @ U, G)
+        FTt = tf.slot(F @ T - (jnp.sum(C * T) / 3.0) * FiT, G)  # F T̃
+        FU = tf.slot(F @ U, G)
         v = frame @ F.T  # rows v_a = F r_a
-        r = _slot(frame, G)  # the frame rows in the gradient slots J, L
+        r = tf.slot(frame, G)  # the frame rows in the gradient slots J, L
         VV = v[:, :, None] * v[:, None, :]  # (a, i, k) v_ai v_ak
         RR = r[:, :, None] * r[:, None, :]  # (b, J, L) r_bJ r_bL
         VR = v[:, :, None] * r[:, None, :]  # (a, i, L) v_ai r_aL
         calT = 0.25 * (jnp.einsum("aik,aJL->iJkL", VV, jnp.einsum("ab,bJL->aJL", beta, RR))
                        + jnp.einsum("aiL,akJ->iJkL", VR, jnp.einsum("ab,bkJ->akJ", beta, VR)))
-        FS = _slot(F @ S, G)
-        FiT = _slot(FiT, G)
-        FiT2 = _outer(FiT, FiT)
-        iso = (_outer(FTt, FTt) + calT - (_outer(FiT, FU) + _outer(FU, FiT)) / 3.0
+        FS = tf.slot(F @ S, G)
+        FiT = tf.slot(FiT, G)
+        FiT2 = tf.outer(FiT, FiT)
+        iso = (tf.outer(FTt, FTt) + calT - (tf.outer(FiT, FU) + tf.outer(FU, FiT)) / 3.0
                + (jnp.sum(C * U) / 9.0) * FiT2)
         A = ((2.0 * self.C * eQ * j23 * j23) * iso
-             + (2.0 * sC / 3.0) * (0.5 * (_delta_ik(_slots(Cinv, G)) + _box(FiT, FiT)) - FiT2 / 3.0)
-             - (2.0 / 3.0) * (_outer(FiT, FS) + _outer(FS, FiT)) + _delta_ik(_slots(S, G)))
+             + (2.0 * sC / 3.0) * (0.5 * (tf.delta_ik(tf.slots(Cinv, G)) + tf.box(FiT, FiT)) - FiT2 / 3.0)
+             - (2.0 / 3.0) * (tf.outer(FiT, FS) + tf.outer(FS, FiT)) + tf.delta_ik(tf.slots(S, G)))
         return S, A
 
 
@@ -595,8 +523,9 @@ class NeoHookean(MaterialLaw):
     closed_form: ClassVar[bool] = True
 
     def pk2_tangent(self, C, frame, with_tangent: bool = True):
-        """Closed form: ``S̄ = mu I``, ``ℂ̄ = 0``, then the isochoric projection (:func:`_isochoric`)."""
-        return _isochoric(C, self.mu * jnp.eye(3), jnp.zeros((3, 3, 3, 3)) if with_tangent else None)
+        """Closed form: ``S̄ = mu I``, ``ℂ̄ = 0``, then the isochoric projection
+        (:func:`~lvcore.mechanics.tensor_forms.isochoric_split`)."""
+        return tf.isochoric_split(C, self.mu * jnp.eye(3), jnp.zeros((3, 3, 3, 3)) if with_tangent else None)
 
 
 #: The one registry of material laws: case-schema name -> law class.
@@ -686,9 +615,9 @@ class ConstitutiveModel:
             cof = cofactor(F)
             P = F @ S + p * cof
             if G is None:
-                return P, A + p * (F.reshape(9) @ _COF_DERIVATIVE).reshape(3, 3, 3, 3)
-            cof = _slot(cof, G)
-            return P, A + (p / det3(F)) * (_outer(cof, cof) - _box(cof, cof))
+                return P, A + p * (F.reshape(9) @ tf.COF_DERIVATIVE).reshape(3, 3, 3, 3)
+            cof = tf.slot(cof, G)
+            return P, A + (p / det3(F)) * (tf.outer(cof, cof) - tf.box(cof, cof))
         return jax.grad(self.psi)(F, frame, p), pull_back(jax.hessian(self.psi)(F, frame, p), G)
 
     def scaled(self, s) -> "ConstitutiveModel":
