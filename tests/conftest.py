@@ -13,6 +13,11 @@ os.environ.setdefault("LVCORE_APP_WARMUP", "0")
 # `lvcore calibrate`'s derived quantities run the FE simulator for 100 posterior draws (about a minute); the
 # tests that check them (tests/test_inference_derived.py) ask for them with --derived-draws, the others skip them
 os.environ.setdefault("LVCORE_DERIVED_DRAWS", "0")
+# A study's figures are written as HTML and, through kaleido (a Chromium started per figure, about 3-6 s), as PNG:
+# 24 PNGs made the realistic-operators mini study 84 s of CI time. The study tests check the HTML and the results;
+# the PNG path of lvcore.studies._common.save_figure is tested in tests/test_studies_common.py (a real export, a
+# failing and a hung one), which unsets this variable.
+os.environ.setdefault("LVCORE_NO_PNG", "1")
 
 import lvcore  # noqa: E402,F401  (turns on float64 before any test makes arrays)
 from lvcore.inference.samplers import use_host_devices  # noqa: E402

@@ -1,10 +1,27 @@
 """Shared study helpers (lvcore.studies._common)."""
+import os
 import threading
+from pathlib import Path
 
 import plotly.graph_objects as go
 import pytest
 
 from lvcore.studies import _common
+
+
+def test_a_study_figure_is_written_as_html_and_png(tmp_path, monkeypatch):
+    """The real export (kaleido and Debian's chromium; CI installs both): a valid PNG beside the HTML."""
+    from lvcore.report import export
+
+    problem = export.static_export_problem()
+    if problem:
+        if os.environ.get("CI"):
+            pytest.fail(f"static export cannot run in CI: {problem}")
+        pytest.skip(problem)
+    monkeypatch.delenv("LVCORE_NO_PNG", raising=False)
+    paths = _common.save_figure(go.Figure(go.Scatter(x=[0, 1], y=[1, 2])), tmp_path / "fig")
+    assert paths == [str(tmp_path / "fig.html"), str(tmp_path / "fig.png")]
+    assert Path(paths[1]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_a_hung_png_export_is_abandoned_and_the_html_kept(tmp_path, monkeypatch):
