@@ -20,8 +20,6 @@ DEFAULT_SUBJECT = "SYNTHETIC-HV3"
 #: Seconds the calibration adds to ``lvcore report`` (JAX compilation included): the range measured on the
 #: 2-core development machine, ``timings_s["calibration posterior"]`` of the manifest (docs/report.md, Appendix: measured runs).
 TYPICAL_SECONDS = (20, 45)
-#: Posterior draws behind the derived quantities (:mod:`lvcore.inference.derived`: the FE EDPVR, stress, ridge).
-DERIVED_DRAWS = 100
 #: Figures and tables :func:`figures` draws (for the default subject), with their titles.
 TITLES = {"fig_calibration_posterior": f"Calibration posterior of θ, {DEFAULT_SUBJECT} (prior and truth shown)",
           "table_calibration_summary": f"Calibration summary, {DEFAULT_SUBJECT}",
@@ -43,7 +41,8 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
         uniform prior, ``truth`` {name: value} or None, ``summary`` (DataFrame with
         ``parameter`` and ``truth``), ``status`` (convergence text), ``wall_s``, ``config`` and ``derived``
         (:func:`lvcore.inference.derived.derive`'s record with ``derived_draws`` posterior draws, default
-        :data:`DERIVED_DRAWS`; None with 0).
+        :func:`lvcore.inference.derived.default_draws`: 100, or the environment's ``LVCORE_DERIVED_DRAWS``; None
+        with 0).
     """
     from lvcore.emulator.io import available_emulators
 
@@ -64,11 +63,12 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
     forward = ScaledForward(load_emulator_forward("chapter", geo.h), geo.scale)
     config = SamplerConfig(num_warmup=num_warmup, num_samples=num_samples, num_chains=num_chains, seed=seed)
     res = calibrate(row.y, forward, "iid", config=config, max_rounds=1)
-    n_derived = DERIVED_DRAWS if derived_draws is None else int(derived_draws)
+    from lvcore.inference import derived
+
+    n_derived = derived.default_draws() if derived_draws is None else int(derived_draws)
     derived_rec = None
     if n_derived:
         from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_V_ML
-        from lvcore.inference import derived
 
         emu = forward.forward.emulator if hasattr(forward.forward, "emulator") else None
         derived_rec, _ = derived.derive(
