@@ -47,7 +47,7 @@ BUILD_ARGS = ["--geometry", "default", "--inputs", "theta,edp", "--bound", "edp=
 
 def fe_truth(theta: dict) -> dict:
     """FE outputs of the SYNTHETIC subject at :data:`PRESSURES` and its reference volume V0 (mL)."""
-    from lvcore.core.space import build_case
+    from lvcore.mechanics.case_inputs import build_case
     from lvcore.mechanics.simulate import simulate
 
     out, v0 = {}, None

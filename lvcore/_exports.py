@@ -18,7 +18,8 @@ import warnings
 from typing import Callable, Mapping
 
 
-def lazy_exports(package: str, namespace: dict, exports: Mapping[str, str]) -> tuple[Callable, Callable]:
+def lazy_exports(package: str, namespace: dict, exports: Mapping[str, str],
+                 moved: Mapping[str, str] | None = None) -> tuple[Callable, Callable]:
     """``(__getattr__, __dir__)`` for ``package`` exporting ``exports``.
 
     Parameters
@@ -30,9 +31,16 @@ def lazy_exports(package: str, namespace: dict, exports: Mapping[str, str]) -> t
     exports : mapping
         Public name -> submodule (relative to ``package``) that defines it; a
         name equal to its submodule exports the submodule itself.
+    moved : mapping, optional
+        Names the package exported before they moved, as for :func:`moved_names`
+        (old name -> ``"package.module:name"``); they resolve with a
+        ``DeprecationWarning`` and are not cached or listed.
     """
+    forward_moved = moved_names(package, moved) if moved else None
 
     def __getattr__(name: str):
+        if forward_moved is not None and name in moved:
+            return forward_moved(name)
         try:
             sub = exports[name]
         except KeyError:

@@ -12,10 +12,13 @@ Two sets of fibre angles and EDPs are easy to confuse, so they are named apart:
 * the **chapter's emulator conditions** (:data:`CHAPTER_ANGLES`,
   :data:`CHAPTER_EDP`): the angles and EDP at which the chapter's emulator
   was trained, the fixed inputs of the ``chapter`` campaign space and what
-  :func:`lvcore.core.space.build_case` fills in.
+  :func:`lvcore.mechanics.case_inputs.build_case` fills in.
 
-The chapter's reference material point θ̃ and the noise levels of its
-SYNTHETIC data sets live here too. Units: degrees, mmHg, kPa (a, af), mL.
+The chapter's fibre-angle pairs (:data:`CHAPTER_ANGLE_PAIRS`, and those of
+the fibre-discrepancy study's data, :data:`FIBRE_DISCREPANCY_ANGLE_PAIRS`),
+its reference material point θ̃, the noise levels of its SYNTHETIC data sets
+and the Holzapfel–Ogden terms every case holds at population values
+(:data:`HO_FIXED`) live here too. Units: degrees, mmHg, kPa (a, af, as, afs), mL.
 """
 from __future__ import annotations
 
@@ -27,7 +30,7 @@ SIMULATOR_DEFAULT_EDP_MMHG = 8.0
 #: The stiffness θ = (a, b, a_f, b_f) of a typical healthy LV (kPa for a, af): the Simulator page's starting point
 #: and the material of the bundled case ``assets/cases/default_lv.json``. These are the healthy-volunteer
 #: Holzapfel–Ogden values of the Glasgow LV models that go with the fixed sheet terms of
-#: :data:`lvcore.units.HO_FIXED` (a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58; Gao et al. 2017, after
+#: :data:`HO_FIXED` (a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58; Gao et al. 2017, after
 #: Gao et al. 2015, J Eng Math 95:231, doi:10.1007/s10665-014-9740-3; quoted from those papers as remembered, not
 #: re-read here: check before citing). On the default LV at 8 mmHg they give EDV/V₀ = 1.85 (LVV 159.1 mL on
 #: V₀ = 86.1 mL, ``default`` mesh), inside the typical 1.66–1.99 of :func:`lvcore.physiology.typical_edv_ratio`
@@ -40,6 +43,12 @@ SIMULATOR_DEFAULT_THETA = {"a": 0.18, "b": 2.60, "af": 3.34, "bf": 2.73}
 CHAPTER_ANGLES = (-60.0, 60.0)
 #: EDP (mmHg) at which the chapter's emulator was trained.
 CHAPTER_EDP = 8.0
+#: The fibre-angle pairs (α_endo, α_epi) in degrees of the chapter's angle study (§9.3.2, Fig 9.5): the simulator's
+#: defaults, the emulator's training angles and two more.
+CHAPTER_ANGLE_PAIRS = (SIMULATOR_DEFAULT_ANGLES, CHAPTER_ANGLES, (-30.0, 60.0), (0.0, 90.0))
+#: The angle pairs (deg) of the fibre-discrepancy study's SYNTHETIC data (§9.4.3): the chapter's pairs other than the
+#: emulator's training angles, so that the fibres are the discrepancy a calibration at :data:`CHAPTER_ANGLES` meets.
+FIBRE_DISCREPANCY_ANGLE_PAIRS = tuple(p for p in CHAPTER_ANGLE_PAIRS if p != CHAPTER_ANGLES)
 
 #: θ̃, the chapter's reference material point (kPa for a, af; b, bf dimensionless): the truth of the SYNTHETIC
 #: studies and the app's starting point.
@@ -49,5 +58,9 @@ SIGMA_S = 0.03
 #: Fixed LVV noise standard deviation σ_V (mL) of every calibration likelihood (chapter Table E.1).
 SIGMA_V_ML = 5.0
 
-__all__ = ["SIMULATOR_DEFAULT_ANGLES", "SIMULATOR_DEFAULT_EDP_MMHG", "SIMULATOR_DEFAULT_THETA", "CHAPTER_ANGLES", "CHAPTER_EDP", "THETA_TILDE",
-           "SIGMA_S", "SIGMA_V_ML"]
+#: The Holzapfel–Ogden sheet and fibre-sheet terms every case holds at population values unless it says otherwise
+#: (Gao et al. 2017): a_s, a_fs in kPa, b_s, b_fs dimensionless; case keys ``as, bs, afs, bfs``.
+HO_FIXED = {"as": 0.69, "bs": 1.11, "afs": 0.31, "bfs": 2.58}
+
+__all__ = ["SIMULATOR_DEFAULT_ANGLES", "SIMULATOR_DEFAULT_EDP_MMHG", "SIMULATOR_DEFAULT_THETA", "CHAPTER_ANGLES", "CHAPTER_EDP",
+           "CHAPTER_ANGLE_PAIRS", "FIBRE_DISCREPANCY_ANGLE_PAIRS", "THETA_TILDE", "SIGMA_S", "SIGMA_V_ML", "HO_FIXED"]

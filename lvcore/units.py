@@ -12,11 +12,13 @@ Conventions used throughout :mod:`lvcore`:
 """
 from __future__ import annotations
 
+from lvcore._exports import moved_names
+
 KPA_PER_MMHG = 0.1333223684
 MM3_PER_ML = 1000.0
 
-#: Fixed Holzapfel–Ogden population values (Gao et al. 2017): a_s, a_fs in kPa.
-HO_FIXED = {"as": 0.69, "bs": 1.11, "afs": 0.31, "bfs": 2.58}
+#: Material values are not units: the fixed Holzapfel–Ogden terms moved to :data:`lvcore.conditions.HO_FIXED`.
+__getattr__ = moved_names(__name__, {"HO_FIXED": "lvcore.conditions:HO_FIXED"})
 
 
 def mmhg_to_kpa(p_mmhg: float) -> float:

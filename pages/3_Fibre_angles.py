@@ -13,9 +13,10 @@ from lvcore.app import freshness
 from lvcore.app.controls import disabled_hint, shared_inputs, why_disabled
 from lvcore.app.live_chart import live_plotly_chart
 from lvcore.emulator.io import available_emulators, load_emulator
+from lvcore.conditions import CHAPTER_ANGLE_PAIRS, CHAPTER_ANGLES
 from lvcore.exceptions import LVCoreError
-from lvcore.studies.fibre_angles import (CHAPTER_ANGLE_PAIRS, angle_map, angle_sweep, emulator_angle_map,
-                                         emulator_angle_sweep, parse_angle_pairs, strain_table)
+from lvcore.studies.fibre_angles import (angle_map, angle_sweep, emulator_angle_map, emulator_angle_sweep,
+                                         parse_angle_pairs, strain_table)
 from lvcore.viz import figures
 
 st.set_page_config(page_title="Fibre angles", layout="wide")
@@ -161,8 +162,8 @@ def _live_map(theta, edp_mmhg, resolution) -> None:
 
     st.markdown("**Verify a point with the FE simulator** (runs in the background; the map stays live)")
     v1, v2, v3 = st.columns([1, 1, 1])
-    pe = v1.number_input("α_endo (°)", -90.0, 0.0, -60.0, 5.0, key="verify_endo")
-    pp = v2.number_input("α_epi (°)", 0.0, 90.0, 60.0, 5.0, key="verify_epi")
+    pe = v1.number_input("α_endo (°)", -90.0, 0.0, CHAPTER_ANGLES[0], 5.0, key="verify_endo")
+    pp = v2.number_input("α_epi (°)", 0.0, 90.0, CHAPTER_ANGLES[1], 5.0, key="verify_epi")
     job = st.session_state.get("angle_verify")
     busy = job is not None and not job["done"]
     inputs = {"a (kPa)": theta["a"], "b (–)": theta["b"], "a_f (kPa)": theta["af"], "b_f (–)": theta["bf"],

@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 
 import lvcore  # noqa: E402
 from lvcore.conditions import SIGMA_V_ML
-from lvcore.core.space import build_case  # noqa: E402
+from lvcore.mechanics.case_inputs import build_case  # noqa: E402
 from lvcore.exceptions import SolverError  # noqa: E402
 from lvcore.geometry.cohort import ROLE_VOLUNTEER, load_cohort  # noqa: E402
 from lvcore.geometry.io import write_template_mesh  # noqa: E402

@@ -6,6 +6,7 @@ from lvcore.campaigns.designs import Design, load_design, make_design, save_desi
 from lvcore.campaigns.space import get_space
 from lvcore.core.space import Parameter, ParameterSpace
 from lvcore.exceptions import CampaignError
+from lvcore.mechanics.case_inputs import space_case
 
 SD = [10.0, 8.0, 6.0, 4.0, 2.0]  # PC score sds for spaces with PCs (no shape model needed)
 
@@ -30,11 +31,11 @@ def test_space_dimensions_and_cases():
     assert angles.names[:7] == ("a", "b", "af", "bf", "alpha_endo", "alpha_epi", "edp") and angles.dim == 12
     np.testing.assert_allclose(chapter.upper[4:], 2 * np.array(SD))
     row = [0.6, 1.3, 1.0, 3.6, 1, 2, 3, 4, 5]
-    case = chapter.case(row, "fast")
+    case = space_case(chapter, row, "fast")
     assert case["geometry"] == {"kind": "pca", "scores": [1.0, 2.0, 3.0, 4.0, 5.0], "resolution": "fast"}
     assert case["fibres"] == {"alpha_endo": -60.0, "alpha_epi": 60.0}
     assert case["load"] == {"pressure": 8.0, "units": "mmHg"}
-    assert get_space("material").case([0.6, 1.3, 1.0, 3.6])["geometry"]["kind"] == "default"
+    assert space_case(get_space("material"), [0.6, 1.3, 1.0, 3.6])["geometry"]["kind"] == "default"
     with pytest.raises(CampaignError, match="unknown parameter space"):
         get_space("nope")
 

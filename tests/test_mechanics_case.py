@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from lvcore import units
+from lvcore import conditions
 from lvcore.exceptions import CaseError
 from lvcore.geometry.analytic import DEFAULT_LV, LAND_LV
 from lvcore.geometry.template import DEFAULT_TEMPLATE
@@ -70,7 +70,7 @@ def test_round_trip(d):
 def test_defaults_and_units():
     case = Case.from_dict(HO)
     assert case.load.pressure_kpa == pytest.approx(8 * 0.1333223684)
-    assert case.material.params["as"] == units.HO_FIXED["as"] and case.material.params["bfs"] == units.HO_FIXED["bfs"]
+    assert case.material.params["as"] == conditions.HO_FIXED["as"] and case.material.params["bfs"] == conditions.HO_FIXED["bfs"]
     assert case.fibres.alpha_endo_deg == -60 and case.fibres.alpha_epi_deg == 90 and case.fibres.direction is None
     assert case.geometry.ellipsoid is DEFAULT_LV and case.geometry.preset == "fast" and case.geometry.resolution is None
     assert case.boundary.base == "clamped"

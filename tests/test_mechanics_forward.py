@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import lvcore
-from lvcore.core import ForwardBatch, build_case
+from lvcore.core import ForwardBatch
+from lvcore.mechanics.case_inputs import build_case
 from lvcore.exceptions import ForwardError
 from lvcore.mechanics.forward import AdjointSimulatorForward
 from lvcore.outputs import THETA_NAMES
@@ -82,7 +83,7 @@ def test_warm_continuation_reaches_a_point_a_plain_warm_start_cannot_and_equals_
     """A failed warm start continues through the parameter midpoint (issue 25): bf 1 -> 10 at soft a, af is out
     of a plain warm start's reach on the fast mesh, the midpoint path converges, and to the cold solve's outputs."""
     from lvcore.chains import light_state
-    from lvcore.core.space import build_case
+    from lvcore.mechanics.case_inputs import build_case
     from lvcore.mechanics import forward as F
     from lvcore.mechanics.simulate import simulate
 

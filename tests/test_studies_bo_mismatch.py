@@ -5,13 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES
+from lvcore.conditions import HO_FIXED, SIMULATOR_DEFAULT_ANGLES
 from lvcore.studies import bo_fibres
 from lvcore.studies import bo_mismatch as bm
 from lvcore.studies.mismatch import bundled_volunteers
 from lvcore.studies.results import bundled_studies_dir
 from lvcore.testing.analytic import AnalyticForward
-from lvcore.units import HO_FIXED
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "studies.md"
 

@@ -102,7 +102,8 @@ def test_emulator_angle_sweep_matches_the_map_at_the_same_points():
     from test_inference_calibrate import _random_emulator
 
     from lvcore.exceptions import EmulatorError
-    from lvcore.studies.fibre_angles import CHAPTER_ANGLE_PAIRS, emulator_angle_map, emulator_angle_sweep
+    from lvcore.conditions import CHAPTER_ANGLE_PAIRS
+    from lvcore.studies.fibre_angles import emulator_angle_map, emulator_angle_sweep
 
     emu = _random_emulator("angles", angles=True)  # UNTRAINED: the plumbing only
     theta = {"a": 0.7, "b": 2.0, "af": 1.2, "bf": 4.0}

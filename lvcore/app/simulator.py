@@ -121,7 +121,9 @@ with st.form("simulator"):
         st.markdown("**Material, fibre terms**")
         for name in ("af", "bf"):
             theta[name] = theta_slider(name, key=name, default=conditions.SIMULATOR_DEFAULT_THETA[name])
-        st.caption("Fixed: a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58 (Gao et al. 2017).")
+        fixed = conditions.HO_FIXED
+        st.caption(f"Fixed: a_s = {fixed['as']:g} kPa, b_s = {fixed['bs']:g}, a_fs = {fixed['afs']:g} kPa, "
+                   f"b_fs = {fixed['bfs']:g} (Gao et al. 2017).")
     with c3:
         st.markdown("**Conditions**")
         alpha_endo = st.slider("α_endo (deg)", -90, 90, int(conditions.SIMULATOR_DEFAULT_ANGLES[0]), key="alpha_endo")

@@ -2,8 +2,8 @@
 
 :mod:`lvcore.core.space`
     :class:`Parameter`, :class:`ParameterSpace`, the chapter's prior box
-    (:data:`THETA_BOUNDS`, Table 9.1), the fibre-angle and EDP ranges and
-    :func:`build_case` (named inputs -> simulator case).
+    (:data:`THETA_BOUNDS`, Table 9.1) and the fibre-angle and EDP ranges
+    (the case for named inputs is :func:`lvcore.mechanics.case_inputs.build_case`).
 :mod:`lvcore.core.forward`
     The :class:`Forward` protocol (named physical inputs -> the 25 outputs,
     batched) and its capabilities :class:`JacobianForward` and
@@ -25,9 +25,10 @@ _EXPORTS = {
     "JaxForward": "forward",
     "register_forward": "registry", "make_forward": "registry", "forward_names": "registry",
     "registered_name": "registry",
-    "Parameter": "space", "ParameterSpace": "space", "build_case": "space", "THETA_BOUNDS": "space",
+    "Parameter": "space", "ParameterSpace": "space", "THETA_BOUNDS": "space",
     "ANGLES_THETA_BOUNDS": "space", "ANGLE_BOUNDS": "space", "EDP_BOUNDS": "space",
 }
 
 __all__ = sorted(_EXPORTS)
-__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS,
+                                   moved={"build_case": "lvcore.mechanics.case_inputs:build_case"})

@@ -1,4 +1,4 @@
-"""Parameter spaces, the prior box and the one case builder (the core layer's inputs side).
+"""Parameter spaces and the prior box (the core layer's inputs side).
 
 Every layer that names the model inputs uses this module: campaigns (named
 design spaces), optimisation (boxes), inference (prior bounds) and the app
@@ -12,21 +12,24 @@ design spaces), optimisation (boxes), inference (prior bounds) and the app
 * :data:`THETA_BOUNDS` (the chapter's Table 9.1 prior box),
   :data:`ANGLES_THETA_BOUNDS`, :data:`ANGLE_BOUNDS`, :data:`EDP_BOUNDS`
   (the angles and EDP themselves are in :mod:`lvcore.conditions`).
-* :func:`build_case`: named physical inputs -> the simulator's case
-  dictionary. It is the only place in lvcore that writes such a dictionary
-  from named inputs.
+
+The simulator's case dictionary for named inputs is written by
+:func:`lvcore.mechanics.case_inputs.build_case` (the case format's layer);
+``build_case`` here is a deprecated alias.
 """
 from __future__ import annotations
 
+import importlib
 import json
+import warnings
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
-from lvcore.exceptions import CampaignError, CaseError
-from lvcore.outputs import ANGLE_NAMES, BASE_CONDITIONS, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
+from lvcore._exports import moved_names
+from lvcore.exceptions import CampaignError
+from lvcore.outputs import BASE_CONDITIONS, is_pc_name
 
 #: Material bounds of the calibration prior (Table 9.1): kPa for a, af.
 THETA_BOUNDS = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
@@ -41,72 +44,6 @@ ANGLE_BOUNDS = {"alpha_endo": (-90.0, 0.0), "alpha_epi": (0.0, 90.0)}
 EDP_BOUNDS = (6.0, 14.0)
 
 SCALES = ("linear", "log")
-#: Case sections :func:`build_case` writes (material law: Holzapfel-Ogden).
-CASE_LAW = "holzapfel-ogden"
-
-
-def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, resolution: str = "default",
-               base: str = "clamped") -> dict:
-    """The simulator case dictionary for named physical inputs.
-
-    Parameters
-    ----------
-    inputs : mapping
-        ``a, b, af, bf`` (kPa, -, kPa, -; required), and optionally
-        ``alpha_endo, alpha_epi`` (deg; default :data:`lvcore.conditions.CHAPTER_ANGLES`),
-        ``edp`` (mmHg; default :data:`lvcore.conditions.CHAPTER_EDP`) and PC scores
-        ``h1..hk`` (consecutive from h1). Other names are an error.
-    geometry : mapping, optional
-        The case's ``geometry`` section (e.g. ``{"kind": "default"}`` or
-        ``{"kind": "mesh", "path": ...}``). Default: a ``pca`` geometry with
-        the scores ``h1..hk`` when ``inputs`` has them, else the default LV.
-        Giving both a geometry and PC scores is an error.
-    resolution : str
-        Mesh resolution preset, used unless ``geometry`` sets its own.
-    base : {"clamped", "sliding"}
-        Basal boundary condition.
-
-    Returns
-    -------
-    dict
-        ``geometry``, ``material``, ``fibres``, ``load`` (mmHg) and
-        ``boundary`` sections; validated later by
-        :meth:`lvcore.mechanics.case.Case.from_dict`.
-
-    Raises
-    ------
-    CaseError
-        Missing material parameters, unknown or non-consecutive input names,
-        or PC scores together with an explicit geometry.
-    """
-    v = {str(k): val for k, val in inputs.items()}
-    known = set(THETA_NAMES) | set(ANGLE_NAMES) | {EDP_NAME}
-    unknown = sorted(n for n in v if n not in known and not is_pc_name(n))
-    if unknown:
-        raise CaseError("inputs", f"unknown input name(s) {unknown}; known: {sorted(known)} and h1..hk")
-    missing = [n for n in THETA_NAMES if n not in v]
-    if missing:
-        raise CaseError("material", f"missing material parameter(s) {missing} (a, af in kPa; b, bf dimensionless)")
-    pcs = sorted((n for n in v if is_pc_name(n)), key=lambda n: int(n[1:]))
-    if pcs and tuple(pcs) != pc_names(len(pcs)):
-        raise CaseError("geometry.scores", f"PC scores must be h1..hk without gaps, got {pcs}")
-    if pcs and geometry is not None:
-        raise CaseError("geometry", f"give either PC scores {pcs} or a geometry section, not both")
-    if geometry is not None:
-        geom = dict(geometry)
-        geom.setdefault("resolution", resolution)
-    elif pcs:
-        geom = {"kind": "pca", "scores": [float(v[n]) for n in pcs], "resolution": resolution}
-    else:
-        geom = {"kind": "default", "resolution": resolution}
-    return {
-        "geometry": geom,
-        "material": {"law": CASE_LAW, **{n: float(v[n]) for n in THETA_NAMES}},
-        "fibres": {"alpha_endo": float(v.get(ANGLE_NAMES[0], CHAPTER_ANGLES[0])),
-                   "alpha_epi": float(v.get(ANGLE_NAMES[1], CHAPTER_ANGLES[1]))},
-        "load": {"pressure": float(v.get(EDP_NAME, CHAPTER_EDP)), "units": "mmHg"},
-        "boundary": {"base": base},
-    }
 
 
 @dataclass(frozen=True)
@@ -236,20 +173,11 @@ class ParameterSpace:
         return values
 
     def case(self, row: Sequence[float], resolution: str = "default") -> dict:
-        """The simulator case dictionary for one design row (see :func:`build_case`).
-
-        Parameters
-        ----------
-        row : sequence of float
-            Values of :attr:`names`, physical units.
-        resolution : {"fast", "default", ...}
-            Mesh resolution passed to the simulator's geometry section.
-        """
-        v = self.full_inputs(row)
-        missing = [n for n in THETA_NAMES if n not in v]
-        if missing:
-            raise CampaignError(f"space '{self.name}' does not define material parameter(s) {missing}")
-        return build_case(v, resolution=resolution, base=self.base)
+        """Deprecated: the case for one design row is :func:`lvcore.mechanics.case_inputs.space_case`
+        (writing cases is the simulator's job, a layer above this one)."""
+        warnings.warn("ParameterSpace.case is deprecated; use lvcore.mechanics.case_inputs.space_case(space, row, "
+                      "resolution)", DeprecationWarning, stacklevel=2)
+        return importlib.import_module("lvcore.mechanics.case_inputs").space_case(self, row, resolution)
 
     # ----- serialisation ----------------------------------------------------
     def to_dict(self) -> dict:
@@ -280,7 +208,11 @@ class ParameterSpace:
             raise CampaignError(f"parameter-space description is not valid JSON: {err}") from err
 
 
+#: Moved to the simulator's layer, with the case format they write.
+__getattr__ = moved_names(__name__, {"build_case": "lvcore.mechanics.case_inputs:build_case",
+                                     "CASE_LAW": "lvcore.mechanics.case_inputs:CASE_LAW"})
+
 __all__ = [
-    "Parameter", "ParameterSpace", "build_case", "THETA_BOUNDS", "ANGLES_THETA_BOUNDS", "ANGLE_BOUNDS",
+    "Parameter", "ParameterSpace", "THETA_BOUNDS", "ANGLES_THETA_BOUNDS", "ANGLE_BOUNDS",
     "EDP_BOUNDS", "SCALES",
 ]

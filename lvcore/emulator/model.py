@@ -234,7 +234,7 @@ class Emulator:
         Parameters
         ----------
         geometry : mapping, optional
-            Geometry description for :func:`lvcore.core.space.build_case`;
+            Geometry description for :func:`lvcore.mechanics.case_inputs.build_case`;
             default: the subject geometry of a subject emulator, else the
             PC-score geometry of the training space.
 

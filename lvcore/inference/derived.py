@@ -251,7 +251,7 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     LoadPath
     """
     from lvcore import chains, units
-    from lvcore.core.space import build_case
+    from lvcore.mechanics.case_inputs import build_case
     from lvcore.exceptions import LVCoreError
     from lvcore.mechanics.fibre_stretch import mean_fibre_stretch
     from lvcore.mechanics.forward import _as_warm, case_values, warm_continuation

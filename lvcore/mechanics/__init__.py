@@ -18,6 +18,7 @@ _EXPORTS = {
     # cases
     "Case": "case", "load_case": "case", "GeometrySpec": "case", "FibreSpec": "case", "LoadSpec": "case",
     "BoundarySpec": "case", "OutputSpec": "case",
+    "build_case": "case_inputs", "space_case": "case_inputs",
     # resolutions
     "LVResolution": "resolution", "BoxResolution": "resolution", "ResolutionError": "resolution",
     "RESOLUTION_PRESETS": "resolution", "RESOLUTION_PRESET_NAMES": "resolution",

@@ -1,7 +1,7 @@
 """The simulator adapter: the FE simulator as a forward model of :mod:`lvcore.core.forward`.
 
 :class:`SimulatorForward` runs :func:`lvcore.mechanics.simulate.simulate` on
-the case :func:`lvcore.core.space.build_case` writes for each point (outputs
+the case :func:`lvcore.mechanics.case_inputs.build_case` writes for each point (outputs
 only, a :class:`~lvcore.core.forward.Forward`); batches run in this process or
 on the process pools of :mod:`lvcore.parallel`. :class:`AdjointSimulatorForward`
 reads material parameters only and adds their Jacobian from the adjoint
@@ -23,7 +23,7 @@ import numpy as np
 
 from lvcore.core.forward import ForwardBatch, as_columns, failure_reason, is_traced
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, register_forward
-from lvcore.core.space import build_case
+from lvcore.mechanics.case_inputs import build_case
 from lvcore.exceptions import ForwardError
 from lvcore.mechanics.simulate import simulate
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
@@ -183,7 +183,7 @@ class SimulatorForward:
     """The FE simulator (:func:`lvcore.simulate`) as a :class:`~lvcore.core.forward.Forward` (outputs only).
 
     Each point's named inputs, merged with ``conditions``, go through
-    :func:`lvcore.core.space.build_case` on ``geometry`` at ``resolution``.
+    :func:`lvcore.mechanics.case_inputs.build_case` on ``geometry`` at ``resolution``.
 
     Parameters
     ----------

@@ -15,14 +15,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore import units
+from lvcore import conditions
 from lvcore.mechanics.kinematics import right_cauchy_green
 from lvcore.mechanics.materials import HolzapfelOgden
 
 #: The calibrated parameters, in :attr:`HolzapfelOgden.keys` order.
 THETA_KEYS = ("a", "b", "af", "bf")
 #: The other parameters of the law at the simulator's population values (Gao et al. 2017; no dispersion).
-FIXED_DEFAULTS = {**units.HO_FIXED, "kappa": 0.0}
+FIXED_DEFAULTS = {**conditions.HO_FIXED, "kappa": 0.0}
 
 #: Rows f0, s0, n0 of the fibre frame in the stress state's own coordinates: fibre e1, sheet (wall normal) e2.
 _FRAME = np.eye(3)
@@ -76,7 +76,7 @@ def ho_fibre_stress(theta: Mapping[str, object], stretch, *, fixed: Mapping[str,
         against the theta arrays.
     fixed : mapping, optional
         Overrides of the other parameters ``"as", "bs", "afs", "bfs"`` (kPa, -, kPa, -) and ``"kappa"`` (fibre
-        dispersion, -); default the simulator's population values :data:`lvcore.units.HO_FIXED`, κ = 0.
+        dispersion, -); default the simulator's population values :data:`lvcore.conditions.HO_FIXED`, κ = 0.
 
     Returns
     -------

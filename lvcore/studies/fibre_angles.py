@@ -21,6 +21,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from lvcore import conditions, units
+from lvcore._exports import moved_names
 from lvcore.core.forward import Forward, ForwardBatch
 from lvcore.emulator.forward import EmulatorForward
 from lvcore.mechanics.forward import SimulatorForward
@@ -28,8 +29,6 @@ from lvcore.exceptions import ForwardError
 from lvcore.geometry.template import N_REGIONS
 from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name, pc_names
 
-#: Angle pairs (α_endo, α_epi) in degrees used by the chapter (§9.3.2, Fig 9.5).
-CHAPTER_ANGLE_PAIRS = ((-60.0, 90.0), (-60.0, 60.0), (-30.0, 60.0), (0.0, 90.0))
 #: Most angle pairs typed into the app's sweep (each is one simulator solve, seconds to a minute).
 MAX_TYPED_ANGLE_PAIRS = 20
 
@@ -151,7 +150,7 @@ def _runs(endo, epi, batch) -> list[AngleRun]:
 
 
 def angle_sweep(
-    angle_pairs: Sequence[tuple[float, float]] = CHAPTER_ANGLE_PAIRS,
+    angle_pairs: Sequence[tuple[float, float]] = conditions.CHAPTER_ANGLE_PAIRS,
     forward: Forward | None = None,
     progress: Callable[[int, int], None] | None = None,
     **case_options,
@@ -281,7 +280,7 @@ def emulator_angle_map(
 
 def emulator_angle_sweep(
     emulator,
-    angle_pairs: Sequence[tuple[float, float]] = CHAPTER_ANGLE_PAIRS,
+    angle_pairs: Sequence[tuple[float, float]] = conditions.CHAPTER_ANGLE_PAIRS,
     theta: Mapping[str, float] | None = None,
     edp_mmhg: float = conditions.SIMULATOR_DEFAULT_EDP_MMHG,
     h: Sequence[float] | None = None,
@@ -351,10 +350,10 @@ def compute(sweep: str = "emulator") -> dict:
     theta = dict(conditions.THETA_TILDE)
     emulator = load_emulator("angles") if (sweep != "simulator" or "angles" in available_emulators()) else None
     if sweep == "simulator":
-        runs = angle_sweep(CHAPTER_ANGLE_PAIRS, theta=theta, resolution="fast")
+        runs = angle_sweep(conditions.CHAPTER_ANGLE_PAIRS, theta=theta, resolution="fast")
         engine = "FE simulator, default (analytic) LV, fast mesh"
     else:
-        runs = emulator_angle_sweep(emulator, CHAPTER_ANGLE_PAIRS, theta=theta)
+        runs = emulator_angle_sweep(emulator, conditions.CHAPTER_ANGLE_PAIRS, theta=theta)
         engine = "bundled `angles` emulator, SYNTHETIC shape model's mean LV"
     amap = None if emulator is None else emulator_angle_map(emulator, MAP_ENDO, MAP_EPI, theta=theta)
     return {"theta": theta, "engine": engine, "runs": list(runs), "map": amap}
@@ -399,9 +398,13 @@ def figures(result: dict) -> dict:
             title="Fig 9.5 (map) — EDV (mL) over the fibre angles, `angles` emulator, SYNTHETIC mean "
                   f"LV (θ: {th}); markers: the chapter's pairs",
             xaxis_title="α_endo (°)", yaxis_title="α_epi (°)", colorbar_title="mL",
-            points={"chapter pairs": ([e for e, _ in CHAPTER_ANGLE_PAIRS], [p for _, p in CHAPTER_ANGLE_PAIRS])})
+            points={"chapter pairs": tuple(map(list, zip(*conditions.CHAPTER_ANGLE_PAIRS)))})
     return out
 
 
 def source_line(result: dict) -> str:
     return result["engine"] + ("; map: bundled `angles` emulator" if result.get("map") is not None else "")
+
+
+#: Moved: the chapter's angle pairs live with the other conditions.
+__getattr__ = moved_names(__name__, {"CHAPTER_ANGLE_PAIRS": "lvcore.conditions:CHAPTER_ANGLE_PAIRS"})

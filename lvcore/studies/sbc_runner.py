@@ -129,7 +129,7 @@ def simulate_truth(draw: Mapping) -> dict:
     TruthFailure
         When a solve fails (the draw is redrawn).
     """
-    from lvcore.core.space import build_case
+    from lvcore.mechanics.case_inputs import build_case
     from lvcore.inference.derived import fe_load_path
     from lvcore.mechanics.edpvr import pca_reference_volume_ml
     from lvcore.mechanics.simulate import simulate
