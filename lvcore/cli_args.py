@@ -1,6 +1,7 @@
-"""Option types shared by the ``lvcore`` sub-commands: bounded numbers, seeds, output paths.
+"""Option types shared by the ``lvcore`` sub-commands: bounded numbers, seeds, output paths; and the two
+helpers that add a sub-command (:func:`command`) or a group of them (:func:`command_group`) to a parser.
 
-Each function returns an ``argparse`` ``type=`` callable. A value outside its
+Each option type is an ``argparse`` ``type=`` callable. A value outside its
 range is refused by argparse itself, so the command exits with 2 and a message
 that names the option (``argument --n: must be an integer from 1 to
 100,000, got 1e9``) before anything runs. User input is echoed at most
@@ -118,5 +119,22 @@ def output_dir(text: str) -> Path:
     return path
 
 
+def command(subparsers, name: str, func, *, help: str, description: str, **defaults) -> argparse.ArgumentParser:
+    """Add the sub-command ``name``, run as ``func(args)`` (which returns the exit code); returns its parser.
+
+    ``defaults`` are further ``set_defaults`` of the sub-command (values its options do not set).
+    """
+    parser = subparsers.add_parser(name, help=help, description=description)
+    parser.set_defaults(func=func, **defaults)
+    return parser
+
+
+def command_group(subparsers, name: str, *, help: str, description: str):
+    """Add ``name`` with sub-commands of its own, one of which must be given (``args.<name>_command`` names it);
+    returns the action to add them to (with :func:`command`)."""
+    parser = subparsers.add_parser(name, help=help, description=description)
+    return parser.add_subparsers(dest=f"{name}_command", required=True)
+
+
 __all__ = ["ECHO_CHARS", "MAX_SEED", "echo", "int_in", "float_in", "seed", "workers", "max_local_workers",
-           "output_file", "output_dir"]
+           "output_file", "output_dir", "command", "command_group"]

@@ -332,3 +332,25 @@ def test_truth_marks_are_drawn_as_the_calibration_caption_says():
     idata = az.from_dict(posterior={n: v.reshape(1, -1) for n, v in draws.items()})
     (mark,) = [t for t in pair_figure(idata, var_names=("a", "b"), truth=truth).data if t.name == "truth"]
     assert mark.marker.color == "red" and mark.marker.symbol == "x"
+
+
+def test_panelled_error_figures_have_one_panel_per_value_and_every_case():
+    """grouped_violins and error_strips (chapter Figs 9.11, 9.12, 9.14): one subplot per value of the panel
+    column, titled "<label>: <value>", every case drawn once, the height 300 px a panel (at least 360)."""
+    import pandas as pd
+
+    from lvcore.viz.report_figures import error_strips, grouped_violins
+
+    rng = np.random.default_rng(0)
+    df = pd.DataFrame({"main_operator": np.repeat(["op2", "op3", "pc5"], 8), "geo": np.tile(["pc5", "pc10"], 12),
+                       "param": np.tile(["a", "a", "b", "b"], 6), "err": rng.random(24)})
+    v = grouped_violins(df, panel="main_operator", x="geo", y="err", title="t", yaxis_title="e", nonnegative=True)
+    s = error_strips(df, panel="main_operator", param="param", x="geo", y="err", title="t", yaxis_title="e",
+                     panel_label="operator")
+    assert [a.text for a in v.layout.annotations] == ["main operator: op2", "main operator: op3", "main operator: pc5"]
+    assert [a.text for a in s.layout.annotations] == ["operator: op2", "operator: op3", "operator: pc5"]
+    assert v.layout.height == s.layout.height == 900
+    assert sum(len(t.y) for t in v.data) == len(df)
+    cases = [t for t in s.data if t.marker.size == 10]
+    assert sum(len(t.y) for t in cases) == len(df)
+    assert all(t.spanmode == "hard" for t in v.data)

@@ -9,8 +9,8 @@ from lvcore.campaigns.runner import RESOLUTIONS
 
 def register(subparsers) -> None:
     # lvcore design METHOD --space NAME --n N --seed S --out design.csv
-    p = subparsers.add_parser(
-        "design", help="write a space-filling design (CSV) over a named parameter space",
+    p = cli_args.command(
+        subparsers, "design", _design, help="write a space-filling design (CSV) over a named parameter space",
         description="Write a Sobol, Latin-hypercube, random or exp-warped Latin-hypercube design over a named "
                     "parameter space as CSV, the input of `lvcore campaign run`.")
     p.add_argument("method", choices=METHODS, help="sobol (scrambled), lhs, random, or exp (the chapter's exp-warped LHS)")
@@ -23,42 +23,36 @@ def register(subparsers) -> None:
                    help="number of PC scores, 0 to 20 (default: the space's own, 5 for chapter and angles, else 0)")
     p.add_argument("--out", type=cli_args.output_file, required=True,
                    help="output CSV file (its folders are created; an existing file is replaced)")
-    p.set_defaults(func=_design)
 
-    c = subparsers.add_parser(
-        "campaign", help="run, resume or inspect a simulation campaign",
+    sub = cli_args.command_group(
+        subparsers, "campaign", help="run, resume or inspect a simulation campaign",
         description="Run a design through the forward model into a resumable HDF5 store, resume an interrupted "
                     "one, or count the converged, failed and pending rows of a store.")
-    sub = c.add_subparsers(dest="campaign_command", required=True)
 
-    run = sub.add_parser(
-        "run", help="run every row of a design; results go to an HDF5 store as they arrive",
+    run = cli_args.command(
+        sub, "run", _run, help="run every row of a design; results go to an HDF5 store as they arrive",
         description="Run every row of a design CSV on local workers or a Dask scheduler; each result is committed "
                     "to a new HDF5 store as it arrives, so a campaign that is stopped can be resumed.")
     run.add_argument("design", help="design CSV written by `lvcore design`")
     run.add_argument("--out", type=cli_args.output_file, required=True,
                      help="HDF5 store to create (refused if it exists: use `lvcore campaign resume`)")
-    _add_executor_args(run)
+    _add_run_options(run)
     run.add_argument("--resolution", choices=RESOLUTIONS, default="default",
                      help="simulator mesh resolution (default: default)")
     run.add_argument("--forward", default=None, metavar="NAME",
                      help="registered forward model (default 'simulator', the FE simulator); others are registered "
                           "in code with lvcore.core.register_forward")
-    run.add_argument("--no-progress", action="store_true", help="no progress bar")
-    run.set_defaults(func=_run)
 
-    res = sub.add_parser(
-        "resume", help="run the rows of a store that are not recorded yet",
+    res = cli_args.command(
+        sub, "resume", _resume, help="run the rows of a store that are not recorded yet",
         description="Run the pending rows of an existing store (and the failed ones with --retry-failed); rows "
                     "that fail the store check are listed and never run.")
     res.add_argument("store", help="HDF5 store written by `lvcore campaign run`")
-    _add_executor_args(res)
+    _add_run_options(res)
     res.add_argument("--retry-failed", action="store_true", help="also run the failed rows again")
-    res.add_argument("--no-progress", action="store_true", help="no progress bar")
-    res.set_defaults(func=_resume)
 
-    st = sub.add_parser(
-        "status", help="counts of converged/failed/pending rows and failure reasons",
+    st = cli_args.command(
+        sub, "status", _status, help="counts of converged/failed/pending rows and failure reasons",
         description="Print how many rows of a store converged, failed or are pending, the failure reasons and the "
                     "mean solve time; inconsistent rows are reported and left out of every count.")
     st.add_argument("store", help="HDF5 store")
@@ -66,10 +60,11 @@ def register(subparsers) -> None:
                     help="list every inconsistent row (state not 0/1/2, record_count not 1, NaN outputs in a "
                          "converged row, inputs outside the space) and exit with 2 if there is one; such rows "
                          "are always excluded from the counts (default: off, the first 10 are listed)")
-    st.set_defaults(func=_status)
 
 
-def _add_executor_args(p) -> None:
+def _add_run_options(p) -> None:
+    """The options of ``campaign run`` and ``campaign resume`` on how rows are run: workers or a scheduler, cold
+    solves, the progress bar."""
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=cli_args.workers, default=None,
                    help=f"local worker processes, 1 to 4 per core ({cli_args.max_local_workers()} here; "
@@ -79,6 +74,7 @@ def _add_executor_args(p) -> None:
     p.add_argument("--cold", action="store_true",
                    help="solve every row cold, one task per row (default: warm-started continuation chains of "
                         "nearby rows, split across the workers; same results within the solver tolerance)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def _design(args) -> int:

@@ -13,14 +13,13 @@ from lvcore.exceptions import EmulatorError
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser(
-        "emulator", help="train or inspect neural-network emulators",
+    sub = cli_args.command_group(
+        subparsers, "emulator", help="train or inspect neural-network emulators",
         description="Train a neural-network emulator on campaign stores, build one for a single subject's "
                     "geometry from FE runs, or show an emulator's inputs and accuracy.")
-    sub = p.add_subparsers(dest="emulator_command", required=True)
 
-    t = sub.add_parser(
-        "train", help="train an emulator on campaign store(s)",
+    t = cli_args.command(
+        sub, "train", _train, help="train an emulator on campaign store(s)",
         description="Train an MLP emulator of the 25 outputs on the converged, consistent rows of campaign "
                     "store(s), choosing the architecture on validation data, and write network.npz and "
                     "metadata.json.")
@@ -40,15 +39,14 @@ def register(subparsers) -> None:
                    help="seed of the split, initialisation and batches, 0 to 2^32 - 1 (default 0)")
     t.add_argument("--workers", type=cli_args.workers, default=1,
                    help="processes for the architecture search (one architecture each; same result as 1; default 1)")
-    t.set_defaults(func=_train)
 
-    b = sub.add_parser("build", help="build a subject-specific emulator: FE runs on one exact geometry, trained "
-                                     "and validated on held-out runs",
-                       description="Design over the prior box (scipy.stats.qmc Sobol), FE runs on the subject's "
-                                   "geometry as it is (no PCA projection), training, and validation on held-out FE "
-                                   "runs the network never saw; the held-out LVV and strain RMSE go into "
-                                   "metadata.json. Use the result with `lvcore calibrate --emulator DIR` (no "
-                                   "--geometry: it is bound in).")
+    b = cli_args.command(
+        sub, "build", _build,
+        help="build a subject-specific emulator: FE runs on one exact geometry, trained and validated on held-out runs",
+        description="Design over the prior box (scipy.stats.qmc Sobol), FE runs on the subject's geometry as it is "
+                    "(no PCA projection), training, and validation on held-out FE runs the network never saw; the "
+                    "held-out LVV and strain RMSE go into metadata.json. Use the result with `lvcore calibrate "
+                    "--emulator DIR` (no --geometry: it is bound in).")
     b.add_argument("--geometry", required=True,
                    help="the subject's geometry: a template mesh (.vtu, e.g. from `lvcore geometry fit --out`), a "
                         "volumetric tet/hex mesh (.inp/.msh/.med/.vtu/.vtk/.xdmf, fitted), a contour stack or case "
@@ -88,14 +86,12 @@ def register(subparsers) -> None:
     from lvcore.emulator.subject import default_training_config
 
     add_training_arguments(b, default_training_config())
-    b.set_defaults(func=_build, architectures="100x100")
 
-    i = sub.add_parser("info", help="show an emulator's inputs, box, architecture and accuracy",
-                       description="Show a bundled or saved emulator's inputs, input box, architecture and "
-                                   "validation and test accuracy.")
+    i = cli_args.command(sub, "info", _info, help="show an emulator's inputs, box, architecture and accuracy",
+                         description="Show a bundled or saved emulator's inputs, input box, architecture and "
+                                     "validation and test accuracy.")
     i.add_argument("name", help="bundled name (e.g. chapter, angles) or directory")
     i.add_argument("--json", action="store_true", help="print the full metadata as JSON")
-    i.set_defaults(func=_info)
 
 
 def add_training_arguments(parser, defaults=None) -> None:
@@ -103,12 +99,14 @@ def add_training_arguments(parser, defaults=None) -> None:
 
     ``defaults`` is a :class:`lvcore.emulator.training.TrainingConfig` (default: its own defaults).
     """
-    from lvcore.emulator.training import TrainingConfig
+    from lvcore.emulator.training import ARCHITECTURES, TrainingConfig
 
     d = defaults or TrainingConfig()
-    parser.add_argument("--architectures", default="all",
+    arch = "all" if tuple(d.architectures) == tuple(ARCHITECTURES) else \
+        ",".join("x".join(str(w) for w in a) for a in d.architectures)
+    parser.add_argument("--architectures", default=arch,
                         help="hidden widths to try: 'all' (the chapter's {50,100,120,200}^2) or e.g. '50x50,100x200' "
-                             "(default all)")
+                             f"(default {arch})")
     parser.add_argument("--max-epochs", type=cli_args.int_in(1, 1_000_000), default=d.max_epochs,
                         help=f"most Adam epochs per architecture (default {d.max_epochs})")
     parser.add_argument("--patience", type=cli_args.int_in(1, 1_000_000), default=d.patience,

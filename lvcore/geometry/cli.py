@@ -134,14 +134,13 @@ def _project(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``lvcore geometry`` and its sub-commands."""
-    p = subparsers.add_parser(
-        "geometry", help="fit segmentations to the LV template, inspect meshes, PCA",
+    sub = cli_args.command_group(
+        subparsers, "geometry", help="fit segmentations to the LV template, inspect meshes, PCA",
         description="Fit a segmentation (contour stack, endo/epi surfaces or a volumetric mesh) to the LV template, "
                     "inspect and compare template meshes, and go between meshes and the shape model's PC scores.")
-    sub = p.add_subparsers(dest="geometry_command", required=True)
 
-    f = sub.add_parser(
-        "fit", help="fit the template to a contour stack (JSON), endo/epi surfaces or a volume mesh",
+    f = cli_args.command(
+        sub, "fit", _fit, help="fit the template to a contour stack (JSON), endo/epi surfaces or a volume mesh",
         description="Fit the LV template to a contour stack, a pair of endocardial and epicardial surfaces "
                     "(--endo/--epi) or a volumetric mesh (--mesh), after finding and cutting the base; prints the "
                     "residual, the cavity volume and any warnings, and --out writes the fitted template mesh.")
@@ -167,38 +166,33 @@ def register(subparsers) -> None:
     f.add_argument("--out", type=cli_args.output_file,
                    help="write the fitted mesh here (.vtu; default: not written, the summary is printed)")
     f.add_argument("--json", action="store_true", help="print the fit summary as JSON")
-    f.set_defaults(func=_fit)
 
-    i = sub.add_parser("info", help="cavity and wall volume of a template mesh",
-                       description="Print the cavity and wall volumes (mL) of a template mesh.")
+    i = cli_args.command(sub, "info", _info, help="cavity and wall volume of a template mesh",
+                         description="Print the cavity and wall volumes (mL) of a template mesh.")
     i.add_argument("mesh", help="template mesh (.vtu written by `lvcore geometry fit --out` or `geometry pca`)")
     i.add_argument("--json", action="store_true", help="print the volumes as JSON (default: a text line)")
-    i.set_defaults(func=_info)
 
-    c = sub.add_parser("compare", help="node MSE (cm²) between two template meshes",
-                       description="Print the mean squared distance (cm²) between the nodes of two template meshes "
-                                   "on the same template, the chapter's measure of how far two geometries differ.")
+    c = cli_args.command(sub, "compare", _compare, help="node MSE (cm²) between two template meshes",
+                         description="Print the mean squared distance (cm²) between the nodes of two template meshes "
+                                     "on the same template, the chapter's measure of how far two geometries differ.")
     c.add_argument("a", help="first template mesh (.vtu)")
     c.add_argument("b", help="second template mesh (.vtu) on the same template")
     c.add_argument("--json", action="store_true", help="print the comparison as JSON (default: a text line)")
-    c.set_defaults(func=_compare)
 
-    r = sub.add_parser("pca", help="reconstruct a mesh from standardised PCA scores",
-                       description="Build a template mesh from standardised PC scores of the shape model (modes not "
-                                   "given are 0) and write it as .vtu.")
+    r = cli_args.command(sub, "pca", _pca, help="reconstruct a mesh from standardised PCA scores",
+                         description="Build a template mesh from standardised PC scores of the shape model (modes not "
+                                     "given are 0) and write it as .vtu.")
     r.add_argument("scores", nargs="+", type=cli_args.float_in(-10.0, 10.0),
                    help="standardised PC scores h1 h2 ... (units of each mode's sd, each in [-10, 10]; modes "
                         "not given are 0)")
     r.add_argument("--out", type=cli_args.output_file, required=True, help="output template mesh (.vtu)")
     r.add_argument("--model", default=None, help="shape model .json (default: bundled SYNTHETIC model)")
-    r.set_defaults(func=_pca)
 
-    q = sub.add_parser("project", help="standardised PCA scores of a template mesh",
-                       description="Project a template mesh onto the shape model: its standardised PC scores and "
-                                   "the mean squared node error (cm²) of their reconstruction.")
+    q = cli_args.command(sub, "project", _project, help="standardised PCA scores of a template mesh",
+                         description="Project a template mesh onto the shape model: its standardised PC scores and "
+                                     "the mean squared node error (cm²) of their reconstruction.")
     q.add_argument("mesh", help="template mesh (.vtu) to project onto the shape model")
     q.add_argument("--modes", type=cli_args.int_in(1, 100), default=5,
                    help="number of PC modes to project onto, 1 to the model's number of modes (default 5)")
     q.add_argument("--model", default=None, help="shape model .json (default: the bundled SYNTHETIC model)")
     q.add_argument("--json", action="store_true", help="print the scores as JSON (default: a text line)")
-    q.set_defaults(func=_project)

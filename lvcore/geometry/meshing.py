@@ -9,11 +9,41 @@ All lengths in mm.
 """
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
 
 from lvcore.exceptions import GeometryError
+
+
+@contextlib.contextmanager
+def gmsh_model(name: str):
+    """A new gmsh model ``name``, terminal output off; yields the ``gmsh`` module.
+
+    gmsh is initialised for the model and finalised after it unless it was
+    initialised already (then only the model is removed), so callers nest.
+
+    Raises
+    ------
+    GeometryError
+        When gmsh is not installed (naming the package to install).
+    """
+    try:
+        import gmsh
+    except ImportError as err:  # pragma: no cover - depends on the install
+        raise GeometryError(f"meshing needs gmsh (pip install gmsh, or lvcore[mesh]): {err}") from None
+    initialised_here = not gmsh.isInitialized()
+    if initialised_here:
+        gmsh.initialize(readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add(name)
+        yield gmsh
+    finally:
+        gmsh.model.remove() if gmsh.isInitialized() else None
+        if initialised_here:
+            gmsh.finalize()
 
 
 def ellipsoid_tet_mesh(lv, size_mm: float, path=None, rotation=None, shift=None, order: int = 1):
@@ -40,10 +70,6 @@ def ellipsoid_tet_mesh(lv, size_mm: float, path=None, rotation=None, shift=None,
     meshio.Mesh
         Points (mm) and one ``tetra`` (or ``tetra10``) block.
     """
-    try:
-        import gmsh
-    except ImportError as err:  # pragma: no cover - depends on the install
-        raise GeometryError(f"meshing needs gmsh (pip install gmsh, or lvcore[mesh]): {err}") from None
     import meshio
 
     if not size_mm > 0:
@@ -51,12 +77,7 @@ def ellipsoid_tet_mesh(lv, size_mm: float, path=None, rotation=None, shift=None,
     e, p = lv.endo, lv.epi
     zb = float(lv.base_z)
     big = 4.0 * max(p.rs, p.ry or p.rs, p.rl)
-    initialised_here = not gmsh.isInitialized()
-    if initialised_here:
-        gmsh.initialize(readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("lv")
+    with gmsh_model("lv") as gmsh:
         occ = gmsh.model.occ
 
         def ellipsoid(s):
@@ -82,10 +103,6 @@ def ellipsoid_tet_mesh(lv, size_mm: float, path=None, rotation=None, shift=None,
         node_tags, coords, _ = gmsh.model.mesh.getNodes()
         etype = 4 if order == 1 else 11
         _, enodes = gmsh.model.mesh.getElementsByType(etype)
-    finally:
-        gmsh.model.remove() if gmsh.isInitialized() else None
-        if initialised_here:
-            gmsh.finalize()
     # gmsh tetra10 edge order (01, 12, 20, 30, 32, 31) -> VTK/meshio (01, 12, 20, 30, 31, 32)
     pts, cells = gmsh_cells(node_tags, coords, enodes, 4 if order == 1 else 10,
                             None if order == 1 else [0, 1, 2, 3, 4, 5, 6, 7, 9, 8])
@@ -105,7 +122,7 @@ def ellipsoid_tet_mesh(lv, size_mm: float, path=None, rotation=None, shift=None,
     return mesh
 
 
-__all__ = ["ellipsoid_tet_mesh", "gmsh_cells"]
+__all__ = ["ellipsoid_tet_mesh", "gmsh_cells", "gmsh_model"]
 
 
 def gmsh_cells(node_tags, coords, element_nodes, nodes_per_cell: int, reorder=None) -> tuple[np.ndarray, np.ndarray]:

@@ -138,16 +138,12 @@ class SyntheticSurfacePair:
 
     def tet_mesh(self, size_mm: float = 4.0):
         """A tetrahedral mesh of the wall (gmsh, from :meth:`closed_wall`), as a ``meshio.Mesh`` (mm)."""
-        import gmsh
         import meshio
 
+        from lvcore.geometry.meshing import gmsh_cells, gmsh_model
+
         pts, tri = self.closed_wall()
-        own = not gmsh.isInitialized()
-        if own:
-            gmsh.initialize(readConfigFiles=False)
-        try:
-            gmsh.option.setNumber("General.Terminal", 0)
-            gmsh.model.add("wall")
+        with gmsh_model("wall") as gmsh:
             s = gmsh.model.addDiscreteEntity(2)
             gmsh.model.mesh.addNodes(2, s, np.arange(1, len(pts) + 1), pts.ravel())
             gmsh.model.mesh.addElementsByType(s, 2, [], (tri + 1).ravel())
@@ -159,12 +155,6 @@ class SyntheticSurfacePair:
             gmsh.model.mesh.generate(3)
             tags, coords, _ = gmsh.model.mesh.getNodes()
             _, enodes = gmsh.model.mesh.getElementsByType(4)
-        finally:
-            gmsh.model.remove() if gmsh.isInitialized() else None
-            if own:
-                gmsh.finalize()
-        from lvcore.geometry.meshing import gmsh_cells
-
         xyz, cells = gmsh_cells(tags, coords, enodes, 4)
         return meshio.Mesh(xyz, [("tetra", cells)])
 

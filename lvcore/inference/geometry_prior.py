@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import jax.numpy as jnp
 import numpy as np
@@ -66,6 +66,22 @@ NO_MEASURE_WARNING = ("--geometry infer without --reference-volume (or --wall-vo
                       "as a smaller one inflated more); measure the early-diastolic cavity volume and give it")
 
 
+def _given_numbers(values: Mapping[str, Any] | None, where: str, label_of: Callable[[str], str]):
+    """``(name, value as given, value as float, label)`` of each measure given: an unknown name or a value that is
+    not a number is refused (naming ``where`` and the measure's ``label_of(name)``); None and NaN are skipped."""
+    for name, value in dict(values or {}).items():
+        if name not in MEASURE_NAMES:
+            raise DataError(f"{where}: unknown geometric measure '{name}'; use {', '.join(MEASURE_NAMES)}")
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            continue
+        label = label_of(name)
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise DataError(f"{where}: {label} must be a number, got {str(value)[:40]!r}") from None
+        yield name, value, v, label
+
+
 def check_measures(measures: Mapping[str, Any] | None, where: str = "geometric measures") -> dict:
     """Validated measures (finite, positive, in :data:`MEASURE_RANGES`); None values dropped.
 
@@ -75,15 +91,7 @@ def check_measures(measures: Mapping[str, Any] | None, where: str = "geometric m
         Naming the option/column and the fix.
     """
     out = {}
-    for name, value in dict(measures or {}).items():
-        if name not in MEASURE_NAMES:
-            raise DataError(f"{where}: unknown geometric measure '{name}'; use {', '.join(MEASURE_NAMES)}")
-        if value is None or (isinstance(value, float) and math.isnan(value)):
-            continue
-        try:
-            v = float(value)
-        except (TypeError, ValueError):
-            raise DataError(f"{where}: {name} must be a number, got {str(value)[:40]!r}") from None
+    for name, value, v, _ in _given_numbers(measures, where, lambda name: name):
         lo, hi = MEASURE_RANGES[name]
         if not (math.isfinite(v) and lo <= v <= hi):
             unit = name.rsplit("_", 1)[-1]
@@ -112,16 +120,8 @@ def check_measure_sds(sds: Mapping[str, Any] | None, where: str = "geometric-mea
         Naming the option/column, the accepted range and the unit.
     """
     out = {}
-    for name, value in dict(sds or {}).items():
-        if name not in MEASURE_NAMES:
-            raise DataError(f"{where}: unknown geometric measure '{name}'; use {', '.join(MEASURE_NAMES)}")
-        label = MEASURE_SD_OPTIONS[name] if by == "option" else MEASURE_SD_COLUMNS[name]
-        if value is None or (isinstance(value, float) and math.isnan(value)):
-            continue
-        try:
-            v = float(value)
-        except (TypeError, ValueError):
-            raise DataError(f"{where}: {label} must be a number, got {str(value)[:40]!r}") from None
+    labels = MEASURE_SD_OPTIONS if by == "option" else MEASURE_SD_COLUMNS
+    for name, _, v, label in _given_numbers(sds, where, labels.__getitem__):
         lo, hi = MEASURE_SD_RANGES[name]
         unit = {"ml": "mL"}.get(name.rsplit("_", 1)[-1], "mm")
         if not (math.isfinite(v) and lo <= v <= hi):

@@ -16,8 +16,8 @@ from lvcore.mechanics.summary import format_summary
 
 def register(subparsers) -> None:
     """Add the ``simulate`` sub-command."""
-    p = subparsers.add_parser(
-        "simulate",
+    p = cli_args.command(
+        subparsers, "simulate", run,
         help="run one forward simulation of a case file",
         description="Inflate the geometry of CASE.json (see docs/case_schema.md) and report the end-diastolic "
                     "volume, the 24 regional circumferential strains, probe positions and solver diagnostics.",
@@ -28,7 +28,6 @@ def register(subparsers) -> None:
                    help="also write the reference mesh and displacement to a VTU file (default: not written)")
     p.add_argument("--sensitivities", action="store_true",
                    help="also compute the derivatives of the outputs with respect to the material parameters")
-    p.set_defaults(func=run)
 
 
 def run(args) -> int:

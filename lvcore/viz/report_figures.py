@@ -216,6 +216,22 @@ def table_figure(df: pd.DataFrame, *, title: str, float_format: str = ".4g", hei
     return fig
 
 
+def _panel_column(df: pd.DataFrame, panel: str, panel_label: str | None) -> tuple[list, go.Figure]:
+    """The values of ``df[panel]`` (first appearance) and a figure of one subplot row per value, titled
+    "<panel_label>: <value>" (default label: the column name with spaces)."""
+    panels = list(dict.fromkeys(df[panel]))
+    label = panel_label or panel.replace("_", " ")
+    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"{label}: {p}" for p in panels],
+                        vertical_spacing=0.12)
+    return panels, fig
+
+
+def _panels_layout(fig: go.Figure, title: str, n_panels: int, height_per_panel: int) -> go.Figure:
+    """Title, height (``height_per_panel`` px a panel, at least 360) and margins of a figure of stacked panels."""
+    fig.update_layout(title=title, height=max(360, height_per_panel * n_panels), margin=dict(l=50, r=20, t=70, b=30))
+    return fig
+
+
 def grouped_violins(df: pd.DataFrame, *, panel: str, x: str, y: str, title: str, yaxis_title: str,
                     order: Sequence[str] | None = None, height_per_panel: int = 300, panel_label: str | None = None,
                     nonnegative: bool = False) -> go.Figure:
@@ -234,11 +250,8 @@ def grouped_violins(df: pd.DataFrame, *, panel: str, x: str, y: str, title: str,
         The quantity cannot be negative (an error's size, an RMSE, a distance): the
         violins end at the data (``spanmode="hard"``) and the axis starts at 0.
     """
-    panels = list(dict.fromkeys(df[panel]))
+    panels, fig = _panel_column(df, panel, panel_label)
     cats = list(order) if order is not None else list(dict.fromkeys(df[x]))
-    label = panel_label or panel.replace("_", " ")
-    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"{label}: {p}" for p in panels],
-                        vertical_spacing=0.12)
     for i, p in enumerate(panels):
         sub = df[df[panel] == p]
         for k, c in enumerate(cats):
@@ -251,9 +264,7 @@ def grouped_violins(df: pd.DataFrame, *, panel: str, x: str, y: str, title: str,
         fig.update_yaxes(title_text=yaxis_title, rangemode="nonnegative" if nonnegative else "normal", row=i + 1,
                          col=1)
         fig.update_xaxes(title_text=x.replace("_", " "), row=i + 1, col=1)
-    fig.update_layout(title=title, height=max(360, height_per_panel * len(panels)),
-                      margin=dict(l=50, r=20, t=70, b=30))
-    return fig
+    return _panels_layout(fig, title, len(panels), height_per_panel)
 
 
 def error_strips(df: pd.DataFrame, *, panel: str, param: str, x: str, y: str, title: str, yaxis_title: str,
@@ -264,12 +275,9 @@ def error_strips(df: pd.DataFrame, *, panel: str, param: str, x: str, y: str, ti
     (e.g. a: op2, op3, pc5, pc10; b: ...), every case a small marker and the
     median a wide tick.
     """
-    panels = list(dict.fromkeys(df[panel]))
+    panels, fig = _panel_column(df, panel, panel_label)
     params = list(dict.fromkeys(df[param]))
     cats = list(dict.fromkeys(df[x]))
-    label = panel_label or panel.replace("_", " ")
-    fig = make_subplots(rows=len(panels), cols=1, subplot_titles=[f"{label}: {p}" for p in panels],
-                        vertical_spacing=0.12)
     for i, p in enumerate(panels):
         sub = df[df[panel] == p]
         for k, c in enumerate(cats):
@@ -292,9 +300,7 @@ def error_strips(df: pd.DataFrame, *, panel: str, param: str, x: str, y: str, ti
                             name=f"{c} median", legendgroup=str(c), showlegend=False, row=i + 1, col=1)
         fig.update_yaxes(title_text=yaxis_title, rangemode="nonnegative", row=i + 1, col=1)
         fig.update_xaxes(title_text=f"{param} / {x.replace('_', ' ')}", row=i + 1, col=1)
-    fig.update_layout(title=title, height=max(360, height_per_panel * len(panels)),
-                      margin=dict(l=50, r=20, t=70, b=30))
-    return fig
+    return _panels_layout(fig, title, len(panels), height_per_panel)
 
 
 def posterior_prior_figure(draws: Mapping[str, Sequence[float]], bounds: Mapping[str, tuple[float, float]], *,
