@@ -102,3 +102,26 @@ def test_warm_continuation_reaches_a_point_a_plain_warm_start_cannot_and_equals_
     cold = simulate(target)
     np.testing.assert_allclose(via.outputs(), cold.outputs(), rtol=1e-7, atol=1e-9)
     assert F.warm_continuation(target, light, depth=0).converged is False  # without the midpoint: as plain
+
+
+def test_a_suspect_warm_result_is_re_solved_cold_in_a_warm_batch(sim, monkeypatch):
+    """A warm-started batch (sweeps, BO, the subject emulators' runs) guards its rows as a campaign does: a point
+    whose warm Newton path is suspect (here every one: the rule forced) is solved again cold, so its outputs are
+    the cold solve's to round-off, and each re-solve is recorded with its reason. Unforced, the warm batch agrees
+    with the cold solves within the solver's tolerance and records nothing it did not re-solve."""
+    from lvcore import chains
+    from lvcore.mechanics.forward import SimulatorForward
+
+    points = {n: THETA[i] * np.array([1.0, 1.04, 0.97, 1.06]) for i, n in enumerate(THETA_NAMES)}
+    cold = SimulatorForward(resolution="fast").evaluate(points)
+    free = SimulatorForward(resolution="fast", warm_start=True)
+    got = free.evaluate(points)
+    np.testing.assert_allclose(got.outputs, cold.outputs, rtol=1e-6, atol=1e-8)
+    assert all(why for why in free.resolved_cold)   # each one recorded with its reason
+    monkeypatch.setattr(chains, "warm_path_problem", lambda log: "forced by the test")
+    guarded = SimulatorForward(resolution="fast", warm_start=True)
+    got = guarded.evaluate(points)
+    assert got.converged.all()
+    np.testing.assert_allclose(got.outputs, cold.outputs, rtol=1e-12, atol=1e-12)
+    # the first point is solved cold (nothing to start from); the other three started warm and were re-solved
+    assert guarded.resolved_cold == ("forced by the test",) * 3

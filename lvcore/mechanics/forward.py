@@ -156,22 +156,38 @@ def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, wa
         return np.full(N_OUTPUTS, np.nan), False, failure_reason(err), nan_jac, time.perf_counter() - t0
 
 
-def _simulate_chunk(input_names, cases, keys, units, seeds, jacobian):
+def _simulate_chunk(input_names, cases, keys, units, seeds, jacobian, suspect=()):
     """Worker task: ``cases`` in order, each warm-started from the nearest converged state (a chain chunk).
 
-    Returns :class:`lvcore.chains.ChainRow` objects whose results are
-    :func:`_simulate_point` tuples.
+    Returns :class:`lvcore.chains.ChainRow` objects whose results are :func:`_simulate_point` tuples with one
+    more item, why the point was re-solved cold ('' when its result is the warm one): a converged warm
+    result whose Newton path makes it suspect (:func:`lvcore.chains.warm_path_problem`: the equilibrium may not
+    be unique, and the start would decide which one Newton finds) is solved again cold, as a campaign's row is,
+    and so is a point started from the state of a point re-solved for its own path (keys in ``suspect``, and
+    those of this chunk). A point's result then does not depend on its neighbours or the order of the work.
     """
-    from lvcore.chains import solve_in_order
+    from lvcore.chains import SEED_RESOLVED, passes_suspicion, solve_in_order, warm_path_problem
+    from lvcore.mechanics.newton import recorded_solves
 
     by_key = dict(zip(keys, cases))
+    suspect = set(suspect)
 
-    def solve(key, initial):
+    def solve(key, initial, seed):
         warm = {"state": initial}
-        res = _simulate_point(by_key[key], input_names, jacobian, warm)
-        return res, (warm["state"] if res[1] else None)
+        with recorded_solves() as log:
+            res = _simulate_point(by_key[key], input_names, jacobian, warm)
+        why = ""
+        solved_cold = bool(log) and log[-1].converged and not log[-1].warm_converged
+        if initial is not None and res[1] and not solved_cold:
+            why = warm_path_problem(log) or (SEED_RESOLVED if seed in suspect else "")
+            if why:
+                warm = {"state": None}
+                res = _simulate_point(by_key[key], input_names, jacobian, warm)
+                if passes_suspicion(why):
+                    suspect.add(key)
+        return (*res, why), (warm["state"] if res[1] else None)
 
-    return solve_in_order(keys, units, seeds, solve)
+    return solve_in_order(keys, units, seeds, solve, pass_seed=True)
 
 
 #: Converged states a warm-starting SimulatorForward keeps between batches.
@@ -294,17 +310,26 @@ class SimulatorForward:
         return [f.result() for f in futures]
 
     def _run_chained(self, cases, jacobian, executor, X):
-        """Warm-started continuation chains over the batch (see ``warm_start``)."""
+        """Warm-started continuation chains over the batch (see ``warm_start``); points whose warm result is
+        suspect are re-solved cold (:func:`_simulate_chunk`), counted in :attr:`resolved_cold`."""
         from lvcore import chains
 
         U = chains.scaled_coordinates(self.input_names, X)
         seeds = self._warm.setdefault("seeds", [])
+        resolved = self._warm.setdefault("resolved", [])
+        suspect: set = set()   # keys of this batch re-solved for their own path
         results: list = [None] * len(cases)
+
+        def returned(rows):
+            suspect.update(r.key for r in rows if chains.passes_suspicion(r.result[-1]))
 
         def collect(rows):
             for r in rows:
-                results[r.key] = r.result
-                if r.state is not None:
+                *result, why = r.result
+                results[r.key] = tuple(result)
+                if why:
+                    resolved.append(why)
+                if r.state is not None and not chains.passes_suspicion(why):  # later batches never start there
                     seeds.append(chains.Seed(r.unit, r.state))
 
         if executor is None:
@@ -314,17 +339,22 @@ class SimulatorForward:
         else:
             def submit(positions, chunk_seeds):
                 return executor.submit(_simulate_chunk, self.input_names, [cases[i] for i in positions], positions,
-                                       U[positions], chunk_seeds, jacobian)
+                                       U[positions], chunk_seeds, jacobian, sorted(suspect))
 
             try:
                 chains.run_chains(executor, submit, U, workers=getattr(executor, "workers", 1), on_rows=collect,
-                                  seeds=seeds[-chains.DEFAULT_KEPT_STATES:])
+                                  seeds=seeds[-chains.DEFAULT_KEPT_STATES:], on_returned=returned)
             except chains.ChainTaskError as err:
                 raise err.__cause__ or err from None
         del seeds[:-WARM_KEPT_STATES]
         for i in range(max(0, len(seeds) - 1)):  # keep one factorised tangent in memory
             seeds[i] = chains.Seed(seeds[i].unit, chains.light_state(seeds[i].state))
         return results
+
+    @property
+    def resolved_cold(self) -> tuple[str, ...]:
+        """Why each warm-started point so far was re-solved cold (its warm result was suspect), in order."""
+        return tuple(self._warm.get("resolved", ()))
 
     def evaluate_warm(self, point: Mapping[str, float], initial=None):
         """One point started from ``initial`` (a converged state of this forward, or None: cold).
