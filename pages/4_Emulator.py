@@ -12,7 +12,7 @@ from lvcore.app.controls import (chosen_index, conditions_text, disabled_hint, i
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
 from lvcore.geometry.scaling import SCALE_BOUNDS, ScaledForward, scale_outputs
-from lvcore.outputs import OUTPUT_NAMES, is_pc_name
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, OUTPUT_NAMES, is_pc_name
 
 
 st.set_page_config(page_title="Emulator", layout="wide")
@@ -79,9 +79,9 @@ with st.expander("Inputs and training box"):
     }), hide_index=True)
     if emu.fixed:
         fixed = dict(emu.fixed)
-        if {"edp", "alpha_endo", "alpha_epi"} <= set(fixed):  # in words, with where the angles come from
-            st.write("Fixed during training: " + conditions_text(fixed["edp"], (fixed["alpha_endo"],
-                                                                               fixed["alpha_epi"]), emu) + ".")
+        if {EDP_NAME, *ANGLE_NAMES} <= set(fixed):  # in words, with where the angles come from
+            st.write("Fixed during training: " + conditions_text(fixed[EDP_NAME], tuple(fixed[n] for n in ANGLE_NAMES),
+                                                                 emu) + ".")
         else:
             st.write("Fixed during training: " + ", ".join(f"{input_label(k)} {float(v):g}" for k, v in fixed.items())
                      + ".")

@@ -10,6 +10,7 @@ import numpy as np
 from lvcore import conditions, units
 from lvcore.core.space import THETA_BOUNDS
 from lvcore.inference.cli import DEFAULT_EMULATOR
+from lvcore.outputs import EDP_NAME
 
 #: The shared sidebar's default subject: a bundled SYNTHETIC volunteer whose PC scores lie inside the
 #: default emulator's box both as projected and size-normalised (HV1, the first in the list, has h1 = 2.40
@@ -63,7 +64,7 @@ def input_label(name: str) -> str:
     """Label with units of an emulator input (θ, fibre angles, EDP, PC scores h1…h5)."""
     if name in THETA_LABELS:
         return THETA_LABELS[name]
-    if name.lower() in ("edp", "edp_mmhg"):
+    if name == EDP_NAME:
         return "EDP (mmHg)"
     if name in ("alpha_endo", "alpha_epi"):
         return f"α_{name.split('_')[1]} (°)"
@@ -98,7 +99,7 @@ def conditions_text(edp_mmhg: float, angles, emulator, *, infer_angles: bool = F
         a = tuple(float(v) for v in angles)
         angle_text = (f"fibre angles {a[0]:.0f}° / {a[1]:.0f}°"
                       + (f", the simulator's default ({who} takes the angles as inputs)" if a == tuple(sim) else ""))
-    edp_text = f"EDP {float(edp_mmhg):g} mmHg" + (f", {who}'s training EDP" if "edp" in fixed else "")
+    edp_text = f"EDP {float(edp_mmhg):g} mmHg" + (f", {who}'s training EDP" if EDP_NAME in fixed else "")
     return f"{edp_text}; {angle_text}"
 
 
@@ -211,7 +212,7 @@ def shared_start(name: str, shared: dict) -> float | None:
     """The shared sidebar's value of emulator input ``name`` (θ component or EDP), or ``None`` if it sets none."""
     if name in shared.get("theta", {}):
         return float(shared["theta"][name])
-    if name.lower() in ("edp", "edp_mmhg") and shared.get("edp_mmhg") is not None:
+    if name == EDP_NAME and shared.get("edp_mmhg") is not None:
         return float(shared["edp_mmhg"])
     return None
 

@@ -81,12 +81,12 @@ def pc_score_sd(k: int) -> np.ndarray:
     return np.ones(k)
 
 
-def _fixed(angles=CHAPTER_ANGLES, edp=CHAPTER_EDP) -> tuple[tuple[str, float], ...]:
+def _fixed(angles=CHAPTER_ANGLES, edp_mmhg=CHAPTER_EDP) -> tuple[tuple[str, float], ...]:
     out = []
     if angles is not None:
         out += [(ANGLE_NAMES[0], float(angles[0])), (ANGLE_NAMES[1], float(angles[1]))]
-    if edp is not None:
-        out.append((EDP_NAME, float(edp)))
+    if edp_mmhg is not None:
+        out.append((EDP_NAME, float(edp_mmhg)))
     return tuple(out)
 
 

@@ -39,7 +39,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from lvcore.outputs import THETA_NAMES
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
 
 #: Pressures (mmHg) of the derived EDPVR besides 0 mmHg (V₀).
 EDPVR_PRESSURES_MMHG = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
@@ -266,7 +266,7 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     t0 = time.perf_counter()
     # every (draw, pressure) is one point of a continuation chain (lvcore.chains): each solve starts from the
     # predicted state of its converged neighbours in (log theta, angles, pressure, PC scores)
-    names = THETA_NAMES + ("alpha_endo", "alpha_epi", "edp")
+    names = THETA_NAMES + ANGLE_NAMES + (EDP_NAME,)
     n_pc = 0 if geometry is not None else len(draws[0]["h"])
     rows, cases = [], []
     for i, d in enumerate(draws):
@@ -275,7 +275,7 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
         inputs["alpha_epi"] = float(d.get("alpha_epi", angles[1]))
         geom = _geometry_section(d, geometry)
         for j, pj in enumerate(levels):
-            cases.append(build_case({**inputs, "edp": float(pj)}, geometry=geom, resolution=resolution, base=base))
+            cases.append(build_case({**inputs, EDP_NAME: float(pj)}, geometry=geom, resolution=resolution, base=base))
             rows.append([inputs[k] for k in names[:-1]] + [float(pj)] + ([] if geometry is not None
                                                                            else [float(v) for v in d["h"]]))
     X = np.asarray(rows, float)

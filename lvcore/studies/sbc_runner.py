@@ -21,7 +21,7 @@ import numpy as np
 
 from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import THETA_NAMES
+from lvcore.outputs import EDP_NAME, THETA_NAMES
 from lvcore.studies._common import clean, write_json_atomic
 from lvcore.studies.sbc_stats import rank_of_truth
 
@@ -140,7 +140,7 @@ def simulate_truth(draw: Mapping) -> dict:
         v_cav = pca_reference_volume_ml(h, RESOLUTION)
         scale = float(np.cbrt(draw["v_ref_ml"] / v_cav))
         case = build_case({**theta, **{f"h{k + 1}": v for k, v in enumerate(h)}, "alpha_endo": ANGLES[0],
-                           "alpha_epi": ANGLES[1], "edp": EDP_MMHG}, resolution=RESOLUTION, base=BASE)
+                           "alpha_epi": ANGLES[1], EDP_NAME: EDP_MMHG}, resolution=RESOLUTION, base=BASE)
         res = simulate(case)
         if not res.converged:
             raise TruthFailure(f"the data solve did not converge: {res.message}")
@@ -569,9 +569,9 @@ def check_emulator_conditions(name: str = EMULATOR) -> dict:
 
     emu = load_emulator(name)
     fixed = emu.metadata.get("fixed_inputs", {})
-    found = {"edp": fixed.get("edp"), "alpha_endo": fixed.get("alpha_endo"), "alpha_epi": fixed.get("alpha_epi"),
+    found = {EDP_NAME: fixed.get(EDP_NAME), "alpha_endo": fixed.get("alpha_endo"), "alpha_epi": fixed.get("alpha_epi"),
              "base": emu.base, "resolution": emu.resolution}
-    want = {"edp": EDP_MMHG, "alpha_endo": ANGLES[0], "alpha_epi": ANGLES[1], "base": BASE, "resolution": RESOLUTION}
+    want = {EDP_NAME: EDP_MMHG, "alpha_endo": ANGLES[0], "alpha_epi": ANGLES[1], "base": BASE, "resolution": RESOLUTION}
     if found != want:
         raise LVCoreError(f"the '{name}' emulator's conditions {found} are not the SBC study's {want}")
     return found
