@@ -31,6 +31,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
+import sys
 import threading
 import time
 from collections.abc import MutableMapping
@@ -47,8 +48,10 @@ def pin_threads(env: MutableMapping[str, str] | None = None, *, threads: int = 1
                 force: bool = False) -> MutableMapping[str, str]:
     """Pin BLAS/OpenMP to ``threads`` threads: numpy's BLAS must not fight XLA's threads on a small machine.
 
-    Sets every :data:`THREAD_VARIABLES` entry in ``env``. Has an effect on this process only before numpy (and
-    SciPy, JAX) are imported, so a script calls it first; this module imports neither.
+    Sets every :data:`THREAD_VARIABLES` entry in ``env``. The libraries read them when they load, so a script calls
+    this before it imports numpy (this module imports neither numpy nor JAX). Where numpy is loaded already (a
+    pytest plugin may import it before ``tests/conftest.py`` runs), the loaded BLAS and OpenMP libraries are set to
+    the variables' values through threadpoolctl (:func:`limit_loaded_libraries`).
 
     Parameters
     ----------
@@ -79,7 +82,32 @@ def pin_threads(env: MutableMapping[str, str] | None = None, *, threads: int = 1
     for var in THREAD_VARIABLES:
         if force or var not in env:
             env[var] = str(int(threads))
+    if env is os.environ and "numpy" in sys.modules:
+        limit_loaded_libraries()
     return env
+
+
+#: threadpoolctl's name of a loaded library -> the variable that sets its threads.
+LIBRARY_VARIABLES = {"openblas": "OPENBLAS_NUM_THREADS", "mkl": "MKL_NUM_THREADS", "blis": "BLIS_NUM_THREADS",
+                     "openmp": "OMP_NUM_THREADS"}
+
+
+def limit_loaded_libraries() -> dict[str, int]:
+    """Set the threads of the BLAS and OpenMP libraries already loaded in this process to the values of their
+    variables (:data:`LIBRARY_VARIABLES`) through threadpoolctl (a scikit-learn dependency); the limits last until
+    the process ends. Returns the limits set (library -> threads; empty without threadpoolctl)."""
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:  # pragma: no cover - installed with scikit-learn
+        return {}
+    controller, limits = ThreadpoolController(), {}
+    for library, var in LIBRARY_VARIABLES.items():
+        try:
+            limits[library] = int(os.environ.get(var, ""))
+        except ValueError:  # unset or not a number: that library keeps its own setting
+            continue
+        controller.select(internal_api=library).limit(limits=limits[library])
+    return limits
 
 
 #: Environment set in worker processes (before they import numpy): one thread per library (:func:`pin_threads`)

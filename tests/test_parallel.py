@@ -152,3 +152,37 @@ def test_the_docstring_examples_run():
 
     result = doctest.testmod(lvcore.parallel)
     assert result.attempted >= 3 and result.failed == 0
+
+
+NUMPY_THEN_PIN = r"""
+import numpy, threadpoolctl
+from lvcore.parallel import pin_threads
+pin_threads()
+print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
+"""
+
+
+def test_pin_threads_after_numpy_limits_the_loaded_blas():
+    """numpy imported first (as a pytest plugin does before tests/conftest.py): the loaded BLAS follows the
+    variables all the same (unpinned, OpenBLAS keeps one thread per core: fails on a multi-core machine)."""
+    pytest.importorskip("threadpoolctl")
+    from lvcore.parallel import THREAD_VARIABLES
+
+    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+    out = subprocess.run([sys.executable, "-c", NUMPY_THEN_PIN], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-1] == "[1]"
+
+
+def test_this_test_process_blas_follows_the_variables():
+    """tests/conftest.py pins the test processes too: their BLAS runs the threads the variables say (1 unless the
+    user set them), whichever plugin imported numpy first."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import numpy  # noqa: F401 - loads the BLAS
+
+    from lvcore.parallel import LIBRARY_VARIABLES
+
+    for lib in threadpoolctl.threadpool_info():
+        var = LIBRARY_VARIABLES.get(lib["internal_api"])
+        if var and os.environ.get(var, "").isdigit():
+            assert lib["num_threads"] == int(os.environ[var]), lib
