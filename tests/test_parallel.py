@@ -131,16 +131,24 @@ pin_threads()
 import numpy, threadpoolctl
 print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
 """
+#: numpy imported first, as a pytest plugin does before tests/conftest.py: the loaded BLAS is limited instead.
+NUMPY_THEN_PIN = r"""
+import numpy, threadpoolctl
+from lvcore.parallel import pin_threads
+pin_threads()
+print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
+"""
 
 
-def test_pin_threads_before_numpy_gives_numpy_one_blas_thread():
-    """In a fresh process with no thread variables: imported first, pin_threads leaves numpy's BLAS one thread
-    (unpinned, OpenBLAS starts one per core: the check fails on a machine with more than one core)."""
+@pytest.mark.parametrize("code", [PIN_THEN_NUMPY, NUMPY_THEN_PIN], ids=["before-numpy", "after-numpy"])
+def test_pin_threads_gives_numpy_one_blas_thread(code):
+    """In a fresh process with no thread variables, pin_threads leaves numpy's BLAS one thread, called before or
+    after numpy is imported (unpinned, OpenBLAS starts one per core: the check fails on a multi-core machine)."""
     pytest.importorskip("threadpoolctl")
     from lvcore.parallel import THREAD_VARIABLES
 
     env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
-    out = subprocess.run([sys.executable, "-c", PIN_THEN_NUMPY], env=env, capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split()[-1] == "[1]"
 
@@ -152,26 +160,6 @@ def test_the_docstring_examples_run():
 
     result = doctest.testmod(lvcore.parallel)
     assert result.attempted >= 3 and result.failed == 0
-
-
-NUMPY_THEN_PIN = r"""
-import numpy, threadpoolctl
-from lvcore.parallel import pin_threads
-pin_threads()
-print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
-"""
-
-
-def test_pin_threads_after_numpy_limits_the_loaded_blas():
-    """numpy imported first (as a pytest plugin does before tests/conftest.py): the loaded BLAS follows the
-    variables all the same (unpinned, OpenBLAS keeps one thread per core: fails on a multi-core machine)."""
-    pytest.importorskip("threadpoolctl")
-    from lvcore.parallel import THREAD_VARIABLES
-
-    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
-    out = subprocess.run([sys.executable, "-c", NUMPY_THEN_PIN], env=env, capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr[-2000:]
-    assert out.stdout.split()[-1] == "[1]"
 
 
 def test_this_test_process_blas_follows_the_variables():
