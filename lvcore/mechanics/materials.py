@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore import conditions, units
+from lvcore import conditions
 from lvcore.mechanics import tensor_forms as tf
 from lvcore.mechanics.kinematics import cofactor, det3, green_strain, isochoric_i1, right_cauchy_green
 from lvcore.mechanics.tensor_forms import pull_back
@@ -242,16 +242,16 @@ class HolzapfelOgden(MaterialLaw):
     b: Any
     a_f: Any
     b_f: Any
-    a_s: Any = units.HO_FIXED["as"]
-    b_s: Any = units.HO_FIXED["bs"]
-    a_fs: Any = units.HO_FIXED["afs"]
-    b_fs: Any = units.HO_FIXED["bfs"]
+    a_s: Any = conditions.HO_FIXED["as"]
+    b_s: Any = conditions.HO_FIXED["bs"]
+    a_fs: Any = conditions.HO_FIXED["afs"]
+    b_fs: Any = conditions.HO_FIXED["bfs"]
     kappa_f: Any = 0.0
 
     law: ClassVar[str] = "holzapfel-ogden"
     keys: ClassVar[tuple[str, ...]] = ("a", "b", "af", "bf", "as", "bs", "afs", "bfs", "kappa")
     required: ClassVar[tuple[str, ...]] = ("a", "b", "af", "bf")
-    optional: ClassVar[Mapping[str, float]] = {**units.HO_FIXED, "kappa": 0.0}
+    optional: ClassVar[Mapping[str, float]] = {**conditions.HO_FIXED, "kappa": 0.0}
     stress_keys: ClassVar[tuple[str, ...]] = ("a", "af", "as", "afs")
     may_be_zero: ClassVar[tuple[str, ...]] = ("as", "afs")
     ranges: ClassVar[Mapping[str, tuple[float, float]]] = {"kappa": (0.0, 1.0 / 3.0)}
@@ -259,7 +259,7 @@ class HolzapfelOgden(MaterialLaw):
     @classmethod
     def default_parameters(cls) -> dict[str, float]:
         """The chapter's reference θ (``conditions.THETA_TILDE``) with the fixed sheet terms (Gao et al. 2017), κ = 0."""
-        return {**conditions.THETA_TILDE, **units.HO_FIXED, "kappa": 0.0}
+        return {**conditions.THETA_TILDE, **conditions.HO_FIXED, "kappa": 0.0}
 
     def strain_energy(self, F, frame):
         C = right_cauchy_green(F)
