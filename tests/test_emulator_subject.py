@@ -124,7 +124,7 @@ def test_prior_mean_choice_matches_the_fe_runs_or_says_why():
     assert choose_prior(subject_space(("theta",)), section, "none") == (None, {"used": False, "reason":
                                                                              "not asked for (--prior none)"})
     with pytest.raises(EmulatorError, match="cannot be the prior mean.*trained at edp = 8"):
-        choose_prior(subject_space(("theta",), edp=10.0), section, "chapter")
+        choose_prior(subject_space(("theta",), edp_mmhg=10.0), section, "chapter")
     with pytest.raises(EmulatorError, match="does not take edp"):
         choose_prior(subject_space(("theta", "edp")), section, "chapter")
 
@@ -161,8 +161,10 @@ def test_design_space():
     space = subject_space(parse_inputs("angles,theta,edp"))
     assert space.names == ("a", "b", "af", "bf", "edp", "alpha_endo", "alpha_epi") and space.fixed == ()
     assert space.parameters[1].lower == 0.5  # the angles emulator's b >= 0.5 with free angles
-    space = subject_space(("theta",), edp=10.0)
+    space = subject_space(("theta",), edp_mmhg=10.0)
     assert dict(space.fixed) == {"edp": 10.0, "alpha_endo": -60.0, "alpha_epi": 60.0} and space.base == "sliding"
+    with pytest.warns(DeprecationWarning, match=r"subject_space\(edp=\.\.\.\) is deprecated; use edp_mmhg="):
+        assert subject_space(("theta",), edp=10.0) == space  # the old keyword still works
     with pytest.raises(EmulatorError):
         parse_inputs("edp")
 

@@ -219,7 +219,7 @@ def _build(args) -> int:
     design = SubjectDesign(args.n_train, args.n_valid, args.n_test, args.design)
     emu = build_subject_emulator(
         args.geometry, args.out, inputs=args.inputs, design=design, resolution=args.resolution, base=args.base,
-        edp=CHAPTER_EDP if args.edp is None else args.edp,
+        edp_mmhg=CHAPTER_EDP if args.edp is None else args.edp,
         alpha_endo=CHAPTER_ANGLES[0] if args.alpha_endo is None else args.alpha_endo,
         alpha_epi=CHAPTER_ANGLES[1] if args.alpha_epi is None else args.alpha_epi,
         bounds=parse_bounds(args.bound), units=args.units, workers=args.workers, seed=args.seed,

@@ -46,6 +46,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from lvcore._exports import renamed_keywords
 from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
 from lvcore.core.space import ANGLE_BOUNDS, ANGLES_THETA_BOUNDS, EDP_BOUNDS, THETA_BOUNDS, Parameter, ParameterSpace
 from lvcore.emulator.subject_geometry import (GEOMETRY_FILE, MESH_SUFFIXES, VOLUME_MESH_SUFFIXES, SubjectGeometry,
@@ -56,7 +57,7 @@ from lvcore.exceptions import EmulatorError
 from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
 
 #: Input groups of ``--inputs``: θ (always), the EDP, the two fibre angles.
-INPUT_GROUPS = {"theta": THETA_NAMES, "edp": (EDP_NAME,), "angles": ANGLE_NAMES}
+INPUT_GROUPS = {"theta": THETA_NAMES, EDP_NAME: (EDP_NAME,), "angles": ANGLE_NAMES}
 #: Most FE runs one build may ask for.
 MAX_RUNS = 20_000
 
@@ -78,7 +79,8 @@ def parse_inputs(text: str | Sequence[str]) -> tuple[str, ...]:
     return tuple(g for g in INPUT_GROUPS if g in groups)
 
 
-def subject_space(groups: Sequence[str] = ("theta",), *, base: str = "sliding", edp: float = CHAPTER_EDP,
+@renamed_keywords(edp="edp_mmhg")
+def subject_space(groups: Sequence[str] = ("theta",), *, base: str = "sliding", edp_mmhg: float = CHAPTER_EDP,
                   alpha_endo: float = CHAPTER_ANGLES[0], alpha_epi: float = CHAPTER_ANGLES[1],
                   bounds: Mapping[str, tuple[float, float]] | None = None, name: str = "subject") -> ParameterSpace:
     """The design space of a subject emulator.
@@ -93,8 +95,8 @@ def subject_space(groups: Sequence[str] = ("theta",), *, base: str = "sliding", 
         angles over :data:`ANGLE_BOUNDS` (deg), uniform.
     base : {"clamped", "sliding"}
         Basal boundary condition (``chapter`` is trained sliding).
-    edp, alpha_endo, alpha_epi : float
-        Values of the inputs that are not varied (mmHg, deg).
+    edp_mmhg, alpha_endo, alpha_epi : float
+        Values of the inputs that are not varied (mmHg, deg); ``edp`` is the old name of ``edp_mmhg``.
     bounds : mapping, optional
         Narrower (or other) bounds by input name, e.g. ``{"a": (0.5, 2)}``.
     """
@@ -110,7 +112,7 @@ def subject_space(groups: Sequence[str] = ("theta",), *, base: str = "sliding", 
     if outside:
         raise EmulatorError(f"bounds given for {outside}, which are not varied (inputs {','.join(groups)})")
     params = tuple(Parameter(n, *box[n], "log" if n in THETA_NAMES else "linear") for n in names)
-    fixed = {EDP_NAME: float(edp), ANGLE_NAMES[0]: float(alpha_endo), ANGLE_NAMES[1]: float(alpha_epi)}
+    fixed = {EDP_NAME: float(edp_mmhg), ANGLE_NAMES[0]: float(alpha_endo), ANGLE_NAMES[1]: float(alpha_epi)}
     fixed = tuple((k, v) for k, v in fixed.items() if k not in names)
     return ParameterSpace(name, params, fixed, base)
 
@@ -191,9 +193,10 @@ def design_rows(space: ParameterSpace, design: SubjectDesign, seed: int) -> tupl
     return np.concatenate([train, held]), parts
 
 
+@renamed_keywords(edp="edp_mmhg")
 def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("theta",),
                            design: SubjectDesign = SubjectDesign(), resolution: str = "default",
-                           base: str = "sliding", edp: float = CHAPTER_EDP, alpha_endo: float = CHAPTER_ANGLES[0],
+                           base: str = "sliding", edp_mmhg: float = CHAPTER_EDP, alpha_endo: float = CHAPTER_ANGLES[0],
                            alpha_epi: float = CHAPTER_ANGLES[1], bounds: Mapping | None = None, units: str = "mm",
                            workers: int = 2, seed: int = 0, config=None, name: str | None = None,
                            prior: str = "auto", log: Callable[[str], None] | None = None,
@@ -215,7 +218,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
         Run counts (at most 1,000 in all by default).
     resolution : str
         Mesh preset of the FE runs.
-    base, edp, alpha_endo, alpha_epi, bounds
+    base, edp_mmhg, alpha_endo, alpha_epi, bounds
         See :func:`subject_space`.
     units : str
         Units of a volumetric mesh.
@@ -258,7 +261,8 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     say = log or (lambda msg: None)
     out = Path(out)
     groups = parse_inputs(inputs)
-    space = subject_space(groups, base=base, edp=edp, alpha_endo=alpha_endo, alpha_epi=alpha_epi, bounds=bounds)
+    space = subject_space(groups, base=base, edp_mmhg=edp_mmhg, alpha_endo=alpha_endo, alpha_epi=alpha_epi,
+                          bounds=bounds)
     geo = geometry if isinstance(geometry, SubjectGeometry) else resolve_subject_geometry(geometry, units=units)
     out.mkdir(parents=True, exist_ok=True)
     section = _write_geometry(geo, out)

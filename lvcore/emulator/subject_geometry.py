@@ -161,7 +161,7 @@ def _case_geometry(section, path: Path) -> SubjectGeometry:
     for key in ("path", "model"):  # relative to the case file, as the case reader does
         if key in section and not Path(str(section[key])).is_absolute():
             section[key] = str((path.parent / str(section[key])).resolve())
-    from lvcore.core.space import build_case
+    from lvcore.mechanics.case_inputs import build_case
 
     try:
         Case.from_dict(build_case({n: 1.0 for n in THETA_NAMES}, geometry=section, resolution="coarse"))
@@ -177,7 +177,7 @@ def _case_geometry(section, path: Path) -> SubjectGeometry:
 
 def subject_template_nodes(section: Mapping) -> np.ndarray:
     """Template node positions (mm) of a case ``geometry`` section (mesh, PC scores, ellipsoid or default)."""
-    from lvcore.core.space import build_case
+    from lvcore.mechanics.case_inputs import build_case
     from lvcore.geometry.template import DEFAULT_TEMPLATE
     from lvcore.mechanics.case import Case
 
