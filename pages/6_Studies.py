@@ -1,7 +1,8 @@
 """Studies: the chapter's optimisation and discrepancy studies from saved results, and small background runs.
 
-Every tab draws through its study module (``load``, ``tables``, ``figures``), the same calls as
-``lvcore report``; this page only lays them out.
+The tabs are the registry's (:func:`lvcore.studies.registry.tabs`): a study added there gets its place here. Every
+study draws through its module (``load``, ``tables``, ``figures``), the same calls as ``lvcore report``; this page
+only lays them out (a study without a layout of its own below shows its source and figures).
 """
 from __future__ import annotations
 
@@ -12,8 +13,7 @@ import streamlit as st
 
 from lvcore.app.tables import no_missing
 from lvcore.exceptions import LVCoreError
-from lvcore.studies import (bo_fibres, bo_mismatch, fibre_discrepancy, findings, geometry_operators, mismatch,
-                            operators, operators_realistic, results, sbc)
+from lvcore.studies import bo_fibres, geometry_operators, operators, registry, results
 from lvcore.viz.report_figures import wrap_title
 
 #: Characters per title line of a figure on this page (a page-wide figure at a 1400-px window holds ~100).
@@ -50,18 +50,18 @@ with st.sidebar:
 sources = results.result_sources(folders)
 
 
-def load(study: str, module, key: str):
+def load(study: registry.Study):
     """The chosen result set of ``study`` loaded by its module, or None (with a message saying why)."""
-    opts = sources[study]
+    opts = sources.get(study.name, [])
     if not opts:
-        st.info(f"No saved results of `{study}` found (bundled folder: {results.bundled_studies_dir()}). "
-                f"Run `lvcore study {study} --out DIR` and add DIR in the sidebar.")
+        st.info(f"No saved results of `{study.name}` found (bundled folder: {results.bundled_studies_dir()}). "
+                f"Run `lvcore study {study.name} --out DIR` and add DIR in the sidebar.")
         return None
-    label = st.selectbox("Result set", [o[0] for o in opts], key=key)
+    label = st.selectbox("Result set", [o[0] for o in opts], key=f"{study.module}_src")
     try:
-        return module.load(dict(opts)[label])
+        return study.load(dict(opts)[label])
     except (LVCoreError, KeyError, TypeError, ValueError) as err:
-        st.error(f"cannot read the {study} results in {dict(opts)[label]}: {err}")
+        st.error(f"cannot read the {study.name} results in {dict(opts)[label]}: {err}")
         return None
 
 
@@ -79,21 +79,20 @@ def show(module, result, figures=None, tables=()) -> None:
             table(tabs[name].round(4))  # "–", never None; a verdict's note in full
 
 
-def verdict_section(study: str, module, key: str, heading: str) -> None:
-    """A study whose findings are verdicts with CIs: its source, verdict table and figures."""
-    st.subheader(heading)
-    res = load(study, module, key)
-    if res is not None:
-        st.caption(module.source_line(res))
-        show(module, res, tables=["verdicts"])
+def verdict_section(heading: str):
+    """A study whose findings are verdicts with CIs: its heading, source, verdict table and figures."""
+    def draw(study: registry.Study) -> None:
+        st.subheader(heading)
+        res = load(study)
+        if res is not None:
+            module = study.load_module()
+            st.caption(module.source_line(res))
+            show(module, res, tables=["verdicts"])
+    return draw
 
 
-tab_bo, tab_ops, tab_fd, tab_geo, tab_mm, tab_sbc, tab_run = st.tabs(
-    ["Fibre-angle BO (Tables 9.2/9.3)", "Operators (Figs 9.11–9.14)", "Fibre discrepancy (Figs 9.6–9.9)",
-     "Operators, geometry (Table 9.4)", "Mismatch dose–response and findings", "SBC", "Run a small study"])
-
-with tab_bo:
-    res = load("bo-fibres", bo_fibres, "bo_src")
+def draw_bo_fibres(study: registry.Study) -> None:
+    res = load(study)
     if res is not None and res["entries"]:
         meta = res["meta"]
         budget = meta.get("budget", {})
@@ -106,10 +105,10 @@ with tab_bo:
         st.subheader("Tables 9.2 (angles fixed at −60°, 90°) and 9.3 (angles optimised)")
         show(bo_fibres, res, figures=["fig_bo_lvv_error", "fig_strain_residuals", "fig_convergence"],
              tables=["table9_2_bo_fixed_angles", "table9_3_bo_free_angles", "angles_vs_hidden"])
-    verdict_section("bo-mismatch", bo_mismatch, "bom_src", "F6 as a real test: data with a known mismatch")
 
-with tab_ops:
-    res = load("operators", operators, "ops_src")
+
+def draw_operators(study: registry.Study) -> None:
+    res = load(study)
     if res is not None:
         m = res.get("meta")
         if m:
@@ -123,16 +122,9 @@ with tab_ops:
             labels = [f"{s['patient']} main {s['main_operator']} test {s['test_geometry']}" for s in res["surfaces"]]
             i = st.selectbox("Loss surface (Fig 9.13) of fit", range(len(labels)), format_func=labels.__getitem__)
             st.plotly_chart(wrap_title(operators.surface_figure(res, i), width=APP_TITLE_CHARS), width="stretch")
-    verdict_section("operators-realistic", operators_realistic, "opr_src",
-                    "F4/F5 with realistic operators (whole slices, trabeculae, breath-hold shifts)")
 
-with tab_fd:
-    res = load("fibre-discrepancy", fibre_discrepancy, "fd_src")
-    if res is not None:
-        st.caption(fibre_discrepancy.source_line(res))
-        show(fibre_discrepancy, res, tables=["sets"])
 
-with tab_geo:
+def draw_geometry_operators(study: registry.Study) -> None:
     @st.cache_data(show_spinner=False)
     def _table94():
         return {"table": geometry_operators.operator_table(), "geometry_effect": None}
@@ -142,32 +134,71 @@ with tab_geo:
     except LVCoreError as err:
         st.error(str(err))
 
-with tab_mm:
-    res = load("mismatch", mismatch, "mm_src")
-    if res is not None:
-        st.caption(mismatch.source_line(res))
-        try:
-            fres = findings.load(res["folder"])
-            st.subheader("The chapter's findings: verdicts")
-            table(findings.tables(fres)["table_findings"])
-            st.caption(findings.source_line(fres))
-        except (LVCoreError, KeyError, TypeError, ValueError, FileNotFoundError) as err:
-            st.error(f"cannot compute the findings table: {err}")
-        st.subheader("Dose–response")
-        show(mismatch, res, figures=["fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s",
-                                     "fig_mismatch_output_error"], tables=["table_mismatch_doses"])
 
-with tab_sbc:
+def draw_findings(study: registry.Study) -> None:
+    """The verdicts, from the result set chosen for the first input study (the mismatch dose-response)."""
+    first = registry.STUDIES[study.inputs[0]]
+    opts = dict(sources[first.name])
+    folder = opts.get(st.session_state.get(f"{first.module}_src")) or next(iter(opts.values()), None)
+    module = study.load_module()
+    try:
+        res = study.load(folder)
+    except (LVCoreError, KeyError, TypeError, ValueError, FileNotFoundError) as err:
+        st.error(f"cannot compute the findings table: {err}")
+        return
+    st.subheader("The chapter's findings: verdicts")
+    table(module.tables(res)["table_findings"])
+    st.caption(module.source_line(res))
+
+
+def draw_mismatch(study: registry.Study) -> None:
+    res = load(study)
+    if res is not None:
+        module = study.load_module()
+        st.caption(module.source_line(res))
+        st.subheader("Dose–response")
+        show(module, res, figures=["fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s",
+                                   "fig_mismatch_output_error"], tables=["table_mismatch_doses"])
+
+
+def draw_sbc(study: registry.Study) -> None:
     st.write("Simulation-based calibration of `lvcore calibrate` (mesh and `--geometry infer`) on SYNTHETIC "
              "subjects drawn from the prior, with the truth by the FE simulator: if the pipeline is calibrated, the "
              "truth's rank among the posterior draws is uniform (`lvcore study sbc --help`).")
-    res = load("sbc", sbc, "sbc_src")
+    res = load(study)
     if res is not None:
-        st.caption(sbc.source_line(res))
+        module = study.load_module()
+        st.caption(module.source_line(res))
         if not res.get("complete", True):
             st.warning(f"Incomplete run: {res['n_subjects']} of {res.get('n_subjects_planned')} subjects; the "
                        "coverage CIs say how little so few subjects can show.")
-        show(sbc, res, figures=["fig_sbc_coverage", "fig_sbc_rank_histograms"], tables=["table_sbc_summary", "runs"])
+        show(module, res, figures=["fig_sbc_coverage", "fig_sbc_rank_histograms"],
+             tables=["table_sbc_summary", "runs"])
+
+
+def draw_default(study: registry.Study, tables=()) -> None:
+    """Any study without a layout of its own: its source, its figures, and the named tables."""
+    res = load(study)
+    if res is not None:
+        module = study.load_module()
+        st.caption(module.source_line(res))
+        show(module, res, tables=tables)
+
+
+#: The studies with a layout of their own (by registry name); every other study is drawn by :func:`draw_default`.
+DRAW = {"bo-fibres": draw_bo_fibres, "operators": draw_operators, "geometry-operators": draw_geometry_operators,
+        "mismatch": draw_mismatch, "findings": draw_findings, "sbc": draw_sbc,
+        "fibre-discrepancy": lambda study: draw_default(study, tables=["sets"]),
+        "bo-mismatch": verdict_section("F6 as a real test: data with a known mismatch"),
+        "operators-realistic": verdict_section("F4/F5 with realistic operators (whole slices, trabeculae, "
+                                               "breath-hold shifts)")}
+
+study_tabs = registry.tabs()
+*tabs, tab_run = st.tabs([*study_tabs, "Run a small study"])
+for tab, studies in zip(tabs, study_tabs.values()):
+    with tab:
+        for s in studies:
+            DRAW.get(s.name, draw_default)(s)
 
 with tab_run:
     st.write("Start a small run (fast mesh) in the background; the page stays usable while it runs and its "

@@ -22,6 +22,12 @@ MODULES = (
     "lvcore.studies.operators",
     "lvcore.studies.operators_realistic",
     "lvcore.studies.bo_fibres",
+    "lvcore.studies.bo_mismatch",
+    "lvcore.studies.mismatch",
+    "lvcore.studies.findings",
+    "lvcore.studies.registry",
+    "lvcore.campaigns.designs",
+    "lvcore.campaigns.runner",
 )
 
 

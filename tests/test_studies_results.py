@@ -59,7 +59,7 @@ def test_studies_page_renders_saved_results(saved):
     assert not at.exception
     at.sidebar.text_input[0].set_value(str(saved)).run()
     assert not at.exception
-    bo_src = next(s for s in at.selectbox if s.key == "bo_src")
+    bo_src = next(s for s in at.selectbox if s.key == "bo_fibres_src")
     bo_src.set_value(next(o for o in bo_src.options if str(saved) in o)).run()  # the saved set, not the bundled one
     assert not at.exception
     assert any("REDUCED" in w.value for w in at.warning)

@@ -1,7 +1,8 @@
 """Build the report: every reproduced figure and table of the chapter, with its data, in one folder.
 
 The report is a list of items over the studies: each :class:`Section` names a
-study module of :mod:`lvcore.studies` and the figures it contributes. The
+study module of :mod:`lvcore.studies` and the figures it contributes (one per
+study with a report section in the registry, :mod:`lvcore.studies.registry`). The
 study draws them (``figures(result)``, ``tables(result)``: the same builders
 as the app's Studies page); this module only gathers the results, and
 :mod:`lvcore.report.export` writes the folder.
@@ -19,14 +20,17 @@ the bundled SYNTHETIC cohort; the calibration posterior from a short live NUTS
 run on SYNTHETIC-HV3; Figs 9.6–9.9, Tables 9.2/9.3 and Figs 9.11–9.14 from
 saved study results (``--from RESULTS`` first, then the bundled ones); the
 mismatch dose–response and the findings table (F1, F2, F3, F5, F6 with
-verdicts) from the shipped ``mismatch.json`` (with ``operators.json`` and
-``bo_fibres.json``); the simulation-based calibration of the pipeline
-(rank histograms, coverage) from the shipped ``sbc.json``; all listed
-as missing with the command that makes them when absent.
+verdicts) from the shipped mismatch results (with the operator and fibre-angle
+BO results); the simulation-based calibration of the pipeline (rank
+histograms, coverage) from the shipped SBC results; all listed as missing with
+the command that makes them when absent. Each study's result file is named by
+its entry in :data:`lvcore.studies.registry.STUDIES`, the list the sections are
+derived from.
 """
 from __future__ import annotations
 
 import importlib
+import inspect
 import json
 import time
 from dataclasses import dataclass
@@ -35,13 +39,14 @@ from typing import Callable
 
 from lvcore.report.export import (ReportError, ReportItem, StaticExportError, export_static, index_html,
                                   plotly_template, write_items)
+from lvcore.studies.registry import STUDIES, Study
 
 
 @dataclass(frozen=True)
 class Section:
     """Items of the report drawn by one study module.
 
-    ``saved``: the study's results are read from its ``RESULT_FILE`` (``load``);
+    ``saved``: the study's results are read from ``result_file`` (its module's ``load``);
     otherwise ``compute(options)`` makes them (seconds), None when impossible.
     """
 
@@ -50,37 +55,25 @@ class Section:
     names: tuple[str, ...]
     saved: bool = False
     compute: Callable[[dict], object] | None = None
+    result_file: str | None = None
 
 
-def _live(study: str, **kw) -> Callable[[dict], object]:
-    return lambda opts: importlib.import_module(f"lvcore.studies.{study}").compute(
-        **{k: opts[v] for k, v in kw.items()})
+def _live(study: str) -> Callable[[dict], object]:
+    """``compute(**options)`` of a study module, given the report options its ``compute`` takes (e.g. ``sweep``)."""
+    def compute(opts: dict):
+        fn = importlib.import_module(f"lvcore.studies.{study}").compute
+        return fn(**{k: v for k, v in opts.items() if k in inspect.signature(fn).parameters})
+    return compute
 
 
-SECTIONS = (
-    Section("Fig 9.5 angle sweep", "fibre_angles", ("fig9_5_angle_sweep", "fig9_5_angle_map"),
-            compute=_live("fibre_angles", sweep="sweep")),
-    Section("Figs 9.6-9.9 fibre discrepancy", "fibre_discrepancy",
-            ("fig9_6_strain_predictive", "fig9_7_sigma_s", "fig9_7_sigma_s_all_sets", "fig9_8_eta_vs_benchmark",
-             "fig9_9_error_violins", "table_fibre_discrepancy_findings"), saved=True),
-    Section("Table 9.4 / Fig 9.10 operators and PCA", "geometry_operators",
-            ("table9_4_operators_pca", "fig_pca_vs_operators", "fig9_10_geometry_effect"),
-            compute=_live("geometry_operators")),
-    Section("calibration posterior", "volunteer_calibration", ("fig_calibration_posterior", "table_calibration_summary",
-                                                                "fig_calibration_edpvr", "table_calibration_derived"),
-            compute=_live("volunteer_calibration")),
-    Section("Tables 9.2/9.3 BO of fibre angles", "bo_fibres",
-            ("table9_2_bo_fixed_angles", "table9_3_bo_free_angles", "fig_bo_lvv_error"), saved=True),
-    Section("Figs 9.11-9.14 operator study", "operators",
-            ("fig9_11_forward_strain_error", "fig9_12_parameter_error", "fig9_13_rss_surface",
-             "fig9_14_output_error"), saved=True),
-    Section("Model-data mismatch dose-response", "mismatch",
-            ("fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s", "fig_mismatch_output_error",
-             "table_mismatch_doses"), saved=True),
-    Section("Findings F1-F6 with verdicts", "findings", ("table_findings", "table_findings_doses"), saved=True),
-    Section("Simulation-based calibration of the pipeline", "sbc",
-            ("fig_sbc_rank_histograms", "fig_sbc_coverage", "table_sbc_summary"), saved=True),
-)
+def _section(study: Study) -> Section:
+    saved = study.report_file is not None
+    return Section(study.report, study.module, study.report_items, saved=saved,
+                   compute=None if saved else _live(study.module), result_file=study.report_file)
+
+
+#: The report's sections: one per study with a report section in the registry, in the registry's order.
+SECTIONS = tuple(_section(s) for s in STUDIES.values() if s.report)
 #: Every figure/table the report produces, in order (the manifest lists each, present or missing).
 FIGURE_NAMES = tuple(n for s in SECTIONS for n in s.names)
 
@@ -92,12 +85,12 @@ def section_items(section: Section, results_dir=None, *, sweep: str = "emulator"
     mod = importlib.import_module(f"lvcore.studies.{section.study}")
     titles = {n: mod.TITLES[n] for n in section.names}
     if section.saved:
-        path = find_result(mod.RESULT_FILE, results_dir)
+        path = find_result(section.result_file, results_dir)
         rerun = f"run {mod.COMMAND}, then lvcore report --from RESULTS"
         if path is None:
             where = f"{results_dir} or {bundled_studies_dir()}" if results_dir else str(bundled_studies_dir())
-            return [ReportItem(n, t, source=mod.RESULT_FILE,
-                               missing=f"missing: {rerun} ({mod.RESULT_FILE} not found in {where})")
+            return [ReportItem(n, t, source=section.result_file,
+                               missing=f"missing: {rerun} ({section.result_file} not found in {where})")
                     for n, t in titles.items()]
         try:
             result = mod.load(path.parent)
@@ -131,8 +124,8 @@ def build_report(out, results_dir=None, *, sweep: str = "emulator", calibration:
     out : path
         Output folder (created).
     results_dir : path, optional
-        Folder with saved study results (``fibre_discrepancy.json``, ``bo_fibres.json``,
-        ``operators.json``); each file falls back to the bundled study results.
+        Folder with saved study results (the ``--out`` folder of ``lvcore study ...``); each study's result
+        file falls back to the bundled one.
     sweep : {"emulator", "simulator"}
         Fig 9.5 by the bundled ``angles`` emulator or by the FE simulator (fast mesh).
     calibration : bool

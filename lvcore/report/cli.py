@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from lvcore import cli_args
+from lvcore.studies.registry import STUDIES
 
 
 def register(subparsers) -> None:
@@ -11,8 +12,9 @@ def register(subparsers) -> None:
                     "come from --from RESULTS (the --out folders of `lvcore study ...`) or else the package's "
                     "bundled lvcore/assets/studies; figures without results are listed as missing in manifest.json.")
     p.add_argument("--out", type=cli_args.output_dir, required=True, help="output folder, created if missing")
+    files = ", ".join(s.result_file for s in STUDIES.values() if s.result_file)
     p.add_argument("--from", dest="results", default=None,
-                   help="folder with study results (fibre_discrepancy.json, bo_fibres.json, operators.json; "
+                   help=f"folder with study results, the --out folder of `lvcore study ...` ({files}; "
                         "default: the bundled results in assets/studies)")
     p.add_argument("--sweep", choices=("emulator", "simulator"), default="emulator",
                    help="Fig 9.5 by the bundled `angles` emulator (default, seconds) or the FE simulator (fast mesh)")

@@ -1,17 +1,19 @@
-"""Reproductions of the chapter's studies (fibre angles, fibre discrepancy, geometry operators, fibre-angle BO, operator SQP refits)
-and the simulation-based calibration of the calibration pipeline (``sbc``).
+"""Reproductions of the chapter's studies (fibre angles, fibre discrepancy, geometry operators, the volunteer
+calibration, fibre-angle BO, operator SQP refits, the mismatch dose-response, the findings with verdicts, realistic
+operators, BO with a known mismatch) and the simulation-based calibration of the calibration pipeline (``sbc``).
 
-Each study is a submodule with a ``run``-style entry point and an ``lvcore
-study`` sub-command; names are imported on first use.
+Each study is a submodule listed in the one registry, :data:`lvcore.studies.registry.STUDIES` (its name, result
+file, ``load``/``tables``/``figures`` and its ``lvcore study`` sub-command); this package exports every study module
+of the registry, imported on first use.
 """
 from __future__ import annotations
 
 from lvcore._exports import lazy_exports
+from lvcore.studies.registry import STUDIES
 
 _EXPORTS = {
-    "fibre_angles": "fibre_angles", "fibre_discrepancy": "fibre_discrepancy",
-    "geometry_operators": "geometry_operators", "bo_fibres": "bo_fibres", "operators": "operators",
-    "results": "results", "sbc": "sbc",
+    **{s.module: s.module for s in STUDIES.values()},
+    "registry": "registry", "results": "results",
     "angle_sweep": "fibre_angles", "angle_map": "fibre_angles", "emulator_angle_map": "fibre_angles",
     "operator_table": "geometry_operators",
 }

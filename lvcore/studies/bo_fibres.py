@@ -24,7 +24,7 @@ The volunteers' hidden truth (``volunteers/truth/``) is read only by
 :func:`findings`, to report whether the angles found are near the hidden
 ones; it is never used by the fit.
 
-Outputs of :func:`write_outputs`: ``bo_fibres.json`` (a list, one entry per
+Outputs of :func:`write_outputs`: the result file :data:`RESULT_FILE` (a list, one entry per
 subject and mode), ``bo_fibres_meta.json`` (budget, settings, findings),
 ``tables.csv`` (Tables 9.2/9.3 side by side) and figures (strain residuals
 before/after optimising the angles, convergence curves).
@@ -49,6 +49,7 @@ from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 from lvcore.resources import asset_path
+from lvcore.studies import registry
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 
 #: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2): the simulator's default rule-based angles.
@@ -257,7 +258,7 @@ class RecordingForward:
 def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_iterations: int = CHAPTER_ITERATIONS,
             seed: int = 0, resolution: str = "default", state_dir=None, executor=None, workers: int = 1,
             forward=None, progress: bool = False, on_evaluation=None, refit_every: int = REFIT_EVERY) -> dict:
-    """BO of one subject in one mode; returns the ``bo_fibres.json`` entry.
+    """BO of one subject in one mode; returns its entry of the result file (:data:`RESULT_FILE`).
 
     Parameters
     ----------
@@ -345,7 +346,8 @@ def run_study(subjects: Sequence[str] | None = None, *, modes: Sequence[str] = M
               scheduler: str | None = None, seed: int = 0, resolution: str = "default", progress: bool = False,
               forward_factory: Callable | None = None, log: Callable[[str], None] | None = None,
               refit_every: int = REFIT_EVERY) -> list[dict]:
-    """Run the BO of every subject and mode; write ``out/bo_fibres.json`` etc. when ``out`` is given.
+    """Run the BO of every subject and mode; write the result file (:data:`RESULT_FILE`) etc. under ``out`` when
+    ``out`` is given.
 
     ``forward_factory(subject, mode)`` replaces the simulator (tests). With
     ``workers > 1`` or a ``scheduler``, simulator batches run on one executor
@@ -376,7 +378,7 @@ def run_study(subjects: Sequence[str] | None = None, *, modes: Sequence[str] = M
                         f"{e['evaluations']} evaluations ({e['failed_evaluations']['count']} failed), "
                         f"{e['seconds']:.0f} s")
                 if out is not None:  # partial results after every run
-                    write_json_atomic(Path(out) / "bo_fibres.json", clean(entries))
+                    write_json_atomic(Path(out) / RESULT_FILE, clean(entries))
     finally:
         if executor is not None:
             executor.close()
@@ -432,7 +434,7 @@ def findings(entries: Sequence[dict], truth: dict | None = None) -> dict:
 
 
 #: Result file of :func:`write_outputs`, read by :func:`load`.
-RESULT_FILE = "bo_fibres.json"
+RESULT_FILE = registry.result_file("bo-fibres")
 #: The command that makes the results.
 COMMAND = "lvcore study bo-fibres --out RESULTS"
 #: Figures and tables :func:`figures` draws, with their titles.
@@ -462,7 +464,7 @@ def load(folder) -> dict:
     Returns
     -------
     dict
-        ``entries`` (the ``bo_fibres.json`` list), ``meta`` (``bo_fibres_meta.json``,
+        ``entries`` (the result file's list), ``meta`` (``bo_fibres_meta.json``,
         or just the findings when that file is missing) and ``folder``.
 
     Examples
@@ -566,13 +568,14 @@ def figures(result: dict) -> dict:
 
 
 def write_outputs(entries: Sequence[dict], out, settings: dict | None = None) -> dict:
-    """Write ``bo_fibres.json``, ``bo_fibres_meta.json``, ``tables.csv`` and the figures under ``out``."""
+    """Write the result file (:data:`RESULT_FILE`), ``bo_fibres_meta.json``, ``tables.csv`` and the figures under
+    ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     settings = dict(settings or {})
     n0 = settings.get("n_initial", entries[0]["n_initial"] if entries else 0)
     n1 = settings.get("n_iterations", entries[0]["n_iterations"] if entries else 0)
-    paths = {"json": str(write_json_atomic(out / "bo_fibres.json", clean(list(entries))))}
+    paths = {"json": str(write_json_atomic(out / RESULT_FILE, clean(list(entries))))}
     meta = {"study": "bo-fibres", "label": "SYNTHETIC volunteers (generated data, not real subjects)",
             "budget": {"n_initial": n0, "n_iterations": n1, "label": budget_label(n0, n1),
                        "chapter_budget": n0 >= CHAPTER_INITIAL and n1 >= CHAPTER_ITERATIONS},
@@ -649,5 +652,5 @@ def _cli(args) -> int:
         print(json.dumps({"entries": clean(entries), "meta": meta}, indent=1))
     else:
         print(format_findings(meta["findings"]))
-        print(f"budget: {meta['budget']['label']}; wrote {args.out}/bo_fibres.json, tables.csv and figures")
+        print(f"budget: {meta['budget']['label']}; wrote {args.out}/{RESULT_FILE}, tables.csv and figures")
     return 0

@@ -32,7 +32,7 @@ Also reported: the LVV error and strain RMSE against the measured (noisy)
 data and against the noise-free mismatched outputs, the angles found, and
 per kind the mean change fixed − free with a 90 % bootstrap CI over
 volunteers. The verdict per kind (reproduced / not reproduced / refuted) is
-data (``verdicts`` in ``bo_mismatch.json``). Everything is SYNTHETIC.
+data (``verdicts`` in the result file, :data:`RESULT_FILE`). Everything is SYNTHETIC.
 """
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ from lvcore import cli_args
 from lvcore.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, THETA_NAMES
-from lvcore.studies import bo_fibres
+from lvcore.studies import bo_fibres, registry
 from lvcore.studies._common import bootstrap_ci, clean, save_figure, write_json_atomic
 
 #: Hidden angles of the ``angles`` kind (deg): far from the fixed pair, inside the free box.
@@ -67,7 +67,7 @@ DEFAULT_VOLUNTEERS = ("HV1", "HV2", "HV3")
 DEFAULT_INITIAL, DEFAULT_ITERATIONS = 30, 30
 #: LVV weight of the chapter's objective.
 LVV_WEIGHT = 2.0
-RESULT_FILE = "bo_mismatch.json"
+RESULT_FILE = registry.result_file("bo-mismatch")
 RUNS_FILE = "bo_mismatch_runs.csv"
 COMMAND = "lvcore study bo-mismatch --out RESULTS"
 N_BOOT, LEVEL = 2000, 0.9
@@ -317,7 +317,36 @@ def summarise(runs: Sequence[dict], meta: dict, n_boot: int = N_BOOT) -> dict:
 
 # ----------------------------------------------------------------------------- results interface
 def load(folder) -> dict:
-    """The results of a ``bo-mismatch`` ``--out`` folder (or the bundled one): the JSON plus ``folder``."""
+    """The result (:data:`RESULT_FILE`) in ``folder``: the ``--out`` folder of ``lvcore study bo-mismatch``, or the
+    bundled results folder.
+
+    Returns
+    -------
+    dict
+        ``runs`` (one per volunteer and mismatch kind: the mismatch's size, and the ``fixed`` and ``free`` BO
+        optima), ``summary``, ``verdicts`` (``F6``: the mean over volunteers of LVV |error| fixed − free in mL,
+        its 90 % bootstrap CI over volunteers and the verdict, overall and ``by_kind``), ``meta`` and ``folder``.
+
+    Raises
+    ------
+    LVCoreError
+        The file is missing, too large or not JSON (naming it).
+
+    Examples
+    --------
+    The bundled (SYNTHETIC) result: one run per volunteer and kind of mismatch, and F6's verdict per kind:
+
+    >>> from lvcore.studies import bo_mismatch
+    >>> from lvcore.studies.results import bundled_studies_dir
+    >>> result = bo_mismatch.load(bundled_studies_dir())
+    >>> len(result["runs"]) == len(result["meta"]["volunteers"]) * len(result["meta"]["kinds"])
+    True
+    >>> f6 = result["verdicts"]["F6"]
+    >>> sorted(f6["by_kind"]) == sorted(result["meta"]["kinds"]), f6["level"]
+    (True, 0.9)
+    >>> all(k["verdict"] in ("reproduced", "not reproduced", "refuted") for k in f6["by_kind"].values())
+    True
+    """
     from lvcore.studies.results import read_result
 
     return read_result(folder, RESULT_FILE)

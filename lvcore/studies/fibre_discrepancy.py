@@ -40,6 +40,7 @@ from lvcore.emulator.forward import load_emulator_forward
 from lvcore.mechanics.forward import SimulatorForward
 from lvcore.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.inference import coverage, diagnostics, samplers
+from lvcore.studies import registry
 from lvcore.outputs import ANGLE_NAMES, THETA_NAMES, pc_names
 
 ANGLE_SETS = ((-60.0, 90.0), (-30.0, 60.0), (0.0, 90.0))
@@ -222,7 +223,7 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
 
 # ----------------------------------------------------------------------------- saved results: load, tables, figures
 #: Result file of :func:`write_study`, read by :func:`load`.
-RESULT_FILE = "fibre_discrepancy.json"
+RESULT_FILE = registry.result_file("fibre-discrepancy")
 #: The command that makes the results (15-30 min of MCMC; the package ships one run).
 COMMAND = "lvcore study fibre-discrepancy --out RESULTS"
 #: Figures and tables :func:`figures` draws, with their titles.
@@ -240,7 +241,7 @@ MISSING = {"fig9_7_sigma_s": "the results hold no σ_S draws (older study output
 
 
 def load(folder) -> dict:
-    """``fibre_discrepancy.json`` of a result folder (or the bundled one), with ``folder``.
+    """The result file (:data:`RESULT_FILE`) of a result folder (or the bundled one), with ``folder``.
 
     Examples
     --------
@@ -494,5 +495,5 @@ def _cli(args) -> int:
         print(json.dumps({k: res[k] for k in ("findings", "timings_s", "forward_model")}, indent=2))
     else:
         print(json.dumps(res["findings"], indent=2))
-        print(f"wrote {args.out}/fibre_discrepancy.json, CSVs and figures")
+        print(f"wrote {args.out}/{RESULT_FILE}, CSVs and figures")
     return 0

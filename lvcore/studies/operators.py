@@ -37,312 +37,27 @@ from __future__ import annotations
 
 import json
 import time
-from itertools import combinations
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from lvcore import cli_args
-from lvcore.core.forward import ForwardBatch, as_columns
-from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
-from lvcore.conditions import SIGMA_S, THETA_TILDE
-from lvcore.exceptions import LVCoreError
+from lvcore.exceptions import LVCoreError  # noqa: F401 - the study's error, as before the split
 from lvcore.outputs import THETA_NAMES
+from lvcore.studies import registry
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
+from lvcore.studies.operators_fit import (BOUND_TOL, CHAPTER_SHARE_10PC, GN_GRID, PAIRS, PC_TESTS,  # noqa: F401
+                                          SIGMA_RESIDUAL, SQP_TOL, SURFACE_SPAN, THETA_TRUE, CachedForward,
+                                          data_task, early_volume_ml, fit_one, gauss_newton_surfaces,
+                                          laplace_covariance, mahalanobis, on_bound, operator_names,
+                                          patient_geometries, residual_jacobian, simulator_surfaces, surface_axes,
+                                          surface_for_fit, test_geometries, test_geometry_name, theta_dict)
 
-#: The chapter's ground truth θ̃ (a, af in kPa).
-THETA_TRUE = tuple(THETA_TILDE[n] for n in THETA_NAMES)
-#: Numbers of PCA modes of the reconstructed test geometries.
-PC_TESTS = (5, 10)
-#: Standard deviation (strain units) of the residuals of loss (9.11) in the Laplace approximation.
-SIGMA_RESIDUAL = SIGMA_S
-#: Parameter pairs of the loss surfaces (Fig 9.13).
-PAIRS = tuple(combinations(THETA_NAMES, 2))
-#: Gauss–Newton surface: grid points per axis and the span (factor around θ̂, log scale).
-GN_GRID, SURFACE_SPAN = 9, 2.0
-#: The chapter's geometric finding (Table 9.4): 10 PCs beat a new operator in 94 % of cases.
-CHAPTER_SHARE_10PC = 0.94
-#: SLSQP's ``ftol`` on loss (9.11) (:func:`lvcore.optimise.sqp.refit_theta`'s default).
-SQP_TOL = 1e-10
-#: θ̂ within this relative distance of a prior bound (Table 9.1) counts as on the bound: there the Laplace
-#: approximation behind the Mahalanobis distance is invalid (the mode is not a stationary point).
-BOUND_TOL = 1e-3
-
-
-# ----------------------------------------------------------------------------- geometry
-def early_volume_ml(nodes) -> float:
-    """Early-diastolic (reference) cavity volume of a template geometry (mL)."""
-    from lvcore.geometry.measures import cavity_volume
-    from lvcore.geometry.template import DEFAULT_TEMPLATE
-
-    return float(cavity_volume(np.asarray(nodes, float), DEFAULT_TEMPLATE)) / 1000.0
-
-
-def patient_geometries(patient: str, out_dir, operator_geometries=None, shape_model=None) -> dict:
-    """Write the patient's geometries as VTU under ``out_dir``; name -> {path, v_early_ml}.
-
-    Names: each operator (``op1``...) and ``<main>/pc5``, ``<main>/pc10`` for
-    the PC reconstructions of each main operator's geometry.
-    """
-    from lvcore.geometry.cohort import load_operator_geometries
-    from lvcore.geometry.io import write_template_mesh
-    from lvcore.geometry.shape_model import load_shape_model
-
-    og = operator_geometries or load_operator_geometries()
-    sm = shape_model or load_shape_model()
-    if patient not in og.patients:
-        raise LVCoreError(f"--patients: unknown patient '{patient}' (operator study: {', '.join(og.patients)})")
-    if patient in set(sm.train_ids):
-        raise LVCoreError(f"patient '{patient}' is in the shape model's training set; hold it out")
-    p = og.patients.index(patient)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    geoms = {}
-
-    def put(name, nodes):
-        path = out_dir / f"{patient.replace('-', '_')}_{name.replace('/', '_')}.vtu"
-        if not path.is_file():
-            write_template_mesh(path, nodes, metadata={"source": f"SYNTHETIC operator study {patient} {name}"})
-        geoms[name] = {"path": str(path), "v_early_ml": early_volume_ml(nodes)}
-
-    for o, op in enumerate(og.operators):
-        g = og.nodes[p, o]
-        put(op, g)
-        for k in PC_TESTS:
-            put(f"{op}/pc{k}", sm.reconstruct_nodes(g, k))
-    return geoms
-
-
-def test_geometries(main: str, operators: Sequence[str]) -> list[tuple[str, str]]:
-    """``(test_geometry label, geometry name)`` for one main operator: the other operators, then pc5, pc10."""
-    return [(o, o) for o in operators if o != main] + [(f"pc{k}", f"{main}/pc{k}") for k in PC_TESTS]
-
-
-def operator_names(geoms: dict) -> list[str]:
-    """The operators' own geometries among :func:`patient_geometries` (not their ``<op>/pcK`` reconstructions)."""
-    return [k for k in geoms if "/" not in k]
-
-
-def test_geometry_name(main: str, test: str, geoms: dict) -> str:
-    """Name in ``geoms`` of test geometry ``test`` (another operator, ``pc5`` or ``pc10``) for main operator ``main``."""
-    return dict(test_geometries(main, operator_names(geoms)))[test]
-
-
-# ----------------------------------------------------------------------------- forward with a cache
-class CachedForward:
-    """One-point cache around a :class:`~lvcore.core.forward.JacobianForward` (the SQP asks for the same θ more
-    than once; the Jacobian is reused)."""
-
-    def __init__(self, inner):
-        self.inner = inner
-        self.input_names = tuple(inner.input_names)
-        self.label = inner.label
-        self.cache: dict = {}
-        self.simulations = 0
-
-    @property
-    def input_bounds(self):
-        return self.inner.input_bounds
-
-    def evaluate(self, inputs) -> ForwardBatch:
-        return self._cached(inputs, False)
-
-    def jacobian(self, inputs) -> ForwardBatch:
-        return self._cached(inputs, True)
-
-    def _cached(self, inputs, jacobian: bool) -> ForwardBatch:
-        cols, n = as_columns(inputs, self.input_names, self.label)
-        if n != 1:
-            self.simulations += n
-            return self.inner.jacobian(cols) if jacobian else self.inner.evaluate(cols)
-        key = tuple(float(cols[k][0]) for k in self.input_names)
-        hit = self.cache.get(key)
-        if hit is None:  # one point: always with its Jacobian, which the SQP asks for next
-            hit = self.inner.jacobian(cols)
-            self.simulations += 1
-            self.cache[key] = hit
-        return hit
-
-    def __call__(self, params):
-        return self.evaluate({k: params[k] for k in self.input_names}).raise_on_failure().outputs[0]
-
-
-def residual_jacobian(loss, y: np.ndarray, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals ``r`` (25,) of loss (9.11) (``L = |r|²``) and ``dr/dθ`` (25, 4) from outputs and their Jacobian."""
-    y0s = loss.measured[0]
-    r = np.empty(len(y))
-    r[0] = (loss.v_early_main - y0s) / y0s - (loss.v_early_test - y[0]) / y[0]
-    r[1:] = loss.measured[1:] - y[1:]
-    J = np.empty_like(jac)
-    J[0] = loss.v_early_test / y[0] ** 2 * jac[0]
-    J[1:] = -jac[1:]
-    return r, J
-
-
-def laplace_covariance(J: np.ndarray, sigma: float = SIGMA_RESIDUAL) -> np.ndarray:
-    """Gauss–Newton/Laplace covariance ``σ² (JᵀJ)⁻¹`` of θ (pseudo-inverse where JᵀJ is singular)."""
-    return sigma**2 * np.linalg.pinv(J.T @ J)
-
-
-def mahalanobis(theta_hat, theta_true, cov) -> float:
-    d = np.asarray(theta_hat, float) - np.asarray(theta_true, float)
-    return float(np.sqrt(max(d @ np.linalg.pinv(cov) @ d, 0.0)))
-
-
-def on_bound(theta_hat, bounds=None, tol: float = BOUND_TOL) -> list[str]:
-    """Names of the parameters of ``theta_hat`` (a, b, af, bf) that sit on a prior bound (within ``tol`` relative).
-
-    ``bounds``: default the prior box of Table 9.1 (:data:`lvcore.core.space.THETA_BOUNDS`), the SQP's box.
-    """
-    from lvcore.core.space import THETA_BOUNDS
-
-    bounds = THETA_BOUNDS if bounds is None else bounds
-    th = _theta(theta_hat)
-    return [n for n in THETA_NAMES if n in th and (abs(th[n] - bounds[n][0]) <= tol * abs(bounds[n][0])
-                                                   or abs(th[n] - bounds[n][1]) <= tol * abs(bounds[n][1]))]
-
-
-def gauss_newton_surfaces(theta_hat, r, J, n: int = GN_GRID, span: float = SURFACE_SPAN) -> list[dict]:
-    """Gauss–Newton model of the loss over each parameter pair around θ̂ (others held at θ̂)."""
-    th = np.asarray(theta_hat, float)
-    out = []
-    for a, b in PAIRS:
-        i, j = THETA_NAMES.index(a), THETA_NAMES.index(b)
-        xs = th[i] * np.geomspace(1 / span, span, n)
-        ys = th[j] * np.geomspace(1 / span, span, n)
-        rss = np.empty((n, n))
-        for q, yv in enumerate(ys):
-            for p_, xv in enumerate(xs):
-                d = np.zeros(4)
-                d[i], d[j] = xv - th[i], yv - th[j]
-                rss[q, p_] = float(np.sum((r + J @ d) ** 2))
-        out.append({"x": a, "y": b, "x_values": xs.tolist(), "y_values": ys.tolist(),
-                    "rss": np.round(rss, 8).tolist()})
-    return out
-
-
-def surface_axes(theta_hat, theta_true, n: int, margin: float = 1.5) -> list[np.ndarray]:
-    """Log-spaced axes per parameter spanning θ̂ and θ̃ (widened by ``margin`` on each side)."""
-    th, tt = np.asarray(theta_hat, float), np.asarray(theta_true, float)
-    return [np.geomspace(min(a, b) / margin, max(a, b) * margin, n) for a, b in zip(th, tt)]
-
-
-def simulator_surfaces(forward, loss, theta_hat, n: int, theta_true=THETA_TRUE) -> list[dict]:
-    """The simulator's loss (9.11) over each parameter pair on an ``n × n`` log grid spanning θ̂ and θ̃.
-
-    The other two parameters are held at θ̂; 6 n² simulations in batches
-    (``forward.evaluate``; a :class:`SimulatorForward` with workers runs them in parallel).
-    """
-    th = np.asarray(theta_hat, float)
-    axes = surface_axes(th, theta_true, n)
-    out = []
-    for a, b in PAIRS:
-        i, j = THETA_NAMES.index(a), THETA_NAMES.index(b)
-        xs, ys = axes[i], axes[j]
-        X, Y = np.meshgrid(xs, ys)
-        pts = np.tile(th, (n * n, 1))
-        pts[:, i], pts[:, j] = X.ravel(), Y.ravel()
-        b_ = forward.evaluate(dict(zip(THETA_NAMES, pts.T)))
-        rss = np.array([loss.value_and_output_gradient(y)[0] if ok else np.nan
-                        for y, ok in zip(b_.outputs, b_.converged)]).reshape(n, n)
-        out.append({"x": a, "y": b, "x_values": xs.tolist(), "y_values": ys.tolist(), "rss": rss.tolist(),
-                    "failed": int(np.sum(~b_.converged))})
-    return out
-
-
-def surface_for_fit(fit: dict, geoms: dict, y_star, n: int, *, resolution: str = "default", workers: int = 1) -> dict:
-    """A simulator loss surface (Fig 9.13) for one finished fit: a ``rss_surfaces.json`` record."""
-    from lvcore.optimise.sqp import OperatorLoss
-
-    name = test_geometry_name(fit["main_operator"], fit["test_geometry"], geoms)
-    fwd = SimulatorForward(geometry={"kind": "mesh", "path": geoms[name]["path"]}, resolution=resolution,
-                           workers=workers)
-    loss = OperatorLoss(np.asarray(y_star, float), geoms[fit["main_operator"]]["v_early_ml"], geoms[name]["v_early_ml"])
-    return {"patient": fit["patient"], "main_operator": fit["main_operator"], "test_geometry": fit["test_geometry"],
-            "method": f"simulator, {n} x {n} log grid per pair spanning theta_hat and theta_true (others at theta_hat)",
-            "theta_hat": fit["theta_hat"], "pairs": simulator_surfaces(fwd, loss, fit["theta_hat"], n)}
-
-
-# ----------------------------------------------------------------------------- one fit
-def fit_one(patient: str, main: str, test: str, y_star, geoms: dict, resolution: str = "default",
-            forward_factory=None, surface_grid: int = 0, sqp_tol: float = SQP_TOL) -> dict:
-    """One SQP refit of θ on test geometry ``test`` against data ``y_star`` from ``main`` (a fit record).
-
-    ``geoms``: :func:`patient_geometries`. ``forward_factory(geometry_name)``
-    replaces the simulator (tests). Runs in worker processes; failures are
-    recorded, not raised.
-    """
-    from lvcore.optimise.sqp import OperatorLoss, refit_theta
-
-    t0 = time.perf_counter()
-    name = test_geometry_name(main, test, geoms)
-
-    def make(geom_name):
-        if forward_factory is not None:
-            return CachedForward(forward_factory(geom_name))
-        # warm start: each SQP step starts Newton from the previous converged state (same mesh, nearby θ)
-        return CachedForward(AdjointSimulatorForward(geometry={"kind": "mesh", "path": geoms[geom_name]["path"]},
-                                                     resolution=resolution,
-                                                     label=f"FE simulator on {patient} {geom_name}", warm_start=True))
-
-    y_star = np.asarray(y_star, float)
-    truth = np.array(THETA_TRUE)
-    rec = {"patient": patient, "main_operator": main, "test_geometry": test, "converged": False,
-           "theta_true": list(THETA_TRUE), "y_star": y_star.tolist()}
-    try:
-        fwd = make(name)
-        loss = OperatorLoss(y_star, geoms[main]["v_early_ml"], geoms[name]["v_early_ml"])
-        y_fwd = fwd.jacobian(dict(zip(THETA_NAMES, truth))).raise_on_failure().outputs[0]
-        err_fwd = y_fwd[1:] - y_star[1:]
-        res = refit_theta(fwd, loss, truth, tol=sqp_tol)
-        b_hat = fwd.jacobian(dict(zip(THETA_NAMES, res.theta))).raise_on_failure()
-        r, J = residual_jacobian(loss, b_hat.outputs[0], b_hat.jacobian[0])
-        cov = laplace_covariance(J)
-        main_fwd = fwd if name == main else make(main)
-        y_main_hat = main_fwd.evaluate(dict(zip(THETA_NAMES, res.theta))).raise_on_failure().outputs[0]
-        err_out = y_main_hat[1:] - y_star[1:]
-        surfaces = {"method": "gauss-newton model at theta_hat (adjoint Jacobian), x1/2..x2 around theta_hat",
-                    "pairs": gauss_newton_surfaces(res.theta, r, J)}
-        if surface_grid:
-            surfaces = {"method": f"simulator, {surface_grid} x {surface_grid} log grid per pair spanning theta_hat "
-                                  "and theta_true (others at theta_hat)",
-                        "pairs": simulator_surfaces(fwd, loss, res.theta, surface_grid)}
-        surfaces["theta_hat"] = res.theta.tolist()
-        rec.update({
-            "converged": bool(res.success),
-            "message": res.message,
-            "theta_hat": res.theta.tolist(),
-            "theta_abs_error": np.abs(res.theta - truth).tolist(),
-            "loss": float(res.loss),
-            "strain_rmse_forward": float(np.sqrt(np.mean(err_fwd**2))),
-            "strain_errors_forward": err_fwd.tolist(),
-            "lvv_forward_ml": float(y_fwd[0]),
-            "output_rmse_refit": float(np.sqrt(np.mean(err_out**2))),
-            "output_distance_refit": float(np.linalg.norm(err_out)),
-            "covariance": cov.tolist(),
-            "sigma_residual": SIGMA_RESIDUAL,
-            "mahalanobis": mahalanobis(res.theta, truth, cov),
-            "on_bound": on_bound(res.theta),
-            "sqp_evaluations": int(res.n_evaluations),
-            "simulations": fwd.simulations + (0 if main_fwd is fwd else main_fwd.simulations),
-            "rss_surface": surfaces,
-        })
-    except Exception as err:  # noqa: BLE001 - a failed fit is data (the study goes on), with its reason
-        from lvcore.core.forward import failure_reason
-
-        rec["message"] = failure_reason(err)
-    rec["seconds"] = round(time.perf_counter() - t0, 2)
-    return rec
-
-
-def _data_task(patient, main, geoms, resolution, forward_factory):
-    """``y* = ζ(θ̃, g_main)`` (worker task)."""
-    if forward_factory is not None:
-        f = forward_factory(main)
-    else:
-        f = SimulatorForward(geometry={"kind": "mesh", "path": geoms[main]["path"]}, resolution=resolution)
-    return f.evaluate(dict(zip(THETA_NAMES, THETA_TRUE))).raise_on_failure().outputs[0].tolist()
+#: Result file of :func:`write_outputs` (the shipped one is under ``assets/studies/``), read by :func:`load`.
+RESULT_FILE = registry.result_file("operators")
+#: ``_data_task``: the former name of :func:`data_task` (``y* = ζ(θ̃, g_main)``, a worker task).
+_data_task = data_task
 
 
 # ----------------------------------------------------------------------------- the study
@@ -350,7 +65,8 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
               resolution: str = "default", surface_grid: int = 0, forward_factory=None, progress: bool = False,
               operator_geometries=None, shape_model=None, collect_only: bool = False, mains=None,
               sqp_tol: float = SQP_TOL) -> dict:
-    """Run every fit of ``patients`` (default: all 6) and write ``out/operators.json`` and the figures.
+    """Run every fit of ``patients`` (default: all 6) and write the result file (:data:`RESULT_FILE`) and the
+    figures under ``out``.
 
     ``mains(patient) -> operators``: the main operators of each patient (default: every operator, the
     chapter's design; the realistic-operator study rotates one main per patient to save simulations).
@@ -411,7 +127,7 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
             todo = []
         with progress_bar(len(todo) + len({(p, m) for p, m, _ in todo}), "operators", progress) as bar:
             main_pairs = sorted({(p, m) for p, m, _ in todo})
-            data_f = {pm: submit(_data_task, pm[0], pm[1], geoms[pm[0]], resolution, forward_factory) for pm in main_pairs}
+            data_f = {pm: submit(data_task, pm[0], pm[1], geoms[pm[0]], resolution, forward_factory) for pm in main_pairs}
             y_star = {}
             for pm, f in data_f.items():
                 y_star[pm] = f.result()
@@ -508,8 +224,8 @@ def fits_frame(fits: Sequence[dict]):
         row = {k: f.get(k) for k in ("patient", "main_operator", "test_geometry", "converged", "strain_rmse_forward",
                                       "output_rmse_refit", "mahalanobis", "loss", "sqp_evaluations", "seconds")}
         row["on_bound"] = ",".join(on_bound(f["theta_hat"])) if "theta_hat" in f else None
-        hat = _theta(f["theta_hat"]) if "theta_hat" in f else {}
-        err = _theta(f["theta_abs_error"]) if "theta_abs_error" in f else {}
+        hat = theta_dict(f["theta_hat"]) if "theta_hat" in f else {}
+        err = theta_dict(f["theta_abs_error"]) if "theta_abs_error" in f else {}
         for n in THETA_NAMES:
             row[f"{n}_hat"] = hat.get(n)
             row[f"{n}_abs_error"] = err.get(n)
@@ -518,11 +234,9 @@ def fits_frame(fits: Sequence[dict]):
     return pd.DataFrame(rows)
 
 
-#: Result file of :func:`write_outputs`, read by :func:`load`.
-RESULT_FILE = "operators.json"
 #: The command that makes the results.
 COMMAND = "lvcore study operators --out RESULTS"
-#: Loss-surface files of a result folder, simulator surfaces first (the flat copy in operators.json is the fallback).
+#: Loss-surface files of a result folder, simulator surfaces first (the flat copy in the result file is the fallback).
 SURFACE_FILES = ("rss_surfaces_simulator.json", "rss_surfaces.json")
 #: Figures :func:`figures` draws, with their titles.
 TITLES = {"fig9_11_forward_strain_error": "Fig 9.11: forward strain error at θ̃ per test geometry",
@@ -542,7 +256,7 @@ def load(folder) -> dict:
     Returns
     -------
     dict
-        ``operators.json`` (``fits``, ``findings``, ``meta``, ``rss_surfaces``) plus
+        The result file (:data:`RESULT_FILE`: ``fits``, ``findings``, ``meta``, ``rss_surfaces``) plus
         ``surfaces``: loss surfaces grouped by fit (each ``patient``, ``main_operator``,
         ``test_geometry``, ``method``, ``theta_hat``, ``pairs``), from the surface files
         when present, else regrouped from the flat ``rss_surfaces``; and ``folder``.
@@ -595,11 +309,6 @@ def source_line(result: dict) -> str:
     return f"{RESULT_FILE} ({source_label(result['folder'])})" + (f"; {budget}" if budget else "")
 
 
-def _theta(v) -> dict:
-    if isinstance(v, dict):
-        return {n: float(v[n]) for n in THETA_NAMES if n in v}
-    return dict(zip(THETA_NAMES, (float(x) for x in v)))
-
 
 def test_order(fits: Sequence[dict]) -> list[str]:
     """Test geometries in order of appearance, the PC reconstructions last."""
@@ -622,7 +331,7 @@ def tables(result: dict) -> dict:
         out["fig9_12_parameter_error"] = pd.DataFrame(
             [{"patient": f["patient"], "main_operator": f["main_operator"], "test_geometry": f["test_geometry"],
               "parameter": n, "abs_error": v} for f in fits if "theta_abs_error" in f
-             for n, v in _theta(f["theta_abs_error"]).items()])
+             for n, v in theta_dict(f["theta_abs_error"]).items()])
     if result.get("surfaces"):
         out["fig9_13_rss_surface"] = result["surfaces"][0]
     if fits:
@@ -674,7 +383,7 @@ def surface_figure(result: dict, index: int = 0):
 
 
 def write_outputs(result: dict, out) -> dict:
-    """``operators.json`` (fits without the surfaces), ``rss_surfaces.json``, CSVs and figures."""
+    """The result file (:data:`RESULT_FILE`, fits without the surfaces), ``rss_surfaces.json``, CSVs and figures."""
     from lvcore.studies.results import read_json
 
     out = Path(out)
@@ -684,7 +393,7 @@ def write_outputs(result: dict, out) -> dict:
                  **f["rss_surface"]} for f in fits if "rss_surface" in f]
     sim = out / "rss_surfaces_simulator.json"
     examples = (read_json(sim) if sim.is_file() else []) + surfaces[:1]
-    paths = {"json": str(write_json_atomic(out / "operators.json", clean(
+    paths = {"json": str(write_json_atomic(out / RESULT_FILE, clean(
         {**{k: v for k, v in result.items() if k not in ("surfaces", "folder")}, "fits": slim,
          "rss_surfaces": flat_surfaces(examples)})))}
     paths["surfaces"] = str(write_json_atomic(out / "rss_surfaces.json", clean([_rounded(r) for r in surfaces])))
@@ -721,7 +430,7 @@ def _rounded(record: dict) -> dict:
 def flat_surfaces(records: Sequence[dict]) -> list[dict]:
     """One record per parameter pair (``params``, ``x``, ``y``, ``rss``, ``truth``, ``method``, fit keys).
 
-    The form kept inside ``operators.json`` (``rss_surfaces``) for reports;
+    The form kept inside the result file (``rss_surfaces``) for reports;
     ``rss_surfaces.json`` keeps every fit's surfaces grouped by fit.
     """
     flat = []
@@ -788,5 +497,15 @@ def _cli(args) -> int:
         print(json.dumps(clean({"findings": res["findings"], "meta": res["meta"]}), indent=1))
     else:
         print(format_findings(res["findings"]))
-        print(f"{res['meta']['budget']}; wrote {args.out}/operators.json, operators_fits.csv and figures")
+        print(f"{res['meta']['budget']}; wrote {args.out}/{RESULT_FILE}, operators_fits.csv and figures")
     return 0
+
+
+__all__ = ["THETA_TRUE", "PC_TESTS", "SIGMA_RESIDUAL", "PAIRS", "GN_GRID", "SURFACE_SPAN", "CHAPTER_SHARE_10PC",
+           "SQP_TOL", "BOUND_TOL", "LVCoreError", "early_volume_ml", "patient_geometries", "test_geometries",
+           "operator_names", "test_geometry_name", "CachedForward", "residual_jacobian", "laplace_covariance",
+           "mahalanobis", "on_bound", "gauss_newton_surfaces", "surface_axes", "simulator_surfaces",
+           "surface_for_fit", "fit_one", "data_task", "theta_dict", "run_study", "findings", "fits_frame",
+           "RESULT_FILE", "COMMAND", "SURFACE_FILES", "TITLES", "VIOLINS", "load", "group_surfaces", "source_line",
+           "test_order", "tables", "surface_title", "figures", "surface_figure", "write_outputs", "flat_surfaces",
+           "format_findings", "add_study_parser"]

@@ -25,7 +25,7 @@ independent units; a resample keeps a patient's 3 mains × 4 tests together):
   flagged (``on_bound``) and left out of the Laplace median; both medians
   are reported.
 
-The verdicts are data (``verdicts`` in ``operators_realistic.json``: finding,
+The verdicts are data (``verdicts`` in the result file, :data:`RESULT_FILE`: finding,
 chapter, value, CI, verdict reproduced / not reproduced / refuted, note),
 read by the findings table through :func:`load`. Everything is SYNTHETIC.
 """
@@ -39,17 +39,17 @@ from typing import Sequence
 import numpy as np
 
 from lvcore import cli_args
-from lvcore.studies import operators
+from lvcore.studies import operators, registry
 from lvcore.studies._common import bootstrap_ci, clean, save_figure, write_json_atomic
 
 #: Result file of :func:`write_outputs`, read by :func:`load`; the per-fit table next to it.
-RESULT_FILE = "operators_realistic.json"
+RESULT_FILE = registry.result_file("operators-realistic")
 FITS_FILE = "operators_realistic_fits.csv"
 #: The command that makes the results.
 COMMAND = "lvcore study operators-realistic --out RESULTS"
 #: Bootstrap resamples and the CI level.
 N_BOOT, LEVEL = 2000, 0.9
-#: Sub-folder of ``--out`` holding the SQP refits (``operators`` study layout: fits/, geometries/, operators.json).
+#: Sub-folder of ``--out`` holding the SQP refits (``operators`` study layout: fits/, geometries/, its result file).
 REFITS = "refits"
 #: Keys of a fit kept in the shipped JSON.
 FIT_KEYS = ("patient", "main_operator", "test_geometry", "converged", "theta_hat", "theta_abs_error",
@@ -203,7 +203,7 @@ def verdicts(boot: dict, n_patients: int, n_fits: int) -> dict:
 # ----------------------------------------------------------------------------- the study
 def summarise(fits: Sequence[dict], operators_: Sequence[str], table: dict | None, meta: dict,
               n_boot: int = N_BOOT, seed: int = 0) -> dict:
-    """``operators_realistic.json``: slim fits, the first study's findings, bootstrap CIs, verdicts, meta."""
+    """The result (:data:`RESULT_FILE`): slim fits, the first study's findings, bootstrap CIs, verdicts, meta."""
     slim = [{k: f[k] for k in FIT_KEYS if k in f} for f in fits]
     for f in slim:
         if "theta_hat" in f:
@@ -227,7 +227,8 @@ def run_study(n_patients: int | None = None, seed: int | None = None, *, out, wo
               scheduler: str | None = None, resolution: str = "default", forward_factory=None, progress: bool = False,
               shape_model=None, n_boot: int = N_BOOT, log=None, all_mains: bool = False,
               sqp_tol: float = SQP_TOL, collect_only: bool = False) -> dict:
-    """Build the realistic operators' geometries, run the SQP refits and write ``out/operators_realistic.json``.
+    """Build the realistic operators' geometries, run the SQP refits and write the result file
+    (:data:`RESULT_FILE`) under ``out``.
 
     ``all_mains``: every operator is the main one for every patient (the chapter's design, 12 refits per
     patient); default: one main per patient in turn (:func:`rotating_mains`, 4 refits per patient).
@@ -368,7 +369,7 @@ def figures(result: dict) -> dict:
 
 
 def write_outputs(result: dict, out) -> dict:
-    """``operators_realistic.json``, ``operators_realistic_fits.csv`` and the figures (HTML; PNG when kaleido works)."""
+    """The result file (:data:`RESULT_FILE`), ``operators_realistic_fits.csv`` and the figures (HTML; PNG when kaleido works)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": str(write_json_atomic(out / RESULT_FILE, clean(result)))}

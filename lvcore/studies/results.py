@@ -6,9 +6,8 @@ Each study module owns its results (``load(folder)``, ``tables(result)``,
 * :func:`bundled_studies_dir` is the bundled results of the shipped runs
   (``studies/`` under the bundled assets), the only place that folder is located;
 * :func:`find_result` looks a result file up in a given folder, then in the bundled one;
-* :func:`result_sources` lists folders holding ``bo_fibres.json``,
-  ``operators.json``, ``fibre_discrepancy.json``, ``operators_realistic.json``,
-  ``bo_mismatch.json``, ``mismatch.json`` or ``sbc.json`` (the app's Studies page);
+* :func:`result_sources` lists folders holding a study's result file
+  (:data:`RESULT_FILES`, from the registry) for the app's Studies page;
 * :func:`read_json` is the reader the study modules' ``load`` use;
 * :class:`BackgroundRun` starts ``lvcore study ...`` in a subprocess and
   reports its progress from the files it writes, so a page is never blocked.
@@ -24,12 +23,10 @@ from pathlib import Path
 from typing import Sequence
 
 from lvcore.exceptions import LVCoreError
+from lvcore.studies.registry import STUDIES
 
-#: The result file of each study.
-RESULT_FILES = {"bo-fibres": "bo_fibres.json", "operators": "operators.json",
-                "fibre-discrepancy": "fibre_discrepancy.json",
-                "operators-realistic": "operators_realistic.json", "bo-mismatch": "bo_mismatch.json",
-                "mismatch": "mismatch.json", "sbc": "sbc.json"}
+#: The result file of each study that has one (study name -> file), from the registry.
+RESULT_FILES = {s.name: s.result_file for s in STUDIES.values() if s.result_file}
 
 
 def bundled_studies_dir() -> Path:

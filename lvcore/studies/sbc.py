@@ -55,7 +55,7 @@ runs, end to end, on SYNTHETIC subjects:
 killed run loses the subject in flight; a half-written last line is cut off).
 Two pieces run at the same time in two processes. Subject ``i``'s draws depend
 only on ``(seed, i)``. ``lvcore study sbc --summarise --workdir W --out
-sbc.json`` builds the result from whatever is finished
+DIR/<result file>`` builds the result from whatever is finished
 (:func:`summarise`), with the per-subject records in the JSON and in
 ``sbc_subjects.csv`` beside it.
 
@@ -69,7 +69,7 @@ route V0 is fixed by the given mesh (no posterior spread), so its rank is 0
 or D and its coverage is near 0 however small the error; the median relative
 error of V0, V20 and V30 (``median_abs_rel_error``) says how far off they are.
 
-**Modules.** This one holds the summary (``sbc.json``), the saved results'
+**Modules.** This one holds the summary (:data:`RESULT_FILE`), the saved results'
 tables and figures and the command line; the rank statistics (pure) are in
 :mod:`lvcore.studies.sbc_stats`, the design, the subjects, the routes through
 ``lvcore calibrate`` and the resumable work folder in
@@ -88,6 +88,7 @@ import numpy as np
 from lvcore import cli_args
 from lvcore.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
+from lvcore.studies import registry
 from lvcore.studies._common import clean, round_floats, write_json_atomic
 # the statistics (pure) and the runs live in their own modules; their names are this module's too
 from lvcore.studies.sbc_runner import (ANGLES, BASE, CLI_DERIVED_PRESSURES_MMHG, DEFAULT_CHAINS,  # noqa: F401
@@ -105,20 +106,20 @@ from lvcore.studies.sbc_stats import (BAND_LEVEL, CI_LEVEL, LEVELS, MIN_EXPECTED
                                       inside_central, nominal_coverage, pit, quantity_summary, rank_chi2,
                                       rank_histogram, rank_of_truth, uniform_band, wilson_interval)
 
-#: Result file of :func:`summarise` (the shipped run: ``assets/studies/sbc.json``), read by :func:`load`.
-RESULT_FILE = "sbc.json"
+#: Result file of :func:`summarise` (the shipped run's is under ``assets/studies/``), read by :func:`load`.
+RESULT_FILE = registry.result_file("sbc")
 #: Per-subject records beside it.
 SUBJECTS_FILE = "sbc_subjects.csv"
 #: The commands that make the results (two pieces on two cores, then the summary).
 COMMAND = ("lvcore study sbc --n-subjects 200 --seed 0 --piece 1/2 & lvcore study sbc --n-subjects 200 --seed 0 "
-           "--piece 2/2; lvcore study sbc --summarise --out DIR/sbc.json")
+           f"--piece 2/2; lvcore study sbc --summarise --out DIR/{RESULT_FILE}")
 UNITS = {"a": "kPa", "b": "-", "af": "kPa", "bf": "-", "V0": "mL", "V20": "mL", "V30": "mL", "fibre_stress": "kPa"}
 LABELS = {"a": "a", "b": "b", "af": "a_f", "bf": "b_f", "V0": "V0", "V20": "V20", "V30": "V30",
           "fibre_stress": "σ_ff(λ=1.10)"}
 SYNTHETIC_LABEL = "SYNTHETIC subjects (prior draws simulated by the FE model)"
 
 
-# ============================================================================ the summary (sbc.json)
+# ============================================================================ the summary (the result file)
 #: Exit codes of the runs whose ranks enter the statistics: 0 (fine) and 4 (ran, results flagged).
 STATISTICS_EXIT_CODES = (0, 4)
 
@@ -204,7 +205,7 @@ def compact_subject(rec: Mapping) -> dict:
 
 def summarise_records(records: Sequence[Mapping], settings: Mapping | None = None,
                       n_planned: int | None = None) -> dict:
-    """The study's result (sbc.json) from subject records (:meth:`Store.records`)."""
+    """The study's result (:data:`RESULT_FILE`) from subject records (:meth:`Store.records`)."""
     if not records:
         raise LVCoreError("no finished SBC subjects to summarise; run `lvcore study sbc --piece ...` first")
     keys = {json.dumps(r.get("settings_key"), sort_keys=True) for r in records}
@@ -287,7 +288,7 @@ def summarise_records(records: Sequence[Mapping], settings: Mapping | None = Non
 
 def summarise(workdir, out=None) -> dict:
     """Build the result from whatever ``workdir`` holds; write it to ``out`` (a ``.json`` path, default
-    ``workdir/sbc.json``) with ``sbc_subjects.csv`` beside it."""
+    the result file under ``workdir``) with ``sbc_subjects.csv`` beside it."""
     store = Store(workdir)
     if not store.root.is_dir():
         raise LVCoreError(f"--workdir {workdir}: no such folder; run `lvcore study sbc --workdir {workdir} ...` "
@@ -332,7 +333,7 @@ MISSING: dict = {}
 
 
 def load(folder) -> dict:
-    """``sbc.json`` of a result folder (or the bundled one), with ``folder``.
+    """The result file (:data:`RESULT_FILE`) of a result folder (or the bundled one), with ``folder``.
 
     Examples
     --------
@@ -475,7 +476,7 @@ def add_study_parser(study_subparsers) -> None:
         description="Simulation-based calibration (Talts et al. 2018) of the calibration pipeline: SYNTHETIC "
                     "subjects drawn from the prior, truth by the FE simulator, each calibrated by `lvcore "
                     "calibrate` with a mesh and with --geometry infer. Runs in resumable pieces; --summarise "
-                    "builds sbc.json from what is finished.")
+                    f"builds {RESULT_FILE} from what is finished.")
     p.add_argument("--n-subjects", type=cli_args.int_in(1, 100_000), default=DEFAULT_N_SUBJECTS,
                    help=f"subjects of the whole study (default {DEFAULT_N_SUBJECTS})")
     p.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the subjects and noise (default 0)")
@@ -506,7 +507,7 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--summarise", action="store_true",
                    help="build the result from the finished subjects in --workdir instead of running any")
     p.add_argument("--out", type=cli_args.output_file, default=None,
-                   help="with --summarise: the result file (default WORKDIR/sbc.json); sbc_subjects.csv beside it")
+                   help=f"with --summarise: the result file (default WORKDIR/{RESULT_FILE}); {SUBJECTS_FILE} beside it")
     p.add_argument("--json", action="store_true", help="print the result (--summarise) or the piece as JSON")
     p.set_defaults(func=_cli)
 

@@ -1,7 +1,7 @@
 """Figures of the optimisation studies (bo-fibres, operators) and of SBC from their saved results (plotly).
 
-Every function takes the plain data the studies write (``bo_fibres.json``
-entries, ``operators.json`` fits, ``rss_surfaces.json`` records) and returns
+Every function takes the plain data the studies write (the fibre-angle BO's
+entries, the operator study's fits, ``rss_surfaces.json`` records) and returns
 a :class:`plotly.graph_objects.Figure`. The study modules' ``figures(result)``
 call them; the study commands, the app's Studies page and ``lvcore report``
 all draw through those.
