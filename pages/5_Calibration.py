@@ -5,34 +5,29 @@ import sys
 import threading
 import time
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
 from lvcore.app import freshness, physiology_panel
+from lvcore.app.subject_prepare import floor_caption
 from lvcore.app.tables import summary_view
 from lvcore.app.controls import (DEFAULT_SUBJECT, chosen_index, conditions_text, disabled_hint, remember_choice,
                                    shared_inputs, why_disabled)
 from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
-from lvcore.emulator.forward import emulator_forward
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import guards
 from lvcore.inference.data import MeasuredData, read_measured_csv
-from lvcore.geometry.scaling import ScaledForward
 from lvcore.inference.diagnostics import banner_status, netcdf_bytes
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
+from lvcore.inference.request import build_request
 from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
 from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
 from lvcore.uploads import session_uploads
-
-#: The conditions emulator_forward binds by default (checked against the emulator's training box).
-DEFAULT_CONDITIONS = {"edp_mmhg": SIMULATOR_DEFAULT_EDP_MMHG, "alpha_endo": SIMULATOR_DEFAULT_ANGLES[0],
-                      "alpha_epi": SIMULATOR_DEFAULT_ANGLES[1]}
 
 st.set_page_config(page_title="Calibration", layout="wide")
 st.title("Bayesian calibration")
@@ -143,18 +138,15 @@ cal_inputs = {"subject": None if data is None else data.subject, "emulator": emu
               "warm-up": int(warmup), "draws": int(samples)}
 
 
-def _consistency(job: dict, y, forward, infer: bool):
+def _consistency(job: dict):
     """The verdict's consistency check (best fit of volume and strains), stored in the job (an error is kept)."""
-    from lvcore.conditions import SIGMA_V_ML
-    from lvcore.inference import verdict
-
     try:
-        job["consistency"] = verdict.consistency_check(y, forward, SIGMA_V_ML, infer_angles=infer)
+        job["consistency"] = job["request"].consistency()
     except Exception as err:  # noqa: BLE001 - shown beside the results, never hides them
         job["consistency"] = err
 
 
-def _worker(job: dict, y, forward, models, config, infer):
+def _worker(job: dict, models, config):
     """Every likelihood's sampler, then the verdict's best fit, one after the other in this thread.
 
     The samplers and the best fit are compiled when the app starts (lvcore.app.warmup) and kept in the
@@ -175,13 +167,14 @@ def _worker(job: dict, y, forward, models, config, infer):
         finally:
             timings[name] = (start, time.perf_counter() - job["t0"])
 
+    request = job["request"]
     try:
         for m in models:
-            step(m, cal.calibrate_subjects, [(job["subject"], y, forward)], [m], config=config, infer_angles=infer,
-                 progress=progress, on_result=lambda item: job["results"].__setitem__(item.model, item.result))
+            step(m, cal.calibrate_subjects, [(job["subject"], request.y, request.forward)], [m], config=config,
+                 sigma_v=request.sigma_v, infer_angles=request.infer_angles, progress=progress, on_result=lambda item: job["results"].__setitem__(item.model, item.result))
         # the verdict's best fit, after the samplers: the results render with it (the banner needs it)
         progress("verdict: best fit of volume and strains", 1.0)
-        step("best fit", _consistency, job, y, forward, infer)
+        step("best fit", _consistency, job)
         job["message"] = "done"
         job["fraction"] = 1.0
     except Exception as err:  # noqa: BLE001 - shown to the user
@@ -203,40 +196,35 @@ disabled_hint(blocked)
 if run_clicked:
     try:
         emulator = _emulator(choices[emu_label])
-        # the EDP: the data's edp_mmhg column if it has one (refused by a fixed-EDP emulator when it differs)
-        conditions = {**DEFAULT_CONDITIONS, **guards.check_conditions(emulator)}
-        conditions["edp_mmhg"] = guards.subject_edp(data, conditions, emulator, emu_label, None)
-        forward = ScaledForward(emulator_forward(emulator, h, infer_angles=angles == "infer", name=emu_label,
-                                                 edp_mmhg=conditions["edp_mmhg"]),
-                                geo.scale if geo is not None else 1.0)
-        # the CLI refuses scores outside the training box without --allow-extrapolation; here it runs, flagged
-        _, extrapolation = guards.check_inputs_in_box(
-            guards.fixed_inputs(h, conditions, emulator, angles == "infer"), emulator,
-            allow_extrapolation=True, what="PC scores")
+        # lvcore calibrate's set-up (lvcore.inference.request): the data's EDP (refused by a fixed-EDP emulator
+        # when it differs), the box check, the scaled forward and the representation floor of a mesh. Outside the
+        # training box the CLI refuses without --allow-extrapolation; here it runs, flagged.
+        request = build_request(emulator, emu_label, geo, row=data, infer_angles=angles == "infer",
+                                allow_extrapolation=True)
     except LVCoreError as err:
         st.error(str(err))
         st.stop()
+    forward, conditions = request.forward, request.conditions
     try:  # what the derived quantities (EDPVR, stress, ridge) need: the emulator's geometry, resolution and base
         physiology_setup = physiology_panel.Setup.of(
             emulator, forward, edp_mmhg=conditions["edp_mmhg"],
             angles=(conditions["alpha_endo"], conditions["alpha_epi"]), measured_lvv_ml=float(data.y[0]),
-            h=h, scale=geo.scale if geo is not None else 1.0, infer_angles=angles == "infer")
+            h=request.geometry.h, scale=request.geometry.scale, infer_angles=request.infer_angles)
     except Exception as err:  # noqa: BLE001 - the calibration still runs; the panel says why it is missing
         st.warning(f"The EDPVR and derived quantities will not be available ({type(err).__name__}: {err}).")
         physiology_setup = None
     config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains))
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
-           "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(angles == "infer", forward),
-           "inputs": dict(cal_inputs), "extrapolation": extrapolation, "verdicts": None, "forward": forward,
-           "infer": angles == "infer",
-           "edp_mmhg": conditions["edp_mmhg"], "edp_source": guards.edp_source(data, None, emulator),
-           "base": str(getattr(emulator, "base", "clamped")), "h": [float(v) for v in h],
+           "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(request.infer_angles, forward),
+           "inputs": dict(cal_inputs), "extrapolation": request.extrapolation, "verdicts": None, "forward": forward,
+           "infer": request.infer_angles, "request": request,
+           "edp_mmhg": conditions["edp_mmhg"], "edp_source": request.edp_source,
+           "base": request.base, "h": [float(v) for v in request.geometry.h],
            "angles": (conditions["alpha_endo"], conditions["alpha_epi"]),
            "physiology": physiology_setup}
     st.session_state["calibration_job"] = job
-    threading.Thread(target=_worker, args=(job, data.y, forward, models, config, angles == "infer"),
-                     daemon=True).start()
+    threading.Thread(target=_worker, args=(job, models, config), daemon=True).start()
 
 
 def _progress():
@@ -260,20 +248,19 @@ if _job is not None and not _job["done"]:  # the 1 Hz timer exists only while sa
 def _verdicts(job: dict, results: dict) -> dict:
     """One verdict per subject (lvcore.inference.verdict), computed once per job; {} if it cannot be computed."""
     if job.get("verdicts") is None:
-        from lvcore.conditions import SIGMA_V_ML
         from lvcore.inference import verdict
 
         out = {}
         try:
             with st.spinner("Verdict: best fit of volume and strains"):
-                forward, infer = job["forward"], job.get("infer", False)
+                request = job["request"]
                 consistency = job.get("consistency")  # computed by the worker after the sampler (_consistency)
                 if isinstance(consistency, Exception):
                     raise consistency
                 if consistency is None:
-                    consistency = verdict.consistency_check(job["y"], forward, SIGMA_V_ML, infer_angles=infer)
+                    consistency = request.consistency()
                 for m, res in results.items():
-                    out[m] = verdict.run_verdict(res, consistency, verdict.checked_bounds(forward, infer))
+                    out[m] = verdict.run_verdict(res, consistency, request.bounds, request.forward)
         except Exception as err:  # noqa: BLE001 - shown, never hides the results
             st.warning(f"The verdict could not be computed ({type(err).__name__}: {err}); judge the results "
                        "by the convergence numbers below.")
@@ -306,6 +293,7 @@ if job is not None and job["done"]:
                 infer_angles=job.get("infer", False))
                 + f" (EDP: {job.get('edp_source', 'default')}); {job.get('base', 'clamped')} base (the emulator's "
                   "simulations)")
+            st.caption(floor_caption(job["request"].representation_error))  # a mesh's, as lvcore calibrate's
             verdicts = _verdicts(job, results)
             for m, res in results.items():
                 v = verdicts.get(m)

@@ -170,14 +170,14 @@ try:
         measures = flow.inferred_measures(entered, None if data is None else data.measures)
         sds, sd_sources = flow.inferred_measure_sds(entered_sd, None if data is None else data.measure_sds, measures)
         prepared = flow.prepare_inferred(emulator, emu_name, measures, edp_mmhg=edp, measure_sd=sds,
-                                         measure_sd_source=sd_sources,
+                                         measure_sd_source=sd_sources, row=data,
                                          representation_error="floor" if floor else "off")
         used_geometry = flow.InferredGeometry.of(prepared)
     elif is_subject_emu:
-        prepared = flow.prepare(emulator, emu_name, geometry, edp_mmhg=edp)
+        prepared = flow.prepare(emulator, emu_name, geometry, edp_mmhg=edp, row=data)
         used_geometry = flow.subject_emulator_geometry(emulator)
     elif geometry is not None:
-        prepared = flow.prepare(emulator, emu_name, geometry, edp_mmhg=edp)
+        prepared = flow.prepare(emulator, emu_name, geometry, edp_mmhg=edp, row=data)
         used_geometry = geometry
 except LVCoreError as err:
     st.error(f"Model: {err}")

@@ -155,8 +155,7 @@ def test_bound_flags_name_a_posterior_piled_on_the_prior_bound():
 
     import arviz as az
 
-    prepared = flow.prepare(load_emulator("chapter"), "chapter",
-                            SimpleNamespace(h=np.zeros(5), scale=1.0, warnings=[], kind="mean"))
+    prepared = flow.prepare(load_emulator("chapter"), "chapter", guards.GeometrySource(np.zeros(5), "mean", "mean"))
     rng = np.random.default_rng(0)
 
     def run(a):

@@ -110,7 +110,7 @@ def show(geometry_file, geometry_bytes: bytes, label: str, *, units: str = "mm",
     except LVCoreError as err:
         st.error(f"Design: {err}")
         return None
-    out = flow.build_dir(geometry_bytes, label, units=units, design=design)
+    out = flow.build_dir(geometry_bytes, label, units=units, design=design, root=flow.BUILD_CACHE)
     job = st.session_state.get(f"{key}_job")
     busy = job is not None and job.running
     from lvcore.app.controls import disabled_hint, why_disabled

@@ -100,13 +100,11 @@ def warm(subject: str | None = None, emulator: str | None = None, models=MODELS,
 
 def _warm(subject, emulator, models, room, stages) -> None:
     from lvcore.app.controls import DEFAULT_SUBJECT
-    from lvcore.conditions import SIGMA_V_ML, SIMULATOR_DEFAULT_EDP_MMHG
-    from lvcore.emulator.forward import emulator_forward
     from lvcore.emulator.io import available_emulators, load_emulator
-    from lvcore.geometry.scaling import ScaledForward
-    from lvcore.inference import guards, samplers, verdict
+    from lvcore.inference import guards, samplers
     from lvcore.inference.cli import DEFAULT_EMULATOR
     from lvcore.inference.data import read_measured_csv
+    from lvcore.inference.request import build_request
     from lvcore.resources import bundled_volunteers, volunteer_files
 
     room("load")
@@ -121,17 +119,16 @@ def _warm(subject, emulator, models, room, stages) -> None:
     data = read_measured_csv(vol.measured)[0]
     geo = guards.resolve_geometry(str(vol.geometry))
     emu = load_emulator(emulator)
-    # built as the Calibration page builds it (pages/5_Calibration.py): the same conditions are bound
-    conditions = {"edp_mmhg": SIMULATOR_DEFAULT_EDP_MMHG, **guards.check_conditions(emu)}
-    edp = guards.subject_edp(data, conditions, emu, emulator, None)
-    forward = ScaledForward(emulator_forward(emu, geo.h, name=emulator, edp_mmhg=edp), geo.scale)
+    # the Calibration page's request (pages/5_Calibration.py): the same forward model, floor and verdict inputs
+    request = build_request(emu, emulator, geo, row=data, allow_extrapolation=True)
+    forward = request.forward
     stages["load"] = time.perf_counter() - t0
     for k, m in enumerate(models):
         room(m)
         stages[m] = samplers.precompile(m, data.y, forward, samplers.INTERACTIVE)
         if k == 0:  # the best fit after the first likelihood: a click on the default selection finds both
             t1 = time.perf_counter()
-            verdict.consistency_check(data.y, forward, SIGMA_V_ML)
+            request.consistency()
             stages["best fit"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     from lvcore.viz import inference_figures, report_figures  # noqa: F401 - the results' imports

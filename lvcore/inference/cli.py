@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from lvcore import cli_args
 from lvcore.conditions import SIGMA_V_ML
@@ -214,31 +216,53 @@ def _volunteer(name: str, volunteer_files):
         raise DataError(f"--volunteer {name}: {err}") from None
 
 
-def run_calibrate(args) -> int:
-    from lvcore.inference.samplers import use_host_devices
+@dataclass(frozen=True)
+class CalibrateSetup:
+    """What ``lvcore calibrate`` sets up before sampling (:func:`prepare_run`).
 
-    check_options(args)
-    use_host_devices(args.chains)
+    Attributes
+    ----------
+    emulator : lvcore.emulator.Emulator
+    name : str
+        The emulator's name or folder as given.
+    models : tuple of str
+        The likelihoods to run.
+    rows : dict
+        Subject -> its :class:`~lvcore.inference.data.MeasuredData`.
+    requests : dict
+        Subject -> its :class:`~lvcore.inference.request.CalibrationRequest`.
+    config : lvcore.inference.samplers.SamplerConfig
+    n_derived : int
+        Posterior draws behind the derived quantities (0: none).
+    geometry : str
+        ``"infer"``, or where the given geometry came from (the netCDF attributes).
+    """
 
-    import numpy as np
+    emulator: Any
+    name: str
+    models: tuple
+    rows: dict
+    requests: dict
+    config: Any
+    n_derived: int
+    geometry: str
 
-    from lvcore.emulator.forward import emulator_forward, load_emulator_forward
-    from lvcore.geometry.scaling import ScaledForward
+    @property
+    def inferred(self) -> bool:
+        return self.geometry == "infer"
+
+    @property
+    def bound(self) -> bool:
+        """The emulator is subject-specific: its geometry is bound in."""
+        return bool(getattr(self.emulator, "is_subject", False))
+
+
+def _data_and_geometry(args, emulator, name: str, bound: bool) -> str:
+    """Check ``--data``/``--geometry``/``--volunteer`` (a volunteer fills them in) and return how the user gave
+    the geometry (the box check's error names it)."""
     from lvcore.exceptions import DataError
-    from lvcore.inference import calibrate as cal
-    from lvcore.inference import derived, geometry_prior, guards, plausibility, verdict
-    from lvcore.inference.models import lvv_sd
-    from lvcore.inference.data import read_measurements
-    from lvcore.inference.models import MODEL_NAMES
-    from lvcore.inference.samplers import SamplerConfig
-    from lvcore.inference.representation_error import given_geometry_floor
-    from lvcore.outputs import is_pc_name
 
-    infer = args.angles == "infer"
-    name = args.emulator or ("angles" if infer else DEFAULT_EMULATOR)
-    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
-    subject = bool(getattr(emulator, "is_subject", False))  # geometry bound in (lvcore emulator build)
-    if subject and args.geometry is not None:
+    if bound and args.geometry is not None:
         raise DataError(f"--geometry: the emulator '{name}' is subject-specific, built on the geometry "
                         f"{emulator.metadata['subject'].get('geometry_source')}, which is bound in; leave --geometry "
                         "out, or build an emulator for this geometry with `lvcore emulator build --geometry FILE`")
@@ -248,227 +272,137 @@ def run_calibrate(args) -> int:
         if args.data is not None or args.geometry is not None:
             raise DataError("--volunteer replaces --data and --geometry: give one or the other")
         vol = _volunteer(args.volunteer, volunteer_files)
-        args.data, args.geometry = str(vol.measured), None if subject else str(vol.geometry)
-        geometry_option = f"--volunteer {args.volunteer} (its bundled geometry)"
-    elif args.data is None or (args.geometry is None and not subject):
+        args.data, args.geometry = str(vol.measured), None if bound else str(vol.geometry)
+        label = f"--volunteer {args.volunteer} (its bundled geometry)"
+    elif args.data is None or (args.geometry is None and not bound):
         raise DataError("give --data and --geometry (your measurements and the subject's geometry; "
                         "'--geometry mean' to use the mean shape knowingly), or --volunteer NAME (a bundled one)")
     else:
-        geometry_option = f"--geometry {args.geometry}"
-    if subject:
-        geometry_option = f"--emulator {name} (its own geometry)"
+        label = f"--geometry {args.geometry}"
+    return f"--emulator {name} (its own geometry)" if bound else label
+
+
+def _measure_options(args, inferred: bool) -> tuple[dict, dict]:
+    """``--reference-volume``/``--wall-volume``/``--long-axis`` and their sds, checked; only with --geometry infer."""
+    from lvcore.exceptions import DataError
+    from lvcore.inference import geometry_prior
+
+    measures = geometry_prior.check_measures(
+        {"reference_volume_ml": args.reference_volume, "wall_volume_ml": args.wall_volume,
+         "long_axis_mm": args.long_axis}, "options")
+    sds = geometry_prior.check_measure_sds(
+        {"reference_volume_ml": args.reference_volume_sd, "wall_volume_ml": args.wall_volume_sd,
+         "long_axis_mm": args.long_axis_sd}, "options")
+    if (measures or sds) and not inferred:
+        opts = [geometry_prior.MEASURE_OPTIONS[k] for k in measures] + [geometry_prior.MEASURE_SD_OPTIONS[k]
+                                                                         for k in sds]
+        raise DataError(f"{', '.join(opts)} inform an inferred geometry; use them with --geometry infer (a mesh or "
+                        "PC scores already fix the size)")
+    return measures, sds
+
+
+def prepare_run(args) -> CalibrateSetup:
+    """Everything ``lvcore calibrate`` does before sampling: the inputs read and checked (exit 2 on a bad one)
+    and one :class:`~lvcore.inference.request.CalibrationRequest` per subject
+    (:func:`lvcore.inference.request.build_request`, as the app's pages)."""
+    import numpy as np
+
+    from lvcore.emulator.forward import load_emulator_forward
+    from lvcore.exceptions import DataError
+    from lvcore.inference import calibrate as cal
+    from lvcore.inference import derived, guards, plausibility
+    from lvcore.inference.data import read_measurements
+    from lvcore.inference.models import MODEL_NAMES
+    from lvcore.inference.request import INFER
+    from lvcore.inference.samplers import SamplerConfig
+    from lvcore.outputs import is_pc_name
+
+    infer = args.angles == "infer"
+    name = args.emulator or ("angles" if infer else DEFAULT_EMULATOR)
+    emulator = load_emulator_forward(name, np.zeros(16), infer_angles=infer).emulator
+    bound = bool(getattr(emulator, "is_subject", False))  # geometry bound in (lvcore emulator build)
+    label = _data_and_geometry(args, emulator, name, bound)
     model_names = [m.strip() for m in args.model.split(",") if m.strip()]
     bad = [m for m in model_names if m not in MODEL_NAMES]
     if bad or not model_names:
         raise DataError(f"--model {','.join(bad)}: choose from {', '.join(MODEL_NAMES)}")
     sigma_ref = plausibility.DEFAULT_SIGMA_REF if args.strain_noise is None else float(args.strain_noise)
-    if not (np.isfinite(sigma_ref) and sigma_ref > 0):
-        raise DataError(f"--strain-noise {args.strain_noise}: must be a positive strain sd (e.g. 0.035)")
     rows = read_measurements(args.data, segments=args.segments, offset_deg=args.segment_offset)
     if args.subject is not None:
         rows = [r for r in rows if r.subject == args.subject]
         if not rows:
             raise DataError(f"--subject {args.subject}: no such subject in {args.data}")
     cal.output_stems([r.subject for r in rows], source=str(args.data))  # unique file names, before any work
-    cond = guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
+    # the conditions once before the geometry (a mesh fit takes seconds); build_request checks them per subject
+    guards.check_conditions(emulator, args.edp, args.alpha_endo, args.alpha_epi, infer_angles=infer)
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
-    base = str(getattr(emulator, "base", "clamped"))
-    resolution = str(emulator.resolution)
-    n_derived = derived.default_draws() if args.derived_draws is None else int(args.derived_draws)
-    cli_measures = geometry_prior.check_measures(
-        {"reference_volume_ml": args.reference_volume, "wall_volume_ml": args.wall_volume,
-         "long_axis_mm": args.long_axis}, "options")
-    cli_sds = geometry_prior.check_measure_sds(
-        {"reference_volume_ml": args.reference_volume_sd, "wall_volume_ml": args.wall_volume_sd,
-         "long_axis_mm": args.long_axis_sd}, "options")
-    inferred = str(args.geometry).strip().lower() == "infer"
-    if (cli_measures or cli_sds) and not inferred:
-        opts = [geometry_prior.MEASURE_OPTIONS[k] for k in cli_measures] + [geometry_prior.MEASURE_SD_OPTIONS[k]
-                                                                              for k in cli_sds]
-        raise DataError(f"{', '.join(opts)} inform an inferred geometry; use them with --geometry infer (a mesh or "
-                        "PC scores already fix the size)")
+    inferred = str(args.geometry).strip().lower() == INFER
+    cli_measures, cli_sds = _measure_options(args, inferred)
     representation = None
-    if inferred and args.representation_error == "floor":
+    if args.representation_error == "floor" and not bound:   # loaded once for every subject
         from lvcore.inference.representation_error import load_representation_error
 
         representation = load_representation_error(n_pc)
-    if inferred:
-        geo = None
-    elif subject:
-        sub = emulator.metadata["subject"]
-        geo = guards.GeometrySource(np.zeros(0), str(sub.get("geometry_source")), "subject-emulator",
-                                    fit_residual_mm=(sub.get("geometry_record") or {}).get("fit_residual_mm"))
-    else:
-        geo = guards.resolve_geometry(args.geometry, n_pc=n_pc, units=args.geometry_units)
-    warnings = [] if geo is None else list(geo.warnings)
+    geometry = INFER if inferred else None if bound else guards.resolve_geometry(args.geometry, n_pc=n_pc,
+                                                                                  units=args.geometry_units)
+    requests = {r.subject: _request(args, emulator, name, r, geometry, label, cli_measures, cli_sds,
+                                    representation=representation, sigma_ref=sigma_ref) for r in rows}
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed,
                            discrepancy_block=args.discrepancy_block)
-    out = Path(args.out)
-    by_subject = {}   # subject -> (row, forward, conditions, box, warnings, geometry record)
+    n_derived = derived.default_draws() if args.derived_draws is None else int(args.derived_draws)
+    source = INFER if inferred else next(iter(requests.values())).geometry.source if requests else str(geometry)
+    return CalibrateSetup(emulator, name, tuple(model_names), {r.subject: r for r in rows}, requests, config,
+                          n_derived, source)
 
-    from lvcore.inference import loaded_states as ls
 
-    for r in rows:
-        if r.states:
-            ls.check_edp_input(emulator, name, f"{r.source and Path(r.source).name or 'the data'}: subject "
-                                               f"'{r.subject}' has {r.n_states} loaded states, which")
-    if args.prior == "klotz":
-        ls.check_klotz_pressures(emulator, name)
-    for r in rows:
-        edp = guards.subject_edp(r, cond, emulator, name, args.edp)
-        c = {**cond, "edp_mmhg": edp}
-        w = list(warnings)
-        if inferred:
-            measures = _subject_measures(r, cli_measures)
-            sds = _subject_measure_sds(r, cli_sds, measures)
+def _request(args, emulator, name: str, row, geometry, label: str, cli_measures: dict, cli_sds: dict, *,
+             representation, sigma_ref: float):
+    """One subject's :class:`~lvcore.inference.request.CalibrationRequest` from the options and its row."""
+    from lvcore.inference.geometry_prior import MEASURE_SD_COLUMNS, MEASURE_SD_OPTIONS
+    from lvcore.inference.request import INFER, build_request
 
-            def at(p, measures=measures, sds=sds, c=c):
-                return geometry_prior.inferred_geometry_forward(
-                    emulator, name=name, measures=measures, infer_angles=infer, alpha_endo=c["alpha_endo"],
-                    alpha_epi=c["alpha_epi"], edp_mmhg=p, measure_sd=sds, representation=representation)
+    kw = {}
+    if geometry == INFER:
+        measures = _subject_measures(row, cli_measures)
+        sds = _subject_measure_sds(row, cli_sds, measures)
+        kw = {"measures": measures, "measure_sd": sds,
+              "measure_sd_source": {k: ("data column " + MEASURE_SD_COLUMNS[k] if k in row.measure_sds
+                                        else MEASURE_SD_OPTIONS[k]) for k in sds}}
+    return build_request(emulator, name, geometry, row=row, edp_mmhg=args.edp, alpha_endo=args.alpha_endo,
+                         alpha_epi=args.alpha_epi, infer_angles=args.angles == "infer",
+                         allow_extrapolation=args.allow_extrapolation, representation_error=args.representation_error,
+                         prior=args.prior, geometry_label=label, representation=representation, sigma_v=args.sigma_v,
+                         sigma_ref=sigma_ref, **kw)
 
-            def box_at(p, c=c, r=r):
-                fixed = {k: v for k, v in guards.fixed_inputs(np.zeros(n_pc), {**c, "edp_mmhg": p}, emulator,
-                                                               infer).items() if not is_pc_name(k)}
-                return guards.check_inputs_in_box(fixed, emulator, args.allow_extrapolation,
-                                                  what=f"subject {r.subject}: the conditions")
 
-            forward = at(c["edp_mmhg"])
-            box, extrap = box_at(c["edp_mmhg"])
-            if not measures:
-                w.append(geometry_prior.NO_MEASURE_WARNING)
-            georec = {"kind": "inferred", "source": "infer", "measures": measures,
-                      "measure_sd": forward.measure_sds,
-                      "measure_sd_source": {k: ("data column " + geometry_prior.MEASURE_SD_COLUMNS[k]
-                                                if k in r.measure_sds else geometry_prior.MEASURE_SD_OPTIONS[k]
-                                                if k in cli_sds else "default") for k in measures},
-                      "likelihood_sd": forward.likelihood_sds,
-                      "representation_error": (None if representation is None else
-                                               {"mode": "floor", **representation.record()})}
-        else:
-            def box_at(p, c=c):
-                return guards.check_inputs_in_box(guards.fixed_inputs(geo.h, {**c, "edp_mmhg": p}, emulator, infer),
-                                                  emulator, args.allow_extrapolation,
-                                                  what=f"{geometry_option}: the PC scores (or conditions)")
+def run_calibrate(args) -> int:
+    """``lvcore calibrate``: set up (:func:`prepare_run`), sample every subject x likelihood, give each result
+    its verdict and write ``summary.json``; the exit code (0, 1 not converged, :data:`EXIT_FLAGGED`)."""
+    from lvcore.inference.samplers import use_host_devices
 
-            def floored_at(p, c=c):
-                # the subject is geo.scale times the shape with scores geo.h: emulated LVV x scale^3
-                # (lvcore.geometry.scaling); a mesh is seen through its 5-mode projection: infer mode's
-                # representation-error floor, scaled to the mesh's own projection error (RepresentationError.for_projection)
-                fw = ScaledForward(emulator_forward(emulator, geo.h, name=name, infer_angles=infer,
-                                                    alpha_endo=c["alpha_endo"], alpha_epi=c["alpha_epi"],
-                                                    edp_mmhg=p), geo.scale)
-                return given_geometry_floor(fw, geo.kind, args.representation_error, n_pc,
-                                            projection_mse_cm2=geo.projection_mse_cm2)
+    check_options(args)
+    use_host_devices(args.chains)
 
-            def at(p, floored_at=floored_at):
-                return floored_at(p)[0]
+    from lvcore.inference import calibrate as cal
 
-            box, extrap = box_at(c["edp_mmhg"])
-            forward, floor = floored_at(c["edp_mmhg"])
-            georec = {**geo.record(), "representation_error": floor}
-        if r.states or args.prior == "klotz":
-            terms = []
-            for st in r.states:
-                _b, e = box_at(st.edp_mmhg)
-                extrap = extrap + [x for x in e if x not in extrap]
-                terms.append(ls.StateTerm(at(st.edp_mmhg), np.asarray(st.y, float), float(st.edp_mmhg)))
-            klotz = None
-            if args.prior == "klotz":
-                klotz = _klotz_prior(ls, forward, at, c["edp_mmhg"], inferred=inferred, subject=subject,
-                                     emulator=emulator, geo=geo, resolution=resolution)
-            forward = ls.LoadedStatesForward(forward, tuple(terms), klotz)
-        by_subject[r.subject] = (r, forward, c, box, w + extrap, georec)
-    for w in dict.fromkeys(w for v in by_subject.values() for w in v[4]):
+    setup = prepare_run(args)
+    for w in dict.fromkeys(w for q in setup.requests.values() for w in q.warnings):
         print(f"lvcore: warning: {w}", file=sys.stderr)
-    extra = {}
-    consistency = {}
-
-    def finish(item):
-        """Verdict, posterior-predictive CSV and the guard records of one (subject, model) result."""
-        r, forward, c, box, w, georec = by_subject[item.subject]
-        res = item.result
-        if item.subject not in consistency:   # one per subject: the same for every model
-            consistency[item.subject] = verdict.consistency_check(r.y, forward, args.sigma_v, sigma_ref,
-                                                                  infer_angles=infer, seed=args.seed)
-        v = verdict.run_verdict(res, consistency[item.subject], verdict.checked_bounds(forward, infer), forward)
-        v = v.with_extra("EXTRAPOLATION", [e.split(": ", 1)[1] for e in w if e.startswith("EXTRAPOLATION: ")])
-        check = plausibility.check_result(res, r.y, args.sigma_v, sigma_ref, seed=args.seed)
-        out.mkdir(parents=True, exist_ok=True)
-        derived_rec = None
-        if n_derived:
-            derived_rec, draws = derived.derive(
-                res.idata, bounds={k: b for k, b in verdict.checked_bounds(forward, infer).items()
-                                   if k in derived.THETA_NAMES},
-                edp_mmhg=c["edp_mmhg"], angles=(c["alpha_endo"], c["alpha_epi"]) if not infer else (None, None),
-                base=base, resolution=resolution, measured_edv_ml=float(r.y[0]),
-                lvv_sd_ml=lambda v_ml, fw=forward: np.asarray(lvv_sd(v_ml, args.sigma_v, fw), float),
-                h=None if (inferred or subject) else geo.h, scale=1.0 if (inferred or subject) else geo.scale,
-                geometry=emulator.subject_geometry if subject else None, n_draws=n_derived,
-                pressures_mmhg=getattr(args, "derived_pressures", None) or derived.EDPVR_PRESSURES_MMHG)
-            draws.save(out / f"{cal.file_stem(item.subject)}_{item.model}_derived.npz")
-            v = v.with_extra("CONSISTENCY", derived.check_flags(derived_rec))
-        ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"
-        ppc_csv.write_text("output,p_value\n" + "".join(f"{k},{val:.6g}\n"
-                                                        for k, val in check.record()["p_values"].items()))
-        geometry = dict(georec)
-        if inferred:
-            geometry["posterior"] = geometry_prior.geometry_posterior(
-                {n: np.asarray(res.idata.posterior[n]) for n in forward.latent_names}, forward)
-        else:
-            geometry["box"] = [b for b in box if is_pc_name(b["name"])]
-        extra[(item.subject, item.model)] = {
-            "ppc_csv": str(ppc_csv),
-            "geometry": geometry,
-            "conditions": {"emulator": name, "base": base, "edp_mmhg": c["edp_mmhg"],
-                           "edp_source": guards.edp_source(r, args.edp, emulator),
-                           "alpha_endo": None if infer else c["alpha_endo"],
-                           "alpha_epi": None if infer else c["alpha_epi"],
-                           "fixed_by_emulator": c["fixed"],
-                           "box": [b for b in box if not is_pc_name(b["name"])]},
-            "extrapolation_allowed": bool(args.allow_extrapolation),
-            "plausible": v.plausible,
-            "plausibility": v.consistency.record(),
-            "posterior_predictive": check.record(),
-            "verdict": v.record(),
-            "flags": v.flags,
-            "notes": list(v.notes) + ([] if derived_rec is None else derived_rec["weakly_identified"]),
-            "derived": derived_rec,
-            **_states_records(r, forward, res),
-            "warnings": [x for x in w if not x.startswith("EXTRAPOLATION: ")] + v.flags}
-        for f in v.flags:
-            print(f"lvcore: warning: [{item.subject}/{item.model}] FLAGGED: {f}", file=sys.stderr)
-        if not args.json:
-            print(f"\n== {item.subject} / {item.model} ({res.sampler}, {res.wall_s:.1f} s; {name} emulator, "
-                  f"{base} base, EDP {c['edp_mmhg']:g} mmHg) ==")
-            print(res.summary.to_string(float_format=lambda val: f"{val:.4g}"))
-            print(res.convergence.message())
-            for line in _states_text(extra[(item.subject, item.model)]):
-                print(line)
-            if derived_rec is not None:
-                print(derived.text_table(derived_rec))
-            names = list(check.record()["p_values"])
-            worst = np.argsort(v.consistency.p_values)[:3]
-            print("fit check: the best-fitting model against the data, the 3 outputs it misses most with their "
-                  "p-value (the chance of missing by at least this much if the model and the noise were right; "
-                  f"below {verdict.ALPHA:g} an output is not reached, and the LVV or {verdict.MIN_BAD_STRAINS}+ "
-                  "strains not reached make the data inconsistent):\n  "
-                  + ", ".join(f"{names[i]} p = {v.consistency.p_values[i]:.2g}" for i in worst)
-                  + ("" if v.plausible else "  -> IMPLAUSIBLE, see warnings")
-                  + (f"; {len(v.flags)} flag(s): exit code 4" if v.flagged else ""))
-
-    subjects = [(s, r.y, fw) for s, (r, fw, *_rest) in by_subject.items()]
-    attrs = {"data_file": str(args.data), "emulator": name, "angles": args.angles, "base": base,
-             "geometry": "infer" if inferred else geo.source}
-    if not inferred:
+    extra, consistency = {}, {}
+    attrs = {"data_file": str(args.data), "emulator": setup.name, "angles": args.angles,
+             "base": str(getattr(setup.emulator, "base", "clamped")), "geometry": setup.geometry}
+    if not setup.inferred:
+        geo = next(iter(setup.requests.values())).geometry
         attrs.update({"pc_scores": json.dumps([float(v) for v in geo.h]), "scale": float(geo.scale)})
     results = cal.calibrate_subjects(
-        subjects, model_names, config=config, sampler=args.sampler,
-        sigma_v=args.sigma_v, infer_angles=infer, out_dir=args.out, attrs=attrs,
-        progress=None if args.json else (lambda msg, frac: print(msg)), on_result=finish)
+        [(s, q.y, q.forward) for s, q in setup.requests.items()], list(setup.models), config=setup.config,
+        sampler=args.sampler, sigma_v=args.sigma_v, infer_angles=args.angles == "infer", out_dir=args.out,
+        attrs=attrs, progress=None if args.json else (lambda msg, frac: print(msg)),
+        on_result=lambda item: _finish(item, setup, args, extra, consistency))
     records = [{**item.record(), **extra[(item.subject, item.model)]} for item in results]
     for rec, item in zip(records, results):
-        rec["edp_mmhg"] = by_subject[item.subject][2]["edp_mmhg"]
+        rec["edp_mmhg"] = setup.requests[item.subject].conditions["edp_mmhg"]
+    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(records, indent=2))
     if args.json:
@@ -478,6 +412,98 @@ def run_calibrate(args) -> int:
     if not all(r["converged"] for r in records):
         return 1
     return EXIT_FLAGGED if any(r["flags"] for r in records) else 0
+
+
+def _finish(item, setup: CalibrateSetup, args, extra: dict, consistency: dict) -> None:
+    """Verdict, posterior-predictive CSV, derived quantities and the guard records of one (subject, model)
+    result, into ``extra``; printed unless ``--json``."""
+    import numpy as np
+
+    from lvcore.inference import calibrate as cal
+    from lvcore.inference import derived, geometry_prior, plausibility, verdict
+    from lvcore.inference.models import lvv_sd
+    from lvcore.outputs import is_pc_name
+
+    q, row, res = setup.requests[item.subject], setup.rows[item.subject], item.result
+    forward, out, c = q.forward, Path(args.out), q.conditions
+    if item.subject not in consistency:   # one per subject: the same for every model
+        consistency[item.subject] = q.consistency(seed=args.seed)
+    v = verdict.run_verdict(res, consistency[item.subject], q.bounds, forward)
+    v = v.with_extra("EXTRAPOLATION", [e.split(": ", 1)[1] for e in q.extrapolation])
+    check = plausibility.check_result(res, q.y, q.sigma_v, q.sigma_ref, seed=args.seed)
+    out.mkdir(parents=True, exist_ok=True)
+    derived_rec = None
+    if setup.n_derived:
+        given = not (setup.inferred or setup.bound)
+        derived_rec, draws = derived.derive(
+            res.idata, bounds={k: b for k, b in q.bounds.items() if k in derived.THETA_NAMES},
+            edp_mmhg=c["edp_mmhg"], angles=(None, None) if q.infer_angles else (c["alpha_endo"], c["alpha_epi"]),
+            base=q.base, resolution=q.resolution, measured_edv_ml=float(q.y[0]),
+            lvv_sd_ml=lambda v_ml, fw=forward: np.asarray(lvv_sd(v_ml, q.sigma_v, fw), float),
+            h=q.geometry.h if given else None, scale=q.geometry.scale if given else 1.0,
+            geometry=setup.emulator.subject_geometry if setup.bound else None, n_draws=setup.n_derived,
+            pressures_mmhg=getattr(args, "derived_pressures", None) or derived.EDPVR_PRESSURES_MMHG)
+        draws.save(out / f"{cal.file_stem(item.subject)}_{item.model}_derived.npz")
+        v = v.with_extra("CONSISTENCY", derived.check_flags(derived_rec))
+    ppc_csv = out / f"{cal.file_stem(item.subject)}_{item.model}_ppc.csv"
+    ppc_csv.write_text("output,p_value\n" + "".join(f"{k},{val:.6g}\n"
+                                                    for k, val in check.record()["p_values"].items()))
+    geometry = dict(q.geometry_record)
+    if setup.inferred:
+        geometry["posterior"] = geometry_prior.geometry_posterior(
+            {n: np.asarray(res.idata.posterior[n]) for n in forward.latent_names}, forward)
+    else:
+        geometry["box"] = [b for b in q.box if is_pc_name(b["name"])]
+    extra[(item.subject, item.model)] = rec = {
+        "ppc_csv": str(ppc_csv),
+        "geometry": geometry,
+        "conditions": {"emulator": setup.name, "base": q.base, "edp_mmhg": c["edp_mmhg"],
+                       "edp_source": q.edp_source,
+                       "alpha_endo": None if q.infer_angles else c["alpha_endo"],
+                       "alpha_epi": None if q.infer_angles else c["alpha_epi"],
+                       "fixed_by_emulator": c["fixed"],
+                       "box": [b for b in q.box if not is_pc_name(b["name"])]},
+        "extrapolation_allowed": bool(args.allow_extrapolation),
+        "plausible": v.plausible,
+        "plausibility": v.consistency.record(),
+        "posterior_predictive": check.record(),
+        "verdict": v.record(),
+        "flags": v.flags,
+        "notes": list(v.notes) + ([] if derived_rec is None else derived_rec["weakly_identified"]),
+        "derived": derived_rec,
+        **_states_records(row, forward, res),
+        "warnings": [x for x in q.warnings if x not in q.extrapolation] + v.flags}
+    for f in v.flags:
+        print(f"lvcore: warning: [{item.subject}/{item.model}] FLAGGED: {f}", file=sys.stderr)
+    if not args.json:
+        _print_result(item, q, v, check, rec, derived_rec)
+
+
+def _print_result(item, q, v, check, rec: dict, derived_rec) -> None:
+    """The printed block of one (subject, model) result: posterior table, convergence, loaded states, derived
+    quantities and the fit check's worst outputs."""
+    import numpy as np
+
+    from lvcore.inference import derived, verdict
+
+    res, c = item.result, q.conditions
+    print(f"\n== {item.subject} / {item.model} ({res.sampler}, {res.wall_s:.1f} s; {q.emulator_name} emulator, "
+          f"{q.base} base, EDP {c['edp_mmhg']:g} mmHg) ==")
+    print(res.summary.to_string(float_format=lambda val: f"{val:.4g}"))
+    print(res.convergence.message())
+    for line in _states_text(rec):
+        print(line)
+    if derived_rec is not None:
+        print(derived.text_table(derived_rec))
+    names = list(check.record()["p_values"])
+    worst = np.argsort(v.consistency.p_values)[:3]
+    print("fit check: the best-fitting model against the data, the 3 outputs it misses most with their "
+          "p-value (the chance of missing by at least this much if the model and the noise were right; "
+          f"below {verdict.ALPHA:g} an output is not reached, and the LVV or {verdict.MIN_BAD_STRAINS}+ "
+          "strains not reached make the data inconsistent):\n  "
+          + ", ".join(f"{names[i]} p = {v.consistency.p_values[i]:.2g}" for i in worst)
+          + ("" if v.plausible else "  -> IMPLAUSIBLE, see warnings")
+          + (f"; {len(v.flags)} flag(s): exit code 4" if v.flagged else ""))
 
 
 def _subject_measure_sds(row, cli_sds: dict, measures: dict) -> dict:
@@ -512,29 +538,6 @@ def _subject_measures(row, cli_measures: dict) -> dict:
                             "drop one of them")
         out[k] = v
     return out
-
-
-
-def _klotz_prior(ls, forward, at, edp_mmhg: float, *, inferred: bool, subject: bool, emulator, geo, resolution: str):
-    """The Klotz prior of one subject (:class:`lvcore.inference.loaded_states.KlotzPrior`): the forward model at
-    20 and 30 mmHg and V0, the geometry's reference cavity (inferred: from the sampled scores and scale)."""
-    import jax.numpy as jnp
-
-    from lvcore.inference.geometry_prior import SCALE_NAME
-
-    fws = tuple(at(p) for p in ls.KLOTZ_PRESSURES_MMHG)
-    if inferred:
-        def v0_fn(params, fw=forward):
-            return fw.shape(jnp.stack([params[n] for n in fw.pc_names]), params[SCALE_NAME])["reference_volume_ml"]
-
-        return ls.KlotzPrior(fws, edp_mmhg, v0_fn=v0_fn)
-    if subject:
-        section = dict(emulator.subject_geometry)
-        v0 = ls.reference_volume_ml(section)
-    else:
-        v0 = ls.reference_volume_ml({"kind": "pca", "scores": [float(h) for h in geo.h], "resolution": resolution}) \
-            * float(geo.scale) ** 3
-    return ls.KlotzPrior(fws, edp_mmhg, v0_ml=v0)
 
 
 def _quantile_record(x) -> dict:
