@@ -18,8 +18,6 @@ MAX_FUNCTION_LINES = 120
 # Modules still being split in the current round of work, exempt from both limits until then. Remove each entry
 # once its module passes; the list must end empty.
 PENDING = frozenset({
-    "lvcore/app/subject_flow.py",
-    "lvcore/inference/cli.py",
     "lvcore/studies/mismatch.py",
     "lvcore/studies/operators.py",
     "lvcore/studies/findings.py",
