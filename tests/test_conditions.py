@@ -74,14 +74,12 @@ def test_only_pin_threads_writes_the_thread_variables():
 
 
 #: Modules other work has open that still write "σ_S / 0.03" in labels; each is to derive it from conditions.SIGMA_S.
-SIGMA_S_LABEL_PENDING = ("lvcore/studies/findings", "lvcore/studies/mismatch", "lvcore/studies/fibre_discrepancy.py")
-#: Files other work has open that still list the fibre-discrepancy study's angle pairs themselves.
-ANGLE_PAIRS_PENDING = {"lvcore/studies/fibre_discrepancy.py"}
+SIGMA_S_LABEL_PENDING = ("lvcore/studies/findings", "lvcore/studies/mismatch")
 
 
 def test_no_second_home_for_angle_pairs_material_values_or_the_case_writer():
     # the angle pairs of the chapter's studies: conditions.CHAPTER_ANGLE_PAIRS / FIBRE_DISCREPANCY_ANGLE_PAIRS
-    assert set(_defined(r"\(-30\.0, 60\.0\)")) - ANGLE_PAIRS_PENDING == {"lvcore/conditions.py"}
+    assert _defined(r"\(-30\.0, 60\.0\)") == ["lvcore/conditions.py"]
     assert not re.search(r"-?\b60\.0\b", (ROOT / "pages" / "3_Fibre_angles.py").read_text())
     # the Holzapfel–Ogden terms held at population values: conditions.HO_FIXED, also in the Simulator page's caption
     assert _defined(r"\b0\.69\b") == ["lvcore/conditions.py"]
@@ -102,6 +100,14 @@ def test_a_moved_name_still_reads_with_a_deprecation_warning(module, name, home)
         assert getattr(old, name) is getattr(new, name)
 
 
+def test_the_fibre_discrepancy_angle_sets_moved_to_conditions():
+    from lvcore.studies import fibre_discrepancy
+
+    with pytest.warns(DeprecationWarning, match=r"fibre_discrepancy\.ANGLE_SETS is deprecated; use "
+                                                r"lvcore\.conditions\.FIBRE_DISCREPANCY_ANGLE_PAIRS"):
+        assert fibre_discrepancy.ANGLE_SETS == conditions.FIBRE_DISCREPANCY_ANGLE_PAIRS
+
+
 def test_the_angle_pairs_are_the_chapters():
     assert conditions.CHAPTER_ANGLE_PAIRS == ((-60.0, 90.0), (-60.0, 60.0), (-30.0, 60.0), (0.0, 90.0))
     # the fibre-discrepancy data: every pair but the emulator's training angles (the model's own)
@@ -111,8 +117,7 @@ def test_the_angle_pairs_are_the_chapters():
 
 #: Modules other work has open that still use the other spelling (a pressure parameter ``edp``, the input name or a
 #: display label written out); each is to follow the rule below.
-SPELLING_PENDING = ("lvcore/studies/bo_mismatch.py", "lvcore/studies/fibre_discrepancy.py",
-                    "lvcore/studies/mismatch", "lvcore/studies/sbc.py")
+SPELLING_PENDING = ("lvcore/studies/bo_mismatch.py", "lvcore/studies/mismatch", "lvcore/studies/sbc.py")
 
 
 def test_one_spelling_per_concept():
