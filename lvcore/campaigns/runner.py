@@ -37,7 +37,9 @@ import lvcore
 from lvcore.campaigns.designs import Design, load_design
 from lvcore.campaigns.store import START_COLD, START_RESOLVED, START_WARM, CampaignStore, RowResult, StoreSummary, \
     worker_tag
-from lvcore.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
+from lvcore.chains import (DEFAULT_CHUNK, SEED_RESOLVED, WARM_TRUSTED_ITERATIONS, ChainTaskError,  # noqa: F401
+                           run_chains, solve_in_order, warm_path_problem)
+from lvcore.chains import passes_suspicion as _suspect_reason
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
@@ -95,51 +97,6 @@ def execute_row(forward, index: int, inputs: dict) -> RowResult:
     except Exception as err:  # noqa: BLE001 - recorded, never swallowed silently
         reason = failure_reason(err)
     return RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, simulator_version(), tag)
-
-
-#: A warm-started row's result is trusted (not re-solved cold) only if its one Newton solve converged from
-#: the predicted state within this many iterations (``material`` space, ``fast`` mesh, 800-row Sobol design,
-#: one chain: median 8, 90th percentile 13, 99th 18; 3.6 % of the rows took more; the row found on another
-#: equilibrium with a positive definite tangent took 20).
-WARM_TRUSTED_ITERATIONS = 15
-
-
-def warm_path_problem(log) -> str:
-    """Why the result of a warm-started row must not be trusted to equal its cold solve ('' if it may be).
-
-    ``log``: the :class:`~lvcore.mechanics.newton.SolveRecord` of every Newton solve of the row
-    (:func:`lvcore.mechanics.newton.recorded_solves`), in order. A warm result is trusted when it came
-    from one Newton solve at full load from the predicted state (no failed attempt and continuation
-    through a midpoint) in at most :data:`WARM_TRUSTED_ITERATIONS` iterations, to a state whose last
-    tangent was positive definite (:func:`~lvcore.mechanics.newton.tangent_definite`: a stable
-    equilibrium). Damped line-search steps (12 % of the rows of that design) and the distance from the
-    predicted state (median 5 %, 90th percentile 25 %) did not tell the rows that found another
-    equilibrium from the others.
-
-    Where it is not, the equilibrium may not be unique and the start decides which one Newton finds:
-    on the soft corner of the ``material`` space (a, af ≲ 0.15 kPa) the cold load path needs many
-    step cuts or stops, tangents turn indefinite, and warm starts from neighbours converged to other
-    equilibria, 1–4 % apart in strain (0.01–0.03 mL in LVV), with clean-looking Newton paths
-    as well as rescued ones. Rows whose result came from a cold solve (the forward model's own cold
-    fallback) and forward models without Newton solves (an empty log) are never suspect.
-    """
-    if not log:
-        return ""
-    last = log[-1]
-    if not (last.warm_converged and last.converged):
-        return ""  # a cold solve's result (or a failure): what the cold run records
-    if len(log) > 1:
-        return "the warm start failed and was continued through intermediate parameters"
-    if last.definite is not True:
-        return "the converged state is not a stable equilibrium (indefinite tangent)" if last.definite is False \
-            else "the stability of the converged state cannot be told (no positive definite factorisation)"
-    if last.iterations > WARM_TRUSTED_ITERATIONS:
-        return f"{last.iterations} Newton iterations from the predicted state (more than {WARM_TRUSTED_ITERATIONS})"
-    return ""
-
-
-#: ``resolve_reason`` of a row re-solved because its seed row was (it does not pass the suspicion on).
-SEED_RESOLVED = "its seed row was re-solved cold"
 
 
 def execute_warm_row(forward, index: int, inputs: dict, initial, seed_suspect: bool = False
@@ -220,7 +177,7 @@ def execute_chunk(forward, positions: list[int], indices: list[int], inputs: lis
 def passes_suspicion(result: RowResult) -> bool:
     """Whether a row re-solved cold makes the rows started from its state suspect: re-solved for its own
     Newton path, not only because its seed row was."""
-    return result.start == START_RESOLVED and result.resolve_reason not in ("", SEED_RESOLVED)
+    return result.start == START_RESOLVED and _suspect_reason(result.resolve_reason)
 
 
 def row_inputs(design: Design, i: int) -> dict:
