@@ -43,3 +43,23 @@ def test_a_failing_png_export_keeps_the_html(tmp_path, monkeypatch):
 
     monkeypatch.setattr(go.Figure, "write_image", broken)
     assert _common.save_figure(go.Figure(), tmp_path / "fig") == [str(tmp_path / "fig.html")]
+
+
+def test_command_line_helpers(capsys):
+    """The simulator options (their defaults and the workers' bound), comma lists and the JSON/text result."""
+    import argparse
+    import json
+
+    parser = argparse.ArgumentParser()
+    _common.add_simulator_options(parser)
+    args = parser.parse_args([])
+    assert (args.workers, args.scheduler, args.resolution) == (1, None, "default")
+    assert parser.parse_args(["--workers", "2", "--resolution", "coarse"]).workers == 2
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--workers", "0"])
+    assert all("default" in a.help for a in parser._actions if a.option_strings and a.dest != "help")
+    assert _common.comma_list(" a,,b , ") == ["a", "b"] and _common.comma_list(None) == []
+    assert _common.print_result(True, {"x": [1, None]}, lambda: "never") == 0
+    assert json.loads(capsys.readouterr().out) == {"x": [1, None]}
+    assert _common.print_result(False, {"x": 1}, lambda: "line one\nline two") == 0
+    assert capsys.readouterr().out == "line one\nline two\n"

@@ -1,4 +1,5 @@
-"""Small helpers shared by the optimisation studies (bo-fibres, operators): files, progress, figures."""
+"""Small helpers shared by the optimisation studies (bo-fibres, operators): files, progress, figures, and the
+command line (simulator options, comma lists, printing a result)."""
 from __future__ import annotations
 
 import json
@@ -8,9 +9,11 @@ import sys
 import threading
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Mapping
 
 import numpy as np
+
+from lvcore import cli_args
 
 #: Seconds a study waits for one PNG export (kaleido starts Chromium) before it goes on with the HTML only.
 PNG_TIMEOUT_S = 120.0
@@ -138,3 +141,23 @@ def bootstrap_ci(units, statistic, n_boot: int = 2000, seed: int = 0, level: flo
         if boots.size:
             ci = [float(v) for v in np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])]
     return {"value": value, "ci": ci, "n_units": len(units), "n_boot": int(n_boot), "level": float(level)}
+
+
+def add_simulator_options(parser) -> None:
+    """``--workers``, ``--scheduler`` and ``--resolution`` of a study command that runs the FE simulator."""
+    parser.add_argument("--workers", type=cli_args.workers, default=1,
+                        help="local worker processes for simulator batches, up to 4 per core (default 1)")
+    parser.add_argument("--scheduler", default=None,
+                        help="tcp://HOST:PORT of a Dask scheduler instead of local workers (default: none)")
+    parser.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
+
+
+def comma_list(text: str | None) -> list[str]:
+    """The items of a comma-separated option, stripped, empty ones dropped (``" a,,b "`` -> ``["a", "b"]``)."""
+    return [s.strip() for s in (text or "").split(",") if s.strip()]
+
+
+def print_result(as_json: bool, payload: Mapping, text: Callable[[], str]) -> int:
+    """Print a study command's result: ``payload`` as indented JSON with ``--json``, else ``text()``; exit code 0."""
+    print(json.dumps(payload, indent=1) if as_json else text())
+    return 0

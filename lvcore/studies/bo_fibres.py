@@ -50,7 +50,8 @@ from lvcore.exceptions import LVCoreError
 from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 from lvcore.resources import asset_path
 from lvcore.studies import registry
-from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
+from lvcore.studies._common import (add_simulator_options, clean, comma_list, print_result, progress_bar,
+                                    save_figure, write_json_atomic)
 
 #: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2): the simulator's default rule-based angles.
 FIXED_ANGLES = SIMULATOR_DEFAULT_ANGLES
@@ -624,11 +625,7 @@ def add_study_parser(study_subparsers) -> None:
                    help=f"size of the exp design (default {CHAPTER_INITIAL}, the chapter's)")
     p.add_argument("--iterations", type=cli_args.int_in(0, 100_000), default=CHAPTER_ITERATIONS,
                    help=f"LCB iterations (default {CHAPTER_ITERATIONS}, the chapter's)")
-    p.add_argument("--workers", type=cli_args.workers, default=1,
-                   help="local worker processes for simulator batches, up to 4 per core (default 1)")
-    p.add_argument("--scheduler", default=None,
-                   help="tcp://HOST:PORT of a Dask scheduler instead of local workers (default: none)")
-    p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
+    add_simulator_options(p)
     p.add_argument("--seed", type=cli_args.seed, default=0, help="random seed, 0 to 2^32 - 1 (default 0)")
     p.add_argument("--refit-every", type=int, default=REFIT_EVERY,
                    help=f"re-estimate the GP hyperparameters every N iterations (default {REFIT_EVERY})")
@@ -638,8 +635,8 @@ def add_study_parser(study_subparsers) -> None:
 
 
 def _cli(args) -> int:
-    subjects = [s.strip() for s in args.subjects.split(",") if s.strip()] if args.subjects else None
-    modes = [m.strip() for m in args.modes.split(",") if m.strip()]
+    subjects = comma_list(args.subjects) if args.subjects else None
+    modes = comma_list(args.modes)
     if args.initial < 2 or args.iterations < 0:
         raise LVCoreError("--initial must be >= 2 and --iterations >= 0")
     if args.refit_every < 1:
@@ -648,9 +645,6 @@ def _cli(args) -> int:
                         workers=args.workers, scheduler=args.scheduler, seed=args.seed, resolution=args.resolution,
                         progress=not args.json, log=None if args.json else print, refit_every=args.refit_every)
     meta = json.loads((Path(args.out) / "bo_fibres_meta.json").read_text())
-    if args.json:
-        print(json.dumps({"entries": clean(entries), "meta": meta}, indent=1))
-    else:
-        print(format_findings(meta["findings"]))
-        print(f"budget: {meta['budget']['label']}; wrote {args.out}/{RESULT_FILE}, tables.csv and figures")
-    return 0
+    return print_result(args.json, {"entries": clean(entries), "meta": meta},
+                        lambda: f"{format_findings(meta['findings'])}\nbudget: {meta['budget']['label']}; wrote "
+                                f"{args.out}/{RESULT_FILE}, tables.csv and figures")
