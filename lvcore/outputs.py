@@ -26,15 +26,18 @@ OUTPUT_COLUMNS = ("lvv_ml",) + tuple(f"strain_{r + 1:02d}" for r in range(N_REGI
 # inputs and their metadata ("fixed"), campaign spaces, design and store columns, the inputs of
 # lvcore.mechanics.case_inputs.build_case and a case file's material keys (af, bf). A *value with its unit* passed
 # around in Python or written to a data file is named with the unit: ``edp_mmhg`` (a parameter, an attribute, the
-# measured-data column, summary.json), like ``lvv_ml``. Users read ``a_f``/``b_f`` (lvcore.viz.inference_figures.
-# display_name); the CLI option is ``--edp`` (mmHg). The subscripted forms a_f, b_f, a_s, a_fs are the attributes of
-# the Holzapfel–Ogden law only (lvcore.mechanics.materials: its math symbols; ``as`` cannot be a Python name).
+# measured-data column, summary.json), like ``lvv_ml``. Users read ``a_f``/``b_f`` (DISPLAY_NAMES below); the CLI
+# option is ``--edp`` (mmHg). The subscripted forms a_f, b_f, a_s, a_fs are the attributes of the Holzapfel–Ogden law
+# only (lvcore.mechanics.materials: its math symbols; ``as`` cannot be a Python name).
 #: Names of material parameters (kPa for a, af; dimensionless b, bf).
 THETA_NAMES = ("a", "b", "af", "bf")
 #: Names of physiological inputs: fibre angles (deg) and EDP (mmHg).
 ANGLE_NAMES = ("alpha_endo", "alpha_epi")
 #: The EDP's input name (mmHg); a pressure value passed as a parameter or written as a column is ``edp_mmhg``.
 EDP_NAME = "edp"
+#: How inputs are written wherever a user reads them (the θ sliders' labels too): a_f, b_f, α_endo, α_epi; other
+#: names as they are (:func:`lvcore.viz.inference_figures.display_name`).
+DISPLAY_NAMES = {"af": "a_f", "bf": "b_f", "alpha_endo": "α_endo", "alpha_epi": "α_epi"}
 #: LV base boundary conditions (the case schema's ``boundary.base``; a campaign space's ``base``).
 BASE_CONDITIONS = ("clamped", "sliding")
 

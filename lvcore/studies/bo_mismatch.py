@@ -46,7 +46,7 @@ import numpy as np
 from lvcore import cli_args
 from lvcore.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import ANGLE_NAMES, THETA_NAMES
+from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
 from lvcore.studies import bo_fibres, registry
 from lvcore.studies._common import bootstrap_ci, clean, save_figure, write_json_atomic
 
@@ -125,7 +125,7 @@ def model_forward(volunteer, mode: str, resolution: str = "default", kind: str =
     from lvcore.studies.mismatch import MODEL_BASE
 
     space = bo_fibres.bo_space(mode)
-    cond = {**space.fixed_dict(), "edp": CHAPTER_EDP, **{f"h{i + 1}": float(v) for i, v in enumerate(volunteer.h)}}
+    cond = {**space.fixed_dict(), EDP_NAME: CHAPTER_EDP, **{f"h{i + 1}": float(v) for i, v in enumerate(volunteer.h)}}
     return SimulatorForward(input_names=space.names, conditions=cond, base=MODEL_BASE, resolution=resolution,
                             label=f"FE simulator on SYNTHETIC-{volunteer.name} PCA geometry ({resolution}, "
                                   f"{MODEL_BASE} base; data: {kind})", warm_start=True)
@@ -294,7 +294,7 @@ def verdicts(summary: dict) -> dict:
                      + f"), lower for {s['free_common_objective_lower']}/{s['n_volunteers']}; the mismatch's own size: "
                      f"strain RMS {min(s['strain_rms_mismatch']):.2g}-{max(s['strain_rms_mismatch']):.2g}, LVV "
                      f"{min(s['lvv_mismatch_ml']):.3g} to {max(s['lvv_mismatch_ml']):.3g} mL"
-                     + (" (below the strain noise 0.03/10: effectively no mismatch, a control)"
+                     + (f" (below the strain noise {SIGMA_S:g}/10: effectively no mismatch, a control)"
                         if max(s["strain_rms_mismatch"]) < SIGMA_S / 10 else ""))}
     absorbable = [k for k in by_kind if KINDS[k]["absorbable"]]
     main = by_kind[absorbable[0]] if absorbable else next(iter(by_kind.values()), None)

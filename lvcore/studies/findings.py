@@ -55,8 +55,8 @@ from __future__ import annotations
 from lvcore.studies import registry
 from lvcore.studies.findings_docs import (DOCS_BEGIN, DOCS_END, PROSE_BEGIN, PROSE_END, docs_markdown,  # noqa: F401
                                           prose_markdown, ranges_markdown, rewrite_docs)
-from lvcore.studies.findings_rule import (BO_THETA_BOX, BOUND_TOL, CLAIMS, F1_INFLATION, F2_BAND,  # noqa: F401
-                                          F5_SHARE, LEVEL, MIN_CHAINS, N_BOOT, N_MIN, PHYSIOLOGICAL_RANGES,
+from lvcore.studies.findings_rule import (BO_THETA_BOX, BOUND_TOL, CLAIMS, F1_COLUMN, F1_INFLATION,  # noqa: F401
+                                          F2_BAND, F5_SHARE, LEVEL, MIN_CHAINS, N_BOOT, N_MIN, PHYSIOLOGICAL_RANGES,
                                           RHAT_SHARE_MAX, TESTABLE_RMS, VERDICTS, call, cluster_boot, combine,
                                           dose_range, fmt_ci)
 from lvcore.studies.findings_tests import (COLUMNS, SOURCES, _f5_row, _f6_rows, _mismatch_row,  # noqa: F401
@@ -150,7 +150,7 @@ def _slim_doses(d):
         + d["strain RMS"].map("{:.4f}".format) + "; " + d["range"] + ")",
         "sampler; R-hat > 1.05 volume / iid / discrepancy": d["sampler"] + "; "
         + d["R-hat > 1.05 (volume / iid / discrepancy)"],
-        "CI over": d["CI over"], "iid σ_S / 0.03": d["iid σ_S / 0.03"], "calls F1 / F2 / F3": d["calls F1 / F2 / F3"],
+        "CI over": d["CI over"], F1_COLUMN: d[F1_COLUMN], "calls F1 / F2 / F3": d["calls F1 / F2 / F3"],
         "deciding": d["deciding"]})
 
 

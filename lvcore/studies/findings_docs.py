@@ -6,7 +6,8 @@ Part of :mod:`lvcore.studies.findings` (the study).
 """
 from __future__ import annotations
 
-from lvcore.studies.findings_rule import (MIN_CHAINS, N_MIN, PHYSIOLOGICAL_RANGES, RHAT_SHARE_MAX, TESTABLE_RMS,
+from lvcore.conditions import SIGMA_S
+from lvcore.studies.findings_rule import (F1_COLUMN, MIN_CHAINS, N_MIN, PHYSIOLOGICAL_RANGES, RHAT_SHARE_MAX, TESTABLE_RMS,
                                           dose_range, fmt_ci)
 from lvcore.studies.findings_tests import SOURCES, dose_rows, replication_tests, verdicts
 
@@ -74,9 +75,9 @@ def prose_markdown(result: dict) -> str:
         infl = [r["iid_sigma_s_inflation"]["value"] for r in small]
         iid_best = sum(r["output_error_gap"]["iid_minus_discrepancy"]["ci"][1] < 0 for r in small)
         out.append(f"* Up to a strain RMS mismatch of 0.02 ({len(small)} doses) the calibration absorbs the "
-                   f"mismatch into θ: the iid σ_S stays within {min(infl):.2f}–{max(infl):.2f}× of 0.03, and the "
-                   f"iid likelihood has a lower output error than the discrepancy one at {iid_best} of them (paired "
-                   "CI below 0).")
+                   f"mismatch into θ: the iid σ_S stays within {min(infl):.2f}–{max(infl):.2f}× of {SIGMA_S:g}, "
+                   f"and the iid likelihood has a lower output error than the discrepancy one at {iid_best} of them "
+                   "(paired CI below 0).")
     b = _row(rows, "base")
     if b:
         rms = b["strain_rms_mismatch"]
@@ -119,7 +120,7 @@ def prose_markdown(result: dict) -> str:
         t = replication_tests(fd)
         med = (fd.get("findings") or {}).get("median_abs_error") or {}
         out.append(f"* The direct replication (the chapter's {t['n_sets']} test sets, "
-                   f"{budget_text(fd.get('sampler'))}): iid σ_S / 0.03 {fmt_ci(t['f1'], '.2f', '×')}, discrepancy σ_S "
+                   f"{budget_text(fd.get('sampler'))}): {F1_COLUMN} {fmt_ci(t['f1'], '.2f', '×')}, discrepancy σ_S "
                    f"{fmt_ci(t['f2'], '.4f')}, iid − discrepancy output error {fmt_ci(t['f3_disc'], '.4f')} (CIs over "
                    "the test sets)"
                    + (f"; median |η error| volume / iid / discrepancy {med['volume']:.4f} / {med['iid']:.4f} / "

@@ -50,8 +50,10 @@ PHYSIOLOGICAL_RANGES = {
 }
 
 VERDICTS = ("reproduced", "not shown", "refuted")
+#: F1's estimate as tables and the verdicts name it: the iid σ_S over the truth.
+F1_COLUMN = f"iid σ_S / {SIGMA_S:g}"
 #: The chapter's claim of each finding.
-CLAIMS = {"F1": "iid inflates σ_S ≈ 2×", "F2": "discrepancy σ_S near the truth (0.024; truth 0.03)",
+CLAIMS = {"F1": "iid inflates σ_S ≈ 2×", "F2": f"discrepancy σ_S near the truth (0.024; truth {SIGMA_S:g})",
           "F3": "output error: discrepancy ≈ volume < iid", "F5": "5/10 PCs no worse than a new operator (Fig 9.14)",
           "F6": "freeing the fibre angles cuts the LVV error (8/8, 18.9 → 5.9 mL)"}
 

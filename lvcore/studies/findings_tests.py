@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from lvcore.conditions import SIGMA_S
-from lvcore.studies.findings_rule import (BO_THETA_BOX, BOUND_TOL, CLAIMS, F1_INFLATION, F2_BAND, F5_SHARE,
-                                          MIN_CHAINS, N_MIN, RHAT_SHARE_MAX, TESTABLE_RMS, call, cluster_boot,
+from lvcore.studies.findings_rule import (BO_THETA_BOX, BOUND_TOL, CLAIMS, F1_COLUMN, F1_INFLATION, F2_BAND,
+                                          F5_SHARE, MIN_CHAINS, N_MIN, RHAT_SHARE_MAX, TESTABLE_RMS, call, cluster_boot,
                                           combine, dose_range, fmt_ci)
 from lvcore.studies.registry import STUDIES
 
@@ -181,7 +181,7 @@ def _replication_rows(fd: dict | None) -> list[dict]:
             + " / ".join(f"{100 * t['rhat_share'][m]:.0f} %" for m in ("volume", "iid", "discrepancy")))
     dose = ("the chapter's design: angles (−60°, 90°), (−30°, 60°), (0°, 90°) × 4 θ against the emulator's "
             "(−60°, 60°), one SYNTHETIC geometry")
-    ests = {"F1": f"iid σ_S / 0.03 {fmt_ci(t['f1'], '.2f', '×')}",
+    ests = {"F1": f"{F1_COLUMN} {fmt_ci(t['f1'], '.2f', '×')}",
             "F2": f"discrepancy σ_S {fmt_ci(t['f2'], '.4f')}" + ("" if t["calls"]["F1"] == "for" else
                                                              "; untestable where iid does not inflate σ_S"),
             "F3": (f"iid − discrepancy {fmt_ci(t['f3_disc'], '.4f')}, iid − volume {fmt_ci(t['f3_vol'], '.4f')} "
@@ -388,7 +388,7 @@ def dose_rows(result: dict) -> list[dict]:
                     "ESS median": " / ".join("n/a" if t["ess_median"].get(m) is None else f"{t['ess_median'][m]:.0f}"
                                              for m in ("volume", "iid", "discrepancy")),
                     "CI over": f"{t['n_units']} {t['unit']}",
-                    "iid σ_S / 0.03": fmt_ci(t["f1"], ".2f"),
+                    F1_COLUMN: fmt_ci(t["f1"], ".2f"),
                     "calls F1 / F2 / F3": " / ".join(t["calls"][f] or "–" for f in ("F1", "F2", "F3")),
                     "deciding": "yes" if t["deciding"] else "no: " + "; ".join(t["why_not"])})
     return out

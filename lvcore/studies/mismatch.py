@@ -285,7 +285,7 @@ def tables(result: dict) -> dict:
         c = r["theta_coverage"]
         flat.append({"source": r["source"], "dose": r["dose"], "strain RMS": x,
                      "data sets": r.get("n_datasets", i["n"]),
-                     "iid σ_S/0.03": i["value"], "iid CI": f"[{i['ci'][0]:.2f}, {i['ci'][1]:.2f}]",
+                     f"iid σ_S/{SIGMA_S:g}": i["value"], "iid CI": f"[{i['ci'][0]:.2f}, {i['ci'][1]:.2f}]",
                      "discrepancy σ_S": d["value"], "disc. CI": f"[{d['ci'][0]:.3f}, {d['ci'][1]:.3f}]",
                      **{f"error {m}": r["output_error"][m]["value"] for m in MODELS},
                      **{f"coverage {m}": c[m]["value"] for m in MODELS},
@@ -308,15 +308,15 @@ def figures(result: dict) -> dict:
     xt = "strain RMS mismatch of the dose (mismatched − nominal simulator outputs, 24 strains)"
     out = {"fig_mismatch_sigma_s_inflation": dose_response_figure(
         tabs["fig_mismatch_sigma_s_inflation"].to_dict("records"),
-        title=f"SYNTHETIC mismatch dose–response ({n}): iid posterior median σ_S / 0.03, median over data sets, "
-              "90 % bootstrap CI band; F1 (chapter) ≈ 2×",
-        xaxis_title=xt, yaxis_title="iid σ_S inflation (σ_S / 0.03)", refs=((1.0, "no inflation"),
+        title=f"SYNTHETIC mismatch dose–response ({n}): iid posterior median σ_S / {SIGMA_S:g}, median over data "
+              "sets, 90 % bootstrap CI band; F1 (chapter) ≈ 2×",
+        xaxis_title=xt, yaxis_title=f"iid σ_S inflation (σ_S / {SIGMA_S:g})", refs=((1.0, "no inflation"),
                                                                             (2.0, "chapter ≈ 2×")))}
     out["fig_mismatch_discrepancy_sigma_s"] = dose_response_figure(
         tabs["fig_mismatch_discrepancy_sigma_s"].to_dict("records"),
         title=f"SYNTHETIC mismatch dose–response ({n}): discrepancy model's posterior median σ_S, 90 % bootstrap "
-              "CI band; truth 0.03, chapter 0.024 (F2)",
-        xaxis_title=xt, yaxis_title="discrepancy σ_S (strain)", refs=((SIGMA_S, "truth 0.03"),))
+              f"CI band; truth {SIGMA_S:g}, chapter 0.024 (F2)",
+        xaxis_title=xt, yaxis_title="discrepancy σ_S (strain)", refs=((SIGMA_S, f"truth {SIGMA_S:g}"),))
     panels = list(dict.fromkeys(tabs["fig_mismatch_output_error"]["panel"]))
     out["fig_mismatch_output_error"] = dose_response_figure(
         tabs["fig_mismatch_output_error"].to_dict("records"), panels=panels,

@@ -5,6 +5,7 @@ Part of :mod:`lvcore.studies.mismatch` (the study).
 """
 from __future__ import annotations
 
+from lvcore.conditions import SIGMA_S
 from lvcore.studies.mismatch_fit import MODELS, budget_text, sampler_text
 from lvcore.studies.mismatch_sim import dose_label
 
@@ -50,7 +51,7 @@ def _check_markdown(result: dict) -> list[str]:
              f"(`lvcore.studies.mismatch.verdict_rows`). MCMC: {_cost_text(check.get('fit_cost'))}."
              + (" Not fitted: " + ", ".join(dose_label(u["source"], u["dose"]) for u in check["not_fitted"]) + "."
                 if check.get("not_fitted") else ""), "",
-             "| source | dose | sampler | iid σ_S / 0.03 [90 % CI] | discrepancy σ_S [90 % CI] | "
+             f"| source | dose | sampler | iid σ_S / {SIGMA_S:g} [90 % CI] | discrepancy σ_S [90 % CI] | "
              "iid − discrepancy error [90 % CI] | iid − volume error [90 % CI] | ESS median | "
              "share R-hat > 1.05 | F1 | F3 |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     yes = {True: "yes", False: "no"}
@@ -95,7 +96,8 @@ def docs_markdown(result: dict) -> str:
                   "this shipped run (" + ", ".join(f"{u['source']} {u['dose']:g}" for u in nf) + "); the same "
                   "command without `--recorded-only` (and `--carry-from`) resumes the study and fits them."]
     lines += ["",
-             "| source | dose | strain RMS mismatch (mean [min, max] over volunteers) | iid σ_S / 0.03 [90 % CI] | "
+             "| source | dose | strain RMS mismatch (mean [min, max] over volunteers) | "
+             f"iid σ_S / {SIGMA_S:g} [90 % CI] | "
              "discrepancy σ_S [90 % CI] | output error volume / iid / discrepancy | "
              "iid − discrepancy error [90 % CI] | θ coverage volume / iid / discrepancy | F1 | F3 |",
              "|---|---|---|---|---|---|---|---|---|---|"]

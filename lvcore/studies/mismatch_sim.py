@@ -13,9 +13,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
-from lvcore.core.space import build_case
-from lvcore.outputs import THETA_NAMES
+from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, HO_FIXED
+from lvcore.mechanics.case_inputs import build_case
+from lvcore.outputs import EDP_NAME, THETA_NAMES
 from lvcore.studies._common import write_json_atomic
 
 #: The calibration model's fixed conditions (the ``chapter`` emulator).
@@ -59,7 +59,7 @@ def mismatch_case(theta: dict, h: Sequence[float], source: str | None, dose: flo
     :data:`MODEL_ANGLES`, base :data:`MODEL_BASE`, population sheet terms.
     """
     inputs = {**{n: float(theta[n]) for n in THETA_NAMES}, "alpha_endo": MODEL_ANGLES[0],
-              "alpha_epi": MODEL_ANGLES[1], "edp": CHAPTER_EDP,
+              "alpha_epi": MODEL_ANGLES[1], EDP_NAME: CHAPTER_EDP,
               **{f"h{i + 1}": float(v) for i, v in enumerate(h)}}
     base = MODEL_BASE
     if source == "angles":
@@ -70,8 +70,6 @@ def mismatch_case(theta: dict, h: Sequence[float], source: str | None, dose: flo
     case = build_case(inputs, resolution=resolution, base=base)
     mat, bnd = case["material"], case["boundary"]
     if source == "sheet":
-        from lvcore.units import HO_FIXED
-
         mat["as"], mat["afs"] = HO_FIXED["as"] * dose, HO_FIXED["afs"] * dose
     elif source == "dispersion":
         mat["kappa"] = float(dose)

@@ -88,6 +88,7 @@ import numpy as np
 from lvcore import cli_args
 from lvcore.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
+from lvcore.outputs import DISPLAY_NAMES
 from lvcore.studies import registry
 from lvcore.studies._common import clean, round_floats, write_json_atomic
 # the statistics (pure) and the runs live in their own modules; their names are this module's too
@@ -114,8 +115,7 @@ SUBJECTS_FILE = "sbc_subjects.csv"
 COMMAND = ("lvcore study sbc --n-subjects 200 --seed 0 --piece 1/2 & lvcore study sbc --n-subjects 200 --seed 0 "
            f"--piece 2/2; lvcore study sbc --summarise --out DIR/{RESULT_FILE}")
 UNITS = {"a": "kPa", "b": "-", "af": "kPa", "bf": "-", "V0": "mL", "V20": "mL", "V30": "mL", "fibre_stress": "kPa"}
-LABELS = {"a": "a", "b": "b", "af": "a_f", "bf": "b_f", "V0": "V0", "V20": "V20", "V30": "V30",
-          "fibre_stress": "σ_ff(λ=1.10)"}
+LABELS = {**{q: DISPLAY_NAMES.get(q, q) for q in UNITS}, "fibre_stress": "σ_ff(λ=1.10)"}
 SYNTHETIC_LABEL = "SYNTHETIC subjects (prior draws simulated by the FE model)"
 
 

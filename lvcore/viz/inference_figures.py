@@ -16,14 +16,12 @@ import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from lvcore.conditions import SIGMA_S
-from lvcore.outputs import OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
+from lvcore.outputs import DISPLAY_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
 from lvcore.viz.figures import SERIES_COLOURS, strain_heatmap, violin
 
 UNITS = {"a": "kPa", "b": "-", "af": "kPa", "bf": "-", "alpha_endo": "deg", "alpha_epi": "deg",
          "sigma_s2": "strain²", "v": "strain", "c": "rad", "tau": "-", "lam": "levels",
          "sigma1_sq": "strain²", "sigma2_sq": "strain²"}
-#: How parameters are written wherever a user reads them (the same as the θ sliders' labels: a_f, b_f).
-DISPLAY_NAMES = {"af": "a_f", "bf": "b_f", "alpha_endo": "α_endo", "alpha_epi": "α_epi"}
 
 
 def display_name(name: str) -> str:
