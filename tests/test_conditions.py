@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ast
+import functools
 import importlib
 import re
 from pathlib import Path
@@ -30,9 +31,20 @@ def test_simulator_defaults_and_chapter_conditions_are_named_apart_and_used_wher
     assert built["load"] == {"pressure": conditions.CHAPTER_EDP, "units": "mmHg"}
 
 
+@functools.lru_cache(maxsize=None)
+def _text(path: Path) -> str:
+    return path.read_text()
+
+
+@functools.lru_cache(maxsize=None)
+def _tree(path: Path) -> ast.Module:
+    """The parsed source, shared by the checks below (read-only)."""
+    return ast.parse(_text(path))
+
+
 def _defined(pattern: str) -> list[str]:
     rx = re.compile(pattern, re.M)
-    return [str(p.relative_to(ROOT)) for p in SOURCES if rx.search(p.read_text())]
+    return [str(p.relative_to(ROOT)) for p in SOURCES if rx.search(_text(p))]
 
 
 def test_no_second_home_for_a_constant():
@@ -77,7 +89,7 @@ def test_only_pin_threads_writes_the_thread_variables():
 
 def _strings_outside_docstrings(path: Path) -> list[ast.Constant]:
     """The string literals of ``path`` (f-strings' literal parts too) that are not docstrings."""
-    tree = ast.parse(path.read_text())
+    tree = _tree(path)
     docs = {id(node.body[0].value) for node in ast.walk(tree)
             if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body
             and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
@@ -132,7 +144,7 @@ def test_one_spelling_per_concept():
     offenders = []
     for path in SOURCES:
         where = str(path.relative_to(ROOT))
-        tree = ast.parse(path.read_text())
+        tree = _tree(path)
         widget_keys = {id(k.value) for k in ast.walk(tree) if isinstance(k, ast.keyword) and k.arg == "key"}
         for node in ast.walk(tree):
             if isinstance(node, ast.Constant) and node.value in homes and homes[node.value] != where \
