@@ -615,16 +615,23 @@ def format_findings(meta_findings: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- CLI
+def add_budget_options(parser, n_initial: int, n_iterations: int, *, per_run: bool = False, note: str = "") -> None:
+    """``--initial`` (size of the exp design, at least 2) and ``--iterations`` (LCB iterations) of a BO study, with
+    their defaults; ``per_run``: the study runs several BOs, each with this budget; ``note`` follows the defaults."""
+    each = " of each run" if per_run else ""
+    parser.add_argument("--initial", type=cli_args.int_in(2, 100_000), default=n_initial,
+                        help=f"size of the exp design{each}, 2 to 100,000 (default {n_initial}{note})")
+    parser.add_argument("--iterations", type=cli_args.int_in(0, 100_000), default=n_iterations,
+                        help=f"LCB iterations{each}, 0 to 100,000 (default {n_iterations}{note})")
+
+
 def add_study_parser(study_subparsers) -> None:
     """``lvcore study bo-fibres``."""
     p = study_subparsers.add_parser("bo-fibres", help="§9.3.1: BO of theta with fixed vs free fibre angles "
                                                       "(FE simulator, SYNTHETIC volunteers; Tables 9.2/9.3)")
     p.add_argument("--subjects", default=None, help="comma-separated, e.g. SYNTHETIC-HV1,SYNTHETIC-HV2 (default: all 8)")
     p.add_argument("--modes", default="fixed,free", help="fixed, free or both (default)")
-    p.add_argument("--initial", type=cli_args.int_in(1, 100_000), default=CHAPTER_INITIAL,
-                   help=f"size of the exp design (default {CHAPTER_INITIAL}, the chapter's)")
-    p.add_argument("--iterations", type=cli_args.int_in(0, 100_000), default=CHAPTER_ITERATIONS,
-                   help=f"LCB iterations (default {CHAPTER_ITERATIONS}, the chapter's)")
+    add_budget_options(p, CHAPTER_INITIAL, CHAPTER_ITERATIONS, note=", the chapter's")
     add_simulator_options(p)
     p.add_argument("--seed", type=cli_args.seed, default=0, help="random seed, 0 to 2^32 - 1 (default 0)")
     p.add_argument("--refit-every", type=int, default=REFIT_EVERY,
@@ -637,8 +644,6 @@ def add_study_parser(study_subparsers) -> None:
 def _cli(args) -> int:
     subjects = comma_list(args.subjects) if args.subjects else None
     modes = comma_list(args.modes)
-    if args.initial < 2 or args.iterations < 0:
-        raise LVCoreError("--initial must be >= 2 and --iterations >= 0")
     if args.refit_every < 1:
         raise LVCoreError("--refit-every must be >= 1")
     entries = run_study(subjects, modes=modes, out=args.out, n_initial=args.initial, n_iterations=args.iterations,

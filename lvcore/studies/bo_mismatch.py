@@ -46,9 +46,10 @@ import numpy as np
 from lvcore import cli_args
 from lvcore.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
+from lvcore.outputs import EDP_NAME, THETA_NAMES
 from lvcore.studies import bo_fibres, registry
-from lvcore.studies._common import bootstrap_ci, clean, save_figure, write_json_atomic
+from lvcore.studies._common import (add_simulator_options, bootstrap_ci, clean, comma_list, print_result, save_figure,
+                                    write_json_atomic)
 
 #: Hidden angles of the ``angles`` kind (deg): far from the fixed pair, inside the free box.
 HIDDEN_ANGLES = (-30.0, 80.0)
@@ -466,13 +467,8 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--volunteers", default=",".join(DEFAULT_VOLUNTEERS),
                    help=f"comma-separated bundled volunteers (default {','.join(DEFAULT_VOLUNTEERS)})")
     p.add_argument("--kinds", default=",".join(KINDS), help=f"mismatch kinds (default {','.join(KINDS)})")
-    p.add_argument("--initial", type=cli_args.int_in(2, 100_000), default=DEFAULT_INITIAL,
-                   help=f"size of each run's exp design (default {DEFAULT_INITIAL})")
-    p.add_argument("--iterations", type=cli_args.int_in(0, 100_000), default=DEFAULT_ITERATIONS,
-                   help=f"LCB iterations per run (default {DEFAULT_ITERATIONS})")
-    p.add_argument("--workers", type=cli_args.workers, default=1, help="local worker processes (default 1)")
-    p.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler (default: none)")
-    p.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
+    bo_fibres.add_budget_options(p, DEFAULT_INITIAL, DEFAULT_ITERATIONS, per_run=True)
+    add_simulator_options(p)
     p.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the designs and the noise (default 0)")
     p.add_argument("--json", action="store_true", help="print the verdicts as JSON")
     p.add_argument("--out", type=cli_args.output_dir, required=True,
@@ -481,8 +477,7 @@ def add_study_parser(study_subparsers) -> None:
 
 
 def _cli(args) -> int:
-    vols = [s.strip() for s in args.volunteers.split(",") if s.strip()]
-    kinds = [s.strip() for s in args.kinds.split(",") if s.strip()]
+    vols, kinds = comma_list(args.volunteers), comma_list(args.kinds)
     try:
         from lvcore.studies.mismatch import bundled_volunteers
 
@@ -492,9 +487,6 @@ def _cli(args) -> int:
     res = run_study(vols, kinds, out=args.out, n_initial=args.initial, n_iterations=args.iterations,
                     workers=args.workers, scheduler=args.scheduler, seed=args.seed, resolution=args.resolution,
                     progress=not args.json, log=None if args.json else print)
-    if args.json:
-        print(json.dumps(clean({"verdicts": res["verdicts"], "meta": res["meta"]}), indent=1))
-    else:
-        print(format_findings(res))
-        print(f"budget: {res['meta']['budget']['label']}; wrote {args.out}/{RESULT_FILE}, {RUNS_FILE} and figures")
-    return 0
+    return print_result(args.json, clean({"verdicts": res["verdicts"], "meta": res["meta"]}),
+                        lambda: f"{format_findings(res)}\nbudget: {res['meta']['budget']['label']}; wrote "
+                                f"{args.out}/{RESULT_FILE}, {RUNS_FILE} and figures")
