@@ -82,6 +82,12 @@ def test_emulator_angle_map_is_one_batched_prediction():
     np.testing.assert_allclose(run.strains, one[1:], rtol=1e-12)
     with pytest.warns(ExtrapolationWarning, match="edp"):
         emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=30.0, h=h)
+    # no θ given: the chapter's θ̃ (conditions.THETA_TILDE), as given explicitly
+    from lvcore.conditions import THETA_TILDE
+
+    default = emulator_angle_map(emu, endo, epi, edp_mmhg=10.0, h=h)
+    np.testing.assert_array_equal(default.lvv_ml, emulator_angle_map(emu, endo, epi, theta=THETA_TILDE,
+                                                                      edp_mmhg=10.0, h=h).lvv_ml)
     with pytest.raises(EmulatorError, match="5 PC scores"):
         emulator_angle_map(emu, endo, epi, h=[0.1])
     with pytest.raises(EmulatorError, match="fibre angles"):

@@ -307,8 +307,8 @@ def _emulator_runs(emulator, endo: np.ndarray, epi: np.ndarray, theta, edp_mmhg:
     if h.size < len(pcs):
         raise EmulatorError(f"emulator '{emulator.name}' needs {len(pcs)} PC scores, got {h.size}")
     theta = dict(conditions.THETA_TILDE if theta is None else theta)
-    conditions = {**theta, EDP_NAME: float(edp_mmhg), **dict(zip(pcs, h[:len(pcs)].tolist()))}
-    fwd = EmulatorForward(emulator, conditions, ANGLE_NAMES, f"emulator '{emulator.name}'")
+    fixed = {**theta, EDP_NAME: float(edp_mmhg), **dict(zip(pcs, h[:len(pcs)].tolist()))}
+    fwd = EmulatorForward(emulator, fixed, ANGLE_NAMES, f"emulator '{emulator.name}'")
     batch = fwd.evaluate({ANGLE_NAMES[0]: endo, ANGLE_NAMES[1]: epi})
     batch = ForwardBatch(batch.outputs, batch.converged, tuple(m or fwd.label for m in batch.messages))
     return _runs(endo, epi, batch)
