@@ -63,3 +63,33 @@ def test_command_line_helpers(capsys):
     assert json.loads(capsys.readouterr().out) == {"x": [1, None]}
     assert _common.print_result(False, {"x": 1}, lambda: "line one\nline two") == 0
     assert capsys.readouterr().out == "line one\nline two\n"
+
+
+def test_study_executor_is_none_in_process_and_closed_after_use(monkeypatch):
+    """No executor for one worker or a local forward model; otherwise make_executor's, closed on leaving (pending
+    tasks cancelled only after an error)."""
+    import lvcore.parallel
+
+    made = []
+
+    class Fake:
+        def __init__(self, workers=None, scheduler=None):
+            self.args, self.closed = (workers, scheduler), None
+            made.append(self)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, exc_type, *exc):
+            self.closed = "cancel" if exc_type is not None else "done"
+
+    monkeypatch.setattr(lvcore.parallel, "make_executor", Fake)
+    for workers, scheduler, local in ((1, None, False), (4, None, True), (2, "tcp://x:1", True)):
+        with _common.study_executor(workers, scheduler, local=local) as ex:
+            assert ex is None
+    assert not made
+    with _common.study_executor(2, None) as ex:
+        assert ex.args == (2, None)
+    with pytest.raises(RuntimeError), _common.study_executor(1, "tcp://x:1") as ex:
+        raise RuntimeError("a run failed")
+    assert [(m.args, m.closed) for m in made] == [((2, None), "done"), ((1, "tcp://x:1"), "cancel")]

@@ -2,6 +2,7 @@
 command line (simulator options, comma lists, printing a result)."""
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -161,3 +162,14 @@ def print_result(as_json: bool, payload: Mapping, text: Callable[[], str]) -> in
     """Print a study command's result: ``payload`` as indented JSON with ``--json``, else ``text()``; exit code 0."""
     print(json.dumps(payload, indent=1) if as_json else text())
     return 0
+
+
+def study_executor(workers: int, scheduler: str | None, *, local: bool = False):
+    """A context manager giving the executor of a study's simulator batches (:func:`lvcore.parallel.make_executor`,
+    closed on leaving; pending tasks cancelled after an error), or None where the batches run in this process: one
+    worker and no scheduler, or ``local`` (e.g. a test's own forward model)."""
+    if local or not (scheduler or workers > 1):
+        return contextlib.nullcontext()
+    from lvcore.parallel import make_executor
+
+    return make_executor(workers=workers, scheduler=scheduler)

@@ -51,7 +51,7 @@ from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 from lvcore.resources import asset_path
 from lvcore.studies import registry
 from lvcore.studies._common import (add_simulator_options, clean, comma_list, print_result, progress_bar,
-                                    save_figure, write_json_atomic)
+                                    save_figure, study_executor, write_json_atomic)
 
 #: Fibre angles (deg) of the fixed-angle mode (the chapter's Table 9.2): the simulator's default rule-based angles.
 FIXED_ANGLES = SIMULATOR_DEFAULT_ANGLES
@@ -359,13 +359,8 @@ def run_study(subjects: Sequence[str] | None = None, *, modes: Sequence[str] = M
     for m in modes:
         bo_space(m)
     state_dir = None if out is None else Path(out) / "state"
-    executor = None
-    if forward_factory is None and (scheduler or workers > 1):
-        from lvcore.parallel import make_executor
-
-        executor = make_executor(workers=workers, scheduler=scheduler)
     entries = []
-    try:
+    with study_executor(workers, scheduler, local=forward_factory is not None) as executor:
         for s in subs:
             for m in modes:
                 fwd = forward_factory(s, m) if forward_factory is not None else None
@@ -380,9 +375,6 @@ def run_study(subjects: Sequence[str] | None = None, *, modes: Sequence[str] = M
                         f"{e['seconds']:.0f} s")
                 if out is not None:  # partial results after every run
                     write_json_atomic(Path(out) / RESULT_FILE, clean(entries))
-    finally:
-        if executor is not None:
-            executor.close()
     if out is not None:
         write_outputs(entries, out, settings={"n_initial": n_initial, "n_iterations": n_iterations, "seed": seed,
                                               "refit_every": refit_every,

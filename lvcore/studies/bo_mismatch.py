@@ -49,7 +49,7 @@ from lvcore.exceptions import LVCoreError
 from lvcore.outputs import EDP_NAME, THETA_NAMES
 from lvcore.studies import bo_fibres, registry
 from lvcore.studies._common import (add_simulator_options, bootstrap_ci, clean, comma_list, print_result, save_figure,
-                                    write_json_atomic)
+                                    study_executor, write_json_atomic)
 
 #: Hidden angles of the ``angles`` kind (deg): far from the fixed pair, inside the free box.
 HIDDEN_ANGLES = (-30.0, 80.0)
@@ -191,13 +191,8 @@ def run_study(volunteers: Sequence[str] = DEFAULT_VOLUNTEERS, kinds: Sequence[st
     vols = bundled_volunteers(list(volunteers))
     out = Path(out)
     t0 = time.perf_counter()
-    executor = None
-    if forward_factory is None and (scheduler or workers > 1):
-        from lvcore.parallel import make_executor
-
-        executor = make_executor(workers=workers, scheduler=scheduler)
     runs = []
-    try:
+    with study_executor(workers, scheduler, local=forward_factory is not None) as executor:
         for kind in kinds:
             for v in vols:
                 d = make_data(v, kind, out, resolution=resolution, simulate=simulate, seed=seed)
@@ -220,9 +215,6 @@ def run_study(volunteers: Sequence[str] = DEFAULT_VOLUNTEERS, kinds: Sequence[st
                         f"{run['free']['lvv_abs_error_ml']:.2f} mL; common objective fixed "
                         f"{run['fixed']['objective_common_at_best']:.3g} / free {run['free']['objective_common_at_best']:.3g}; "
                         f"free angles ({run['free']['alpha_endo']:.0f}, {run['free']['alpha_epi']:.0f})")
-    finally:
-        if executor is not None:
-            executor.close()
     meta = {"study": "bo-mismatch", "label": "SYNTHETIC volunteers with a known model-data mismatch (F6 test)",
             "volunteers": [v.name for v in vols], "kinds": {k: KINDS[k] for k in kinds},
             "fixed_angles": list(bo_fibres.FIXED_ANGLES),
