@@ -82,8 +82,9 @@ def write_csv(path: Path, states: dict, strains_at=None, extra: dict | None = No
     return path
 
 
-def v20_posterior(out: Path, emulator, geometry_infer: bool) -> "np.ndarray | None":
-    """The model's V20 at every posterior draw: the Klotz prior's record, or the emulator at 20 mmHg."""
+def v20_posterior(out: Path, emulator, geometry_infer: bool):
+    """The model's V20 at every posterior draw (a numpy array, mL; None without a posterior): the Klotz prior's
+    record, or the emulator at 20 mmHg."""
     import arviz as az
     import jax
     import numpy as np
