@@ -17,6 +17,7 @@ MODULES = (
     "lvcore.emulator.model",
     "lvcore.emulator.forward",
     "lvcore.inference.calibrate",
+    "lvcore.inference.request",
     "lvcore.studies.sbc",
     "lvcore.studies.fibre_discrepancy",
     "lvcore.studies.operators",

@@ -10,7 +10,8 @@ end, and every subject x model), :mod:`~lvcore.inference.coverage`
 (credible-interval coverage check); around them :mod:`~lvcore.inference.segments`
 (AHA <-> lvcore strain segments), :mod:`~lvcore.inference.loaded_states` (further
 loaded states of a subject and the Klotz EDPVR prior), :mod:`~lvcore.inference.guards` (what
-``lvcore calibrate`` refuses) and :mod:`~lvcore.inference.plausibility`
+``lvcore calibrate`` refuses), :mod:`~lvcore.inference.request` (the whole set-up of one calibration, built once
+for the CLI and the app) and :mod:`~lvcore.inference.plausibility`
 (posterior-predictive check of the data). One calibration is
 ``lvcore.inference.calibrate.calibrate`` (the name ``calibrate`` here is the
 module). Names are imported on first use. The forward model is any JAX-traceable
@@ -31,6 +32,7 @@ _EXPORTS = {
     "aha_to_lvcore": "segments", "lvcore_to_aha": "segments", "to_lvcore": "segments",
     "GeometrySource": "guards", "resolve_geometry": "guards", "check_conditions": "guards",
     "check_inputs_in_box": "guards",
+    "CalibrationRequest": "request", "build_request": "request",
     "PlausibilityCheck": "plausibility", "posterior_predictive_check": "plausibility",
     "Convergence": "diagnostics", "posterior_predictive": "diagnostics", "to_inference_data": "diagnostics",
     "MODEL_NAMES": "models", "get_model": "models", "prior_bounds": "models",

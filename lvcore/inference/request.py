@@ -245,6 +245,26 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
     lvcore.exceptions.EmulatorError
         Conditions the emulator was trained at fixed values of, or inputs outside its training box without
         ``allow_extrapolation``.
+
+    Examples
+    --------
+    The bundled 'chapter' emulator at the mean shape (PC scores 0, scale 1): its own EDP and angles, no floor
+    (a mesh would get one), and a refusal naming what to fix outside its box:
+
+    >>> import numpy as np
+    >>> from lvcore.emulator.io import load_emulator
+    >>> from lvcore.inference.guards import GeometrySource
+    >>> emulator = load_emulator("chapter")
+    >>> request = build_request(emulator, "chapter", GeometrySource(np.zeros(5), "mean", "mean"))
+    >>> request.conditions["edp_mmhg"], request.edp_source, request.representation_error
+    (8.0, 'fixed by the emulator', None)
+    >>> request.forward({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}).shape   # LVV (mL) and 24 strains
+    (25,)
+    >>> build_request(emulator, "chapter", GeometrySource(np.array([2.5, 0, 0, 0, 0]), "h.json", "scores"),
+    ...               geometry_label="--geometry h.json")
+    Traceback (most recent call last):
+    ...
+    lvcore.exceptions.EmulatorError: --geometry h.json: the PC scores (or conditions) outside ... h1 = 2.5 (trained on [-2, 2])...
     """
     from lvcore.inference import guards
 
