@@ -132,3 +132,31 @@ def test_derived_pressures_option_is_checked(tmp_path, value):
 
     assert main(["calibrate", "--volunteer", "SYNTHETIC_HV2", "--derived-pressures", value,
                  "--out", str(tmp_path / "o")]) == 2
+
+
+def test_the_cli_table_and_the_app_panel_word_the_stress_alike():
+    """One wording of the stresses (derived.stress_phrases) in the CLI's table and the app's panel; a record
+    without the end-diastolic stretch gives the fixed-stretch phrase only."""
+    from lvcore.app.physiology_panel import summary_lines
+
+    def q(m):
+        return {"median": m, "q05": 0.9 * m, "q95": 1.1 * m}
+
+    combo = {"text": "log_a + log_b", "median": 0.1, "width90_factor": 1.5, "width90_log": 0.4}
+    record = {"stress": {"fixed_stretch": {"stretch": 1.1, "fibre_kpa": q(2.0), "cross_fibre_kpa": q(0.5)},
+                         "end_diastolic": {"stretch": q(1.08), "fibre_kpa": q(1.2), "cross_fibre_kpa": q(0.3)}},
+              "ridge": {"a_b": combo, "best": combo, "least": combo, "correlation_log_a_log_b": -0.5},
+              "edpvr": [{"pressure_mmhg": 0, "median": 50.0, "q05": 48.0, "q95": 52.0}],
+              "edpvr_check": {"edp_mmhg": 8.0, "emulator_to_fe_offset_ml": q(0.2), "source": "FE"},
+              "contraction": {"a": 0.5}, "weakly_identified": []}
+    phrases = derived.stress_phrases(record["stress"])
+    assert phrases == ["Cauchy stress at fibre stretch 1.10: fibre 2.00 kPa [1.80, 2.20]; cross-fibre 0.50 kPa "
+                       "[0.45, 0.55]", "At the mean end-diastolic fibre stretch 1.080 [0.972, 1.188]: fibre 1.20 kPa "
+                       "[1.08, 1.32]; cross-fibre 0.30 kPa [0.27, 0.33]"]
+    table = derived.text_table(record).splitlines()
+    assert [f"  {p}" for p in phrases] == [line for line in table if "fibre stretch" in line]
+    panel = [line for line in summary_lines(record) if "fibre stretch" in line]
+    assert [p.replace("**", "") for p in panel] == [f"{p}." for p in phrases]
+    assert panel[0].startswith("**Cauchy stress at fibre stretch 1.10**:")
+    del record["stress"]["end_diastolic"]
+    assert derived.stress_phrases(record["stress"]) == phrases[:1]

@@ -181,19 +181,15 @@ def check_text(record: Mapping) -> tuple[str, str]:
 def summary_lines(record: Mapping) -> list[str]:
     """The derived quantities in words (markdown bullets, each "median [equal-tailed 90 % interval]"): the identified
     combination, the stress, the emulator-to-FE offset."""
+    from lvcore.inference.derived import stress_phrases
+
     rg, st_, c = record["ridge"], record["stress"], record["edpvr_check"]
     ab, best = rg["a_b"], rg["best"]
     lines = [f"**Identified combination** (matrix pair): {ab['text']} = {ab['median']:.2f} (90 % width a factor "
              f"{ab['width90_factor']:.2f}); best-determined over all four: {best['text']} = {best['median']:.2f} "
              f"(90 % width a factor {best['width90_factor']:.2f}). corr(log a, log b) "
              f"{rg['correlation_log_a_log_b']:+.2f}."]
-    fs = st_["fixed_stretch"]
-    lines.append(f"**Cauchy stress at fibre stretch {fs['stretch']:.2f}**: fibre {_q(fs['fibre_kpa'], ' kPa', 2)}; "
-                 f"cross-fibre {_q(fs['cross_fibre_kpa'], ' kPa', 2)}.")
-    if "end_diastolic" in st_:
-        e = st_["end_diastolic"]
-        lines.append(f"**At the mean end-diastolic fibre stretch** {_q(e['stretch'], '', 3)}: fibre "
-                     f"{_q(e['fibre_kpa'], ' kPa', 2)}; cross-fibre {_q(e['cross_fibre_kpa'], ' kPa', 2)}.")
+    lines += [f"{phrase}." for phrase in stress_phrases(st_, lambda heading: f"**{heading}**")]
     lines.append(f"**Emulator-to-FE offset** at {c['edp_mmhg']:g} mmHg (FE volume − emulated volume, same draws): "
                  f"{_q(c['emulator_to_fe_offset_ml'], ' mL')}; {c['source']}.")
     return lines

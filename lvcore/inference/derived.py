@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -541,7 +541,8 @@ def check_flags(record: Mapping) -> list[str]:
 
 __all__ = ["EDPVR_PRESSURES_MMHG", "N_DERIVED_DRAWS", "default_draws", "FIXED_FIBRE_STRETCH", "WEAK_CONTRACTION", "LoadPath",
            "DerivedDraws", "log_uniform_moments", "contraction", "ridge", "fe_load_path", "stress_summary",
-           "quantiles", "posterior_draws", "thinned_indices", "predictive_interval", "derive", "check_flags", "text_table", "summary_rows"]
+           "quantiles", "posterior_draws", "thinned_indices", "predictive_interval", "derive", "check_flags", "text_table", "summary_rows",
+           "format_interval", "stress_phrases"]
 
 
 def text_table(record: Mapping) -> str:
@@ -557,14 +558,7 @@ def text_table(record: Mapping) -> str:
         lines.append(f"  measured EDV {c['measured_edv_ml']:.1f} mL at {c['edp_mmhg']:g} mmHg: "
                      f"{'inside' if c['inside'] else 'OUTSIDE'} the EDPVR's 99 % predictive interval "
                      f"[{lo:.1f}, {hi:.1f}]; emulator-to-FE offset {c['emulator_to_fe_offset_ml']['median']:+.2f} mL")
-    st = record["stress"]
-    fs = st["fixed_stretch"]
-    lines.append(f"  Cauchy stress at fibre stretch {fs['stretch']:.2f}: fibre {_q(fs['fibre_kpa'])} kPa, "
-                 f"cross-fibre {_q(fs['cross_fibre_kpa'])} kPa")
-    if "end_diastolic" in st:
-        e = st["end_diastolic"]
-        lines.append(f"  at the mean end-diastolic fibre stretch {_q(e['stretch'], 3)}: fibre {_q(e['fibre_kpa'])} "
-                     f"kPa, cross-fibre {_q(e['cross_fibre_kpa'])} kPa")
+    lines += [f"  {phrase}" for phrase in stress_phrases(record["stress"])]
     rg = record["ridge"]
     lines.append(f"  best-determined combination: {rg['best']['text']} = {rg['best']['median']:.2f} "
                  f"(90 % width {rg['best']['width90_log']:.2f}, a factor {rg['best']['width90_factor']:.2f})")
@@ -587,6 +581,23 @@ def format_interval(q: Mapping, digits: int = 2, unit: str = "") -> str:
 
 
 _q = format_interval
+
+
+def stress_phrases(stress: Mapping, emphasis: Callable[[str], str] = str) -> list[str]:
+    """The Cauchy stresses of a derived record (``record["stress"]``) in words, one phrase per stretch: at the fixed
+    fibre stretch and, where recorded, at the mean end-diastolic one (medians and equal-tailed 90 % intervals, kPa).
+    ``emphasis`` marks each phrase's heading (the app's panel: markdown bold); the CLI's table and the panel both
+    use these phrases."""
+    def values(q: Mapping) -> str:
+        return f"fibre {_q(q['fibre_kpa'], 2, ' kPa')}; cross-fibre {_q(q['cross_fibre_kpa'], 2, ' kPa')}"
+
+    fs = stress["fixed_stretch"]
+    heading = f"Cauchy stress at fibre stretch {fs['stretch']:.2f}"
+    out = [f"{emphasis(heading)}: {values(fs)}"]
+    if "end_diastolic" in stress:
+        e = stress["end_diastolic"]
+        out.append(f"{emphasis('At the mean end-diastolic fibre stretch')} {_q(e['stretch'], 3)}: {values(e)}")
+    return out
 
 
 def summary_rows(record: Mapping) -> list[dict]:
