@@ -78,8 +78,10 @@ class Design:
         return self.points.shape[0]
 
     def cases(self, resolution: str = "default") -> list[dict]:
-        """Simulator case dictionaries, one per row."""
-        return [self.space.case(row, resolution) for row in self.points]
+        """Simulator case dictionaries, one per row (:func:`lvcore.mechanics.case_inputs.space_case`)."""
+        from lvcore.mechanics.case_inputs import space_case
+
+        return [space_case(self.space, row, resolution) for row in self.points]
 
 
 def unit_design(method: str, n: int, dim: int, seed: int) -> np.ndarray:
