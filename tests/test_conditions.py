@@ -104,6 +104,9 @@ def test_no_second_home_for_angle_pairs_material_values_or_the_case_writer():
     assert _defined(r"\b0\.69\b") == ["lvcore/conditions.py"]
     # the one writer of cases from named inputs
     assert _defined(r"^def build_case\(") == ["lvcore/mechanics/case_inputs.py"]
+    # and lvcore itself uses neither through its old home (the shims are for users' code)
+    assert _defined(r"from lvcore\.core\.space import [^\n]*\bbuild_case|\bunits\.HO_FIXED|from lvcore\.units import "
+                    r"[^\n]*HO_FIXED|self\.space\.case\(") == []
     # labels derive σ_S's value from conditions.SIGMA_S (docstrings may quote the chapter)
     label = re.compile(r"σ_S ?/ ?0\.03|truth 0\.03|noise 0\.03")
     assert [f"{p.relative_to(ROOT)}:{n.lineno}" for p in SOURCES for n in _strings_outside_docstrings(p)
