@@ -258,7 +258,8 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
     >>> request = build_request(emulator, "chapter", GeometrySource(np.zeros(5), "mean", "mean"))
     >>> request.conditions["edp_mmhg"], request.edp_source, request.representation_error
     (8.0, 'fixed by the emulator', None)
-    >>> request.forward({"a": 0.6, "b": 1.3, "af": 1.0, "bf": 3.6}).shape   # LVV (mL) and 24 strains
+    >>> from lvcore.conditions import THETA_TILDE
+    >>> request.forward(THETA_TILDE).shape   # LVV (mL) and 24 strains at the chapter's θ̃
     (25,)
     >>> build_request(emulator, "chapter", GeometrySource(np.array([2.5, 0, 0, 0, 0]), "h.json", "scores"),
     ...               geometry_label="--geometry h.json")
