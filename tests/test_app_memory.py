@@ -157,6 +157,23 @@ def test_warmup_is_skipped_with_a_note_when_memory_is_short(monkeypatch, fresh_s
     assert "warm-up skipped" in capsys.readouterr().err
 
 
+def test_calibration_room_counts_the_samplers_still_to_compile(fresh_status):
+    """A calibration needs its run's memory plus one compile per likelihood the warm-up has not compiled; short of
+    that the app is told why (the room, the cap) and what to do, before a compile could abort the server."""
+    both = ("iid", "discrepancy")
+    run, stage = warmup.CALIBRATION_RUN_BYTES / memory.GiB, warmup.STAGE_BYTES / memory.GiB
+    assert warmup.calibration_room(both, _short(run + 2 * stage + 0.05)()) is None
+    why = warmup.calibration_room(both, _short(run + 2 * stage - 0.05)())
+    assert why.startswith("memory is short") and "compiling the iid and discrepancy samplers" in why
+    assert "4.0 GB address-space limit" in why and "more memory" in why
+    fresh_status.update(state="done", stages={"load": 1.0, "iid": 2.0, "best fit": 1.0, "discrepancy": 3.0})
+    assert warmup.calibration_room(both, _short(run + 0.05)()) is None   # both compiled by the warm-up
+    fresh_status.update(state="partial", stages={"load": 1.0, "iid": 2.0, "best fit": 1.0})
+    why = warmup.calibration_room(both, _short(run + stage - 0.05)())
+    assert "compiling the discrepancy sampler" in why and "iid" not in why.split("compiling")[1].split(",")[0]
+    assert warmup.calibration_room(("iid",), _short(run + 0.05)()) is None
+
+
 def test_warmup_stops_after_the_stages_that_fit(monkeypatch, fresh_status):
     """Room for the data and the first likelihood (and its best fit), not for the second: partial, with a note."""
     from lvcore.inference import samplers, verdict

@@ -67,6 +67,41 @@ def check_room(stage: str, need: float = STAGE_BYTES, reserve: float = RESERVE_B
                             f"{(need + reserve) / memory.GiB:.1f} GB for itself and the users ({mem.text()})")
 
 
+#: Address space a calibration adds besides compiling its samplers (bytes): its draws, the verdict's checks and
+#: the result figures. Measured 2026-12-02 (2-core machine, under ``ulimit -v`` 4 GB): a 1-chain 100 + 100 run of
+#: both likelihoods with the discrepancy sampler compiled on the click took the server from 3.05 to 3.44 GB,
+#: of which the compile is :data:`STAGE_BYTES` at most; rounded up.
+CALIBRATION_RUN_BYTES = 0.25 * memory.GiB
+
+
+def calibration_room(models, state: "memory.MemoryState | None" = None) -> str | None:
+    """Why a calibration of likelihoods ``models`` cannot start in this process now, or None when it can.
+
+    It needs :data:`CALIBRATION_RUN_BYTES` plus :data:`STAGE_BYTES` for each likelihood whose sampler the warm-up
+    has not compiled (:data:`STATUS`); a compile that runs out of address space aborts the whole server (LLVM
+    cannot allocate section memory), so the app checks before it starts, not after.
+
+    Parameters
+    ----------
+    models : sequence of str
+        The likelihoods chosen.
+    state : MemoryState, optional
+        The memory now (default :func:`lvcore.app.memory.state`).
+    """
+    mem = memory.state() if state is None else state
+    compiled = set(STATUS.get("stages") or {}) if STATUS.get("state") in ("done", "partial", "skipped") else set()
+    to_compile = [m for m in models if m not in compiled]
+    need = CALIBRATION_RUN_BYTES + STAGE_BYTES * len(to_compile)
+    if mem.headroom >= need:
+        return None
+    what = f", compiling the {' and '.join(to_compile)} sampler{'s' if len(to_compile) > 1 else ''}" if to_compile \
+        else ""
+    return (f"memory is short on this server: a calibration needs about {need / memory.GiB:.1f} GB{what}, and "
+            f"{mem.headroom / memory.GiB:.1f} GB is left ({mem.text()}). Choose fewer likelihoods, wait for other "
+            "sessions' calibrations to finish, or start the server with more memory (at least a 4 GB address "
+            "space: docs/reliability.md).")
+
+
 def enabled() -> bool:
     """False when ``LVCORE_APP_WARMUP`` is ``0``/``off``/``false``."""
     return os.environ.get(ENV, "1").strip().lower() not in ("0", "off", "false", "no")
@@ -178,5 +213,5 @@ def start() -> bool:
         return True
 
 
-__all__ = ["ENV", "MODELS", "STAGE_BYTES", "RESERVE_BYTES", "STATUS", "ShortOfMemory", "enabled", "check_room",
-           "warm", "note", "start"]
+__all__ = ["ENV", "MODELS", "STAGE_BYTES", "RESERVE_BYTES", "CALIBRATION_RUN_BYTES", "STATUS", "ShortOfMemory",
+           "enabled", "check_room", "calibration_room", "warm", "note", "start"]
