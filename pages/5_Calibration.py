@@ -171,7 +171,8 @@ def _worker(job: dict, models, config):
     try:
         for m in models:
             step(m, cal.calibrate_subjects, [(job["subject"], request.y, request.forward)], [m], config=config,
-                 sigma_v=request.sigma_v, infer_angles=request.infer_angles, progress=progress, on_result=lambda item: job["results"].__setitem__(item.model, item.result))
+                 sigma_v=request.sigma_v, infer_angles=request.infer_angles, progress=progress,
+                 on_result=lambda item: job["results"].__setitem__(item.model, item.result))
         # the verdict's best fit, after the samplers: the results render with it (the banner needs it)
         progress("verdict: best fit of volume and strains", 1.0)
         step("best fit", _consistency, job)
