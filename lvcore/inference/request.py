@@ -269,17 +269,7 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
     """
     from lvcore.inference import guards
 
-    if representation_error not in ("floor", "off"):
-        raise ValueError(f"representation_error must be 'floor' or 'off', got {representation_error!r}")
-    bound = bool(getattr(emulator, "is_subject", False))
-    inferred = isinstance(geometry, str) and geometry.strip().lower() == INFER
-    if bound and inferred:
-        raise EmulatorError(f"the '{emulator_name}' emulator is subject-specific: its geometry is bound in, so "
-                            "there is none to infer; choose a shape-model emulator (e.g. 'chapter') for the no-mesh "
-                            "route")
-    if not (bound or inferred) and geometry is None:
-        raise DataError("no geometry: give the subject's mesh or PC scores ('mean' for the mean shape, knowingly), "
-                        "or infer it from the geometric measures")
+    bound, inferred = _geometry_route(emulator, emulator_name, geometry, representation_error)
     cond = guards.check_conditions(emulator, edp_mmhg, alpha_endo, alpha_epi, infer_angles=infer_angles)
     _check_states(emulator, emulator_name, row, prior)
     if row is not None:
@@ -308,6 +298,22 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
         infer_angles=bool(infer_angles), allow_extrapolation=bool(allow_extrapolation),
         base=str(getattr(emulator, "base", "clamped")), resolution=str(getattr(emulator, "resolution", "default")),
         sigma_v=float(sigma_v), sigma_ref=DEFAULT_SIGMA_REF if sigma_ref is None else float(sigma_ref))
+
+
+def _geometry_route(emulator, name: str, geometry, representation_error: str) -> tuple[bool, bool]:
+    """``(bound, inferred)``: the geometry is bound into a subject-specific emulator, or sampled with θ; a route
+    the emulator cannot take, no geometry at all, or an unknown floor mode is refused."""
+    if representation_error not in ("floor", "off"):
+        raise ValueError(f"representation_error must be 'floor' or 'off', got {representation_error!r}")
+    bound = bool(getattr(emulator, "is_subject", False))
+    inferred = isinstance(geometry, str) and geometry.strip().lower() == INFER
+    if bound and inferred:
+        raise EmulatorError(f"the '{name}' emulator is subject-specific: its geometry is bound in, so there is none "
+                            "to infer; choose a shape-model emulator (e.g. 'chapter') for the no-mesh route")
+    if not (bound or inferred) and geometry is None:
+        raise DataError("no geometry: give the subject's mesh or PC scores ('mean' for the mean shape, knowingly), "
+                        "or infer it from the geometric measures")
+    return bound, inferred
 
 
 def _edp_source(row, edp_mmhg, emulator) -> str:
