@@ -20,6 +20,7 @@ import jax.numpy as jnp
 
 from lvcore import limits, units
 from lvcore.bounded_cache import BoundedCache
+from lvcore.jax_cache import exported_kernel
 from lvcore.exceptions import CaseError, GeometryError, SolverError
 from lvcore.outputs import N_OUTPUTS, THETA_NAMES
 from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables
@@ -226,27 +227,28 @@ def prepare_case(case) -> PreparedCase:
             raise CaseError("probes", str(exc)) from None
     v_ref = out_args = None
     if mesh.kind == "lv":
-        v_ref = float(_cavity_volume(jnp.asarray(mesh.nodes), *_volume_args(mesh)))
+        v_ref = float(_cavity_volume(jax.device_put(mesh.nodes), *_volume_args(mesh)))
         check_reference_volumes(mesh, v_ref)
         op = observables.strain_operator(mesh, case.outputs.strain_layer)
-        out_args = (jnp.asarray(mesh.nodes),) + _volume_args(mesh) + (
-            jnp.asarray(op.connectivity), jnp.asarray(op.dNdX), jnp.asarray(op.e_c), jnp.asarray(op.weights))
+        # jax.device_put, not jnp.asarray: the latter compiles a small program per shape (~20 ms each a process)
+        out_args = (jax.device_put(mesh.nodes),) + _volume_args(mesh) + tuple(
+            jax.device_put(a) for a in (op.connectivity, op.dNdX, op.e_c, op.weights))
     prep = PreparedCase(mesh, system, v_ref, elem_p, xi_p, out_args)
     _PREPARED.put(key, prep)
     return prep
 
 
 def _volume_args(mesh: FEMesh):
-    return jnp.asarray(mesh.surfaces["endocardium"]), jnp.asarray(float(mesh.base_z))
+    return jax.device_put(mesh.surfaces["endocardium"]), jax.device_put(float(mesh.base_z))
 
 
-@jax.jit
+@exported_kernel
 def _cavity_volume(x, faces, base_z):
     """Cavity volume (mm³), compiled once per topology (see :func:`loads.cavity_volume`)."""
     return loads.cavity_volume(x, faces, base_z)
 
 
-@jax.jit
+@exported_kernel
 def _outputs(u_full, X, faces, base_z, connectivity, dNdX, e_c, weights):
     """The 25 outputs ``[LVV (mL), 24 strains]`` of a full displacement vector.
 
@@ -339,7 +341,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         def output_fn(u_full):
             return _outputs(u_full, *out_args)
 
-        y = np.asarray(output_fn(jnp.asarray(u)))
+        y = np.asarray(output_fn(jax.device_put(u)))
         vol = (v_ref, float(y[0]) * units.MM3_PER_ML)
         strains = y[1:]
         standardised = vol[1] / v_ref

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from lvcore.jax_cache import exported_kernel
 from lvcore.mechanics import loads, robin
 from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern, upper_triangle
 from lvcore.mechanics.element import element_residual, element_tangent
@@ -84,7 +85,7 @@ def _external_stiffness(data, x, pressure, potential):
     return jax.vmap(jax.jacfwd(loads.follower_force), in_axes=(0, None))(xf, pressure).reshape(-1, 27, 27)
 
 
-@partial(jax.jit, static_argnames=("potential", "energy"))
+@exported_kernel(static_argnames=("potential", "energy"))
 def _residual(u, p, pressure, model, data, potential, energy=True):
     x = data["X"] + u.reshape(-1, 3)
     r_u, r_p, mj, w = _map_elements(element_residual, data, x, p, model, energy=energy)
@@ -100,14 +101,14 @@ def _spring_forces(data, u):
     return jnp.einsum("mij,mj->mi", data["spring_K"], uf).reshape(-1, 9, 3)
 
 
-@partial(jax.jit, static_argnames=("potential",))
+@exported_kernel(static_argnames=("potential",))
 def _external_load(pressure, data, potential):
     """The external nodal forces (mN) in the reference configuration, (n_nodes, 3)."""
     x = data["X"]
     return jnp.zeros_like(x).at[data["faces"]].add(_external_forces(data, x, pressure, potential))
 
 
-@partial(jax.jit, static_argnames=("potential", "triangle"))
+@exported_kernel(static_argnames=("potential", "triangle"))
 def _tangent(u, p, pressure, model, data, potential, triangle=False):
     """Condensed residual, element tangents (n_el, 6, 27, 27), load-face stiffnesses (f, 27, 27), D, r_p.
 
@@ -195,20 +196,21 @@ class DiscreteSystem:
         self._triangle_pattern = partial(_pattern_cached, *pattern_args, triangle=True) if self.potential else None
         self.spring_faces, self.spring_K = spring_faces, spring_K
         self.wdet = wdet
+        # jax.device_put, not jnp.asarray: the latter compiles a small program per shape (~20 ms each a process)
         self.data = {
-            "X": jnp.asarray(mesh.nodes),
-            "elements": jnp.asarray(elements),
-            "Jinv": jnp.asarray(Jinv),
-            "dNdxi": jnp.asarray(dNdxi),
-            "wdet": jnp.asarray(wdet),
-            "frames": jnp.asarray(frames),
-            "Minv": jnp.asarray(np.linalg.inv(M)),
-            "P": jnp.asarray(P),
-            "faces": jnp.asarray(faces),
-            "base_z": jnp.asarray(float(mesh.base_z) if mesh.base_z is not None else 0.0),
-            "scale": jnp.asarray(scale),
-            "spring_faces": jnp.asarray(spring_faces),
-            "spring_K": jnp.asarray(spring_K),
+            "X": jax.device_put(mesh.nodes),
+            "elements": jax.device_put(elements),
+            "Jinv": jax.device_put(Jinv),
+            "dNdxi": jax.device_put(dNdxi),
+            "wdet": jax.device_put(wdet),
+            "frames": jax.device_put(frames),
+            "Minv": jax.device_put(np.linalg.inv(M)),
+            "P": jax.device_put(P),
+            "faces": jax.device_put(faces),
+            "base_z": jax.device_put(float(mesh.base_z) if mesh.base_z is not None else 0.0),
+            "scale": jax.device_put(scale),
+            "spring_faces": jax.device_put(spring_faces),
+            "spring_K": jax.device_put(spring_K),
         }
         self.free = self.pattern.free
         self._shared = {}  # values computed once per system, shared by its with_model copies
