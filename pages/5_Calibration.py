@@ -11,6 +11,7 @@ import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
 from lvcore.app import freshness, physiology_panel
+from lvcore.app import warmup as app_warmup
 from lvcore.app.subject_prepare import floor_caption
 from lvcore.app.tables import summary_view
 from lvcore.app.controls import (DEFAULT_SUBJECT, chosen_index, conditions_text, disabled_hint, remember_choice,
@@ -187,11 +188,13 @@ def _worker(job: dict, models, config):
               + ", ".join(f"{k} {a:.1f}-{b:.1f} s" for k, (a, b) in timings.items()), file=sys.stderr, flush=True)
 
 
+room = app_warmup.calibration_room(models)   # a compile short of memory would abort the server: checked first
 blocked = why_disabled(
     (data is None, "no measurements yet: choose a bundled volunteer or upload a measured CSV (LVV + 24 strains)."),
     (h is None, "no geometry yet: upload the subject's PC scores or template mesh too (the emulator needs its shape)."),
     (not models, "no likelihood chosen: pick at least one under Likelihood(s)."),
-    (job is not None and not job["done"], "a calibration is running; its results appear below when it is done."))
+    (job is not None and not job["done"], "a calibration is running; its results appear below when it is done."),
+    (room is not None, room))
 run_clicked = st.button("Run calibration", type="primary", disabled=blocked is not None, help=blocked)
 disabled_hint(blocked)
 if run_clicked:

@@ -7,6 +7,7 @@ import streamlit as st
 
 from lvcore.units import rms_mm_from_mse_cm2
 from lvcore.app import freshness, physiology_panel, subject_emulator_panel, subject_flow as flow
+from lvcore.app import warmup as app_warmup
 from lvcore.app.tables import number_column, summary_view
 from lvcore.app.controls import chosen_index, conditions_text, disabled_hint, remember_choice, shared_inputs, why_disabled
 from lvcore.conditions import SIMULATOR_DEFAULT_EDP_MMHG
@@ -213,12 +214,14 @@ settings = {"geometry": "infer" if inferred else geometry_name, "units": units,
             "reference_volume_ml": ref_volume or None, "measures": measures,
             "subject": None if data is None else data.subject, "emulator": emu_name, "edp_mmhg": float(edp),
             "models": list(models), "chains": int(chains), "warmup": int(warmup), "draws": int(draws)}
+room = app_warmup.calibration_room(models)   # a compile short of memory would abort the server: checked first
 blocked = why_disabled(
     (data is None, "no measurements yet: upload LVV + 24 strains in step 2 (or pick a bundled example in step 1)."),
     (prepared is None and (inferred or geometry is not None),
      "the model is not ready: see the message in steps 1–3 (e.g. an EDP the emulator does not take)."),
     (prepared is None, "no geometry yet: upload a mesh or PC scores in step 1, or choose \"No mesh: infer it\"."),
-    (not models, "no likelihood chosen: pick at least one in step 3."))
+    (not models, "no likelihood chosen: pick at least one in step 3."),
+    (room is not None, room))
 clicked = st.button("Run calibration", type="primary", key="my_run", disabled=blocked is not None, help=blocked)
 disabled_hint(blocked)
 if clicked:

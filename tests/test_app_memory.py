@@ -244,3 +244,27 @@ def test_app_survives_simulations_under_a_4gb_cap_with_the_warmup_on():
     assert out["warmup"] in ("running", "done", "partial"), out
     assert out["peak"] < 0.85 * CAP_BYTES, f"address space peaked at {out['peak'] / memory.GiB:.2f} GB"
     assert "LLVM ERROR" not in proc.stderr and "bad_alloc" not in proc.stderr
+
+
+@pytest.mark.parametrize("page", ["5_Calibration.py", "8_My_subject.py"])
+def test_run_calibration_is_greyed_out_with_the_reason_when_memory_is_short(page, monkeypatch, fresh_status):
+    """Short of room for the samplers' compile (which would abort the server) the page's "Run calibration" button is
+    disabled and says why under it; with room it is not held back for memory."""
+    from streamlit.testing.v1 import AppTest
+
+    from lvcore.resources import pages_dir
+
+    monkeypatch.setattr(memory, "state", _short(0.3))
+    at = AppTest.from_file(str(pages_dir() / page), default_timeout=180).run()
+    assert not at.exception, [e.value for e in at.exception]
+    hints = [c.value for c in at.caption if c.value.startswith("Disabled:")]
+    button = next(b for b in at.button if b.label == "Run calibration")
+    assert button.disabled
+    if page == "5_Calibration.py":   # a bundled volunteer is chosen: memory is the only reason left
+        assert hints == [f"Disabled: {warmup.calibration_room(warmup.MODELS, _short(0.3)())}"], hints
+        assert "memory is short" in hints[0] and "0.3 GB is left" in hints[0]
+        monkeypatch.setattr(memory, "state", _short(3.0))
+        at.run()
+        assert not next(b for b in at.button if b.label == "Run calibration").disabled
+    else:   # no measurements yet come first; the memory check is in the list too
+        assert hints and "no measurements yet" in hints[0]
