@@ -9,10 +9,12 @@ prints a markdown table of wall and CPU time (user + system, the command and eve
 campaign workers included), median of ``--repeats``:
 
 * ``lvcore --help``: the first call of this benchmark, and then the median of the further calls;
-* ``lvcore campaign run`` of a ``--rows``-row Sobol design over the ``material`` space (``default`` mesh,
-  default workers: one per core), **first run**: JAX's persistent compilation cache empty (a new
-  ``LVCORE_JAX_CACHE`` folder per repeat), so every program is traced and compiled; **second run**: the
-  same command again with the cache the first run filled (what every later campaign of a user gets).
+* ``lvcore campaign run`` of a ``--rows``-row Sobol design over the ``material`` space (``default`` mesh),
+  default options (16 rows or fewer: in this process, cold), **first run**: JAX's persistent compilation cache
+  empty (a new ``LVCORE_JAX_CACHE`` folder per repeat), so every program is traced and compiled; **second run**:
+  the same command again with the cache the first run filled (what every later campaign of a user gets); then
+  the second run with ``--workers 2`` (two spawned workers), and with the exported kernels off
+  (``LVCORE_JAX_EXPORT=0``: every process traces and lowers the simulator's kernels), see :data:`VARIANTS`.
 
 Every row states the sparse solver the simulator uses here and the load average before it (``uptime``):
 the machine is shared, so compare rows of one run.
@@ -32,6 +34,19 @@ from pathlib import Path
 from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
 
 pin_threads()  # before numpy is imported
+
+
+#: The campaign runs of one repeat, in order: (extra options, extra environment, an untimed run first). The
+#: first starts with an empty compilation cache (a new ``LVCORE_JAX_CACHE`` folder per repeat).
+VARIANTS = {
+    "first run (empty compilation cache), default options": ([], {}, False),
+    "second run (the cache the first filled), default options": ([], {}, False),
+    "second run, `--workers 2`": (["--workers", "2"], {}, False),
+    "second run, `--workers 2 --chained` (the default options before 12-02)": (["--workers", "2", "--chained"], {},
+                                                                               False),
+    "second run, exported kernels off (`LVCORE_JAX_EXPORT=0`; after an untimed run that fills the cache)":
+        ([], {"LVCORE_JAX_EXPORT": "0"}, True),
+}
 
 
 def _load() -> str:
@@ -84,16 +99,18 @@ def main(argv=None) -> int:
         design = tmp / "design.csv"
         timed([exe, "design", "sobol", "--space", "material", "--n", str(args.rows), "--seed", "1",
                "--out", str(design)])
-        first_runs, second_runs, loads = [], [], []
-        for k in range(args.repeats):  # first and second runs alternate, so a drift of the load hits both
+        runs = {k: [] for k in VARIANTS}
+        loads = []
+        for k in range(args.repeats):  # the variants alternate, so a drift of the load hits all of them
             cache = {"LVCORE_JAX_CACHE": str(tmp / f"cache{k}")}
             loads.append(_load())
-            first_runs.append(timed([exe, "campaign", "run", str(design), "--out", str(tmp / f"a{k}.h5"),
-                                     "--no-progress"], cache))
-            second_runs.append(timed([exe, "campaign", "run", str(design), "--out", str(tmp / f"b{k}.h5"),
-                                      "--no-progress"], cache))
-        row(f"{args.rows}-row campaign, first run (empty compilation cache)", first_runs, " → ".join(loads))
-        row(f"{args.rows}-row campaign, second run (the cache the first filled)", second_runs, " → ".join(loads))
+            for name, (extra, env, warm_up) in VARIANTS.items():
+                cmd = [exe, "campaign", "run", str(design), "--no-progress", *extra, "--out"]
+                if warm_up:  # untimed: fills the cache for this variant's programs
+                    timed(cmd + [str(tmp / f"{k}-{len(runs[name])}-warm.h5")], {**cache, **env})
+                runs[name].append(timed(cmd + [str(tmp / f"{k}-{len(runs[name])}.h5")], {**cache, **env}))
+        for name, samples in runs.items():
+            row(f"{args.rows}-row campaign, {name}", samples, " → ".join(loads))
 
     print(f"lvcore: {exe}; python {sys.version.split()[0]}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print("| what | wall s (median) | CPU s, all processes (median) | wall s, each run | sparse solver | load before |")

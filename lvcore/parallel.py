@@ -293,6 +293,40 @@ class DaskExecutor:
         self.close(cancel=exc_type is not None)
 
 
+class InProcessExecutor:
+    """Tasks run in this process, one after another, when submitted: no worker start-up.
+
+    For work too small to repay starting worker processes (each spawned worker imports the simulator and loads
+    its compiled kernels, about 2 CPU-s, before its first task): a small campaign
+    (:data:`lvcore.campaigns.runner.IN_PROCESS_MAX_ROWS`). A task's exception is kept in its future, as a pool's.
+    """
+
+    workers = 1
+
+    def describe(self) -> str:
+        return "this process (no worker processes)"
+
+    def submit(self, fn, *args):
+        done = cf.Future()
+        try:
+            done.set_result(fn(*args))
+        except Exception as err:  # noqa: BLE001 - handed to the caller through the future, as a pool does
+            done.set_exception(err)
+        return done
+
+    def as_completed(self, futures):
+        return iter(list(futures))
+
+    def close(self, cancel: bool = False) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def make_executor(workers: int | None = None, scheduler: str | None = None):
     """The executor the CLI asks for: Dask if ``scheduler`` is given, else local processes."""
     if scheduler:

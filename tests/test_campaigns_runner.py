@@ -97,3 +97,27 @@ def test_real_simulator_rows_at_fast_resolution(tmp_path):
     assert np.all(np.abs(c.outputs[1, 1:]) < np.abs(c.outputs[0, 1:]))    # ... and smaller strains
     assert np.all(c.seconds > 0) and len(set(c.versions)) == 1 and c.versions[0].startswith(lvcore.__version__ + "+src.")
 
+
+
+def test_small_campaigns_run_in_this_process_unless_workers_are_given():
+    from lvcore.campaigns.runner import IN_PROCESS_MAX_ROWS, choose_executor
+    from lvcore.parallel import InProcessExecutor, LocalExecutor
+
+    assert isinstance(choose_executor(IN_PROCESS_MAX_ROWS), InProcessExecutor)
+    for n, workers in ((IN_PROCESS_MAX_ROWS + 1, None), (1, 2), (1, 1)):  # more rows, or --workers given
+        with choose_executor(n, workers) as ex:  # no worker starts before a task is submitted
+            assert isinstance(ex, LocalExecutor) and ex.workers == (workers or default_workers())
+
+
+@pytest.mark.parametrize("chained, rows, expect_chains", [(None, 6, False), (None, 8, True), (True, 6, True),
+                                                          (False, 8, False)])
+def test_chains_from_chain_min_rows_when_not_chosen(tmp_path, monkeypatch, chained, rows, expect_chains):
+    from lvcore.campaigns import runner
+
+    monkeypatch.setattr(runner, "CHAIN_MIN_ROWS", 8)  # the rule, on the test double's cheap rows
+    design = make_design(get_space("material"), "sobol", rows, seed=3)
+    s = run_campaign(design, tmp_path / "s.h5", forward=campaign_double.NAME, progress=False, chained=chained)
+    c = read_store(tmp_path / "s.h5")
+    assert s.converged == rows  # ran in this process (at most IN_PROCESS_MAX_ROWS rows, no workers given)
+    assert bool(np.all(c.chain >= 0)) == expect_chains and bool(np.all(c.chain == -1)) == (not expect_chains)
+    np.testing.assert_allclose(c.outputs, [closed_form(*r) for r in design.points], rtol=1e-12)

@@ -53,7 +53,7 @@ def test_sigkill_then_resume_loses_nothing_and_runs_nothing_twice(tmp_path):
     store_path, log = tmp_path / "s.h5", tmp_path / "exec.log"
     env = _env(LVCORE_TEST_EXEC_LOG=log, LVCORE_TEST_SLEEP=0.15)
     proc = subprocess.Popen(
-        _cli("campaign", "run", str(dpath), "--out", str(store_path), "--workers", "2",
+        _cli("campaign", "run", str(dpath), "--out", str(store_path), "--workers", "2", "--chained",
              "--forward", DOUBLE, "--no-progress"),
         env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )
@@ -79,7 +79,7 @@ def test_sigkill_then_resume_loses_nothing_and_runs_nothing_twice(tmp_path):
     assert 6 <= done_before.size < design.n, "the kill must land mid-campaign"
     n_log_before = len(_log_events(log))
 
-    res = subprocess.run(_cli("campaign", "resume", str(store_path), "--workers", "2", "--no-progress"),
+    res = subprocess.run(_cli("campaign", "resume", str(store_path), "--workers", "2", "--chained", "--no-progress"),
                          env=env, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr[-2000:]
     assert "pending 0" in res.stdout
@@ -98,7 +98,7 @@ def test_sigkill_then_resume_loses_nothing_and_runs_nothing_twice(tmp_path):
     started_after = Counter(k for ev, k in _log_events(log)[n_log_before:] if ev == "start")
     assert not set(started_after) & {keys[i] for i in done_before}
     assert started_after == Counter(keys[i] for i in pending_before)
-    # both runs were warm-started continuation chains (the default): rows started from neighbours' states
+    # both runs were warm-started continuation chains (--chained): rows started from neighbours' states
     events = [ev for ev, _ in _log_events(log)]
     assert events[:n_log_before].count("warm") > 0 and events[n_log_before:].count("warm") > 0
 

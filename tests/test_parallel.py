@@ -174,3 +174,14 @@ def test_this_test_process_blas_follows_the_variables():
         var = LIBRARY_VARIABLES.get(lib["internal_api"])
         if var and os.environ.get(var, "").isdigit():
             assert lib["num_threads"] == int(os.environ[var]), lib
+
+
+def test_in_process_executor_runs_each_task_when_submitted():
+    from lvcore.parallel import InProcessExecutor
+
+    with InProcessExecutor() as ex:
+        assert ex.workers == 1 and "this process" in ex.describe()
+        futures = [ex.submit(pow, 2, k) for k in range(4)] + [ex.submit(int, "not a number")]
+        assert all(f.done() for f in futures)  # run at submit
+        assert [f.result() for f in list(ex.as_completed(futures))[:4]] == [1, 2, 4, 8]
+        assert isinstance(futures[-1].exception(), ValueError)  # kept in the future, as a pool does

@@ -4,7 +4,7 @@ from __future__ import annotations
 from lvcore import cli_args, limits
 from lvcore.campaigns.designs import METHODS, make_design, save_design
 from lvcore.campaigns.space import SPACE_NAMES, get_space
-from lvcore.campaigns.runner import RESOLUTIONS
+from lvcore.campaigns.runner import CHAIN_MIN_ROWS, IN_PROCESS_MAX_ROWS, RESOLUTIONS
 
 
 def register(subparsers) -> None:
@@ -68,12 +68,17 @@ def _add_run_options(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=cli_args.workers, default=None,
                    help=f"local worker processes, 1 to 4 per core ({cli_args.max_local_workers()} here; "
-                        "default: one per core)")
+                        f"default: none for at most {IN_PROCESS_MAX_ROWS} rows to run, which run in this process, "
+                        "else one per core)")
     g.add_argument("--scheduler", default=None,
                    help="Dask scheduler address tcp://HOST:PORT instead of local workers (default: none)")
-    p.add_argument("--cold", action="store_true",
-                   help="solve every row cold, one task per row (default: warm-started continuation chains of "
-                        "nearby rows, split across the workers; same results within the solver tolerance)")
+    how = p.add_mutually_exclusive_group()
+    how.add_argument("--cold", action="store_const", const=False, dest="chained",
+                     help="solve every row cold, one task per row (default: cold below "
+                          f"{CHAIN_MIN_ROWS} rows to run, where chains cost more, else --chained)")
+    how.add_argument("--chained", action="store_const", const=True, dest="chained",
+                     help="warm-started continuation chains of nearby rows, split across the workers; same "
+                          f"results within the solver tolerance (default: from {CHAIN_MIN_ROWS} rows to run)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -90,7 +95,7 @@ def _run(args) -> int:
 
     summary = run_campaign(args.design, args.out, workers=args.workers, scheduler=args.scheduler,
                            resolution=args.resolution, forward=args.forward or DEFAULT_FORWARD,
-                           progress=not args.no_progress, chained=not args.cold)
+                           progress=not args.no_progress, chained=args.chained)
     print(summary.format())
     return 0
 
@@ -99,7 +104,7 @@ def _resume(args) -> int:
     from lvcore.campaigns.runner import resume_campaign
 
     summary = resume_campaign(args.store, workers=args.workers, scheduler=args.scheduler,
-                              retry_failed=args.retry_failed, progress=not args.no_progress, chained=not args.cold)
+                              retry_failed=args.retry_failed, progress=not args.no_progress, chained=args.chained)
     print(summary.format())
     return 0
 

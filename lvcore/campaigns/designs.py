@@ -33,7 +33,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import qmc
 
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
@@ -103,6 +102,9 @@ def unit_design(method: str, n: int, dim: int, seed: int) -> np.ndarray:
                             f"of {limits.MAX_DESIGN_VALUES:,} (lvcore.limits.MAX_DESIGN_VALUES); use fewer points")
     if not 0 <= int(seed) <= 2 ** 32 - 1:
         raise CampaignError(f"design seed must be an integer from 0 to 2^32 - 1, got {str(seed)[:40]}")
+    # imported here: scipy.stats costs ~0.8 CPU-s to import, and reading a design (every campaign worker) needs none
+    from scipy.stats import qmc
+
     if method == "sobol":
         sampler = qmc.Sobol(d=dim, scramble=True, seed=seed)
         with warnings.catch_warnings():

@@ -45,11 +45,24 @@ from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_
 from lvcore.exceptions import CampaignError
 from lvcore.mechanics import forward as _simulator_forward  # noqa: F401 - registers the default forward "simulator"
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, recorded_resolution
-from lvcore.parallel import make_executor
+from lvcore.parallel import InProcessExecutor, make_executor
 
 #: The real simulator.
 DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
 RESOLUTIONS = RESOLUTION_PRESET_NAMES
+
+#: A campaign with at most this many rows to run, and neither ``workers`` nor a scheduler given, runs in this
+#: process (:class:`~lvcore.parallel.InProcessExecutor`): each spawned worker first imports the simulator and
+#: loads its compiled kernels (≈ 2.2 CPU-s, measured), more than it saves on so few rows (a cold ``default`` row
+#: ≈ 0.3 CPU-s); on a loaded machine, where CPU time is wall time, the workers' start-up is all loss.
+#: BENCHMARKS.md row 61 has both measured. ``--workers N`` given explicitly always starts N workers.
+IN_PROCESS_MAX_ROWS = 16
+#: ``chained=None`` (the CLI's default): continuation chains for at least this many rows to run, else one cold
+#: solve per row. Fewer rows lie too far apart in the design's cube for a neighbour's state to be a good start:
+#: most warm starts are then re-solved cold, and chains cost more than cold solves. Measured in one process
+#: (Sobol over ``material``, ``default`` mesh, CPU-s in all, imports included): 16 rows 7.8 cold vs 12.2 chained,
+#: 32 rows 12.0 vs 23.9, 64 rows 20.1 vs 41.8, 128 rows 45.7 vs 47.2 (BENCHMARKS.md row 61).
+CHAIN_MIN_ROWS = 128
 
 _VERSION: list[str] = []
 
@@ -250,7 +263,8 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
 
 def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int | None = None,
                  scheduler: str | None = None, resolution: str = "default", forward: str = DEFAULT_FORWARD,
-                 progress: bool = True, executor=None, overwrite: bool = False, chained: bool = True) -> StoreSummary:
+                 progress: bool = True, executor=None, overwrite: bool = False,
+                 chained: bool | None = True) -> StoreSummary:
     """Run every row of ``design`` and record the results in a new store ``out``.
 
     Parameters
@@ -260,7 +274,8 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
     out : path
         The HDF5 store to create (refuses to overwrite unless ``overwrite``).
     workers : int, optional
-        Local worker processes (default one per core).
+        Local worker processes (default: none for at most :data:`IN_PROCESS_MAX_ROWS` rows, which run in this
+        process, else one per core; see :func:`choose_executor`).
     scheduler : str, optional
         ``tcp://HOST:PORT`` of a Dask scheduler; overrides ``workers``.
     resolution : a preset name of :data:`lvcore.mechanics.resolution.RESOLUTION_PRESET_NAMES`
@@ -271,10 +286,11 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
     executor : optional
         An executor object (see :mod:`lvcore.parallel`) to use
         instead of creating one; it is not closed.
-    chained : bool
+    chained : bool or None
         Run the rows as warm-started continuation chains of nearby rows split
         across the workers (:mod:`lvcore.chains`; the default), or
-        each row cold in its own task. Both give the same results within the
+        each row cold in its own task; None: chains for at least
+        :data:`CHAIN_MIN_ROWS` rows to run, else cold (the CLI's default). Both give the same results within the
         solver tolerance.
 
     Returns
@@ -336,7 +352,7 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
 
 def resume_campaign(store_path: str | Path, *, workers: int | None = None, scheduler: str | None = None,
                     retry_failed: bool = False, progress: bool = True, executor=None,
-                    chained: bool = True) -> StoreSummary:
+                    chained: bool | None = True) -> StoreSummary:
     """Run the rows of an existing store that are not committed yet.
 
     With ``retry_failed`` the failed rows are run again too (their previous
@@ -357,14 +373,25 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
         return store.summary()
 
 
+def choose_executor(n_rows: int, workers: int | None = None, scheduler: str | None = None):
+    """The executor of a campaign with ``n_rows`` rows to run: this process when the campaign is small and the
+    user chose neither workers nor a scheduler (:data:`IN_PROCESS_MAX_ROWS`), else
+    :func:`lvcore.parallel.make_executor` (``workers`` local processes, default one per core, or Dask)."""
+    if workers is None and not scheduler and n_rows <= IN_PROCESS_MAX_ROWS:
+        return InProcessExecutor()
+    return make_executor(workers=workers, scheduler=scheduler)
+
+
 def _run_with(store, rows, executor, workers, scheduler, forward, progress, allow_rerecord=False, chained=True):
     if rows.size == 0:
         return
+    if chained is None:
+        chained = rows.size >= CHAIN_MIN_ROWS
     if executor is not None:
         _drive(store, rows, executor, forward=forward, progress=progress, allow_rerecord=allow_rerecord,
                chained=chained)
         return
-    with make_executor(workers=workers, scheduler=scheduler) as ex:
+    with choose_executor(rows.size, workers, scheduler) as ex:
         if progress:
             how = "warm-started continuation chains" if chained else "cold, one task per row"
             print(f"lvcore campaign: {rows.size} row(s) on {ex.describe()}, {how}", file=sys.stderr)
