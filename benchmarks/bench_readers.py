@@ -5,9 +5,9 @@ shape as a volumetric tet mesh (VTU), times
 
 * ``in-process``: the reader as before those defences (``lvcore.geometry.surfaces._read_surface`` /
   ``meshio.read``) in this process;
-* ``header check``: :func:`lvcore.headers.check_mesh_header` alone;
+* ``header check``: :func:`lvcore.safety.headers.check_mesh_header` alone;
 * ``checked + child``: the public reader (``read_surface`` / ``read_meshio_file``): size and header
-  checks, then the parse in a forked child with ``RLIMIT_AS`` (:mod:`lvcore.isolation`);
+  checks, then the parse in a forked child with ``RLIMIT_AS`` (:mod:`lvcore.safety.isolation`);
 * and the time from upload to error for the two files that crashed VTK (169-byte PLY, 33-byte OBJ).
 
 Prints a table of medians over ``--repeat`` runs (default 7)::
@@ -50,11 +50,11 @@ def main(argv=None) -> None:
     import meshio
     import pyvista as pv
 
-    from lvcore import limits
+    from lvcore.safety import limits
     from lvcore.exceptions import GeometryError
     from lvcore.geometry.io import read_meshio_file
     from lvcore.geometry.surfaces import _read_surface, read_surface
-    from lvcore.headers import check_mesh_header
+    from lvcore.safety.headers import check_mesh_header
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     import hostile_files as hf

@@ -1,4 +1,4 @@
-"""Peak memory of one solve against the mesh size: the data behind lvcore.limits.BYTES_PER_ELEMENT.
+"""Peak memory of one solve against the mesh size: the data behind lvcore.safety.limits.BYTES_PER_ELEMENT.
 
 Run one resolution per process (peak RSS is per process)::
 

@@ -7,10 +7,17 @@ import JAX itself (``lvcore --help`` and commands that never compute start in a
 fraction of a second): where JAX is not imported yet, both settings go into the
 environment variables JAX reads when it is imported (``JAX_ENABLE_X64``,
 ``JAX_COMPILATION_CACHE_DIR``, ...), which worker processes inherit too.
+
+Modules that moved into a subpackage keep their old import paths for a while
+(``lvcore.limits`` is ``lvcore.safety.limits``, with a ``DeprecationWarning``;
+:data:`lvcore._exports.MOVED_MODULES` lists them).
 """
 from __future__ import annotations
 
+from lvcore._exports import install_moved_modules
 from lvcore.jax_cache import enable_compilation_cache, enable_x64
+
+install_moved_modules()
 
 enable_x64()
 enable_compilation_cache()

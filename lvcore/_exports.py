@@ -7,15 +7,29 @@ subpackage never creates import cycles between layers.
 
 Names that moved keep working for a while: :func:`moved_names` gives a module
 the ``__getattr__`` that forwards an old name to its new home with a
-``DeprecationWarning``, and :func:`renamed_keywords` lets a function accept a
-keyword's old spelling the same way.
+``DeprecationWarning``, :func:`renamed_keywords` lets a function accept a
+keyword's old spelling the same way, and :func:`install_moved_modules` (called
+by ``lvcore/__init__.py``) lets the old import path of a module that moved into
+a subpackage (:data:`MOVED_MODULES`) import the module at its new path.
 """
 from __future__ import annotations
 
 import functools
 import importlib
+import importlib.abc
+import importlib.machinery
+import sys
 import warnings
 from typing import Callable, Mapping
+
+#: Modules that moved into a subpackage: old import path -> new one. ``import lvcore.limits`` (or
+#: ``from lvcore import limits``) still works and gives the module at its new path, with a ``DeprecationWarning``
+#: that names it (:func:`install_moved_modules`).
+MOVED_MODULES = {
+    "lvcore.headers": "lvcore.safety.headers",
+    "lvcore.isolation": "lvcore.safety.isolation",
+    "lvcore.limits": "lvcore.safety.limits",
+}
 
 
 def lazy_exports(package: str, namespace: dict, exports: Mapping[str, str],
@@ -101,3 +115,39 @@ def renamed_keywords(**renamed: str) -> Callable:
         return wrapper
 
     return decorate
+
+
+class _MovedModuleFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Import finder and loader for the old paths of :data:`MOVED_MODULES`: the module itself, at its new path.
+
+    The old path's entry in ``sys.modules`` and its attribute on the parent package are the new module object
+    (one module, one state: patching either name patches both).
+    """
+
+    def __init__(self, moved: Mapping[str, str]):
+        self.moved = dict(moved)
+
+    def find_spec(self, fullname, path=None, target=None):
+        if fullname not in self.moved:
+            return None
+        return importlib.machinery.ModuleSpec(fullname, self)
+
+    def create_module(self, spec):
+        new = self.moved[spec.name]
+        warnings.warn(f"the module {spec.name} moved to {new}; import {new}", DeprecationWarning, stacklevel=2)
+        module = importlib.import_module(new)
+        spec.loader_state = module.__spec__  # the import system sets __spec__ to the old path's: put it back
+        return module
+
+    def exec_module(self, module):
+        module.__spec__ = module.__spec__.loader_state
+
+
+def install_moved_modules(moved: Mapping[str, str] = MOVED_MODULES) -> None:
+    """Let the old import paths of ``moved`` (old -> new module name) import the moved modules.
+
+    Idempotent: a finder is put first on ``sys.meta_path`` once per process (``lvcore/__init__.py`` calls this,
+    so any ``import lvcore.<old>`` finds it, the package being imported first).
+    """
+    if not any(isinstance(f, _MovedModuleFinder) for f in sys.meta_path):
+        sys.meta_path.insert(0, _MovedModuleFinder(moved))

@@ -14,8 +14,8 @@ import math
 import os
 from pathlib import Path
 
-from lvcore.limits import MAX_ECHO_CHARS as ECHO_CHARS
-from lvcore.limits import echo
+from lvcore.safety.limits import MAX_ECHO_CHARS as ECHO_CHARS
+from lvcore.safety.limits import echo
 #: Largest seed accepted (numpy, scipy.stats.qmc and JAX all take a non-negative 32-bit integer).
 MAX_SEED = 2 ** 32 - 1
 

@@ -40,4 +40,4 @@ class ForwardError(LVCoreError, ValueError):
 
 
 class LimitError(LVCoreError, ValueError):
-    """An input exceeds a limit of :mod:`lvcore.limits` (size, count, memory) or is not a regular file."""
+    """An input exceeds a limit of :mod:`lvcore.safety.limits` (size, count, memory) or is not a regular file."""

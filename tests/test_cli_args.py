@@ -8,7 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from lvcore import cli_args, limits
+from lvcore import cli_args
+from lvcore.safety import limits
 from lvcore.cli import _all_parsers, build_parser, main
 
 
@@ -90,7 +91,7 @@ def test_memory_estimate_is_an_admission_check_under_ulimit():
     """100 x 100 x 1 passed every limit (10 GB estimated, half the RAM) and died at 4 GB under a 4 GB limit."""
     import hostile_files as hf
 
-    code = ("from lvcore import limits\nfrom lvcore.exceptions import LimitError\n"
+    code = ("from lvcore.safety import limits\nfrom lvcore.exceptions import LimitError\n"
             "try:\n    limits.check_mesh_size((100, 100, 1))\n    print('ACCEPTED')\n"
             "except LimitError as e:\n    print('REFUSED', e)\n")
     res = hf.run_limited(code, limit_kb=4_000_000)

@@ -343,8 +343,8 @@ def test_fuzz_store_layout(good_store, edit, key, value):
 
 # --------------------------------------------------------------------------- binary formats with declared sizes (issue 28)
 # Generated headers declare counts from 0 to 10^12; the bodies hold a few items at most. Every reader
-# must parse or raise an LVCoreError; the header checks (lvcore.headers) refuse before allocating, and the
-# mesh parsers run in a child capped at 1 GB here (lvcore.isolation), so memory stays bounded whatever
+# must parse or raise an LVCoreError; the header checks (lvcore.safety.headers) refuse before allocating, and the
+# mesh parsers run in a child capped at 1 GB here (lvcore.safety.isolation), so memory stays bounded whatever
 # the example declares.
 #: The binary-format fuzzers below: 10 examples each in CI (each surface example forks a VTK reader).
 BINARY = settings(max_examples=int(10 * SCALE), deadline=None, suppress_health_check=list(HealthCheck), database=None)
@@ -355,7 +355,7 @@ small_floats = st.lists(st.sampled_from(["0", "1", "-1", "2.5", "30", "nan", "1e
 
 @pytest.fixture
 def capped_reader(monkeypatch):
-    from lvcore import limits
+    from lvcore.safety import limits
 
     monkeypatch.setattr(limits, "MAX_READER_MEMORY_BYTES", 1024 ** 3)
 

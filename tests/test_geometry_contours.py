@@ -170,7 +170,7 @@ def test_huge_contour_is_refused_fast(good, tmp_path):
 
 
 def test_too_many_points_in_all_are_refused(good, monkeypatch):
-    from lvcore import limits
+    from lvcore.safety import limits
 
     monkeypatch.setattr(limits, "MAX_CONTOUR_POINTS", 100)
     with pytest.raises(GeometryError, match="MAX_CONTOUR_POINTS"):

@@ -301,7 +301,7 @@ def test_box_preset_on_a_needle_is_refused():
 
 
 def test_too_many_probes():
-    from lvcore import limits
+    from lvcore.safety import limits
 
     Case.from_dict(_edit(LAND2, ("probes",), [[0, 0, -17]] * limits.MAX_PROBES))
     with pytest.raises(CaseError, match="probes.*MAX_PROBES"):

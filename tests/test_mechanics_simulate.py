@@ -164,7 +164,7 @@ def test_land_problem2_benchmark_is_not_flagged():
 
 def test_a_cavity_inflated_more_than_5_times_is_flagged_at_any_pressure():
     """The flattened ellipsoid of the report went from 2.6 to 187 mL (71.7 times) at 10 kPa without a word."""
-    from lvcore import limits
+    from lvcore.safety import limits
     from lvcore.mechanics.simulate import plausibility_warnings
 
     assert limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE == 5.0

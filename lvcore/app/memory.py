@@ -112,7 +112,7 @@ def _read_number(path) -> float:
 def available_bytes() -> float:
     """Memory the kernel can still give this process (bytes): ``MemAvailable``, and the room under a cgroup v2
     ``memory.max`` when the process runs in a memory-limited cgroup; ``inf`` where neither is known."""
-    from lvcore.limits import mem_available_bytes
+    from lvcore.safety.limits import mem_available_bytes
 
     room = mem_available_bytes()
     try:

@@ -1,7 +1,8 @@
 """``lvcore design ...`` and ``lvcore campaign run|status|resume``."""
 from __future__ import annotations
 
-from lvcore import cli_args, limits
+from lvcore import cli_args
+from lvcore.safety import limits
 from lvcore.campaigns.designs import METHODS, make_design, save_design
 from lvcore.campaigns.space import SPACE_NAMES, get_space
 from lvcore.campaigns.runner import CHAIN_MIN_ROWS, IN_PROCESS_MAX_ROWS, RESOLUTIONS
@@ -16,7 +17,7 @@ def register(subparsers) -> None:
     p.add_argument("method", choices=METHODS, help="sobol (scrambled), lhs, random, or exp (the chapter's exp-warped LHS)")
     p.add_argument("--space", required=True, choices=SPACE_NAMES, help="named parameter space (see lvcore.campaigns.space)")
     p.add_argument("--n", type=cli_args.int_in(1, limits.MAX_DESIGN_POINTS), required=True,
-                   help=f"number of design points, 1 to {limits.MAX_DESIGN_POINTS:,} (lvcore.limits.MAX_DESIGN_POINTS; "
+                   help=f"number of design points, 1 to {limits.MAX_DESIGN_POINTS:,} (lvcore.safety.limits.MAX_DESIGN_POINTS; "
                         "also the most rows `lvcore campaign run` accepts)")
     p.add_argument("--seed", type=cli_args.seed, required=True, help="random seed, an integer from 0 to 2^32 - 1")
     p.add_argument("--pcs", type=cli_args.int_in(0, 20), default=None,

@@ -86,20 +86,20 @@ class Design:
 def unit_design(method: str, n: int, dim: int, seed: int) -> np.ndarray:
     """``(n, dim)`` points in [0, 1) from one of :data:`METHODS` (``exp`` = LHS).
 
-    ``n`` and ``n x dim`` are checked against :data:`lvcore.limits.MAX_DESIGN_POINTS` and
-    :data:`~lvcore.limits.MAX_DESIGN_VALUES` before anything is drawn, so every design written
-    here can be read back by ``lvcore campaign run`` (:data:`~lvcore.limits.MAX_DESIGN_BYTES`).
+    ``n`` and ``n x dim`` are checked against :data:`lvcore.safety.limits.MAX_DESIGN_POINTS` and
+    :data:`~lvcore.safety.limits.MAX_DESIGN_VALUES` before anything is drawn, so every design written
+    here can be read back by ``lvcore campaign run`` (:data:`~lvcore.safety.limits.MAX_DESIGN_BYTES`).
     """
-    from lvcore import limits
+    from lvcore.safety import limits
 
     if n < 1:
         raise CampaignError(f"a design needs n >= 1 points, got {n}")
     if n > limits.MAX_DESIGN_POINTS:
         raise CampaignError(f"a design of {n:,} points is more than the limit of {limits.MAX_DESIGN_POINTS:,} "
-                            "(lvcore.limits.MAX_DESIGN_POINTS); split the campaign")
+                            "(lvcore.safety.limits.MAX_DESIGN_POINTS); split the campaign")
     if n * dim > limits.MAX_DESIGN_VALUES:
         raise CampaignError(f"a design of {n:,} points x {dim} parameters = {n * dim:,} values is more than the limit "
-                            f"of {limits.MAX_DESIGN_VALUES:,} (lvcore.limits.MAX_DESIGN_VALUES); use fewer points")
+                            f"of {limits.MAX_DESIGN_VALUES:,} (lvcore.safety.limits.MAX_DESIGN_VALUES); use fewer points")
     if not 0 <= int(seed) <= 2 ** 32 - 1:
         raise CampaignError(f"design seed must be an integer from 0 to 2^32 - 1, got {str(seed)[:40]}")
     # imported here: scipy.stats costs ~0.8 CPU-s to import, and reading a design (every campaign worker) needs none
@@ -195,13 +195,13 @@ def load_design(path: str | Path) -> Design:
         columns that do not match its space, non-numeric or missing values,
         out-of-order row numbers or points outside the space's bounds.
     """
-    from lvcore import limits
+    from lvcore.safety import limits
 
     path = Path(path)
     lines = limits.read_text_file(path, limits.MAX_DESIGN_BYTES, "design file", CampaignError).splitlines()
     if len(lines) > limits.MAX_DESIGN_POINTS + 2:
         raise CampaignError(f"design file '{path}' has {len(lines) - 2:,} rows, more than the limit of "
-                            f"{limits.MAX_DESIGN_POINTS:,} (lvcore.limits.MAX_DESIGN_POINTS)")
+                            f"{limits.MAX_DESIGN_POINTS:,} (lvcore.safety.limits.MAX_DESIGN_POINTS)")
     where = f"design file '{path}'"
     if not lines or not lines[0].startswith(HEADER_TAG):
         raise CampaignError(f"{where}: first line must be '{HEADER_TAG.strip()} {{...}}' (write designs with `lvcore design`)")

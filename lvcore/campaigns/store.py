@@ -30,7 +30,7 @@ import h5py
 import numpy as np
 
 import lvcore
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.campaigns.designs import Design
 from lvcore.campaigns.store_format import (CONVERGED, FAILED, FORMAT, FORMAT_VERSION, PENDING, PROVENANCE,
                                           REASON_LEN, START_COLD, START_NAMES, START_RESOLVED, START_WARM,

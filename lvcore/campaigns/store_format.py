@@ -56,7 +56,7 @@ import h5py
 import numpy as np
 
 import lvcore
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
 from lvcore.outputs import N_OUTPUTS
@@ -150,7 +150,7 @@ def layout_problem(h5: h5py.File) -> str | None:
         return f"attribute 'space' is not a parameter space ({type(err).__name__}: {str(err)[:200]})"
     if len(space.names) > limits.MAX_DESIGN_DIMENSIONS:
         return (f"its space has {len(space.names)} parameters, more than the limit of "
-                f"{limits.MAX_DESIGN_DIMENSIONS} (lvcore.limits.MAX_DESIGN_DIMENSIONS)")
+                f"{limits.MAX_DESIGN_DIMENSIONS} (lvcore.safety.limits.MAX_DESIGN_DIMENSIONS)")
     n = None
     for name, tail in DATASETS.items():
         if name not in h5 or not isinstance(h5[name], h5py.Dataset):
@@ -161,7 +161,7 @@ def layout_problem(h5: h5py.File) -> str | None:
         n = shape[0] if n is None else n
         if n > limits.MAX_DESIGN_POINTS:  # checked before any dataset is read into memory
             return (f"dataset '{name}' declares {n:,} rows, more than the limit of {limits.MAX_DESIGN_POINTS:,} "
-                    "(lvcore.limits.MAX_DESIGN_POINTS)")
+                    "(lvcore.safety.limits.MAX_DESIGN_POINTS)")
         expect = (n, len(space.names)) if name == "inputs" else (n,) + tail
         if shape != expect:
             return f"dataset '{name}' has shape {shape}, expected {expect}"

@@ -195,7 +195,7 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
     meta_path, net_path = directory / "metadata.json", directory / "network.npz"
     if not meta_path.is_file() or not net_path.is_file():
         raise EmulatorError(f"emulator directory '{directory}' needs metadata.json and network.npz")
-    from lvcore import limits
+    from lvcore.safety import limits
 
     meta = limits.read_json_file(meta_path, limits.MAX_EMULATOR_BYTES, "emulator metadata", EmulatorError)
     if not isinstance(meta, dict):
@@ -205,9 +205,9 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
         raise EmulatorError(f"'{meta_path}' lacks key(s) {missing}")
     if meta["format"] != FORMAT or int(meta["format_version"]) > FORMAT_VERSION:
         raise EmulatorError(f"'{meta_path}': unsupported format {meta['format']!r} v{meta['format_version']}")
-    from lvcore.headers import load_npz
+    from lvcore.safety.headers import load_npz
 
-    # every array header is checked against the limits before numpy allocates (lvcore.headers)
+    # every array header is checked against the limits before numpy allocates (lvcore.safety.headers)
     arrays = load_npz(net_path, limits.MAX_EMULATOR_BYTES, "emulator network", EmulatorError)
     try:
         network = from_arrays(arrays)
@@ -334,8 +334,8 @@ def load_validation(name_or_path: str | Path) -> dict | None:
     path = resolve_emulator_dir(name_or_path) / "validation.npz"
     if not path.is_file():
         return None
-    from lvcore import limits
-    from lvcore.headers import load_npz
+    from lvcore.safety import limits
+    from lvcore.safety.headers import load_npz
 
     return load_npz(path, limits.MAX_EMULATOR_BYTES, "emulator validation arrays", EmulatorError)
 

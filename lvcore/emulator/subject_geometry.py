@@ -12,7 +12,7 @@ from typing import Mapping
 
 import numpy as np
 
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import GeometryError
 from lvcore.outputs import THETA_NAMES
 

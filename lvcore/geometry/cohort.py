@@ -406,8 +406,8 @@ def _load_npz_json(stem: Path):
     if not jpath.exists() or not npath.exists():
         raise GeometryError(f"'{npath}' / '{jpath.name}' not found; build them with `python scripts/build_cohort.py`")
     meta = json.loads(jpath.read_text())
-    from lvcore import limits
-    from lvcore.headers import load_npz
+    from lvcore.safety import limits
+    from lvcore.safety.headers import load_npz
 
     arrays = load_npz(npath, limits.MAX_SHAPE_MODEL_BYTES, "cohort arrays", GeometryError)
     return meta, arrays

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import GeometryError
 
 SCHEMA = "lvcore.contours/1"
@@ -178,7 +178,7 @@ def contours_from_dict(data, source: str = "<dict>") -> ContourStack:
                             f"({{'name': ..., 'endo': [[x,y,z],...], 'epi': [[x,y,z],...]}}), got {type(la_in).__name__}")
     if len(slices_in) + len(la_in) > limits.MAX_CONTOUR_SLICES:
         raise GeometryError(f"{where}: {len(slices_in)} slices and {len(la_in)} long-axis views are more than the "
-                            f"limit of {limits.MAX_CONTOUR_SLICES} (lvcore.limits.MAX_CONTOUR_SLICES)")
+                            f"limit of {limits.MAX_CONTOUR_SLICES} (lvcore.safety.limits.MAX_CONTOUR_SLICES)")
     total = 0
     for i, s in enumerate(list(slices_in) + list(la_in)):
         if isinstance(s, dict):
@@ -187,7 +187,7 @@ def contours_from_dict(data, source: str = "<dict>") -> ContourStack:
                     total += len(s[key])
     if total > limits.MAX_CONTOUR_POINTS:
         raise GeometryError(f"{where}: {total:,} contour points in all is more than the limit of "
-                            f"{limits.MAX_CONTOUR_POINTS:,} (lvcore.limits.MAX_CONTOUR_POINTS); resample the contours")
+                            f"{limits.MAX_CONTOUR_POINTS:,} (lvcore.safety.limits.MAX_CONTOUR_POINTS); resample the contours")
     for key in ("patient", "operator"):
         if data.get(key) is not None and not isinstance(data[key], (str, int, float)):
             raise GeometryError(f"{where}: '{key}' must be a string, got {type(data[key]).__name__}")
@@ -256,7 +256,7 @@ def _points(value, where: str, scale: float) -> np.ndarray:
         raise GeometryError(f"{where}: points must be a list of [x, y, z] numbers, got {type(value).__name__}")
     if len(value) > limits.MAX_POINTS_PER_CONTOUR:
         raise GeometryError(f"{where}: {len(value):,} points is more than the limit of "
-                            f"{limits.MAX_POINTS_PER_CONTOUR:,} per contour (lvcore.limits.MAX_POINTS_PER_CONTOUR); "
+                            f"{limits.MAX_POINTS_PER_CONTOUR:,} per contour (lvcore.safety.limits.MAX_POINTS_PER_CONTOUR); "
                             "resample the contour")
     if not isinstance(value, np.ndarray) and any(
             not isinstance(p, (list, tuple)) or any(isinstance(v, (bool, str)) or v is None for v in p)

@@ -148,10 +148,10 @@ def units_warnings(res, units: str = "mm", option: str = "--units") -> list[str]
     Returns
     -------
     list of str
-        One warning when the cavity exceeds :data:`lvcore.limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML` or the
-        length exceeds :data:`lvcore.limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM`; empty otherwise.
+        One warning when the cavity exceeds :data:`lvcore.safety.limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML` or the
+        length exceeds :data:`lvcore.safety.limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM`; empty otherwise.
     """
-    from lvcore import limits
+    from lvcore.safety import limits
 
     if not (res.cavity_volume_ml > limits.PLAUSIBLE_MAX_FITTED_CAVITY_ML
             or res.length_mm > limits.PLAUSIBLE_MAX_FITTED_LENGTH_MM):

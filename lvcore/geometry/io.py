@@ -187,7 +187,7 @@ def read_meshio_file(path, what: str, max_bytes: int, hint: str):
     what : str
         What the file is, for messages (e.g. ``"template mesh"``).
     max_bytes : int
-        Size limit (:mod:`lvcore.limits`).
+        Size limit (:mod:`lvcore.safety.limits`).
     hint : str
         What to do instead, appended to the message when meshio cannot read it.
 
@@ -195,13 +195,13 @@ def read_meshio_file(path, what: str, max_bytes: int, hint: str):
     -------
     meshio.Mesh
     """
-    from lvcore import limits
-    from lvcore.headers import check_mesh_header
-    from lvcore.isolation import run_isolated
+    from lvcore.safety import limits
+    from lvcore.safety.headers import check_mesh_header
+    from lvcore.safety.isolation import run_isolated
 
     path = limits.check_regular_file(path, max_bytes, what, GeometryError)
     check_mesh_header(path, what, GeometryError)
-    # parsed in a memory-limited child: a crafted file cannot crash or exhaust the caller (lvcore.isolation)
+    # parsed in a memory-limited child: a crafted file cannot crash or exhaust the caller (lvcore.safety.isolation)
     return run_isolated(_meshio_read, path, what, hint, what=what, path=path, error=GeometryError)
 
 
@@ -246,7 +246,7 @@ def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndar
         the template, has non-finite coordinates, looks like it is in metres or
         centimetres, or has inverted elements.
     """
-    from lvcore import limits
+    from lvcore.safety import limits
 
     mesh = read_meshio_file(path, "template mesh", limits.MAX_MESH_BYTES,
                             "write it with `lvcore geometry fit ... --out MESH.vtu` or write_template_mesh()")

@@ -3,7 +3,7 @@
 Used wherever a user gives a geometry by its scores: calibration
 (:mod:`lvcore.inference.calibrate`, the app's Calibration page) and subject
 emulators (:mod:`lvcore.emulator.subject`). Every read goes through the
-limits of :mod:`lvcore.limits`; a bad file is a :class:`GeometryError`
+limits of :mod:`lvcore.safety.limits`; a bad file is a :class:`GeometryError`
 naming it.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import GeometryError
 from lvcore.outputs import is_pc_name
 
@@ -129,9 +129,9 @@ def project_mesh(path: Path, n_pc: int | None = None, with_scale: bool = False):
 
     if path.suffix.lower() in (".npy", ".npz"):
         try:
-            from lvcore.headers import load_npy, load_npz
+            from lvcore.safety.headers import load_npy, load_npz
 
-            # array headers are checked against the limits before numpy allocates (lvcore.headers)
+            # array headers are checked against the limits before numpy allocates (lvcore.safety.headers)
             if path.suffix.lower() == ".npy":
                 nodes = load_npy(path, limits.MAX_MESH_BYTES, "geometry file", GeometryError)
             else:

@@ -199,12 +199,12 @@ def load_shape_model(path=None) -> ShapeModel:
     if not jpath.exists() or not npath.exists():
         hint = " (build it with `python scripts/build_cohort.py`)" if path == BUNDLED_MODEL else ""
         raise GeometryError(f"shape model files '{jpath.name}' and '{npath.name}' not found in '{stem.parent}'{hint}")
-    from lvcore import limits
+    from lvcore.safety import limits
 
     meta = limits.read_json_file(jpath, limits.MAX_SHAPE_MODEL_BYTES, "shape model", GeometryError)
-    from lvcore.headers import load_npz
+    from lvcore.safety.headers import load_npz
 
-    # array headers are checked against the limits before numpy allocates (lvcore.headers)
+    # array headers are checked against the limits before numpy allocates (lvcore.safety.headers)
     raw = load_npz(npath, limits.MAX_SHAPE_MODEL_BYTES, "shape model", GeometryError,
                    keys=("mean", "components", "std", "explained_variance_ratio"))
     try:

@@ -54,8 +54,8 @@ def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSu
     """Read an LV surface from a file or a PyVista mesh and check it.
 
     A file is first checked for its size and for the counts its header
-    declares (:func:`lvcore.headers.check_mesh_header`), then parsed by
-    VTK/meshio in a memory-limited child process (:func:`lvcore.isolation.run_isolated`),
+    declares (:func:`lvcore.safety.headers.check_mesh_header`), then parsed by
+    VTK/meshio in a memory-limited child process (:func:`lvcore.safety.isolation.run_isolated`),
     so a crafted file that crashes the parser raises a :class:`GeometryError`
     naming it instead of killing the caller (or the app's server).
 
@@ -73,9 +73,9 @@ def read_surface(path_or_mesh, name: str = "surface", units: str = "mm") -> LVSu
         Missing, empty or unreadable file; no surface cells; wrong units.
     """
     if isinstance(path_or_mesh, (str, Path)):
-        from lvcore import limits
-        from lvcore.headers import check_mesh_header
-        from lvcore.isolation import run_isolated
+        from lvcore.safety import limits
+        from lvcore.safety.headers import check_mesh_header
+        from lvcore.safety.isolation import run_isolated
 
         what = "surface file" if name == "surface" else f"{name} surface file"
         path = limits.check_regular_file(path_or_mesh, limits.MAX_SURFACE_BYTES, what, GeometryError)
@@ -93,7 +93,7 @@ def _read_surface(path_or_mesh, name: str, units: str) -> LVSurface:
         raise GeometryError(f"{name} surface: units '{units}' not understood; use mm, cm or m")
     source = "<mesh>"
     if isinstance(path_or_mesh, (str, Path)):
-        from lvcore import limits
+        from lvcore.safety import limits
 
         path = limits.check_regular_file(path_or_mesh, limits.MAX_SURFACE_BYTES, f"{name} surface file", GeometryError)
         source = str(path)

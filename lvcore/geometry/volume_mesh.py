@@ -170,7 +170,7 @@ def read_volume_cells(path_or_mesh, units: str = "mm"):
     if isinstance(path_or_mesh, meshio.Mesh):
         mesh, source = path_or_mesh, "<mesh>"
     else:
-        from lvcore import limits
+        from lvcore.safety import limits
 
         path = Path(path_or_mesh)
         source = str(path)

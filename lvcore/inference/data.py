@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import DataError
 from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
 
@@ -372,7 +372,7 @@ def read_measured_csv(path) -> list[MeasuredData]:
         raise DataError(f"{path.name}: no data rows")
     if raw.shape[0] > limits.MAX_MEASURED_ROWS + 1:
         raise DataError(f"{path.name}: {raw.shape[0]:,} rows is more than the limit of {limits.MAX_MEASURED_ROWS:,} "
-                        "(lvcore.limits.MAX_MEASURED_ROWS); split the file")
+                        "(lvcore.safety.limits.MAX_MEASURED_ROWS); split the file")
     first = [str(v).strip() for v in raw.iloc[0].tolist()]
     has_header = not all(_is_number(v) for v in first if v not in ("", "nan"))
     expected = ", ".join(OUTPUT_COLUMNS[:2]) + ", ..., " + OUTPUT_COLUMNS[-1]
@@ -479,7 +479,7 @@ def _read_json(path: Path, segments, offset_deg) -> list[MeasuredData]:
         raise DataError(f"{path.name}: no subjects")
     if len(items) > limits.MAX_MEASURED_ROWS:
         raise DataError(f"{path.name}: {len(items):,} subjects is more than the limit of {limits.MAX_MEASURED_ROWS:,} "
-                        "(lvcore.limits.MAX_MEASURED_ROWS); split the file")
+                        "(lvcore.safety.limits.MAX_MEASURED_ROWS); split the file")
     out = []
     for i, it in enumerate(items):
         where = f"{path.name} subject {i + 1}"

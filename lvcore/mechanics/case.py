@@ -21,7 +21,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lvcore import conditions, limits, units
+from lvcore import conditions, units
+from lvcore.safety import limits
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE, N_REGIONS
@@ -296,7 +297,7 @@ def loads_case(text: str, base_dir: str | Path | None = None, source: str = "cas
     """Validate a case given as JSON text (e.g. typed into the app), with the same limits as a case file.
 
     Duplicate keys, non-finite numbers, deep nesting and text longer than
-    :data:`lvcore.limits.MAX_CASE_BYTES` are refused with a :class:`CaseError`.
+    :data:`lvcore.safety.limits.MAX_CASE_BYTES` are refused with a :class:`CaseError`.
     """
     if len(text.encode("utf-8", "replace")) > limits.MAX_CASE_BYTES:
         raise CaseError("<text>", f"{source} is longer than the limit of {limits.MAX_CASE_BYTES // 1024} kB")
@@ -435,7 +436,7 @@ def _parse_resolution(value, where: str, kind: str) -> tuple[LVResolution | BoxR
 
 
 def _check_size(counts, kind: str, gauss_points: int, where: str) -> None:
-    """Refuse meshes over the limits of :mod:`lvcore.limits` before anything is allocated."""
+    """Refuse meshes over the limits of :mod:`lvcore.safety.limits` before anything is allocated."""
     limits.check_mesh_size(counts, kind, gauss_points, error=lambda msg: CaseError(where, msg), where="too large")
 
 
@@ -632,7 +633,7 @@ def _parse_probes(p) -> tuple[tuple[float, float, float], ...]:
         raise CaseError("probes", f"must be a list of [x, y, z] points (mm), got {_short(p)}")
     if len(p) > limits.MAX_PROBES:
         raise CaseError("probes", f"{len(p):,} points is more than the limit of {limits.MAX_PROBES:,} "
-                                  "(lvcore.limits.MAX_PROBES)")
+                                  "(lvcore.safety.limits.MAX_PROBES)")
     return tuple(_vector(v, f"probes[{i}]") for i, v in enumerate(p))
 
 

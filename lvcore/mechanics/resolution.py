@@ -5,7 +5,7 @@ This module is the one source of truth for resolutions:
 * :class:`LVResolution` - elements around, base to apex (evenly or per
   short-axis level) and through the wall of an LV mesh, and the Gauss
   points through the wall. Every bound is checked once, here, in
-  ``__post_init__`` (including the size limits of :mod:`lvcore.limits`:
+  ``__post_init__`` (including the size limits of :mod:`lvcore.safety.limits`:
   elements, degrees of freedom, estimated memory); a violation raises :class:`ResolutionError` naming the
   case-schema field (``circumferential``, ``longitudinal``, ``transmural``,
   ``transmural_gauss_points``), which :mod:`lvcore.mechanics.case` turns into
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from lvcore.exceptions import GeometryError
 from lvcore.geometry.template import N_LEVELS, LVTemplate
-from lvcore.limits import check_mesh_size
+from lvcore.safety.limits import check_mesh_size
 
 #: Largest number of Gauss points through the wall (the 1-D Gauss rule is exact to degree 19).
 MAX_TRANSMURAL_GAUSS_POINTS = 10
@@ -49,7 +49,7 @@ def _positive_int(value, field: str) -> int:
 
 
 def _check_limits(counts, fields, kind: str, gauss_points: int) -> None:
-    """Refuse meshes over the limits of :mod:`lvcore.limits` (elements, dofs, estimated memory),
+    """Refuse meshes over the limits of :mod:`lvcore.safety.limits` (elements, dofs, estimated memory),
     before anything is allocated; the error names the field of the largest count."""
     field = fields[max(range(len(counts)), key=lambda i: counts[i])]
     check_mesh_size(counts, kind, gauss_points, error=lambda msg: ResolutionError(field, msg), where="mesh too large")

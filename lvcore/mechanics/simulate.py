@@ -18,7 +18,8 @@ import numpy as np
 import jax
 import jax.numpy as jnp
 
-from lvcore import limits, units
+from lvcore import units
+from lvcore.safety import limits
 from lvcore.bounded_cache import BoundedCache
 from lvcore.jax_cache import exported_kernel
 from lvcore.exceptions import CaseError, GeometryError, SolverError
@@ -372,7 +373,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
 
 
 def check_reference_volumes(mesh: FEMesh, cavity_mm3: float) -> None:
-    """Refuse a degenerate LV: cavity or wall volume below the floors of :mod:`lvcore.limits` (mm³ in).
+    """Refuse a degenerate LV: cavity or wall volume below the floors of :mod:`lvcore.safety.limits` (mm³ in).
 
     Raises
     ------
@@ -385,23 +386,23 @@ def check_reference_volumes(mesh: FEMesh, cavity_mm3: float) -> None:
     cavity_ml = float(cavity_mm3) / units.MM3_PER_ML
     if not cavity_ml >= limits.MIN_CAVITY_ML:
         raise GeometryError(f"degenerate geometry: the reference cavity volume is {cavity_ml:.3g} mL, below the floor "
-                            f"of {limits.MIN_CAVITY_ML} mL (lvcore.limits.MIN_CAVITY_ML); check the base plane "
+                            f"of {limits.MIN_CAVITY_ML} mL (lvcore.safety.limits.MIN_CAVITY_ML); check the base plane "
                             "(geometry.base_z must leave a cavity between the base and the apex) and the radii")
     if not wall_ml >= limits.MIN_WALL_ML:
         raise GeometryError(f"degenerate geometry: the wall volume is {wall_ml:.3g} mL, below the floor of "
-                            f"{limits.MIN_WALL_ML} mL (lvcore.limits.MIN_WALL_ML); check the geometry")
+                            f"{limits.MIN_WALL_ML} mL (lvcore.safety.limits.MIN_WALL_ML); check the geometry")
 
 
 def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None = None) -> tuple[str, ...]:
     """Flags for physiologically implausible or unusual LV results (values are kept, not hidden).
 
-    The loaded cavity above :data:`lvcore.limits.PLAUSIBLE_MAX_LVV_ML` is always flagged (a units slip). EDV/V₀
+    The loaded cavity above :data:`lvcore.safety.limits.PLAUSIBLE_MAX_LVV_ML` is always flagged (a units slip). EDV/V₀
     (``standardised``) is judged only for an LV at a physiological pressure (``pressure_mmhg`` in
     :data:`lvcore.physiology.PHYSIOLOGICAL_EDP_RANGE_MMHG`): above
-    :data:`lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV` it is "implausible", outside the typical range of
+    :data:`lvcore.safety.limits.PLAUSIBLE_MAX_STANDARDISED_LVV` it is "implausible", outside the typical range of
     :func:`lvcore.physiology.typical_edv_ratio` by more than its own uncertainty
     (:data:`lvcore.physiology.EDV_RATIO_NOTE_TOLERANCE`, 2 %) "unusual". At any other pressure (or ``pressure_mmhg=None``,
-    unknown) only EDV/V₀ above :data:`lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE` (5) is
+    unknown) only EDV/V₀ above :data:`lvcore.safety.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE` (5) is
     flagged, so benchmarks such as Land et al. (2015) problem 2 (10 kPa, EDV/V₀ 4.3) are not.
 
     Parameters
@@ -437,7 +438,7 @@ def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None 
                     " mL)")
             out.append(f"implausible result: the cavity inflated to {float(standardised):.3g} times its reference "
                        f"volume{vols}{at}, more than {limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE:g} times "
-                       "at any pressure (lvcore.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE), so check the "
+                       "at any pressure (lvcore.safety.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE), so check the "
                        "geometry, the stiffness parameters and the pressure units")
         return tuple(out)
     if float(standardised) > limits.PLAUSIBLE_MAX_STANDARDISED_LVV:

@@ -42,7 +42,7 @@ def parse_angle_pairs(text: str, max_pairs: int = MAX_TYPED_ANGLE_PAIRS) -> list
         A pair that is not two numbers, an angle outside [-180, 180] degrees, or more than
         ``max_pairs`` pairs; the message repeats at most 60 characters of the text.
     """
-    from lvcore.limits import echo
+    from lvcore.safety.limits import echo
 
     items = [s.strip() for s in str(text).split(";") if s.strip()]
     if len(items) > max_pairs:

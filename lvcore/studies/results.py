@@ -85,7 +85,7 @@ def parse_folders(text: str, max_folders: int = MAX_TYPED_FOLDERS) -> list[Path]
     LVCoreError
         More than ``max_folders`` folders; the message repeats at most 60 characters of the text.
     """
-    from lvcore.limits import echo
+    from lvcore.safety.limits import echo
 
     items = [p.strip() for p in str(text).split(",") if p.strip()]
     if len(items) > max_folders:
@@ -103,8 +103,8 @@ def read_result(folder, filename: str) -> dict:
 
 def read_json(path):
     """A study's JSON file; a clear :class:`LVCoreError` naming the file when it is missing, not a regular
-    file, over :data:`lvcore.limits.MAX_STUDY_RESULT_BYTES`, not UTF-8 text or not JSON."""
-    from lvcore import limits
+    file, over :data:`lvcore.safety.limits.MAX_STUDY_RESULT_BYTES`, not UTF-8 text or not JSON."""
+    from lvcore.safety import limits
 
     text = limits.read_text_file(path, limits.MAX_STUDY_RESULT_BYTES, "study results", LVCoreError)
     try:

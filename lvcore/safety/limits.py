@@ -108,7 +108,7 @@ MAX_CONTOUR_POINTS = 100_000
 MAX_CONTOUR_SLICES = 500
 
 # ----------------------------------------------------------------------------- declared sizes (file headers)
-#: Most points (vertices, nodes) a mesh file may declare in its header (lvcore.headers); a 64 MB binary
+#: Most points (vertices, nodes) a mesh file may declare in its header (lvcore.safety.headers); a 64 MB binary
 #: STL holds about 4 M vertex records, a real LV surface or volume mesh well under 1 M.
 MAX_DECLARED_POINTS = 5_000_000
 #: Most cells (faces, triangles, elements) a mesh file may declare.
@@ -127,7 +127,7 @@ MAX_DESIGN_VALUES = 2_000_000
 #: Most columns (parameters) of a design or campaign store.
 MAX_DESIGN_DIMENSIONS = 64
 #: Extra address space (bytes) the child process that parses an untrusted mesh file with VTK or
-#: meshio may allocate (lvcore.isolation); a crafted file that asks for more fails there, not in the caller.
+#: meshio may allocate (lvcore.safety.isolation); a crafted file that asks for more fails there, not in the caller.
 MAX_READER_MEMORY_BYTES = 3 * 1024 * MiB
 #: Seconds the child process that parses a mesh file may run.
 MAX_READER_SECONDS = 120.0
@@ -213,7 +213,7 @@ def _check_stat(st, path, max_bytes, what, error) -> None:
         _raise(error, f"{what} '{echo(path)}' is not a regular file ({_kind(st.st_mode)}); give a file")
     if st.st_size > max_bytes:
         _raise(error, f"{what} '{echo(path)}' is {_human(st.st_size)}, larger than the limit of {_human(max_bytes)} "
-                      "(lvcore.limits); check that it is the right file")
+                      "(lvcore.safety.limits); check that it is the right file")
     if st.st_size == 0:
         _raise(error, f"{what} '{echo(path)}' is an empty file")
 
@@ -418,19 +418,19 @@ def check_mesh_size(counts, kind: str = "lv", gauss_points_per_element: int = 27
     big = [c for c in counts if c > MAX_ELEMENTS_PER_DIRECTION]
     if big:
         _raise(error, f"{where}: {big[0]} elements along one direction is more than the limit of "
-                      f"{MAX_ELEMENTS_PER_DIRECTION} (lvcore.limits.MAX_ELEMENTS_PER_DIRECTION)")
+                      f"{MAX_ELEMENTS_PER_DIRECTION} (lvcore.safety.limits.MAX_ELEMENTS_PER_DIRECTION)")
     n_el, dofs = (box_mesh_size if kind == "box" else lv_mesh_size)(*counts)
     shape = " x ".join(str(c) for c in counts)
     if n_el > MAX_ELEMENTS:
         _raise(error, f"{where}: {shape} = {n_el:,} elements is more than the limit of {MAX_ELEMENTS:,} "
-                      "(lvcore.limits.MAX_ELEMENTS); use a coarser resolution (the 'accurate' preset has 288)")
+                      "(lvcore.safety.limits.MAX_ELEMENTS); use a coarser resolution (the 'accurate' preset has 288)")
     if dofs > MAX_DOFS:
         _raise(error, f"{where}: {shape} has {dofs:,} degrees of freedom, more than the limit of {MAX_DOFS:,} "
-                      "(lvcore.limits.MAX_DOFS); use a coarser resolution")
+                      "(lvcore.safety.limits.MAX_DOFS); use a coarser resolution")
     need, budget = estimate_memory_bytes(n_el, gauss_points_per_element), memory_budget_bytes()
     if need > budget:
         _raise(error, f"{where}: {shape} = {n_el:,} elements would need about {need / 1024 ** 3:.1f} GB of memory, "
-                      f"more than the {budget / 1024 ** 3:.1f} GB available (the least of lvcore.limits."
+                      f"more than the {budget / 1024 ** 3:.1f} GB available (the least of lvcore.safety.limits."
                       "MAX_SOLVE_MEMORY_BYTES, half the machine's memory, its free memory and any ulimit -v); "
                       "use a coarser resolution")
 

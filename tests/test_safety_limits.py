@@ -1,4 +1,4 @@
-"""lvcore.limits: regular files only, size limits, strict JSON, mesh sizes refused before allocation.
+"""lvcore.safety.limits: regular files only, size limits, strict JSON, mesh sizes refused before allocation.
 
 Each reader of a user file is checked against a directory, /dev/zero, a FIFO
 and an over-size file: it must say "not a regular file" (not "does not
@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import CampaignError, CaseError, DataError, GeometryError, LimitError, LVCoreError
 
 

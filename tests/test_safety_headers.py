@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import hostile_files as hf
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import EmulatorError, GeometryError, LimitError
-from lvcore.headers import check_mesh_header, check_npy, check_npz, load_npy, load_npz
+from lvcore.safety.headers import check_mesh_header, check_npy, check_npz, load_npy, load_npz
 
 
 def _write(tmp_path, name, data: bytes):

@@ -8,10 +8,10 @@ server with every user's session. :func:`run_isolated` runs the parser in a
 forked child instead:
 
 * the child's address space is capped at what it inherited plus
-  :data:`~lvcore.limits.MAX_READER_MEMORY_BYTES` (``RLIMIT_AS``), so a
+  :data:`~lvcore.safety.limits.MAX_READER_MEMORY_BYTES` (``RLIMIT_AS``), so a
   declared 10⁹ vertices fails there as an allocation error instead of
   exhausting the machine's memory;
-* it is killed after :data:`~lvcore.limits.MAX_READER_SECONDS`;
+* it is killed after :data:`~lvcore.safety.limits.MAX_READER_SECONDS`;
 * its result (plain Python and numpy objects) comes back pickled through a
   pipe; an :class:`~lvcore.exceptions.LVCoreError` raised in the child is
   raised again in the caller, and any other exception, a crash by a signal,
@@ -32,7 +32,7 @@ import time
 import warnings
 from typing import Any, Callable
 
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import LimitError, LVCoreError
 
 #: Exit status of a child that could not send its result (e.g. it ran out of memory while pickling).
@@ -114,9 +114,9 @@ def run_isolated(func: Callable[..., Any], *args, what: str, path, error: Callab
     error : callable
         ``error(message) -> exception`` for crashes, memory and time (default :class:`LimitError`).
     memory_bytes : int, optional
-        Address space the child may add (default :data:`~lvcore.limits.MAX_READER_MEMORY_BYTES`).
+        Address space the child may add (default :data:`~lvcore.safety.limits.MAX_READER_MEMORY_BYTES`).
     timeout_s : float, optional
-        Seconds before the child is killed (default :data:`~lvcore.limits.MAX_READER_SECONDS`).
+        Seconds before the child is killed (default :data:`~lvcore.safety.limits.MAX_READER_SECONDS`).
 
     Returns
     -------
@@ -163,7 +163,7 @@ def run_isolated(func: Callable[..., Any], *args, what: str, path, error: Callab
         _, status = os.waitpid(pid, 0)
     if timed_out:
         raise error(f"reading {what} '{path}' took longer than {timeout_s:g} s "
-                    "(lvcore.limits.MAX_READER_SECONDS) and was stopped; the file is damaged or far too large")
+                    "(lvcore.safety.limits.MAX_READER_SECONDS) and was stopped; the file is damaged or far too large")
     if os.WIFSIGNALED(status):
         raise error(f"{what} '{path}' crashed the mesh reader ({_describe_signal(os.WTERMSIG(status))}); "
                     "the file is malformed or declares more data than it holds. Export it again or give "
@@ -171,13 +171,13 @@ def run_isolated(func: Callable[..., Any], *args, what: str, path, error: Callab
     if not chunks:
         raise error(f"{what} '{path}' could not be read: the reader process ended without a result "
                     f"(exit status {os.WEXITSTATUS(status)}); it probably ran out of memory "
-                    f"(limit {memory_bytes / 1024 ** 3:.1f} GB, lvcore.limits.MAX_READER_MEMORY_BYTES)")
+                    f"(limit {memory_bytes / 1024 ** 3:.1f} GB, lvcore.safety.limits.MAX_READER_MEMORY_BYTES)")
     kind, *rest = pickle.loads(b"".join(chunks))  # our own child's output, never the file's bytes
     if kind == "ok":
         return rest[0]
     if kind == "memory":
         raise error(f"{what} '{path}' needs more memory than a reader may use "
-                    f"({memory_bytes / 1024 ** 3:.1f} GB, lvcore.limits.MAX_READER_MEMORY_BYTES); the file declares "
+                    f"({memory_bytes / 1024 ** 3:.1f} GB, lvcore.safety.limits.MAX_READER_MEMORY_BYTES); the file declares "
                     "more data than it holds or is far too large for an LV mesh")
     module, name, message = rest
     if kind == "lvcore":

@@ -6,10 +6,10 @@ numbers and allocate them before they find that the data are not there. This
 module reads only the headers (a few kB, never the whole file into arrays),
 and refuses
 
-* a count above the caps of :mod:`lvcore.limits`
-  (:data:`~lvcore.limits.MAX_DECLARED_POINTS`,
-  :data:`~lvcore.limits.MAX_DECLARED_CELLS`,
-  :data:`~lvcore.limits.MAX_ARRAY_BYTES`), and
+* a count above the caps of :mod:`lvcore.safety.limits`
+  (:data:`~lvcore.safety.limits.MAX_DECLARED_POINTS`,
+  :data:`~lvcore.safety.limits.MAX_DECLARED_CELLS`,
+  :data:`~lvcore.safety.limits.MAX_ARRAY_BYTES`), and
 * a count whose data cannot fit in the file: each declared item needs at
   least a known number of bytes (2 per ASCII number, the type's size in a
   binary file), so ``count x bytes > file size`` means the header lies.
@@ -17,7 +17,7 @@ and refuses
 :func:`check_mesh_header` covers PLY, OBJ (face indices against the vertex
 count), legacy and XML VTK, gmsh ``.msh`` (v2 and v4), binary STL and OFF;
 other formats pass unchecked (their parsing still runs in a memory-limited
-child process, :mod:`lvcore.isolation`). :func:`load_npy` and
+child process, :mod:`lvcore.safety.isolation`). :func:`load_npy` and
 :func:`load_npz` check every array header and then load with
 ``allow_pickle=False``. Every refusal names the file and the declared count.
 """
@@ -32,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from lvcore import limits
+from lvcore.safety import limits
 from lvcore.exceptions import LimitError, LVCoreError
 
 #: Most bytes read to find a text header (PLY ``end_header``, the first lines of VTK/OFF/MSH).
@@ -67,7 +67,7 @@ def _count(text: str, what: str, path, error) -> int:
 def _check_cap(n: int, cap: int, noun: str, what: str, path, error, const: str) -> None:
     if n > cap:
         _fail(error, f"{what} '{path}' declares {n:,} {noun}, more than the limit of {cap:,} "
-                     f"(lvcore.limits.{const}); the file is damaged or not an LV mesh")
+                     f"(lvcore.safety.limits.{const}); the file is damaged or not an LV mesh")
 
 
 def _check_fits(need: int, have: int, detail: str, what: str, path, error) -> None:
@@ -88,7 +88,7 @@ def check_mesh_header(path, what: str = "mesh file", error: Callable[[str], Exce
     Parameters
     ----------
     path : str or Path
-        A regular file (check it with :func:`lvcore.limits.check_regular_file` first).
+        A regular file (check it with :func:`lvcore.safety.limits.check_regular_file` first).
     what : str
         What the file is, for messages (e.g. ``"endo surface file"``).
     error : callable, optional
@@ -270,7 +270,7 @@ def _stl(path, head, size, what, error):
     if n > limits.MAX_DECLARED_CELLS or 84 + 50 * n > size:
         _fail(error, f"{what} '{path}' is not a valid STL file: an ASCII STL starts with 'solid', and read as a binary "
                      f"STL it declares {n:,} triangles ({84 + 50 * n:,} bytes) in {size:,} bytes (limit "
-                     f"{limits.MAX_DECLARED_CELLS:,} triangles, lvcore.limits.MAX_DECLARED_CELLS); export the "
+                     f"{limits.MAX_DECLARED_CELLS:,} triangles, lvcore.safety.limits.MAX_DECLARED_CELLS); export the "
                      "surface again as STL, VTK, PLY or OBJ")
 
 
@@ -312,7 +312,7 @@ def _npy_header(fp, what: str, where: str, error) -> tuple[tuple[int, ...], np.d
     if nbytes > limits.MAX_ARRAY_BYTES:
         _fail(error, f"{what} '{where}' declares an array of shape {tuple(shape)[:8]} ({dtype}), "
                      f"{nbytes / 1024 ** 3:.1f} GB, more than the limit of {limits.MAX_ARRAY_BYTES // limits.MiB} MB "
-                     "(lvcore.limits.MAX_ARRAY_BYTES); the file is damaged or not an lvcore array")
+                     "(lvcore.safety.limits.MAX_ARRAY_BYTES); the file is damaged or not an lvcore array")
     return tuple(int(s) for s in shape), dtype, nbytes
 
 
@@ -331,7 +331,7 @@ def check_npz(path, what: str = "array archive", error: Callable[[str], Exceptio
 
     Each member's declared array must fit in the member's uncompressed size
     (recorded in the zip directory, which :mod:`zipfile` enforces on reading)
-    and below :data:`~lvcore.limits.MAX_ARRAY_BYTES`; their sum too.
+    and below :data:`~lvcore.safety.limits.MAX_ARRAY_BYTES`; their sum too.
     """
     path = Path(path)
     try:
@@ -339,13 +339,13 @@ def check_npz(path, what: str = "array archive", error: Callable[[str], Exceptio
             infos = zf.infolist()
             if len(infos) > limits.MAX_NPZ_MEMBERS:
                 _fail(error, f"{what} '{path}' holds {len(infos):,} members, more than the limit of "
-                             f"{limits.MAX_NPZ_MEMBERS} (lvcore.limits.MAX_NPZ_MEMBERS)")
+                             f"{limits.MAX_NPZ_MEMBERS} (lvcore.safety.limits.MAX_NPZ_MEMBERS)")
             total = 0
             for info in infos:
                 where = f"{path}' member '{info.filename[:80]}"
                 if info.file_size > limits.MAX_ARRAY_BYTES:
                     _fail(error, f"{what} '{where}' is {info.file_size / 1024 ** 3:.1f} GB uncompressed, more than "
-                                 f"the limit of {limits.MAX_ARRAY_BYTES // limits.MiB} MB (lvcore.limits.MAX_ARRAY_BYTES)")
+                                 f"the limit of {limits.MAX_ARRAY_BYTES // limits.MiB} MB (lvcore.safety.limits.MAX_ARRAY_BYTES)")
                 if not info.filename.endswith(".npy"):
                     continue
                 with zf.open(info) as fp:
@@ -356,7 +356,7 @@ def check_npz(path, what: str = "array archive", error: Callable[[str], Exceptio
                 total += nbytes
             if total > limits.MAX_ARRAY_BYTES:
                 _fail(error, f"{what} '{path}' declares {total / 1024 ** 2:.0f} MB of arrays in all, more than the "
-                             f"limit of {limits.MAX_ARRAY_BYTES // limits.MiB} MB (lvcore.limits.MAX_ARRAY_BYTES)")
+                             f"limit of {limits.MAX_ARRAY_BYTES // limits.MiB} MB (lvcore.safety.limits.MAX_ARRAY_BYTES)")
     except LVCoreError:
         raise
     except zipfile.BadZipFile as err:
@@ -366,7 +366,7 @@ def check_npz(path, what: str = "array archive", error: Callable[[str], Exceptio
 
 
 def load_npy(path, max_bytes: int, what: str, error: Callable[[str], Exception] | None = None) -> np.ndarray:
-    """Load a ``.npy`` file after :func:`lvcore.limits.check_regular_file` and :func:`check_npy`.
+    """Load a ``.npy`` file after :func:`lvcore.safety.limits.check_regular_file` and :func:`check_npy`.
 
     Raises ``error`` (default :class:`LimitError`) for every problem, naming the file.
     """

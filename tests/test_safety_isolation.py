@@ -10,7 +10,7 @@ import pytest
 
 import hostile_files as hf
 from lvcore.exceptions import CaseError, GeometryError
-from lvcore.isolation import run_isolated
+from lvcore.safety.isolation import run_isolated
 
 
 def _returns(x):
