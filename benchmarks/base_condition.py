@@ -37,7 +37,7 @@ THETAS = {
 
 
 def run_one(theta, base, resolution):
-    from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+    from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP
     from lvcore.mechanics.case import Case
     from lvcore.mechanics.simulate import simulate
 

@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 import lvcore  # noqa: E402,F401
 from lvcore.emulator.model import Emulator  # noqa: E402
 from lvcore.emulator.network import MLP  # noqa: E402
-from lvcore.outputs import OUTPUT_NAMES  # noqa: E402
+from lvcore.domain.outputs import OUTPUT_NAMES  # noqa: E402
 
 
 def timing_emulator() -> Emulator:

@@ -4,7 +4,7 @@
     python benchmarks/bench_loaded_states.py --quick             # the CI version: emulator data, a small budget
 
 The SYNTHETIC subject is the simulator's default LV (``{"kind": "default"}``) at the typical heart's material
-(:data:`lvcore.conditions.SIMULATOR_DEFAULT_THETA`: a 0.18 kPa, b 2.60, af 3.34 kPa, bf 2.73), sliding base,
+(:data:`lvcore.domain.conditions.SIMULATOR_DEFAULT_THETA`: a 0.18 kPa, b 2.60, af 3.34 kPa, bf 2.73), sliding base,
 fibres -60/60 deg, simulated by the FE simulator at 8, 14, 20 and 30 mmHg; its measurements are the FE LVV and
 24 strains plus noise (sigma_V 5 mL, sigma_S 0.03, seeded). Each row runs ``lvcore calibrate`` in this process
 (iid model, ``--derived-draws 0``) and reports a's 90 % interval (q05, q95, their ratio), whether each true
@@ -71,7 +71,7 @@ def noisy(y, rng):
 
 def write_csv(path: Path, states: dict, strains_at=None, extra: dict | None = None) -> Path:
     """One row per loaded state (``states``: pressure -> 25 values); strains only at ``strains_at`` pressures."""
-    from lvcore.outputs import OUTPUT_COLUMNS
+    from lvcore.domain.outputs import OUTPUT_COLUMNS
 
     cols = ["subject", "edp_mmhg", *OUTPUT_COLUMNS, *(extra or {})]
     lines = [",".join(cols)]
@@ -90,7 +90,7 @@ def v20_posterior(out: Path, emulator, geometry_infer: bool):
     import numpy as np
 
     from lvcore.emulator.forward import emulator_forward
-    from lvcore.outputs import EDP_NAME
+    from lvcore.domain.outputs import EDP_NAME
 
     idata = az.from_netcdf(next(out.glob("*_iid.nc")))
     post = idata.posterior
@@ -154,7 +154,7 @@ def run(out_dir: Path, *, quick: bool, emulator: str | None, chains: int, warmup
         seed: int = 0, theta: dict | None = None, routes=("mesh", "infer")) -> list[dict]:
     import numpy as np
 
-    from lvcore.conditions import SIMULATOR_DEFAULT_THETA
+    from lvcore.domain.conditions import SIMULATOR_DEFAULT_THETA
 
     out_dir.mkdir(parents=True, exist_ok=True)
     theta = dict(theta or SIMULATOR_DEFAULT_THETA)

@@ -45,7 +45,7 @@ def main(argv=None) -> int:
     from lvcore.emulator.forward import emulator_forward
     from lvcore.emulator.io import load_emulator
     from lvcore.inference import samplers
-    from lvcore.outputs import THETA_NAMES
+    from lvcore.domain.outputs import THETA_NAMES
     from lvcore.studies import mismatch as mm
 
     load0 = os.getloadavg()[0]

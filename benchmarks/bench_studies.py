@@ -104,8 +104,8 @@ def _bench_sqp_warm(args) -> int:
     """One operator-study refit with and without the Newton warm start (same process, same data)."""
     import numpy as np
 
+    from lvcore.domain.outputs import THETA_NAMES
     from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
-    from lvcore.core.space import THETA_NAMES
     from lvcore.mechanics.linear import available_backends
     from lvcore.optimise.sqp import OperatorLoss, refit_theta
     from lvcore.studies import operators as ops

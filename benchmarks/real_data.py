@@ -294,7 +294,7 @@ def calibrate_all(rows, workdir: Path, chains: int, warmup: int, samples: int, e
     import numpy as np
 
     from lvcore.cli import main
-    from lvcore.outputs import OUTPUT_COLUMNS
+    from lvcore.domain.outputs import OUTPUT_COLUMNS
 
     res_path = workdir / (f"results_{tag}.json" if tag else "results.json")
     out = json.loads(res_path.read_text()) if res_path.is_file() else []   # resumable: cases done are kept

@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     from lvcore.resources import volunteers_dir
     from lvcore.inference.data import read_measured_csv
     from lvcore.inference.samplers import SamplerConfig
-    from lvcore.outputs import ANGLE_NAMES, THETA_NAMES
+    from lvcore.domain.outputs import ANGLE_NAMES, THETA_NAMES
 
     infer = args.angles == "infer"
     emulator = args.emulator or ("angles" if infer else "chapter")

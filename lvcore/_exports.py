@@ -26,6 +26,10 @@ from typing import Callable, Mapping
 #: ``from lvcore import limits``) still works and gives the module at its new path, with a ``DeprecationWarning``
 #: that names it (:func:`install_moved_modules`).
 MOVED_MODULES = {
+    "lvcore.conditions": "lvcore.domain.conditions",
+    "lvcore.outputs": "lvcore.domain.outputs",
+    "lvcore.physiology": "lvcore.domain.physiology",
+    "lvcore.units": "lvcore.domain.units",
     "lvcore.headers": "lvcore.safety.headers",
     "lvcore.isolation": "lvcore.safety.isolation",
     "lvcore.limits": "lvcore.safety.limits",

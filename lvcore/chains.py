@@ -595,7 +595,7 @@ def scaled_coordinates(names: Sequence[str], X: np.ndarray) -> np.ndarray:
     angles in units of 90°; EDP in units of 8 mmHg; PC scores in units of 4
     (their ±2 box); anything else as given.
     """
-    from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name
+    from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name
 
     X = np.atleast_2d(np.asarray(X, dtype=float))
     cols = []

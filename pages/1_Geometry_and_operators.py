@@ -102,7 +102,7 @@ else:
 names = list(geoms)
 from lvcore.geometry.measures import geometry_info  # noqa: E402
 from lvcore.geometry.measures import node_mse_cm2  # noqa: E402
-from lvcore import units  # noqa: E402
+from lvcore.domain import units  # noqa: E402
 
 rows = []
 for n in names:

@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import streamlit as st
 
-from lvcore import units
+from lvcore.domain import units
 from lvcore.exceptions import LVCoreError
 
 st.set_page_config(page_title="Shape model", layout="wide")

@@ -13,7 +13,7 @@ from lvcore.app import freshness
 from lvcore.app.controls import disabled_hint, shared_inputs, why_disabled
 from lvcore.app.live_chart import live_plotly_chart
 from lvcore.emulator.io import available_emulators, load_emulator
-from lvcore.conditions import CHAPTER_ANGLE_PAIRS, CHAPTER_ANGLES
+from lvcore.domain.conditions import CHAPTER_ANGLE_PAIRS, CHAPTER_ANGLES
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (angle_map, angle_sweep, emulator_angle_map, emulator_angle_sweep,
                                          parse_angle_pairs, strain_table)

@@ -12,7 +12,7 @@ from lvcore.app.controls import (chosen_index, conditions_text, disabled_hint, i
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
 from lvcore.exceptions import LVCoreError
 from lvcore.geometry.scaling import SCALE_BOUNDS, ScaledForward, scale_outputs
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, OUTPUT_NAMES, is_pc_name
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, OUTPUT_NAMES, is_pc_name
 
 
 st.set_page_config(page_title="Emulator", layout="wide")

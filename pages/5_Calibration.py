@@ -16,7 +16,7 @@ from lvcore.app.subject_prepare import floor_caption
 from lvcore.app.tables import summary_view
 from lvcore.app.controls import (DEFAULT_SUBJECT, chosen_index, conditions_text, disabled_hint, remember_choice,
                                    shared_inputs, why_disabled)
-from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
+from lvcore.domain.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal

@@ -5,12 +5,12 @@ from pathlib import Path
 
 import streamlit as st
 
-from lvcore.units import rms_mm_from_mse_cm2
+from lvcore.domain.units import rms_mm_from_mse_cm2
 from lvcore.app import freshness, physiology_panel, subject_emulator_panel, subject_flow as flow
 from lvcore.app import warmup as app_warmup
 from lvcore.app.tables import number_column, summary_view
 from lvcore.app.controls import chosen_index, conditions_text, disabled_hint, remember_choice, shared_inputs, why_disabled
-from lvcore.conditions import SIMULATOR_DEFAULT_EDP_MMHG
+from lvcore.domain.conditions import SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.io import available_emulators, load_emulator
 from lvcore.exceptions import LVCoreError
 from lvcore.inference.diagnostics import banner_status

@@ -36,7 +36,7 @@ pin_threads()  # before numpy is imported
 import numpy as np  # noqa: E402
 
 import lvcore  # noqa: E402
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.mechanics.case_inputs import build_case  # noqa: E402
 from lvcore.exceptions import SolverError  # noqa: E402
 from lvcore.geometry.cohort import ROLE_VOLUNTEER, load_cohort  # noqa: E402
@@ -44,7 +44,7 @@ from lvcore.geometry.io import write_template_mesh  # noqa: E402
 from lvcore.geometry.measures import cavity_volume  # noqa: E402
 from lvcore.geometry.shape_model import load_shape_model  # noqa: E402
 from lvcore.geometry.template import DEFAULT_TEMPLATE  # noqa: E402
-from lvcore.outputs import OUTPUT_COLUMNS  # noqa: E402
+from lvcore.domain.outputs import OUTPUT_COLUMNS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SIGMA_S = 0.03

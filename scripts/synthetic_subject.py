@@ -65,7 +65,7 @@ def main(argv=None) -> int:
 
     import scipy.io
 
-    from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+    from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP
     from lvcore.geometry.io import write_template_mesh
     from lvcore.geometry.meshing import ellipsoid_tet_mesh
     from lvcore.geometry.volume_mesh import fit_volume_mesh

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 
 from lvcore.core.forward import JaxForward
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.testing.analytic import AnalyticForward
 
 

@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 from streamlit.testing.v1 import AppTest
 
-from lvcore import conditions
+from lvcore.domain import conditions
 from lvcore.app import APP_DIR, PAGES_DIR, ENTRY, PAGES  # noqa: E402
 
 #: The packaged entry (``lvcore app``; ``streamlit run app.py`` serves it too), whose default page is the Simulator.

@@ -12,7 +12,7 @@ from lvcore.campaigns.runner import _drive, execute_chunk, run_campaign
 from lvcore.campaigns.space import get_space
 from lvcore.campaigns.store import CampaignStore, read_store
 from lvcore.mechanics.forward import SimulatorForward
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 
 class _Inline:

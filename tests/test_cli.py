@@ -525,7 +525,7 @@ def test_the_bundled_default_case_is_a_typical_heart(capsys):
     """``lvcore simulate assets/cases/default_lv.json`` at its typical healthy θ (conditions.SIMULATOR_DEFAULT_THETA):
     EDV/V₀ inside the typical band at 8 mmHg (measured: 159.1 mL on 86.1 mL, 1.85), no "unusual result" warning,
     one name for the ratio (EDV/V₀, not "standardised LVV" or V_early), and the case says why in its note."""
-    from lvcore import conditions, physiology
+    from lvcore.domain import conditions, physiology
 
     path = ROOT / "assets" / "cases" / "default_lv.json"
     d = json.loads(path.read_text())

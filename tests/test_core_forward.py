@@ -7,7 +7,7 @@ from lvcore.core import (Forward, JacobianForward, TraceableForward, forward_nam
 from lvcore.emulator.forward import emulator_forward
 from lvcore.exceptions import CampaignError, ForwardError
 from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.testing.analytic import AnalyticForward
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from lvcore.emulator.forward import EmulatorForward, emulator_forward
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 THETA = np.array([0.6, 1.3, 1.0, 3.6])
 

@@ -15,9 +15,9 @@ from lvcore._exports import MOVED_MODULES, moved_names, renamed_keywords
 
 def test_a_moved_name_forwards_to_its_new_home_with_a_deprecation_warning():
     old = types.ModuleType("old_home")
-    old.__getattr__ = moved_names("old_home", {"KPA": "lvcore.units:KPA_PER_MMHG"})
-    with pytest.warns(DeprecationWarning, match=r"old_home\.KPA is deprecated; use lvcore\.units\.KPA_PER_MMHG"):
-        from lvcore.units import KPA_PER_MMHG
+    old.__getattr__ = moved_names("old_home", {"KPA": "lvcore.domain.units:KPA_PER_MMHG"})
+    with pytest.warns(DeprecationWarning, match=r"old_home\.KPA is deprecated; use lvcore\.domain\.units\.KPA_PER_MMHG"):
+        from lvcore.domain.units import KPA_PER_MMHG
 
         assert old.__getattr__("KPA") == KPA_PER_MMHG
     with pytest.raises(AttributeError, match="has no attribute 'other'"):

@@ -475,7 +475,7 @@ def prior_emulator_dir(tmp_path_factory):
     from lvcore.emulator.io import save_emulator
     from lvcore.emulator.model import Emulator, PriorMean
     from lvcore.emulator.network import MLP
-    from lvcore.outputs import THETA_NAMES, pc_names
+    from lvcore.domain.outputs import THETA_NAMES, pc_names
 
     def emulator(name, names, fixed, prior=None):
         d = len(names)

@@ -9,7 +9,7 @@ from lvcore.emulator.forward import emulator_forward
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import coverage, models, samplers
-from lvcore.outputs import THETA_NAMES, pc_names
+from lvcore.domain.outputs import THETA_NAMES, pc_names
 from lvcore.testing.analytic import AnalyticForward
 
 

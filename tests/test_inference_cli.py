@@ -43,7 +43,7 @@ def test_every_bundled_volunteer_but_hv5_is_inside_the_box_once_size_normalised(
 
 
 def _csv(tmp_path, extra_header="", extra_values=""):
-    from lvcore.outputs import OUTPUT_COLUMNS
+    from lvcore.domain.outputs import OUTPUT_COLUMNS
     from lvcore.resources import volunteer_files
     from lvcore.inference.data import read_measured_csv
 

@@ -4,7 +4,7 @@ import pytest
 
 from lvcore.exceptions import DataError
 from lvcore.inference import data
-from lvcore.outputs import OUTPUT_COLUMNS
+from lvcore.domain.outputs import OUTPUT_COLUMNS
 
 
 def _good():

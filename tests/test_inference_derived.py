@@ -56,7 +56,7 @@ def test_ridge_finds_the_combination_the_draws_pin():
 def test_fe_load_path_matches_direct_solves_and_the_scale_identity():
     """The chained load path gives what separate cold solves give, and a geometry scaled by s has every volume
     times s^3 (lvcore.geometry.scaling): checked on the fast mesh with three draws."""
-    from lvcore import units
+    from lvcore.domain import units
     from lvcore.mechanics.case_inputs import build_case
     from lvcore.mechanics.simulate import simulate
 

@@ -1,6 +1,6 @@
 """--prior klotz: the Klotz et al. (2006) EDPVR as a likelihood term on the model's V20 and V30.
 
-The single-beat prediction is :mod:`lvcore.physiology`'s Klotz curve (checked against it, not a copy); the
+The single-beat prediction is :mod:`lvcore.domain.physiology`'s Klotz curve (checked against it, not a copy); the
 Bn scatter's linearisation against a finite difference; the refusals (no EDP input, an EDP box short of
 30 mmHg) exit 2; on SYNTHETIC cases whose truth follows Klotz's curve the prior keeps the true V20 inside
 its 90 % interval and narrows that interval, and summary.json records the prior.
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from loaded_states_double import at
 
-from lvcore import physiology
+from lvcore.domain import physiology
 from lvcore.exceptions import DataError
 from lvcore.inference import loaded_states as ls
 

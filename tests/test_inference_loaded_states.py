@@ -18,7 +18,7 @@ from scipy import stats
 from lvcore.exceptions import DataError
 from lvcore.inference import data
 from lvcore.inference.loaded_states import LoadedStatesForward, StateTerm, has_extra_terms
-from lvcore.outputs import OUTPUT_COLUMNS
+from lvcore.domain.outputs import OUTPUT_COLUMNS
 
 THETA = {"a": 0.6, "b": 5.0, "af": 1.5, "bf": 5.0}
 STRAINS = ",".join(["-0.15"] * 24)

@@ -137,7 +137,7 @@ def test_a_sampler_compiled_with_default_settings_serves_a_run_that_names_them()
     this key, the click recompiled (first iid run 5.6 CPU-s against 2.6 after the fix, 2026-11-27)."""
     import numpy as np
 
-    from lvcore.conditions import SIGMA_V_ML
+    from lvcore.domain.conditions import SIGMA_V_ML
     from lvcore.inference import samplers
 
     cfg = samplers.INTERACTIVE

@@ -7,7 +7,7 @@ from scipy import stats
 from numpyro.infer.util import potential_energy
 
 from lvcore.inference import coverage, kernels, models, samplers
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.testing.analytic import AnalyticForward
 
 FWD = AnalyticForward()

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from lvcore import conditions
+from lvcore.domain import conditions
 from lvcore.exceptions import CaseError
 from lvcore.geometry.analytic import DEFAULT_LV, LAND_LV
 from lvcore.geometry.template import DEFAULT_TEMPLATE

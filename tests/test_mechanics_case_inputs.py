@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from lvcore.campaigns.space import get_space
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, THETA_TILDE
+from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP, THETA_TILDE
 from lvcore.core.space import Parameter, ParameterSpace
 from lvcore.exceptions import CampaignError, CaseError
 from lvcore.mechanics import case_inputs

@@ -8,7 +8,7 @@ from lvcore.core import ForwardBatch
 from lvcore.mechanics.case_inputs import build_case
 from lvcore.exceptions import ForwardError
 from lvcore.mechanics.forward import AdjointSimulatorForward
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 THETA = np.array([0.6, 1.3, 1.0, 3.6])
 

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lvcore import conditions
+from lvcore.domain import conditions
 from lvcore.mechanics.materials import HolzapfelOgden
 from lvcore.mechanics.stress import ho_fibre_stress
 

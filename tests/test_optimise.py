@@ -8,7 +8,7 @@ from forward_double import JacobianDouble
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.optimise.bayesopt import StandardisedRSS, bayesian_optimise
 from lvcore.optimise.sqp import OperatorLoss, refit_theta
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 W = np.random.default_rng(3).normal(size=(25, 4)) * 0.2
 

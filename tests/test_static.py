@@ -35,7 +35,7 @@ def test_the_check_finds_a_local_that_shadows_a_module():
     """The bug it was written for (fibre_angles, 2026-12-02): a local named like the module it reads first."""
     bad = ROOT / "build" / "static_check_example.py"
     bad.parent.mkdir(exist_ok=True)
-    bad.write_text("from lvcore import conditions\n\n\ndef f(theta=None):\n"
+    bad.write_text("from lvcore.domain import conditions\n\n\ndef f(theta=None):\n"
                    "    theta = dict(conditions.THETA_TILDE if theta is None else theta)\n"
                    "    conditions = {**theta}\n    return conditions\n")
     try:

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lvcore.conditions import HO_FIXED, SIMULATOR_DEFAULT_ANGLES
+from lvcore.domain.conditions import HO_FIXED, SIMULATOR_DEFAULT_ANGLES
 from lvcore.studies import bo_fibres
 from lvcore.studies import bo_mismatch as bm
 from lvcore.studies.mismatch import bundled_volunteers

@@ -83,7 +83,7 @@ def test_emulator_angle_map_is_one_batched_prediction():
     with pytest.warns(ExtrapolationWarning, match="edp"):
         emulator_angle_map(emu, endo, epi, theta=theta, edp_mmhg=30.0, h=h)
     # no θ given: the chapter's θ̃ (conditions.THETA_TILDE), as given explicitly
-    from lvcore.conditions import THETA_TILDE
+    from lvcore.domain.conditions import THETA_TILDE
 
     default = emulator_angle_map(emu, endo, epi, edp_mmhg=10.0, h=h)
     np.testing.assert_array_equal(default.lvv_ml, emulator_angle_map(emu, endo, epi, theta=THETA_TILDE,
@@ -108,7 +108,7 @@ def test_emulator_angle_sweep_matches_the_map_at_the_same_points():
     from test_inference_calibrate import _random_emulator
 
     from lvcore.exceptions import EmulatorError
-    from lvcore.conditions import CHAPTER_ANGLE_PAIRS
+    from lvcore.domain.conditions import CHAPTER_ANGLE_PAIRS
     from lvcore.studies.fibre_angles import emulator_angle_map, emulator_angle_sweep
 
     emu = _random_emulator("angles", angles=True)  # UNTRAINED: the plumbing only

@@ -7,7 +7,7 @@ import pytest
 from lvcore.core import ForwardBatch
 from lvcore.exceptions import EmulatorError
 from lvcore.inference import samplers
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.studies import fibre_discrepancy as fd
 from lvcore.testing.analytic import AnalyticForward
 
@@ -31,7 +31,7 @@ def test_missing_chapter_emulator_is_a_clear_error(tmp_path, monkeypatch):
 # The chapter's design (DESIGN.md, fibre-discrepancy study): simulator angles x true theta, noise sigma_V, sigma_S.
 CHAPTER_ANGLES = ((-60.0, 90.0), (-30.0, 60.0), (0.0, 90.0))
 CHAPTER_THETAS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), (1.0, 5.0, 1.0, 5.0))
-SIGMA_V_ML, SIGMA_S = 5.0, 0.03  # the chapter's values, independent of lvcore.conditions
+SIGMA_V_ML, SIGMA_S = 5.0, 0.03  # the chapter's values, independent of lvcore.domain.conditions
 #: SYNTHETIC stand-ins: the "simulator" shifts the strains with the fibre angles; the "emulator" has none.
 TRUTH = AnalyticForward(input_names=("a", "b", "af", "bf", "alpha_endo", "alpha_epi"))
 EMULATOR = AnalyticForward()

@@ -84,7 +84,7 @@ def test_fit_datasets_sees_a_strain_mismatch_on_the_analytic_stand_in():
     import jax
 
     from lvcore.inference import samplers
-    from lvcore.outputs import THETA_NAMES
+    from lvcore.domain.outputs import THETA_NAMES
     from lvcore.testing.analytic import AnalyticForward
 
     fwd = AnalyticForward()

@@ -7,7 +7,7 @@ import pytest
 from forward_double import JacobianDouble
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.optimise.sqp import OperatorLoss
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.studies import operators as ops
 
 TRUTH = np.array(ops.THETA_TRUE)

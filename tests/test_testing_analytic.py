@@ -1,7 +1,7 @@
 """lvcore.testing.analytic: the SYNTHETIC closed-form stand-in (tests and benchmarks only)."""
 import numpy as np
 
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.testing.analytic import AnalyticForward
 
 

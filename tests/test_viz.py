@@ -6,7 +6,7 @@ import pytest
 
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE, LVTemplate
-from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES
+from lvcore.domain.outputs import LEVEL_NAMES, STRAIN_NAMES
 from lvcore.viz import figures, mesh3d
 
 

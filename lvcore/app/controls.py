@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from lvcore import conditions, units
+from lvcore.domain import conditions, units
 from lvcore.core.space import THETA_BOUNDS
 from lvcore.inference.cli import DEFAULT_EMULATOR
-from lvcore.outputs import EDP_NAME
+from lvcore.domain.outputs import EDP_NAME
 
 #: The shared sidebar's default subject: a bundled SYNTHETIC volunteer whose PC scores lie inside the
 #: default emulator's box both as projected and size-normalised (HV1, the first in the list, has h1 = 2.40
@@ -42,7 +42,7 @@ def theta_slider(name: str, value: float | None = None, *, key: str | None = Non
     """A log-scaled select slider for θ component ``name`` (a, b, af, bf) with its unit in the label.
 
     ``default`` is the starting value and a stop of the slider (default the chapter's θ̃; the Simulator page passes
-    :data:`lvcore.conditions.SIMULATOR_DEFAULT_THETA`); θ̃ is always a stop too. The stops depend only on these, so
+    :data:`lvcore.domain.conditions.SIMULATOR_DEFAULT_THETA`); θ̃ is always a stop too. The stops depend only on these, so
     they are the same on every rerun."""
     import streamlit as st
 
@@ -79,8 +79,8 @@ def conditions_text(edp_mmhg: float, angles, emulator, *, infer_angles: bool = F
     """The conditions a calibration or an emulator uses, with where each comes from, in one sentence.
 
     The emulator's own fixed training conditions win, and are said to be its own: the ``chapter`` emulator was
-    trained at fibre angles −60° / 60° (:data:`lvcore.conditions.CHAPTER_ANGLES`), while the simulator's default
-    (Simulator page, case files) is −60° / 90° (:data:`lvcore.conditions.SIMULATOR_DEFAULT_ANGLES`); an emulator with
+    trained at fibre angles −60° / 60° (:data:`lvcore.domain.conditions.CHAPTER_ANGLES`), while the simulator's default
+    (Simulator page, case files) is −60° / 90° (:data:`lvcore.domain.conditions.SIMULATOR_DEFAULT_ANGLES`); an emulator with
     angle inputs gets the simulator's default unless the angles are inferred.
     """
     fixed = dict(getattr(emulator, "fixed", None) or {})

@@ -1,7 +1,7 @@
 """The physiology panel of the Calibration and My subject results: EDV/V₀ and the derived quantities on request.
 
 EDV/V₀: the posterior of the emulated end-diastolic volume (``eta[..., 0]``) over the reference cavity V₀, with
-the measured LVV's ratio and the typical range (:mod:`lvcore.physiology`).
+the measured LVV's ratio and the typical range (:mod:`lvcore.domain.physiology`).
 EDPVR and the derived quantities: :func:`lvcore.inference.derived.derive`, exactly what ``lvcore calibrate``
 writes to summary.json (``derived``): the FE simulator on the calibration's own geometry (PC scores and scale,
 the posterior's own scores and scale when the geometry was inferred, or a subject emulator's mesh), base
@@ -18,7 +18,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lvcore import physiology
+from lvcore.domain import physiology
 
 #: Posterior draws behind the EDPVR band and the derived quantities (a 90 % band from fewer is mostly noise).
 N_EDPVR_DRAWS = 100
@@ -80,10 +80,10 @@ class Setup:
     def of(cls, emulator, forward, *, edp_mmhg: float, angles, measured_lvv_ml, h=None, scale: float = 1.0,
            infer_angles: bool = False, sigma_v: float | None = None) -> "Setup":
         """The setup of a calibration with ``emulator`` through ``forward`` (its bounds and volume sd)."""
-        from lvcore.conditions import SIGMA_V_ML
+        from lvcore.domain.conditions import SIGMA_V_ML
         from lvcore.inference import verdict
         from lvcore.inference.models import lvv_sd
-        from lvcore.outputs import THETA_NAMES
+        from lvcore.domain.outputs import THETA_NAMES
 
         sv = SIGMA_V_ML if sigma_v is None else float(sigma_v)
         subject = bool(getattr(emulator, "is_subject", False))

@@ -12,7 +12,7 @@ import json
 import numpy as np
 import streamlit as st
 
-from lvcore import conditions, physiology, units
+from lvcore.domain import conditions, physiology, units
 from lvcore.app import PAGES
 from lvcore.app.controls import THETA_LABELS, THETA_RANGES, log_options, theta_slider  # noqa: F401 (shared log sliders)
 from lvcore.exceptions import LVCoreError

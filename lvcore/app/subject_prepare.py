@@ -23,7 +23,7 @@ GEOMETRY_LABEL = "the subject's geometry"
 
 def _edp(emulator, edp_mmhg):
     """The page's EDP; the EDP a fixed-EDP emulator was trained at counts as not given (another is refused)."""
-    from lvcore.outputs import EDP_NAME
+    from lvcore.domain.outputs import EDP_NAME
 
     fixed_edp = dict(getattr(emulator, "fixed", None) or {}).get(EDP_NAME)
     if edp_mmhg is not None and fixed_edp is not None and abs(float(edp_mmhg) - float(fixed_edp)) <= 1e-6:

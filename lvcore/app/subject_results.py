@@ -49,7 +49,7 @@ def calibrate(subject: str, y, prepared: Prepared, models: Sequence[str], *, con
               sigma_v: float | None = None, progress: Callable[[str, float], None] | None = None,
               on_result: Callable[[ModelRun], None] | None = None) -> list[ModelRun]:
     """Calibrate each likelihood in ``models`` for one subject and give each result the CLI's verdict."""
-    from lvcore.conditions import SIGMA_V_ML
+    from lvcore.domain.conditions import SIGMA_V_ML
     from lvcore.inference import calibrate as cal
     from lvcore.inference import verdict
     from lvcore.inference.samplers import SamplerConfig

@@ -36,7 +36,7 @@ import numpy as np
 
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 METHODS = ("sobol", "lhs", "random", "exp")
 HEADER_TAG = "# lvcore-design "

@@ -33,10 +33,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP
 from lvcore.core.space import ANGLE_BOUNDS, ANGLES_THETA_BOUNDS, EDP_BOUNDS, THETA_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import CampaignError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, pc_names
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, pc_names
 
 #: How many score standard deviations the PC bounds span on each side.
 PC_SPAN_SD = 2.0

@@ -38,7 +38,7 @@ from lvcore.campaigns.store_format import (CONVERGED, FAILED, FORMAT, FORMAT_VER
                                           migrate)
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
-from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
+from lvcore.domain.outputs import N_OUTPUTS, OUTPUT_COLUMNS
 
 
 def worker_tag() -> str:

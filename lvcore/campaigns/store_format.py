@@ -59,7 +59,7 @@ import lvcore
 from lvcore.safety import limits
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 FORMAT = "lvcore-campaign"
 FORMAT_VERSION = 2

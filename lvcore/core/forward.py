@@ -4,7 +4,7 @@ A *forward model* is anything that satisfies the :class:`Forward` protocol.
 It maps named physical inputs (``a, af`` in kPa, ``b, bf`` dimensionless,
 ``alpha_endo, alpha_epi`` in degrees, ``edp`` in mmHg, PC scores ``h1..hk``)
 to the 25 outputs ``[LVV (mL), 24 circumferential strains]`` in the order of
-:mod:`lvcore.outputs`. Inputs that are not varied (a geometry, fixed angles,
+:mod:`lvcore.domain.outputs`. Inputs that are not varied (a geometry, fixed angles,
 the EDP) are bound into the forward model when it is built, so its users
 (campaigns, optimisers, samplers, studies, the app) see only the inputs in
 :attr:`Forward.input_names`.
@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore.exceptions import ForwardError, SolverError
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 
 # --------------------------------------------------------------------------- the interface

@@ -11,7 +11,7 @@ design spaces), optimisation (boxes), inference (prior bounds) and the app
   cube of a design to physical values.
 * :data:`THETA_BOUNDS` (the chapter's Table 9.1 prior box),
   :data:`ANGLES_THETA_BOUNDS`, :data:`ANGLE_BOUNDS`, :data:`EDP_BOUNDS`
-  (the angles and EDP themselves are in :mod:`lvcore.conditions`).
+  (the angles and EDP themselves are in :mod:`lvcore.domain.conditions`).
 
 The simulator's case dictionary for named inputs is written by
 :func:`lvcore.mechanics.case_inputs.build_case` (the case format's layer);
@@ -29,7 +29,7 @@ import numpy as np
 
 from lvcore._exports import moved_names
 from lvcore.exceptions import CampaignError
-from lvcore.outputs import BASE_CONDITIONS, is_pc_name
+from lvcore.domain.outputs import BASE_CONDITIONS, is_pc_name
 
 #: Material bounds of the calibration prior (Table 9.1): kPa for a, af.
 THETA_BOUNDS = {"a": (0.05, 10.0), "b": (0.1, 30.0), "af": (0.05, 10.0), "bf": (0.1, 30.0)}
@@ -53,7 +53,7 @@ class Parameter:
     Parameters
     ----------
     name : str
-        Input name (see :mod:`lvcore.outputs`).
+        Input name (see :mod:`lvcore.domain.outputs`).
     lower, upper : float
         Bounds in physical units (kPa, -, deg, mmHg or score units).
     scale : {"linear", "log"}

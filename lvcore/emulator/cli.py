@@ -204,7 +204,7 @@ def parse_bounds(items) -> dict:
 
 
 def _build(args) -> int:
-    from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+    from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP
     from lvcore.emulator.subject import SubjectDesign, build_subject_emulator
     from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES
 

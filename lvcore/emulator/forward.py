@@ -15,11 +15,11 @@ from typing import Any, Mapping
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
+from lvcore.domain.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.core.forward import JaxForward
 from lvcore.emulator.io import load_emulator
 from lvcore.exceptions import EmulatorError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES, is_pc_name, pc_names
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, N_OUTPUTS, THETA_NAMES, is_pc_name, pc_names
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,7 +157,7 @@ def load_emulator_forward(name: str, h, **kwargs) -> EmulatorForward:
     --------
     A :class:`lvcore.core.forward.Forward` of the mean shape (all five PC scores 0): θ in, 25 outputs out.
 
-    >>> from lvcore.conditions import THETA_TILDE
+    >>> from lvcore.domain.conditions import THETA_TILDE
     >>> from lvcore.emulator.forward import load_emulator_forward
     >>> forward = load_emulator_forward("chapter", [0.0, 0.0, 0.0, 0.0, 0.0])
     >>> forward.input_names

@@ -47,7 +47,7 @@ import lvcore
 from lvcore.emulator.model import Emulator
 from lvcore.emulator.network import from_arrays, to_arrays
 from lvcore.exceptions import EmulatorError
-from lvcore.outputs import OUTPUT_COLUMNS
+from lvcore.domain.outputs import OUTPUT_COLUMNS
 from lvcore.resources import asset_path
 
 FORMAT = "lvcore-emulator"

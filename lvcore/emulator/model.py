@@ -32,7 +32,7 @@ import numpy as np
 
 from lvcore.emulator.network import MLP
 from lvcore.exceptions import EmulatorError
-from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS, THETA_NAMES
+from lvcore.domain.outputs import N_OUTPUTS, OUTPUT_COLUMNS, THETA_NAMES
 
 #: Inputs that are log-transformed before standardisation (positive, scale-like).
 LOG_INPUTS = THETA_NAMES

@@ -47,14 +47,14 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from lvcore._exports import renamed_keywords
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP
 from lvcore.core.space import ANGLE_BOUNDS, ANGLES_THETA_BOUNDS, EDP_BOUNDS, THETA_BOUNDS, Parameter, ParameterSpace
 from lvcore.emulator.subject_geometry import (GEOMETRY_FILE, MESH_SUFFIXES, VOLUME_MESH_SUFFIXES, SubjectGeometry,
                                               resolve_subject_geometry, subject_template_nodes)
 from lvcore.emulator.subject_prior import choose_prior, describe_prior
 from lvcore.emulator.subject_runs import CHECKPOINT_ROWS, RUNS_FILE, SimulatedRows, simulate_rows
 from lvcore.exceptions import EmulatorError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
 
 #: Input groups of ``--inputs``: θ (always), the EDP, the two fibre angles.
 INPUT_GROUPS = {"theta": THETA_NAMES, EDP_NAME: (EDP_NAME,), "angles": ANGLE_NAMES}

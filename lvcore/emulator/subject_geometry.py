@@ -14,7 +14,7 @@ import numpy as np
 
 from lvcore.safety import limits
 from lvcore.exceptions import GeometryError
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 #: The geometry file written into the emulator directory (template nodes, mm).
 GEOMETRY_FILE = "geometry.vtu"

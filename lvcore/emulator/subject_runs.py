@@ -15,7 +15,7 @@ import numpy as np
 
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import EmulatorError
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 #: FE runs per batch of a build on one worker (in this process): progress is reported, and the runs done are saved
 #: to :data:`RUNS_FILE`, after each. With a pool every chain chunk (:data:`lvcore.chains.DEFAULT_CHUNK` runs) is.

@@ -38,7 +38,7 @@ import lvcore
 from lvcore.emulator.model import LOG_INPUTS, Emulator, correction_targets, prior_outputs
 from lvcore.emulator.network import INIT_SD, MLP, WIDTHS, from_arrays, to_arrays
 from lvcore.exceptions import EmulatorError
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 #: The chapter's architecture grid: every pair of widths.
 ARCHITECTURES = tuple(itertools.product(WIDTHS, WIDTHS))

@@ -16,7 +16,7 @@ import pandas as pd
 
 from lvcore.safety import limits
 from lvcore.exceptions import GeometryError
-from lvcore.outputs import is_pc_name
+from lvcore.domain.outputs import is_pc_name
 
 
 def read_pc_scores(path, n_pc: int = 5) -> np.ndarray:

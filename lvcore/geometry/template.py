@@ -61,7 +61,7 @@ from functools import cached_property
 
 import numpy as np
 
-from lvcore.outputs import N_LEVELS, N_REGIONS, N_SECTORS  # the region map's size is part of the outputs' definition
+from lvcore.domain.outputs import N_LEVELS, N_REGIONS, N_SECTORS  # the region map's size is part of the outputs' definition
 
 
 def checked_level_elements(level_elements, n_long: int) -> tuple[int, ...]:

@@ -17,7 +17,7 @@ import arviz as az
 import numpy as np
 import pandas as pd
 
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.exceptions import GeometryError
 from lvcore.geometry.scores import read_pc_scores, read_scale  # noqa: F401 - the calibration's geometry inputs
 from lvcore.inference import diagnostics, models, samplers

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from lvcore import cli_args
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 
 #: Range of ``--sigma-v`` (LVV noise sd, mL): echocardiographic/MRI volume errors are 2-15 mL; outside
 #: this range the likelihood either ignores the volume (the posterior is the prior) or is degenerate.
@@ -315,7 +315,7 @@ def prepare_run(args) -> CalibrateSetup:
     from lvcore.inference.models import MODEL_NAMES
     from lvcore.inference.request import INFER
     from lvcore.inference.samplers import SamplerConfig
-    from lvcore.outputs import is_pc_name
+    from lvcore.domain.outputs import is_pc_name
 
     infer = args.angles == "infer"
     name = args.emulator or ("angles" if infer else DEFAULT_EMULATOR)
@@ -422,7 +422,7 @@ def _finish(item, setup: CalibrateSetup, args, extra: dict, consistency: dict) -
     from lvcore.inference import calibrate as cal
     from lvcore.inference import derived, geometry_prior, plausibility, verdict
     from lvcore.inference.models import lvv_sd
-    from lvcore.outputs import is_pc_name
+    from lvcore.domain.outputs import is_pc_name
 
     q, row, res = setup.requests[item.subject], setup.rows[item.subject], item.result
     forward, out, c = q.forward, Path(args.out), q.conditions

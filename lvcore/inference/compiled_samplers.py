@@ -20,10 +20,10 @@ import numpy as np
 from numpyro.infer import MCMC
 
 from lvcore.bounded_cache import BoundedCache
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.inference import kernels
 from lvcore.inference.sampler_config import SamplerConfig
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 
 def _with_dynamic_model_args(fn):

@@ -22,9 +22,9 @@ import numpy as np
 from numpyro.infer.hmc import hmc
 from numpyro.infer.util import initialize_model
 
-from lvcore.conditions import SIGMA_S, SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.inference import models, samplers
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 Three file formats are read by :func:`read_measurements` (by suffix):
 
 CSV (``.csv``)
-    A header row with the columns of :data:`lvcore.outputs.OUTPUT_COLUMNS`
+    A header row with the columns of :data:`lvcore.domain.outputs.OUTPUT_COLUMNS`
     (``lvv_ml, strain_01 .. strain_24``), or ``lvv_ml, aha_01 .. aha_16``
     (``aha_17``, the apical cap, allowed and unused) for AHA segments,
     optionally preceded by a ``subject`` column, one row per measurement.
@@ -51,7 +51,7 @@ import pandas as pd
 
 from lvcore.safety import limits
 from lvcore.exceptions import DataError
-from lvcore.outputs import N_OUTPUTS, OUTPUT_COLUMNS
+from lvcore.domain.outputs import N_OUTPUTS, OUTPUT_COLUMNS
 
 #: Plausible LV end-diastolic volume range (mL) accepted without complaint.
 LVV_RANGE_ML = (20.0, 600.0)

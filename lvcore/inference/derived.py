@@ -39,7 +39,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
 
 #: Pressures (mmHg) of the derived EDPVR besides 0 mmHg (V₀).
 EDPVR_PRESSURES_MMHG = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
@@ -250,7 +250,8 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     -------
     LoadPath
     """
-    from lvcore import chains, units
+    from lvcore import chains
+    from lvcore.domain import units
     from lvcore.mechanics.case_inputs import build_case
     from lvcore.exceptions import LVCoreError
     from lvcore.mechanics.fibre_stretch import mean_fibre_stretch
@@ -418,7 +419,7 @@ def posterior_draws(idata, n: int = N_DERIVED_DRAWS, *, h=None, scale: float = 1
     index : ndarray
         Positions in the flattened (chain, draw) posterior.
     """
-    from lvcore.outputs import is_pc_name
+    from lvcore.domain.outputs import is_pc_name
 
     post = idata.posterior
     flat = {k: np.asarray(post[k]).reshape(-1) for k in post.data_vars
@@ -485,7 +486,7 @@ def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float,
         ``weakly_identified``, ``n_draws``, ``seconds``.
     draws : DerivedDraws
     """
-    from lvcore import physiology
+    from lvcore.domain import physiology
 
     t0 = time.perf_counter()
     post = idata.posterior

@@ -18,9 +18,9 @@ import arviz as az
 import numpy as np
 import pandas as pd
 
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.inference import models, samplers
-from lvcore.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES, is_pc_name
+from lvcore.domain.outputs import ANGLE_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES, is_pc_name
 
 #: Default convergence thresholds.
 DEFAULT_RHAT_MAX = 1.05

@@ -34,9 +34,9 @@ from typing import Any, Callable, Mapping
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.exceptions import DataError, EmulatorError
-from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES, is_pc_name
+from lvcore.domain.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES, is_pc_name
 
 #: Geometric measures a subject may have, with their units.
 MEASURE_NAMES = ("reference_volume_ml", "wall_volume_ml", "long_axis_mm")

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from lvcore.exceptions import DataError, EmulatorError, GeometryError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name
 
 #: Physiological end-diastolic pressures accepted (mmHg).
 EDP_RANGE_MMHG = (2.0, 40.0)
@@ -209,7 +209,7 @@ def check_conditions(emulator, edp_mmhg=None, alpha_endo=None, alpha_epi=None, i
     EmulatorError
         EDP or angles given to an emulator trained at fixed values.
     """
-    from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
+    from lvcore.domain.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 
     names = set(getattr(emulator, "input_names", ()))
     fixed = dict(getattr(emulator, "fixed", None) or {})

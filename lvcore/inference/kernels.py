@@ -3,7 +3,7 @@ r"""Polar Gaussian-process kernel for the strain discrepancy (chapter eq. 9.7).
 The 24 circumferential strains live on a cylinder: sector angle
 :math:`\gamma \in \{0, \pi/3, \dots, 5\pi/3\}` and short-axis level
 :math:`z \in \{0, 1, 2, 3\}` (0 basal). Region ``r = 6 * level + sector`` has
-``x_r = (sector * pi / 3, level)``, matching :mod:`lvcore.outputs`.
+``x_r = (sector * pi / 3, level)``, matching :mod:`lvcore.domain.outputs`.
 
 The kernel is additive,
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lvcore.outputs import OUTPUT_COLUMNS
+from lvcore.domain.outputs import OUTPUT_COLUMNS
 
 #: Reference strain noise (Green strain) of the replicates.
 DEFAULT_SIGMA_REF = 0.035

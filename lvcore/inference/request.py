@@ -36,7 +36,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.exceptions import DataError, EmulatorError
 from lvcore.inference.plausibility import DEFAULT_SIGMA_REF
 
@@ -258,7 +258,7 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
     >>> request = build_request(emulator, "chapter", GeometrySource(np.zeros(5), "mean", "mean"))
     >>> request.conditions["edp_mmhg"], request.edp_source, request.representation_error
     (8.0, 'fixed by the emulator', None)
-    >>> from lvcore.conditions import THETA_TILDE
+    >>> from lvcore.domain.conditions import THETA_TILDE
     >>> request.forward(THETA_TILDE).shape   # LVV (mL) and 24 strains at the chapter's θ̃
     (25,)
     >>> build_request(emulator, "chapter", GeometrySource(np.array([2.5, 0, 0, 0, 0]), "h.json", "scores"),
@@ -347,7 +347,7 @@ def _given_setup(*, emulator, name, cond, infer, allow, representation_error, re
     from lvcore.geometry.scaling import ScaledForward
     from lvcore.inference import guards
     from lvcore.inference.representation_error import given_geometry_floor
-    from lvcore.outputs import is_pc_name
+    from lvcore.domain.outputs import is_pc_name
 
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
     h, scale = np.asarray(geometry.h, float), float(geometry.scale)
@@ -371,7 +371,7 @@ def _inferred_setup(*, emulator, name, cond, infer, allow, representation_error,
     """An inferred geometry: PC scores and scale sampled with θ, observed through the measures
     (:func:`lvcore.inference.geometry_prior.inferred_geometry_forward`); the conditions box-checked."""
     from lvcore.inference import geometry_prior, guards
-    from lvcore.outputs import is_pc_name
+    from lvcore.domain.outputs import is_pc_name
 
     n_pc = sum(1 for n in emulator.input_names if is_pc_name(n))
     measures = geometry_prior.check_measures(measures or {})

@@ -31,7 +31,7 @@ from lvcore.inference.compiled_samplers import (  # noqa: F401  (re-exported: th
     use_host_devices)
 from lvcore.inference.gibbs import DISCREPANCY_BLOCKS, GibbsState, PolarGPGibbs, sigma_s2_conditional  # noqa: F401
 from lvcore.inference.sampler_config import INTERACTIVE, SamplerConfig, SamplerRun  # noqa: F401
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 _STATS_FIELDS = {"diverging": "diverging", "n_steps": "num_steps"}
 

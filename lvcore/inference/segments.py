@@ -1,7 +1,7 @@
 """Strain segment conventions: lvcore's 6 sectors x 4 levels and the AHA 17-segment model.
 
 lvcore's grid
-    Region ``r = 6 * level + sector`` (:mod:`lvcore.outputs`): level 0 (basal)
+    Region ``r = 6 * level + sector`` (:mod:`lvcore.domain.outputs`): level 0 (basal)
     to 3 (apical) are the quarters of the base-to-apex parameter ``s``; sector
     ``k`` spans ``φ ∈ [60k, 60k + 60)`` degrees, ``φ`` measured counter-clockwise
     *seen from the base* from the template's +x axis, which a fit with a

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lvcore.bounded_cache import BoundedCache
-from lvcore.outputs import ANGLE_NAMES, OUTPUT_COLUMNS, THETA_NAMES, is_pc_name
+from lvcore.domain.outputs import ANGLE_NAMES, OUTPUT_COLUMNS, THETA_NAMES, is_pc_name
 
 #: p-value below which an output counts as not reached at the best fit.
 ALPHA = 0.01
@@ -71,7 +71,7 @@ N_PERMUTATIONS = 2000
 def _grid_adjacency():
     """Neighbours on lvcore's 6 x 4 strain grid (region = level * 6 + sector): the two sectors beside a region
     on its ring (circular) and the regions above and below it in the same sector."""
-    from lvcore.outputs import N_LEVELS, N_SECTORS
+    from lvcore.domain.outputs import N_LEVELS, N_SECTORS
 
     n = N_LEVELS * N_SECTORS
     w = np.zeros((n, n))

@@ -21,13 +21,13 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from lvcore import conditions, units
+from lvcore.domain import conditions, units
 from lvcore.safety import limits
 from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE, N_REGIONS
 from lvcore.mechanics.materials import LAWS, MaterialLaw
-from lvcore.outputs import BASE_CONDITIONS
+from lvcore.domain.outputs import BASE_CONDITIONS
 from lvcore.mechanics.resolution import (
     BOX_RESOLUTION_PRESET_NAMES,
     BOX_RESOLUTION_PRESETS,

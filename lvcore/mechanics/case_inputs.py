@@ -13,10 +13,10 @@ from __future__ import annotations
 
 from typing import Mapping, Sequence
 
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP
+from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError, CaseError
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
 
 #: The material law of the cases :func:`build_case` writes.
 CASE_LAW = "holzapfel-ogden"
@@ -30,8 +30,8 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
     ----------
     inputs : mapping
         ``a, b, af, bf`` (kPa, -, kPa, -; required), and optionally
-        ``alpha_endo, alpha_epi`` (deg; default :data:`lvcore.conditions.CHAPTER_ANGLES`),
-        ``edp`` (mmHg; default :data:`lvcore.conditions.CHAPTER_EDP`) and PC scores
+        ``alpha_endo, alpha_epi`` (deg; default :data:`lvcore.domain.conditions.CHAPTER_ANGLES`),
+        ``edp`` (mmHg; default :data:`lvcore.domain.conditions.CHAPTER_EDP`) and PC scores
         ``h1..hk`` (consecutive from h1). Other names are an error.
     geometry : mapping, optional
         The case's ``geometry`` section (e.g. ``{"kind": "default"}`` or
@@ -58,7 +58,7 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
 
     Examples
     --------
-    >>> from lvcore.conditions import THETA_TILDE
+    >>> from lvcore.domain.conditions import THETA_TILDE
     >>> case = build_case({**THETA_TILDE, "edp": 10.0}, resolution="fast")
     >>> case["load"], case["fibres"], case["geometry"]
     ({'pressure': 10.0, 'units': 'mmHg'}, {'alpha_endo': -60.0, 'alpha_epi': 60.0}, {'kind': 'default', 'resolution': 'fast'})

@@ -3,13 +3,13 @@
 The simulated EDPVR of a posterior (warm-chained FE load paths over draws and
 pressures) is :func:`lvcore.inference.derived.fe_load_path`; the relations it is
 compared with (Klotz et al. 2006, the typical EDV/V₀) are pure functions in
-:mod:`lvcore.physiology`.
+:mod:`lvcore.domain.physiology`.
 """
 from __future__ import annotations
 
 from typing import Sequence
 
-from lvcore import conditions, units
+from lvcore.domain import conditions, units
 from lvcore.mechanics.case import Case
 from lvcore.mechanics.simulate import prepare_case
 

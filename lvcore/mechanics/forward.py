@@ -26,7 +26,7 @@ from lvcore.core.registry import DEFAULT_FORWARD_NAME, register_forward
 from lvcore.mechanics.case_inputs import build_case
 from lvcore.exceptions import ForwardError
 from lvcore.mechanics.simulate import simulate
-from lvcore.outputs import N_OUTPUTS, THETA_NAMES
+from lvcore.domain.outputs import N_OUTPUTS, THETA_NAMES
 
 
 class WarmState(NamedTuple):

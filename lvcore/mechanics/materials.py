@@ -34,7 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore import conditions
+from lvcore.domain import conditions
 from lvcore.mechanics import tensor_forms as tf
 from lvcore.mechanics.kinematics import cofactor, det3, green_strain, isochoric_i1, right_cauchy_green
 from lvcore.mechanics.tensor_forms import pull_back

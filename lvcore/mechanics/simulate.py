@@ -18,12 +18,12 @@ import numpy as np
 import jax
 import jax.numpy as jnp
 
-from lvcore import units
+from lvcore.domain import units
 from lvcore.safety import limits
 from lvcore.bounded_cache import BoundedCache
 from lvcore.jax_cache import exported_kernel
 from lvcore.exceptions import CaseError, GeometryError, SolverError
-from lvcore.outputs import N_OUTPUTS, THETA_NAMES
+from lvcore.domain.outputs import N_OUTPUTS, THETA_NAMES
 from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables
 from lvcore.mechanics.mesh import FEMesh, box_mesh, lv_mesh
 from lvcore.mechanics.resolution import RESOLUTION_PRESETS, BoxResolution
@@ -298,7 +298,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     --------
     The default LV (coarse ``fast`` mesh) at the typical-heart material, inflated to 8 mmHg:
 
-    >>> from lvcore import conditions
+    >>> from lvcore.domain import conditions
     >>> from lvcore.mechanics.simulate import simulate
     >>> case = {"geometry": {"kind": "default", "resolution": "fast"},
     ...         "material": {"law": "holzapfel-ogden", **conditions.SIMULATOR_DEFAULT_THETA},
@@ -398,10 +398,10 @@ def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None 
 
     The loaded cavity above :data:`lvcore.safety.limits.PLAUSIBLE_MAX_LVV_ML` is always flagged (a units slip). EDV/V₀
     (``standardised``) is judged only for an LV at a physiological pressure (``pressure_mmhg`` in
-    :data:`lvcore.physiology.PHYSIOLOGICAL_EDP_RANGE_MMHG`): above
+    :data:`lvcore.domain.physiology.PHYSIOLOGICAL_EDP_RANGE_MMHG`): above
     :data:`lvcore.safety.limits.PLAUSIBLE_MAX_STANDARDISED_LVV` it is "implausible", outside the typical range of
-    :func:`lvcore.physiology.typical_edv_ratio` by more than its own uncertainty
-    (:data:`lvcore.physiology.EDV_RATIO_NOTE_TOLERANCE`, 2 %) "unusual". At any other pressure (or ``pressure_mmhg=None``,
+    :func:`lvcore.domain.physiology.typical_edv_ratio` by more than its own uncertainty
+    (:data:`lvcore.domain.physiology.EDV_RATIO_NOTE_TOLERANCE`, 2 %) "unusual". At any other pressure (or ``pressure_mmhg=None``,
     unknown) only EDV/V₀ above :data:`lvcore.safety.limits.PLAUSIBLE_MAX_STANDARDISED_LVV_ANY_PRESSURE` (5) is
     flagged, so benchmarks such as Land et al. (2015) problem 2 (10 kPa, EDV/V₀ 4.3) are not.
 
@@ -419,7 +419,7 @@ def plausibility_warnings(volume_mm3, standardised, pressure_mmhg: float | None 
     tuple of str
         One sentence per flag (empty when nothing is flagged).
     """
-    from lvcore import physiology
+    from lvcore.domain import physiology
 
     out = []
     if volume_mm3 is not None and volume_mm3[1] is not None:

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore import conditions
+from lvcore.domain import conditions
 from lvcore.mechanics.kinematics import right_cauchy_green
 from lvcore.mechanics.materials import HolzapfelOgden
 
@@ -76,7 +76,7 @@ def ho_fibre_stress(theta: Mapping[str, object], stretch, *, fixed: Mapping[str,
         against the theta arrays.
     fixed : mapping, optional
         Overrides of the other parameters ``"as", "bs", "afs", "bfs"`` (kPa, -, kPa, -) and ``"kappa"`` (fibre
-        dispersion, -); default the simulator's population values :data:`lvcore.conditions.HO_FIXED`, κ = 0.
+        dispersion, -); default the simulator's population values :data:`lvcore.domain.conditions.HO_FIXED`, κ = 0.
 
     Returns
     -------

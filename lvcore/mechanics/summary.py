@@ -1,7 +1,7 @@
 """Plain-text summaries of simulation results (the ``lvcore simulate`` report and the app's)."""
 from __future__ import annotations
 
-from lvcore.outputs import LEVEL_NAMES, strains_by_level
+from lvcore.domain.outputs import LEVEL_NAMES, strains_by_level
 
 
 def format_summary(result) -> str:

@@ -32,7 +32,7 @@ from lvcore.campaigns.designs import make_design
 from lvcore.core.forward import Forward
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import ForwardError, SolverError
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 #: The GP models log(f + floor): the RSS spans orders of magnitude over the box.
 _LOG_FLOOR = 1e-6

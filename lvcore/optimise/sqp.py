@@ -24,7 +24,7 @@ from scipy.optimize import minimize
 from lvcore.core.forward import Forward, JacobianForward
 from lvcore.core.space import THETA_BOUNDS
 from lvcore.exceptions import ForwardError
-from lvcore.outputs import N_OUTPUTS, THETA_NAMES
+from lvcore.domain.outputs import N_OUTPUTS, THETA_NAMES
 
 
 @dataclass(frozen=True)

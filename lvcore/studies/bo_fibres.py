@@ -44,10 +44,10 @@ import numpy as np
 from lvcore import cli_args
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.mechanics.forward import SimulatorForward
-from lvcore.conditions import SIMULATOR_DEFAULT_ANGLES
+from lvcore.domain.conditions import SIMULATOR_DEFAULT_ANGLES
 from lvcore.core.space import ANGLE_BOUNDS, Parameter, ParameterSpace
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
+from lvcore.domain.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 from lvcore.resources import asset_path
 from lvcore.studies import registry
 from lvcore.studies._common import (add_simulator_options, clean, comma_list, print_result, progress_bar,

@@ -44,9 +44,9 @@ from typing import Sequence
 import numpy as np
 
 from lvcore import cli_args
-from lvcore.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
+from lvcore.domain.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import EDP_NAME, THETA_NAMES
 from lvcore.studies import bo_fibres, registry
 from lvcore.studies._common import (add_simulator_options, bootstrap_ci, clean, comma_list, print_result, save_figure,
                                     study_executor, write_json_atomic)

@@ -20,14 +20,14 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from lvcore import conditions, units
+from lvcore.domain import conditions, units
 from lvcore._exports import moved_names
 from lvcore.core.forward import Forward, ForwardBatch
 from lvcore.emulator.forward import EmulatorForward
 from lvcore.mechanics.forward import SimulatorForward
 from lvcore.exceptions import ForwardError
 from lvcore.geometry.template import N_REGIONS
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name, pc_names
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, is_pc_name, pc_names
 
 #: Most angle pairs typed into the app's sweep (each is one simulator solve, seconds to a minute).
 MAX_TYPED_ANGLE_PAIRS = 20
@@ -407,4 +407,4 @@ def source_line(result: dict) -> str:
 
 
 #: Moved: the chapter's angle pairs live with the other conditions.
-__getattr__ = moved_names(__name__, {"CHAPTER_ANGLE_PAIRS": "lvcore.conditions:CHAPTER_ANGLE_PAIRS"})
+__getattr__ = moved_names(__name__, {"CHAPTER_ANGLE_PAIRS": "lvcore.domain.conditions:CHAPTER_ANGLE_PAIRS"})

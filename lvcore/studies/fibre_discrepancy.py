@@ -39,10 +39,10 @@ from lvcore.core.forward import Forward
 from lvcore.emulator.forward import load_emulator_forward
 from lvcore.mechanics.forward import SimulatorForward
 from lvcore._exports import moved_names
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, FIBRE_DISCREPANCY_ANGLE_PAIRS, SIGMA_S, SIGMA_V_ML
+from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP, FIBRE_DISCREPANCY_ANGLE_PAIRS, SIGMA_S, SIGMA_V_ML
 from lvcore.inference import coverage, diagnostics, samplers
 from lvcore.studies import registry
-from lvcore.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, pc_names
+from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, pc_names
 
 THETA_SETS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), (1.0, 5.0, 1.0, 5.0))
 #: The synthetic geometry: a point in the shape model's standardised 5-PC space.
@@ -82,7 +82,7 @@ def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulator: Forward | 
     ``simulator`` reads ``a, b, af, bf, alpha_endo, alpha_epi`` and makes the
     noise-free data (default :func:`data_simulator`); ``forward`` (theta only)
     gives the benchmark. Set ``i`` has angles ``FIBRE_DISCREPANCY_ANGLE_PAIRS[i // 4]``
-    (:mod:`lvcore.conditions`) and theta ``THETA_SETS[i % 4]``.
+    (:mod:`lvcore.domain.conditions`) and theta ``THETA_SETS[i % 4]``.
     """
     simulator = simulator or data_simulator(h, resolution, getattr(forward, "base", "clamped"))
     rng = np.random.default_rng(seed)
@@ -502,4 +502,4 @@ def _cli(args) -> int:
 
 
 #: Moved: the study's angle pairs live with the other conditions.
-__getattr__ = moved_names(__name__, {"ANGLE_SETS": "lvcore.conditions:FIBRE_DISCREPANCY_ANGLE_PAIRS"})
+__getattr__ = moved_names(__name__, {"ANGLE_SETS": "lvcore.domain.conditions:FIBRE_DISCREPANCY_ANGLE_PAIRS"})

@@ -6,7 +6,7 @@ Part of :mod:`lvcore.studies.findings` (the study).
 """
 from __future__ import annotations
 
-from lvcore.conditions import SIGMA_S
+from lvcore.domain.conditions import SIGMA_S
 from lvcore.studies.findings_rule import (F1_COLUMN, MIN_CHAINS, N_MIN, PHYSIOLOGICAL_RANGES, RHAT_SHARE_MAX, TESTABLE_RMS,
                                           dose_range, fmt_ci)
 from lvcore.studies.findings_tests import SOURCES, dose_rows, replication_tests, verdicts

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lvcore.conditions import SIGMA_S
+from lvcore.domain.conditions import SIGMA_S
 
 #: F1's threshold (the chapter's ≈ 2×, read as at least 1.5×), shared with :mod:`lvcore.studies.mismatch`.
 F1_INFLATION = 1.5

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lvcore.conditions import SIGMA_S
+from lvcore.domain.conditions import SIGMA_S
 from lvcore.studies.findings_rule import (BO_THETA_BOX, BOUND_TOL, CLAIMS, F1_COLUMN, F1_INFLATION, F2_BAND,
                                           F5_SHARE, MIN_CHAINS, N_MIN, RHAT_SHARE_MAX, TESTABLE_RMS, call, cluster_boot,
                                           combine, dose_range, fmt_ci)

@@ -137,7 +137,7 @@ def geometry_effect(table: dict | None = None, theta=None, emulator: str = "chap
     Returns ``{"operator", "theta", "emulator", "rows": [{patient, operator, h1..h5, scale, lvv_ml,
     strain_01..strain_24}]}``, or None when the emulator is not installed.
     """
-    from lvcore import conditions, units
+    from lvcore.domain import conditions, units
     from lvcore.emulator.io import available_emulators
 
     if emulator not in available_emulators():

@@ -58,8 +58,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.conditions import SIGMA_S, SIGMA_V_ML
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.studies._common import clean, write_json_atomic
 from lvcore.studies.mismatch_docs import DOCS_BEGIN, DOCS_END, docs_markdown
 from lvcore.studies.mismatch_fit import (BATCH, F1_CI_FLOOR, F1_INFLATION, MODELS, PER_VOLUNTEER_DIGITS,  # noqa: F401

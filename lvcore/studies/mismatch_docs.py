@@ -5,7 +5,7 @@ Part of :mod:`lvcore.studies.mismatch` (the study).
 """
 from __future__ import annotations
 
-from lvcore.conditions import SIGMA_S
+from lvcore.domain.conditions import SIGMA_S
 from lvcore.studies.mismatch_fit import MODELS, budget_text, sampler_text
 from lvcore.studies.mismatch_sim import dose_label
 

@@ -10,8 +10,8 @@ from typing import Sequence
 
 import numpy as np
 
-from lvcore.conditions import SIGMA_S, SIGMA_V_ML
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.studies._common import percentile_bootstrap
 from lvcore.studies.mismatch_sim import SOURCES
 

@@ -13,9 +13,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, HO_FIXED
+from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP, HO_FIXED
 from lvcore.mechanics.case_inputs import build_case
-from lvcore.outputs import EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import EDP_NAME, THETA_NAMES
 from lvcore.studies._common import write_json_atomic
 
 #: The calibration model's fixed conditions (the ``chapter`` emulator).

@@ -44,7 +44,7 @@ import numpy as np
 
 from lvcore import cli_args
 from lvcore.exceptions import LVCoreError  # noqa: F401 - the study's error, as before the split
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.studies import registry
 from lvcore.studies._common import clean, progress_bar, save_figure, write_json_atomic
 from lvcore.studies.operators_fit import (BOUND_TOL, CHAPTER_SHARE_10PC, GN_GRID, PAIRS, PC_TESTS,  # noqa: F401

@@ -12,11 +12,11 @@ from typing import Sequence
 
 import numpy as np
 
-from lvcore.conditions import SIGMA_S, THETA_TILDE
+from lvcore.domain.conditions import SIGMA_S, THETA_TILDE
 from lvcore.core.forward import ForwardBatch, as_columns
 from lvcore.exceptions import LVCoreError
 from lvcore.mechanics.forward import AdjointSimulatorForward, SimulatorForward
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 #: The chapter's ground truth θ̃ (a, af in kPa).
 THETA_TRUE = tuple(THETA_TILDE[n] for n in THETA_NAMES)

@@ -86,9 +86,9 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from lvcore import cli_args
-from lvcore.conditions import SIGMA_S, SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import DISPLAY_NAMES
+from lvcore.domain.outputs import DISPLAY_NAMES
 from lvcore.studies import registry
 from lvcore.studies._common import clean, round_floats, write_json_atomic
 # the statistics (pure) and the runs live in their own modules; their names are this module's too

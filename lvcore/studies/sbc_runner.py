@@ -19,9 +19,9 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
+from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
-from lvcore.outputs import EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import EDP_NAME, THETA_NAMES
 from lvcore.studies._common import clean, write_json_atomic
 from lvcore.studies.sbc_stats import rank_of_truth
 

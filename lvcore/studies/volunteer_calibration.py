@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 
 #: The subject of the report's calibration.
 DEFAULT_SUBJECT = "SYNTHETIC-HV3"
@@ -68,7 +68,7 @@ def compute(subject: str = DEFAULT_SUBJECT, *, num_warmup: int = 500, num_sample
     n_derived = derived.default_draws() if derived_draws is None else int(derived_draws)
     derived_rec = None
     if n_derived:
-        from lvcore.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_V_ML
+        from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP, SIGMA_V_ML
 
         emu = forward.forward.emulator if hasattr(forward.forward, "emulator") else None
         derived_rec, _ = derived.derive(

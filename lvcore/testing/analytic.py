@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore.core.forward import JaxForward
-from lvcore.outputs import ANGLE_NAMES, THETA_NAMES
+from lvcore.domain.outputs import ANGLE_NAMES, THETA_NAMES
 
 
 def _analytic_matrix() -> np.ndarray:

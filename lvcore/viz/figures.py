@@ -2,7 +2,7 @@
 
 Every builder is a pure function of plain arrays and returns a
 ``plotly.graph_objects.Figure``; nothing here runs a simulation or reads
-files. Strain figures follow :mod:`lvcore.outputs`: region
+files. Strain figures follow :mod:`lvcore.domain.outputs`: region
 ``r = 6 * level + sector`` (level 0 basal ... 3 apical; sector 0 spans
 0°–60° counter-clockwise from +x seen from the base).
 """
@@ -14,7 +14,7 @@ import numpy as np
 import plotly.graph_objects as go
 
 from lvcore.geometry.template import N_LEVELS, N_REGIONS, N_SECTORS
-from lvcore.outputs import LEVEL_NAMES, STRAIN_NAMES, strain_vector, strains_by_level
+from lvcore.domain.outputs import LEVEL_NAMES, STRAIN_NAMES, strain_vector, strains_by_level
 
 #: Sector labels: "S1 (0–60°)" ... "S6 (300–360°)".
 SECTOR_NAMES = tuple(f"S{k + 1} ({60 * k}–{60 * (k + 1)}°)" for k in range(N_SECTORS))
@@ -310,7 +310,7 @@ def derived_edpvr_figure(record: Mapping, *, title: str = "End-diastolic pressur
     Traces: "posterior 90% band", "posterior median", "99% predictive interval at the EDP", "measured (EDV, EDP)",
     "Klotz et al. 2006 normal".
     """
-    from lvcore import physiology
+    from lvcore.domain import physiology
 
     rows = [r for r in record["edpvr"] if r.get("median") is not None]
     p = np.array([r["pressure_mmhg"] for r in rows], float)

@@ -15,8 +15,8 @@ import pandas as pd
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
-from lvcore.conditions import SIGMA_S
-from lvcore.outputs import DISPLAY_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
+from lvcore.domain.conditions import SIGMA_S
+from lvcore.domain.outputs import DISPLAY_NAMES, OUTPUT_NAMES, STRAIN_NAMES, THETA_NAMES
 from lvcore.viz.figures import SERIES_COLOURS, strain_heatmap, violin
 
 UNITS = {"a": "kPa", "b": "-", "af": "kPa", "bf": "-", "alpha_endo": "deg", "alpha_epi": "deg",

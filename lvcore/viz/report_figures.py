@@ -15,7 +15,7 @@ import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from lvcore.geometry.template import N_REGIONS, N_SECTORS
-from lvcore.outputs import LEVEL_NAMES
+from lvcore.domain.outputs import LEVEL_NAMES
 from lvcore.viz.figures import SERIES_COLOURS, plain_text
 
 #: Region tick labels "basal S1" ... for 24-strain line plots (r = 6 * level + sector).

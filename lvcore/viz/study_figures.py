@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from lvcore.outputs import THETA_NAMES
+from lvcore.domain.outputs import THETA_NAMES
 from lvcore.viz.figures import SERIES_COLOURS
 
 #: Modes of the BO study, in table order.

@@ -1,4 +1,4 @@
-"""Units and unit conversions (the conditions of simulations and studies are in :mod:`lvcore.conditions`).
+"""Units and unit conversions (the conditions of simulations and studies are in :mod:`lvcore.domain.conditions`).
 
 Conventions used throughout :mod:`lvcore`:
 
@@ -17,8 +17,8 @@ from lvcore._exports import moved_names
 KPA_PER_MMHG = 0.1333223684
 MM3_PER_ML = 1000.0
 
-#: Material values are not units: the fixed Holzapfel–Ogden terms moved to :data:`lvcore.conditions.HO_FIXED`.
-__getattr__ = moved_names(__name__, {"HO_FIXED": "lvcore.conditions:HO_FIXED"})
+#: Material values are not units: the fixed Holzapfel–Ogden terms moved to :data:`lvcore.domain.conditions.HO_FIXED`.
+__getattr__ = moved_names(__name__, {"HO_FIXED": "lvcore.domain.conditions:HO_FIXED"})
 
 
 def mmhg_to_kpa(p_mmhg: float) -> float:

@@ -1,4 +1,4 @@
-"""lvcore.conditions: each condition has one home, and the two sets of angles/EDP are used where they belong."""
+"""lvcore.domain.conditions: each condition has one home, and the two sets of angles/EDP are used where they belong."""
 from __future__ import annotations
 
 import ast
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from lvcore import conditions
+from lvcore.domain import conditions
 from lvcore.mechanics.case_inputs import build_case
 from lvcore.mechanics.case import Case
 from lvcore.parallel import THREAD_VARIABLES
@@ -48,10 +48,10 @@ def _defined(pattern: str) -> list[str]:
 
 
 def test_no_second_home_for_a_constant():
-    assert _defined(r"^\s*SIGMA_S\s*=\s*0\.03\b") == ["lvcore/conditions.py"]
+    assert _defined(r"^\s*SIGMA_S\s*=\s*0\.03\b") == ["lvcore/domain/conditions.py"]
     # θ̃ written out in code (a tuple or a dict of its values) only as THETA_TILDE
     assert _defined(r"^\s*[A-Za-z_]\w*\s*=\s*\(0\.60?, 1\.30?, 1\.00?, 3\.60?\)") == []
-    assert _defined(r"\{\s*\"a\": 0\.60?, \"b\": 1\.30?, \"af\": 1\.00?, \"bf\": 3\.60?\s*\}") == ["lvcore/conditions.py"]
+    assert _defined(r"\{\s*\"a\": 0\.60?, \"b\": 1\.30?, \"af\": 1\.00?, \"bf\": 3\.60?\s*\}") == ["lvcore/domain/conditions.py"]
     assert _defined(r"^MODEL_LABELS\s*=") == ["lvcore/inference/models.py"]
     # the app's set-up: one function, called once by the entry script
     assert [p for p in _defined(r"\bpin_threads\(") if p.startswith(("lvcore/app", "pages"))] == \
@@ -98,15 +98,15 @@ def _strings_outside_docstrings(path: Path) -> list[ast.Constant]:
 
 def test_no_second_home_for_angle_pairs_material_values_or_the_case_writer():
     # the angle pairs of the chapter's studies: conditions.CHAPTER_ANGLE_PAIRS / FIBRE_DISCREPANCY_ANGLE_PAIRS
-    assert _defined(r"\(-30\.0, 60\.0\)") == ["lvcore/conditions.py"]
+    assert _defined(r"\(-30\.0, 60\.0\)") == ["lvcore/domain/conditions.py"]
     assert not re.search(r"-?\b60\.0\b", (ROOT / "pages" / "3_Fibre_angles.py").read_text())
     # the Holzapfel–Ogden terms held at population values: conditions.HO_FIXED, also in the Simulator page's caption
-    assert _defined(r"\b0\.69\b") == ["lvcore/conditions.py"]
+    assert _defined(r"\b0\.69\b") == ["lvcore/domain/conditions.py"]
     # the one writer of cases from named inputs
     assert _defined(r"^def build_case\(") == ["lvcore/mechanics/case_inputs.py"]
     # and lvcore itself uses neither through its old home (the shims are for users' code)
-    assert _defined(r"from lvcore\.core\.space import [^\n]*\bbuild_case|\bunits\.HO_FIXED|from lvcore\.units import "
-                    r"[^\n]*HO_FIXED|self\.space\.case\(") == []
+    assert _defined(r"from lvcore\.core\.space import [^\n]*\bbuild_case|\bunits\.HO_FIXED|"
+                    r"from lvcore(\.domain)?\.units import [^\n]*HO_FIXED|self\.space\.case\(") == []
     # labels derive σ_S's value from conditions.SIGMA_S (docstrings may quote the chapter)
     label = re.compile(r"σ_S ?/ ?0\.03|truth 0\.03|noise 0\.03")
     assert [f"{p.relative_to(ROOT)}:{n.lineno}" for p in SOURCES for n in _strings_outside_docstrings(p)
@@ -114,8 +114,8 @@ def test_no_second_home_for_angle_pairs_material_values_or_the_case_writer():
 
 
 @pytest.mark.parametrize("module, name, home", [
-    ("lvcore.units", "HO_FIXED", "lvcore.conditions"),
-    ("lvcore.studies.fibre_angles", "CHAPTER_ANGLE_PAIRS", "lvcore.conditions"),
+    ("lvcore.domain.units", "HO_FIXED", "lvcore.domain.conditions"),
+    ("lvcore.studies.fibre_angles", "CHAPTER_ANGLE_PAIRS", "lvcore.domain.conditions"),
     ("lvcore.core.space", "build_case", "lvcore.mechanics.case_inputs"),
 ])
 def test_a_moved_name_still_reads_with_a_deprecation_warning(module, name, home):
@@ -128,7 +128,7 @@ def test_the_fibre_discrepancy_angle_sets_moved_to_conditions():
     from lvcore.studies import fibre_discrepancy
 
     with pytest.warns(DeprecationWarning, match=r"fibre_discrepancy\.ANGLE_SETS is deprecated; use "
-                                                r"lvcore\.conditions\.FIBRE_DISCREPANCY_ANGLE_PAIRS"):
+                                                r"lvcore\.domain\.conditions\.FIBRE_DISCREPANCY_ANGLE_PAIRS"):
         assert fibre_discrepancy.ANGLE_SETS == conditions.FIBRE_DISCREPANCY_ANGLE_PAIRS
 
 
@@ -140,10 +140,10 @@ def test_the_angle_pairs_are_the_chapters():
 
 
 def test_one_spelling_per_concept():
-    """The input names ``edp``, ``af``, ``bf`` are written once (lvcore.outputs: EDP_NAME, THETA_NAMES) and the labels
-    users read (``a_f``, ``b_f``) once (lvcore.outputs.DISPLAY_NAMES); a pressure passed as a parameter
+    """The input names ``edp``, ``af``, ``bf`` are written once (lvcore.domain.outputs: EDP_NAME, THETA_NAMES) and the labels
+    users read (``a_f``, ``b_f``) once (lvcore.domain.outputs.DISPLAY_NAMES); a pressure passed as a parameter
     is ``edp_mmhg`` (a ``bool`` parameter ``edp`` is a page's "show the EDP slider" flag). Widget keys are exempt."""
-    homes = dict.fromkeys(("edp", "a_f", "b_f"), "lvcore/outputs.py")
+    homes = dict.fromkeys(("edp", "a_f", "b_f"), "lvcore/domain/outputs.py")
     offenders = []
     for path in SOURCES:
         where = str(path.relative_to(ROOT))

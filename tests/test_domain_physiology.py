@@ -1,8 +1,8 @@
-"""lvcore.physiology: the Klotz et al. (2006) EDPVR and typical EDV/V0, against their formulas."""
+"""lvcore.domain.physiology: the Klotz et al. (2006) EDPVR and typical EDV/V0, against their formulas."""
 import numpy as np
 import pytest
 
-from lvcore import physiology as ph
+from lvcore.domain import physiology as ph
 
 
 def test_klotz_curve_matches_the_formula():

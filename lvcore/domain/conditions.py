@@ -33,7 +33,7 @@ SIMULATOR_DEFAULT_EDP_MMHG = 8.0
 #: :data:`HO_FIXED` (a_s = 0.69 kPa, b_s = 1.11, a_fs = 0.31 kPa, b_fs = 2.58; Gao et al. 2017, after
 #: Gao et al. 2015, J Eng Math 95:231, doi:10.1007/s10665-014-9740-3; quoted from those papers as remembered, not
 #: re-read here: check before citing). On the default LV at 8 mmHg they give EDV/V₀ = 1.85 (LVV 159.1 mL on
-#: V₀ = 86.1 mL, ``default`` mesh), inside the typical 1.66–1.99 of :func:`lvcore.physiology.typical_edv_ratio`
+#: V₀ = 86.1 mL, ``default`` mesh), inside the typical 1.66–1.99 of :func:`lvcore.domain.physiology.typical_edv_ratio`
 #: (central 1.81). The chapter's θ̃ (:data:`THETA_TILDE`) has a 3.3× softer fibre term (a_f = 1.00 kPa) and a
 #: softer-rising matrix (b = 1.30) and inflates the same LV to 2.14 × V₀ (184.7 mL), above that range: it stays the
 #: truth of the SYNTHETIC studies and the emulators' pages' starting point, not the default heart.
