@@ -12,6 +12,13 @@ One sweep is exactly Algorithm 4 of the chapter:
    ``"marginal"``) for ``(theta, v)`` with ``b`` integrated out, then ``b`` from its Gaussian full
    conditional.
 
+With a forward model that carries the shape model's representation error (a mesh's floor,
+:class:`lvcore.inference.representation_error.FlooredForward`), ``K`` above is ``K_GP + Sigma_rep``
+(:func:`lvcore.inference.models.discrepancy_cholesky`: ``Sigma_rep`` a known part of the discrepancy, its
+per-mesh factor a run-time value) and the LVV sd is :func:`lvcore.inference.models.lvv_sd`, as in
+:func:`lvcore.inference.models.discrepancy_model`; ``sigma_S^2`` stays conjugate. Without one every step is
+the GP's alone, draw for draw as before.
+
 Each NUTS block keeps its own step size and diagonal mass-matrix adaptation
 (numpyro's functional :func:`numpyro.infer.hmc.hmc` with ``potential_fn_gen``),
 and the cached potential energy and gradient are refreshed whenever the
@@ -84,11 +91,15 @@ class PolarGPGibbs(MCMCKernel):
     NUTS on (θ, b̃, v), ``b = L b̃``, as the chapter writes it. Steps (4) of either kind draw (θ, v, b) from
     their joint conditional given σ_S² and the hyperparameters, so both samplers have the same posterior.
 
+    A forward model that carries the representation error (a mesh's floor) makes K the GP's Gram matrix plus
+    the known Σ_rep in every step, and widens the LVV sd (:func:`lvcore.inference.models.lvv_sd`): the model
+    of :func:`lvcore.inference.models.discrepancy_model`.
+
     Parameters
     ----------
     forward : lvcore.core.Forward
         JAX-traceable (a :class:`lvcore.core.TraceableForward`).
-        Forward model returning the 25 outputs.
+        Forward model returning the 25 outputs; its ``representation`` (if any) is used.
     y : array_like, shape (25,)
         Measured data [LVV (mL), 24 strains].
     sigma_v : float
@@ -132,11 +143,11 @@ class PolarGPGibbs(MCMCKernel):
         self._main_init, self._main_sample = hmc(potential_fn_gen=self._main_gen, algo="NUTS")
 
     # --- conditionals -------------------------------------------------------
-    def _hyper_potential_gen(self, b, y=None):
-        """Potential of block 2: ``-log MVN(b | 0, K(hyper)) - log prior`` (unconstrained)."""
+    def _hyper_potential_gen(self, b, rep_cov=None):
+        """Potential of block 2: ``-log MVN(b | 0, K(hyper) [+ Sigma_rep]) - log prior`` (unconstrained)."""
         def potential(u):
             hyper, logp = _constrain(self.hyper_priors, u)
-            chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
+            chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov)
             alpha = solve_triangular(chol, b, lower=True)
             loglik = -0.5 * alpha @ alpha - jnp.sum(jnp.log(jnp.diag(chol)))
             return -(loglik + logp)
@@ -146,6 +157,15 @@ class PolarGPGibbs(MCMCKernel):
         """The forward model with run-time conditions ``cond`` (None: the forward as given)."""
         return self.forward if cond is None else self._template.bind(cond)
 
+    def _rep_cov(self, cond):
+        """``Sigma_rep`` of the forward model at run-time conditions ``cond`` (its floor factor one of them), or
+        None without a floor."""
+        return models.strain_rep_covariance(self._forward_at(cond))
+
+    @staticmethod
+    def _hyper_args(b, rep_cov):
+        return (b,) if rep_cov is None else (b, rep_cov)
+
     def _main_potential_gen(self, sigma_s2, chol, y, cond=None):
         """Potential of block 4 over (theta, b_tilde, v) given sigma_S^2 and L."""
         forward = self._forward_at(cond)
@@ -154,7 +174,7 @@ class PolarGPGibbs(MCMCKernel):
             params, logp = _constrain(self.theta_priors, u)
             eta = forward(params)
             b = chol @ u["disc_tilde"]
-            logl = dist.Normal(eta[0], self.sigma_v).log_prob(y[0])
+            logl = dist.Normal(eta[0], models.lvv_sd(eta[0], self.sigma_v, forward)).log_prob(y[0])
             logl += jnp.sum(dist.Normal(eta[1:] + b + u["v"], jnp.sqrt(sigma_s2)).log_prob(y[1:]))
             logp += -0.5 * u["disc_tilde"] @ u["disc_tilde"] + self.v_prior.log_prob(u["v"])
             return -(logl + logp)
@@ -168,7 +188,7 @@ class PolarGPGibbs(MCMCKernel):
         def potential(u):
             params, logp = _constrain(self.theta_priors, u)
             eta = forward(params)
-            logl = dist.Normal(eta[0], self.sigma_v).log_prob(y[0])
+            logl = dist.Normal(eta[0], models.lvv_sd(eta[0], self.sigma_v, forward)).log_prob(y[0])
             alpha = solve_triangular(chol, y[1:] - eta[1:] - u["v"], lower=True)
             logp += self.v_prior.log_prob(u["v"])
             return -(logl - 0.5 * alpha @ alpha + logp)
@@ -183,7 +203,7 @@ class PolarGPGibbs(MCMCKernel):
     def _discrepancy_draw(self, key, params, v, sigma_s2, chol_k, chol_t, y, cond=None):
         """b from its full conditional ``N(K (K + σ²I)⁻¹ r, K - K (K + σ²I)⁻¹ K)``, r = y_S - η_S - v, by
         Matheron's rule: ``b = b₀ + K (K + σ²I)⁻¹ (r - b₀ - e₀)``, b₀ ~ N(0, K), e₀ ~ N(0, σ²I).
-        ``chol_k``, ``chol_t``: Cholesky factors of K and of K + σ² I."""
+        ``chol_k``, ``chol_t``: Cholesky factors of K (the GP's, plus Σ_rep with a floor) and of K + σ² I."""
         k_b, k_e = jax.random.split(key)
         n = chol_k.shape[0]
         r = y[1:] - self._forward_at(cond)(params)[1:] - v
@@ -232,13 +252,14 @@ class PolarGPGibbs(MCMCKernel):
             b_tilde = jnp.asarray(init_params.get("disc_tilde", jnp.zeros(24)), dtype=jnp.float64)
             v = jnp.asarray(init_params.get("v", 0.0), dtype=jnp.float64)
         hyper, _ = _constrain(self.hyper_priors, u_hyper)
-        chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
+        rep_cov = self._rep_cov(cond)
+        chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov)
         b = chol @ b_tilde
         params, _ = _constrain(self.theta_priors, u_theta)
         sigma_s2 = self._sigma_s2_draw(k_s, params, b, v, y, cond)
         common = dict(num_warmup=num_warmup, target_accept_prob=self.target_accept_prob,
                       max_tree_depth=self.max_tree_depth)
-        hyper_state = self._hyper_init(u_hyper, model_args=(b,), rng_key=k_h, **common)
+        hyper_state = self._hyper_init(u_hyper, model_args=self._hyper_args(b, rep_cov), rng_key=k_h, **common)
         if self.block4 == "chapter":
             main_state = self._main_init({**u_theta, "disc_tilde": b_tilde, "v": v},
                                          model_args=(sigma_s2, chol, y, cond), rng_key=k_m, **common)
@@ -278,14 +299,16 @@ class PolarGPGibbs(MCMCKernel):
         z = state.z
         params = {n: z[n] for n in self.theta_priors}
         b = z["disc"]
+        rep_cov = self._rep_cov(cond)
         # 1. sigma_S^2 from its conjugate inverse gamma.
         sigma_s2 = self._sigma_s2_draw(k_s, params, b, z["v"], y, cond)
-        # 2. NUTS on the GP hyperparameters given b.
-        hyper_state = self._refresh(state.hyper_state, self._hyper_potential_gen(b))
-        hyper_state = self._hyper_sample(hyper_state, model_args=(b,))
+        # 2. NUTS on the GP hyperparameters given b (b ~ N(0, K + Sigma_rep) with a floor).
+        hyper_args = self._hyper_args(b, rep_cov)
+        hyper_state = self._refresh(state.hyper_state, self._hyper_potential_gen(*hyper_args))
+        hyper_state = self._hyper_sample(hyper_state, model_args=hyper_args)
         hyper, _ = _constrain(self.hyper_priors, hyper_state.z)
-        # 3. Cholesky of the new K.
-        chol = kernels.gram_cholesky(hyper, nugget=self.nugget)
+        # 3. Cholesky of the new K (+ Sigma_rep).
+        chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov)
         args = self._block4_args(sigma_s2, chol, y, cond)
         main_state = state.main_state
         if self.block4 == "chapter":  # re-whiten so that b is unchanged

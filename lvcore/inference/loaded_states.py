@@ -230,7 +230,8 @@ class LoadedStatesForward:
         """The further states' outputs, shape ``(n_states - 1, 25)``."""
         return jnp.stack([st.forward(params) for st in self.states])
 
-    def likelihood_terms(self, params, eta, *, sigma_v: float, sigma_s2=None, strain_offset=0.0) -> None:
+    def likelihood_terms(self, params, eta, *, sigma_v: float, sigma_s2=None, strain_offset=0.0,
+                         strain_floor: bool = True) -> None:
         """numpyro sites of the further states (``lvv_obs_state<k>``, ``strain_obs_state<k>``) and of the Klotz prior.
 
         Parameters
@@ -245,6 +246,9 @@ class LoadedStatesForward:
             Strain noise variance; None for the volume-only model (strains not modelled).
         strain_offset : array
             Added to every state's strain mean (the discrepancy model's ``b + v``).
+        strain_floor : bool
+            Widen the states' strains by the representation error, if the forward model carries one; False
+            where ``strain_offset`` already holds it (the discrepancy model's b, shared by every state).
         """
         import numpyro
         import numpyro.distributions as dist
@@ -258,8 +262,9 @@ class LoadedStatesForward:
                 y = jnp.asarray(st.y, dtype=jnp.float64)
                 numpyro.sample(f"lvv_obs_state{k}", dist.Normal(e[0], lvv_sd(e[0], sigma_v, self.forward)), obs=y[0])
                 if sigma_s2 is not None and st.has_strains:
+                    floored = self.forward if strain_floor else None
                     numpyro.sample(f"strain_obs_state{k}", strain_likelihood(e[1:] + strain_offset, sigma_s2,
-                                                                             self.forward), obs=y[1:])
+                                                                             floored), obs=y[1:])
         if self.klotz is not None:
             vols = numpyro.deterministic("klotz_volumes", self.klotz.volumes(params))
             numpyro.deterministic("klotz_v0", jnp.asarray(self.klotz.v0(params), dtype=jnp.float64))

@@ -19,6 +19,15 @@ Models
     ``v ~ N(0, 0.05^2)``, ``lambda ~ Gamma(2, 2)``,
     ``sigma_1^2, sigma_2^2 ~ IG(0.001, 0.001)``, ``c ~ U(0, pi)``, ``tau ~ U(4, 10)``.
 
+A forward model that carries the shape model's representation error (a mesh's floor,
+:class:`lvcore.inference.representation_error.FlooredForward`, or ``--geometry infer``) widens every model:
+the LVV sd becomes :func:`lvv_sd`; the iid strains become ``MVN(eta, sigma_S^2 I + Sigma_rep)``
+(:func:`strain_likelihood`); in the discrepancy model ``Sigma_rep`` is a known part of the discrepancy,
+``b ~ N(0, K + Sigma_rep)`` (:func:`discrepancy_cholesky`), the strains staying ``N(eta + b + v, sigma_S^2)``:
+the same distribution of the data given (theta, sigma_S^2, GP hyperparameters, v), with ``sigma_S^2``
+conjugate, so joint NUTS and the blocked sampler (:class:`lvcore.inference.gibbs.PolarGPGibbs`) state one
+model and ``disc`` means the same in both.
+
 A forward model that carries further likelihood terms (several loaded states of the subject, the
 Klotz EDPVR prior: :class:`lvcore.inference.loaded_states.LoadedStatesForward`) adds them to
 each model through :func:`extra_terms`; the volume-only model reads only the states' volumes.
@@ -161,16 +170,43 @@ def strain_likelihood(mean, sigma_s2, forward=None):
     return dist.MultivariateNormal(mean, covariance_matrix=rep.strain_covariance(sigma_s2))
 
 
+def strain_rep_covariance(forward):
+    """The known strain covariance ``Sigma_rep`` (strain², 24 x 24) the forward model carries, or None."""
+    rep = representation_error(forward)
+    return None if rep is None else rep.strain_rep_covariance()
+
+
+def discrepancy_cholesky(hyper, nugget: float = kernels.DEFAULT_NUGGET, rep_cov=None):
+    """Lower Cholesky factor of the discrepancy's covariance ``K(hyper) + nugget I (+ Sigma_rep)`` (strain).
+
+    Parameters
+    ----------
+    hyper : mapping
+        GP hyperparameters (:data:`HYPER_NAMES`).
+    nugget : float
+        Diagonal jitter of the Gram matrix (strain²).
+    rep_cov : array (24, 24), optional
+        The representation error's known covariance (:func:`strain_rep_covariance`, strain²); None: the
+        GP's alone, exactly :func:`lvcore.inference.kernels.gram_cholesky`.
+    """
+    if rep_cov is None:
+        return kernels.gram_cholesky(hyper, nugget=nugget)
+    return jnp.linalg.cholesky(kernels.gram(hyper, nugget=nugget) + rep_cov)
+
+
 def _volume_term(eta0, y, sigma_v, forward=None):
     numpyro.sample("lvv_obs", dist.Normal(eta0, lvv_sd(eta0, sigma_v, forward)), obs=None if y is None else y[0])
 
 
-def extra_terms(forward, params, eta, sigma_v, sigma_s2=None, strain_offset=0.0) -> None:
+def extra_terms(forward, params, eta, sigma_v, sigma_s2=None, strain_offset=0.0, strain_floor: bool = True) -> None:
     """The forward model's further likelihood terms, if it carries any (``forward.likelihood_terms``: further
-    loaded states, the Klotz prior; :mod:`lvcore.inference.loaded_states`); nothing otherwise."""
+    loaded states, the Klotz prior; :mod:`lvcore.inference.loaded_states`); nothing otherwise.
+
+    ``strain_floor=False``: ``strain_offset`` already carries the representation error (the discrepancy
+    model's b), so the further states' strains get ``sigma_S^2 I`` only."""
     terms = getattr(forward, "likelihood_terms", None)
     if terms is not None:
-        terms(params, eta, sigma_v=sigma_v, sigma_s2=sigma_s2, strain_offset=strain_offset)
+        terms(params, eta, sigma_v=sigma_v, sigma_s2=sigma_s2, strain_offset=strain_offset, strain_floor=strain_floor)
 
 
 def volume_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False):
@@ -197,9 +233,11 @@ def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_ang
                       nugget: float = kernels.DEFAULT_NUGGET):
     """Model (iii): strains ``~ N(eta + b + v, sigma_S^2)`` with ``b = L b_tilde`` a polar GP.
 
-    ``disc_tilde ~ N(0, I_24)`` is the whitened discrepancy; ``disc`` (= b, named so it cannot clash with the material parameter b) is recorded as a
-    deterministic site. ``L`` is the Cholesky factor of the polar-kernel Gram
-    matrix (plus ``nugget``) on the 6 x 4 strain grid.
+    ``disc_tilde ~ N(0, I_24)`` is the whitened discrepancy; ``disc`` (= b, named so it cannot clash with the
+    material parameter b) is recorded as a deterministic site. ``L`` is the Cholesky factor of the
+    polar-kernel Gram matrix (plus ``nugget``) on the 6 x 4 strain grid, plus the representation error's
+    ``Sigma_rep`` when the forward model carries one (:func:`discrepancy_cholesky`; module docstring): b is
+    then the GP discrepancy and the shape model's known one together, and further loaded states share it.
     """
     _check_y(y)
     params = _sample_params(infer_angles, forward)
@@ -207,13 +245,14 @@ def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_ang
     hyper = {n: numpyro.sample(n, d) for n, d in hyper_priors().items()}
     b_tilde = numpyro.sample("disc_tilde", dist.Normal(0.0, 1.0).expand([24]).to_event(1))
     v = numpyro.sample("v", v_prior())
-    chol = kernels.gram_cholesky(hyper, nugget=nugget)
+    rep_cov = strain_rep_covariance(forward)
+    chol = discrepancy_cholesky(hyper, nugget, rep_cov)
     b = numpyro.deterministic("disc", chol @ b_tilde)
     eta = numpyro.deterministic("eta", forward(params))
     _volume_term(eta[0], y, sigma_v, forward)
-    numpyro.sample("strain_obs", strain_likelihood(eta[1:] + b + v, sigma_s2, forward),
-                   obs=None if y is None else y[1:])
-    extra_terms(forward, params, eta, sigma_v, sigma_s2, b + v)
+    # Sigma_rep is inside b: the strains' own noise is sigma_S^2 I (strain_likelihood without a floor)
+    numpyro.sample("strain_obs", strain_likelihood(eta[1:] + b + v, sigma_s2), obs=None if y is None else y[1:])
+    extra_terms(forward, params, eta, sigma_v, sigma_s2, b + v, strain_floor=rep_cov is None)
 
 
 MODELS = {"volume": volume_model, "iid": iid_model, "discrepancy": discrepancy_model}
@@ -264,5 +303,5 @@ __all__ = [
     "parameter_meaning", "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model", "representation_error", "lvv_sd",
-    "strain_likelihood", "extra_terms",
+    "strain_likelihood", "extra_terms", "strain_rep_covariance", "discrepancy_cholesky",
 ]

@@ -31,7 +31,9 @@ Ledoit-Wolf shrinkage, :func:`sklearn.covariance.ledoit_wolf`) and relative
 standard deviations (root mean squares). The models of
 :mod:`lvcore.inference.models` then use, in infer mode,
 
-* strains ``~ MVN(eta, sigma_S^2 I + Sigma_rep)``;
+* strains ``~ MVN(eta, sigma_S^2 I + Sigma_rep)`` (iid model); in the discrepancy model ``Sigma_rep`` is a
+  known part of the discrepancy: ``b ~ N(0, K_GP + Sigma_rep)``, strains ``~ N(eta + b + v, sigma_S^2 I)``
+  (the same distribution of the data; ``sigma_S^2`` stays conjugate for the blocked sampler);
 * LVV ``~ N(eta_0, sigma_V^2 + (r_V eta_0)^2)``;
 * each geometric measure ``~ N(m(h, s), sd^2 + (r_m m_measured)^2)``.
 
@@ -177,11 +179,21 @@ class RepresentationError:
         """Root mean square over the 24 segments of the strain error sd (strain), ``strain_scale`` included."""
         return float(np.sqrt(np.mean(np.diag(self.effective_strain_cov))))
 
+    def strain_rep_covariance(self):
+        """``Sigma_rep = strain_scale * strain_cov`` (strain²), JAX-traceable in ``strain_scale``.
+
+        The covariance the likelihoods add for this geometry: to ``sigma_S^2 I`` in the iid model, to the GP
+        discrepancy's ``K`` in the discrepancy model (:func:`lvcore.inference.models.discrepancy_cholesky`).
+        """
+        import jax.numpy as jnp
+
+        return jnp.asarray(self.strain_scale) * jnp.asarray(self.strain_cov)
+
     def strain_covariance(self, sigma_s2):
         """``sigma_s2 * I + strain_scale * strain_cov`` (JAX-traceable in ``sigma_s2`` and ``strain_scale``)."""
         import jax.numpy as jnp
 
-        return jnp.asarray(sigma_s2) * jnp.eye(24) + jnp.asarray(self.strain_scale) * jnp.asarray(self.strain_cov)
+        return jnp.asarray(sigma_s2) * jnp.eye(24) + self.strain_rep_covariance()
 
     def lvv_sd(self, sigma_v, eta0):
         """LVV sd (mL) with the floor: ``sqrt(sigma_v^2 + (lvv_rel_sd eta0)^2)`` (JAX-traceable)."""
