@@ -104,11 +104,11 @@ def main(argv=None) -> int:
         for k in range(args.repeats):  # the variants alternate, so a drift of the load hits all of them
             cache = {"LVCORE_JAX_CACHE": str(tmp / f"cache{k}")}
             loads.append(_load())
-            for name, (extra, env, warm_up) in VARIANTS.items():
+            for i, (name, (extra, env, warm_up)) in enumerate(VARIANTS.items()):
                 cmd = [exe, "campaign", "run", str(design), "--no-progress", *extra, "--out"]
                 if warm_up:  # untimed: fills the cache for this variant's programs
-                    timed(cmd + [str(tmp / f"{k}-{len(runs[name])}-warm.h5")], {**cache, **env})
-                runs[name].append(timed(cmd + [str(tmp / f"{k}-{len(runs[name])}.h5")], {**cache, **env}))
+                    timed(cmd + [str(tmp / f"{k}-{i}-warm.h5")], {**cache, **env})
+                runs[name].append(timed(cmd + [str(tmp / f"{k}-{i}.h5")], {**cache, **env}))
         for name, samples in runs.items():
             row(f"{args.rows}-row campaign, {name}", samples, " → ".join(loads))
 

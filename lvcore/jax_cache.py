@@ -83,6 +83,12 @@ _JIT = "jit"  # a key whose exported program could not be made or loaded: the pl
 _CODE_VERSION: list[str] = []
 
 
+def _exports_off() -> bool:
+    """Whether the exported kernels are off (cheap: checked on every call)."""
+    return (os.environ.get(EXPORT_ENV, "").lower() in ("0", "off", "false", "no")
+            or not sys.modules["jax"].config.jax_compilation_cache_dir)
+
+
 def export_dir() -> Path | None:
     """The folder of the exported kernels, or None when they are off (the compilation cache off or
     ``LVCORE_JAX_EXPORT=0``). JAX must be imported."""
@@ -187,20 +193,24 @@ class ExportedKernel:
         functools.update_wrapper(self, fn)
         self.jitted = jax.jit(fn, static_argnames=static_argnames)
         self._programs: dict = {}
+        #: The files of the exported programs this process read or wrote: path -> identity (:meth:`identity`).
+        self.files: dict[Path, str] = {}
 
     def __call__(self, *args, **static):
-        folder = export_dir()
-        if folder is None:
+        if _exports_off():
             return self.jitted(*args, **static)
         import jax
 
         leaves, tree = jax.tree.flatten(args)
-        if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        tracer = jax.core.Tracer
+        if any(isinstance(x, tracer) for x in leaves):
             return self.jitted(*args, **static)
-        key = (tree, tuple(sorted(static.items())), tuple(map(_signature, leaves)))
+        # the in-memory key, cheap (~10 µs); the file's is :meth:`signature`, made once per new key
+        key = (tree, tuple(sorted(static.items())), tuple([(x.shape, x.dtype, getattr(x, "weak_type", False))
+                                                           if hasattr(x, "shape") else type(x) for x in leaves]))
         program = self._programs.get(key)
         if program is None:
-            program = self._programs[key] = self._program(folder, key, args, static)
+            program = self._programs[key] = self._program(export_dir(), args, static)
         if program == _JIT:
             return self.jitted(*args, **static)
         if callable(program):
@@ -213,6 +223,15 @@ class ExportedKernel:
         self._programs[key] = program[0]
         return out
 
+    @staticmethod
+    def signature(args: tuple, static: dict) -> tuple:
+        """What selects an exported program: the pytree structure of ``args``, the static arguments and each leaf's
+        shape, dtype and weak type (a Python scalar by its type)."""
+        import jax
+
+        leaves, tree = jax.tree.flatten(args)
+        return (tree, tuple(sorted(static.items())), tuple(map(_signature, leaves)))
+
     def identity(self, key) -> str:
         """What the exported program of signature ``key`` is: this kernel, ``key`` and :func:`code_version`."""
         return repr((f"{self.__module__}.{self.__qualname__}", key, code_version()))
@@ -223,14 +242,18 @@ class ExportedKernel:
 
         return folder / f"{self.__name__}-{hashlib.sha256(self.identity(key).encode()).hexdigest()[:32]}.jaxexp"
 
-    def _program(self, folder: Path, key, args, static):
+    def _program(self, folder: Path | None, args, static):
         """``(callable,)`` running the exported program of ``args`` (loaded, or made and written), or _JIT."""
         import jax
 
+        if folder is None:
+            return _JIT
         try:
             from jax import export
 
+            key = self.signature(args, static)
             path, identity = self.file_for(folder, key), self.identity(key)
+            self.files[path] = identity
             payload = read_exported(path, identity)
             exp = None
             if payload is not None:

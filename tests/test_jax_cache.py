@@ -26,8 +26,10 @@ def export_to(monkeypatch):
     as in a new process."""
     def use(folder):
         monkeypatch.setattr(jax_cache, "export_dir", lambda: folder)
+        monkeypatch.setattr(jax_cache, "_exports_off", lambda: folder is None)
         for k in KERNELS:
             k._programs.clear()
+            k.files.clear()
         simulate_module._PREPARED.clear()  # the prepared case (its reference volume, load norm) made anew too
     yield use
     for k in KERNELS:
@@ -67,7 +69,7 @@ def test_a_corrupt_or_stale_file_falls_back_with_no_error(tmp_path, export_to, d
     plain = _solve()
     export_to(tmp_path)
     _solve()
-    known = {k.file_for(tmp_path, key): k.identity(key) for k in KERNELS for key in k._programs}
+    known = {path: identity for k in KERNELS for path, identity in k.files.items()}
     files = sorted(known)
     assert files == sorted(tmp_path.glob("*.jaxexp"))
     blobs = {f: f.read_bytes() for f in files}
@@ -100,6 +102,7 @@ def read_exported_bytes(blob: bytes) -> bytes:
 def test_traced_arguments_and_the_off_switch_take_the_jit_path(tmp_path, monkeypatch):
     kernel = ExportedKernel(lambda x, y, scale=1.0: scale * jnp.sum(jnp.sin(x) * y), static_argnames=("scale",))
     monkeypatch.setattr(jax_cache, "export_dir", lambda: tmp_path)
+    monkeypatch.setattr(jax_cache, "_exports_off", lambda: False)
     x, y = np.linspace(0, 1, 5), np.arange(5.0)
     assert float(kernel(x, y, scale=2.0)) == float(kernel.jitted(x, y, scale=2.0))
     assert len(list(tmp_path.glob("*.jaxexp"))) == 1
@@ -113,7 +116,7 @@ def test_traced_arguments_and_the_off_switch_take_the_jit_path(tmp_path, monkeyp
     assert len(list(tmp_path.glob("*.jaxexp"))) == 3
     monkeypatch.undo()
     monkeypatch.setenv(jax_cache.EXPORT_ENV, "0")
-    assert jax_cache.export_dir() is None
+    assert jax_cache.export_dir() is None and jax_cache._exports_off()
 
 
 def test_the_file_name_follows_the_code_version(tmp_path, monkeypatch):
@@ -133,8 +136,9 @@ def test_the_file_name_follows_the_code_version(tmp_path, monkeypatch):
 def test_fuzz_any_file_content_is_read_or_refused_and_the_kernel_still_runs(tmp_path, monkeypatch, blob, framed):
     kernel = ExportedKernel(lambda x: jnp.cumsum(x) * 3.0)
     monkeypatch.setattr(jax_cache, "export_dir", lambda: tmp_path)
+    monkeypatch.setattr(jax_cache, "_exports_off", lambda: False)
     x = np.arange(4.0)
-    key = (jax.tree.structure((x,)), (), (((4,), "float64", False),))
+    key = kernel.signature((x,), {})
     path, identity = kernel.file_for(tmp_path, key), kernel.identity(key)
     if framed:
         write_exported(path, blob, identity)
