@@ -78,6 +78,9 @@ EXPORT_SUBDIR = "exported"
 #: Environment variable that turns the exported kernels off (``0``/``off``): every kernel is then a plain
 #: ``jax.jit``. They are off too whenever the compilation cache is.
 EXPORT_ENV = "LVCORE_JAX_EXPORT"
+#: Exported programs kept in the folder, the most recently written (:func:`prune_exported`): about 40 kB to
+#: 300 kB each; a ``default`` solve has 5.
+MAX_EXPORTED_FILES = 200
 _MAGIC = b"LVCORE-JAX-EXPORT 1\n"
 _JIT = "jit"  # a key whose exported program could not be made or loaded: the plain jit path
 _CODE_VERSION: list[str] = []
@@ -147,6 +150,24 @@ def write_exported(path: Path, payload: bytes, identity: str) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    prune_exported(path.parent)
+
+
+def prune_exported(folder: Path, keep: int | None = None) -> int:
+    """Delete all but the ``keep`` (default :data:`MAX_EXPORTED_FILES`) most recently written programs in
+    ``folder``; returns how many were deleted. Every change of lvcore's source makes new files (the name hashes
+    :func:`code_version`), so without this the folder would only grow."""
+    keep = MAX_EXPORTED_FILES if keep is None else keep
+    files = []
+    for f in folder.glob("*.jaxexp"):
+        try:
+            files.append((f.stat().st_mtime_ns, f))
+        except OSError:  # deleted meanwhile by another process
+            continue
+    old = sorted(files, reverse=True)[keep:]
+    for _, f in old:
+        f.unlink(missing_ok=True)
+    return len(old)
 
 
 def read_exported(path: Path, identity: str) -> bytes | None:

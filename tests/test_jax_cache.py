@@ -1,5 +1,7 @@
 """lvcore.jax_cache: the exported simulator kernels give bitwise the plain jit results, on the first process (made
 and written) and on a later one (read back), and a missing, corrupt or stale file falls back with no error."""
+import os
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -149,3 +151,13 @@ def test_fuzz_any_file_content_is_read_or_refused_and_the_kernel_still_runs(tmp_
         assert read_exported(path, identity) is None  # random bytes never pass the checksum
     np.testing.assert_array_equal(kernel(x), np.cumsum(x) * 3.0)
     assert read_exported(path, identity) is not None  # made again where it could not be used
+
+
+def test_the_folder_keeps_the_most_recent_programs(tmp_path):
+    for k in range(7):
+        f = tmp_path / f"k{k}.jaxexp"
+        write_exported(f, b"x" * k, f"identity {k}")
+        os.utime(f, ns=(k * 10**9, k * 10**9))  # written in this order
+    assert jax_cache.prune_exported(tmp_path, keep=3) == 4
+    assert sorted(p.name for p in tmp_path.glob("*.jaxexp")) == ["k4.jaxexp", "k5.jaxexp", "k6.jaxexp"]
+    assert jax_cache.prune_exported(tmp_path, keep=3) == 0
