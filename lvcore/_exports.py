@@ -30,6 +30,7 @@ MOVED_MODULES = {
     "lvcore.outputs": "lvcore.domain.outputs",
     "lvcore.physiology": "lvcore.domain.physiology",
     "lvcore.units": "lvcore.domain.units",
+    "lvcore.uploads": "lvcore.app.uploads",
     "lvcore.headers": "lvcore.safety.headers",
     "lvcore.isolation": "lvcore.safety.isolation",
     "lvcore.limits": "lvcore.safety.limits",

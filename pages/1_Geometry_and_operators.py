@@ -19,7 +19,7 @@ st.caption(
 @st.cache_data(show_spinner="fitting the template…")
 def _fit_upload(kind: str, files: tuple) -> dict:
     """Fit an uploaded segmentation; files are (name, bytes) pairs. Returns nodes + summary or an error."""
-    from lvcore.uploads import fit_segmentation
+    from lvcore.app.uploads import fit_segmentation
 
     return fit_segmentation(kind, files)
 
@@ -158,7 +158,7 @@ with st.expander("Build a subject emulator for one of these geometries (optional
                  expanded=st.session_state.get("geo_build_job") is not None):
     from lvcore.app import subject_emulator_panel
     from lvcore.app.subject_flow import template_mesh_file
-    from lvcore.uploads import session_uploads
+    from lvcore.app.uploads import session_uploads
 
     which = st.selectbox("Geometry", names, key="geo_build_which")
     label = f"{patient} {which}" if source.startswith("Bundled") else which

@@ -28,7 +28,7 @@ from lvcore.inference.request import build_request
 from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
 from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
-from lvcore.uploads import session_uploads
+from lvcore.app.uploads import session_uploads
 
 st.set_page_config(page_title="Calibration", layout="wide")
 st.title("Bayesian calibration")

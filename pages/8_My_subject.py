@@ -18,7 +18,7 @@ from lvcore.inference.models import MODEL_LABELS
 from lvcore.inference.samplers import SamplerConfig
 from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files
-from lvcore.uploads import session_uploads
+from lvcore.app.uploads import session_uploads
 
 st.set_page_config(page_title="My subject", layout="wide")
 st.title("My subject")

@@ -15,7 +15,7 @@ from lvcore.exceptions import LVCoreError
 from lvcore.inference import guards
 from lvcore.inference.samplers import SamplerConfig
 from lvcore.resources import volunteer_files
-from lvcore.uploads import UploadError, UploadSession
+from lvcore.app.uploads import UploadError, UploadSession
 
 SUBJECT = "SYNTHETIC_HV3"
 

@@ -154,7 +154,7 @@ def _check(at, name, prefix: str, accepted, kept=(), uploaders=()):
     """After an upload of ``name`` (or of several files, a tuple of names): no exception; errors starting with
     ``prefix`` name a file of the upload and no server path; no such error: the upload was used
     (``accepted(texts)``); the ``kept`` texts and the ``uploaders`` are still on the page."""
-    from lvcore.uploads import display_name
+    from lvcore.app.uploads import display_name
 
     shown = [display_name(n) for n in ((name,) if isinstance(name, str) else name)]
     assert not at.exception, (name, [str(e.value)[:500] for e in at.exception])
@@ -179,7 +179,7 @@ def _page(fragment: str) -> str:
     return str(sorted(PAGES_DIR.glob(f"*{fragment}*.py"))[0])
 
 
-OVERSIZED = b"0" * (10 * 1024 * 1024 + 1)  # lvcore.uploads.MAX_UPLOAD_MB + 1 byte
+OVERSIZED = b"0" * (10 * 1024 * 1024 + 1)  # lvcore.app.uploads.MAX_UPLOAD_MB + 1 byte
 
 
 # --------------------------------------------------------------------------- the pages (run in capped children)

@@ -15,7 +15,7 @@ from lvcore.exceptions import LVCoreError
 from lvcore.inference import cli, guards
 from lvcore.inference.request import INFER, CalibrationRequest, build_request
 from lvcore.resources import volunteer_files
-from lvcore.uploads import UploadSession
+from lvcore.app.uploads import UploadSession
 
 from test_app_uploads import HEADER, _page, _stand_in_calibration
 

@@ -53,7 +53,7 @@ def test_the_contract_can_fail(tmp_path):
     swapped = list(layers)
     swapped[i_mech], swapped[i_core] = layers[i_core], layers[i_mech]
     assert lint_imports(_config(tmp_path, swapped), no_cache=True, no_logo=True) == 1
-    missing = [x.replace(" | uploads", "") for x in layers]
+    missing = [x.replace(" | resources", "") for x in layers]
     assert lint_imports(_config(tmp_path, missing), no_cache=True, no_logo=True) == 1
 
 

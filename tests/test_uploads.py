@@ -1,4 +1,4 @@
-"""lvcore.uploads: per-session upload folders, size limit, messages without server paths."""
+"""lvcore.app.uploads: per-session upload folders, size limit, messages without server paths."""
 from __future__ import annotations
 
 import gc
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from lvcore import uploads
+from lvcore.app import uploads
 from lvcore.exceptions import LVCoreError
-from lvcore.uploads import UploadError, UploadSession, fit_segmentation, safe_name, session_uploads
+from lvcore.app.uploads import UploadError, UploadSession, fit_segmentation, safe_name, session_uploads
 
 ROOT = Path(__file__).resolve().parents[1]
 

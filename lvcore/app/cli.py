@@ -23,7 +23,7 @@ def register(subparsers) -> None:
 
 def streamlit_command(port: int | None = None, extra=()) -> list[str]:
     """The ``python -m streamlit run`` command line for the packaged app."""
-    from lvcore.uploads import MAX_UPLOAD_MB
+    from lvcore.app.uploads import MAX_UPLOAD_MB
 
     # the upload limit travels with the command (a .streamlit/config.toml is read only from the working directory)
     # no usage statistics: nothing leaves localhost (also in .streamlit/config.toml for `streamlit run app.py`)

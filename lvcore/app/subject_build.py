@@ -24,7 +24,7 @@ def build_dir(geometry_bytes: bytes, stem: str, *, units: str = "mm", design=Non
     """The cache folder of a subject emulator: named by the geometry file's stem and a digest of its contents,
     units, design, seed and mesh, so the same request finds the same folder."""
     from lvcore.emulator.subject import SubjectDesign
-    from lvcore.uploads import safe_name
+    from lvcore.app.uploads import safe_name
 
     design = design or SubjectDesign()
     key = json.dumps({"units": units, "design": [design.n_train, design.n_valid, design.n_test, design.method],

@@ -24,7 +24,7 @@ def read_geometry(session, name: str, data: bytes, *, n_pc: int = 5, units: str 
 
     Parameters
     ----------
-    session : lvcore.uploads.UploadSession
+    session : lvcore.app.uploads.UploadSession
         The browser session's upload folder.
     name : str
         The user's file name (its suffix picks the reader).
@@ -41,7 +41,7 @@ def read_geometry(session, name: str, data: bytes, *, n_pc: int = 5, units: str 
 
     Raises
     ------
-    lvcore.uploads.UploadError
+    lvcore.app.uploads.UploadError
         With a message naming the user's file.
     """
     from lvcore.inference import guards
@@ -92,7 +92,7 @@ def read_data(session, name: str, data: bytes, segments: str | None = None) -> l
 
     Raises
     ------
-    lvcore.uploads.UploadError
+    lvcore.app.uploads.UploadError
         With a message naming the user's file.
     """
     from lvcore.inference.data import read_measurements
@@ -217,7 +217,7 @@ def template_mesh_file(session, nodes, label: str) -> Path:
     """Write fitted template nodes (mm) as a template mesh in the session's upload folder, the file
     ``lvcore emulator build --geometry`` takes (the Geometry page's fitted segmentations)."""
     from lvcore.geometry.io import write_template_mesh
-    from lvcore.uploads import safe_name
+    from lvcore.app.uploads import safe_name
 
     path = Path(session.path) / f"fitted_{safe_name(label, 'geometry')}.vtu"
     write_template_mesh(path, np.asarray(nodes, float), metadata={"label": f"fitted geometry {label}"})
