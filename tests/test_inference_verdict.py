@@ -134,6 +134,13 @@ def test_posterior_misfit_flags_structured_residuals_the_likelihood_calls_indepe
     assert verdict.posterior_misfit(_result(y, eta, 0.001 ** 2))[1]          # without the floor: flagged
     structure, flags = verdict.posterior_misfit(_result(y, eta, 0.001 ** 2), Fw())
     assert flags == [] and structure["whitened_by"].endswith("representation error")
+    # the discrepancy model's b holds the floor already (models.discrepancy_model): its residual y - η - b - v is
+    # the noise, whitened by σ_S² I alone
+    disc = _result(y, eta, 0.001 ** 2, model="discrepancy")
+    disc.idata.posterior["disc"] = (("chain", "draw", "region"), np.zeros((1, 200, 24)))
+    disc.idata.posterior["v"] = (("chain", "draw"), np.zeros((1, 200)))
+    structure, flags = verdict.posterior_misfit(disc, Fw())
+    assert flags and structure["whitened_by"] == "sigma_S^2 I"
     v = verdict.Verdict(verdict.Consistency({}, np.zeros(25), np.ones(25)), misfit=("x",))
     assert v.plausible and v.flagged and v.flags == ["MISFIT: x"]
 

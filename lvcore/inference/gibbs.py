@@ -38,10 +38,10 @@ from numpyro.distributions.transforms import biject_to
 from numpyro.infer.hmc import hmc
 from numpyro.infer.mcmc import MCMCKernel
 
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.inference import kernels, models
 from lvcore.inference.compiled_samplers import runtime_conditions
-from lvcore.outputs import N_OUTPUTS
+from lvcore.domain.outputs import N_OUTPUTS
 
 
 def _constrain(priors: dict, u: dict):

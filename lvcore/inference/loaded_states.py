@@ -18,13 +18,13 @@ The Klotz prior (:class:`KlotzPrior`, ``lvcore calibrate --prior klotz``)
     Klotz et al. (2006), Am J Physiol Heart Circ Physiol 291:H403-H412: the
     normalised EDPVR of human hearts, ``EDP = An EDVn^Bn`` with
     ``EDVn = (V - V0)/(V30 - V0)``, An = 27.78 mmHg, Bn = 2.76
-    (:mod:`lvcore.physiology`). Their single-beat prediction of the volume at
+    (:mod:`lvcore.domain.physiology`). Their single-beat prediction of the volume at
     pressure p from one point (EDP, EDV) and V0 is
 
     .. math:: V_p = V_0 + (EDV - V_0)\,\frac{EDVn(p)}{EDVn(EDP)}
               = V_0 + (EDV - V_0)\,(p/EDP)^{1/B_n}
 
-    (:func:`lvcore.physiology.klotz_volume` through :func:`lvcore.physiology.klotz_v30`; the curve's own
+    (:func:`lvcore.domain.physiology.klotz_volume` through :func:`lvcore.domain.physiology.klotz_v30`; the curve's own
     normalising "V30", where EDVn = 1, lies at An = 27.78 mmHg on the fit, so the volume at 30 mmHg is
     2.8 % of the rise above it higher; the term uses the volumes at 20 and 30 mmHg on the curve).
 
@@ -55,7 +55,7 @@ from typing import Any, Callable, Sequence
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore import physiology
+from lvcore.domain import physiology
 from lvcore.exceptions import DataError
 
 #: Pressures (mmHg) of the Klotz prior's volumes.
@@ -126,7 +126,7 @@ class KlotzPrior:
             raise ValueError("one forward model per Klotz pressure")
 
     def ratios(self) -> np.ndarray:
-        """``EDVn(p)/EDVn(EDP)`` at the prior's pressures (Klotz's normalised curve, :func:`lvcore.physiology.klotz_edvn`)."""
+        """``EDVn(p)/EDVn(EDP)`` at the prior's pressures (Klotz's normalised curve, :func:`lvcore.domain.physiology.klotz_edvn`)."""
         return np.asarray([float(physiology.klotz_edvn(p) / physiology.klotz_edvn(self.edp_mmhg))
                            for p in self.pressures_mmhg])
 
@@ -285,7 +285,7 @@ def check_edp_input(emulator, name: str, what: str) -> None:
     DataError
         Naming the emulator, its fixed EDP and the emulators that take one.
     """
-    from lvcore.outputs import EDP_NAME
+    from lvcore.domain.outputs import EDP_NAME
 
     if EDP_NAME in tuple(emulator.input_names):
         return
@@ -298,7 +298,7 @@ def check_edp_input(emulator, name: str, what: str) -> None:
 
 def edp_box(emulator) -> tuple[float, float]:
     """The EDP range (mmHg) of an emulator's training box."""
-    from lvcore.outputs import EDP_NAME
+    from lvcore.domain.outputs import EDP_NAME
 
     names = tuple(emulator.input_names)
     i = names.index(EDP_NAME)
@@ -319,7 +319,7 @@ def check_klotz_pressures(emulator, name: str, pressures: Sequence[float] = KLOT
 
 def reference_volume_ml(geometry_section: dict) -> float:
     """Reference (stress-free) cavity volume V0 (mL) of a case's geometry section, as the simulator meshes it."""
-    from lvcore import conditions, units
+    from lvcore.domain import conditions, units
     from lvcore.mechanics.case import Case
     from lvcore.mechanics.simulate import prepare_case
 

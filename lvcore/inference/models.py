@@ -1,7 +1,7 @@
 r"""numpyro models for calibrating theta = (a, b, af, bf) from LVV and 24 strains.
 
 Each model is a plain function of the measured data ``y`` (25 values: LVV in
-mL then 24 circumferential strains, :mod:`lvcore.outputs` order) and a
+mL then 24 circumferential strains, :mod:`lvcore.domain.outputs` order) and a
 JAX-traceable forward model (a :class:`lvcore.core.TraceableForward`, e.g.
 :class:`lvcore.emulator.EmulatorForward`). Priors follow
 the chapter's Table 9.1 and live in :data:`PRIORS` so that the blocked
@@ -44,12 +44,12 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
-from lvcore.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.core.forward import TraceableForward
 from lvcore.core.space import ANGLE_BOUNDS, THETA_BOUNDS  # Table 9.1 and the angle ranges
 from lvcore.exceptions import ForwardError
 from lvcore.inference import kernels
-from lvcore.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
+from lvcore.domain.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 #: Inverse-gamma (shape, scale) of every variance prior.
 IG_SHAPE, IG_SCALE = 0.001, 0.001
 #: Standard deviation of the global strain bias v.

@@ -377,7 +377,8 @@ def posterior_misfit(result, forward=None, seed: int = 0) -> tuple[dict, list[st
         mean = mean + np.asarray(post["v"], float).reshape(-1, 1)
     r = y[1:] - mean.mean(axis=0)
     cov = float(np.median(np.asarray(post["sigma_s2"], float))) * np.eye(r.size)
-    rep = representation_error(forward)
+    # the discrepancy model's b (``disc``) already holds the representation error (models.discrepancy_model)
+    rep = None if "disc" in post else representation_error(forward)
     if rep is not None:
         cov = cov + rep.effective_strain_cov
     lam, u = np.linalg.eigh(cov)
