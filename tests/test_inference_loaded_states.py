@@ -243,3 +243,34 @@ def test_the_printed_lines_name_every_state_and_the_prior():
     assert "20 mmHg 190.0 mL (volume only) -> 160.0" in states
     assert prior.startswith("prior: Klotz et al. (2006)") and "V30 160.0 [150.0, 170.0] mL" in prior
     assert _states_text({}) == []
+
+
+def test_discrepancy_model_shares_its_floored_discrepancy_with_every_state():
+    """With a floor the discrepancy model's b ~ N(0, K + Σ_rep) already holds the representation error, so a further
+    state's strains are N(η_k + b + v, σ_S² I): the model's log density equals the scipy sum of its terms (a state
+    that widened by Σ_rep again, counting the shape error twice, would not)."""
+    import jax.numpy as jnp
+    from numpyro.infer.util import log_density
+
+    from lvcore.inference import kernels, models
+    from lvcore.inference.representation_error import FlooredForward, RepresentationError
+
+    a = np.random.default_rng(1).normal(size=(24, 24)) * 0.004
+    rep = RepresentationError(5, a @ a.T, 0.02)
+    params = {"a": 0.8, "b": 4.0, "af": 1.2, "bf": 6.0}
+    y20 = np.asarray(at(20)(params)) + 0.01
+    fw = LoadedStatesForward(FlooredForward(at(8), rep), (StateTerm(at(20), y20, 20.0),))
+    y8 = np.asarray(at(8)(params)) + 0.01
+    hyper = {"lam": 0.9, "sigma1_sq": 2e-3, "sigma2_sq": 1e-3, "c": 1.5, "tau": 6.0}
+    bt, v, s2 = 0.3 * np.random.default_rng(2).standard_normal(24), 0.004, 0.02 ** 2
+    site = {**params, **hyper, "sigma_s2": s2, "disc_tilde": jnp.asarray(bt), "v": jnp.asarray(v)}
+    _, trace = log_density(models.discrepancy_model, (jnp.asarray(y8),), {"forward": fw}, site)
+    b = np.linalg.cholesky(np.asarray(kernels.gram(hyper)) + rep.strain_cov) @ bt
+    e8, e20 = np.asarray(at(8)(params)), np.asarray(at(20)(params))
+    terms = {"lvv_obs": stats.norm(e8[0], np.hypot(5.0, 0.02 * e8[0])).logpdf(y8[0]),
+             "strain_obs": stats.norm(e8[1:] + b + v, 0.02).logpdf(y8[1:]).sum(),
+             "lvv_obs_state2": stats.norm(e20[0], np.hypot(5.0, 0.02 * e20[0])).logpdf(y20[0]),
+             "strain_obs_state2": stats.norm(e20[1:] + b + v, 0.02).logpdf(y20[1:]).sum()}
+    for name, want in terms.items():
+        got = float(jnp.sum(trace[name]["fn"].log_prob(trace[name]["value"])))
+        assert got == pytest.approx(want, rel=1e-10), name
