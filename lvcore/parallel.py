@@ -293,12 +293,40 @@ class DaskExecutor:
         self.close(cancel=exc_type is not None)
 
 
+class _Deferred(cf.Future):
+    """A future of :class:`InProcessExecutor`: its task runs when the caller first needs it (``result``,
+    ``exception`` or the executor's ``as_completed``), in the caller's thread."""
+
+    def __init__(self, fn, args):
+        super().__init__()
+        self._task = (fn, args)
+
+    def run(self) -> "_Deferred":
+        if self._task is not None:
+            fn, args = self._task
+            self._task = None
+            try:
+                self.set_result(fn(*args))
+            except Exception as err:  # noqa: BLE001 - handed to the caller through the future, as a pool does
+                self.set_exception(err)
+        return self
+
+    def result(self, timeout=None):
+        return self.run() and super().result(timeout)
+
+    def exception(self, timeout=None):
+        return self.run() and super().exception(timeout)
+
+
 class InProcessExecutor:
-    """Tasks run in this process, one after another, when submitted: no worker start-up.
+    """Tasks run in this process, one at a time, when the caller takes them: no worker start-up.
 
     For work too small to repay starting worker processes (each spawned worker imports the simulator and loads
     its compiled kernels, about 2 CPU-s, before its first task): a small campaign
-    (:data:`lvcore.campaigns.runner.IN_PROCESS_MAX_ROWS`). A task's exception is kept in its future, as a pool's.
+    (:data:`lvcore.campaigns.runner.IN_PROCESS_MAX_ROWS`). ``submit`` only queues the task; ``as_completed``
+    runs the tasks in submission order, handing each future over as soon as its task ended, so a campaign
+    records every row before the next one starts (a killed run loses only the row being solved). A task's
+    exception is kept in its future, as a pool's.
     """
 
     workers = 1
@@ -307,15 +335,11 @@ class InProcessExecutor:
         return "this process (no worker processes)"
 
     def submit(self, fn, *args):
-        done = cf.Future()
-        try:
-            done.set_result(fn(*args))
-        except Exception as err:  # noqa: BLE001 - handed to the caller through the future, as a pool does
-            done.set_exception(err)
-        return done
+        return _Deferred(fn, args)
 
     def as_completed(self, futures):
-        return iter(list(futures))
+        for fut in list(futures):
+            yield fut.run() if isinstance(fut, _Deferred) else fut
 
     def close(self, cancel: bool = False) -> None:
         pass

@@ -176,12 +176,20 @@ def test_this_test_process_blas_follows_the_variables():
             assert lib["num_threads"] == int(os.environ[var]), lib
 
 
-def test_in_process_executor_runs_each_task_when_submitted():
+def test_in_process_executor_runs_each_task_when_the_caller_takes_it():
     from lvcore.parallel import InProcessExecutor
+
+    ran = []
+
+    def task(k):
+        ran.append(k)
+        return 2 ** k
 
     with InProcessExecutor() as ex:
         assert ex.workers == 1 and "this process" in ex.describe()
-        futures = [ex.submit(pow, 2, k) for k in range(4)] + [ex.submit(int, "not a number")]
-        assert all(f.done() for f in futures)  # run at submit
-        assert [f.result() for f in list(ex.as_completed(futures))[:4]] == [1, 2, 4, 8]
+        futures = [ex.submit(task, k) for k in range(4)] + [ex.submit(int, "not a number")]
+        assert ran == [] and not any(f.done() for f in futures)  # queued only
+        for k, fut in enumerate(ex.as_completed(futures[:4])):  # one at a time: the caller records each first
+            assert fut.done() and ran == list(range(k + 1)) and fut.result() == 2 ** k
         assert isinstance(futures[-1].exception(), ValueError)  # kept in the future, as a pool does
+        assert ex.submit(task, 5).result() == 32  # result() runs a task not taken yet
