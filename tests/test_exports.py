@@ -70,3 +70,26 @@ def test_new_paths_import_without_warnings_and_unknown_old_paths_still_fail():
     out = subprocess.run([sys.executable, "-W", "error::DeprecationWarning", "-c", code], capture_output=True,
                          text=True, check=True)
     assert out.stdout.strip() == "ok"
+
+
+def test_the_repository_imports_moved_modules_at_their_new_paths():
+    """The old paths are for users' code: nothing in lvcore, the pages, scripts, benchmarks or tests imports one."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    old_leaves = {old.rpartition(".")[2] for old in MOVED_MODULES}
+    found = []
+    for folder in ("lvcore", "pages", "scripts", "benchmarks", "tests"):
+        for path in sorted((root / folder).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    names = [node.module] + [f"{node.module}.{a.name}" for a in node.names
+                                             if node.module == "lvcore" and a.name in old_leaves]
+                else:
+                    continue
+                if any(n == old or n.startswith(old + ".") for n in names for old in MOVED_MODULES):
+                    found.append(f"{path.relative_to(root)}:{node.lineno}")
+    assert not found, f"import the new paths (lvcore._exports.MOVED_MODULES) in {found}"
