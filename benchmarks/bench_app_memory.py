@@ -29,7 +29,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from lvcore.parallel import pin_threads  # noqa: E402
+from lvcore.execution.parallel import pin_threads  # noqa: E402
 
 
 def _status(pid: int) -> dict:

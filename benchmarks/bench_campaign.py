@@ -24,7 +24,7 @@ Without ``--chains``: the older 1 vs 2 workers comparison (cold rows; best of
 
 ``--chain-profile N``: where the time of a warm-chained solve goes.
 The first N points of the same design's continuation order are solved in this
-process, one chain (:func:`lvcore.chains.solve_in_order`, each point warm-started
+process, one chain (:func:`lvcore.execution.chains.solve_in_order`, each point warm-started
 from the nearest converged one, as a campaign worker does), after one
 compile run. Printed per solve: Newton iterations, tangents (= numeric
 factorisations), residual evaluations and cold fallbacks (deterministic
@@ -42,7 +42,7 @@ import os
 import tempfile
 import time
 
-from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+from lvcore.execution.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
 
 pin_threads()  # before numpy is imported
 
@@ -53,7 +53,7 @@ from lvcore.campaigns.runner import DEFAULT_FORWARD, _drive, execute_row, row_in
 from lvcore.campaigns.space import get_space  # noqa: E402
 from lvcore.campaigns.store import CampaignStore, read_store  # noqa: E402
 from lvcore.core.registry import make_forward, registered_name  # noqa: E402
-from lvcore.parallel import LocalExecutor  # noqa: E402
+from lvcore.execution.parallel import LocalExecutor  # noqa: E402
 
 
 def _load() -> str:
@@ -134,7 +134,7 @@ def chain_profile(args) -> int:
     import statistics
 
     from lvcore.campaigns.runner import execute_warm_row
-    from lvcore.chains import continuation_order, solve_in_order
+    from lvcore.execution.chains import continuation_order, solve_in_order
     from lvcore.mechanics import newton
     from lvcore.mechanics.linear import default_backend
 

@@ -36,7 +36,7 @@ import os
 import tempfile
 import time
 
-from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+from lvcore.execution.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
 
 pin_threads()  # before numpy is imported
 os.environ.setdefault("LVCORE_NO_PNG", "1")  # time the study, not Chrome starting for PNG export

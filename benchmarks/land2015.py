@@ -39,7 +39,7 @@ import os
 import sys
 import time
 
-from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+from lvcore.execution.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
 
 pin_threads()  # before numpy is imported
 

@@ -15,7 +15,7 @@ import argparse
 import csv
 import time
 
-from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+from lvcore.execution.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
 
 pin_threads()  # before numpy is imported
 

@@ -2,7 +2,7 @@
 
 Importing :mod:`lvcore` switches JAX to float64 (the simulator needs it) before
 any array is created, and turns on JAX's persistent compilation cache
-(:mod:`lvcore.jax_cache`; ``LVCORE_JAX_CACHE=off`` disables it). It does not
+(:mod:`lvcore.execution.jax_cache`; ``LVCORE_JAX_CACHE=off`` disables it). It does not
 import JAX itself (``lvcore --help`` and commands that never compute start in a
 fraction of a second): where JAX is not imported yet, both settings go into the
 environment variables JAX reads when it is imported (``JAX_ENABLE_X64``,
@@ -15,7 +15,7 @@ Modules that moved into a subpackage keep their old import paths for a while
 from __future__ import annotations
 
 from lvcore._exports import install_moved_modules
-from lvcore.jax_cache import enable_compilation_cache, enable_x64
+from lvcore.execution.jax_cache import enable_compilation_cache, enable_x64
 
 install_moved_modules()
 

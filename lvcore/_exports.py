@@ -26,13 +26,17 @@ from typing import Callable, Mapping
 #: ``from lvcore import limits``) still works and gives the module at its new path, with a ``DeprecationWarning``
 #: that names it (:func:`install_moved_modules`).
 MOVED_MODULES = {
+    "lvcore.bounded_cache": "lvcore.execution.bounded_cache",
+    "lvcore.chains": "lvcore.execution.chains",
     "lvcore.conditions": "lvcore.domain.conditions",
     "lvcore.outputs": "lvcore.domain.outputs",
+    "lvcore.parallel": "lvcore.execution.parallel",
     "lvcore.physiology": "lvcore.domain.physiology",
     "lvcore.units": "lvcore.domain.units",
     "lvcore.uploads": "lvcore.app.uploads",
     "lvcore.headers": "lvcore.safety.headers",
     "lvcore.isolation": "lvcore.safety.isolation",
+    "lvcore.jax_cache": "lvcore.execution.jax_cache",
     "lvcore.limits": "lvcore.safety.limits",
 }
 

@@ -138,7 +138,7 @@ def below_spec(args) -> str:
 
 def build_one(name: str, args) -> Path | None:
     from lvcore.campaigns.designs import load_design, make_design, save_design
-    from lvcore.parallel import default_workers
+    from lvcore.execution.parallel import default_workers
     from lvcore.campaigns.runner import resume_campaign, run_campaign
     from lvcore.campaigns.space import get_space
     from lvcore.emulator.cli import format_info, training_config

@@ -32,7 +32,7 @@ import sys
 import time
 from pathlib import Path
 
-from lvcore.parallel import pin_threads
+from lvcore.execution.parallel import pin_threads
 
 pin_threads()  # before numpy is imported (lvcore.studies imports it)
 

@@ -81,8 +81,8 @@ out["pages"] = len(PAGES)
 print(json.dumps(out))
 """
 
-#: The thread variables as the installed package sets them (lvcore.parallel.pin_threads), printed as JSON.
-PIN_THREADS = "import json; from lvcore.parallel import pin_threads; print(json.dumps(dict(pin_threads({}, force=True))))"
+#: The thread variables as the installed package sets them (lvcore.execution.parallel.pin_threads), printed as JSON.
+PIN_THREADS = "import json; from lvcore.execution.parallel import pin_threads; print(json.dumps(dict(pin_threads({}, force=True))))"
 
 
 def free_port() -> int:

@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from lvcore.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
+from lvcore.execution.parallel import pin_threads  # noqa: E402 - imports neither numpy nor JAX
 
 pin_threads()  # before numpy is imported
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
@@ -101,7 +101,7 @@ def _release_compiled_programs():
     tell), not after every module: a module that compiles what an earlier one compiled (the fast simulator,
     the chapter emulator's samplers) then reuses it, where a recompile costs its tracing again (measured
     2026-12-02: the fast default LV's first solve with sensitivities 22 CPU s, after ``jax.clear_caches()``
-    7.4 s, warm 0.4 s; the persistent compilation cache, :mod:`lvcore.jax_cache`, spares only XLA's part).
+    7.4 s, warm 0.4 s; the persistent compilation cache, :mod:`lvcore.execution.jax_cache`, spares only XLA's part).
     """
     yield
     pressure = _process_pressure()

@@ -1,6 +1,6 @@
 """The one executor test double: runs every submitted task at once in this process.
 
-It has the interface of :mod:`lvcore.parallel`'s executors (``workers``,
+It has the interface of :mod:`lvcore.execution.parallel`'s executors (``workers``,
 ``describe``, ``submit``, ``as_completed``), so campaigns and studies run
 through their real code paths while monkeypatches stay visible and no
 worker process is started.

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lvcore.parallel import pin_threads
+from lvcore.execution.parallel import pin_threads
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Address-space cap of :func:`run_limited` (KiB for ``ulimit -v``): about 2 GB.

@@ -6,7 +6,7 @@ import os
 import pytest
 
 from lvcore.app import process
-from lvcore.parallel import THREAD_VARIABLES
+from lvcore.execution.parallel import THREAD_VARIABLES
 
 
 def test_setup_process_pins_threads_without_overriding_the_environment(monkeypatch):
@@ -61,5 +61,5 @@ def test_ast_parse_is_serialised_across_threads(monkeypatch):
 
 
 def test_the_thread_variables_moved_to_lvcore_parallel():
-    with pytest.warns(DeprecationWarning, match="lvcore.parallel.THREAD_VARIABLES"):
+    with pytest.warns(DeprecationWarning, match="lvcore.execution.parallel.THREAD_VARIABLES"):
         assert process.THREAD_VARIABLES == THREAD_VARIABLES

@@ -13,7 +13,7 @@ from lvcore.campaigns.space import get_space
 from lvcore.campaigns.store import CampaignStore, read_store
 from lvcore.core.registry import registered_name
 from lvcore.exceptions import CampaignError
-from lvcore.parallel import DaskExecutor, default_workers
+from lvcore.execution.parallel import DaskExecutor, default_workers
 
 
 def test_dask_localcluster_campaign_of_20_rows(tmp_path):
@@ -101,7 +101,7 @@ def test_real_simulator_rows_at_fast_resolution(tmp_path):
 
 def test_small_campaigns_run_in_this_process_unless_workers_are_given():
     from lvcore.campaigns.runner import IN_PROCESS_MAX_ROWS, choose_executor
-    from lvcore.parallel import InProcessExecutor, LocalExecutor
+    from lvcore.execution.parallel import InProcessExecutor, LocalExecutor
 
     assert isinstance(choose_executor(IN_PROCESS_MAX_ROWS), InProcessExecutor)
     for n, workers in ((IN_PROCESS_MAX_ROWS + 1, None), (1, 2), (1, 1)):  # more rows, or --workers given

@@ -10,7 +10,7 @@ import importlib
 import pytest
 
 MODULES = (
-    "lvcore.bounded_cache",
+    "lvcore.execution.bounded_cache",
     "lvcore.mechanics.simulate",
     "lvcore.core.forward",
     "lvcore.emulator.io",

@@ -12,7 +12,7 @@ import pytest
 from lvcore.domain import conditions
 from lvcore.mechanics.case_inputs import build_case
 from lvcore.mechanics.case import Case
-from lvcore.parallel import THREAD_VARIABLES
+from lvcore.execution.parallel import THREAD_VARIABLES
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = [*sorted((ROOT / "lvcore").rglob("*.py")), *sorted((ROOT / "pages").glob("*.py"))]
@@ -66,12 +66,12 @@ def _reads_environment(call: ast.AST) -> bool:
 
 
 def test_only_pin_threads_writes_the_thread_variables():
-    """Every script, benchmark, test and lvcore module pins threads through lvcore.parallel.pin_threads: none names a
+    """Every script, benchmark, test and lvcore module pins threads through lvcore.execution.parallel.pin_threads: none names a
     thread variable itself (a dict key, a keyword, a setdefault or loop over the names), except to read it."""
     offenders = []
     for path in [*SOURCES, *sorted((ROOT / "benchmarks").glob("*.py")), *sorted((ROOT / "scripts").glob("*.py")),
                  *sorted((ROOT / "tests").glob("*.py")), ROOT / "app.py"]:
-        if path == ROOT / "lvcore" / "parallel.py":
+        if path == ROOT / "lvcore" / "execution" / "parallel.py":
             continue
         text = path.read_text()
         if not any(v in text for v in THREAD_VARIABLES):
@@ -82,7 +82,7 @@ def test_only_pin_threads_writes_the_thread_variables():
             named = node.value if isinstance(node, ast.Constant) else node.arg if isinstance(node, ast.keyword) else None
             if named in THREAD_VARIABLES and id(node) not in reads:
                 offenders.append(f"{path.relative_to(ROOT)}:{node.lineno if hasattr(node, 'lineno') else '?'}")
-    assert not offenders, f"call lvcore.parallel.pin_threads() instead of setting the thread variables: {offenders}"
+    assert not offenders, f"call lvcore.execution.parallel.pin_threads() instead of setting the thread variables: {offenders}"
 
 
 

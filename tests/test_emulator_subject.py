@@ -192,7 +192,7 @@ def test_simulate_rows_keeps_the_runs_done_and_resumes(tmp_path):
                         progress=lambda done, total: calls.append(done))
     assert calls == [3, 6]  # the 3 kept rows were not simulated again
     assert res.converged.all()
-    from lvcore.chains import continuation_order, scaled_coordinates
+    from lvcore.execution.chains import continuation_order, scaled_coordinates
 
     first = continuation_order(scaled_coordinates(space.names, x))[:3]  # solved in the walk's order
     np.testing.assert_array_equal(x[first], kept_x)

@@ -57,7 +57,7 @@ def test_simulator_failures_are_rows_and_tracing_is_refused(sim):
 
 @pytest.mark.slow
 def test_simulator_batch_on_a_process_pool_equals_serial(sim):
-    """workers=2 runs the batch on lvcore.parallel.LocalExecutor: same numbers as in-process."""
+    """workers=2 runs the batch on lvcore.execution.parallel.LocalExecutor: same numbers as in-process."""
     pts = {"a": [0.6, 1.2], "b": 1.3, "af": 1.0, "bf": 3.6}
     pooled = AdjointSimulatorForward(resolution="fast", workers=2).jacobian(pts)
     serial = sim.jacobian(pts)
@@ -82,7 +82,7 @@ def test_simulator_warm_start_reproduces_cold_solves(sim):
 def test_warm_continuation_reaches_a_point_a_plain_warm_start_cannot_and_equals_the_cold_solve():
     """A failed warm start continues through the parameter midpoint (issue 25): bf 1 -> 10 at soft a, af is out
     of a plain warm start's reach on the fast mesh, the midpoint path converges, and to the cold solve's outputs."""
-    from lvcore.chains import light_state
+    from lvcore.execution.chains import light_state
     from lvcore.mechanics.case_inputs import build_case
     from lvcore.mechanics import forward as F
     from lvcore.mechanics.simulate import simulate
@@ -109,7 +109,7 @@ def test_a_suspect_warm_result_is_re_solved_cold_in_a_warm_batch(sim, monkeypatc
     whose warm Newton path is suspect (here every one: the rule forced) is solved again cold, so its outputs are
     the cold solve's to round-off, and each re-solve is recorded with its reason. Unforced, the warm batch agrees
     with the cold solves within the solver's tolerance and records nothing it did not re-solve."""
-    from lvcore import chains
+    from lvcore.execution import chains
     from lvcore.mechanics.forward import SimulatorForward
 
     points = {n: THETA[i] * np.array([1.0, 1.04, 0.97, 1.06]) for i, n in enumerate(THETA_NAMES)}

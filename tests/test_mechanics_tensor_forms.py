@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lvcore.jax_cache import enable_x64
+from lvcore.execution.jax_cache import enable_x64
 from lvcore.mechanics import tensor_forms as tf
 from lvcore.mechanics.kinematics import cofactor
 

@@ -68,7 +68,7 @@ def test_command_line_helpers(capsys):
 def test_study_executor_is_none_in_process_and_closed_after_use(monkeypatch):
     """No executor for one worker or a local forward model; otherwise make_executor's, closed on leaving (pending
     tasks cancelled only after an error)."""
-    import lvcore.parallel
+    import lvcore.execution.parallel
 
     made = []
 
@@ -83,7 +83,7 @@ def test_study_executor_is_none_in_process_and_closed_after_use(monkeypatch):
         def __exit__(self, exc_type, *exc):
             self.closed = "cancel" if exc_type is not None else "done"
 
-    monkeypatch.setattr(lvcore.parallel, "make_executor", Fake)
+    monkeypatch.setattr(lvcore.execution.parallel, "make_executor", Fake)
     for workers, scheduler, local in ((1, None, False), (4, None, True), (2, "tcp://x:1", True)):
         with _common.study_executor(workers, scheduler, local=local) as ex:
             assert ex is None

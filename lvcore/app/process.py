@@ -9,14 +9,14 @@ from __future__ import annotations
 import os
 
 from lvcore._exports import moved_names
-from lvcore.parallel import pin_threads
+from lvcore.execution.parallel import pin_threads
 
 #: Chains a calibration from the app runs; each gets its own XLA host device.
 APP_CHAINS = 4
 
 
 def setup_process(num_chains: int = APP_CHAINS) -> None:
-    """Pin BLAS/OpenMP to one thread (:func:`lvcore.parallel.pin_threads`), render VTK off-screen with EGL, and give each calibration chain an XLA
+    """Pin BLAS/OpenMP to one thread (:func:`lvcore.execution.parallel.pin_threads`), render VTK off-screen with EGL, and give each calibration chain an XLA
     host device (:func:`lvcore.inference.samplers.use_host_devices`). Under an address-space limit
     (``ulimit -v``) it also drops the reservations that hold no data (:func:`lvcore.app.memory.economise`).
 
@@ -60,6 +60,6 @@ def serialise_ast_parse() -> None:
     ast.parse = parse
 
 
-__getattr__ = moved_names(__name__, {"THREAD_VARIABLES": "lvcore.parallel:THREAD_VARIABLES"})
+__getattr__ = moved_names(__name__, {"THREAD_VARIABLES": "lvcore.execution.parallel:THREAD_VARIABLES"})
 
 __all__ = ["APP_CHAINS", "setup_process", "serialise_ast_parse"]

@@ -1,7 +1,7 @@
 """Warm the Calibration page when the app starts: its samplers and the verdict's best fit, compiled in the background.
 
 A click on "Run calibration" traces, lowers and compiles (or loads from JAX's
-persistent cache, :mod:`lvcore.jax_cache`) two samplers and the verdict's
+persistent cache, :mod:`lvcore.execution.jax_cache`) two samplers and the verdict's
 best fit before it samples: measured 2026-11-27 on the 2-core machine, with
 the persistent cache warm, ≈ 2.6 CPU-s for iid, ≈ 5.2 CPU-s for the
 discrepancy model and ≈ 6 CPU-s for the best fit (numpyro's model

@@ -2,7 +2,7 @@
 
 The forward model of a campaign is a registered :class:`lvcore.core.Forward`
 (see :mod:`lvcore.core.registry`); parameter spaces live in :mod:`lvcore.core.space`; rows run on the
-executors of :mod:`lvcore.parallel`. Names are imported on first use.
+executors of :mod:`lvcore.execution.parallel`. Names are imported on first use.
 """
 from __future__ import annotations
 

@@ -14,9 +14,9 @@ exception raised by the forward model) or a point that did not converge is
 recorded as a failed row with its reason; rows are never dropped or filled in.
 
 Rows run as warm-started continuation chains by default
-(:mod:`lvcore.chains`): nearby rows in the design's unit cube are
+(:mod:`lvcore.execution.chains`): nearby rows in the design's unit cube are
 solved one after another, each starting Newton from a neighbour's solution,
-in chunks of :data:`~lvcore.chains.DEFAULT_CHUNK` rows, with at
+in chunks of :data:`~lvcore.execution.chains.DEFAULT_CHUNK` rows, with at
 least two chains per worker; ``chained=False`` (``--cold``) runs one cold
 task per row.
 
@@ -37,22 +37,22 @@ import lvcore
 from lvcore.campaigns.designs import Design, load_design
 from lvcore.campaigns.store import START_COLD, START_RESOLVED, START_WARM, CampaignStore, RowResult, StoreSummary, \
     worker_tag
-from lvcore.chains import (DEFAULT_CHUNK, SEED_RESOLVED, WARM_TRUSTED_ITERATIONS, ChainTaskError,  # noqa: F401
+from lvcore.execution.chains import (DEFAULT_CHUNK, SEED_RESOLVED, WARM_TRUSTED_ITERATIONS, ChainTaskError,  # noqa: F401
                            run_chains, solve_in_order, warm_path_problem)
-from lvcore.chains import passes_suspicion as _suspect_reason
+from lvcore.execution.chains import passes_suspicion as _suspect_reason
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
 from lvcore.mechanics import forward as _simulator_forward  # noqa: F401 - registers the default forward "simulator"
 from lvcore.mechanics.resolution import RESOLUTION_PRESET_NAMES, recorded_resolution
-from lvcore.parallel import InProcessExecutor, make_executor
+from lvcore.execution.parallel import InProcessExecutor, make_executor
 
 #: The real simulator.
 DEFAULT_FORWARD = DEFAULT_FORWARD_NAME
 RESOLUTIONS = RESOLUTION_PRESET_NAMES
 
 #: A campaign with at most this many rows to run, and neither ``workers`` nor a scheduler given, runs in this
-#: process (:class:`~lvcore.parallel.InProcessExecutor`): each spawned worker first imports the simulator and
+#: process (:class:`~lvcore.execution.parallel.InProcessExecutor`): each spawned worker first imports the simulator and
 #: loads its compiled kernels (≈ 2.2 CPU-s, measured), more than it saves on so few rows (a cold ``default`` row
 #: ≈ 0.3 CPU-s); on a loaded machine, where CPU time is wall time, the workers' start-up is all loss.
 #: BENCHMARKS.md row 61 has both measured. ``--workers N`` given explicitly always starts N workers.
@@ -161,12 +161,12 @@ def execute_warm_row(forward, index: int, inputs: dict, initial, seed_suspect: b
 
 def execute_chunk(forward, positions: list[int], indices: list[int], inputs: list[dict], units, seeds,
                   suspect=()) -> list:
-    """Run one chunk of a continuation chain in a worker (see :mod:`lvcore.chains`).
+    """Run one chunk of a continuation chain in a worker (see :mod:`lvcore.execution.chains`).
 
     Rows are solved in the given order, each warm-started from the nearest
     converged state among ``seeds`` and the chunk's earlier rows, when the
     forward model can (``evaluate_warm``); otherwise cold, as :func:`execute_row`.
-    Returns :class:`~lvcore.chains.ChainRow` objects keyed by ``positions``
+    Returns :class:`~lvcore.execution.chains.ChainRow` objects keyed by ``positions``
     whose results are :class:`RowResult` for store rows ``indices``.
     ``suspect``: positions of earlier rows re-solved cold for their own Newton path; a row started from
     one of those (or from such a row of this chunk) is re-solved cold too (:func:`execute_warm_row`).
@@ -203,9 +203,9 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
     """Submit ``rows`` to ``forward`` (a Forward) and record their results as they complete.
 
     ``chained``: the rows run as warm-started continuation chains split across
-    the executor's workers (:func:`lvcore.chains.run_chains`), in
+    the executor's workers (:func:`lvcore.execution.chains.run_chains`), in
     chunks of ``chunk`` rows; otherwise one cold task per row. Returns the
-    :class:`~lvcore.chains.ChainStats` of a chained run, else None.
+    :class:`~lvcore.execution.chains.ChainStats` of a chained run, else None.
     """
     if rows.size == 0:
         return None
@@ -284,11 +284,11 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         Name of a registered forward model (default ``"simulator"``, the FE
         simulator; see :func:`lvcore.core.register_forward`). The store records the name.
     executor : optional
-        An executor object (see :mod:`lvcore.parallel`) to use
+        An executor object (see :mod:`lvcore.execution.parallel`) to use
         instead of creating one; it is not closed.
     chained : bool or None
         Run the rows as warm-started continuation chains of nearby rows split
-        across the workers (:mod:`lvcore.chains`; the default), or
+        across the workers (:mod:`lvcore.execution.chains`; the default), or
         each row cold in its own task; None: chains for at least
         :data:`CHAIN_MIN_ROWS` rows to run, else cold (the CLI's default). Both give the same results within the
         solver tolerance.
@@ -308,7 +308,7 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
     --------
     A 4-row campaign in seconds: the SYNTHETIC analytic stand-in (tests only, not a model of the heart) registered
     as a forward model, on an executor that runs each task in this process (any object with ``submit`` and
-    ``as_completed``, as the executors of :mod:`lvcore.parallel`; without one, ``workers`` processes start):
+    ``as_completed``, as the executors of :mod:`lvcore.execution.parallel`; without one, ``workers`` processes start):
 
     >>> import tempfile
     >>> from concurrent.futures import Future
@@ -376,7 +376,7 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
 def choose_executor(n_rows: int, workers: int | None = None, scheduler: str | None = None):
     """The executor of a campaign with ``n_rows`` rows to run: this process when the campaign is small and the
     user chose neither workers nor a scheduler (:data:`IN_PROCESS_MAX_ROWS`), else
-    :func:`lvcore.parallel.make_executor` (``workers`` local processes, default one per core, or Dask)."""
+    :func:`lvcore.execution.parallel.make_executor` (``workers`` local processes, default one per core, or Dask)."""
     if workers is None and not scheduler and n_rows <= IN_PROCESS_MAX_ROWS:
         return InProcessExecutor()
     return make_executor(workers=workers, scheduler=scheduler)

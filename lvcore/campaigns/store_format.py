@@ -22,7 +22,7 @@ dataset                   dtype          meaning
 ``run``                   (n,) i2        the run that recorded the row: 0 ``campaign run``,
                                          k the k-th ``campaign resume``; -1 pending
 ``chain``                 (n,) i4        the continuation chain of the row in its run
-                                         (:mod:`lvcore.chains`); -1 solved on its own (cold)
+                                         (:mod:`lvcore.execution.chains`); -1 solved on its own (cold)
 ``chain_position``        (n,) i4        its place in that chain (0 first): with ``run`` and
                                          ``chain``, the order the rows were solved in
 ``seed_row``              (n,) i8        the row whose converged state warm-started this one

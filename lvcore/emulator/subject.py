@@ -16,7 +16,7 @@ geometry as it is, with no projection:
    training rows, and an independent one the validation and held-out test
    rows, split at random (:func:`design_rows`).
 3. Every row is simulated on the exact geometry (:func:`simulate_rows`:
-   continuation chains of :mod:`lvcore.chains`, each solve starting Newton
+   continuation chains of :mod:`lvcore.execution.chains`, each solve starting Newton
    from a neighbour's solution, fed chunk by chunk to the worker processes
    with no barrier between them); the runs done are saved (``fe_runs.npz``)
    as every chunk returns: a build that fails, is stopped or killed keeps

@@ -18,7 +18,7 @@ from lvcore.exceptions import EmulatorError
 from lvcore.domain.outputs import N_OUTPUTS
 
 #: FE runs per batch of a build on one worker (in this process): progress is reported, and the runs done are saved
-#: to :data:`RUNS_FILE`, after each. With a pool every chain chunk (:data:`lvcore.chains.DEFAULT_CHUNK` runs) is.
+#: to :data:`RUNS_FILE`, after each. With a pool every chain chunk (:data:`lvcore.execution.chains.DEFAULT_CHUNK` runs) is.
 CHECKPOINT_ROWS = 100
 #: The FE runs of a build so far, in the emulator directory; kept when a build fails or is stopped (a new build of
 #: the same design, geometry and mesh resumes from it), removed when the emulator is saved.
@@ -59,13 +59,13 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
 
     The FE simulator with warm starts (:meth:`~lvcore.mechanics.forward.SimulatorForward.evaluate_warm`):
     the rows are ordered along one continuation walk over the whole design
-    (:func:`lvcore.chains.continuation_order`), each solve starting Newton from
+    (:func:`lvcore.execution.chains.continuation_order`), each solve starting Newton from
     a neighbour's converged solution and falling back to a cold solve when that
     fails, so the results satisfy the same tolerances as cold solves. Failures
     are data (NaN rows, ``converged`` False); results come back in the input order.
 
     With ``workers > 1`` the walk is split into continuation chains fed to a
-    process pool chunk by chunk (:func:`lvcore.chains.run_chains`: the next
+    process pool chunk by chunk (:func:`lvcore.execution.chains.run_chains`: the next
     chunk of a chain is submitted as soon as the previous one returns, and a
     chain that runs dry splits the longest remaining one), with no barrier
     anywhere: both cores are busy until the last chunk. With ``workers=1`` the
@@ -79,7 +79,7 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
         and base are taken from it, not simulated again (a stopped or failed
         build resumes; the rest is walked again from cold starts).
     chunk : int, optional
-        Rows per task (default :data:`lvcore.chains.DEFAULT_CHUNK` with a pool,
+        Rows per task (default :data:`lvcore.execution.chains.DEFAULT_CHUNK` with a pool,
         :data:`CHECKPOINT_ROWS` in this process).
     progress : callable, optional
         ``progress(done, total)`` (rows) as every chunk returns.
@@ -89,13 +89,13 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
         (the rows done are in ``checkpoint``; chunks in flight are finished
         and kept too).
     executor : optional
-        A running pool of :mod:`lvcore.parallel` to use (not closed), e.g.
+        A running pool of :mod:`lvcore.execution.parallel` to use (not closed), e.g.
         shared by the stages of a build; default one of ``workers`` processes
         is started for the call.
     """
     import contextlib
 
-    from lvcore.chains import DEFAULT_CHUNK, ChainTaskError, continuation_order, run_chains, scaled_coordinates
+    from lvcore.execution.chains import DEFAULT_CHUNK, ChainTaskError, continuation_order, run_chains, scaled_coordinates
     from lvcore.mechanics.forward import SimulatorForward
 
     x_given = np.atleast_2d(np.asarray(x, dtype=float))
@@ -136,7 +136,7 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     check_stop()
     todo = np.flatnonzero(~done)
     if todo.size and pooled and todo.size > 1:
-        from lvcore.parallel import make_executor
+        from lvcore.execution.parallel import make_executor
 
         with contextlib.ExitStack() as stack:
             if executor is None:
@@ -161,7 +161,7 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
             rows = _fe_chunk(fwd, x[keys], keys, units[keys], seeds)
             last = [r for r in rows if r.state is not None]
             if last:
-                from lvcore.chains import Seed
+                from lvcore.execution.chains import Seed
 
                 state = Seed(last[-1].unit, last[-1].state)
             record(rows)
@@ -174,10 +174,10 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
 def _fe_chunk(forward, points: np.ndarray, keys: Sequence[int], units: np.ndarray, seeds) -> list:
     """Worker task: FE runs of one chain chunk, in order, each warm-started from the nearest converged state.
 
-    Returns :class:`lvcore.chains.ChainRow` objects keyed by ``keys`` whose results are
+    Returns :class:`lvcore.execution.chains.ChainRow` objects keyed by ``keys`` whose results are
     ``(outputs (25,), converged, message, seconds)``.
     """
-    from lvcore.chains import solve_in_order
+    from lvcore.execution.chains import solve_in_order
 
     by_key = {int(k): p for k, p in zip(keys, np.atleast_2d(points))}
 

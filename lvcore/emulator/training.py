@@ -323,7 +323,7 @@ def search_architectures(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, z
     Each architecture gets its own seed drawn from ``config.seed``, so the
     fits, and therefore the selected network, are the same whether they run
     in this process (``workers=1``) or in ``workers`` spawned processes
-    (:class:`lvcore.parallel.LocalExecutor`, one thread each).
+    (:class:`lvcore.execution.parallel.LocalExecutor`, one thread each).
 
     Returns
     -------
@@ -345,7 +345,7 @@ def search_architectures(zx: np.ndarray, zy: np.ndarray, zx_valid: np.ndarray, z
             report(fits[-1])
         return fits
 
-    from lvcore.parallel import LocalExecutor
+    from lvcore.execution.parallel import LocalExecutor
 
     fits: dict[int, FitResult] = {}
     with LocalExecutor(min(int(workers), len(jobs))) as pool:

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from numpyro.infer import MCMC
 
-from lvcore.bounded_cache import BoundedCache
+from lvcore.execution.bounded_cache import BoundedCache
 from lvcore.domain.conditions import SIGMA_V_ML
 from lvcore.inference import kernels
 from lvcore.inference.sampler_config import SamplerConfig
@@ -318,7 +318,7 @@ class ConditionedForward:
     pass the values as an argument of the compiled sampler, next to the data,
     so one compiled program serves every subject of an emulator: a new
     geometry reuses it (in memory, and across processes and app sessions
-    through JAX's persistent compilation cache, :mod:`lvcore.jax_cache`)
+    through JAX's persistent compilation cache, :mod:`lvcore.execution.jax_cache`)
     instead of compiling the sampler again (10-25 CPU-s per model).
 
     Call :meth:`bind` with the (traced) values to get the forward model.

@@ -12,7 +12,7 @@ that its interval is a posterior interval:
   calibration's own geometry (PC scores and scale, or the subject emulator's
   mesh), base condition, fibre angles and mesh resolution (the emulator's
   training resolution), with one warm-started solve per draw and pressure
-  (draws ordered along a continuation path, :func:`lvcore.chains.continuation_order`).
+  (draws ordered along a continuation path, :func:`lvcore.execution.chains.continuation_order`).
   A solve at the data's EDP gives the emulator-to-FE offset, reported with
   the curve, and the mean end-diastolic fibre stretch.
 * **Stress** (:func:`stress_summary`): the fibre and cross-fibre Cauchy
@@ -250,7 +250,7 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     -------
     LoadPath
     """
-    from lvcore import chains
+    from lvcore.execution import chains
     from lvcore.domain import units
     from lvcore.mechanics.case_inputs import build_case
     from lvcore.exceptions import LVCoreError
@@ -265,7 +265,7 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     levels = np.unique(np.r_[p, edp])
     n, m = len(draws), levels.size
     t0 = time.perf_counter()
-    # every (draw, pressure) is one point of a continuation chain (lvcore.chains): each solve starts from the
+    # every (draw, pressure) is one point of a continuation chain (lvcore.execution.chains): each solve starts from the
     # predicted state of its converged neighbours in (log theta, angles, pressure, PC scores)
     names = THETA_NAMES + ANGLE_NAMES + (EDP_NAME,)
     n_pc = 0 if geometry is not None else len(draws[0]["h"])

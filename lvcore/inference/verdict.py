@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lvcore.bounded_cache import BoundedCache
+from lvcore.execution.bounded_cache import BoundedCache
 from lvcore.domain.outputs import ANGLE_NAMES, OUTPUT_COLUMNS, THETA_NAMES, is_pc_name
 
 #: p-value below which an output counts as not reached at the best fit.

@@ -3,7 +3,7 @@
 :class:`SimulatorForward` runs :func:`lvcore.mechanics.simulate.simulate` on
 the case :func:`lvcore.mechanics.case_inputs.build_case` writes for each point (outputs
 only, a :class:`~lvcore.core.forward.Forward`); batches run in this process or
-on the process pools of :mod:`lvcore.parallel`. :class:`AdjointSimulatorForward`
+on the process pools of :mod:`lvcore.execution.parallel`. :class:`AdjointSimulatorForward`
 reads material parameters only and adds their Jacobian from the adjoint
 sensitivities (:mod:`lvcore.mechanics.sensitivities`): a
 :class:`~lvcore.core.forward.JacobianForward`.
@@ -159,14 +159,14 @@ def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, wa
 def _simulate_chunk(input_names, cases, keys, units, seeds, jacobian, suspect=()):
     """Worker task: ``cases`` in order, each warm-started from the nearest converged state (a chain chunk).
 
-    Returns :class:`lvcore.chains.ChainRow` objects whose results are :func:`_simulate_point` tuples with one
+    Returns :class:`lvcore.execution.chains.ChainRow` objects whose results are :func:`_simulate_point` tuples with one
     more item, why the point was re-solved cold ('' when its result is the warm one): a converged warm
-    result whose Newton path makes it suspect (:func:`lvcore.chains.warm_path_problem`: the equilibrium may not
+    result whose Newton path makes it suspect (:func:`lvcore.execution.chains.warm_path_problem`: the equilibrium may not
     be unique, and the start would decide which one Newton finds) is solved again cold, as a campaign's row is,
     and so is a point started from the state of a point re-solved for its own path (keys in ``suspect``, and
     those of this chunk). A point's result then does not depend on its neighbours or the order of the work.
     """
-    from lvcore.chains import SEED_RESOLVED, passes_suspicion, solve_in_order, warm_path_problem
+    from lvcore.execution.chains import SEED_RESOLVED, passes_suspicion, solve_in_order, warm_path_problem
     from lvcore.mechanics.newton import recorded_solves
 
     by_key = dict(zip(keys, cases))
@@ -217,7 +217,7 @@ class SimulatorForward:
     base : {"clamped", "sliding"}
     workers : int, optional
         Batches of more than one point run on a local process pool of this
-        many workers (:class:`lvcore.parallel.LocalExecutor`;
+        many workers (:class:`lvcore.execution.parallel.LocalExecutor`;
         ``None``: one per core). ``1`` (default) runs them in this process.
     scheduler : str, optional
         ``tcp://HOST:PORT`` of a Dask scheduler for batches (overrides ``workers``).
@@ -226,7 +226,7 @@ class SimulatorForward:
         Every point starts Newton at full load from the nearest converged
         state (:func:`lvcore.mechanics.newton.solve`), which saves most of the
         load stepping: a batch is ordered into continuation chains
-        (:mod:`lvcore.chains`), in this process or split across the executor's
+        (:mod:`lvcore.execution.chains`), in this process or split across the executor's
         workers, and the forward keeps its last converged states to start
         later batches (a sequence of nearby points: an SQP, a line search, BO
         iterations). A failed warm start falls back to a cold solve, and the
@@ -281,7 +281,7 @@ class SimulatorForward:
     def evaluate(self, inputs: Mapping[str, Any], *, executor=None) -> ForwardBatch:
         """Simulate every point (see :class:`~lvcore.core.forward.Forward`); ``executor`` reuses a running pool.
 
-        ``executor`` is any object of :mod:`lvcore.parallel`
+        ``executor`` is any object of :mod:`lvcore.execution.parallel`
         (``submit``/``as_completed``); it is not closed.
         """
         return self._batch(inputs, False, executor)
@@ -291,7 +291,7 @@ class SimulatorForward:
         cases = [self.case({k: cols[k][i] for k in self.input_names}) for i in range(n)]
         X = np.column_stack([cols[k] for k in self.input_names]) if self.input_names else np.zeros((n, 0))
         if executor is None and n > 1 and (self.scheduler or self.workers != 1):
-            from lvcore.parallel import make_executor
+            from lvcore.execution.parallel import make_executor
 
             with make_executor(workers=self.workers, scheduler=self.scheduler) as ex:
                 results = self._run(cases, jacobian, ex, X)
@@ -312,7 +312,7 @@ class SimulatorForward:
     def _run_chained(self, cases, jacobian, executor, X):
         """Warm-started continuation chains over the batch (see ``warm_start``); points whose warm result is
         suspect are re-solved cold (:func:`_simulate_chunk`), counted in :attr:`resolved_cold`."""
-        from lvcore import chains
+        from lvcore.execution import chains
 
         U = chains.scaled_coordinates(self.input_names, X)
         seeds = self._warm.setdefault("seeds", [])
@@ -360,7 +360,7 @@ class SimulatorForward:
         """One point started from ``initial`` (a converged state of this forward, or None: cold).
 
         Returns ``(ForwardBatch of one point, state)``; ``state`` is None when the
-        point did not converge. Used by campaign chains (:mod:`lvcore.chains`).
+        point did not converge. Used by campaign chains (:mod:`lvcore.execution.chains`).
         """
         cols, n = as_columns({k: point[k] for k in self.input_names}, self.input_names, self.label)
         if n != 1:

@@ -20,8 +20,8 @@ import jax.numpy as jnp
 
 from lvcore.domain import units
 from lvcore.safety import limits
-from lvcore.bounded_cache import BoundedCache
-from lvcore.jax_cache import exported_kernel
+from lvcore.execution.bounded_cache import BoundedCache
+from lvcore.execution.jax_cache import exported_kernel
 from lvcore.exceptions import CaseError, GeometryError, SolverError
 from lvcore.domain.outputs import N_OUTPUTS, THETA_NAMES
 from lvcore.mechanics import boundary, fibres, loads, materials, newton, observables

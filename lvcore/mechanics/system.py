@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lvcore.jax_cache import exported_kernel
+from lvcore.execution.jax_cache import exported_kernel
 from lvcore.mechanics import loads, robin
 from lvcore.mechanics.assembly import SparsityPattern, block_dofs, build_pattern, upper_triangle
 from lvcore.mechanics.element import element_residual, element_tangent

@@ -152,7 +152,7 @@ def _outputs(forward: Forward, space: ParameterSpace, X: np.ndarray, chain: bool
     """``(n, 25)`` outputs at the rows of ``X`` (columns ``space.names``); NaN rows where a point failed.
 
     ``chain``: evaluate the rows in continuation order (near neighbours in the
-    space's unit cube one after another, :func:`lvcore.chains.continuation_order`)
+    space's unit cube one after another, :func:`lvcore.execution.chains.continuation_order`)
     and return them in the order of ``X``. A warm-starting forward model
     (``SimulatorForward(warm_start=True)``) then starts each solve from a
     neighbour's solution, also when a caller splits the batch into chunks; for
@@ -161,7 +161,7 @@ def _outputs(forward: Forward, space: ParameterSpace, X: np.ndarray, chain: bool
     X = np.atleast_2d(X)
     if not chain or X.shape[0] < 3:
         return forward.evaluate(dict(zip(space.names, X.T))).outputs
-    from lvcore.chains import continuation_order
+    from lvcore.execution.chains import continuation_order
 
     order = continuation_order(space.to_unit(X))
     Y = np.empty((X.shape[0], N_OUTPUTS))

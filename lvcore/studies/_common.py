@@ -165,11 +165,11 @@ def print_result(as_json: bool, payload: Mapping, text: Callable[[], str]) -> in
 
 
 def study_executor(workers: int, scheduler: str | None, *, local: bool = False):
-    """A context manager giving the executor of a study's simulator batches (:func:`lvcore.parallel.make_executor`,
+    """A context manager giving the executor of a study's simulator batches (:func:`lvcore.execution.parallel.make_executor`,
     closed on leaving; pending tasks cancelled after an error), or None where the batches run in this process: one
     worker and no scheduler, or ``local`` (e.g. a test's own forward model)."""
     if local or not (scheduler or workers > 1):
         return contextlib.nullcontext()
-    from lvcore.parallel import make_executor
+    from lvcore.execution.parallel import make_executor
 
     return make_executor(workers=workers, scheduler=scheduler)

@@ -21,7 +21,7 @@ and ``base`` the data's angles are the fixed pair). Noise σ_V = 5 mL,
 σ_S = 0.03 is added (seeded per volunteer and kind). The BO of
 :func:`lvcore.studies.bo_fibres.run_one` then runs in both modes, ``fixed``
 (θ, angles at (−60°, 90°)) and ``free`` (θ and both angles), on the FE
-simulator (warm-started continuation chains, :mod:`lvcore.chains`) with a
+simulator (warm-started continuation chains, :mod:`lvcore.execution.chains`) with a
 **reduced budget** (default 30 + 30 per run; the chapter used 300 + 300).
 
 The comparison is made on a **common objective scale**: the chapter's

@@ -161,7 +161,7 @@ def simulate_all(volunteers, plan, out: Path, *, resolution="default", workers=1
                 if progress:
                     progress(f"simulated {k} ({i + 1}/{len(jobs)})")
         else:
-            from lvcore.parallel import make_executor
+            from lvcore.execution.parallel import make_executor
 
             with make_executor(workers=workers, scheduler=scheduler) as ex:
                 futures = [ex.submit(_simulate_job, k, c) for k, c in jobs.items()]

@@ -92,7 +92,7 @@ def run_study(patients: Sequence[str] | None = None, *, out, workers: int = 1, s
                 "surface_grid": surface_grid, **({} if sqp_tol == SQP_TOL else {"sqp_tol": sqp_tol})}
     executor = None
     if not collect_only and (scheduler or workers > 1):
-        from lvcore.parallel import make_executor
+        from lvcore.execution.parallel import make_executor
 
         executor = make_executor(workers=workers, scheduler=scheduler)
 

@@ -22,7 +22,7 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from lvcore.parallel import pin_threads
+from lvcore.execution.parallel import pin_threads
 
 #: Debian's Chromium (the only browser used; never ``playwright install``).
 CHROMIUM = "/usr/bin/chromium"

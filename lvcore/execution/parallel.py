@@ -180,7 +180,7 @@ def _worker_init(parent_pid: int | None = None, slots=None, cores: tuple[int, ..
             pass
     for k, v in WORKER_ENV.items():
         os.environ.setdefault(k, v)
-    import lvcore.jax_cache  # noqa: F401 - imports lvcore: float64 and the persistent compilation cache
+    import lvcore.execution.jax_cache  # noqa: F401 - imports lvcore: float64 and the persistent compilation cache
 
 
 class LocalExecutor:

@@ -1,4 +1,4 @@
-"""lvcore.jax_cache: the exported simulator kernels give bitwise the plain jit results, on the first process (made
+"""lvcore.execution.jax_cache: the exported simulator kernels give bitwise the plain jit results, on the first process (made
 and written) and on a later one (read back), and a missing, corrupt or stale file falls back with no error."""
 import os
 
@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 import jax
 import jax.numpy as jnp
 
-from lvcore import jax_cache
-from lvcore.jax_cache import ExportedKernel, exported_kernel, read_exported, write_exported
+from lvcore.execution import jax_cache
+from lvcore.execution.jax_cache import ExportedKernel, exported_kernel, read_exported, write_exported
 from lvcore.mechanics import simulate as simulate_module
 from lvcore.mechanics import system as system_module
 from lvcore.mechanics.case import Case

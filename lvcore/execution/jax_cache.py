@@ -110,7 +110,7 @@ def code_version() -> str:
         import jax
         import jaxlib
 
-        root = Path(__file__).resolve().parent  # the lvcore package
+        root = Path(__file__).resolve().parents[1]  # the lvcore package
         h = hashlib.sha256()
         for f in sorted(root.rglob("*.py")):
             h.update(str(f.relative_to(root)).encode())

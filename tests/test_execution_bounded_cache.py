@@ -1,9 +1,9 @@
-"""The shared LRU of compiled programs and prepared cases (lvcore.bounded_cache)."""
+"""The shared LRU of compiled programs and prepared cases (lvcore.execution.bounded_cache)."""
 import threading
 
 import pytest
 
-from lvcore.bounded_cache import BoundedCache
+from lvcore.execution.bounded_cache import BoundedCache
 
 
 def test_least_recently_used_entry_goes_first():

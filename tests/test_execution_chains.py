@@ -1,4 +1,4 @@
-"""Continuation chains (lvcore.chains): order, scheduling, and warm-chained results equal cold ones."""
+"""Continuation chains (lvcore.execution.chains): order, scheduling, and warm-chained results equal cold ones."""
 from concurrent.futures import Future
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 
 import campaign_double
 from campaign_double import closed_form
-from lvcore import chains
+from lvcore.execution import chains
 from lvcore.campaigns.designs import Design, make_design
 from lvcore.campaigns.runner import _drive, execute_chunk, run_campaign
 from lvcore.campaigns.space import get_space

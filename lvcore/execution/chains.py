@@ -498,7 +498,7 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
 
     Parameters
     ----------
-    executor : object with ``as_completed(futures)`` (see :mod:`lvcore.parallel`)
+    executor : object with ``as_completed(futures)`` (see :mod:`lvcore.execution.parallel`)
     submit_chunk : callable
         ``submit_chunk(positions, seeds) -> future`` whose result is a list of
         :class:`ChainRow` keyed by those positions (rows of ``U``); it is

@@ -12,7 +12,7 @@ import pytest
 
 DRIVER = r"""
 import os, sys, time
-from lvcore.parallel import LocalExecutor
+from lvcore.execution.parallel import LocalExecutor
 
 def work(i):
     time.sleep(600)
@@ -80,7 +80,7 @@ def test_workers_and_resource_tracker_die_with_a_sigkilled_driver(tmp_path):
 
 
 def test_watch_parent_exits_when_the_parent_changes():
-    code = ("import os, time\nfrom lvcore.parallel import watch_parent\n"
+    code = ("import os, time\nfrom lvcore.execution.parallel import watch_parent\n"
             "watch_parent(os.getppid() + 999999, poll_s=0.05)\ntime.sleep(30)\n")
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
     t0 = time.time()
@@ -96,7 +96,7 @@ def _affinity_after(seconds):
 @pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
                     reason="needs Linux and two cores")
 def test_local_workers_are_pinned_one_per_core_unless_switched_off(monkeypatch):
-    from lvcore.parallel import PIN_ENV, LocalExecutor, worker_cores
+    from lvcore.execution.parallel import PIN_ENV, LocalExecutor, worker_cores
 
     cores = sorted(os.sched_getaffinity(0))
     assert worker_cores(2) == cores[:2]
@@ -112,7 +112,7 @@ def test_local_workers_are_pinned_one_per_core_unless_switched_off(monkeypatch):
 
 
 def test_pin_threads_fills_in_every_thread_variable_and_keeps_what_is_set():
-    from lvcore.parallel import THREAD_VARIABLES, WORKER_ENV, pin_threads
+    from lvcore.execution.parallel import THREAD_VARIABLES, WORKER_ENV, pin_threads
 
     env = {THREAD_VARIABLES[0]: "4", "OTHER": "x"}
     assert pin_threads(env) is env  # the mapping itself, for use in an expression
@@ -125,8 +125,8 @@ def test_pin_threads_fills_in_every_thread_variable_and_keeps_what_is_set():
 
 PIN_THEN_NUMPY = r"""
 import sys
-from lvcore.parallel import pin_threads
-assert "numpy" not in sys.modules and "jax" not in sys.modules, "lvcore.parallel must not import numpy or JAX"
+from lvcore.execution.parallel import pin_threads
+assert "numpy" not in sys.modules and "jax" not in sys.modules, "lvcore.execution.parallel must not import numpy or JAX"
 pin_threads()
 import numpy, threadpoolctl
 print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
@@ -134,7 +134,7 @@ print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
 #: numpy imported first, as a pytest plugin does before tests/conftest.py: the loaded BLAS is limited instead.
 NUMPY_THEN_PIN = r"""
 import numpy, threadpoolctl
-from lvcore.parallel import pin_threads
+from lvcore.execution.parallel import pin_threads
 pin_threads()
 print(sorted({i["num_threads"] for i in threadpoolctl.threadpool_info()}))
 """
@@ -145,7 +145,7 @@ def test_pin_threads_gives_numpy_one_blas_thread(code):
     """In a fresh process with no thread variables, pin_threads leaves numpy's BLAS one thread, called before or
     after numpy is imported (unpinned, OpenBLAS starts one per core: the check fails on a multi-core machine)."""
     pytest.importorskip("threadpoolctl")
-    from lvcore.parallel import THREAD_VARIABLES
+    from lvcore.execution.parallel import THREAD_VARIABLES
 
     env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
@@ -156,9 +156,9 @@ def test_pin_threads_gives_numpy_one_blas_thread(code):
 def test_the_docstring_examples_run():
     import doctest
 
-    import lvcore.parallel
+    import lvcore.execution.parallel
 
-    result = doctest.testmod(lvcore.parallel)
+    result = doctest.testmod(lvcore.execution.parallel)
     assert result.attempted >= 3 and result.failed == 0
 
 
@@ -168,7 +168,7 @@ def test_this_test_process_blas_follows_the_variables():
     threadpoolctl = pytest.importorskip("threadpoolctl")
     import numpy  # noqa: F401 - loads the BLAS
 
-    from lvcore.parallel import LIBRARY_VARIABLES
+    from lvcore.execution.parallel import LIBRARY_VARIABLES
 
     for lib in threadpoolctl.threadpool_info():
         var = LIBRARY_VARIABLES.get(lib["internal_api"])
@@ -177,7 +177,7 @@ def test_this_test_process_blas_follows_the_variables():
 
 
 def test_in_process_executor_runs_each_task_when_the_caller_takes_it():
-    from lvcore.parallel import InProcessExecutor
+    from lvcore.execution.parallel import InProcessExecutor
 
     ran = []
 
