@@ -29,15 +29,15 @@ MOVED_MODULES = {
     "lvcore.bounded_cache": "lvcore.execution.bounded_cache",
     "lvcore.chains": "lvcore.execution.chains",
     "lvcore.conditions": "lvcore.domain.conditions",
+    "lvcore.headers": "lvcore.safety.headers",
+    "lvcore.isolation": "lvcore.safety.isolation",
+    "lvcore.jax_cache": "lvcore.execution.jax_cache",
+    "lvcore.limits": "lvcore.safety.limits",
     "lvcore.outputs": "lvcore.domain.outputs",
     "lvcore.parallel": "lvcore.execution.parallel",
     "lvcore.physiology": "lvcore.domain.physiology",
     "lvcore.units": "lvcore.domain.units",
     "lvcore.uploads": "lvcore.app.uploads",
-    "lvcore.headers": "lvcore.safety.headers",
-    "lvcore.isolation": "lvcore.safety.isolation",
-    "lvcore.jax_cache": "lvcore.execution.jax_cache",
-    "lvcore.limits": "lvcore.safety.limits",
 }
 
 
