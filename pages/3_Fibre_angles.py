@@ -12,7 +12,8 @@ import streamlit as st
 from lvcore.app import freshness
 from lvcore.app.controls import disabled_hint, shared_inputs, why_disabled
 from lvcore.app.live_chart import live_plotly_chart
-from lvcore.emulator.io import available_emulators, load_emulator
+from lvcore.app.emulators import cached_emulator
+from lvcore.emulator.io import available_emulators
 from lvcore.domain.conditions import CHAPTER_ANGLE_PAIRS, CHAPTER_ANGLES
 from lvcore.exceptions import LVCoreError
 from lvcore.studies.fibre_angles import (angle_map, angle_sweep, emulator_angle_map, emulator_angle_sweep,
@@ -91,9 +92,8 @@ with tab_sweep:
 EMULATOR_ENGINE = "`angles` emulator (live)"
 
 
-@st.cache_resource(show_spinner=False)
 def _angles_emulator():
-    return load_emulator("angles")
+    return cached_emulator("angles")
 
 
 def _draw_map(amap, live: bool = False):

@@ -9,7 +9,8 @@ import streamlit as st
 from lvcore.app.controls import (chosen_index, conditions_text, disabled_hint, input_label, log_options,
                                    remember_choice, shared_inputs, shared_start, why_disabled)
 
-from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator, load_validation
+from lvcore.app.emulators import cached_emulator
+from lvcore.emulator.io import available_emulators, below_spec_emulators, load_validation
 from lvcore.exceptions import LVCoreError
 from lvcore.geometry.scaling import SCALE_BOUNDS, ScaledForward, scale_outputs
 from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, OUTPUT_NAMES, is_pc_name
@@ -24,9 +25,7 @@ st.caption(
 )
 
 
-@st.cache_resource(show_spinner=False)
-def _load(path: str):
-    return load_emulator(path)
+_load = cached_emulator
 
 
 @st.cache_data(show_spinner=False)

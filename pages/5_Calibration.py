@@ -11,13 +11,14 @@ import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
 from lvcore.app import freshness, physiology_panel
+from lvcore.app.emulators import cached_emulator
 from lvcore.app import warmup as app_warmup
 from lvcore.app.subject_prepare import floor_caption
 from lvcore.app.tables import summary_view
 from lvcore.app.controls import (DEFAULT_SUBJECT, chosen_index, conditions_text, disabled_hint, remember_choice,
                                    shared_inputs, why_disabled)
 from lvcore.domain.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
-from lvcore.emulator.io import available_emulators, below_spec_emulators, load_emulator
+from lvcore.emulator.io import available_emulators, below_spec_emulators
 from lvcore.exceptions import LVCoreError
 from lvcore.inference import calibrate as cal
 from lvcore.inference import guards
@@ -51,9 +52,7 @@ if not choices:
     st.stop()
 
 
-@st.cache_resource(show_spinner=False)
-def _emulator(path: str):
-    return load_emulator(path)
+_emulator = cached_emulator
 
 
 shared_inputs(theta=False, edp=False)  # it reads no θ, no EDP: the sidebar shows no shared inputs here

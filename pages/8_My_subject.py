@@ -8,10 +8,11 @@ import streamlit as st
 from lvcore.domain.units import rms_mm_from_mse_cm2
 from lvcore.app import freshness, physiology_panel, subject_emulator_panel, subject_flow as flow
 from lvcore.app import warmup as app_warmup
+from lvcore.app.emulators import cached_emulator
 from lvcore.app.tables import number_column, summary_view
 from lvcore.app.controls import chosen_index, conditions_text, disabled_hint, remember_choice, shared_inputs, why_disabled
 from lvcore.domain.conditions import SIMULATOR_DEFAULT_EDP_MMHG
-from lvcore.emulator.io import available_emulators, load_emulator
+from lvcore.emulator.io import available_emulators
 from lvcore.exceptions import LVCoreError
 from lvcore.inference.diagnostics import banner_status
 from lvcore.inference.models import MODEL_LABELS
@@ -26,9 +27,7 @@ st.caption("From your subject's geometry and measurements to a calibrated θ = (
            "Each step shows what it used; results grey out when an input changes.")
 
 
-@st.cache_resource(show_spinner=False)
-def _emulator(name: str):
-    return load_emulator(name)
+_emulator = cached_emulator
 
 
 uploads = session_uploads()

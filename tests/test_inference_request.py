@@ -180,3 +180,23 @@ def test_a_request_without_data_has_no_fit_check():
     assert request.representation_error is None   # PC scores and the mean shape never get a floor
     with pytest.raises(DataError, match="no measurements"):
         request.consistency()
+
+
+def test_the_pages_load_an_emulator_again_when_its_files_change(tmp_path, monkeypatch):
+    """The app's emulator cache is keyed by the files behind a name: another LVCORE_EMULATORS folder (as a test
+    with a stand-in emulator of the same name leaves behind) or a rebuilt emulator is loaded again, not served
+    from the cache (a stale 'chapter' once gave a later request the wrong base condition)."""
+    from test_inference_calibrate import _random_emulator
+
+    from lvcore.app.emulators import cached_emulator
+    from lvcore.emulator.io import emulator_identity, save_emulator
+
+    real = cached_emulator("chapter")
+    assert cached_emulator("chapter") is real   # cached
+    save_emulator(_random_emulator(), tmp_path / "chapter")
+    monkeypatch.setenv("LVCORE_EMULATORS", str(tmp_path))
+    stand_in = cached_emulator("chapter")
+    assert stand_in is not real and emulator_identity("chapter")[0] == str((tmp_path / "chapter").resolve())
+    monkeypatch.delenv("LVCORE_EMULATORS")
+    assert cached_emulator("chapter") is real
+    assert emulator_identity("no-such-emulator") == ("", 0)

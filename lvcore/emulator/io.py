@@ -122,6 +122,19 @@ def resolve_emulator_dir(name_or_path: str | Path) -> Path:
     )
 
 
+def emulator_identity(name_or_path: str | Path) -> tuple[str, int]:
+    """Which emulator files ``name_or_path`` means now: its folder (:func:`resolve_emulator_dir`) and the newest
+    modification time (ns) of the files in it. A cache of loaded emulators keyed by it (the app's pages) loads
+    again when the name resolves elsewhere (another ``LVCORE_EMULATORS``) or the files are rebuilt; ``("", 0)``
+    when the name resolves to nothing (the load then says why)."""
+    try:
+        folder = resolve_emulator_dir(name_or_path)
+    except EmulatorError:
+        return "", 0
+    stamps = [f.stat().st_mtime_ns for f in folder.iterdir() if f.is_file()]
+    return str(folder.resolve()), max(stamps, default=0)
+
+
 def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict | None = None) -> Path:
     """Write ``emulator`` to ``directory`` (created) as network.npz + metadata.json.
 
