@@ -70,16 +70,18 @@ _VERSION: list[str] = []
 def simulator_version() -> str:
     """``lvcore.__version__`` plus a hash of the simulator's source files.
 
-    ``"0.1.0+src.1a2b3c4d5e"``: the hash covers ``lvcore/mechanics`` and
-    ``lvcore/geometry`` (``*.py``), so rows computed by different code are
-    told apart even when the package version did not change.
+    ``"0.1.0+src.1a2b3c4d5e"``: the hash covers ``lvcore/mechanics``,
+    ``lvcore/geometry`` and ``lvcore/domain`` (``*.py``; the last holds the
+    fixed Holzapfel-Ogden terms and units the simulator reads), so rows
+    computed by different code are told apart even when the package version
+    did not change.
     """
     if not _VERSION:
         import hashlib
 
         root = Path(lvcore.__file__).resolve().parent
         h = hashlib.sha256()
-        for sub in ("mechanics", "geometry"):
+        for sub in ("mechanics", "geometry", "domain"):
             for f in sorted((root / sub).glob("*.py")):
                 h.update(f.name.encode())
                 h.update(f.read_bytes())
