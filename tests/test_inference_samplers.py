@@ -203,7 +203,7 @@ def test_data_passed_to_the_compiled_sampler_give_the_same_draws():
 
     def draws(chain_method, y):
         # 10 warm-up steps: each NUTS step amplifies the chain methods' different rounding (after 60, one chain's
-        # first draws differed by 1 % where XLA's back end ran at -O0, the test suite's setting, tests/conftest.py)
+        # first draws differed by 1 % with XLA's back end at -O0, another rounding than this machine's default)
         cfg = samplers.SamplerConfig(num_warmup=10, num_samples=40, num_chains=2, seed=3, chain_method=chain_method)
         return samplers.run_nuts("iid", y, FWD, cfg).samples["a"]
 
