@@ -183,6 +183,33 @@ OVERSIZED = b"0" * (10 * 1024 * 1024 + 1)  # lvcore.app.uploads.MAX_UPLOAD_MB + 
 
 
 # --------------------------------------------------------------------------- the pages (run in capped children)
+def _fuzz_slot(at, key: str, mime: str, names_st, contents_st, n: int, prefix: str, used, *, kept, controls) -> int:
+    """``n`` hypothesis files through the upload widget ``key`` of the page ``at``, each checked by :func:`_check`
+    (``prefix``, ``used``, ``kept``, ``controls`` as there); the number of files sent."""
+    count = 0
+
+    @_examples(n)
+    @given(name=names_st, content=contents_st)
+    def upload(name, content):
+        nonlocal count
+        at.file_uploader(key=key).upload(name, content, mime)
+        at.run()
+        count += 1
+        _check(at, name, prefix, used, kept=kept, uploaders=controls)
+
+    upload()
+    return count
+
+
+def _oversized(at, key: str, name: str, mime: str, prefix: str, *, kept, controls) -> int:
+    """One file of 10 MB + 1 byte through the widget ``key``: refused with the limit named, nothing else lost."""
+    at.file_uploader(key=key).upload(name, OVERSIZED, mime)
+    at.run()
+    _check(at, name, prefix, lambda t: False, kept=kept, uploaders=controls)
+    assert any("more than the 10 MB allowed" in str(e.value) for e in at.error)
+    return 1
+
+
 def fuzz_calibration() -> int:
     """Calibration page, 'upload': the measured CSV and the geometry (PC scores .json/.csv or template .vtu)."""
     from streamlit.testing.v1 import AppTest
@@ -198,42 +225,18 @@ def fuzz_calibration() -> int:
     at.file_uploader(key="up_geometry").upload("good.json", json.dumps(SCORES_JSON).encode(), "application/json")
     at.run()
     _check(at, "good.json", "Geometry:", lambda t: True, kept=(good_data, good_geo), uploaders=controls)
-    count = 0
-
-    @_examples(12)
-    @given(name=names(["csv"]), content=contents([MEASURED_CSV, vtu[:2000]]))
-    def measured(name, content):
-        nonlocal count
-        at.file_uploader(key="up_measured").upload(name, content, "text/csv")
-        at.run()
-        count += 1
-        _check(at, name, "Measured data:", lambda t: any("LVV = " in x for x in t), kept=(good_geo,),
-               uploaders=controls)
-
-    measured()
+    count = _fuzz_slot(at, "up_measured", "text/csv", names(["csv"]), contents([MEASURED_CSV, vtu[:2000]]), 12,
+                       "Measured data:", lambda t: any("LVV = " in x for x in t), kept=(good_geo,), controls=controls)
     at.file_uploader(key="up_measured").upload("good.csv", MEASURED_CSV, "text/csv")
     at.run()
-
-    @_examples(12)
-    @given(name=names(["json", "csv", "vtu"]), content=contents([SCORES_CSV, vtu], [SCORES_JSON]))
-    def geometry(name, content):
-        nonlocal count
-        at.file_uploader(key="up_geometry").upload(name, content, "application/octet-stream")
-        at.run()
-        count += 1
-        _check(at, name, "Geometry:", lambda t: any("PC scores h = " in x for x in t), kept=(good_data,),
-               uploaders=controls)
-
-    geometry()
+    count += _fuzz_slot(at, "up_geometry", "application/octet-stream", names(["json", "csv", "vtu"]),
+                        contents([SCORES_CSV, vtu], [SCORES_JSON]), 12, "Geometry:",
+                        lambda t: any("PC scores h = " in x for x in t), kept=(good_data,), controls=controls)
     for key, prefix, kept in (("up_measured", "Measured data:", good_geo), ("up_geometry", "Geometry:", good_data)):
         at.file_uploader(key="up_measured").upload("good.csv", MEASURED_CSV, "text/csv")
         at.file_uploader(key="up_geometry").upload("good.json", json.dumps(SCORES_JSON).encode(), "application/json")
         at.run()
-        at.file_uploader(key=key).upload("big.csv", OVERSIZED, "text/csv")
-        at.run()
-        _check(at, "big.csv", prefix, lambda t: False, kept=(kept,), uploaders=controls)
-        assert any("more than the 10 MB allowed" in str(e.value) for e in at.error)
-        count += 1
+        count += _oversized(at, key, "big.csv", "text/csv", prefix, kept=(kept,), controls=controls)
     return count
 
 
@@ -261,34 +264,12 @@ def fuzz_geometry_page() -> int:
     def used(texts):  # operator 1's upload fitted too
         return sum(fitted in x for x in texts) >= 2
 
+    count += _fuzz_slot(fresh(), "c0", "application/json", names(["json"]), contents([], [contours]), 6, prefix, used,
+                        kept=(fitted,), controls=controls)
     at = fresh()
-
-    @_examples(6)
-    @given(name=names(["json"]), content=contents([], [contours]))
-    def contour(name, content):
-        nonlocal count
-        at.file_uploader(key="c0").upload(name, content, "application/json")
-        at.run()
-        count += 1
-        _check(at, name, prefix, used, kept=(fitted,), uploaders=controls)
-
-    contour()
-    at = fresh()
-
-    @_examples(6)
-    @given(name=names(["vtu", "vtk", "msh", "inp", "stl", "txt", ""]), content=contents([MSH, INP, vtk_seed, STL]))
-    def mesh(name, content):
-        nonlocal count
-        at.file_uploader(key="m0").upload(name, content, "application/octet-stream")
-        at.run()
-        count += 1
-        _check(at, name, prefix, used, kept=(fitted,), uploaders=controls)
-
-    mesh()
-    at.file_uploader(key="m0").upload("big.vtu", OVERSIZED, "application/octet-stream")
-    at.run()
-    _check(at, "big.vtu", prefix, lambda t: False, kept=(fitted,), uploaders=controls)
-    assert any("more than the 10 MB allowed" in str(e.value) for e in at.error)
+    count += _fuzz_slot(at, "m0", "application/octet-stream", names(["vtu", "vtk", "msh", "inp", "stl", "txt", ""]),
+                        contents([MSH, INP, vtk_seed, STL]), 6, prefix, used, kept=(fitted,), controls=controls)
+    count += _oversized(at, "m0", "big.vtu", "application/octet-stream", prefix, kept=(fitted,), controls=controls)
     at = fresh()
 
     @_examples(6)
@@ -303,7 +284,7 @@ def fuzz_geometry_page() -> int:
         _check(at, (endo, "epi.stl"), prefix, used, kept=(fitted,), uploaders=controls)
 
     surfaces()
-    return count + 1
+    return count
 
 
 def fuzz_my_subject() -> int:
@@ -321,41 +302,18 @@ def fuzz_my_subject() -> int:
     good_geo, good_data = "Read as **scores**", "**S1**: LVV 150.0 mL"
     controls = ("my_data", "my_geometry")
     _check(at, "good.json", "Geometry:", lambda t: True, kept=(good_geo, good_data), uploaders=controls)
-    count = 0
     mat = _mat(subject=np.array(["S1"]), lvv_ml=np.array([150.0]), strains=np.full((1, 24), -0.15))
-
-    @_examples(6)
-    @given(name=names(flow.DATA_TYPES), content=contents([MEASURED_CSV, mat], [MEASURED_JSON]))
-    def data(name, content):
-        nonlocal count
-        at.file_uploader(key="my_data").upload(name, content, "application/octet-stream")
-        at.run()
-        count += 1
-        _check(at, name, "Measurements:", lambda t: any(": LVV " in x for x in t), kept=(good_geo,),
-               uploaders=controls)
-
-    data()
+    count = _fuzz_slot(at, "my_data", "application/octet-stream", names(flow.DATA_TYPES),
+                       contents([MEASURED_CSV, mat], [MEASURED_JSON]), 6, "Measurements:",
+                       lambda t: any(": LVV " in x for x in t), kept=(good_geo,), controls=controls)
     at.file_uploader(key="my_data").upload("good.csv", MEASURED_CSV, "text/csv")
     at.run()
     arrays = [_npy(np.zeros(5)), _npy(np.zeros((3, 3))), _npy(np.array(["a"])), _npy(np.full(5, np.nan))]
-
-    @_examples(8)
-    @given(name=names(flow.GEOMETRY_TYPES),
-           content=contents([vtu, MSH, INP, SCORES_CSV] + arrays, [SCORES_JSON]))
-    def geometry(name, content):
-        nonlocal count
-        at.file_uploader(key="my_geometry").upload(name, content, "application/octet-stream")
-        at.run()
-        count += 1
-        _check(at, name, "Geometry:", lambda t: any("Read as **" in x for x in t), kept=(good_data,),
-               uploaders=controls)
-
-    geometry()
-    at.file_uploader(key="my_geometry").upload("big.vtu", OVERSIZED, "application/octet-stream")
-    at.run()
-    _check(at, "big.vtu", "Geometry:", lambda t: False, kept=(good_data,), uploaders=controls)
-    assert any("more than the 10 MB allowed" in str(e.value) for e in at.error)
-    return count + 1
+    count += _fuzz_slot(at, "my_geometry", "application/octet-stream", names(flow.GEOMETRY_TYPES),
+                        contents([vtu, MSH, INP, SCORES_CSV] + arrays, [SCORES_JSON]), 8, "Geometry:",
+                        lambda t: any("Read as **" in x for x in t), kept=(good_data,), controls=controls)
+    return count + _oversized(at, "my_geometry", "big.vtu", "application/octet-stream", "Geometry:",
+                              kept=(good_data,), controls=controls)
 
 
 # --------------------------------------------------------------------------- the tests
