@@ -92,10 +92,6 @@ with tab_sweep:
 EMULATOR_ENGINE = "`angles` emulator (live)"
 
 
-def _angles_emulator():
-    return cached_emulator("angles")
-
-
 def _draw_map(amap, live: bool = False):
     # one figure with two heat maps: far cheaper for the browser to redraw than two labelled contour plots
     fig = figures.map_pair(amap.alpha_endo, amap.alpha_epi, amap.lvv_ml, amap.mean_strain,
@@ -140,7 +136,7 @@ def _grid_controls(n_min: int, n_max: int, n_default: int):
 def _live_map(theta, edp_mmhg, resolution) -> None:
     """The emulator's map and its grid/range sliders: moving them reruns only this fragment, not the page."""
     n, endo, epi = _grid_controls(5, 41, 21)
-    emu = _angles_emulator()  # cached resource: the emulator and its compiled prediction live across reruns
+    emu = cached_emulator("angles")  # cached resource: the emulator and its compiled prediction live across reruns
     st.caption(f"{n * n} emulator predictions on the shape model's mean LV (PC scores 0) with the {emu.base} base "
                "of its training simulations, not the analytic default LV with the simulator's clamped base; the "
                "mesh choice does not apply.")

@@ -25,9 +25,6 @@ st.caption(
 )
 
 
-_load = cached_emulator
-
-
 @st.cache_data(show_spinner=False)
 def _validation(path: str):
     return load_validation(path)
@@ -49,7 +46,7 @@ label = st.selectbox("Emulator", list(choices), index=chosen_index("emulator", c
                      help="Starts at the emulator last chosen on the Emulator, Calibration or My subject page.")
 remember_choice("emulator", label)
 try:
-    emu = _load(choices[label])
+    emu = cached_emulator(choices[label])
 except LVCoreError as err:
     st.error(str(err))
     st.stop()

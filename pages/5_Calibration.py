@@ -52,9 +52,6 @@ if not choices:
     st.stop()
 
 
-_emulator = cached_emulator
-
-
 shared_inputs(theta=False, edp=False)  # it reads no θ, no EDP: the sidebar shows no shared inputs here
 
 # ----------------------------------------------------------------------------- data
@@ -198,7 +195,7 @@ run_clicked = st.button("Run calibration", type="primary", disabled=blocked is n
 disabled_hint(blocked)
 if run_clicked:
     try:
-        emulator = _emulator(choices[emu_label])
+        emulator = cached_emulator(choices[emu_label])
         # lvcore calibrate's set-up (lvcore.inference.request): the data's EDP (refused by a fixed-EDP emulator
         # when it differs), the box check, the scaled forward and the representation floor of a mesh. Outside the
         # training box the CLI refuses without --allow-extrapolation; here it runs, flagged.
@@ -292,7 +289,7 @@ if job is not None and job["done"]:
                                                   "plot, and the truth column of the table." if truth else ""))
             st.caption("Conditions used: " + conditions_text(
                 job.get("edp_mmhg", SIMULATOR_DEFAULT_EDP_MMHG), job.get("angles", SIMULATOR_DEFAULT_ANGLES),
-                _emulator(choices[job["emulator"]]) if job["emulator"] in choices else None,
+                cached_emulator(choices[job["emulator"]]) if job["emulator"] in choices else None,
                 infer_angles=job.get("infer", False))
                 + f" (EDP: {job.get('edp_source', 'default')}); {job.get('base', 'clamped')} base (the emulator's "
                   "simulations)")

@@ -27,9 +27,6 @@ st.caption("From your subject's geometry and measurements to a calibrated θ = (
            "Each step shows what it used; results grey out when an input changes.")
 
 
-_emulator = cached_emulator
-
-
 uploads = session_uploads()
 shared_inputs(theta=False, edp=False)  # own EDP (step 3, as lvcore calibrate --edp): no shared inputs in sidebar
 
@@ -158,7 +155,7 @@ warmup = c2.number_input("warm-up", 50, 5000, 500, step=50, key="my_warmup")
 draws = c3.number_input("draws kept", 50, 5000, 500, step=50, key="my_draws")
 emulator = None
 try:
-    emulator = _emulator(subject_emus.get(emu_name, emu_name))
+    emulator = cached_emulator(subject_emus.get(emu_name, emu_name))
 except LVCoreError as err:
     st.error(f"Emulator: {err}")
 is_subject_emu = bool(getattr(emulator, "is_subject", False))
