@@ -248,6 +248,34 @@ def test_summary_has_the_designed_keys_and_draws(tmp_path):
     assert res["n_subjects"] == 30
 
 
+def test_a_lost_work_folder_resumes_from_its_summary(tmp_path):
+    """--import-summary: a summary's subjects seed a new work folder, give the same statistics and are not rerun."""
+    settings = sbc.default_settings()
+    sbc.run_piece(0, 12, settings, tmp_path / "old", n_subjects=20, subject_fn=_fake_record)
+    first = sbc.summarise(tmp_path / "old", tmp_path / "first" / "sbc.json")
+    store = sbc.Store(tmp_path / "new")
+    assert store.import_summary(first, settings, "first/sbc.json") == 12
+    assert store.import_summary(first, settings, "first/sbc.json") == 0          # already there: kept as is
+    assert store.settings()["n_subjects"] == 20
+    ran = []
+    sbc.run_piece(0, 20, settings, tmp_path / "new", subject_fn=lambda i: ran.append(i) or _fake_record(i))
+    assert ran == list(range(12, 20))
+    again = sbc.summarise(tmp_path / "new", tmp_path / "again" / "sbc.json")
+    sbc.run_piece(12, 20, settings, tmp_path / "old", subject_fn=_fake_record)      # the folder never lost
+    whole = sbc.summarise(tmp_path / "old", tmp_path / "whole" / "sbc.json")
+    for route in sbc.ROUTES:
+        for q in sbc.QUANTITIES:
+            for key in ("coverage_90", "coverage_50", "rank_chi2_p", "n"):
+                assert again["routes"][route][q][key] == whole["routes"][route][q][key], (route, q, key)
+        assert again["routes"][route]["exit4_reasons"] == whole["routes"][route]["exit4_reasons"]
+        assert again["routes"][route]["errors"] == whole["routes"][route]["errors"]
+    assert {r.get("imported_from") for r in store.records()} == {"first/sbc.json", None}
+    with pytest.raises(sbc.LVCoreError, match="other settings.*warmup"):
+        sbc.Store(tmp_path / "third").import_summary(first, sbc.default_settings(warmup=10), "first/sbc.json")
+    with pytest.raises(sbc.LVCoreError, match="no per-subject records"):
+        sbc.Store(tmp_path / "third").import_summary({**first, "subjects": []}, settings, "x.json")
+
+
 def test_summarise_refuses_an_empty_work_folder(tmp_path):
     with pytest.raises(sbc.LVCoreError, match="no such folder"):
         sbc.summarise(tmp_path / "none")

@@ -504,6 +504,10 @@ def add_study_parser(study_subparsers) -> None:
                         "the emulator's box is then refused, exit 2, and counted)")
     p.add_argument("--keep-runs", action="store_true",
                    help="keep each subject's files and calibration output under WORKDIR/runs (default: removed)")
+    p.add_argument("--import-summary", type=Path, default=None, metavar="SBC_JSON",
+                   help="before running, take over the subjects of an earlier summary made with the same settings "
+                        f"(e.g. the shipped {RESULT_FILE}), so that a lost work folder resumes where that summary "
+                        "stopped (default: none)")
     p.add_argument("--summarise", action="store_true",
                    help="build the result from the finished subjects in --workdir instead of running any")
     p.add_argument("--out", type=cli_args.output_file, default=None,
@@ -534,6 +538,12 @@ def _cli(args) -> int:
     settings = default_settings(seed=args.seed, warmup=args.warmup, samples=args.samples, chains=args.chains,
                                 derived_draws=args.derived_draws, thin=args.thin, routes=routes,
                                 allow_extrapolation=bool(args.allow_extrapolation))
+    if args.import_summary is not None:
+        from lvcore.studies.results import read_json
+
+        n = Store(args.workdir).import_summary(read_json(args.import_summary), settings, str(args.import_summary))
+        if not args.json:
+            print(f"imported {n} finished subjects from {args.import_summary}", flush=True)
     res = run_piece(start, stop, settings, args.workdir, n_subjects=args.n_subjects,
                     log=None if args.json else (lambda m: print(m, flush=True)), keep_runs=args.keep_runs)
     if args.json:

@@ -501,6 +501,41 @@ class Store:
     def done(self) -> set[int]:
         return {int(r["index"]) for r in self.records()}
 
+    #: File of the records taken over from an earlier summary (:meth:`import_summary`).
+    IMPORTED_FILE = "subjects_imported.jsonl"
+
+    def import_summary(self, result: Mapping, settings: Mapping, source: str) -> int:
+        """Take over the subjects of an earlier summary (``sbc.json``) whose work folder is gone.
+
+        The summary's subjects keep every field the statistics read (truths,
+        ranks, widths, exit codes, flag kinds, seconds); each imported record
+        says where it came from (``imported_from``). The summary must have been
+        made with the same settings. Subjects already in the folder are kept
+        as they are. Returns the number of subjects imported.
+        """
+        theirs = dict(result.get("settings") or {})
+        key = settings_key(settings)
+        mismatch = {k: (theirs.get(k), v) for k, v in key.items() if k != "version" and theirs.get(k) != v}
+        if mismatch:
+            raise LVCoreError(f"--import-summary {source}: made with other settings "
+                              f"({', '.join(f'{k} {a!r} there, {b!r} here' for k, (a, b) in mismatch.items())}); "
+                              "run with the same settings or without --import-summary")
+        subjects = result.get("subjects")
+        if not isinstance(subjects, list) or not subjects:
+            raise LVCoreError(f"--import-summary {source}: no per-subject records in it (a summary written by "
+                              "`lvcore study sbc --summarise` has them under 'subjects')")
+        self.check_settings(settings, result.get("n_subjects_planned"))
+        done, n = self.done(), 0
+        for sub in subjects:
+            if int(sub["index"]) in done:
+                continue
+            rec = {**sub, "version": RECORD_VERSION, "subject": subject_name(int(sub["index"])),
+                   "settings_key": key, "imported_from": str(source)}
+            rec["routes"] = {r: {"derived_failed": 0, "error": None, **v} for r, v in sub["routes"].items()}
+            self.append(self.root / self.IMPORTED_FILE, rec)
+            n += 1
+        return n
+
     def append(self, path, record: Mapping) -> None:
         """Append one record as a line (a partial last line left by a kill is cut off first)."""
         path = Path(path)
