@@ -23,6 +23,8 @@ The layout under ``assets/``::
     volunteers/             SYNTHETIC volunteers: <name>_measured.csv, <name>_geometry.vtu
     volunteers/truth/       the volunteers' hidden true parameters
     studies/                saved study results read by ``lvcore report`` (scripts/ship_fibre_discrepancy.py)
+    real_lv/                a REAL (patient-derived, not synthetic) LV: Dalton et al. 2022, MIT licence, with its
+                            upstream licence text (scripts/ship_real_lv.py)
 
 Building these files is a script's job (``scripts/build_cohort.py``,
 ``scripts/build_volunteers.py``, ``scripts/build_emulators.py``); their
@@ -156,5 +158,43 @@ def volunteer_truth(subject: str) -> dict[str, float] | None:
     return None
 
 
+# ----------------------------------------------------------------------------- the real LV
+#: The shipped real LV's folder under ``assets/``.
+REAL_LV_DIR = "real_lv"
+#: Its fitted template mesh (27-node hexahedra, mm).
+REAL_LV_TEMPLATE = "real_lv_dalton2022_template.vtu"
+#: How it is labelled everywhere: real, patient-derived, with its source.
+REAL_LV_LABEL = ("REAL patient-derived LV (not synthetic): Dalton et al. 2022, dodaltuin/passive-lv-gnn-emul, "
+                 "MIT licence")
+
+
+@dataclass(frozen=True)
+class RealLVFiles:
+    """The shipped real LV (patient-derived, not synthetic; Dalton et al. 2022, MIT licence)."""
+
+    template: Path     #: fitted template mesh (.vtu, mm)
+    fit_summary: Path  #: the fit's summary (JSON: cavity volume mL, residual mm, source)
+    licence: Path      #: the upstream licence text
+    readme: Path       #: attribution and how the files were made
+    label: str = REAL_LV_LABEL
+
+
+def real_lv_files() -> RealLVFiles:
+    """The files of the shipped real LV (``assets/real_lv/``; made by ``scripts/ship_real_lv.py``).
+
+    Raises
+    ------
+    DataError
+        If the folder is not shipped (a checkout without the asset).
+    """
+    d = asset_path(REAL_LV_DIR)
+    out = RealLVFiles(d / REAL_LV_TEMPLATE, d / "fit_summary.json", d / "LICENSE-upstream.md", d / "README.md")
+    missing = [p.name for p in (out.template, out.fit_summary, out.licence, out.readme) if not p.is_file()]
+    if missing:
+        raise DataError(f"the real LV is not shipped: {', '.join(missing)} missing in {d} (python scripts/ship_real_lv.py)")
+    return out
+
+
 __all__ = ["ASSETS", "PAGES", "asset_path", "assets_dir", "pages_dir", "example_cases", "VolunteerFiles",
-           "volunteers_dir", "bundled_volunteers", "volunteer_files", "volunteer_truth"]
+           "volunteers_dir", "bundled_volunteers", "volunteer_files", "volunteer_truth", "REAL_LV_DIR", "REAL_LV_TEMPLATE",
+           "REAL_LV_LABEL", "RealLVFiles", "real_lv_files"]

@@ -13,6 +13,7 @@
    * finds the live chart's page (``lvcore.app.live_chart``) and plotly.js;
    * finds the bundled data and every page script inside the installed package
      (the repository's top-level ``assets/`` and ``pages/``, mapped by pyproject);
+   * reads the shipped REAL patient-derived LV (``assets/real_lv/``) and its upstream licence from the package;
    * calibrates on a bundled SYNTHETIC volunteer with a tiny chain
      (``lvcore calibrate --volunteer``);
    * starts the app (``lvcore app``, headless on 127.0.0.1, a free port), waits
@@ -78,6 +79,11 @@ from lvcore.resources import assets_dir
 assert venv in assets_dir().resolve().parents and assets_dir().parts[-2:] == ("lvcore", "assets"), assets_dir()
 assert all(p.path.is_file() and venv in p.path.resolve().parents for p in PAGES), [str(p.path) for p in PAGES]
 out["pages"] = len(PAGES)
+from lvcore.geometry.io import read_template_mesh  # the REAL patient-derived LV ships with its upstream licence
+from lvcore.resources import real_lv_files
+real = real_lv_files()
+assert venv in real.template.resolve().parents and "MIT License" in real.licence.read_text(), real
+out["real_lv_nodes"] = int(read_template_mesh(real.template).shape[0])
 print(json.dumps(out))
 """
 
