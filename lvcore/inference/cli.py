@@ -149,6 +149,11 @@ def register(subparsers) -> None:
                    help="pressures (mmHg, increasing, in (0, 30]) of the derived EDPVR besides 0 mmHg (default "
                         "5,10,15,20,25,30; fewer pressures cost fewer FE solves, e.g. 20,30 in a study)")
     p.add_argument("--subject", default=None, help="row to use (subject id); default: every row")
+    p.add_argument("--hierarchical", action="store_true",
+                   help="one joint posterior for a cohort (--data COHORT.csv with optional group and geometry "
+                        "columns): log theta ~ N(mu, Sigma) across subjects, NUTS, --model volume or iid; writes "
+                        "the population, per-subject shrinkage against separate fits and group differences "
+                        "(docs/calibration.md; default off: each subject alone)")
     p.add_argument("--out", type=cli_args.output_dir, default="calibration_out",
                    help="output folder, created if missing (default calibration_out)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -382,6 +387,10 @@ def run_calibrate(args) -> int:
 
     check_options(args)
     use_host_devices(args.chains)
+    if getattr(args, "hierarchical", False):
+        from lvcore.inference.hierarchical_cli import run_hierarchical_calibrate
+
+        return run_hierarchical_calibrate(args)
 
     from lvcore.inference import calibrate as cal
 

@@ -359,8 +359,11 @@ def _join_states(rows: list[_Pending], name: str) -> list[MeasuredData]:
     return out
 
 
-def read_measured_csv(path) -> list[MeasuredData]:
-    """Read and validate a measured-data CSV (see module docstring); one :class:`MeasuredData` per row."""
+def read_measured_csv(path, skip_columns: tuple = ()) -> list[MeasuredData]:
+    """Read and validate a measured-data CSV (see module docstring); one :class:`MeasuredData` per subject.
+
+    ``skip_columns``: header names another reader owns (a cohort's ``group`` and ``geometry``,
+    :mod:`lvcore.inference.cohort`), left out here."""
     path = Path(path)
     text = limits.read_text_file(path, limits.MAX_MEASURED_BYTES, "measured-data file", DataError)
     try:
@@ -383,7 +386,8 @@ def read_measured_csv(path) -> list[MeasuredData]:
         if header and header[0].lower() in ("subject", "id", "subject_id"):
             subject_col = 0
         extra_cols = {i: header[i] for i in range(len(header)) if header[i] in OPTIONAL_COLUMNS}
-        data_cols = [i for i in range(len(header)) if i != subject_col and i not in extra_cols]
+        data_cols = [i for i in range(len(header)) if i != subject_col and i not in extra_cols
+                     and header[i] not in skip_columns]
         if len(data_cols) != N_OUTPUTS:
             raise DataError(
                 f"{path.name}: expected {N_OUTPUTS} data columns ({expected}), found {len(data_cols)}"

@@ -1,0 +1,235 @@
+"""The hierarchical calibration of a cohort (lvcore.inference.hierarchical, cohort, hierarchical_cli).
+
+Fast: the sampling tests use the SYNTHETIC analytic stand-in (4-5 subjects, short chains); the CLI tests
+refuse bad cohorts before any sampling, and one small end-to-end run uses the chapter emulator.
+"""
+from __future__ import annotations
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from lvcore.domain.outputs import OUTPUT_COLUMNS, THETA_NAMES
+from lvcore.exceptions import DataError
+from lvcore.inference import cohort as co
+from lvcore.inference import hierarchical as hi
+from lvcore.inference.sampler_config import SamplerConfig
+from lvcore.testing.analytic import AnalyticForward
+
+SHORT = SamplerConfig(num_warmup=150, num_samples=150, num_chains=2, seed=1)
+
+
+@pytest.fixture(scope="module")
+def emulator():
+    from lvcore.emulator.io import load_emulator
+
+    return load_emulator("chapter")
+
+
+@pytest.fixture(scope="module")
+def cohort4(emulator, tmp_path_factory):
+    """A SYNTHETIC cohort of 4 subjects in two groups, written as a cohort CSV with per-subject scores files."""
+    c = co.synthetic_cohort(4, emulator, seed=3, n_groups=2)
+    return c, co.write_cohort(c, tmp_path_factory.mktemp("cohort4"))
+
+
+def _analytic_members(a_values, seed=0):
+    fw = AnalyticForward()
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, a in enumerate(a_values):
+        y = np.asarray(fw({"a": a, "b": 5.0, "af": 1.5, "bf": 5.0}), float)
+        y = y + np.r_[5.0 * rng.standard_normal(), 0.01 * rng.standard_normal(24)]
+        out.append(hi.CohortMember(f"S{i}", y, fw))
+    return out
+
+
+def _cli(args, tmp_path):
+    from lvcore.cli import main
+
+    return main(["calibrate", "--hierarchical", *args, "--out", str(tmp_path / "out")])
+
+
+def _write(tmp_path, header, rows, name="cohort.csv"):
+    p = tmp_path / name
+    p.write_text(",".join(header) + "\n" + "\n".join(",".join(str(v) for v in r) for r in rows) + "\n")
+    return p
+
+
+def _data(lvv=140.0):
+    return [lvv] + [-0.1] * 24
+
+
+# --------------------------------------------------------------------------- refusals (exit 2, row and column named)
+def test_a_cohort_of_one_is_refused_naming_the_row_and_column(tmp_path, capsys):
+    p = _write(tmp_path, ["subject", "geometry", *OUTPUT_COLUMNS], [["S1", "mean", *_data()]])
+    assert _cli(["--data", str(p)], tmp_path) == 2
+    err = capsys.readouterr().err
+    assert "cohort.csv line 2" in err and "column subject" in err and "at least 2" in err
+
+
+def test_two_rows_of_one_subject_are_still_a_cohort_of_one(tmp_path, capsys):
+    header = ["subject", "edp_mmhg", "geometry", *OUTPUT_COLUMNS]
+    p = _write(tmp_path, header, [["S1", 8, "mean", *_data()], ["S1", 12, "mean", *_data(160)]])
+    with pytest.raises(DataError, match="one subject"):
+        co.read_cohort(p)
+
+
+def test_a_state_without_its_pressure_is_refused(tmp_path, capsys):
+    header = ["subject", "edp_mmhg", "geometry", *OUTPUT_COLUMNS]
+    rows = [["S1", 8, "mean", *_data()], ["S1", "", "mean", *_data(160)], ["S2", 8, "mean", *_data()]]
+    assert _cli(["--data", str(_write(tmp_path, header, rows))], tmp_path) == 2
+    err = capsys.readouterr().err
+    assert "line 3" in err and "edp_mmhg" in err
+
+
+def test_duplicate_pressures_of_one_subject_are_refused(tmp_path, capsys):
+    header = ["subject", "edp_mmhg", "geometry", *OUTPUT_COLUMNS]
+    rows = [["S1", 8, "mean", *_data()], ["S2", 8, "mean", *_data()], ["S2", 8, "mean", *_data(150)]]
+    assert _cli(["--data", str(_write(tmp_path, header, rows))], tmp_path) == 2
+    err = capsys.readouterr().err
+    assert "line 4" in err and "edp_mmhg = 8" in err and "repeats" in err
+
+
+def test_a_subject_whose_geometry_cannot_be_read_is_refused(tmp_path, capsys):
+    (tmp_path / "bad.json").write_text("{not json")
+    header = ["subject", "geometry", *OUTPUT_COLUMNS]
+    rows = [["S1", "mean", *_data()], ["S2", "missing.json", *_data()], ["S3", "bad.json", *_data()]]
+    assert _cli(["--data", str(_write(tmp_path, header, rows))], tmp_path) == 2
+    err = capsys.readouterr().err
+    assert "line 3, column geometry" in err and "'S2'" in err
+    rows[1][1] = "mean"
+    assert _cli(["--data", str(_write(tmp_path, header, rows))], tmp_path) == 2
+    assert "line 4, column geometry" in capsys.readouterr().err
+
+
+def test_a_group_of_one_and_two_geometries_of_one_subject_are_refused(tmp_path):
+    header = ["subject", "group", "geometry", *OUTPUT_COLUMNS]
+    rows = [["S1", "A", "mean", *_data()], ["S2", "A", "mean", *_data()], ["S3", "B", "mean", *_data()]]
+    with pytest.raises(DataError, match=r"line 4: column group = 'B' has one subject"):
+        co.read_cohort(_write(tmp_path, header, rows))
+    header = ["subject", "edp_mmhg", "geometry", *OUTPUT_COLUMNS]
+    rows = [["S1", 8, "mean", *_data()], ["S1", 12, "infer", *_data(160)], ["S2", 8, "mean", *_data()]]
+    with pytest.raises(DataError, match=r"line 3: column geometry = 'infer' differs from line 2"):
+        co.read_cohort(_write(tmp_path, header, rows))
+
+
+def test_options_a_hierarchical_run_does_not_take_are_refused(cohort4, tmp_path, capsys):
+    _, path = cohort4
+    for extra, text in ((["--model", "discrepancy"], "choose one of volume, iid"),
+                        (["--chains", "1"], "--chains >= 2"), (["--subject", "S1"], "--subject")):
+        assert _cli(["--data", str(path), *extra], tmp_path) == 2
+        assert text in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- the cohort reader and generator
+def test_cohort_reader_keeps_groups_geometry_and_data(cohort4):
+    c, path = cohort4
+    read = co.read_cohort(path)
+    assert read.subjects == list(c.subjects) and read.groups == ["A", "B"]
+    assert all(s.startswith("SYNTHETIC") for s in read.subjects)
+    np.testing.assert_allclose(np.stack([r.y for r in read.rows]), c.y, rtol=1e-7)
+    geo = co.resolve_subject_geometry(read, c.subjects[1], None, n_pc=5)
+    np.testing.assert_allclose(geo.h, c.h[1], rtol=1e-9)
+    assert geo.scale == pytest.approx(c.scale[1])
+    truth = json.loads((path.parent / "truth.json").read_text())
+    assert truth["label"] == "SYNTHETIC"
+    assert np.exp(truth["mu_log"]["B"][0] - truth["mu_log"]["A"][0]) == pytest.approx(2.0)
+
+
+# --------------------------------------------------------------------------- the model
+def test_batched_and_per_subject_models_have_the_same_density(cohort4, emulator):
+    """The batched emulator call (one vmap over the subjects) and the loop over the subjects are one model."""
+    from numpyro.infer.util import log_density
+
+    from lvcore.inference.request import build_request
+
+    c, path = cohort4
+    read = co.read_cohort(path)
+    members = []
+    for r in read.rows:
+        q = build_request(emulator, "chapter", co.resolve_subject_geometry(read, r.subject, None, n_pc=5), row=r)
+        members.append(hi.CohortMember(r.subject, q.y, q.forward, read.groups.index(read.group[r.subject])))
+    batch = hi.batched(members)
+    assert batch is not None
+    rng = np.random.default_rng(0)
+    params = {"mu": np.log([[0.6, 1.3, 1.0, 3.6], [1.2, 1.3, 1.0, 3.6]]), "tau": np.full(4, 0.3),
+              "L_omega": np.eye(4), "z": rng.standard_normal((4, 4)), "sigma_s2": np.full(4, 1e-3)}
+    params = {k: jax.numpy.asarray(v) for k, v in params.items()}
+    kw = dict(members=members, n_groups=2, likelihood="iid", bounds=hi.log_bounds())
+
+    def density(y, batch=None):
+        return float(jax.jit(lambda y: log_density(hi.hierarchical_model, (y,), {**kw, "batch": batch}, params)[0])(y))
+
+    y = np.stack([m.y for m in members])
+    loop, vec = density(y), density(y, batch)
+    assert np.isfinite(loop) and loop == pytest.approx(vec, rel=1e-9)
+    y2 = y.copy()
+    y2[2, 0] += 20.0   # another LVV changes the density (the data are used)
+    assert abs(density(y2, batch) - vec) > 1.0
+
+
+@pytest.fixture(scope="module")
+def analytic_run():
+    members = _analytic_members([0.4, 0.6, 0.9, 1.3, 0.7])
+    return members, hi.run_hierarchical(members, config=SHORT)
+
+
+def test_joint_posterior_recovers_the_subjects_and_reports_every_level(analytic_run):
+    members, run = analytic_run
+    rec = hi.summarise(run)
+    for s, a in zip(run.subjects, [0.4, 0.6, 0.9, 1.3, 0.7]):
+        q = rec["subjects"][s]["a"]
+        assert q["q05"] < a < q["q95"], (s, q)
+    assert set(rec["diagnostics"]) == {"population", "subject"}
+    for level in rec["diagnostics"].values():
+        assert {"max_rhat", "min_ess_bulk", "n_divergent", "failing", "converged"} <= set(level)
+    assert set(rec["population"]["groups"]["all"]["mu_log"]) == set(THETA_NAMES)
+    corr = np.asarray(rec["population"]["corr"]["median"])
+    np.testing.assert_allclose(np.diag(corr), 1.0, atol=1e-9)
+
+
+def test_a_subjects_permuted_data_change_its_posterior(analytic_run):
+    """Swap the data of the stiffest and the softest subject: their posteriors follow their data."""
+    members, run = analytic_run
+    swapped = list(members)
+    swapped[0] = hi.CohortMember(members[0].subject, members[3].y, members[0].forward)
+    swapped[3] = hi.CohortMember(members[3].subject, members[0].y, members[3].forward)
+    run2 = hi.run_hierarchical(swapped, config=SHORT)
+    med = {k: np.median(np.exp(r.samples["log_theta"][..., :, 0]).reshape(-1, 5), axis=0) for k, r in
+           (("before", run), ("after", run2))}
+    assert med["before"][0] < 0.6 < med["after"][0]
+    assert med["after"][3] < 0.6 < med["before"][3]
+
+
+def test_shrinkage_and_group_difference_are_computed_from_the_draws():
+    hier = {"S": {k: {"q05": 1.0, "median": 1.5, "q95": 2.0} for k in THETA_NAMES}}
+    sep = {"S": {k: {"q05": 0.5, "median": 1.5, "q95": 4.5} for k in THETA_NAMES}}
+    shr = hi.shrinkage(hier, sep)
+    assert shr["per_subject"]["S"]["a"]["shrinkage"] == pytest.approx(0.75)
+    assert shr["median_narrowing"]["a"] == pytest.approx(4.0)
+    rng = np.random.default_rng(0)
+    mu = rng.normal(0.0, 0.05, (2, 500, 2, 4))
+    mu[..., 1, 0] += np.log(2.0)
+    samples = {"mu": mu, "tau": np.abs(rng.normal(0.3, 0.01, (2, 500, 4))),
+               "corr": np.broadcast_to(np.eye(4), (2, 500, 4, 4)), "log_theta": rng.normal(0, 0.1, (2, 500, 3, 4))}
+    run = hi.HierarchicalRun(("a", "b", "c"), ("A", "B"), np.array([0, 1, 1]), "volume", samples,
+                             {"diverging": np.zeros((2, 500), bool)})
+    d = hi.population(run)["differences"]["B - A"]
+    assert d["a"]["excludes_zero"] and d["a"]["ratio"]["median"] == pytest.approx(2.0, rel=0.05)
+    assert not d["b"]["excludes_zero"]
+
+
+# --------------------------------------------------------------------------- end to end
+def test_cli_writes_the_hierarchical_summary(cohort4, tmp_path):
+    _, path = cohort4
+    code = _cli(["--data", str(path), "--chains", "2", "--warmup", "60", "--samples", "60", "--json"], tmp_path)
+    assert code in (0, 1, 4)
+    rec = json.loads((tmp_path / "out" / "summary.json").read_text())["hierarchical"]
+    assert rec["synthetic"] and rec["n_subjects"] == 4 and rec["groups"] == ["A", "B"]
+    assert set(rec["population"]["differences"]) == {"B - A"}
+    assert set(rec["shrinkage"]["per_subject"]) == set(rec["subjects"])
+    assert (tmp_path / "out" / "hierarchical.nc").is_file()
+    assert (code == 1) == (not rec["converged"])
