@@ -68,13 +68,24 @@ def test_pardiso_factors_stay_valid_and_share_one_analysis_per_pattern():
 
 
 @needs_pardiso
-def test_pardiso_sends_an_indefinite_matrix_to_superlu_or_refuses_it():
+def test_pardiso_factors_an_indefinite_matrix_with_ldlt_or_refuses_it(monkeypatch):
     A = _spd_plus_shift(shift=2.5)
     b = np.arange(A.shape[0], dtype=float)
     cache = {}
     f = linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True)
-    assert f.backend == "superlu"  # the LLT refused it (a negative pivot)
-    np.testing.assert_allclose(A @ f.solve(b), b, atol=1e-9 * np.abs(b).max())
+    # the LLT refused it (a negative pivot): PARDISO's indefinite LDLT, a solver of its own pool
+    assert (f.backend, f.factorisation) == ("pardiso", "indefinite")
+    assert f._pardiso.mtype == linear._pardiso().MTYPE_REAL_SYM_INDEF and cache["pardiso_indefinite"] == []
+    x = f.solve(b)
+    assert f.factorisation == "indefinite"  # its backward error passed the check: no SuperLU
+    np.testing.assert_allclose(A @ x, b, atol=1e-9 * np.abs(b).max())
+    np.testing.assert_allclose(x, linear.factorize(A, backend="superlu", symmetric=True).solve(b), rtol=1e-10)
+    B = np.stack([b, -2.0 * b], axis=1)  # 2-D right-hand sides, checked as one block
+    np.testing.assert_allclose(f.solve(B), np.stack([x, -2.0 * x], axis=1), rtol=1e-12)
+    monkeypatch.setenv(linear.PARDISO_INDEFINITE_ENV, "0")  # switched off: SuperLU, as before
+    assert linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache=cache,
+                            triangle=True).backend == "superlu"
+    monkeypatch.delenv(linear.PARDISO_INDEFINITE_ENV)
     with pytest.raises(linear.NotPositiveDefinite, match="not positive definite"):
         linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache=cache, triangle=True,
                          require_definite=True)
@@ -89,6 +100,19 @@ def test_pardiso_sends_an_indefinite_matrix_to_superlu_or_refuses_it():
         linear.factorize(Z, backend="pardiso", symmetric=True, require_definite=True)
     np.testing.assert_allclose(linear.factorize(Z, backend="pardiso", symmetric=True).solve(np.array([1.0, 4.0])),
                                [2.0, 1.0], rtol=1e-12)
+
+
+@needs_pardiso
+def test_pardiso_ldlt_with_a_large_backward_error_falls_back_to_superlu(monkeypatch):
+    A = _spd_plus_shift(shift=2.5, seed=1)
+    b = np.linspace(1.0, 2.0, A.shape[0])
+    ref = linear.factorize(A, backend="superlu", symmetric=True).solve(b)
+    monkeypatch.setattr(linear, "BACKWARD_ERROR_TOL", 0.0)  # no solve in floating point passes this
+    f = linear.factorize(sp.triu(A).tocsr(), backend="pardiso", symmetric=True, cache={}, triangle=True)
+    assert f.factorisation == "indefinite"
+    np.testing.assert_allclose(f.solve(b), ref, rtol=1e-12)
+    assert (f.backend, f.factorisation, f._pardiso) == ("superlu", "", None)  # factorised again, with SuperLU
+    np.testing.assert_allclose(A @ f.solve(b), b, atol=1e-9)
 
 
 def test_backends_without_pardiso(monkeypatch):
@@ -127,9 +151,11 @@ def test_unstable_ldl_falls_back_to_pivoting():
     # [[0, 1], [1, 0]] has a zero leading pivot: LDLT without pivoting cannot factor it
     A = sp.csr_matrix(np.array([[1e-30, 1.0, 0.0], [1.0, 1e-30, 0.0], [0.0, 0.0, 2.0]]))
     b = np.array([1.0, 2.0, 4.0])
-    f = linear.factorize(A, symmetric=True)
-    np.testing.assert_allclose(f.solve(b), [2.0, 1.0, 2.0], rtol=1e-12)
-    assert f.backend == "superlu"
+    for backend in linear.available_backends():
+        f = linear.factorize(A, backend=backend, symmetric=True)
+        np.testing.assert_allclose(f.solve(b), [2.0, 1.0, 2.0], rtol=1e-12)
+        # pivoting: SuperLU's, or PARDISO's Bunch-Kaufman 2x2 pivot (CHOLMOD's LDLT has none: SuperLU)
+        assert (f.backend, f.factorisation) in (("superlu", ""), ("pardiso", "indefinite"))
 
 
 def test_nonsymmetric_uses_superlu():
@@ -202,9 +228,11 @@ def test_upper_triangle_solves_like_the_whole_matrix(backend, shift):
 
 def test_upper_triangle_falls_back_to_pivoting_on_the_whole_matrix():
     A = sp.csr_matrix(np.array([[1e-30, 1.0, 0.0], [1.0, 1e-30, 0.0], [0.0, 0.0, 2.0]]))
-    f = linear.factorize(sp.triu(A).tocsr(), symmetric=True, triangle=True)
-    np.testing.assert_allclose(f.solve(np.array([1.0, 2.0, 4.0])), [2.0, 1.0, 2.0], rtol=1e-12)
-    assert f.backend == "superlu"
+    for backend in linear.TRIANGLE_BACKENDS:
+        if backend in linear.available_backends():
+            f = linear.factorize(sp.triu(A).tocsr(), backend=backend, symmetric=True, triangle=True)
+            np.testing.assert_allclose(f.solve(np.array([1.0, 2.0, 4.0])), [2.0, 1.0, 2.0], rtol=1e-12)
+            assert (f.backend, f.factorisation) in (("superlu", ""), ("pardiso", "indefinite"))
 
 
 def test_upper_triangle_needs_a_symmetric_csr_matrix():

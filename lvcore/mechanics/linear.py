@@ -7,7 +7,13 @@
     once per sparsity pattern (a small pool of analysed solvers kept in the pattern's cache, so every
     factorisation stays valid while later ones are made). A matrix that is not positive definite
     (the indefinite tangents met away from equilibrium) is refused by the LLᵀ (zero or negative
-    pivot) and goes to SuperLU. On the default LV's tangents 3–4× less CPU per factorisation than
+    pivot) and gets PARDISO's symmetric indefinite LDLᵀ (Bunch–Kaufman 1×1 and 2×2 pivots within
+    its supernodes, small pivots perturbed, iterative refinement where they were; its own pool of
+    analysed solvers); as pivoting is restricted, every solve checks its normwise backward error
+    ``‖Kx − b‖∞ / (‖K‖∞‖x‖∞ + ‖b‖∞)`` and above :data:`BACKWARD_ERROR_TOL` SuperLU is used instead.
+    On the default LV's indefinite tangents ≈ 4× less CPU than SuperLU (BENCHMARKS.md, start-up);
+    ``$LVCORE_PARDISO_INDEFINITE=0`` sends them to SuperLU directly. On the default LV's definite
+    tangents the LLᵀ takes 3–4× less CPU per factorisation than
     CHOLMOD supernodal with OpenBLAS (``benchmarks/bench_sparse_solvers.py``, BENCHMARKS.md).
   - CHOLMOD (scikit-sparse, optional: ``lvcore[fast]`` plus the system's SuiteSparse) with the symbolic
     analysis done once per sparsity pattern and reused. Where CHOLMOD is linked to an optimised BLAS
@@ -59,6 +65,13 @@ BACKWARD_ERROR_TOL = 1e-10
 
 #: Environment variable naming the backend to use (``pardiso``, ``cholmod`` or ``superlu``), e.g. to compare them.
 BACKEND_ENV = "LVCORE_SPARSE_SOLVER"
+#: Environment variable that sends indefinite symmetric matrices to SuperLU instead of PARDISO's indefinite LDLᵀ
+#: (``0``/``off``), e.g. to compare them.
+PARDISO_INDEFINITE_ENV = "LVCORE_PARDISO_INDEFINITE"
+#: ``iparm`` of PARDISO's symmetric indefinite LDLᵀ (0-based): minimum-degree ordering (1: 0), pivots below
+#: 1e-8 ‖K‖ perturbed (9: 8), Bunch–Kaufman 1×1 and 2×2 pivoting (20: 1); with ``iparm[0] = 1`` (the
+#: wrapper's) unset entries are 0, not PARDISO's defaults, hence all three.
+PARDISO_INDEFINITE_IPARM = {1: 0, 9: 8, 20: 1}
 #: Environment variable forcing CHOLMOD's factorisation (``supernodal`` or ``simplicial``), e.g. to compare them.
 CHOLMOD_MODE_ENV = "LVCORE_CHOLMOD_MODE"
 #: Shared-library names of BLAS implementations fast enough for CHOLMOD's supernodal factorisation.
@@ -181,20 +194,37 @@ def _definite_like(U):
     return B
 
 
-def _pardiso_solver(U, cache: dict | None):
+def _pardiso_solver(U, cache: dict | None, indefinite: bool = False):
     """A PARDISO solver analysed for ``U``'s pattern (upper triangle, CSR, sorted): an idle one of ``cache``'s pool.
 
     PARDISO keeps one factor per solver, so each :class:`Factorization` holds its own solver and gives it
     back to the pool when it is garbage collected; the symbolic analysis (minimum-degree ordering,
     ``iparm[1] = 0``: fewer operations than METIS at these sizes) is done when a solver is made,
-    on a positive definite matrix of the pattern.
+    on a positive definite matrix of the pattern. ``indefinite``: a solver of the symmetric indefinite
+    LDLᵀ (:data:`PARDISO_INDEFINITE_IPARM`), from a pool of its own.
     """
-    pool = cache.setdefault("pardiso", []) if cache is not None else []
+    name = "pardiso_indefinite" if indefinite else "pardiso"
+    pool = cache.setdefault(name, []) if cache is not None else []
     try:
         return pool.pop(), pool
     except IndexError:
         pm = _pardiso()
+        if indefinite:
+            return pm.PardisoSolver(_definite_like(U), pm.MTYPE_REAL_SYM_INDEF, iparms=PARDISO_INDEFINITE_IPARM), pool
         return pm.PardisoSolver(_definite_like(U), pm.MTYPE_REAL_SYM_POSDEF, iparms={1: 0}), pool
+
+
+def _pardiso_indefinite_on() -> bool:
+    """Whether indefinite symmetric matrices go to PARDISO's LDLᵀ (else SuperLU): :data:`PARDISO_INDEFINITE_ENV`."""
+    return os.environ.get(PARDISO_INDEFINITE_ENV, "").strip().lower() not in ("0", "off", "false", "no")
+
+
+def _backward_stable(Ax, x, b, norm_A: float) -> bool:
+    """Whether a solve ``x`` of ``Ax = b`` has a normwise backward error ``‖Ax − b‖∞ / (‖A‖∞‖x‖∞ + ‖b‖∞)`` of at
+    most :data:`BACKWARD_ERROR_TOL` (``Ax``: the product, computed by the caller; ``norm_A`` = ‖A‖∞)."""
+    if not np.all(np.isfinite(x)):
+        return False
+    return bool(np.max(np.abs(Ax - b)) <= BACKWARD_ERROR_TOL * (norm_A * np.max(np.abs(x)) + np.max(np.abs(b))))
 
 
 def _upper_csr(K, triangle: bool):
@@ -254,19 +284,16 @@ class Factorization:
             # pool's analysis assumes); anything else is indefinite or singular
             definite = bool(np.all(U.diagonal() > 0))
             if definite:
-                solver, pool = _pardiso_solver(U, cache)
-                try:
-                    solver.refactor(U.data)
-                except RuntimeError as exc:  # "zero pivot": the LLᵀ met a pivot ≤ 0
-                    pool.append(solver)  # a failed numeric factorisation leaves the analysis usable
-                    definite = "pivot" not in str(exc)  # another failure: SuperLU, whatever require_definite
-                else:
-                    self._pardiso = solver
-                    self.factorisation = "supernodal"
-                    weakref.finalize(self, pool.append, solver)  # back to the pool when this one is dropped
+                if self._pardiso_factor(U, cache, indefinite=False):
                     return
+                definite = self._pardiso_error  # another failure than a pivot ≤ 0: SuperLU, whatever asked
             if not definite and require_definite:
                 raise NotPositiveDefinite("the matrix is not positive definite (PARDISO Cholesky)")
+            if not definite and _pardiso_indefinite_on() and np.all(U.indptr[:-1] < U.indptr[1:]) \
+                    and np.array_equal(U.indices[U.indptr[:-1]], np.arange(U.shape[0])) \
+                    and self._pardiso_factor(U, cache, indefinite=True):
+                self._U = U  # its solves check their backward error on the whole matrix, U + Uᵀ − diag(U)
+                return
         elif self.backend == "cholmod" and _cholmod_analyze is not None and symmetric:
             modes = ("supernodal", "simplicial") if cholmod_mode() == "supernodal" else ("simplicial",)
             for mode in modes:
@@ -285,8 +312,24 @@ class Factorization:
                     continue
         self._superlu()
 
-    #: Factorisation used: "supernodal" (PARDISO's or CHOLMOD's LLᵀ), "simplicial" (CHOLMOD's LDLᵀ) or "" (SuperLU).
+    #: Factorisation used: "supernodal" (PARDISO's or CHOLMOD's LLᵀ), "simplicial" (CHOLMOD's LDLᵀ),
+    #: "indefinite" (PARDISO's LDLᵀ with Bunch–Kaufman pivoting) or "" (SuperLU).
     factorisation: str = ""
+    _pardiso_error = False  # PARDISO failed for another reason than a pivot ≤ 0
+
+    def _pardiso_factor(self, U, cache: dict | None, indefinite: bool) -> bool:
+        """Factorise the upper triangle ``U`` with a pool's solver (LLᵀ, or ``indefinite`` LDLᵀ); False: it failed."""
+        solver, pool = _pardiso_solver(U, cache, indefinite)
+        try:
+            solver.refactor(U.data)
+        except RuntimeError as exc:  # "zero pivot": the LLᵀ met a pivot ≤ 0
+            pool.append(solver)  # a failed numeric factorisation leaves the analysis usable
+            self._pardiso_error = "pivot" not in str(exc)
+            return False
+        self._pardiso = solver
+        self.factorisation = "indefinite" if indefinite else "supernodal"
+        weakref.finalize(self, pool.append, solver)  # back to the pool when this one is dropped
+        return True
 
     def _matrix(self):
         """The whole matrix (CSC), formed from its lower triangle on first use where only that was given."""
@@ -300,6 +343,7 @@ class Factorization:
         self.backend = "superlu"
         self.factorisation = ""
         self._chol = None
+        self._pardiso = None
         if self._symmetric:
             self._lu = spla.splu(self._matrix(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01,
                                  options={"SymmetricMode": True})
@@ -308,16 +352,25 @@ class Factorization:
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         if self._pardiso is not None:
-            # LLᵀ of a positive definite matrix is backward stable (no pivoting needed): no check
-            return self._pardiso.solve(np.ascontiguousarray(b, dtype=np.float64))
-        if self._chol is not None:
+            x = self._pardiso.solve(np.ascontiguousarray(b, dtype=np.float64))
+            if self.factorisation == "supernodal":
+                # LLᵀ of a positive definite matrix is backward stable (no pivoting needed): no check
+                return x
+            U = self._U
+            if not hasattr(self, "_norm_A"):  # ‖A‖∞ of A = U + Uᵀ − diag(U): its row sums from U's rows and columns
+                aU = abs(U)
+                self._norm_A = float((np.asarray(aU.sum(axis=1)).ravel() + np.asarray(aU.sum(axis=0)).ravel()
+                                      - np.abs(U.diagonal())).max())
+            d = U.diagonal() if x.ndim == 1 else U.diagonal()[:, None]
+            if _backward_stable(U @ x + U.T @ x - d * x, x, b, self._norm_A):
+                return x
+            self._superlu()  # restricted pivoting was not enough: factor again with SuperLU's
+        elif self._chol is not None:
             x = self._chol(b)
             if self.factorisation == "supernodal":
                 # LLᵀ of a positive definite matrix is backward stable (no pivoting needed): no check
                 return x
-            r = self._matrix() @ x - b
-            denom = self._norm_A * np.max(np.abs(x)) + np.max(np.abs(b))
-            if np.all(np.isfinite(x)) and np.max(np.abs(r)) <= BACKWARD_ERROR_TOL * denom:
+            if _backward_stable(self._matrix() @ x, x, b, self._norm_A):
                 return x
             self._superlu()  # unstable LDLᵀ (tiny pivot): factor again with pivoting
         return self._lu.solve(b)
