@@ -101,7 +101,7 @@ class DoubleForward:
             _log("warm", f"{float(point['a'])!r}->{float(initial[0])!r}")
         b = self.evaluate({k: [float(point[k])] for k in self.input_names})
         state = np.array([float(point[k]) for k in self.input_names]) if b.converged[0] else None
-        return b, state
+        return b, state, "cold" if initial is None else "warm", ""
 
     def __call__(self, params):
         return self.evaluate({k: params[k] for k in self.input_names}).outputs[0]

@@ -125,3 +125,51 @@ def test_a_suspect_warm_result_is_re_solved_cold_in_a_warm_batch(sim, monkeypatc
     np.testing.assert_allclose(got.outputs, cold.outputs, rtol=1e-12, atol=1e-12)
     # the first point is solved cold (nothing to start from); the other three started warm and were re-solved
     assert guarded.resolved_cold == ("forced by the test",) * 3
+
+
+def test_the_soft_corner_is_a_box_in_a_and_af_that_grows_with_the_pressure():
+    """Pure: the points solved cold whatever their start (a, af both below the bounds, scaled above 8 mmHg)."""
+    from lvcore.mechanics.forward import SOFT_CORNER_KPA, soft_corner
+
+    a0, af0 = SOFT_CORNER_KPA["a"], SOFT_CORNER_KPA["af"]
+
+    def case(a, af, edp=8.0, b=1.0):
+        return build_case({"a": a, "b": b, "af": af, "bf": 1.0, "edp": edp}, resolution="fast")
+
+    assert soft_corner(case(0.9 * a0, 0.9 * af0)) and soft_corner(case(0.05, 0.05, b=30.0))
+    assert not soft_corner(case(1.1 * a0, 0.9 * af0)) and not soft_corner(case(0.9 * a0, 1.1 * af0))
+    assert not soft_corner(case(0.9 * a0, 1.1 * af0, edp=4.0))   # never smaller than at 8 mmHg
+    assert soft_corner(case(1.5 * a0, 1.5 * af0, edp=16.0))      # twice the pressure: twice the bounds
+    assert not soft_corner(case(2.1 * a0, 1.5 * af0, edp=16.0))
+    box = case(0.05, 0.05)
+    box["material"] = {"law": "neo_hookean", "mu": 1.0}
+    assert soft_corner(box) == ""   # another law: never in it
+
+
+def test_the_simulators_warm_solve_reports_how_each_point_was_solved(monkeypatch):
+    """evaluate_warm is the one guarded warm solve (campaign rows, subject runs, warm batches): a point in the
+    soft corner is solved cold at once; a suspect warm path is re-solved cold and its state marked suspect, so
+    a point started from that state is re-solved too (and passes nothing on); every result equals the cold one."""
+    from lvcore.execution import chains
+    from lvcore.mechanics import forward as F
+
+    fwd = F.SimulatorForward(resolution="fast")
+    near = dict(zip(THETA_NAMES, THETA * 1.05))
+    cold = fwd.evaluate_warm(dict(zip(THETA_NAMES, THETA)))
+    assert cold.start == F.COLD and cold.why == "" and not cold.state.suspect
+    ref = fwd.evaluate({k: [v] for k, v in near.items()}).outputs[0]
+    warm = fwd.evaluate_warm(near, cold.state)
+    assert (warm.start, warm.why) == (F.WARM, "") and warm.batch.messages == ("converged (warm start)",)
+    np.testing.assert_allclose(warm.batch.outputs[0], ref, rtol=1e-7, atol=1e-9)
+    monkeypatch.setattr(chains, "warm_path_problem", lambda log: "forced by the test")
+    flagged = fwd.evaluate_warm(near, cold.state)
+    assert (flagged.start, flagged.why, flagged.state.suspect) == (F.RESOLVED, "forced by the test", True)
+    np.testing.assert_allclose(flagged.batch.outputs[0], ref, rtol=1e-12, atol=1e-12)
+    monkeypatch.setattr(chains, "warm_path_problem", lambda log: "")
+    seeded = fwd.evaluate_warm(near, flagged.state._replace(tangent=None))
+    assert (seeded.start, seeded.why, seeded.state.suspect) == (F.RESOLVED, chains.SEED_RESOLVED, False)
+    monkeypatch.setattr(F, "SOFT_CORNER_KPA", {"a": 10.0, "af": 10.0})   # every point in the corner
+    corner = fwd.evaluate_warm(near, cold.state)
+    assert corner.start == F.COLD and corner.why.startswith("in the soft corner")
+    assert corner.batch.messages == ("converged",)
+    np.testing.assert_allclose(corner.batch.outputs[0], ref, rtol=1e-12, atol=1e-12)

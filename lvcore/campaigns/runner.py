@@ -37,9 +37,7 @@ import lvcore
 from lvcore.campaigns.designs import Design, load_design
 from lvcore.campaigns.store import START_COLD, START_RESOLVED, START_WARM, CampaignStore, RowResult, StoreSummary, \
     worker_tag
-from lvcore.execution.chains import (DEFAULT_CHUNK, SEED_RESOLVED, WARM_TRUSTED_ITERATIONS, ChainTaskError,  # noqa: F401
-                           run_chains, solve_in_order, warm_path_problem)
-from lvcore.execution.chains import passes_suspicion as _suspect_reason
+from lvcore.execution.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
 from lvcore.core.forward import failure_reason
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
@@ -114,41 +112,26 @@ def execute_row(forward, index: int, inputs: dict) -> RowResult:
     return RowResult(index, np.full(25, np.nan), False, reason, time.perf_counter() - t0, simulator_version(), tag)
 
 
-def execute_warm_row(forward, index: int, inputs: dict, initial, seed_suspect: bool = False
-                     ) -> tuple[RowResult, object]:
+#: The store's ``start`` of each way a forward model's ``evaluate_warm`` reports (:class:`~lvcore.mechanics.forward.WarmSolve`).
+_STARTS = {"cold": START_COLD, "warm": START_WARM, "re-solved cold": START_RESOLVED}
+
+
+def execute_warm_row(forward, index: int, inputs: dict, initial) -> tuple[RowResult, object]:
     """:func:`execute_row` started from ``initial`` (a converged state, or None) with ``forward.evaluate_warm``.
 
-    Returns ``(RowResult, state)``; ``state`` is None unless the row converged. A warm-started row whose
-    Newton path makes its result suspect (:func:`warm_path_problem`) is solved again cold, and the cold
-    result is recorded (``start`` :data:`~lvcore.campaigns.store.START_RESOLVED`, as is a row whose warm
-    start failed and was solved cold by the forward model itself), so that a row's result does not depend
-    on its neighbours or on the order of the work. ``seed_suspect``: the state ``initial`` was predicted
-    from belongs to a row that was re-solved for its own path; the row is then re-solved cold whatever
-    its path (a clean-looking warm path next to such a row reached another stable equilibrium too:
-    10 iterations, one tangent, positive definite, 3.9 % from the cold strains). Its ``resolve_reason``
-    says why (:data:`SEED_RESOLVED` for this one).
+    Returns ``(RowResult, state)``; ``state`` is None unless the row converged. The forward model decides
+    how the row is solved and says so (the simulator: :func:`lvcore.mechanics.forward.solve_warm`, which
+    keeps a warm result only where it equals the cold solve); the row records it as its ``start``
+    (:data:`~lvcore.campaigns.store.START_COLD`, ``START_WARM`` or ``START_RESOLVED``) and ``resolve_reason``.
     """
-    from lvcore.mechanics.newton import recorded_solves
-
     t0 = time.perf_counter()
     tag = worker_tag()
     start = START_COLD if initial is None else START_WARM
     point = {n: float(v) for n, v in inputs.items()}
     try:
-        with recorded_solves() as log:
-            batch, state = forward.evaluate_warm(point, initial)
-        cold_result = bool(log) and log[-1].converged and not log[-1].warm_converged
-        why = ""
-        if initial is not None and cold_result:
-            start = START_RESOLVED  # the warm start failed: the forward model solved the row cold
-            why = "the warm start failed and the row was solved cold"
-        elif initial is not None and bool(batch.converged[0]):
-            why = warm_path_problem(log) or (SEED_RESOLVED if seed_suspect else "")
-            if why:
-                batch, state = forward.evaluate_warm(point, None)
-                start = START_RESOLVED
-        seconds = time.perf_counter() - t0 if start == START_RESOLVED or batch.seconds is None \
-            else float(batch.seconds[0])
+        batch, state, how, why = forward.evaluate_warm(point, initial)
+        start = _STARTS[how]
+        seconds = time.perf_counter() - t0 if batch.seconds is None else float(batch.seconds[0])
         if not bool(batch.converged[0]):
             reason = batch.messages[0] or "did not converge"
             return RowResult(index, np.full(25, np.nan), False, reason, seconds, simulator_version(), tag,
@@ -161,8 +144,7 @@ def execute_warm_row(forward, index: int, inputs: dict, initial, seed_suspect: b
                       start=start), None)
 
 
-def execute_chunk(forward, positions: list[int], indices: list[int], inputs: list[dict], units, seeds,
-                  suspect=()) -> list:
+def execute_chunk(forward, positions: list[int], indices: list[int], inputs: list[dict], units, seeds) -> list:
     """Run one chunk of a continuation chain in a worker (see :mod:`lvcore.execution.chains`).
 
     Rows are solved in the given order, each warm-started from the nearest
@@ -170,29 +152,17 @@ def execute_chunk(forward, positions: list[int], indices: list[int], inputs: lis
     forward model can (``evaluate_warm``); otherwise cold, as :func:`execute_row`.
     Returns :class:`~lvcore.execution.chains.ChainRow` objects keyed by ``positions``
     whose results are :class:`RowResult` for store rows ``indices``.
-    ``suspect``: positions of earlier rows re-solved cold for their own Newton path; a row started from
-    one of those (or from such a row of this chunk) is re-solved cold too (:func:`execute_warm_row`).
     """
     by_pos = {p: (i, x) for p, i, x in zip(positions, indices, inputs)}
     warm = callable(getattr(forward, "evaluate_warm", None))
-    suspect = set(suspect)
 
-    def solve(pos, initial, seed):
+    def solve(pos, initial):
         i, x = by_pos[pos]
         if not warm:
             return execute_row(forward, i, x), None
-        result, state = execute_warm_row(forward, i, x, initial, seed_suspect=seed in suspect)
-        if passes_suspicion(result):
-            suspect.add(pos)
-        return result, state
+        return execute_warm_row(forward, i, x, initial)
 
-    return solve_in_order(positions, units, seeds, solve, pass_seed=True)
-
-
-def passes_suspicion(result: RowResult) -> bool:
-    """Whether a row re-solved cold makes the rows started from its state suspect: re-solved for its own
-    Newton path, not only because its seed row was."""
-    return result.start == START_RESOLVED and _suspect_reason(result.resolve_reason)
+    return solve_in_order(positions, units, seeds, solve)
 
 
 def row_inputs(design: Design, i: int) -> dict:
@@ -232,15 +202,10 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
         if chained:
             U = design.space.to_unit(design.points[rows])
 
-            suspect: set[int] = set()  # positions re-solved cold for their own path (see execute_chunk)
-
             def submit(positions, seeds):
                 idx = [int(rows[p]) for p in positions]
                 return executor.submit(execute_chunk, forward, positions, idx, [row_inputs(design, i) for i in idx],
-                                       U[positions], seeds, sorted(suspect))
-
-            def returned(out):
-                suspect.update(r.key for r in out if passes_suspicion(r.result))
+                                       U[positions], seeds)
 
             def provenance(r):  # the chain, the place in it and the seed's store row of a chained row
                 seed = -1 if r.seed is None or r.result.start == START_COLD else int(rows[r.seed])
@@ -248,7 +213,7 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
 
             try:
                 return run_chains(executor, submit, U, workers=getattr(executor, "workers", 1), chunk=chunk,
-                                  on_rows=lambda out: record(*(provenance(r) for r in out)), on_returned=returned)
+                                  on_rows=lambda out: record(*(provenance(r) for r in out)))
             except ChainTaskError as err:
                 raise died(err.__cause__ or err) from err
         futures = [executor.submit(execute_row, forward, int(i), row_inputs(design, int(i))) for i in rows]

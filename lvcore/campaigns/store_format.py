@@ -27,10 +27,11 @@ dataset                   dtype          meaning
                                          ``chain``, the order the rows were solved in
 ``seed_row``              (n,) i8        the row whose converged state warm-started this one
                                          (the nearest of the predictor's neighbours); -1 none
-``start``                 (n,) i1        0 cold, 1 warm from ``seed_row``, 2 warm start
-                                         discarded and re-solved cold (its converged state
-                                         was not a stable equilibrium: see
-                                         :func:`lvcore.campaigns.runner.execute_warm_row`)
+``start``                 (n,) i1        0 cold (no start, or the simulator's soft
+                                         corner), 1 warm from ``seed_row``, 2 warm
+                                         result discarded and re-solved cold (it was
+                                         suspect: see
+                                         :func:`lvcore.mechanics.forward.solve_warm`)
 ========================  =============  =======================================
 
 The last five datasets came with format version 2. A version-1 store is read as

@@ -61,7 +61,9 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     the rows are ordered along one continuation walk over the whole design
     (:func:`lvcore.execution.chains.continuation_order`), each solve starting Newton from
     a neighbour's converged solution and falling back to a cold solve when that
-    fails, so the results satisfy the same tolerances as cold solves. Failures
+    fails or when the warm result could differ from the cold solve
+    (:func:`lvcore.mechanics.forward.solve_warm`), so the results equal the cold solves within
+    the solver tolerance. Failures
     are data (NaN rows, ``converged`` False); results come back in the input order.
 
     With ``workers > 1`` the walk is split into continuation chains fed to a
@@ -182,7 +184,7 @@ def _fe_chunk(forward, points: np.ndarray, keys: Sequence[int], units: np.ndarra
     by_key = {int(k): p for k, p in zip(keys, np.atleast_2d(points))}
 
     def solve(key, initial):
-        batch, state = forward.evaluate_warm(dict(zip(forward.input_names, by_key[key])), initial)
+        batch, state, _, _ = forward.evaluate_warm(dict(zip(forward.input_names, by_key[key])), initial)
         result = (np.asarray(batch.outputs[0], dtype=float), bool(batch.converged[0]), str(batch.messages[0] or ""),
                   float(batch.seconds[0]))
         return result, state

@@ -27,8 +27,11 @@ arrives), so killing a run loses only the chunks in flight, and a resumed run
 chains whatever is still pending.
 
 Forward models opt in by providing ``evaluate_warm(point, initial)``
-returning ``(ForwardBatch of one point, state or None)`` (the FE simulator
-does); others are evaluated point by point, cold, in the same order.
+returning ``(ForwardBatch of one point, state or None, start, why)``: how the
+point was solved (``"cold"``, ``"warm"`` or ``"re-solved cold"``) and why it was
+solved cold although a start was given (the FE simulator does, with its guard:
+:func:`lvcore.mechanics.forward.solve_warm`); others are evaluated point by
+point, cold, in the same order.
 """
 from __future__ import annotations
 
@@ -387,9 +390,13 @@ def warm_path_problem(log) -> str:
     step cuts or stops, tangents turn indefinite, and warm starts from neighbours converged to other
     equilibria, 1–4 % apart in strain (0.01–0.03 mL in LVV), with clean-looking Newton paths
     as well as rescued ones. Rows whose result came from a cold solve (the forward model's own cold
-    fallback) and forward models without Newton solves (an empty log) are never suspect. Used by the
-    campaigns' chains (:func:`lvcore.campaigns.runner.execute_warm_row`) and by a warm-starting
-    :class:`lvcore.mechanics.forward.SimulatorForward` (sweeps, BO, the subject emulators' runs).
+    fallback) and forward models without Newton solves (an empty log) are never suspect. The look of
+    a path is not a proof: a clean-looking path reached another equilibrium there too where the
+    rounding changed (XLA at -O0), so the simulator solves that corner cold whatever the path
+    (:func:`lvcore.mechanics.forward.soft_corner`); elsewhere this judgement costs time, not results.
+    Used by the simulator's one guarded warm solve, :func:`lvcore.mechanics.forward.solve_warm`
+    (campaign chains, warm-starting :class:`~lvcore.mechanics.forward.SimulatorForward` batches, the
+    subject emulators' runs).
     """
     if not log:
         return ""
@@ -413,7 +420,7 @@ def passes_suspicion(why: str) -> bool:
 
 
 def solve_in_order(keys: Sequence[int], units: np.ndarray, seeds: Sequence[Seed],
-                   solve: Callable[..., tuple[Any, Any]], *, pass_seed: bool = False) -> list[ChainRow]:
+                   solve: Callable[..., tuple[Any, Any]]) -> list[ChainRow]:
     """Solve ``keys`` in the given order, each warm-started from the nearest converged state so far
     (moved by the linear predictor of :func:`predicted_state` where the states allow it).
 
@@ -429,16 +436,13 @@ def solve_in_order(keys: Sequence[int], units: np.ndarray, seeds: Sequence[Seed]
         ``solve(key, initial) -> (result, state)``; ``initial`` is None (cold) or a
         state; ``state`` is None when the point did not converge (it is then
         never used as a start).
-    pass_seed : bool
-        Call ``solve(key, initial, seed)`` instead, ``seed`` the key of the state ``initial`` was
-        predicted from (:attr:`ChainRow.seed`; None when cold or the seed has no key).
     """
     pool = SeedPool(seeds)
     out = []
     for key, u in zip(keys, np.asarray(units, dtype=float)):
         initial, nearest = _predicted(u, pool)
         seed = None if initial is None or nearest is None else pool[nearest].key
-        result, state = solve(int(key), initial, seed) if pass_seed else solve(int(key), initial)
+        result, state = solve(int(key), initial)
         if state is not None:
             if pool:  # only the newest state keeps its factorised tangent (they are large)
                 pool[-1] = replace(pool[-1], state=light_state(pool[-1].state))
@@ -492,8 +496,7 @@ def plan_chains(U: np.ndarray, workers: int) -> list[list[int]]:
 
 def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U: np.ndarray, *,
                workers: int, on_rows: Callable[[list[ChainRow]], None], chunk: int = DEFAULT_CHUNK,
-               seeds: Sequence[Seed] = (), kept_states: int = DEFAULT_KEPT_STATES,
-               on_returned: Callable[[list[ChainRow]], None] | None = None) -> ChainStats:
+               seeds: Sequence[Seed] = (), kept_states: int = DEFAULT_KEPT_STATES) -> ChainStats:
     """Run the points of ``U`` as continuation chains on ``executor``.
 
     Parameters
@@ -516,9 +519,6 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
         States known before the run (e.g. from earlier batches).
     kept_states : int
         Converged states the driver keeps to seed chunks.
-    on_returned : callable, optional
-        Receives every returned chunk's rows before the chain's next chunk is submitted (quick
-        bookkeeping that the next chunk's submission reads; recording belongs in ``on_rows``).
 
     Raises
     ------
@@ -560,8 +560,6 @@ def run_chains(executor, submit_chunk: Callable[[list[int], list[Seed]], Any], U
         except Exception as err:  # a dead worker or a broken pool: the chunks in flight are lost
             raise ChainTaskError(f"{type(err).__name__}: {err}") from err
         rows = [replace(r, chain=ch.index, position=first + j) for j, r in enumerate(rows)]
-        if on_returned is not None:
-            on_returned(rows)
         for r in rows:
             if r.state is not None:
                 kept.append(Seed(U[r.key], r.state, r.key))

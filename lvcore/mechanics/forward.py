@@ -34,13 +34,18 @@ class WarmState(NamedTuple):
 
     ``values`` (:func:`case_values`) are the material parameters, fibre angles
     and pressure it was solved at, so that a failed warm start can continue
-    through intermediate parameters (:func:`warm_continuation`).
+    through intermediate parameters (:func:`warm_continuation`). ``suspect``: the
+    state is the cold solution of a point whose own warm Newton path was suspect
+    (:func:`solve_warm`); a point started from it is solved cold too. A predicted
+    start (:func:`lvcore.execution.chains.predicted_state`) keeps the nearest state's
+    ``values`` and ``suspect``.
     """
 
     u: np.ndarray
     p: np.ndarray
     tangent: Any = None
     values: tuple | None = None
+    suspect: bool = False
 
 
 #: Material parameters interpolated geometrically by the continuation (positive), then the linear ones.
@@ -87,9 +92,9 @@ def _midpoint(v0: tuple, v1: tuple) -> tuple:
     return tuple(math.sqrt(x * y) if i < n else 0.5 * (x + y) for i, (x, y) in enumerate(zip(v0, v1)))
 
 
-def _as_warm(result, values) -> WarmState:
+def _as_warm(result, values, suspect: bool = False) -> WarmState:
     u, p, tangent = result.warm_state
-    return WarmState(u, p, tangent, values)
+    return WarmState(u, p, tangent, values, suspect)
 
 
 def warm_continuation(case: Mapping, initial, *, with_sensitivities: bool = False,
@@ -156,38 +161,129 @@ def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, wa
         return np.full(N_OUTPUTS, np.nan), False, failure_reason(err), nan_jac, time.perf_counter() - t0
 
 
-def _simulate_chunk(input_names, cases, keys, units, seeds, jacobian, suspect=()):
-    """Worker task: ``cases`` in order, each warm-started from the nearest converged state (a chain chunk).
+#: How :func:`solve_warm` solved a point: from zero load (no start given, or one in :func:`soft_corner`), warm
+#: from the given start, or warm and then again cold (:attr:`WarmSolve.why`).
+COLD, WARM, RESOLVED = "cold", "warm", "re-solved cold"
+#: Why a point given a start was solved cold when its warm start failed (the solver's own cold fallback).
+WARM_FAILED = "the warm start failed and the point was solved cold"
 
-    Returns :class:`lvcore.execution.chains.ChainRow` objects whose results are :func:`_simulate_point` tuples with one
-    more item, why the point was re-solved cold ('' when its result is the warm one): a converged warm
-    result whose Newton path makes it suspect (:func:`lvcore.execution.chains.warm_path_problem`: the equilibrium may not
-    be unique, and the start would decide which one Newton finds) is solved again cold, as a campaign's row is,
-    and so is a point started from the state of a point re-solved for its own path (keys in ``suspect``, and
-    those of this chunk). A point's result then does not depend on its neighbours or the order of the work.
+
+class WarmSolve(NamedTuple):
+    """One point solved from a converged neighbour's state (:meth:`SimulatorForward.evaluate_warm`).
+
+    ``batch``: its outputs (a :class:`~lvcore.core.forward.ForwardBatch` of one point); ``state``: its
+    :class:`WarmState` (None unless converged); ``start``: :data:`COLD`, :data:`WARM` or :data:`RESOLVED`;
+    ``why``: why a point given a start was solved cold ('' when its result is the warm start's or no start
+    was given).
     """
-    from lvcore.execution.chains import SEED_RESOLVED, passes_suspicion, solve_in_order, warm_path_problem
+
+    batch: ForwardBatch
+    state: WarmState | None
+    start: str = COLD
+    why: str = ""
+
+
+#: The soft corner of the θ box (kPa, at 8 mmHg), where the equilibrium is not unique: a point with ``a``
+#: and ``af`` both below these is solved cold even when a start is given (:func:`soft_corner`). Measured
+#: (``material`` space, default LV, ``fast`` mesh; each row warm-started six ways: from its three nearest
+#: rows' cold states, their spline prediction and two noisy predictions): rows with a second equilibrium had
+#: a <= 0.126 and af <= 0.102 kPa, cold tangents were indefinite up to a 0.143, af 0.111 kPa; none of 210 rows
+#: with a or af above 0.2 kPa (the other down to 0.05) had one: 1,027 converged warm starts, all within 4.7e-9
+#: relative of the cold solve (docs/reliability.md, "Reproducible campaigns").
+SOFT_CORNER_KPA = {"a": 0.2, "af": 0.2}
+#: The pressure the soft corner was measured at (mmHg); at higher pressures its bounds grow in proportion.
+SOFT_CORNER_PRESSURE_MMHG = 8.0
+
+
+def soft_corner(case: Mapping) -> str:
+    """Why ``case`` is solved cold whatever start it is given ('' where a warm start may be used).
+
+    There the equilibrium is not unique and which one Newton finds depends on where it starts:
+    ``a`` and ``af`` both below :data:`SOFT_CORNER_KPA` at 8 mmHg, bounds scaled by ``max(1, pressure /
+    8 mmHg)`` (the isotropic and fibre terms of the Holzapfel-Ogden law are linear in ``a`` and ``af``:
+    the same strains under ``a, af, p`` as under ``ka, kaf, kp`` but for the fixed sheet terms). Cases
+    without the four material parameters (:func:`case_values`) are never in it. Measured on the default
+    LV with the chapter's fibre angles and a clamped base; other shapes, angles and bases are given the
+    same bounds.
+    """
+    from lvcore.domain.units import mmhg_to_kpa
+    from lvcore.mechanics.case import PRESSURE_UNITS
+
+    vals = case_values(case)
+    if vals is None:
+        return ""
+    try:
+        p_kpa = float(case["load"]["pressure"]) * PRESSURE_UNITS[str(case["load"]["units"]).lower()]
+    except (KeyError, TypeError, ValueError):
+        return ""
+    grow = max(1.0, p_kpa / mmhg_to_kpa(SOFT_CORNER_PRESSURE_MMHG))
+    if vals[0] < SOFT_CORNER_KPA["a"] * grow and vals[2] < SOFT_CORNER_KPA["af"] * grow:
+        return (f"in the soft corner (a, af < {SOFT_CORNER_KPA['a'] * grow:.3g}, "
+                f"{SOFT_CORNER_KPA['af'] * grow:.3g} kPa), where the equilibrium is not unique")
+    return ""
+
+
+def solve_warm(case: dict, input_names: tuple[str, ...], jacobian: bool = False, initial=None):
+    """One point from ``initial`` (a :class:`WarmState`, or None: cold), with the guard of warm results.
+
+    Returns ``(result, state, start, why)``: ``result`` as :func:`_simulate_point` (``seconds``: all
+    its solves), ``state`` its :class:`WarmState` (None unless converged), ``start`` :data:`COLD`,
+    :data:`WARM` or :data:`RESOLVED`, ``why`` why a point given a start was solved cold.
+
+    A warm result is kept only where it equals the cold solve, whatever the start and the rounding:
+
+    * a point in :func:`soft_corner` (the equilibrium is not unique there) is solved cold at once;
+    * a warm result whose Newton path is suspect (:func:`lvcore.execution.chains.warm_path_problem`)
+      is solved again cold, and so is one started from a ``suspect`` state; the cold state of a point
+      re-solved for its own path is marked ``suspect`` (:func:`lvcore.execution.chains.passes_suspicion`);
+    * a warm start that failed is solved cold by :func:`_simulate_point` (:data:`WARM_FAILED`).
+
+    Used by :meth:`SimulatorForward.evaluate_warm` (campaign chains, the subject emulators' runs) and
+    by a warm-starting :class:`SimulatorForward`'s batches.
+    """
+    from lvcore.execution import chains
     from lvcore.mechanics.newton import recorded_solves
 
+    t0 = time.perf_counter()
+    why = "" if initial is None else soft_corner(case)
+    if initial is None or why:
+        warm = {"state": None}
+        res = _simulate_point(case, input_names, jacobian, warm)
+        return res, warm["state"] if res[1] else None, COLD, why
+    warm = {"state": initial}
+    with recorded_solves() as log:
+        res = _simulate_point(case, input_names, jacobian, warm)
+    if not res[1]:
+        return res, None, WARM, ""
+    if log and not log[-1].warm_converged:
+        why = WARM_FAILED
+    else:
+        why = chains.warm_path_problem(log) or (chains.SEED_RESOLVED if getattr(initial, "suspect", False) else "")
+        if why:
+            warm = {"state": None}
+            res = _simulate_point(case, input_names, jacobian, warm)
+    res = (*res[:4], time.perf_counter() - t0)
+    state = warm["state"] if res[1] else None
+    if state is not None and chains.passes_suspicion(why):
+        state = state._replace(suspect=True)
+    return res, state, RESOLVED if why else WARM, why
+
+
+def _simulate_chunk(input_names, cases, keys, units, seeds, jacobian):
+    """Worker task: ``cases`` in order, each warm-started from the nearest converged state (a chain chunk).
+
+    Returns :class:`lvcore.execution.chains.ChainRow` objects whose results are :func:`_simulate_point`
+    tuples with two more items, the ``start`` and ``why`` of :func:`solve_warm` (which guards each point).
+    """
+    from lvcore.execution.chains import solve_in_order
+
     by_key = dict(zip(keys, cases))
-    suspect = set(suspect)
 
-    def solve(key, initial, seed):
-        warm = {"state": initial}
-        with recorded_solves() as log:
-            res = _simulate_point(by_key[key], input_names, jacobian, warm)
-        why = ""
-        solved_cold = bool(log) and log[-1].converged and not log[-1].warm_converged
-        if initial is not None and res[1] and not solved_cold:
-            why = warm_path_problem(log) or (SEED_RESOLVED if seed in suspect else "")
-            if why:
-                warm = {"state": None}
-                res = _simulate_point(by_key[key], input_names, jacobian, warm)
-                if passes_suspicion(why):
-                    suspect.add(key)
-        return (*res, why), (warm["state"] if res[1] else None)
+    def solve(key, initial):
+        res, state, start, why = solve_warm(by_key[key], input_names, jacobian, initial)
+        return (*res, start, why), state
 
-    return solve_in_order(keys, units, seeds, solve, pass_seed=True)
+    return solve_in_order(keys, units, seeds, solve)
 
 
 #: Converged states a warm-starting SimulatorForward keeps between batches.
@@ -310,26 +406,22 @@ class SimulatorForward:
         return [f.result() for f in futures]
 
     def _run_chained(self, cases, jacobian, executor, X):
-        """Warm-started continuation chains over the batch (see ``warm_start``); points whose warm result is
-        suspect are re-solved cold (:func:`_simulate_chunk`), counted in :attr:`resolved_cold`."""
+        """Warm-started continuation chains over the batch (see ``warm_start``); each point is guarded by
+        :func:`solve_warm`, and points re-solved cold are counted in :attr:`resolved_cold`."""
         from lvcore.execution import chains
 
         U = chains.scaled_coordinates(self.input_names, X)
         seeds = self._warm.setdefault("seeds", [])
         resolved = self._warm.setdefault("resolved", [])
-        suspect: set = set()   # keys of this batch re-solved for their own path
         results: list = [None] * len(cases)
-
-        def returned(rows):
-            suspect.update(r.key for r in rows if chains.passes_suspicion(r.result[-1]))
 
         def collect(rows):
             for r in rows:
-                *result, why = r.result
+                *result, start, why = r.result
                 results[r.key] = tuple(result)
-                if why:
+                if start == RESOLVED:
                     resolved.append(why)
-                if r.state is not None and not chains.passes_suspicion(why):  # later batches never start there
+                if r.state is not None and not r.state.suspect:  # later batches never start there
                     seeds.append(chains.Seed(r.unit, r.state))
 
         if executor is None:
@@ -339,11 +431,11 @@ class SimulatorForward:
         else:
             def submit(positions, chunk_seeds):
                 return executor.submit(_simulate_chunk, self.input_names, [cases[i] for i in positions], positions,
-                                       U[positions], chunk_seeds, jacobian, sorted(suspect))
+                                       U[positions], chunk_seeds, jacobian)
 
             try:
                 chains.run_chains(executor, submit, U, workers=getattr(executor, "workers", 1), on_rows=collect,
-                                  seeds=seeds[-chains.DEFAULT_KEPT_STATES:], on_returned=returned)
+                                  seeds=seeds[-chains.DEFAULT_KEPT_STATES:])
             except chains.ChainTaskError as err:
                 raise err.__cause__ or err from None
         del seeds[:-WARM_KEPT_STATES]
@@ -353,23 +445,24 @@ class SimulatorForward:
 
     @property
     def resolved_cold(self) -> tuple[str, ...]:
-        """Why each warm-started point so far was re-solved cold (its warm result was suspect), in order."""
+        """Why each warm-started point so far was re-solved cold (its warm result was suspect or its warm start
+        failed), in order; points solved cold at once (:func:`soft_corner`) are not listed."""
         return tuple(self._warm.get("resolved", ()))
 
-    def evaluate_warm(self, point: Mapping[str, float], initial=None):
+    def evaluate_warm(self, point: Mapping[str, float], initial=None) -> WarmSolve:
         """One point started from ``initial`` (a converged state of this forward, or None: cold).
 
-        Returns ``(ForwardBatch of one point, state)``; ``state`` is None when the
-        point did not converge. Used by campaign chains (:mod:`lvcore.execution.chains`).
+        Returns a :class:`WarmSolve` (the outputs, the state, how the point was solved and why it was
+        solved cold if given a start): :func:`solve_warm`, which keeps a warm result only where it equals
+        the cold solve. Used by campaign chains (:mod:`lvcore.execution.chains`) and the subject
+        emulators' FE runs.
         """
         cols, n = as_columns({k: point[k] for k in self.input_names}, self.input_names, self.label)
         if n != 1:
             raise ForwardError("evaluate_warm takes one point")
-        warm = {"state": initial}
-        y, ok, msg, _, sec = _simulate_point(self.case({k: cols[k][0] for k in self.input_names}),
-                                             self.input_names, False, warm)
-        batch = ForwardBatch(y[None], np.array([ok]), (msg,), None, np.array([sec]))
-        return batch, (warm["state"] if ok else None)
+        (y, ok, msg, _, sec), state, start, why = solve_warm(self.case({k: cols[k][0] for k in self.input_names}),
+                                                             self.input_names, False, initial)
+        return WarmSolve(ForwardBatch(y[None], np.array([ok]), (msg,), None, np.array([sec])), state, start, why)
 
     def __call__(self, params: Mapping[str, Any]) -> np.ndarray:
         """Outputs ``(25,)`` of one point; raises :class:`SolverError` if it fails. Not JAX-traceable."""
@@ -410,4 +503,4 @@ def simulator_factory(space, resolution: str) -> SimulatorForward:
 
 register_forward(DEFAULT_FORWARD_NAME, simulator_factory)
 
-__all__ = ["SimulatorForward", "AdjointSimulatorForward", "simulator_factory"]
+__all__ = ["SimulatorForward", "AdjointSimulatorForward", "simulator_factory", "WarmSolve", "solve_warm", "soft_corner"]

@@ -349,8 +349,8 @@ def recorded_solves():
     stack.append(log)
     try:
         yield log
-    finally:
-        stack.remove(log)
+    finally:  # by identity: an enclosing block's log may hold the same records (lists compare by value)
+        del stack[next(i for i in range(len(stack) - 1, -1, -1) if stack[i] is log)]
 
 
 def solve(system, opts: NewtonOptions | None = None, initial: tuple | None = None) -> NewtonResult:
