@@ -34,7 +34,9 @@ def table(frame) -> None:
 
 st.title("Studies")
 st.caption("The chapter's studies from saved results: the bundled results of a shipped run, and any `--out` folder "
-           "of `lvcore study ...`. Everything here is SYNTHETIC (generated volunteers, imitation operators).")
+           "of `lvcore study ...`. Everything here is SYNTHETIC (generated volunteers, imitation operators), except "
+           "the geometry of the fibre-discrepancy run on the real LV: a REAL patient-derived LV (Dalton et al. 2022, "
+           "MIT licence) on which the data are simulated.")
 
 with st.sidebar:
     st.header("Results")

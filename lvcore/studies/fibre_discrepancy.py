@@ -48,6 +48,8 @@ THETA_SETS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), 
 #: The synthetic geometry: a point in the shape model's standardised 5-PC space.
 DEFAULT_H = (0.5, -0.4, 0.3, -0.2, 0.1)
 MODELS = ("volume", "iid", "discrepancy")
+#: ``--geometry`` value naming the shipped real LV (patient-derived, not synthetic; :mod:`lvcore.resources`).
+REAL_LV = "real-lv"
 CHAPTER_SIGMA_S_DISCREPANCY = 0.024
 
 
@@ -64,27 +66,77 @@ class TestSet:
     benchmark: np.ndarray  # eta(theta, h): the emulator at the truth (25)
 
 
-def data_simulator(h=DEFAULT_H, resolution: str = "default", base: str = "clamped") -> SimulatorForward:
-    """The FE simulator that makes the test data: inputs theta and the fibre angles, on the PCA geometry ``h`` at 8 mmHg.
+def data_simulator(h=DEFAULT_H, resolution: str = "default", base: str = "clamped",
+                   geometry: dict | None = None) -> SimulatorForward:
+    """The FE simulator that makes the test data: inputs theta and the fibre angles, at 8 mmHg.
 
-    ``base`` is the basal boundary condition; the study passes the emulator's
-    own, so that the fibre angles are the only discrepancy between data and model.
+    The geometry is the PCA geometry ``h``, or ``geometry`` (a case geometry section, e.g. a subject's template
+    mesh ``{"kind": "mesh", "path": ...}``) when given. ``base`` is the basal boundary condition; the study passes
+    the emulator's own, so that the fibre angles are the only discrepancy between data and model.
     """
+    if geometry is not None:
+        return SimulatorForward(input_names=THETA_NAMES + ANGLE_NAMES, conditions={EDP_NAME: CHAPTER_EDP},
+                                geometry=dict(geometry), resolution=resolution, base=base,
+                                label="FE simulator (fibre-discrepancy test data, subject mesh)")
     return SimulatorForward(input_names=THETA_NAMES + ANGLE_NAMES,
                             conditions={**dict(zip(pc_names(len(h)), map(float, h))), EDP_NAME: CHAPTER_EDP},
                             resolution=resolution, base=base, label="FE simulator (fibre-discrepancy test data)")
 
 
+def geometry_section(geometry) -> dict:
+    """The case geometry section of ``--geometry``: ``real-lv`` (the shipped real LV,
+    :func:`lvcore.resources.real_lv_files`) or a template mesh (.vtu, e.g. from ``lvcore geometry fit --out``)."""
+    from lvcore.resources import real_lv_files
+
+    path = real_lv_files().template if str(geometry) == REAL_LV else Path(geometry)
+    return {"kind": "mesh", "path": str(path)}
+
+
+def subject_forward(emulator, section: dict):
+    """The subject emulator ``emulator`` (name or directory) as the study's forward model of theta.
+
+    Raises
+    ------
+    EmulatorError
+        If it is not a subject emulator, was trained on another geometry than ``section`` (template nodes more
+        than 1e-6 mm apart) or at other fixed conditions than the study's (angles (-60°, 60°), 8 mmHg).
+    """
+    from lvcore.emulator.io import load_emulator
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.emulator.subject import subject_template_nodes
+    from lvcore.exceptions import EmulatorError
+
+    emu = load_emulator(emulator)
+    how = (f"build it with lvcore emulator build --geometry {section.get('path')} --out DIR "
+           "(theta inputs, angles (-60, 60), 8 mmHg)")
+    if not emu.is_subject:
+        raise EmulatorError(f"emulator '{emulator}' takes PC scores; a subject mesh needs a subject emulator: {how}")
+    gap = np.abs(subject_template_nodes(emu.subject_geometry) - subject_template_nodes(section)).max()
+    if not gap <= 1e-6:
+        raise EmulatorError(f"emulator '{emulator}' was trained on another geometry (nodes up to {gap:.3g} mm "
+                            f"apart): {how}")
+    fixed = dict(emu.fixed)
+    want = {ANGLE_NAMES[0]: CHAPTER_ANGLES[0], ANGLE_NAMES[1]: CHAPTER_ANGLES[1], EDP_NAME: CHAPTER_EDP}
+    bad = {k: fixed.get(k) for k, v in want.items() if fixed.get(k) is None or abs(float(fixed[k]) - v) > 1e-9}
+    if bad or tuple(emu.input_names) != THETA_NAMES:
+        raise EmulatorError(f"emulator '{emulator}' has inputs {list(emu.input_names)} and fixed {bad}; the study "
+                            f"needs theta inputs at {want}: {how}")
+    return emulator_forward(emu, (), alpha_endo=CHAPTER_ANGLES[0], alpha_epi=CHAPTER_ANGLES[1],
+                            edp_mmhg=CHAPTER_EDP, name=emu.name)
+
+
 def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulator: Forward | None = None,
-                   resolution: str = "default", progress=None, set_indices=None) -> list[TestSet]:
+                   resolution: str = "default", progress=None, set_indices=None,
+                   geometry: dict | None = None) -> list[TestSet]:
     """The 12 SYNTHETIC test sets (or those in ``set_indices``).
 
     ``simulator`` reads ``a, b, af, bf, alpha_endo, alpha_epi`` and makes the
     noise-free data (default :func:`data_simulator`); ``forward`` (theta only)
-    gives the benchmark. Set ``i`` has angles ``FIBRE_DISCREPANCY_ANGLE_PAIRS[i // 4]``
-    (:mod:`lvcore.domain.conditions`) and theta ``THETA_SETS[i % 4]``.
+    gives the benchmark; ``geometry`` (a case geometry section) replaces ``h`` in the default simulator.
+    Set ``i`` has angles ``FIBRE_DISCREPANCY_ANGLE_PAIRS[i // 4]`` (:mod:`lvcore.domain.conditions`) and theta
+    ``THETA_SETS[i % 4]``.
     """
-    simulator = simulator or data_simulator(h, resolution, getattr(forward, "base", "clamped"))
+    simulator = simulator or data_simulator(h, resolution, getattr(forward, "base", "clamped"), geometry)
     rng = np.random.default_rng(seed)
     out = []
     for i, ((ae, ap), th) in enumerate((a, t) for a in FIBRE_DISCREPANCY_ANGLE_PAIRS for t in THETA_SETS):
@@ -120,6 +172,18 @@ def _rhat(draws: dict, i: int, names) -> float:
     return float(max(float(r[n]) for n in r.data_vars))
 
 
+def _geometry_record(geometry) -> dict:
+    """What the test data were simulated on (JSON-ready; a file's name only, no build-machine path)."""
+    if geometry is None:
+        return {"kind": "pca", "label": "SYNTHETIC PCA geometry h", "synthetic": True}
+    if str(geometry) == REAL_LV:
+        from lvcore.resources import REAL_LV_LABEL
+
+        return {"kind": "mesh", "source": REAL_LV, "label": REAL_LV_LABEL, "synthetic": False}
+    return {"kind": "mesh", "source": Path(geometry).name, "label": f"subject mesh {Path(geometry).name}",
+            "synthetic": None}
+
+
 def _build_record(forward) -> dict:
     """Which emulator build (creation time, mesh, base condition) the study calibrated with."""
     emu = getattr(forward, "emulator", None)
@@ -131,7 +195,7 @@ def _build_record(forward) -> dict:
 
 def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | None = None, seed: int = 0,
               simulator: Forward | None = None, resolution: str = "default", out: str | Path | None = None,
-              progress=None, set_indices=None, emulator: str = "chapter") -> dict:
+              progress=None, set_indices=None, emulator: str = "chapter", geometry=None) -> dict:
     """Run the study; returns plain data (and writes it under ``out`` if given).
 
     Parameters
@@ -143,14 +207,19 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
     simulator : Forward, optional
         Reads theta and the fibre angles and makes the test data; default
         the FE simulator (:func:`data_simulator`).
+    geometry : str or Path, optional
+        A subject mesh instead of ``h``: ``real-lv`` (:data:`REAL_LV`, the shipped real LV) or a template mesh.
+        The test data are FE-simulated on it and the default forward is the subject emulator ``emulator``
+        trained on it (:func:`subject_forward`; a directory from ``lvcore emulator build --geometry MESH``).
     """
     t_start = time.perf_counter()
     # Algorithm 4 as the chapter writes it, whatever the caller's config, as in the shipped results
     config = dataclasses.replace(config or samplers.SamplerConfig(), discrepancy_block="chapter")
+    section = None if geometry is None else geometry_section(geometry)
     if forward is None:
-        forward = load_emulator_forward(emulator, h)
+        forward = load_emulator_forward(emulator, h) if section is None else subject_forward(emulator, section)
     sets = make_test_sets(forward, h, seed=seed, simulator=simulator, resolution=resolution, progress=progress,
-                          set_indices=set_indices)
+                          set_indices=set_indices, geometry=section)
     t_sim = time.perf_counter() - t_start
     fits, timings = {}, {}
     for k, m in enumerate(MODELS):
@@ -206,7 +275,8 @@ def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | Non
         "synthetic": True,
         "forward_model": getattr(forward, "label", type(forward).__name__),
         "forward_build": _build_record(forward),
-        "h": [float(v) for v in h],
+        "h": None if section else [float(v) for v in h],
+        "geometry": _geometry_record(geometry),
         "noise": {"sigma_v_ml": SIGMA_V_ML, "sigma_s": SIGMA_S},
         "sampler": {"num_warmup": config.num_warmup, "num_samples": config.num_samples,
                     "num_chains": config.num_chains, "discrepancy": "HMC-within-Gibbs (Algorithm 4)",
@@ -484,6 +554,11 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--emulator", default="chapter",
                    help=f"emulator name or directory trained at angles ({CHAPTER_ANGLES[0]:g}, {CHAPTER_ANGLES[1]:g}) "
                         "(default: chapter)")
+    p.add_argument("--geometry", default=None,
+                   help=f"a subject mesh instead of the PCA geometry h: '{REAL_LV}' (the shipped real, patient-derived "
+                        "LV) or a template mesh (.vtu); the data are FE-simulated on it and --emulator must be a "
+                        "subject emulator of it (lvcore emulator build --geometry MESH --out DIR) "
+                        "(default: the SYNTHETIC PCA geometry h)")
     p.set_defaults(func=_cli)
 
 
@@ -492,7 +567,7 @@ def _cli(args) -> int:
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
                                  seed=args.seed)
     res = run_study(config=cfg, seed=args.seed, resolution=args.resolution, out=args.out, emulator=args.emulator,
-                    progress=None if args.json else (lambda msg, frac: print(msg, flush=True)))
+                    geometry=args.geometry, progress=None if args.json else (lambda msg, frac: print(msg, flush=True)))
     if args.json:
         print(json.dumps({k: res[k] for k in ("findings", "timings_s", "forward_model")}, indent=2))
     else:

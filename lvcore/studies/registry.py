@@ -135,6 +135,11 @@ _STUDIES = (
           report_items=("fig9_6_strain_predictive", "fig9_7_sigma_s", "fig9_7_sigma_s_all_sets",
                         "fig9_8_eta_vs_benchmark", "fig9_9_error_violins", "table_fibre_discrepancy_findings"),
           tab="Fibre discrepancy (Figs 9.6–9.9)"),
+    Study("fibre-discrepancy-real-lv", "fibre_discrepancy_real_lv", "fibre_discrepancy_real_lv.json", cli=False,
+          report="Fibre discrepancy on the real LV, per strain layer",
+          report_items=("fig_real_lv_regional_pattern", "fig_real_lv_regional_spread",
+                        "fig_real_lv_sigma_s_inflation", "table_real_lv_findings"),
+          tab="Fibre discrepancy (Figs 9.6–9.9)"),
     Study("geometry-operators", "geometry_operators",
           description="Table 9.4 on the SYNTHETIC cohort: how far the operators' geometries lie from each other "
                       "against the error of 5- to 10-mode PCA reconstructions (node MSE, cm²).",
@@ -179,6 +184,8 @@ _STUDIES = (
           description="Finding F6 as a real test: Bayesian optimisation with fixed or free fibre angles on SYNTHETIC "
                       "volunteer data with a known kind of model-data mismatch.",
           tab="Fibre-angle BO (Tables 9.2/9.3)"),
+    Study("cohort", "cohort", "cohort.json", cli=False, report="Hierarchical calibration of a SYNTHETIC cohort",
+          report_items=("fig_cohort_a", "table_cohort_population")),
 )
 
 #: Every study by name, in the report's (the chapter's) order.
