@@ -189,11 +189,45 @@ def test_in_process_executor_runs_each_task_when_the_caller_takes_it():
         ran.append(k)
         return 2 ** k
 
-    with InProcessExecutor() as ex:
-        assert ex.workers == 1 and "this process" in ex.describe()
+    with InProcessExecutor(threads=1) as ex:
+        assert ex.workers == 1 and ex.describe() == "this process (no worker processes)"
         futures = [ex.submit(task, k) for k in range(4)] + [ex.submit(int, "not a number")]
         assert ran == [] and not any(f.done() for f in futures)  # queued only
         for k, fut in enumerate(ex.as_completed(futures[:4])):  # one at a time: the caller records each first
             assert fut.done() and ran == list(range(k + 1)) and fut.result() == 2 ** k
         assert isinstance(futures[-1].exception(), ValueError)  # kept in the future, as a pool does
         assert ex.submit(task, 5).result() == 32  # result() runs a task not taken yet
+
+
+def test_in_process_executor_on_two_threads_runs_two_tasks_at_once(monkeypatch):
+    import threading
+
+    from lvcore.execution import parallel
+    from lvcore.execution.parallel import InProcessExecutor
+
+    started, second_started = [], threading.Event()
+
+    def first():  # ends only once the second task has started beside it (one thread: never, a 10 s time-out)
+        started.append(0)
+        return second_started.wait(10.0)
+
+    def later(k):
+        started.append(k)
+        second_started.set()
+        return 2 ** k
+
+    with InProcessExecutor(threads=2) as ex:
+        assert ex.workers == 1 and ex.describe().endswith("2 threads")
+        futures = [ex.submit(first)] + [ex.submit(later, k) for k in range(1, 5)] + [ex.submit(int, "not a number")]
+        assert started == []  # queued only
+        done = list(ex.as_completed(futures))
+    assert sorted(done, key=futures.index) == futures and all(f.done() for f in futures)
+    assert [f.result() for f in futures[:5]] == [True, 2, 4, 8, 16] and started[0] == 0
+    assert isinstance(futures[-1].exception(), ValueError)  # kept in the future, as a pool does
+    monkeypatch.setenv(parallel.IN_PROCESS_THREADS_ENV, "1")
+    assert InProcessExecutor().threads == 1
+    monkeypatch.setenv(parallel.IN_PROCESS_THREADS_ENV, "many")
+    with pytest.raises(ValueError, match="whole number"):
+        parallel.in_process_threads()
+    monkeypatch.delenv(parallel.IN_PROCESS_THREADS_ENV)
+    assert parallel.in_process_threads() == min(2, parallel.default_workers())

@@ -295,16 +295,19 @@ class DaskExecutor:
 
 class _Deferred(cf.Future):
     """A future of :class:`InProcessExecutor`: its task runs when the caller first needs it (``result``,
-    ``exception`` or the executor's ``as_completed``), in the caller's thread."""
+    ``exception`` or the executor's ``as_completed``), in the caller's thread or one of the executor's."""
+
+    _take = threading.Lock()  # one task, one run: the caller and a thread of the executor may both ask
 
     def __init__(self, fn, args):
         super().__init__()
         self._task = (fn, args)
 
     def run(self) -> "_Deferred":
-        if self._task is not None:
-            fn, args = self._task
-            self._task = None
+        with self._take:
+            task, self._task = self._task, None
+        if task is not None:
+            fn, args = task
             try:
                 self.set_result(fn(*args))
             except Exception as err:  # noqa: BLE001 - handed to the caller through the future, as a pool does
@@ -318,28 +321,73 @@ class _Deferred(cf.Future):
         return self.run() and super().exception(timeout)
 
 
+#: Environment variable: how many threads :class:`InProcessExecutor` runs tasks on (default
+#: :func:`in_process_threads`), e.g. ``1`` to compare.
+IN_PROCESS_THREADS_ENV = "LVCORE_IN_PROCESS_THREADS"
+#: Most threads of :class:`InProcessExecutor` by default (at most one per core).
+IN_PROCESS_MAX_THREADS = 2
+
+
+def in_process_threads() -> int:
+    """Threads of an :class:`InProcessExecutor` by default: ``$LVCORE_IN_PROCESS_THREADS``, else one per core up to
+    :data:`IN_PROCESS_MAX_THREADS`."""
+    want = os.environ.get(IN_PROCESS_THREADS_ENV, "").strip()
+    if want:
+        if not want.isdigit() or int(want) < 1:
+            raise ValueError(f"{IN_PROCESS_THREADS_ENV}={want!r}: use a whole number of threads, 1 or more")
+        return int(want)
+    return min(IN_PROCESS_MAX_THREADS, default_workers())
+
+
 class InProcessExecutor:
-    """Tasks run in this process, one at a time, when the caller takes them: no worker start-up.
+    """Tasks run in this process, on ``threads`` threads, when the caller takes them: no worker start-up.
 
     For work too small to repay starting worker processes (each spawned worker imports the simulator and loads
     its compiled kernels, about 2 CPU-s, before its first task): a small campaign
     (:data:`lvcore.campaigns.runner.IN_PROCESS_MAX_ROWS`). ``submit`` only queues the task; ``as_completed``
-    runs the tasks in submission order, handing each future over as soon as its task ended, so a campaign
-    records every row before the next one starts (a killed run loses only the row being solved). A task's
-    exception is kept in its future, as a pool's.
+    runs the tasks in submission order, at most ``threads`` at a time, handing each future over as soon as its
+    task ended, so a campaign records every row as it ends (a killed run loses only the rows being solved).
+    The simulator's heavy calls (XLA's kernels, PARDISO) release the GIL, so two threads of one process solve
+    two rows at once without a second import of the simulator. A task's exception is kept in its future, as a
+    pool's.
+
+    Parameters
+    ----------
+    threads : int, optional
+        Tasks run at once (default :func:`in_process_threads`: one per core, at most 2); 1: one at a time, in
+        the caller's thread.
     """
 
-    workers = 1
+    workers = 1  # one process: the chains of a chained campaign are planned for one worker
+
+    def __init__(self, threads: int | None = None):
+        self.threads = in_process_threads() if threads is None else max(1, int(threads))
 
     def describe(self) -> str:
-        return "this process (no worker processes)"
+        return "this process (no worker processes)" + (f", {self.threads} threads" if self.threads > 1 else "")
 
     def submit(self, fn, *args):
         return _Deferred(fn, args)
 
     def as_completed(self, futures):
-        for fut in list(futures):
-            yield fut.run() if isinstance(fut, _Deferred) else fut
+        futures = list(futures)
+        if self.threads == 1:
+            for fut in futures:
+                yield fut.run() if isinstance(fut, _Deferred) else fut
+            return
+        with cf.ThreadPoolExecutor(self.threads, thread_name_prefix="lvcore-in-process") as pool:
+            queued, running = iter(futures), {}
+            for fut in queued:  # the first ``threads`` tasks
+                running[pool.submit(fut.run) if isinstance(fut, _Deferred) else fut] = fut
+                if len(running) == self.threads:
+                    break
+            while running:
+                done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+                for d in [f for f in running if f in done]:  # in submission order among those done
+                    yield running.pop(d)
+                    nxt = next(queued, None)
+                    if nxt is not None:
+                        running[pool.submit(nxt.run) if isinstance(nxt, _Deferred) else nxt] = nxt
 
     def close(self, cancel: bool = False) -> None:
         pass
