@@ -6,6 +6,7 @@ from lvcore.safety import limits
 from lvcore.campaigns.designs import METHODS, make_design, save_design
 from lvcore.campaigns.space import SPACE_NAMES, get_space
 from lvcore.campaigns.runner import CHAIN_MIN_ROWS, IN_PROCESS_MAX_ROWS, RESOLUTIONS
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, STRAIN_LAYERS
 
 
 def register(subparsers) -> None:
@@ -40,6 +41,9 @@ def register(subparsers) -> None:
     _add_run_options(run)
     run.add_argument("--resolution", choices=RESOLUTIONS, default="default",
                      help="simulator mesh resolution (default: default)")
+    run.add_argument("--strain-layer", choices=tuple(STRAIN_LAYERS), default=DEFAULT_STRAIN_LAYER,
+                     help="wall layer the 24 regional strains are averaged over, recorded in the store (default: "
+                          f"{DEFAULT_STRAIN_LAYER}; the chapter does not say which layer its strains come from)")
     run.add_argument("--forward", default=None, metavar="NAME",
                      help="registered forward model (default 'simulator', the FE simulator); others are registered "
                           "in code with lvcore.core.register_forward")
@@ -96,7 +100,7 @@ def _run(args) -> int:
 
     summary = run_campaign(args.design, args.out, workers=args.workers, scheduler=args.scheduler,
                            resolution=args.resolution, forward=args.forward or DEFAULT_FORWARD,
-                           progress=not args.no_progress, chained=args.chained)
+                           progress=not args.no_progress, chained=args.chained, strain_layer=args.strain_layer)
     print(summary.format())
     return 0
 

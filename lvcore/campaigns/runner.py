@@ -36,9 +36,11 @@ import numpy as np
 import lvcore
 from lvcore.campaigns.designs import Design, load_design
 from lvcore.campaigns.store import START_COLD, START_RESOLVED, START_WARM, CampaignStore, RowResult, StoreSummary, \
-    worker_tag
+    recorded_strain_layer, worker_tag
 from lvcore.execution.chains import DEFAULT_CHUNK, ChainTaskError, run_chains, solve_in_order
 from lvcore.core.forward import failure_reason
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER
+from lvcore.domain.outputs import strain_layer as canonical_strain_layer
 from lvcore.core.registry import DEFAULT_FORWARD_NAME, make_forward, registered_name
 from lvcore.exceptions import CampaignError
 from lvcore.mechanics import forward as _simulator_forward  # noqa: F401 - registers the default forward "simulator"
@@ -231,7 +233,7 @@ def _drive(store: CampaignStore, rows: np.ndarray, executor, *, forward, progres
 def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int | None = None,
                  scheduler: str | None = None, resolution: str = "default", forward: str = DEFAULT_FORWARD,
                  progress: bool = True, executor=None, overwrite: bool = False,
-                 chained: bool | None = True) -> StoreSummary:
+                 chained: bool | None = True, strain_layer: str = DEFAULT_STRAIN_LAYER) -> StoreSummary:
     """Run every row of ``design`` and record the results in a new store ``out``.
 
     Parameters
@@ -259,6 +261,9 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
         each row cold in its own task; None: chains for at least
         :data:`CHAIN_MIN_ROWS` rows to run, else cold (the CLI's default). Both give the same results within the
         solver tolerance.
+    strain_layer : str
+        The wall layer of the strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`; default the inner half), set on
+        the forward model (:func:`with_strain_layer`) and recorded as the store attribute ``strain_layer``.
 
     Returns
     -------
@@ -311,8 +316,9 @@ def run_campaign(design: Design | str | Path, out: str | Path, *, workers: int |
     if not isinstance(design, Design):
         design = load_design(design)
     name = registered_name(forward)  # fail early on an unknown forward model
-    fwd = make_forward(name, design.space, resolution)
-    with CampaignStore.create(out, design, forward=name, resolution=resolution, overwrite=overwrite) as store:
+    fwd = with_strain_layer(make_forward(name, design.space, resolution), strain_layer, name)
+    with CampaignStore.create(out, design, forward=name, resolution=resolution, overwrite=overwrite,
+                              strain_layer=strain_layer) as store:
         _run_with(store, store.pending_rows(), executor, workers, scheduler, fwd, progress, chained=chained)
         return store.summary()
 
@@ -333,11 +339,35 @@ def resume_campaign(store_path: str | Path, *, workers: int | None = None, sched
         if before.inconsistent and progress:
             print("\n".join(before.format().splitlines()[2:]), file=sys.stderr)
         resolution = recorded_resolution(str(attrs["resolution"]), before.versions)
-        fwd = make_forward(str(attrs["forward"]), store.design().space, resolution)
+        fwd = with_strain_layer(make_forward(str(attrs["forward"]), store.design().space, resolution),
+                                recorded_strain_layer(attrs), str(attrs["forward"]))
         rows = store.pending_rows(retry_failed=retry_failed)
         _run_with(store, rows, executor, workers, scheduler, fwd, progress, allow_rerecord=retry_failed,
                   chained=chained)
         return store.summary()
+
+
+def with_strain_layer(fwd, layer: str, name: str = "the forward model"):
+    """``fwd`` writing strains of ``layer`` (:data:`lvcore.domain.outputs.STRAIN_LAYERS`): a forward model with a
+    ``strain_layer`` field (the simulator) is copied with it set; one without (an analytic stand-in) takes the
+    default layer only.
+
+    Raises
+    ------
+    CampaignError
+        An unknown layer, or a layer the forward model cannot write.
+    """
+    try:
+        layer = canonical_strain_layer(layer, "--strain-layer")
+    except ValueError as err:
+        raise CampaignError(str(err)) from None
+    have = getattr(fwd, "strain_layer", None)
+    if have is None:
+        if layer != DEFAULT_STRAIN_LAYER:
+            raise CampaignError(f"forward model '{name}' has no strain layer to set; only the default "
+                                f"({DEFAULT_STRAIN_LAYER}) is possible with it")
+        return fwd
+    return fwd if have == layer else replace(fwd, strain_layer=layer)
 
 
 def choose_executor(n_rows: int, workers: int | None = None, scheduler: str | None = None):

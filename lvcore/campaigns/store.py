@@ -38,7 +38,7 @@ from lvcore.campaigns.store_format import (CONVERGED, FAILED, FORMAT, FORMAT_VER
                                           migrate)
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError
-from lvcore.domain.outputs import N_OUTPUTS, OUTPUT_COLUMNS
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, N_OUTPUTS, OUTPUT_COLUMNS, STRAIN_LAYER_LABELS, strain_layer
 
 
 def worker_tag() -> str:
@@ -99,6 +99,22 @@ def _value(v) -> str:
     return str(v)[:40]
 
 
+def recorded_strain_layer(attrs: dict) -> str:
+    """The wall layer of a store's strains: its ``strain_layer`` attribute (a name of
+    :data:`lvcore.domain.outputs.STRAIN_LAYERS`); stores written before the layer was recorded hold the simulator's
+    default, the inner half.
+
+    Raises
+    ------
+    CampaignError
+        An attribute that names no layer.
+    """
+    try:
+        return strain_layer(str(attrs.get("strain_layer", DEFAULT_STRAIN_LAYER)), "store attribute strain_layer")
+    except ValueError as err:
+        raise CampaignError(str(err)) from None
+
+
 @dataclass(frozen=True)
 class StoreContents:
     """Everything in a store, read into memory (see the layout table of :mod:`lvcore.campaigns.store_format`)."""
@@ -130,6 +146,11 @@ class StoreContents:
         known = done[self.run[done] >= 0]
         key = np.lexsort((self.chain_position[known], self.chain[known], self.run[known]))
         return np.concatenate([known[key], done[self.run[done] < 0]])
+
+    @property
+    def strain_layer(self) -> str:
+        """The wall layer of the stored strains (:func:`recorded_strain_layer`)."""
+        return recorded_strain_layer(self.attrs)
 
     @property
     def converged(self) -> np.ndarray:
@@ -213,6 +234,8 @@ class StoreSummary:
     #: Committed rows started warm / re-solved cold after a discarded warm start (format version 2 stores).
     warm: int = 0
     resolved: int = 0
+    #: The wall layer of the stored strains (:func:`recorded_strain_layer`).
+    strain_layer: str = DEFAULT_STRAIN_LAYER
 
     def format(self, all_problems: bool = False) -> str:
         """Human-readable summary; the inconsistent rows are listed (the first 10 unless ``all_problems``)."""
@@ -221,7 +244,8 @@ class StoreSummary:
             rows += f", inconsistent {self.inconsistent} (excluded from every count and from emulator training)"
         lines = [
             f"campaign store {self.path}",
-            f"  space {self.space}, resolution {self.resolution}, forward {self.forward}",
+            f"  space {self.space}, resolution {self.resolution}, forward {self.forward}, strains over the "
+            f"{STRAIN_LAYER_LABELS.get(self.strain_layer, self.strain_layer)}",
             rows,
         ]
         if self.inconsistent:
@@ -267,8 +291,10 @@ class CampaignStore:
 
     # ----- life cycle -------------------------------------------------------
     @classmethod
-    def create(cls, path: str | Path, design: Design, *, forward: str, resolution: str, overwrite: bool = False) -> "CampaignStore":
-        """Create a store for ``design`` and open it for writing.
+    def create(cls, path: str | Path, design: Design, *, forward: str, resolution: str, overwrite: bool = False,
+               strain_layer: str = DEFAULT_STRAIN_LAYER) -> "CampaignStore":
+        """Create a store for ``design`` and open it for writing; ``strain_layer`` (the wall layer of the strains
+        the forward model writes) is recorded as the store attribute ``strain_layer``.
 
         Raises
         ------
@@ -294,6 +320,7 @@ class CampaignStore:
                     "design_seed": -1 if design.seed is None else int(design.seed),
                     "resolution": resolution,
                     "forward": forward,
+                    "strain_layer": recorded_strain_layer({"strain_layer": strain_layer}),
                     "lvcore_version": lvcore.__version__,
                     "created_at": time.time(),
                 })
@@ -535,6 +562,7 @@ class CampaignStore:
             problems=c.check(limit=1000),
             warm=int(np.sum(done & (c.start == START_WARM))),
             resolved=int(np.sum(done & (c.start == START_RESOLVED))),
+            strain_layer=c.strain_layer,
         )
 
 

@@ -41,6 +41,46 @@ DISPLAY_NAMES = {"af": "a_f", "bf": "b_f", "alpha_endo": "α_endo", "alpha_epi":
 #: LV base boundary conditions (the case schema's ``boundary.base``; a campaign space's ``base``).
 BASE_CONDITIONS = ("clamped", "sliding")
 
+# The strain layer: which part of the wall the 24 regional strains are averaged over. The chapter does not say which
+# layer its strains come from, so the layer is a condition of every simulation, store, emulator and data set; every
+# layer's strain is the circumferential Green strain with end diastole as its reference (the early-diastolic,
+# stress-free geometry is the simulator's reference configuration).
+#: Strain layers by name -> transmural band ``(lo, hi)`` as fractions of the wall from the endocardium (t = 0) to
+#: the epicardium (t = 1). ``mid_wall`` is the band of the same width as the halves centred on the mid-wall surface
+#: t = 1/2, where tagging and feature-tracking analyses report "mid-wall" strain.
+STRAIN_LAYERS = {"inner_half": (0.0, 0.5), "mid_wall": (0.25, 0.75), "whole_wall": (0.0, 1.0),
+                 "outer_half": (0.5, 1.0)}
+#: The layer of every simulation, campaign and emulator that does not name one (and of everything written before
+#: the layer was recorded): the inner half of the wall.
+DEFAULT_STRAIN_LAYER = "inner_half"
+#: Old names still read (deprecated): ``endocardial`` is the inner half, ``wall`` the whole wall.
+STRAIN_LAYER_ALIASES = {"endocardial": "inner_half", "wall": "whole_wall"}
+#: How the layers are written for a reader.
+STRAIN_LAYER_LABELS = {"inner_half": "inner half of the wall (t in [0, 1/2])",
+                       "mid_wall": "mid-wall band (t in [1/4, 3/4])",
+                       "whole_wall": "whole wall (t in [0, 1])", "outer_half": "outer half of the wall (t in [1/2, 1])"}
+
+
+def strain_layer(name, where: str = "strain_layer") -> str:
+    """The canonical name of a strain layer (:data:`STRAIN_LAYERS`); the deprecated aliases are accepted.
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` for anything else.
+
+    Examples
+    --------
+    >>> strain_layer("endocardial"), strain_layer("whole_wall")
+    ('inner_half', 'whole_wall')
+    """
+    key = name.strip().lower().replace("-", "_") if isinstance(name, str) else None
+    key = STRAIN_LAYER_ALIASES.get(key, key)
+    if key not in STRAIN_LAYERS:
+        raise ValueError(f"{where}: strain layer must be one of {', '.join(STRAIN_LAYERS)} (or the deprecated "
+                         f"{', '.join(STRAIN_LAYER_ALIASES)}), got {name!r}")
+    return key
+
 
 def strain_vector(values, where: str = "strains") -> np.ndarray:
     """The 24 regional strains (-) of ``values``: 24 strains, or 25 outputs whose first entry (LVV) is dropped.

@@ -168,6 +168,10 @@ def _train(args) -> int:
     if args.test:
         t = load_store_data(args.test, data.input_names)
         xt, yt = t.inputs, t.outputs
+    for what, other in (("--valid", v if args.valid else data), ("--test", t if args.test else data)):
+        if other.info["strain_layer"] != data.info["strain_layer"]:
+            raise EmulatorError(f"{what} stores hold {other.info['strain_layer']} strains but the training stores "
+                                f"{data.info['strain_layer']}; use stores of one wall layer")
     config = training_config(args, seed=args.seed)
     name = args.name or Path(args.out).name
     if data.n_inconsistent:
@@ -240,6 +244,7 @@ def format_info(meta: dict) -> str:
     source = meta.get("source") or {}
     base = (source.get("space") or {}).get("base", "clamped")
     lines.append(f"  simulations: mesh {', '.join(map(str, source.get('resolution') or ['?']))}, base {base}, "
+                 f"strains {meta.get('strain_layer', 'inner_half (not recorded: the default)')}, "
                  f"simulator {', '.join(map(str, source.get('simulator_versions') or ['?']))}")
     arch = meta.get("architecture", {})
     sub = meta.get("subject")

@@ -15,7 +15,10 @@ An emulator directory holds
     sizes, seed, optimiser settings, the architecture search), ``validation``
     (metrics, see :func:`lvcore.emulator.training.metrics`), ``test``
     (metrics on a held-out set, if any), ``source`` (store, space,
-    resolution, simulator versions), ``created_at``, ``lvcore_version``,
+    resolution, simulator versions), ``strain_layer`` (the wall layer of
+    the training strains, :data:`lvcore.domain.outputs.STRAIN_LAYERS`;
+    absent in emulators built before it was recorded, which were all
+    trained on the inner half), ``created_at``, ``lvcore_version``,
     ``spec_note`` (honest statement of how far the training set is from the
     chapter's size).
 ``validation.npz`` (optional)
@@ -160,6 +163,7 @@ def save_emulator(emulator: Emulator, directory: str | Path, *, validation: dict
         "input_scaler": {"mean": _floats(emulator.x_mean), "sd": _floats(emulator.x_sd)},
         "output_scaler": {"mean": _floats(emulator.y_mean), "sd": _floats(emulator.y_sd)},
         "architecture": {**meta.get("architecture", {}), "hidden": list(emulator.network.hidden), "activation": "tanh"},
+        "strain_layer": emulator.strain_layer,
         "lvcore_version": meta.get("lvcore_version", lvcore.__version__),
         "created_at": meta.get("created_at", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())),
     })
@@ -227,6 +231,13 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
     except (ValueError, KeyError, TypeError) as err:
         raise EmulatorError(f"'{net_path}' is not an emulator network: {str(err)[:200]}") from None
     names = tuple(meta["input_names"])
+    from lvcore.domain.outputs import strain_layer
+
+    try:  # absent: built before the layer was recorded, on the simulator's default (the inner half)
+        if "strain_layer" in meta:
+            meta["strain_layer"] = strain_layer(meta["strain_layer"], f"'{meta_path}': strain_layer")
+    except ValueError as err:
+        raise EmulatorError(str(err)) from None
     _resolve_subject_geometry(meta, directory)
     prior = _load_prior(meta, directory)
     try:

@@ -215,6 +215,18 @@ class Emulator:
         return recorded_resolution(str((source.get("resolution") or ["default"])[0]), source.get("simulator_versions"))
 
     @property
+    def strain_layer(self) -> str:
+        """The wall layer of the strains it was trained on (``metadata["strain_layer"]``, a name of
+        :data:`lvcore.domain.outputs.STRAIN_LAYERS`); emulators built before it was recorded were all trained on
+        the simulator's default, the inner half."""
+        from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, strain_layer
+
+        try:
+            return strain_layer(self.metadata.get("strain_layer", DEFAULT_STRAIN_LAYER), "emulator metadata")
+        except ValueError as err:
+            raise EmulatorError(f"emulator '{self.name}': {err}") from None
+
+    @property
     def is_subject(self) -> bool:
         """True for a subject-specific emulator (:mod:`lvcore.emulator.subject`): its
         geometry is fixed and bound in, so it takes no PC scores."""
@@ -242,7 +254,7 @@ class Emulator:
         -------
         lvcore.mechanics.forward.SimulatorForward
             Over the training space's inputs and fixed conditions, at the
-            training resolution and base condition.
+            training resolution, base condition and strain layer.
 
         Raises
         ------
@@ -257,7 +269,7 @@ class Emulator:
         geometry = self.subject_geometry if geometry is None else geometry
         kwargs = {} if geometry is None else {"geometry": dict(geometry)}
         return SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), resolution=self.resolution,
-                                base=space.base, **kwargs)
+                                base=space.base, strain_layer=self.strain_layer, **kwargs)
 
     # ----- inputs -----------------------------------------------------------
     def as_array(self, x=None, **named) -> np.ndarray:

@@ -38,7 +38,7 @@ import lvcore
 from lvcore.emulator.model import LOG_INPUTS, Emulator, correction_targets, prior_outputs
 from lvcore.emulator.network import INIT_SD, MLP, WIDTHS, from_arrays, to_arrays
 from lvcore.exceptions import EmulatorError
-from lvcore.domain.outputs import N_OUTPUTS
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, N_OUTPUTS, strain_layer
 
 #: The chapter's architecture grid: every pair of widths.
 ARCHITECTURES = tuple(itertools.product(WIDTHS, WIDTHS))
@@ -521,6 +521,8 @@ def _training_metadata(fits, best: FitResult, refinement, config: TrainingConfig
             "lbfgs": None if refinement is None else {**refinement, "history": [list(h) for h in refinement["history"]]},
         },
         "source": dict(source or {}),
+        # the wall layer of the training strains (the stores' layer, which load_store_data puts in the source)
+        "strain_layer": strain_layer((source or {}).get("strain_layer", DEFAULT_STRAIN_LAYER), "source.strain_layer"),
         "lvcore_version": lvcore.__version__,
     }
 
@@ -582,6 +584,10 @@ def load_store_data(stores: Sequence[str | Path], inputs: Sequence[str] | None =
         if not np.allclose(vals, vals[0]):
             raise EmulatorError(f"input '{n}' varies in the data but is not an emulator input; add it to --inputs")
         fixed[n] = float(vals[0])
+    layers = {c.strain_layer for c in contents}
+    if len(layers) > 1:
+        raise EmulatorError(f"the stores hold strains of different wall layers ({', '.join(sorted(layers))}); train "
+                            "an emulator on stores of one layer")
     versions = sorted({v for c in contents for v, ok in zip(c.versions, c.converged) if ok})
     return StoreData(
         inputs=x, outputs=y, input_names=names,
@@ -594,5 +600,5 @@ def load_store_data(stores: Sequence[str | Path], inputs: Sequence[str] | None =
         info={"stores": [str(p) for p in stores], "space": space.to_dict(),
               "resolution": sorted({str(c.attrs.get("resolution")) for c in contents}),
               "forward": sorted({str(c.attrs.get("forward")) for c in contents}),
-              "simulator_versions": versions},
+              "simulator_versions": versions, "strain_layer": layers.pop()},
     )

@@ -27,6 +27,7 @@ from typing import Any
 
 from lvcore import cli_args
 from lvcore.domain.conditions import SIGMA_V_ML
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, STRAIN_LAYERS
 
 #: Range of ``--sigma-v`` (LVV noise sd, mL): echocardiographic/MRI volume errors are 2-15 mL; outside
 #: this range the likelihood either ignores the volume (the posterior is the prior) or is degenerate.
@@ -58,6 +59,9 @@ def register(subparsers) -> None:
     p.add_argument("--segment-offset", type=float, default=None, metavar="DEG",
                    help="lvcore angle (deg, counter-clockwise seen from the base) of the data's septal centre "
                         "(aha) or sector-0 start (lvcore); default 0")
+    p.add_argument("--strain-layer", choices=tuple(STRAIN_LAYERS), default=None, help="wall layer of the strains; "
+                   "another layer than the emulator's is refused (default: what the file declares in a strain_layer "
+                   "column or key, else the emulator's own: inner_half for the bundled ones)")
     p.add_argument("--geometry",
                    help="(required with --data, unless --emulator is a subject-specific one from `lvcore emulator "
                         "build`, whose geometry is bound in) the subject's geometry: PC scores (.json/.csv, "
@@ -377,7 +381,7 @@ def _request(args, emulator, name: str, row, geometry, label: str, cli_measures:
                          alpha_epi=args.alpha_epi, infer_angles=args.angles == "infer",
                          allow_extrapolation=args.allow_extrapolation, representation_error=args.representation_error,
                          prior=args.prior, geometry_label=label, representation=representation, sigma_v=args.sigma_v,
-                         sigma_ref=sigma_ref, **kw)
+                         sigma_ref=sigma_ref, strain_layer=getattr(args, "strain_layer", None), **kw)
 
 
 def run_calibrate(args) -> int:
@@ -399,7 +403,8 @@ def run_calibrate(args) -> int:
         print(f"lvcore: warning: {w}", file=sys.stderr)
     extra, consistency = {}, {}
     attrs = {"data_file": str(args.data), "emulator": setup.name, "angles": args.angles,
-             "base": str(getattr(setup.emulator, "base", "clamped")), "geometry": setup.geometry}
+             "base": str(getattr(setup.emulator, "base", "clamped")), "geometry": setup.geometry,
+             "strain_layer": str(getattr(setup.emulator, "strain_layer", DEFAULT_STRAIN_LAYER))}
     if not setup.inferred:
         geo = next(iter(setup.requests.values())).geometry
         attrs.update({"pc_scores": json.dumps([float(v) for v in geo.h]), "scale": float(geo.scale)})
@@ -466,7 +471,8 @@ def _finish(item, setup: CalibrateSetup, args, extra: dict, consistency: dict) -
     extra[(item.subject, item.model)] = rec = {
         "ppc_csv": str(ppc_csv),
         "geometry": geometry,
-        "conditions": {"emulator": setup.name, "base": q.base, "edp_mmhg": c["edp_mmhg"],
+        "conditions": {"emulator": setup.name, "base": q.base, "strain_layer": q.strain_layer,
+                       "edp_mmhg": c["edp_mmhg"],
                        "edp_source": q.edp_source,
                        "alpha_endo": None if q.infer_angles else c["alpha_endo"],
                        "alpha_epi": None if q.infer_angles else c["alpha_epi"],

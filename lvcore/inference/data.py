@@ -118,6 +118,8 @@ class MeasuredData:
     states : tuple of LoadedState
         The subject's other loaded states, by increasing pressure (empty for one state); ``y`` and
         ``extras["edp_mmhg"]`` are the primary state's (the lowest pressure with strains).
+    strain_layer : str or None
+        The wall layer the file declares for its strains (:mod:`lvcore.inference.strain_layers`); None: undeclared.
     """
 
     y: np.ndarray
@@ -126,6 +128,7 @@ class MeasuredData:
     synthetic: bool = False
     extras: dict = field(default_factory=dict)
     states: tuple = ()
+    strain_layer: str | None = None
 
     @property
     def n_states(self) -> int:
@@ -387,7 +390,7 @@ def read_measured_csv(path, skip_columns: tuple = ()) -> list[MeasuredData]:
             subject_col = 0
         extra_cols = {i: header[i] for i in range(len(header)) if header[i] in OPTIONAL_COLUMNS}
         data_cols = [i for i in range(len(header)) if i != subject_col and i not in extra_cols
-                     and header[i] not in skip_columns]
+                     and header[i] not in skip_columns and header[i] != "strain_layer"]  # strain_layers.py
         if len(data_cols) != N_OUTPUTS:
             raise DataError(
                 f"{path.name}: expected {N_OUTPUTS} data columns ({expected}), found {len(data_cols)}"
@@ -639,7 +642,8 @@ def read_measurements(path, segments: str | None = None, offset_deg: float | Non
 
     Returns
     -------
-    list of MeasuredData, strains on lvcore's 6 x 4 grid.
+    list of MeasuredData, strains on lvcore's 6 x 4 grid, with the wall layer the file declares
+    (:func:`lvcore.inference.strain_layers.declared_strain_layer`).
     """
     path = Path(path)
     if not path.is_file():
@@ -647,12 +651,15 @@ def read_measurements(path, segments: str | None = None, offset_deg: float | Non
     if offset_deg is not None and not np.isfinite(offset_deg):
         raise DataError(f"--segment-offset must be a finite angle in degrees, got {offset_deg}")
     suffix = path.suffix.lower()
-    if suffix == ".json":
-        return _read_json(path, segments, offset_deg)
-    if suffix == ".mat":
-        return _read_mat(path, segments, offset_deg)
-    if suffix in (".csv", ".txt", ""):
-        return _read_csv_any(path, segments, offset_deg)
+    readers = {".json": _read_json, ".mat": _read_mat, ".csv": _read_csv_any, ".txt": _read_csv_any, "": _read_csv_any}
+    if suffix in readers:
+        from dataclasses import replace
+
+        from lvcore.inference.strain_layers import declared_strain_layer
+
+        rows = readers[suffix](path, segments, offset_deg)
+        layer = declared_strain_layer(path)
+        return rows if layer is None else [replace(r, strain_layer=layer) for r in rows]
     raise DataError(f"{path.name}: unknown measured-data format '{suffix}'; use {', '.join(MEASUREMENT_SUFFIXES)}")
 
 

@@ -5,6 +5,8 @@ its My subject flow (:mod:`lvcore.app.subject_flow`) gather their inputs in thei
 own terms (options, widgets, uploads) and hand them to :func:`build_request`,
 which does everything that comes between the inputs and the sampler:
 
+0. **the strain layer**: the data's wall layer (declared by the file or the front end) must be the emulator's
+   (:func:`lvcore.inference.strain_layers.check_strain_layer`);
 1. **conditions**: the EDP and fibre angles the emulator can honour
    (:func:`lvcore.inference.guards.check_conditions`), the subject's own EDP from
    the data (:func:`lvcore.inference.guards.subject_edp`), and for a subject with
@@ -37,6 +39,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from lvcore.domain.conditions import SIGMA_V_ML
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER
 from lvcore.exceptions import DataError, EmulatorError
 from lvcore.inference.plausibility import DEFAULT_SIGMA_REF
 
@@ -92,6 +95,8 @@ class CalibrationRequest:
         The emulator's base condition (``clamped`` or ``sliding``).
     resolution : str
         The mesh resolution the emulator was trained on.
+    strain_layer : str
+        The wall layer of the strains, the emulator's and the data's (:mod:`lvcore.inference.strain_layers`).
     sigma_v : float
         LVV noise sd (mL) of the likelihood and the verdict.
     sigma_ref : float
@@ -116,6 +121,7 @@ class CalibrationRequest:
     allow_extrapolation: bool = False
     base: str = "clamped"
     resolution: str = "default"
+    strain_layer: str = DEFAULT_STRAIN_LAYER
     sigma_v: float = SIGMA_V_ML
     sigma_ref: float = DEFAULT_SIGMA_REF
 
@@ -159,6 +165,7 @@ class CalibrationRequest:
                 "box": [dict(b) for b in self.box], "warnings": list(self.warnings),
                 "geometry": dict(self.geometry_record), "infer_angles": self.infer_angles,
                 "allow_extrapolation": self.allow_extrapolation, "base": self.base, "resolution": self.resolution,
+                "strain_layer": self.strain_layer,
                 "sigma_v": float(self.sigma_v), "sigma_ref": float(self.sigma_ref),
                 "forward": getattr(self.forward, "label", type(self.forward).__name__)}
 
@@ -194,7 +201,7 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
                   measure_sd_source: Mapping[str, str] | None = None, prior: str = "none",
                   geometry_label: str = "the geometry", no_measure_warning: str | None = None,
                   representation=None, sigma_v: float = SIGMA_V_ML,
-                  sigma_ref: float | None = None) -> CalibrationRequest:
+                  sigma_ref: float | None = None, strain_layer: str | None = None) -> CalibrationRequest:
     """The calibration set-up of one subject (module docstring): conditions, geometry, box check, forward model,
     representation floor and the verdict's inputs.
 
@@ -232,6 +239,9 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
     sigma_ref : float, optional
         Reference strain noise sd of the verdict's fit check (default
         :data:`lvcore.inference.plausibility.DEFAULT_SIGMA_REF`).
+    strain_layer : str, optional
+        The wall layer of the measured strains (``--strain-layer``); default: the layer ``row`` declares, else the
+        emulator's own (:func:`lvcore.inference.strain_layers.check_strain_layer`).
 
     Returns
     -------
@@ -241,7 +251,7 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
     ------
     lvcore.exceptions.DataError
         Conditions or data the emulator cannot take (an EDP outside 2-40 mmHg, loaded states without an EDP input,
-        no geometry), naming what to fix.
+        no geometry, strains of another wall layer than the emulator's), naming what to fix.
     lvcore.exceptions.EmulatorError
         Conditions the emulator was trained at fixed values of, or inputs outside its training box without
         ``allow_extrapolation``.
@@ -268,7 +278,10 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
     lvcore.exceptions.EmulatorError: --geometry h.json: the PC scores (or conditions) outside ... h1 = 2.5 (trained on [-2, 2])...
     """
     from lvcore.inference import guards
+    from lvcore.inference.strain_layers import check_strain_layer
 
+    layer = check_strain_layer(emulator, emulator_name, getattr(row, "strain_layer", None), strain_layer,
+                               where="the data" if row is None else f"subject {row.subject}")
     bound, inferred = _geometry_route(emulator, emulator_name, geometry, representation_error)
     cond = guards.check_conditions(emulator, edp_mmhg, alpha_endo, alpha_epi, infer_angles=infer_angles)
     _check_states(emulator, emulator_name, row, prior)
@@ -297,7 +310,7 @@ def build_request(emulator, emulator_name: str, geometry=None, *, row=None, edp_
         geometry=setup.geometry, geometry_record=georec, edp_source=_edp_source(row, edp_mmhg, emulator),
         infer_angles=bool(infer_angles), allow_extrapolation=bool(allow_extrapolation),
         base=str(getattr(emulator, "base", "clamped")), resolution=str(getattr(emulator, "resolution", "default")),
-        sigma_v=float(sigma_v), sigma_ref=DEFAULT_SIGMA_REF if sigma_ref is None else float(sigma_ref))
+        strain_layer=layer, sigma_v=float(sigma_v), sigma_ref=DEFAULT_SIGMA_REF if sigma_ref is None else float(sigma_ref))
 
 
 def _geometry_route(emulator, name: str, geometry, representation_error: str) -> tuple[bool, bool]:

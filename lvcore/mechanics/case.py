@@ -27,7 +27,7 @@ from lvcore.exceptions import CaseError, LVCoreError
 from lvcore.geometry.analytic import DEFAULT_LV, EllipsoidSurface, TruncatedEllipsoidLV
 from lvcore.geometry.template import DEFAULT_TEMPLATE, N_REGIONS
 from lvcore.mechanics.materials import LAWS, MaterialLaw
-from lvcore.domain.outputs import BASE_CONDITIONS
+from lvcore.domain.outputs import BASE_CONDITIONS, DEFAULT_STRAIN_LAYER, STRAIN_LAYER_ALIASES, STRAIN_LAYERS
 from lvcore.mechanics.resolution import (
     BOX_RESOLUTION_PRESET_NAMES,
     BOX_RESOLUTION_PRESETS,
@@ -46,7 +46,6 @@ LV_KINDS = ("ellipsoid", "default", "mesh", "pca")
 #: Law names of ``material.law``; parameters, required ones and defaults come from :data:`materials.LAWS`.
 MATERIAL_LAWS = tuple(LAWS)
 BOX_FACES = ("x0", "x1", "y0", "y1", "z0", "z1")
-STRAIN_LAYERS = ("endocardial", "wall")
 #: Directions of the epicardial Robin spring: the displacement along the reference normal, or all of it.
 SPRING_DIRECTIONS = ("normal", "full")
 #: Largest epicardial spring stiffness accepted (kPa/mm); pericardial values are ~0.01-1 kPa/mm.
@@ -200,9 +199,11 @@ class RegionalStiffness:
 
 @dataclass(frozen=True)
 class OutputSpec:
-    """Output options: strains averaged over the "endocardial" element layer or the "wall"."""
+    """Output options: the wall layer the regional strains are averaged over (a name of
+    :data:`lvcore.domain.outputs.STRAIN_LAYERS`; the deprecated ``endocardial`` and ``wall`` are read as
+    ``inner_half`` and ``whole_wall``)."""
 
-    strain_layer: str = "endocardial"
+    strain_layer: str = DEFAULT_STRAIN_LAYER
 
 
 @dataclass(frozen=True)
@@ -639,7 +640,9 @@ def _parse_probes(p) -> tuple[tuple[float, float, float], ...]:
 
 def _parse_outputs(o) -> OutputSpec:
     _check_keys(o, "outputs", ("strain_layer",))
-    return OutputSpec(_string(o.get("strain_layer", "endocardial"), "outputs.strain_layer", STRAIN_LAYERS))
+    name = _string(o.get("strain_layer", DEFAULT_STRAIN_LAYER), "outputs.strain_layer",
+                   tuple(STRAIN_LAYERS) + tuple(STRAIN_LAYER_ALIASES))
+    return OutputSpec(STRAIN_LAYER_ALIASES.get(name, name))
 
 
 # ----------------------------------------------------------------------------

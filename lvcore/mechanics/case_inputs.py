@@ -16,14 +16,15 @@ from typing import Mapping, Sequence
 from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import CampaignError, CaseError
-from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, is_pc_name, pc_names
+from lvcore.domain.outputs import (ANGLE_NAMES, DEFAULT_STRAIN_LAYER, EDP_NAME, THETA_NAMES, is_pc_name, pc_names,
+                                   strain_layer as _layer)
 
 #: The material law of the cases :func:`build_case` writes.
 CASE_LAW = "holzapfel-ogden"
 
 
 def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, resolution: str = "default",
-               base: str = "clamped") -> dict:
+               base: str = "clamped", strain_layer: str = DEFAULT_STRAIN_LAYER) -> dict:
     """The simulator case dictionary for named physical inputs.
 
     Parameters
@@ -42,12 +43,15 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
         Mesh resolution preset, used unless ``geometry`` sets its own.
     base : {"clamped", "sliding"}
         Basal boundary condition.
+    strain_layer : str
+        The wall layer of the regional strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`; default the inner
+        half); written as ``outputs.strain_layer`` unless it is the default.
 
     Returns
     -------
     dict
         ``geometry``, ``material``, ``fibres``, ``load`` (mmHg) and
-        ``boundary`` sections; validated later by
+        ``boundary`` sections (and ``outputs`` for another strain layer); validated later by
         :meth:`lvcore.mechanics.case.Case.from_dict`.
 
     Raises
@@ -64,6 +68,10 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
     ({'pressure': 10.0, 'units': 'mmHg'}, {'alpha_endo': -60.0, 'alpha_epi': 60.0}, {'kind': 'default', 'resolution': 'fast'})
     """
     v = {str(k): val for k, val in inputs.items()}
+    try:
+        layer = _layer(strain_layer)
+    except ValueError as err:
+        raise CaseError("outputs.strain_layer", str(err).split(": ", 1)[1]) from None
     known = set(THETA_NAMES) | set(ANGLE_NAMES) | {EDP_NAME}
     unknown = sorted(n for n in v if n not in known and not is_pc_name(n))
     if unknown:
@@ -83,7 +91,7 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
         geom = {"kind": "pca", "scores": [float(v[n]) for n in pcs], "resolution": resolution}
     else:
         geom = {"kind": "default", "resolution": resolution}
-    return {
+    case = {
         "geometry": geom,
         "material": {"law": CASE_LAW, **{n: float(v[n]) for n in THETA_NAMES}},
         "fibres": {"alpha_endo": float(v.get(ANGLE_NAMES[0], CHAPTER_ANGLES[0])),
@@ -91,9 +99,13 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
         "load": {"pressure": float(v.get(EDP_NAME, CHAPTER_EDP)), "units": "mmHg"},
         "boundary": {"base": base},
     }
+    if layer != DEFAULT_STRAIN_LAYER:  # the default is left out, so the cases of every earlier store are unchanged
+        case["outputs"] = {"strain_layer": layer}
+    return case
 
 
-def space_case(space: ParameterSpace, row: Sequence[float], resolution: str = "default") -> dict:
+def space_case(space: ParameterSpace, row: Sequence[float], resolution: str = "default",
+               strain_layer: str = DEFAULT_STRAIN_LAYER) -> dict:
     """The simulator case dictionary for one design row of ``space`` (see :func:`build_case`).
 
     Parameters
@@ -104,6 +116,8 @@ def space_case(space: ParameterSpace, row: Sequence[float], resolution: str = "d
         Values of ``space.names``, physical units.
     resolution : {"fast", "default", ...}
         Mesh resolution passed to the simulator's geometry section.
+    strain_layer : str
+        The wall layer of the strains (:func:`build_case`).
 
     Raises
     ------
@@ -114,7 +128,7 @@ def space_case(space: ParameterSpace, row: Sequence[float], resolution: str = "d
     missing = [n for n in THETA_NAMES if n not in v]
     if missing:
         raise CampaignError(f"space '{space.name}' does not define material parameter(s) {missing}")
-    return build_case(v, resolution=resolution, base=space.base)
+    return build_case(v, resolution=resolution, base=space.base, strain_layer=strain_layer)
 
 
 __all__ = ["CASE_LAW", "build_case", "space_case"]

@@ -26,7 +26,8 @@ from lvcore.core.registry import DEFAULT_FORWARD_NAME, register_forward
 from lvcore.mechanics.case_inputs import build_case
 from lvcore.exceptions import ForwardError
 from lvcore.mechanics.simulate import simulate
-from lvcore.domain.outputs import N_OUTPUTS, THETA_NAMES
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, N_OUTPUTS, THETA_NAMES
+from lvcore.domain.outputs import strain_layer as canonical_strain_layer
 
 
 class WarmState(NamedTuple):
@@ -311,6 +312,8 @@ class SimulatorForward:
     resolution : str
         Mesh preset (``"fast"``, ``"coarse"``, ``"default"``, ``"accurate"``).
     base : {"clamped", "sliding"}
+    strain_layer : str
+        The wall layer of the strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`; default the inner half).
     workers : int, optional
         Batches of more than one point run on a local process pool of this
         many workers (:class:`lvcore.execution.parallel.LocalExecutor`;
@@ -340,6 +343,7 @@ class SimulatorForward:
     geometry: Mapping | None = None
     resolution: str = "default"
     base: str = "clamped"
+    strain_layer: str = DEFAULT_STRAIN_LAYER
     workers: int | None = 1
     scheduler: str | None = None
     label: str = "FE simulator"
@@ -349,13 +353,18 @@ class SimulatorForward:
     def __post_init__(self):
         object.__setattr__(self, "input_names", tuple(str(n) for n in self.input_names))
         object.__setattr__(self, "conditions", {str(k): float(v) for k, v in dict(self.conditions).items()})
+        try:
+            object.__setattr__(self, "strain_layer", canonical_strain_layer(self.strain_layer))
+        except ValueError as err:
+            raise ForwardError(f"simulator forward: {err}") from None
         both = sorted(set(self.input_names) & set(self.conditions))
         if both:
             raise ForwardError(f"simulator forward: {both} are both inputs and fixed conditions")
         # fail now, not per point, on names the case builder does not know
         probe = {**{n: 1.0 for n in THETA_NAMES}, **self.conditions, **{n: 0.0 for n in self.input_names}}
         probe.update({n: 1.0 for n in THETA_NAMES if n in self.input_names})
-        build_case(probe, geometry=self.geometry, resolution=self.resolution, base=self.base)
+        build_case(probe, geometry=self.geometry, resolution=self.resolution, base=self.base,
+                   strain_layer=self.strain_layer)
 
     def __getstate__(self):
         # the kept warm-start states stay in this process (a pickled copy, e.g. sent to a worker, starts empty)
@@ -372,7 +381,8 @@ class SimulatorForward:
     def case(self, point: Mapping[str, float]) -> dict:
         """The simulator case of one point (``input_names`` -> values)."""
         return build_case({**self.conditions, **{n: float(point[n]) for n in self.input_names}},
-                          geometry=self.geometry, resolution=self.resolution, base=self.base)
+                          geometry=self.geometry, resolution=self.resolution, base=self.base,
+                          strain_layer=self.strain_layer)
 
     def evaluate(self, inputs: Mapping[str, Any], *, executor=None) -> ForwardBatch:
         """Simulate every point (see :class:`~lvcore.core.forward.Forward`); ``executor`` reuses a running pool.

@@ -10,13 +10,12 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, STRAIN_LAYERS, strain_layer
 from lvcore.geometry.template import N_REGIONS, lagrange_q2_shape
 from lvcore.mechanics.fibres import lv_wall_frame
 from lvcore.mechanics.kinematics import circumferential_green_strain
 from lvcore.mechanics.mesh import FEMesh
 from lvcore.mechanics.quadrature import gauss_hex, reference_gradients
-
-STRAIN_LAYERS = ("endocardial", "wall")
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,6 +28,7 @@ class StrainOperator:
     dNdX : (m, q, 27, 3) shape gradients at the strain sampling points.
     e_c : (m, q, 3) reference circumferential unit vectors there.
     weights : (24, m * q) volume weights, each row summing to 1.
+    volumes : (24,) reference volume of each region's part of the layer (mm³); None where not kept.
     """
 
     elements: np.ndarray
@@ -36,32 +36,63 @@ class StrainOperator:
     dNdX: np.ndarray
     e_c: np.ndarray
     weights: np.ndarray
+    volumes: np.ndarray | None = None
 
 
-#: Transmural extent (fraction of the wall from the endocardium) of each strain layer.
-LAYER_DEPTH = {"endocardial": 0.5, "wall": 1.0}
+#: Transmural coordinate at which every band is cut: each half-wall piece is integrated with its own mapped Gauss
+#: rule, so the whole wall is exactly the volume-weighted mean of the inner and the outer half.
+SPLIT_T = 0.5
 
 
-def strain_operator(mesh: FEMesh, layer: str = "endocardial") -> StrainOperator:
+def layer_pieces(layer: str, nt: int) -> list[tuple[int, float, float]]:
+    """The parts of the transmural element layers inside a strain layer's band, each integrated on its own.
+
+    Parameters
+    ----------
+    layer : a name of :data:`lvcore.domain.outputs.STRAIN_LAYERS` (or a deprecated alias)
+    nt : transmural elements of the mesh
+
+    Returns
+    -------
+    list of (element layer, t_lo, t_hi)
+        The band ``[lo, hi]`` intersected with each element layer ``[et / nt, (et + 1) / nt]`` and cut at
+        :data:`SPLIT_T`; empty pieces dropped.
+    """
+    lo, hi = STRAIN_LAYERS[strain_layer(layer)]
+    out = []
+    for et in range(nt):
+        a, b = max(et / nt, lo), min((et + 1) / nt, hi)
+        cuts = [a] + [c for c in (SPLIT_T,) if a + 1e-12 < c < b - 1e-12] + [b]
+        out += [(et, p, q) for p, q in zip(cuts[:-1], cuts[1:]) if q > p + 1e-12]
+    return out
+
+
+def strain_operator(mesh: FEMesh, layer: str = DEFAULT_STRAIN_LAYER) -> StrainOperator:
     """Build the regional strain average for an LV mesh.
 
-    ``layer="endocardial"``: the inner half of the wall (transmural coordinate
-    t <= 1/2: the elements next to the endocardium of a two-layer mesh),
-    integrated with 3x3x3 Gauss points mapped into the part of each element
-    that lies in it, so the definition does not depend on the resolution;
-    ``"wall"``: the whole wall.
+    The strains are averaged over the layer's transmural band ``[lo, hi]``
+    (:data:`lvcore.domain.outputs.STRAIN_LAYERS`, fractions of the wall from
+    the endocardium): ``inner_half`` [0, 1/2] (the default), ``mid_wall``
+    [1/4, 3/4], ``whole_wall`` [0, 1], ``outer_half`` [1/2, 1]. Each part of
+    an element inside the band (:func:`layer_pieces`) is integrated with
+    3x3x3 Gauss points mapped into it, so the definition does not depend on
+    the resolution. The deprecated names ``endocardial`` and ``wall`` are the
+    inner half and the whole wall.
+
+    Raises
+    ------
+    ValueError
+        An unknown layer, or a resolution that leaves a region empty.
     """
-    if layer not in STRAIN_LAYERS:
-        raise ValueError(f"strain layer must be one of {STRAIN_LAYERS}, got {layer!r}")
+    try:
+        layer = strain_layer(layer)
+    except ValueError as err:
+        raise ValueError(str(err)) from None
     tpl = mesh.template
     nt = mesh.resolution[2]
-    depth = LAYER_DEPTH[layer]
     xi0, w0 = gauss_hex(3)
     parts = []
-    for et in range(nt):
-        lo, hi = et / nt, min((et + 1) / nt, depth)
-        if hi <= lo + 1e-12:
-            continue
+    for et, lo, hi in layer_pieces(layer, nt):
         b_lo, b_hi = 2 * (lo * nt - et) - 1, 2 * (hi * nt - et) - 1
         xi = xi0.copy()
         xi[:, 1] = b_lo + (xi0[:, 1] + 1) * 0.5 * (b_hi - b_lo)
@@ -84,7 +115,8 @@ def strain_operator(mesh: FEMesh, layer: str = "endocardial") -> StrainOperator:
             f"resolution {mesh.resolution} leaves strain regions {np.flatnonzero(tot <= 0).tolist()} empty; "
             "use at least 6 elements around and 4 base to apex"
         )
-    return StrainOperator(elements=sel, connectivity=mesh.elements[sel], dNdX=dNdX, e_c=e_c, weights=W.reshape(N_REGIONS, -1) / tot[:, None])
+    return StrainOperator(elements=sel, connectivity=mesh.elements[sel], dNdX=dNdX, e_c=e_c,
+                          weights=W.reshape(N_REGIONS, -1) / tot[:, None], volumes=tot)
 
 
 def regional_strains(x, op: StrainOperator):

@@ -67,6 +67,8 @@ class SimulationResult:
     #: The last factorised tangent of the solve (:class:`lvcore.mechanics.newton.Tangent`, in-process only:
     #: it pickles empty); :attr:`warm_state` passes it on with the state.
     solver_tangent: newton.Tangent | None = field(default=None, repr=False)
+    #: The wall layer the strains are averaged over (:data:`lvcore.domain.outputs.STRAIN_LAYERS`); None for a box.
+    strain_layer: str | None = None
 
     @property
     def warm_state(self) -> tuple | None:
@@ -101,6 +103,7 @@ class SimulationResult:
                                                                "epicardium": vec(self.apex_epicardium)},
             "probes": [vec(p) for p in self.probes],
             "strains": vec(self.strains),
+            "strain_layer": self.strain_layer,
             "newton_iterations": int(self.newton_iterations),
             "load_steps": int(self.load_steps),
             "dofs": int(self.dofs),
@@ -319,6 +322,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
     else:  # per-element multipliers depend on the law: a system of its own
         system = build_system(case, mesh)
     is_lv = mesh.kind == "lv"
+    layer = case.outputs.strain_layer if is_lv else None
     if case.load.pressure_kpa == 0:
         res = newton.NewtonResult(True, "converged (zero load)", np.zeros(system.n_free), system.zero_pressure(),
                                   1.0, 0, 0, 0, {})
@@ -330,7 +334,8 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
             raise SolverError(res.message)
         return SimulationResult(False, res.message, None if v_ref is None else (v_ref, None), None, None, None,
                                 np.zeros((0, 3)), None, res.iterations, res.load_steps, dofs,
-                                time.perf_counter() - t0, mesh.nodes, None, mesh.elements, None, res.timings)
+                                time.perf_counter() - t0, mesh.nodes, None, mesh.elements, None, res.timings,
+                                strain_layer=layer)
     u = system.full(res.u)
     x = mesh.nodes + u.reshape(-1, 3)
     probes = observables.point_positions(x, mesh, elem_p, xi_p)
@@ -359,7 +364,8 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         if raise_on_failure:
             raise SolverError(msg)
         return SimulationResult(False, msg, None, None, None, None, np.zeros((0, 3)), None, res.iterations,
-                                res.load_steps, dofs, time.perf_counter() - t0, mesh.nodes, None, mesh.elements)
+                                res.load_steps, dofs, time.perf_counter() - t0, mesh.nodes, None, mesh.elements,
+                                strain_layer=layer)
     return SimulationResult(
         converged=True, message=res.message, cavity_volume_mm3=vol, lvv_standardised=standardised,
         apex_endocardium=apex_endo, apex_epicardium=apex_epi, probes=probes, strains=strains,
@@ -368,7 +374,7 @@ def simulate(case, with_sensitivities: bool = False, options: newton.NewtonOptio
         elements=mesh.elements, sensitivities=sens, timings=res.timings,
         warnings=plausibility_warnings(vol, standardised, units.kpa_to_mmhg(case.load.pressure_kpa) if is_lv else None),
         solver_state=(res.u, res.p),
-        solver_tangent=res.tangent,
+        solver_tangent=res.tangent, strain_layer=layer,
     )
 
 

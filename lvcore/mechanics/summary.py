@@ -1,7 +1,7 @@
 """Plain-text summaries of simulation results (the ``lvcore simulate`` report and the app's)."""
 from __future__ import annotations
 
-from lvcore.domain.outputs import LEVEL_NAMES, strains_by_level
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, LEVEL_NAMES, STRAIN_LAYER_LABELS, strains_by_level
 
 
 def format_summary(result) -> str:
@@ -23,7 +23,9 @@ def format_summary(result) -> str:
     for k, pos in enumerate(d.get("probes") or []):
         lines.append(f"probe {k} (deformed): ({pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}) mm")
     if d.get("strains") is not None:
-        lines.append("circumferential strain E_cc (rows: levels base -> apex; columns: sectors S1..S6):")
+        layer = d.get("strain_layer") or DEFAULT_STRAIN_LAYER
+        lines.append(f"circumferential Green strain E_cc, end diastole as reference, {STRAIN_LAYER_LABELS[layer]} "
+                     "(rows: levels base -> apex; columns: sectors S1..S6):")
         for name, row in zip(LEVEL_NAMES, strains_by_level(d["strains"])):
             lines.append(f"  {name:>10s} " + " ".join(f"{v:+.4f}" for v in row))
     for w in d.get("warnings") or []:

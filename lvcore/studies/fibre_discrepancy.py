@@ -42,7 +42,7 @@ from lvcore._exports import moved_names
 from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP, FIBRE_DISCREPANCY_ANGLE_PAIRS, SIGMA_S, SIGMA_V_ML
 from lvcore.inference import coverage, diagnostics, samplers
 from lvcore.studies import registry
-from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES, pc_names
+from lvcore.domain.outputs import ANGLE_NAMES, DEFAULT_STRAIN_LAYER, EDP_NAME, THETA_NAMES, pc_names
 
 THETA_SETS = ((0.1, 5.0, 1.0, 6.0), (0.5, 8.0, 1.5, 6.0), (1.0, 1.0, 1.0, 1.0), (1.0, 5.0, 1.0, 5.0))
 #: The synthetic geometry: a point in the shape model's standardised 5-PC space.
@@ -67,20 +67,28 @@ class TestSet:
 
 
 def data_simulator(h=DEFAULT_H, resolution: str = "default", base: str = "clamped",
-                   geometry: dict | None = None) -> SimulatorForward:
+                   geometry: dict | None = None, strain_layer: str = DEFAULT_STRAIN_LAYER) -> SimulatorForward:
     """The FE simulator that makes the test data: inputs theta and the fibre angles, at 8 mmHg.
 
     The geometry is the PCA geometry ``h``, or ``geometry`` (a case geometry section, e.g. a subject's template
-    mesh ``{"kind": "mesh", "path": ...}``) when given. ``base`` is the basal boundary condition; the study passes
-    the emulator's own, so that the fibre angles are the only discrepancy between data and model.
+    mesh ``{"kind": "mesh", "path": ...}``) when given. ``base`` is the basal boundary condition and
+    ``strain_layer`` the wall layer of the strains; the study passes the emulator's own, so that the fibre angles
+    are the only discrepancy between data and model.
     """
     if geometry is not None:
         return SimulatorForward(input_names=THETA_NAMES + ANGLE_NAMES, conditions={EDP_NAME: CHAPTER_EDP},
-                                geometry=dict(geometry), resolution=resolution, base=base,
+                                geometry=dict(geometry), resolution=resolution, base=base, strain_layer=strain_layer,
                                 label="FE simulator (fibre-discrepancy test data, subject mesh)")
     return SimulatorForward(input_names=THETA_NAMES + ANGLE_NAMES,
                             conditions={**dict(zip(pc_names(len(h)), map(float, h))), EDP_NAME: CHAPTER_EDP},
-                            resolution=resolution, base=base, label="FE simulator (fibre-discrepancy test data)")
+                            resolution=resolution, base=base, strain_layer=strain_layer,
+                            label="FE simulator (fibre-discrepancy test data)")
+
+
+def emulator_layer(forward) -> str:
+    """The wall layer of ``forward``'s strains: its emulator's (:attr:`lvcore.emulator.model.Emulator.strain_layer`),
+    else the default (the inner half)."""
+    return getattr(getattr(forward, "emulator", None), "strain_layer", DEFAULT_STRAIN_LAYER)
 
 
 def geometry_section(geometry) -> dict:
@@ -136,7 +144,8 @@ def make_test_sets(forward, h=DEFAULT_H, *, seed: int = 0, simulator: Forward | 
     Set ``i`` has angles ``FIBRE_DISCREPANCY_ANGLE_PAIRS[i // 4]`` (:mod:`lvcore.domain.conditions`) and theta
     ``THETA_SETS[i % 4]``.
     """
-    simulator = simulator or data_simulator(h, resolution, getattr(forward, "base", "clamped"), geometry)
+    simulator = simulator or data_simulator(h, resolution, getattr(forward, "base", "clamped"), geometry,
+                                            strain_layer=emulator_layer(forward))
     rng = np.random.default_rng(seed)
     out = []
     for i, ((ae, ap), th) in enumerate((a, t) for a in FIBRE_DISCREPANCY_ANGLE_PAIRS for t in THETA_SETS):
@@ -188,9 +197,9 @@ def _build_record(forward) -> dict:
     """Which emulator build (creation time, mesh, base condition) the study calibrated with."""
     emu = getattr(forward, "emulator", None)
     if emu is None:
-        return {"base": getattr(forward, "base", None)}
+        return {"base": getattr(forward, "base", None), "strain_layer": DEFAULT_STRAIN_LAYER}
     return {"name": emu.name, "created_at": emu.metadata.get("created_at"), "resolution": emu.resolution,
-            "base": emu.base, "lvcore_version": emu.metadata.get("lvcore_version")}
+            "base": emu.base, "strain_layer": emu.strain_layer, "lvcore_version": emu.metadata.get("lvcore_version")}
 
 
 def run_study(forward=None, *, h=DEFAULT_H, config: samplers.SamplerConfig | None = None, seed: int = 0,
