@@ -142,3 +142,28 @@ def test_stores_record_the_layer_and_training_refuses_a_mix(tmp_path):
     with h5py.File(tmp_path / "b.h5", "r+") as f:
         del f.attrs["strain_layer"]   # a store written before the layer was recorded: the inner half
     assert read_store(tmp_path / "b.h5").strain_layer == "inner_half"
+
+
+def test_subject_emulator_builds_take_the_layer():
+    """``lvcore emulator build --strain-layer``: the FE runs use the layer, their checkpoint knows it, and a prior
+    mean of another layer is refused (named) or passed over (auto)."""
+    from lvcore.emulator.subject import subject_space
+    from lvcore.emulator.subject_prior import choose_prior
+    from lvcore.emulator.subject_runs import _runs_signature, simulate_rows
+    from lvcore.mechanics.case import Case
+    from lvcore.mechanics.simulate import simulate
+
+    space = subject_space(("theta",))
+    section = {"kind": "default"}
+    assert _runs_signature(space, section, "fast") == _runs_signature(space, section, "fast", "inner_half")
+    assert _runs_signature(space, section, "fast", "whole_wall") != _runs_signature(space, section, "fast")
+    with pytest.raises(EmulatorError, match="its strains are inner_half, the FE runs' whole_wall"):
+        choose_prior(space, section, "chapter", strain_layer="whole_wall")
+    prior, record = choose_prior(space, section, "auto", strain_layer="whole_wall")
+    assert prior is None and "its strains are inner_half" in record["rejected"]["chapter"]
+    runs = simulate_rows(space, np.array([[THETA[n] for n in space.names]]), section, resolution="fast", workers=1,
+                         strain_layer="whole_wall")
+    case = Case.from_dict(SimulatorForward(input_names=space.names, conditions=space.fixed_dict(),
+                                           geometry=section, resolution="fast", base=space.base,
+                                           strain_layer="whole_wall").case(THETA))
+    np.testing.assert_allclose(runs.outputs[0], simulate(case).outputs(), rtol=1e-9, atol=1e-12)

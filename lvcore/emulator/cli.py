@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from lvcore import cli_args
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, STRAIN_LAYERS
 from lvcore.exceptions import EmulatorError
 
 
@@ -69,6 +70,9 @@ def register(subparsers) -> None:
     b.add_argument("--design", choices=("sobol", "lhs"), default=dd.method,
                    help=f"space-filling design (default {dd.method})")
     b.add_argument("--resolution", default="default", help="mesh preset of the FE runs (default 'default')")
+    b.add_argument("--strain-layer", choices=tuple(STRAIN_LAYERS), default=DEFAULT_STRAIN_LAYER,
+                   help=f"wall layer of the FE runs' strains, recorded in metadata.json (default {DEFAULT_STRAIN_LAYER}); "
+                        "the outer layers want a mesh with two elements through the wall (docs/simulator.md)")
     b.add_argument("--base", choices=("sliding", "clamped"), default="sliding",
                    help="basal boundary condition (default sliding, as the 'chapter' emulator)")
     b.add_argument("--edp", type=float, default=None, help="EDP (mmHg) when not varied (default 8)")
@@ -227,7 +231,8 @@ def _build(args) -> int:
         alpha_endo=CHAPTER_ANGLES[0] if args.alpha_endo is None else args.alpha_endo,
         alpha_epi=CHAPTER_ANGLES[1] if args.alpha_epi is None else args.alpha_epi,
         bounds=parse_bounds(args.bound), units=args.units, workers=args.workers, seed=args.seed,
-        config=training_config(args, seed=args.seed), name=args.name, prior=args.prior, log=print)
+        config=training_config(args, seed=args.seed), name=args.name, prior=args.prior, log=print,
+        strain_layer=args.strain_layer)
     print(format_info(emu.metadata))
     return 0
 

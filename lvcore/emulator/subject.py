@@ -54,7 +54,8 @@ from lvcore.emulator.subject_geometry import (GEOMETRY_FILE, MESH_SUFFIXES, VOLU
 from lvcore.emulator.subject_prior import choose_prior, describe_prior
 from lvcore.emulator.subject_runs import CHECKPOINT_ROWS, RUNS_FILE, SimulatedRows, simulate_rows
 from lvcore.exceptions import EmulatorError
-from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import ANGLE_NAMES, DEFAULT_STRAIN_LAYER, EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import strain_layer as canonical_strain_layer
 
 #: Input groups of ``--inputs``: θ (always), the EDP, the two fibre angles.
 INPUT_GROUPS = {"theta": THETA_NAMES, EDP_NAME: (EDP_NAME,), "angles": ANGLE_NAMES}
@@ -201,7 +202,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                            workers: int = 2, seed: int = 0, config=None, name: str | None = None,
                            prior: str = "auto", log: Callable[[str], None] | None = None,
                            progress: Callable[[int, int], None] | None = None,
-                           stop: Callable[[], bool] | None = None):
+                           stop: Callable[[], bool] | None = None, strain_layer: str = DEFAULT_STRAIN_LAYER):
     """Build, validate and save a subject-specific emulator (see the module docstring).
 
     Parameters
@@ -242,6 +243,9 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     stop : callable, optional
         Asked as every chunk of FE runs returns; True stops the build with an
         :class:`~lvcore.exceptions.EmulatorError`.
+    strain_layer : str
+        The wall layer of the FE runs' strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`; default the inner
+        half), recorded in the emulator's metadata; a prior mean must have the same layer.
 
     The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) as every chunk returns, so a build that
     fails, is stopped or killed keeps them, and a new build of the same design into ``out`` resumes from them.
@@ -271,13 +275,17 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     for w in geo.warnings:
         say(f"  warning: {w}")
 
-    prior_mean, prior_record = choose_prior(space, section, prior)
+    try:
+        strain_layer = canonical_strain_layer(strain_layer, "--strain-layer")
+    except ValueError as err:
+        raise EmulatorError(str(err)) from None
+    prior_mean, prior_record = choose_prior(space, section, prior, strain_layer=strain_layer)
     say(_prior_line(prior_mean, prior_record))
     points, parts = design_rows(space, design, seed)
     say(f"design: {design.total} {design.method} points over {list(space.names)} "
         f"({design.n_train} train / {design.n_valid} validation / {design.n_test} held-out test), "
-        f"{resolution} mesh, {base} base, {workers} worker(s)")
-    runs = simulate_rows(space, points, section, resolution=resolution, workers=workers,
+        f"{resolution} mesh, {base} base, {strain_layer} strains, {workers} worker(s)")
+    runs = simulate_rows(space, points, section, resolution=resolution, workers=workers, strain_layer=strain_layer,
                          checkpoint=out / RUNS_FILE, progress=progress, stop=stop)
     n_failed = int(np.sum(~runs.converged))
     say(f"FE runs: {runs.converged.sum()} of {design.total} converged in {runs.wall_s:.1f} s "
@@ -286,7 +294,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
 
     t_train0 = time.perf_counter()
     name = name or f"subject-{Path(geo.source).stem if geo.kind != 'default' else 'default'}"
-    emu = _train(space, sets, name=name, resolution=resolution, n_failed=n_failed,
+    emu = _train(space, sets, name=name, resolution=resolution, n_failed=n_failed, strain_layer=strain_layer,
                  config=config or default_training_config(seed), log=log, prior_mean=prior_mean)
     t_train = time.perf_counter() - t_train0
     emu.metadata["subject"] = {
@@ -338,13 +346,13 @@ def _converged_sets(points: np.ndarray, runs: SimulatedRows, parts: Mapping, out
 
 
 def _train(space: ParameterSpace, sets: Mapping, *, name: str, resolution: str, n_failed: int, config, log,
-           prior_mean):
+           prior_mean, strain_layer: str = DEFAULT_STRAIN_LAYER):
     """Train the network on the training rows (validation rows: early stopping; test rows: held-out accuracy)."""
     from lvcore.campaigns.runner import simulator_version
     from lvcore.emulator.training import train_emulator
 
     source = {"space": space.to_dict(), "resolution": [resolution], "simulator_versions": [simulator_version()],
-              "forward": ["simulator"], "n_failed_excluded": n_failed}
+              "forward": ["simulator"], "n_failed_excluded": n_failed, "strain_layer": strain_layer}
     return train_emulator(*sets["train"], *sets["valid"], input_names=space.names, name=name, lower=space.lower,
                           upper=space.upper, fixed=space.fixed_dict(), config=config, x_test=sets["test"][0],
                           y_test=sets["test"][1], source=source, log=log, prior=prior_mean)

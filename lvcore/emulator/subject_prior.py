@@ -11,14 +11,18 @@ from typing import Mapping
 import numpy as np
 
 from lvcore.core.space import ParameterSpace
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER
 from lvcore.emulator.subject_geometry import subject_template_nodes
 from lvcore.exceptions import EmulatorError
 
 
-def _prior_mismatch(emu, space: ParameterSpace) -> str | None:
-    """Why ``emu`` cannot be the prior mean of a subject emulator over ``space`` (None: it can)."""
+def _prior_mismatch(emu, space: ParameterSpace, strain_layer: str = DEFAULT_STRAIN_LAYER) -> str | None:
+    """Why ``emu`` cannot be the prior mean of a subject emulator over ``space`` with strains of ``strain_layer``
+    (None: it can)."""
     if emu.is_subject or emu.prior is not None:
         return "it is itself a subject emulator"
+    if emu.strain_layer != strain_layer:
+        return f"its strains are {emu.strain_layer}, the FE runs' {strain_layer}"
     if emu.base != space.base:
         return f"its base is {emu.base}, the FE runs' is {space.base}"
     def inside(name, lo, hi) -> bool:  # [lo, hi] within the emulator's box of input `name` (Emulator.in_box's tolerance)
@@ -55,7 +59,8 @@ def _score_index(name: str) -> int | None:
     return int(name[1:]) - 1 if name.startswith("h") and name[1:].isdigit() and int(name[1:]) > 0 else None
 
 
-def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
+def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto",
+                 strain_layer: str = DEFAULT_STRAIN_LAYER):
     """The prior mean of a subject emulator over ``space`` on geometry ``section``.
 
     The subject's template mesh is split into a size ``s`` and PC scores
@@ -63,7 +68,7 @@ def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
     (:func:`lvcore.geometry.scaling.size_normalised_scores`); the prior is an
     emulator over PC scores (``chapter``, ``angles``, or one on
     ``$LVCORE_EMULATORS``) evaluated there, with LVV times ``s^3``. It must
-    match the FE runs: the same base condition, every varied input within its
+    match the FE runs: the same base condition and strain layer, every varied input within its
     box, the same fixed conditions. ``auto`` takes the matching emulator with
     the fewest inputs; scores outside its box are clipped to it (recorded;
     the network corrects the rest).
@@ -101,7 +106,7 @@ def choose_prior(space: ParameterSpace, section: Mapping, choice: str = "auto"):
                 raise
             rejected[name] = str(err)
             continue
-        why = _prior_mismatch(emu, space)
+        why = _prior_mismatch(emu, space, strain_layer)
         if why is None:
             candidates.append(emu)
         elif choice != "auto":

@@ -15,7 +15,7 @@ import numpy as np
 
 from lvcore.core.space import ParameterSpace
 from lvcore.exceptions import EmulatorError
-from lvcore.domain.outputs import N_OUTPUTS
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, N_OUTPUTS
 
 #: FE runs per batch of a build on one worker (in this process): progress is reported, and the runs done are saved
 #: to :data:`RUNS_FILE`, after each. With a pool every chain chunk (:data:`lvcore.execution.chains.DEFAULT_CHUNK` runs) is.
@@ -53,8 +53,8 @@ class SimulatedRows:
 
 def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, resolution: str = "default",
                   workers: int = 2, checkpoint=None, chunk: int | None = None,
-                  progress: Callable[[int, int], None] | None = None,
-                  stop: Callable[[], bool] | None = None, executor=None) -> SimulatedRows:
+                  progress: Callable[[int, int], None] | None = None, stop: Callable[[], bool] | None = None,
+                  executor=None, strain_layer: str = DEFAULT_STRAIN_LAYER) -> SimulatedRows:
     """Simulate every row of ``x`` (physical units, columns ``space.names``) on ``geometry``.
 
     The FE simulator with warm starts (:meth:`~lvcore.mechanics.forward.SimulatorForward.evaluate_warm`):
@@ -63,8 +63,7 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     a neighbour's converged solution and falling back to a cold solve when that
     fails or when the warm result could differ from the cold solve
     (:func:`lvcore.mechanics.forward.solve_warm`), so the results equal the cold solves within
-    the solver tolerance. Failures
-    are data (NaN rows, ``converged`` False); results come back in the input order.
+    the solver tolerance. Failures are data (NaN rows, ``converged`` False); results come back in the input order.
 
     With ``workers > 1`` the walk is split into continuation chains fed to a
     process pool chunk by chunk (:func:`lvcore.execution.chains.run_chains`: the next
@@ -94,6 +93,8 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
         A running pool of :mod:`lvcore.execution.parallel` to use (not closed), e.g.
         shared by the stages of a build; default one of ``workers`` processes
         is started for the call.
+    strain_layer : str
+        Wall layer of the strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`), in the checkpoint's identity.
     """
     import contextlib
 
@@ -109,14 +110,13 @@ def simulate_rows(space: ParameterSpace, x: np.ndarray, geometry: Mapping, *, re
     chunk = max(1, int(chunk or (DEFAULT_CHUNK if pooled else CHECKPOINT_ROWS)))
     outputs = np.full((n, N_OUTPUTS), np.nan)
     converged = np.zeros(n, dtype=bool)
-    messages = [""] * n
-    seconds = np.zeros(n)
-    signature = _runs_signature(space, geometry, resolution)
+    messages, seconds = [""] * n, np.zeros(n)
+    signature = _runs_signature(space, geometry, resolution, strain_layer)
     done = _resume_rows(checkpoint, signature, x, outputs, converged, messages, seconds)
     if progress is not None and done.any():
         progress(int(done.sum()), n)
     fwd = SimulatorForward(input_names=space.names, conditions=space.fixed_dict(), geometry=dict(geometry),
-                           resolution=resolution, base=space.base, workers=1, warm_start=True)
+                           resolution=resolution, base=space.base, workers=1, warm_start=True, strain_layer=strain_layer)
 
     def record(rows) -> None:
         for r in rows:
@@ -192,11 +192,14 @@ def _fe_chunk(forward, points: np.ndarray, keys: Sequence[int], units: np.ndarra
     return solve_in_order(keys, units, seeds, solve)
 
 
-def _runs_signature(space: ParameterSpace, geometry: Mapping, resolution: str) -> str:
+def _runs_signature(space: ParameterSpace, geometry: Mapping, resolution: str,
+                    strain_layer: str = DEFAULT_STRAIN_LAYER) -> str:
     import json
 
-    return json.dumps({"space": space.to_dict(), "geometry": dict(geometry), "resolution": str(resolution)},
-                      sort_keys=True, default=str)
+    key = {"space": space.to_dict(), "geometry": dict(geometry), "resolution": str(resolution)}
+    if strain_layer != DEFAULT_STRAIN_LAYER:  # the default is left out: checkpoints written before still resume
+        key["strain_layer"] = strain_layer
+    return json.dumps(key, sort_keys=True, default=str)
 
 
 def _save_rows(path, signature: str, x, done, outputs, converged, messages, seconds) -> None:
