@@ -393,6 +393,8 @@ def reverdict(workdir: Path, tag: str) -> list[dict]:
     when the run had the floor) and the exit code follows (4 with any flag, 1 when not converged).
     ``exit_at_run`` keeps the code the run returned.
     """
+    from dataclasses import replace
+
     import arviz as az
 
     from lvcore.inference import verdict
@@ -406,8 +408,9 @@ def reverdict(workdir: Path, tag: str) -> list[dict]:
         idata = az.from_netcdf(rec["netcdf"] if Path(rec["netcdf"]).is_file() else out / Path(rec["netcdf"]).name)
         floor = (rec.get("geometry") or {}).get("representation_error")
 
-        class _Fw:
-            representation = load_representation_error(5) if floor else None
+        class _Fw:   # the floor the run used: the asset's covariance at the mesh's own factor (strain_scale)
+            representation = (replace(load_representation_error(5), strain_scale=float(floor.get("strain_scale", 1.0)))
+                              if floor else None)
 
         class _Res:
             model = rec["model"]

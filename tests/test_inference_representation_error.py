@@ -209,12 +209,21 @@ def test_a_mesh_gets_the_floor_and_pc_scores_do_not():
     np.testing.assert_allclose(sd[1:], np.sqrt(0.035 ** 2 + np.diag(rep.strain_cov)))
 
 
-def test_calibrate_with_a_mesh_records_the_floor(tmp_path):
+def test_calibrate_with_a_mesh_records_the_floor(tmp_path, monkeypatch):
     """lvcore calibrate --geometry MESH: summary.json's geometry.representation_error is the floor's record;
-    --representation-error off records None."""
+    --representation-error off records None. The floored forward model reaches the posterior predictive of the
+    .nc file and the posterior-predictive check (their noise: tests/test_inference_floor_consumers.py)."""
     from lvcore.cli import main
+    from lvcore.inference import diagnostics, plausibility
+    from lvcore.inference.models import representation_error
     from lvcore.resources import asset_path
 
+    seen = {"y_rep": [], "ppc": []}
+    real_idata, real_check = diagnostics.to_inference_data, plausibility.check_result
+    monkeypatch.setattr(diagnostics, "to_inference_data",
+                        lambda *a, **k: seen["y_rep"].append(k.get("forward")) or real_idata(*a, **k))
+    monkeypatch.setattr(plausibility, "check_result",
+                        lambda *a, **k: seen["ppc"].append(k.get("forward")) or real_check(*a, **k))
     mesh = asset_path("volunteers", "SYNTHETIC_HV1_geometry.vtu")
     data = asset_path("volunteers", "SYNTHETIC_HV1_measured.csv")
     for mode in ("floor", "off"):
@@ -232,8 +241,11 @@ def test_calibrate_with_a_mesh_records_the_floor(tmp_path):
             fit = rep["projection_fit"]
             assert rep["strain_scale"] == pytest.approx(
                 (fit["intercept"] + fit["slope"] * rep["projection_mse_cm2"]) / fit["mean"])
+            for k in seen:
+                assert representation_error(seen[k][-1]).strain_scale == pytest.approx(rep["strain_scale"])
         else:
             assert rec["representation_error"] is None
+            assert all(representation_error(seen[k][-1]) is None for k in seen)
 
 
 @pytest.mark.slow

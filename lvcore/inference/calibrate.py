@@ -120,7 +120,7 @@ def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig 
                                                    **kwargs)
     label = getattr(forward, "label", type(forward).__name__)
     idata = diagnostics.to_inference_data(run, y, convergence=conv, sigma_v=sigma_v, forward_label=label,
-                                          extra_attrs=attrs)
+                                          extra_attrs=attrs, forward=forward)
     return CalibrationResult(model, run.method, idata, conv, diagnostics.summary_table(run.samples), run.wall_s,
                              diagnostics.ess_per_second(run))
 

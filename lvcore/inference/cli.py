@@ -444,7 +444,7 @@ def _finish(item, setup: CalibrateSetup, args, extra: dict, consistency: dict) -
         consistency[item.subject] = q.consistency(seed=args.seed)
     v = verdict.run_verdict(res, consistency[item.subject], q.bounds, forward)
     v = v.with_extra("EXTRAPOLATION", [e.split(": ", 1)[1] for e in q.extrapolation])
-    check = plausibility.check_result(res, q.y, q.sigma_v, q.sigma_ref, seed=args.seed)
+    check = plausibility.check_result(res, q.y, q.sigma_v, q.sigma_ref, seed=args.seed, forward=forward)
     out.mkdir(parents=True, exist_ok=True)
     derived_rec = None
     if setup.n_derived:

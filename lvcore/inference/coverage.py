@@ -109,7 +109,7 @@ def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.Sampler
     def constrain(z, y, c=None):
         return info.postprocess_fn(*args(y, c))(z)
 
-    return init, sample, constrain
+    return init, sample, constrain, lambda state: state.potential_energy
 
 
 def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
@@ -118,7 +118,68 @@ def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
     kw = lambda c: None if c is None else {"conditions": c}  # noqa: E731
     return (lambda key, y, c=None: kernel.init(key, config.num_warmup, None, (y,), kw(c)),
             lambda state, y, c=None: kernel.sample(state, (y,), kw(c)),
-            lambda z, y, c=None: z)
+            lambda z, y, c=None: z,
+            lambda state: state.main_state.potential_energy)
+
+
+#: The site of :func:`batched_posteriors` that records the sampler's potential energy at each kept draw: NUTS's
+#: ``-log p(z | y)`` at the unconstrained draw (volume, iid), block 4's conditional potential for the blocked
+#: discrepancy sampler (:class:`lvcore.inference.gibbs.PolarGPGibbs`). It shows which likelihood the sampler used.
+POTENTIAL_SITE = "potential_energy"
+
+
+def batch_conditions(forwards) -> dict:
+    """The run-time values (:func:`lvcore.inference.samplers.runtime_conditions`) of one forward model per data
+    set, stacked along a leading data-set axis: the ``conditions`` of :func:`batched_posteriors` that give each
+    data set exactly the likelihood of its own forward model (its PC scores and, for a mesh, its
+    representation-floor factor ``floor_scale``).
+
+    Raises
+    ------
+    ValueError
+        If a forward model's conditions cannot be passed at run time, or the forward models do not share one
+        compiled program (another emulator, another floor covariance, a floor on some but not all).
+    """
+    from lvcore.inference.compiled_samplers import _template_key
+
+    values, keys = [], set()
+    for f in forwards:
+        template, v = samplers.runtime_conditions(f)
+        if v is None:
+            raise ValueError(f"batch_conditions: forward model '{getattr(f, 'label', f)}' has no run-time conditions "
+                             "(an emulator forward model is needed)")
+        keys.add(_template_key(template))
+        values.append(v)
+    if len(keys) != 1:
+        raise ValueError("batch_conditions: the forward models differ in more than their run-time conditions "
+                         "(emulator, inputs or representation floor)")
+    return {k: jnp.stack([jnp.asarray(v[k], dtype=jnp.float64) for v in values]) for k in values[0]}
+
+
+def _stacked_conditions(forward, conditions, n: int) -> dict:
+    """``conditions`` of :func:`batched_posteriors` as run-time values with a leading data-set axis, checked
+    against ``forward``'s own (:func:`lvcore.inference.samplers.runtime_conditions`)."""
+    template, values = samplers.runtime_conditions(forward)
+    if values is None or "scale" in values:
+        raise ValueError("per-data-set conditions need an emulator forward model without a geometry scale")
+    if not isinstance(conditions, dict):
+        if "floor_scale" in values:
+            raise ValueError("per-data-set conditions of a forward model with a representation floor must give each "
+                             "data set's floor factor too: pass coverage.batch_conditions(forwards), or a dict with "
+                             "'conditions' (n, k) and 'floor_scale' (n,)")
+        conditions = {"conditions": conditions}
+    if set(conditions) != set(values):
+        raise ValueError(f"conditions must hold {sorted(values)} (the forward model's run-time values), got "
+                         f"{sorted(conditions)}")
+    out = {}
+    for k, ref in values.items():
+        a, want = jnp.asarray(conditions[k], dtype=jnp.float64), (n,) + tuple(jnp.shape(ref))
+        if a.size != int(np.prod(want)):
+            floor = f" and floor_scale ({n},)" if "floor_scale" in values else ""
+            raise ValueError(f"conditions must have shape ({n}, {values['conditions'].shape[0]}) "
+                             f"({', '.join(template._keys)}){floor}, got {k} of shape {a.shape}")
+        out[k] = a.reshape(want)
+    return out
 
 
 def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.SamplerConfig,
@@ -133,16 +194,24 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
     group_by_chain : bool
         Return arrays of shape (n_datasets, num_chains, num_samples, ...) instead
         of (n_datasets, num_chains * num_samples, ...).
-    conditions : array_like, shape (n_datasets, k), optional
+    conditions : array_like, shape (n_datasets, k), or dict, optional
         Per data set, the forward model's run-time conditions (the values of
         :func:`lvcore.inference.samplers.runtime_conditions`, e.g. each data
         set's PC scores): data sets of several geometries then share one
         compiled program. ``forward`` must be an emulator forward model
-        (without a geometry scale); its own conditions are replaced.
+        (without a geometry scale); its own conditions are replaced. A forward
+        model with a mesh's representation floor needs each data set's floor
+        factor as well: a dict of all run-time values with a leading data-set axis,
+        ``{"conditions": (n, k), "floor_scale": (n,)}``, as :func:`batch_conditions`
+        makes from one forward model per data set (each data set then gets the
+        posterior its own forward model gives in :func:`lvcore.inference.samplers.run_model`).
     """
     models.check_traceable(forward)
     ys = jnp.asarray(ys, dtype=jnp.float64)
     n = ys.shape[0]
+    # every run-time value (PC scores and a mesh's floor factor) per data set, so each data set's likelihood is
+    # that of its own forward model
+    conds = _stacked_conditions(forward, conditions, n) if conditions is not None else {"none": jnp.zeros((n, 0))}
     key = (id(forward), model_name, config, float(sigma_v), tuple(sites), conditions is not None)
     hit = _COMPILED.get(key)
     if hit is not None and hit[0] is forward:  # the same sampler again (another batch): no new trace/compile
@@ -152,18 +221,10 @@ def batched_posteriors(forward, model_name: str, ys, keys, config: samplers.Samp
         if len(_COMPILED) >= 8:
             _COMPILED.pop(next(iter(_COMPILED)))
         _COMPILED[key] = (forward, run)
-    if conditions is not None:
-        template, values = samplers.runtime_conditions(forward)
-        conds = jnp.asarray(conditions, dtype=jnp.float64).reshape(n, -1)
-        if conds.shape[1] != values["conditions"].shape[0]:
-            raise ValueError(f"conditions must have shape ({n}, {values['conditions'].shape[0]}) "
-                             f"({', '.join(template._keys)}), got {tuple(jnp.shape(conditions))}")
-    else:
-        conds = jnp.zeros((n, 0))
     chain_keys = jax.vmap(lambda k: jax.random.split(k, config.num_chains))(keys)
     flat_keys = chain_keys.reshape((n * config.num_chains,) + chain_keys.shape[2:])
     flat_y = jnp.repeat(ys, config.num_chains, axis=0)
-    flat_c = jnp.repeat(conds, config.num_chains, axis=0)
+    flat_c = {k: jnp.repeat(v, config.num_chains, axis=0) for k, v in conds.items()}
     draws = run(flat_keys, flat_y, flat_c)
     shape = (n, config.num_chains, config.num_samples) if group_by_chain else (n, -1)
     return {k: np.asarray(v).reshape(shape + np.shape(v)[2:]) for k, v in draws.items()}
@@ -177,19 +238,17 @@ _COMPILED: dict = {}
 def _batched_sampler(forward, model_name, y0, config, sigma_v, sites, with_conditions: bool):
     """The jitted ``(keys, ys, conditions) -> draws`` of :func:`batched_posteriors`, vmapped over chains."""
     template = None
-    if with_conditions:
+    if with_conditions:   # all run-time values (scores, floor factor) per data set, checked by _stacked_conditions
         template, values = samplers.runtime_conditions(forward)
-        if values is None or "scale" in values:
-            raise ValueError("per-data-set conditions need an emulator forward model without a geometry scale")
-        cond_of = lambda c: {"conditions": c}  # noqa: E731
-        c0 = values["conditions"]
+        cond_of = lambda c: c  # noqa: E731
+        c0 = values
     else:
         cond_of = lambda c: None  # noqa: E731
         c0 = None
     if model_name == "discrepancy":
-        init, sample, constrain = _gibbs_fns(forward, sigma_v, config)
+        init, sample, constrain, energy = _gibbs_fns(forward, sigma_v, config)
     else:
-        init, sample, constrain = _nuts_fns(model_name, forward, sigma_v, config, y0, template, cond_of(c0))
+        init, sample, constrain, energy = _nuts_fns(model_name, forward, sigma_v, config, y0, template, cond_of(c0))
     total = config.num_warmup + config.num_samples
 
     def one_chain(key, y, cv):
@@ -199,7 +258,7 @@ def _batched_sampler(forward, model_name, y0, config, sigma_v, sites, with_condi
         def body(st, _):
             st = sample(st, y, c)
             zc = constrain(st.z, y, c)
-            return st, {k: zc[k] for k in sites}
+            return st, {k: energy(st) if k == POTENTIAL_SITE else zc[k] for k in sites}
 
         _, draws = jax.lax.scan(body, state, None, length=total)
         return {k: v[config.num_warmup:] for k, v in draws.items()}
@@ -229,4 +288,5 @@ def coverage_study(forward, model_name: str = "iid", n_datasets: int = 50, *, le
     return CoverageResult(model_name, n_datasets, level, per, float(hits.mean()), wall, hits)
 
 
-__all__ = ["CoverageResult", "coverage_study", "batched_posteriors", "simulate_data", "prior_draw"]
+__all__ = ["CoverageResult", "coverage_study", "batched_posteriors", "batch_conditions", "POTENTIAL_SITE",
+           "simulate_data", "prior_draw"]

@@ -176,8 +176,14 @@ def ess_per_second(run: samplers.SamplerRun, var_names=THETA_NAMES) -> dict:
     return out
 
 
-def posterior_predictive(samples: dict, sigma_v: float, rng: np.random.Generator) -> np.ndarray:
+def posterior_predictive(samples: dict, sigma_v: float, rng: np.random.Generator, forward=None,
+                         model: str | None = None) -> np.ndarray:
     """Replicated data ``(..., 25)`` under the model's likelihood, one replicate per draw.
+
+    The noise is the likelihood's own (:func:`lvcore.inference.models.lvv_sd`,
+    :func:`lvcore.inference.models.strain_noise_covariance`), so a forward model that carries the shape
+    model's representation error (a mesh's floor, ``--geometry infer``) widens the replicates as it widened the
+    likelihood the sampler used.
 
     Parameters
     ----------
@@ -188,34 +194,55 @@ def posterior_predictive(samples: dict, sigma_v: float, rng: np.random.Generator
     sigma_v : float
         LVV noise sd (mL).
     rng : numpy Generator
+    forward : Forward, optional
+        The forward model the posterior was sampled with; its ``representation`` (if any) is the floor.
+    model : {"volume", "iid", "discrepancy"}, optional
+        The likelihood; default: read from ``samples`` (``disc``: discrepancy, ``sigma_s2``: iid, else volume).
 
     Returns
     -------
     ndarray
-        ``y_rep[..., 0] ~ N(eta_0, sigma_v^2)``; strains ``~ N(eta_i + b_i + v, sigma_S^2)``
-        (without ``b, v`` for iid). The volume-only model does not model the
-        strains: there they are ``eta`` without noise.
+        ``y_rep[..., 0] ~ N(eta_0, lvv_sd^2)`` (``sigma_v``, widened by the floor's ``r_V eta_0``); strains
+        ``~ MVN(eta, sigma_S^2 I + Sigma_rep)`` (iid; without a floor ``N(eta, sigma_S^2)``) or
+        ``~ N(eta + b + v, sigma_S^2)`` (discrepancy: the drawn b already holds ``Sigma_rep``,
+        ``b ~ N(0, K + Sigma_rep)``). The volume-only model does not model the strains: there they are ``eta``
+        without noise.
     """
-    eta = np.asarray(samples["eta"])
+    if model is None:
+        model = "discrepancy" if "disc" in samples else "iid" if "sigma_s2" in samples else "volume"
+    eta = np.asarray(samples["eta"], dtype=float)
     y_rep = eta.copy()
-    y_rep[..., 0] += sigma_v * rng.standard_normal(eta.shape[:-1])
-    if "sigma_s2" in samples:
+    lvv_sd = np.asarray(models.lvv_sd(eta[..., 0], float(sigma_v), forward), dtype=float)
+    y_rep[..., 0] += lvv_sd * rng.standard_normal(eta.shape[:-1])
+    if model != "volume":
         mean = eta[..., 1:]
-        if "disc" in samples:
+        if model == "discrepancy":
             mean = mean + np.asarray(samples["disc"]) + np.asarray(samples["v"])[..., None]
-        y_rep[..., 1:] = mean + np.sqrt(np.asarray(samples["sigma_s2"]))[..., None] * rng.standard_normal(mean.shape)
+        cov = np.asarray(models.strain_noise_covariance(np.asarray(samples["sigma_s2"], dtype=float), forward,
+                                                        model), dtype=float)
+        y_rep[..., 1:] = mean + _gaussian_noise(cov, rng.standard_normal(mean.shape))
     return y_rep
+
+
+def _gaussian_noise(cov, z):
+    """``L z`` with ``L L^T = cov`` (``(..., n, n)``, ``z`` of shape ``(..., n)``): zero-mean Gaussian draws of
+    covariance ``cov``; a diagonal ``cov`` gives ``sqrt(diag) z`` exactly (the iid formula, bit for bit)."""
+    diag = np.diagonal(cov, axis1=-2, axis2=-1)
+    if not np.any(cov - diag[..., None] * np.eye(cov.shape[-1])):
+        return np.sqrt(diag) * z
+    return np.einsum("...ij,...j->...i", np.linalg.cholesky(cov), z)
 
 
 def to_inference_data(run: samplers.SamplerRun, y, *, convergence: Convergence | None = None,
                       sigma_v: float = SIGMA_V_ML, forward_label: str = "",
-                      extra_attrs: dict | None = None) -> az.InferenceData:
+                      extra_attrs: dict | None = None, forward=None) -> az.InferenceData:
     """ArviZ InferenceData with posterior, posterior_predictive, observed_data and sample_stats.
 
     ``eta`` (forward-model outputs at every draw) has dimension ``output``
     (LVV, 24 strain names); ``disc`` (the discrepancy b) and ``disc_tilde`` have
-    dimension ``region``. For the volume-only model the strain part of
-    ``y_rep`` is the forward model without noise (strains are not modelled).
+    dimension ``region``. ``y_rep`` is :func:`posterior_predictive` under the run's likelihood with
+    ``forward``'s representation floor, if any (the forward model that ran); for the volume-only model its
+    strain part is the forward model without noise (strains are not modelled).
     """
     posterior = {k: np.asarray(v) for k, v in run.samples.items()}
     coords = {"output": list(OUTPUT_NAMES), "region": list(STRAIN_NAMES)}
@@ -237,7 +264,8 @@ def to_inference_data(run: samplers.SamplerRun, y, *, convergence: Convergence |
     attrs.update(extra_attrs or {})
     return az.from_dict(
         posterior=posterior,
-        posterior_predictive={"y_rep": posterior_predictive(run.samples, sigma_v, np.random.default_rng(1))},
+        posterior_predictive={"y_rep": posterior_predictive(run.samples, sigma_v, np.random.default_rng(1), forward,
+                                                            run.model)},
         observed_data={"y": np.asarray(y, dtype=float)},
         sample_stats={k: np.asarray(v) for k, v in run.sample_stats.items()},
         coords=coords,

@@ -163,17 +163,44 @@ def lvv_sd(eta0, sigma_v, forward=None):
 
 def strain_likelihood(mean, sigma_s2, forward=None):
     """Distribution of the 24 strains: iid ``N(mean, sigma_s2)``, or, when ``forward`` carries a
-    representation error, ``MVN(mean, sigma_s2 I + Sigma_rep)`` (the shape model's known discrepancy)."""
-    rep = representation_error(forward)
-    if rep is None:
+    representation error, ``MVN(mean, sigma_s2 I + Sigma_rep)`` (the shape model's known discrepancy;
+    the covariance of :func:`strain_noise_covariance`)."""
+    if strain_floor(forward) is None:
         return dist.Normal(mean, jnp.sqrt(sigma_s2)).to_event(1)
-    return dist.MultivariateNormal(mean, covariance_matrix=rep.strain_covariance(sigma_s2))
+    return dist.MultivariateNormal(mean, covariance_matrix=strain_noise_covariance(sigma_s2, forward))
 
 
 def strain_rep_covariance(forward):
     """The known strain covariance ``Sigma_rep`` (strain², 24 x 24) the forward model carries, or None."""
     rep = representation_error(forward)
     return None if rep is None else rep.strain_rep_covariance()
+
+
+def strain_floor(forward, model: str = "iid"):
+    """The representation error's covariance that the likelihood ``model`` adds to the strains' own noise
+    (strain², 24 x 24), or None.
+
+    ``iid`` (and the verdict's reference likelihood): ``Sigma_rep`` when ``forward`` carries one.
+    ``discrepancy``: None, ``Sigma_rep`` is a known part of the discrepancy b (:func:`discrepancy_cholesky`),
+    so a posterior draw of b already holds it. ``volume``: None (the strains are not modelled).
+    """
+    if model not in MODEL_NAMES:
+        raise ValueError(f"unknown model '{model}'; choose one of {MODEL_NAMES}")
+    return strain_rep_covariance(forward) if model == "iid" else None
+
+
+def strain_noise_covariance(sigma_s2, forward=None, model: str = "iid"):
+    """Covariance (strain², shape ``sigma_s2.shape + (24, 24)``) of the 24 measured strains about the likelihood's
+    strain mean: ``sigma_s2 I`` plus :func:`strain_floor` (``Sigma_rep`` in the iid model with a floor).
+
+    The one place that composes the strains' noise: the likelihood (:func:`strain_likelihood`), the posterior
+    predictive (:func:`lvcore.inference.diagnostics.posterior_predictive`) and the verdict
+    (:mod:`lvcore.inference.verdict`) all read it. JAX-traceable; ``sigma_s2`` may have leading (draw) axes.
+    """
+    s2 = jnp.asarray(sigma_s2)
+    cov = s2[..., None, None] * jnp.eye(24)
+    floor = strain_floor(forward, model)
+    return cov if floor is None else cov + floor
 
 
 def discrepancy_cholesky(hyper, nugget: float = kernels.DEFAULT_NUGGET, rep_cov=None):
@@ -303,5 +330,6 @@ __all__ = [
     "parameter_meaning", "MODEL_LABELS", "SIGMA_V_ML", "THETA_BOUNDS", "ANGLE_BOUNDS", "check_traceable", "HYPER_NAMES", "MODEL_NAMES", "MODELS",
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model", "representation_error", "lvv_sd",
-    "strain_likelihood", "extra_terms", "strain_rep_covariance", "discrepancy_cholesky",
+    "strain_likelihood", "extra_terms", "strain_rep_covariance", "strain_floor", "strain_noise_covariance",
+    "discrepancy_cholesky",
 ]

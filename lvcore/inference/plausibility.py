@@ -6,6 +6,10 @@ of the discrepancy model) are compared with the data. Replicates are
 
     y_rep_0 = eta_0 + N(0, sigma_V^2),   y_rep_i = eta_i + N(0, sigma_ref^2)  (i = 1..24)
 
+(with a forward model that carries the shape model's representation error, a mesh's floor or
+``--geometry infer``, the likelihood's floor is added as everywhere else:
+``y_rep_0 ~ N(eta_0, sigma_V^2 + (r_V eta_0)^2)``, strains ``~ MVN(eta, sigma_ref^2 I + Sigma_rep)``,
+:func:`lvcore.inference.diagnostics.posterior_predictive` of the iid likelihood)
 with ``sigma_V`` the model's fixed LVV noise and ``sigma_ref`` a *reference*
 strain noise (:data:`DEFAULT_SIGMA_REF`: the posterior sigma_S of the eight
 SYNTHETIC volunteers with their own geometry, 0.034, rounded up). The
@@ -74,7 +78,7 @@ class PlausibilityCheck:
 
 
 def posterior_predictive_check(y, eta_draws, sigma_v: float, sigma_ref: float = DEFAULT_SIGMA_REF,
-                               seed: int = 0) -> PlausibilityCheck:
+                               seed: int = 0, forward=None) -> PlausibilityCheck:
     """Posterior-predictive p-values and plausibility flags (see the module docstring).
 
     Parameters
@@ -87,14 +91,16 @@ def posterior_predictive_check(y, eta_draws, sigma_v: float, sigma_ref: float = 
         LVV noise sd (mL).
     sigma_ref : float
         Reference strain noise sd.
+    forward : Forward, optional
+        The forward model that ran; its representation floor (if any) widens the replicates.
     """
     from lvcore.inference.diagnostics import posterior_predictive
 
     y = np.asarray(y, float).reshape(-1)
     eta = np.asarray(eta_draws, float).reshape(-1, y.size)
-    # the iid model's replicate formula, with sigma_S^2 fixed at the reference noise
+    # the iid likelihood's replicates (its floor included), with sigma_S^2 fixed at the reference noise
     y_rep = posterior_predictive({"eta": eta, "sigma_s2": np.full(eta.shape[0], float(sigma_ref) ** 2)},
-                                 float(sigma_v), np.random.default_rng(seed))
+                                 float(sigma_v), np.random.default_rng(seed), forward, "iid")
     n = eta.shape[0]
     upper = (np.sum(y_rep >= y, axis=0) + 1) / (n + 1)
     lower = (np.sum(y_rep <= y, axis=0) + 1) / (n + 1)
@@ -123,10 +129,12 @@ def posterior_predictive_check(y, eta_draws, sigma_v: float, sigma_ref: float = 
     return PlausibilityCheck(p_values=p, flags=tuple(flags), sigma_ref=float(sigma_ref), n_draws=int(n))
 
 
-def check_result(result, y, sigma_v: float, sigma_ref: float = DEFAULT_SIGMA_REF, seed: int = 0) -> PlausibilityCheck:
-    """:func:`posterior_predictive_check` on a :class:`~lvcore.inference.calibrate.CalibrationResult`."""
+def check_result(result, y, sigma_v: float, sigma_ref: float = DEFAULT_SIGMA_REF, seed: int = 0,
+                 forward=None) -> PlausibilityCheck:
+    """:func:`posterior_predictive_check` on a :class:`~lvcore.inference.calibrate.CalibrationResult`
+    (``forward``: the forward model that ran, for its representation floor)."""
     eta = np.asarray(result.idata.posterior["eta"])
-    return posterior_predictive_check(y, eta, sigma_v, sigma_ref, seed)
+    return posterior_predictive_check(y, eta, sigma_v, sigma_ref, seed, forward)
 
 
 __all__ = ["DEFAULT_SIGMA_REF", "ALPHA", "MIN_BAD_STRAINS", "PlausibilityCheck", "posterior_predictive_check",

@@ -189,12 +189,6 @@ class RepresentationError:
 
         return jnp.asarray(self.strain_scale) * jnp.asarray(self.strain_cov)
 
-    def strain_covariance(self, sigma_s2):
-        """``sigma_s2 * I + strain_scale * strain_cov`` (JAX-traceable in ``sigma_s2`` and ``strain_scale``)."""
-        import jax.numpy as jnp
-
-        return jnp.asarray(sigma_s2) * jnp.eye(24) + self.strain_rep_covariance()
-
     def lvv_sd(self, sigma_v, eta0):
         """LVV sd (mL) with the floor: ``sqrt(sigma_v^2 + (lvv_rel_sd eta0)^2)`` (JAX-traceable)."""
         import jax.numpy as jnp

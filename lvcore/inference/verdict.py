@@ -296,13 +296,13 @@ def best_fit(y, forward, sigma_v: float, sigma_ref: float, infer_angles: bool = 
 
 def output_sds(eta, sigma_v: float, sigma_ref: float, forward=None) -> np.ndarray:
     """Marginal sd of each of the 25 outputs in the consistency likelihood: ``sigma_v`` and ``sigma_ref``,
-    widened by the shape model's representation error when ``forward`` carries one (``--geometry infer``)."""
-    from lvcore.inference.models import representation_error
+    widened by the shape model's representation error when ``forward`` carries one (a mesh's floor,
+    ``--geometry infer``): the iid likelihood's :func:`lvcore.inference.models.lvv_sd` and
+    :func:`lvcore.inference.models.strain_noise_covariance` at ``sigma_S = sigma_ref``."""
+    from lvcore.inference.models import lvv_sd, strain_noise_covariance
 
-    rep = representation_error(forward)
-    if rep is None:
-        return np.r_[float(sigma_v), np.full(24, float(sigma_ref))]
-    return np.r_[float(rep.lvv_sd(sigma_v, float(eta[0]))), np.sqrt(float(sigma_ref) ** 2 + np.diag(rep.effective_strain_cov))]
+    cov = np.asarray(strain_noise_covariance(float(sigma_ref) ** 2, forward, "iid"), dtype=float)
+    return np.r_[float(lvv_sd(float(eta[0]), float(sigma_v), forward)), np.sqrt(np.diag(cov))]
 
 
 def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None, infer_angles: bool = False,
@@ -329,7 +329,7 @@ def consistency_check(y, forward, sigma_v: float, sigma_ref: float | None = None
                      f"against a reference noise of {sigma_ref:g}): volume and strains imply different stiffness, "
                      "the geometry is not the subject's, or the strains use another convention")
     # the data-only checks (signs, no deformation) of the posterior-predictive module, at the best fit
-    data_only = plausibility.posterior_predictive_check(y, eta[None, :], sigma_v, sigma_ref)
+    data_only = plausibility.posterior_predictive_check(y, eta[None, :], sigma_v, sigma_ref, forward=forward)
     flags += [f for f in data_only.flags if "sign opposite" in f or "within" in f]
     i, p_s = residual_structure(y[1:] - eta[1:], seed=seed)
     structure = {"moran_i": i, "p_value": p_s, "residual_rms": float(np.sqrt(np.mean((y[1:] - eta[1:]) ** 2)))}
@@ -362,7 +362,7 @@ def posterior_misfit(result, forward=None, seed: int = 0) -> tuple[dict, list[st
         ``moran_i``, ``p_value``, ``residual_rms`` (unwhitened), or empty when not checked.
     flags : list of str
     """
-    from lvcore.inference.models import representation_error
+    from lvcore.inference.models import strain_floor, strain_noise_covariance
 
     idata = result.idata
     post = idata.posterior
@@ -376,11 +376,12 @@ def posterior_misfit(result, forward=None, seed: int = 0) -> tuple[dict, list[st
     if "v" in post:
         mean = mean + np.asarray(post["v"], float).reshape(-1, 1)
     r = y[1:] - mean.mean(axis=0)
-    cov = float(np.median(np.asarray(post["sigma_s2"], float))) * np.eye(r.size)
-    # the discrepancy model's b (``disc``) already holds the representation error (models.discrepancy_model)
-    rep = None if "disc" in post else representation_error(forward)
-    if rep is not None:
-        cov = cov + rep.effective_strain_cov
+    # the likelihood's own strain covariance: sigma_S^2 I, plus Sigma_rep in the iid model with a floor (the
+    # discrepancy model's b already holds it: models.strain_floor)
+    model = "discrepancy" if "disc" in post else "iid"
+    cov = np.asarray(strain_noise_covariance(float(np.median(np.asarray(post["sigma_s2"], float))), forward, model),
+                     dtype=float)
+    rep = strain_floor(forward, model)
     lam, u = np.linalg.eigh(cov)
     w = u @ ((u.T @ r) / np.sqrt(np.maximum(lam, 1e-300)))
     moran_i, p = residual_structure(w, seed=seed)
