@@ -10,7 +10,7 @@ import numpy as np
 import streamlit as st
 
 import lvcore  # noqa: F401  (float64)
-from lvcore.app import freshness, physiology_panel
+from lvcore.app import cohort_panel, freshness, physiology_panel
 from lvcore.app.emulators import cached_emulator
 from lvcore.app import warmup as app_warmup
 from lvcore.app.subject_prepare import floor_caption
@@ -357,3 +357,6 @@ if job is not None and job["done"]:
                 st.download_button(name, partial(fig.to_html, include_plotlyjs=True),
                                    file_name=f"{cal.file_stem(job['subject'])}_{name}", mime="text/html",
                                    key=f"html_{name}")
+
+# --------------------------------------------------------------------------- a cohort: one joint posterior
+cohort_panel.show(st)

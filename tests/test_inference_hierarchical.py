@@ -171,6 +171,33 @@ def test_batched_and_per_subject_models_have_the_same_density(cohort4, emulator)
     assert abs(density(y2, batch) - vec) > 1.0
 
 
+def test_each_subject_keeps_its_own_geometry_route(tmp_path, emulator):
+    """Subjects with an inferred geometry (PC scores and scale sampled per subject, observed through their own
+    reference volume) and with given scores share one model: each subject's latent sites and data are its own."""
+    import numpyro
+
+    from lvcore.inference.request import build_request
+
+    (tmp_path / "h.json").write_text('{"h": [0.5, 0, 0, 0, 0], "scale": 1.05}')
+    header = ["subject", "reference_volume_ml", "geometry", *OUTPUT_COLUMNS]
+    rows = [["S1", 60, "infer", *_data(140)], ["S2", 90, "infer", *_data(170)], ["S3", "", "h.json", *_data()]]
+    read = co.read_cohort(_write(tmp_path, header, rows))
+    members = []
+    for r in read.rows:
+        g = co.resolve_subject_geometry(read, r.subject, None, n_pc=5)
+        kw = {"measures": r.measures} if g == "infer" else {}
+        q = build_request(emulator, "chapter", g, row=r, **kw)
+        members.append(hi.CohortMember(r.subject, q.y, q.forward))
+    assert hi.batched(members) is None   # an inferred geometry: the loop over the subjects
+    y = np.stack([m.y for m in members])
+    with numpyro.handlers.seed(rng_seed=0):
+        tr = numpyro.handlers.trace(hi.hierarchical_model).get_trace(y, members=members)
+    for i in (0, 1):
+        assert f"s{i}/h1" in tr and f"s{i}/log_scale" in tr
+    assert "s2/h1" not in tr and all(f"s{i}/lvv_obs" in tr for i in range(3))
+    assert float(tr["s0/lvv_obs"]["value"]) == 140.0 and float(tr["s1/lvv_obs"]["value"]) == 170.0
+
+
 @pytest.fixture(scope="module")
 def analytic_run():
     members = _analytic_members([0.4, 0.6, 0.9, 1.3, 0.7])
@@ -204,20 +231,25 @@ def test_a_subjects_permuted_data_change_its_posterior(analytic_run):
     assert med["after"][3] < 0.6 < med["before"][3]
 
 
+def two_group_run(n_draws: int = 500) -> hi.HierarchicalRun:
+    """Made-up draws (not a calibration) of 3 subjects in groups A, B: group B's mu_a is A's + log 2."""
+    rng = np.random.default_rng(0)
+    mu = rng.normal(0.0, 0.05, (2, n_draws, 2, 4))
+    mu[..., 1, 0] += np.log(2.0)
+    samples = {"mu": mu, "tau": np.abs(rng.normal(0.3, 0.01, (2, n_draws, 4))),
+               "corr": np.broadcast_to(np.eye(4), (2, n_draws, 4, 4)),
+               "log_theta": rng.normal(0, 0.1, (2, n_draws, 3, 4))}
+    return hi.HierarchicalRun(("S1", "S2", "S3"), ("A", "B"), np.array([0, 1, 1]), "volume", samples,
+                              {"diverging": np.zeros((2, n_draws), bool)})
+
+
 def test_shrinkage_and_group_difference_are_computed_from_the_draws():
     hier = {"S": {k: {"q05": 1.0, "median": 1.5, "q95": 2.0} for k in THETA_NAMES}}
     sep = {"S": {k: {"q05": 0.5, "median": 1.5, "q95": 4.5} for k in THETA_NAMES}}
     shr = hi.shrinkage(hier, sep)
     assert shr["per_subject"]["S"]["a"]["shrinkage"] == pytest.approx(0.75)
     assert shr["median_narrowing"]["a"] == pytest.approx(4.0)
-    rng = np.random.default_rng(0)
-    mu = rng.normal(0.0, 0.05, (2, 500, 2, 4))
-    mu[..., 1, 0] += np.log(2.0)
-    samples = {"mu": mu, "tau": np.abs(rng.normal(0.3, 0.01, (2, 500, 4))),
-               "corr": np.broadcast_to(np.eye(4), (2, 500, 4, 4)), "log_theta": rng.normal(0, 0.1, (2, 500, 3, 4))}
-    run = hi.HierarchicalRun(("a", "b", "c"), ("A", "B"), np.array([0, 1, 1]), "volume", samples,
-                             {"diverging": np.zeros((2, 500), bool)})
-    d = hi.population(run)["differences"]["B - A"]
+    d = hi.population(two_group_run())["differences"]["B - A"]
     assert d["a"]["excludes_zero"] and d["a"]["ratio"]["median"] == pytest.approx(2.0, rel=0.05)
     assert not d["b"]["excludes_zero"]
 

@@ -108,10 +108,27 @@ def separate_fits(members, likelihood: str, config, sigma_v: float, progress=Non
     return out
 
 
-def run_hierarchical_calibrate(args) -> int:
-    """``lvcore calibrate --hierarchical``: the exit code (0, 1 not converged, 4 flagged)."""
+def cohort_args(data, out, **options):
+    """``lvcore calibrate --hierarchical``'s options as the command line parses them (its defaults), for a front
+    end that is not the command line (the app): ``options`` by their destination names, e.g. ``warmup=300``,
+    ``geometry="mean"``."""
+    import argparse
+
+    from lvcore.inference.cli import register
+
+    parser = argparse.ArgumentParser(prog="lvcore")
+    register(parser.add_subparsers())
+    argv = ["calibrate", "--data", str(data), "--hierarchical", "--out", str(out)]
+    for k, v in options.items():
+        if v is not None:
+            argv += [f"--{k.replace('_', '-')}", str(v)]
+    return parser.parse_args(argv)
+
+
+def calibrate_cohort(args, say=print, progress_bar: bool = True) -> dict:
+    """Read the cohort, sample the joint posterior, fit each subject alone and write ``summary.json`` and
+    ``hierarchical.nc`` to ``args.out``; return summary.json's ``hierarchical`` section."""
     from lvcore.inference import hierarchical as hi
-    from lvcore.inference.cli import EXIT_FLAGGED
     from lvcore.inference.samplers import SamplerConfig
 
     likelihood = check_hierarchical_options(args)
@@ -119,11 +136,10 @@ def run_hierarchical_calibrate(args) -> int:
     for w in dict.fromkeys(w for q in requests.values() for w in q.warnings):
         print(f"lvcore: warning: {w}", file=sys.stderr)
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed)
-    say = (lambda msg: None) if args.json else print
     say(f"joint NUTS over {len(members)} subjects ({likelihood} likelihood, {name} emulator, "
         f"{args.chains} x ({args.warmup} + {args.samples})); progress on stderr")
     run = hi.run_hierarchical(members, groups=tuple(groups), likelihood=likelihood, config=config,
-                              sigma_v=args.sigma_v, progress_bar=not args.json)
+                              sigma_v=args.sigma_v, progress_bar=progress_bar)
     say(f"joint posterior in {run.wall_s:.1f} s; separate fits for the shrinkage")
     separate = separate_fits(members, likelihood, config, args.sigma_v, progress=say)
     rec = hi.summarise(run, separate)
@@ -134,12 +150,20 @@ def run_hierarchical_calibrate(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     _write_netcdf(run, out / "hierarchical.nc", rec)
     (out / "summary.json").write_text(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
+    return rec
+
+
+def run_hierarchical_calibrate(args) -> int:
+    """``lvcore calibrate --hierarchical``: the exit code (0, 1 not converged, 4 flagged)."""
+    from lvcore.inference.cli import EXIT_FLAGGED
+
+    rec = calibrate_cohort(args, say=(lambda msg: None) if args.json else print, progress_bar=not args.json)
     if args.json:
         print(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
     else:
         for line in text_report(rec):
             print(line)
-        print(f"\nwrote {out}/summary.json and {out}/hierarchical.nc")
+        print(f"\nwrote {args.out}/summary.json and {args.out}/hierarchical.nc")
     if not rec["converged"]:
         return 1
     return EXIT_FLAGGED if rec["diagnostics"]["population"]["n_divergent"] > 0 else 0
@@ -201,5 +225,5 @@ def text_report(rec: dict) -> list[str]:
     return lines
 
 
-__all__ = ["run_hierarchical_calibrate", "check_hierarchical_options", "prepare_cohort", "separate_fits",
+__all__ = ["run_hierarchical_calibrate", "calibrate_cohort", "cohort_args", "check_hierarchical_options", "prepare_cohort", "separate_fits",
            "text_report"]

@@ -184,6 +184,8 @@ _STUDIES = (
           description="Finding F6 as a real test: Bayesian optimisation with fixed or free fibre angles on SYNTHETIC "
                       "volunteer data with a known kind of model-data mismatch.",
           tab="Fibre-angle BO (Tables 9.2/9.3)"),
+    Study("cohort", "cohort", "cohort.json", cli=False, report="Hierarchical calibration of a SYNTHETIC cohort",
+          report_items=("fig_cohort_a", "table_cohort_population")),
 )
 
 #: Every study by name, in the report's (the chapter's) order.

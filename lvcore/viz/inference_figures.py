@@ -259,6 +259,37 @@ def error_violin_figure(errors: Mapping[str, np.ndarray]) -> go.Figure:
                   yaxis_title="absolute strain error (-)", xaxis_title="likelihood model", nonnegative=True)
 
 
+def cohort_figure(record: Mapping, name: str = "a", *, truth: Mapping | None = None) -> go.Figure:
+    """A cohort's subjects: the 90 % interval and median of ``name`` per subject in the joint (hierarchical)
+    posterior and, where given, in the subject's separate fit, with each group's population median exp(mu)
+    (its 90 % interval shaded); log x axis.
+
+    ``record``: summary.json's ``hierarchical`` section (:func:`lvcore.inference.hierarchical.summarise`);
+    ``truth``: subject -> true value (SYNTHETIC cohorts), drawn as crosses.
+    """
+    from lvcore.viz.report_figures import interval_figure
+
+    subjects = list(record["subjects"])
+    rows = [{"label": s, "series": "joint (hierarchical)", **record["subjects"][s][name]} for s in subjects]
+    rows += [{"label": s, "series": "separate fit", **record["separate"][s][name]}
+             for s in subjects if s in record.get("separate", {})]
+    n = len(subjects)
+    fig = interval_figure(rows, truth=None, title=f"{display_name(name)}: joint posterior vs separate fits, "
+                          f"{n} subjects (median, 90 % interval)", xaxis_title=display_label(name), yaxis_title="subject",
+                          height=max(360, 22 * n + 140))
+    for k, (g, grp) in enumerate(record["population"]["groups"].items()):
+        q = grp["median_theta"][name]
+        colour = SERIES_COLOURS[(k + 2) % len(SERIES_COLOURS)]
+        fig.add_vrect(x0=q["q05"], x1=q["q95"], fillcolor=colour, opacity=0.12, line_width=0)
+        fig.add_vline(x=q["median"], line=dict(color=colour, dash="dot"),
+                      annotation_text=f"population {g}" if len(record["population"]["groups"]) > 1 else "population")
+    if truth:
+        fig.add_scatter(x=[truth[s] for s in subjects if s in truth], y=[s for s in subjects if s in truth],
+                        mode="markers", name="truth (SYNTHETIC)", marker=dict(symbol="x", color="black", size=8))
+    fig.update_xaxes(type="log")
+    return fig
+
+
 def write_html(fig: go.Figure, path) -> Path:
     """Write a self-contained HTML file of ``fig``."""
     path = Path(path)
@@ -269,4 +300,5 @@ def write_html(fig: go.Figure, path) -> Path:
 
 __all__ = ["DISPLAY_NAMES", "display_name", "display_label", "trace_figure", "rank_figure", "diagnostics_table", "pair_figure", "geometry_posterior_figure",
            "predictive_density_figure",
-           "discrepancy_figure", "sigma_s_figure", "strain_predictive_figure", "error_violin_figure", "write_html"]
+           "discrepancy_figure", "sigma_s_figure", "strain_predictive_figure", "error_violin_figure", "write_html",
+           "cohort_figure"]
