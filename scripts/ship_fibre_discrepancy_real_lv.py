@@ -4,11 +4,15 @@
 The geometry is the REAL patient-derived LV in ``assets/real_lv/`` (``scripts/ship_real_lv.py``); the data are
 FE-simulated on it (SYNTHETIC data on a real shape). One run of this script does one strain layer:
 
-1. the subject emulator of the layer (``--emulator``, default ``build/real_lv/emulator_<layer>``) is built
-   beforehand with the documented command (the inner half is lvcore's default layer)::
+1. ``emulator``: the subject emulator of the layer (``--emulator``, default ``build/real_lv/emulator_<layer>``),
+   unless one is there: :data:`LAYER_SETUP`'s mesh, design and prior mean. For the inner half (lvcore's default
+   layer) that is exactly::
 
        nice -n 5 lvcore emulator build --geometry assets/real_lv/real_lv_dalton2022_template.vtu \\
            --out build/real_lv/emulator_inner_half --name real-lv-inner-half
+
+   and for the whole wall the same with ``--strain-layer whole_wall --prior none``, 640 + 50 + 60 runs, on the
+   default mesh with two elements through the wall (a mesh the command's ``--resolution`` does not name);
 
 2. ``study``: ``lvcore study fibre-discrepancy --geometry real-lv --emulator DIR`` as a function call (12 test sets
    FE-simulated on the real LV, three likelihoods fitted by MCMC; the full output in ``--work``/study_<layer>);
@@ -22,6 +26,7 @@ FE-simulated on it (SYNTHETIC data on a real shape). One run of this script does
 Run from the repository root (each layer about 20-25 min on 2 shared cores at the default budget)::
 
     OMP_NUM_THREADS=1 nice -n 5 python scripts/ship_fibre_discrepancy_real_lv.py --layer inner_half
+    OMP_NUM_THREADS=1 nice -n 5 python scripts/ship_fibre_discrepancy_real_lv.py --layer whole_wall
 """
 from __future__ import annotations
 
@@ -43,8 +48,27 @@ def _say(msg: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
 
+#: Per layer: the FE mesh, the subject emulator's design (train, validation, held-out test) and its prior mean. The
+#: whole wall needs two elements through the wall (docs/simulator.md "Strain layers"); no bundled emulator has
+#: whole-wall strains, so its subject emulator has no prior mean and more training runs.
+LAYER_SETUP = {"inner_half": {"resolution": "default", "design": (512, 50, 100), "prior": "auto"},
+               "whole_wall": {"resolution": "6,2+1+1+2,2,5", "design": (640, 50, 60), "prior": "none"}}
+
+
+def build_emulator(layer: str, out: Path, workers: int = 2) -> None:
+    """The subject emulator of ``layer`` on the shipped real LV (:data:`LAYER_SETUP`), as ``lvcore emulator build``
+    builds it (the inner half's is exactly that command's default)."""
+    from lvcore.emulator.subject import SubjectDesign, build_subject_emulator
+    from lvcore.resources import real_lv_files
+
+    setup = LAYER_SETUP[layer]
+    build_subject_emulator(real_lv_files().template, out, design=SubjectDesign(*setup["design"]),
+                           resolution=mesh(setup["resolution"]), strain_layer=layer, prior=setup["prior"],
+                           name=f"real-lv-{layer.replace('_', '-')}", workers=workers, log=_say)
+
+
 def run_layer_study(layer: str, emulator: Path, work: Path, warmup: int, samples: int, chains: int, seed: int,
-                    resolution: str) -> dict:
+                    resolution) -> dict:
     from lvcore.inference import samplers
     from lvcore.studies import fibre_discrepancy as fd
 
@@ -54,34 +78,35 @@ def run_layer_study(layer: str, emulator: Path, work: Path, warmup: int, samples
                         out=work / f"study_{layer}", progress=lambda msg, frac: _say(msg))
 
 
-def _warm(simulator):
-    """The simulator with warm starts (each solve starts Newton from the nearest converged state; same tolerances)."""
-    return dataclasses.replace(simulator, warm_start=True)
-
-
-def regional(study: dict, volunteers: list[str], resolution: str, base: str) -> tuple[list, dict]:
-    """The real LV's and the SYNTHETIC geometries' regional changes at the study's 4 θ."""
+def regional(study: dict | None, volunteers: list[str], resolution, base: str, layer: str) -> tuple[list, dict]:
+    """The real LV's and the SYNTHETIC geometries' regional changes at the study's 4 θ (strains of ``layer``)."""
     from lvcore.resources import volunteer_files
     from lvcore.studies import fibre_discrepancy as fd
     from lvcore.studies import fibre_discrepancy_real_lv as rl
 
+    def sim(h=fd.DEFAULT_H, geometry=None):  # warm starts: each solve starts from the nearest converged state
+        return dataclasses.replace(fd.data_simulator(h, resolution, base, geometry, strain_layer=layer), warm_start=True)
+
     thetas = fd.THETA_SETS
-    to = {tuple(s["theta"][n] for n in fd.THETA_NAMES): s["z"] for s in study["sets"]
+    to = {tuple(s["theta"][n] for n in fd.THETA_NAMES): s["z"] for s in (study or {}).get("sets", [])
           if (s["alpha_endo"], s["alpha_epi"]) == rl.TO_ANGLES}
-    sim = fd.data_simulator(resolution=resolution, base=base, geometry=fd.geometry_section(fd.REAL_LV))
-    _say("regional change on the REAL LV")
-    real = rl.regional_changes(_warm(sim), thetas, to_outputs=[to.get(tuple(th)) for th in thetas]
-                               if all(tuple(th) in to for th in thetas) else None, progress=_say)
-    synthetic = {}
+    known = [to[tuple(th)] for th in thetas] if all(tuple(th) in to for th in thetas) else None
+    _say(f"regional change on the REAL LV ({layer})")
+    real = rl.regional_changes(sim(geometry=fd.geometry_section(fd.REAL_LV)), thetas, to_outputs=known, progress=_say)
     _say("regional change on the SYNTHETIC PCA geometry h")
-    synthetic["SYNTHETIC h"] = rl.regional_changes(_warm(fd.data_simulator(fd.DEFAULT_H, resolution, base)), thetas,
-                                                   progress=_say)
+    synthetic = {"SYNTHETIC h": rl.regional_changes(sim(), thetas, progress=_say)}
     for name in volunteers:
         _say(f"regional change on {name}")
         geo = {"kind": "mesh", "path": str(volunteer_files(name).geometry)}
-        synthetic[name] = rl.regional_changes(_warm(fd.data_simulator(resolution=resolution, base=base, geometry=geo)),
-                                              thetas, progress=_say)
+        synthetic[name] = rl.regional_changes(sim(geometry=geo), thetas, progress=_say)
     return real, synthetic
+
+
+def mesh(spec: str):
+    """A preset name as it is, else ``NC,NL,NT[,GP]`` (e.g. ``6,2+1+1+2,2,5``) as the case's resolution dict."""
+    from lvcore.mechanics.resolution import RESOLUTION_PRESETS, LVResolution
+
+    return spec if spec in RESOLUTION_PRESETS else LVResolution.from_spec(spec).case_dict()
 
 
 def assemble(work: Path, out: Path) -> Path:
@@ -93,7 +118,8 @@ def assemble(work: Path, out: Path) -> Path:
         f = work / f"pieces_{layer}.json"
         if f.is_file():
             p = json.loads(f.read_text())
-            layers[layer] = {"study": p["study"], "regional": p["regional"], "emulator": p["emulator"]}
+            layers[layer] = {"study": p["study"], "regional": p["regional"], "emulator": p["emulator"],
+                             "resolution": p.get("resolution", "default")}
             synthetic[layer] = p["synthetic"]
     result = round_floats(clean(rl.assemble(layers, synthetic)))
     out.mkdir(parents=True, exist_ok=True)
@@ -126,11 +152,15 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, default=250, help="draws kept per chain (default 250)")
     p.add_argument("--chains", type=int, default=2, help="chains per fit (default 2)")
     p.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    p.add_argument("--resolution", default="default", help="FE mesh preset (default 'default')")
+    p.add_argument("--resolution", default=None,
+                   help="FE mesh: a preset or NC,NL,NT[,GP] (default: the layer's, LAYER_SETUP: 'default' for the "
+                        "inner half, 6,2+1+1+2,2,5 (the default mesh with two elements through the wall) for the whole "
+                        "wall)")
     p.add_argument("--volunteers", default=",".join(f"SYNTHETIC_HV{i}" for i in range(1, 9)),
                    help="SYNTHETIC volunteers of the regional comparison (default SYNTHETIC_HV1..8)")
-    p.add_argument("--steps", default="study,regional,assemble,docs",
-                   help="steps to run, of study,regional,assemble,docs (default all four)")
+    p.add_argument("--steps", default="emulator,study,regional,assemble,docs",
+                   help="steps to run, of emulator,study,regional,assemble,docs (default all five; the emulator step "
+                        "is skipped when --emulator already holds one)")
     p.add_argument("--docs", type=Path, default=ROOT / "docs" / "studies.md",
                    help="docs file whose generated block the docs step rewrites (default docs/studies.md)")
     p.add_argument("--work", type=Path, default=ROOT / "build" / "real_lv", help="work folder (default build/real_lv)")
@@ -139,23 +169,29 @@ def main(argv=None) -> int:
     steps = {s.strip() for s in args.steps.split(",")}
     emulator = args.emulator or args.work / f"emulator_{args.layer}"
     pieces = args.work / f"pieces_{args.layer}.json"
+    args.resolution = args.resolution or LAYER_SETUP[args.layer]["resolution"]
     t0 = time.perf_counter()
+    if "emulator" in steps and not (emulator / "metadata.json").is_file():
+        build_emulator(args.layer, emulator)
     if "study" in steps:
         from lvcore.emulator.io import load_emulator
 
         study = run_layer_study(args.layer, emulator, args.work, args.warmup, args.samples, args.chains, args.seed,
-                                args.resolution)
+                                mesh(args.resolution))
         emu = load_emulator(emulator)
         record = {"name": emu.name, **{k: emu.metadata["test"][k] for k in ("n", "lvv_rmse_ml", "strain_rmse")},
                   "runs": emu.metadata["subject"]["runs"], "seconds": emu.metadata["subject"]["seconds"],
                   "prior": {k: emu.metadata["subject"]["prior"].get(k) for k in ("used", "name", "scale", "clipped")},
-                  "base": emu.base, "resolution": emu.resolution, "strain_layer": args.layer}
-        pieces.write_text(json.dumps({"study": study, "emulator": record, "regional": [], "synthetic": {}}))
+                  "base": emu.base, "resolution": args.resolution, "strain_layer": emu.strain_layer}
+        old = json.loads(pieces.read_text()) if pieces.is_file() else {}  # FE sweeps already run are kept
+        pieces.write_text(json.dumps({"regional": [], "synthetic": {}, **old, "study": study, "emulator": record}))
         _say(f"study done in {time.perf_counter() - t0:.0f} s: {json.dumps(study['findings'])}")
     if "regional" in steps:
-        p_ = json.loads(pieces.read_text())
+        p_ = json.loads(pieces.read_text()) if pieces.is_file() else {"study": None, "emulator": {"base": "sliding"}}
         vols = [v.strip() for v in args.volunteers.split(",") if v.strip()]
-        p_["regional"], p_["synthetic"] = regional(p_["study"], vols, args.resolution, p_["emulator"]["base"])
+        p_["regional"], p_["synthetic"] = regional(p_["study"], vols, mesh(args.resolution), p_["emulator"]["base"],
+                                                   args.layer)
+        p_["resolution"] = args.resolution
         pieces.write_text(json.dumps(p_))
         _say(f"regional done at {time.perf_counter() - t0:.0f} s")
     if "assemble" in steps:

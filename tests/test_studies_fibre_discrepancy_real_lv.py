@@ -146,6 +146,13 @@ def test_assembled_result_reports_spread_and_inflation_per_layer():
     assert tab.loc[0, "regional spread real LV"] == pytest.approx(np.linspace(-0.03, 0.03, 24).std())
     assert set(rl.figures(res)) == set(rl.TITLES) - {"regional"}
     assert "REAL patient-derived" in rl.source_line(res)
+    # a layer with the FE sweeps only (its MCMC not run) is reported as such
+    res = rl.assemble({"inner_half": {"study": _fake_study(2.0), "regional": real},
+                       "whole_wall": {"study": None, "regional": real, "resolution": "6,2+1+1+2,2,5"}},
+                      {"whole_wall": {"SYNTHETIC h": real}}) | {"folder": "somewhere"}
+    tab = rl.tables(res)["table_real_lv_findings"]
+    assert list(tab["layer"]) == ["inner half", "whole wall"] and tab.loc[1, "iid σ_S inflation [CI]"] == "not run"
+    assert "FE sweeps only" in rl.source_line(res) and "whole wall" not in rl.docs_markdown(res).split("\n\n")[2]
 
 
 def test_the_shipped_result_holds_the_inner_half():

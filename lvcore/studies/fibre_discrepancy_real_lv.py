@@ -156,8 +156,8 @@ def assemble(layers: Mapping[str, Mapping], synthetic: Mapping[str, Mapping[str,
     Parameters
     ----------
     layers : mapping
-        Layer -> ``{"study": run_study's result on the real LV, "regional": regional_changes on the real LV,
-        "emulator": the subject emulator's held-out accuracy and build}``.
+        Layer -> ``{"study": run_study's result on the real LV (None: not run), "regional": regional_changes on
+        the real LV, "emulator": the subject emulator's held-out accuracy and build, "resolution": the FE mesh}``.
     synthetic : mapping
         Layer -> SYNTHETIC geometry label -> its :func:`regional_changes`.
     """
@@ -169,10 +169,11 @@ def assemble(layers: Mapping[str, Mapping], synthetic: Mapping[str, Mapping[str,
            "ci": {"level": CI_LEVEL, "n_boot": N_BOOT, "unit": "test set (12; each its own noise draw)"},
            "layers": {}}
     for layer in [k for k in LAYERS if k in layers] + [k for k in layers if k not in LAYERS]:
-        run = layers[layer]
-        out["layers"][layer] = {"summary": layer_summary(run["study"], seed=seed), "regional": list(run["regional"]),
-                                "synthetic_regional": dict(synthetic.get(layer, {})),
-                                "emulator": dict(run.get("emulator", {})), "study": compact_study(run["study"])}
+        run, study = layers[layer], layers[layer].get("study")  # no study: the FE sweeps alone (σ_S not run)
+        out["layers"][layer] = {"summary": layer_summary(study, seed=seed) if study else None,
+                                "regional": list(run["regional"]), "synthetic_regional": dict(synthetic.get(layer, {})),
+                                "resolution": run.get("resolution", "default"),
+                                "emulator": dict(run.get("emulator") or {}), "study": compact_study(study) if study else None}
     return out
 
 
@@ -199,18 +200,19 @@ def tables(result: dict) -> dict:
     rows, regional = [], []
     for layer, L in result["layers"].items():
         real, syn, s = L["regional"], L["synthetic_regional"], L["summary"]
-        syn_spread = np.concatenate([_spreads(v) for v in syn.values()]) if syn else np.array([np.nan])
-        med = s["median_abs_error"]
+        syn_spread = np.concatenate([_spreads(v) for v in syn.values()]) if syn else None
+        med = s["median_abs_error"] if s else None
         rows.append({
             "layer": layer.replace("_", " "), "ΔLVV real LV (mL)": float(np.mean([r["delta_lvv_ml"] for r in real])),
             "mean Δstrain real LV": float(np.mean([r["mean"] for r in real])),
             "regional spread real LV": float(np.mean(_spreads(real))),
-            "regional spread SYNTHETIC (min–max)": f"{np.nanmin(syn_spread):.4f}–{np.nanmax(syn_spread):.4f}",
+            "regional spread SYNTHETIC (min–max)": "not run" if syn_spread is None else
+            f"{syn_spread.min():.4f}–{syn_spread.max():.4f}",
             "chapter spread": result.get("chapter_regional_spread"),
-            "iid σ_S inflation [CI]": _ci(s["iid_sigma_s_inflation"]),
-            "discrepancy σ_S [CI]": _ci(s["discrepancy_sigma_s"], ".4f"),
-            "median |error| volume / iid / discrepancy": f"{med['volume']:.4f} / {med['iid']:.4f} / "
-                                                         f"{med['discrepancy']:.4f}"})
+            "iid σ_S inflation [CI]": _ci(s["iid_sigma_s_inflation"]) if s else "not run",
+            "discrepancy σ_S [CI]": _ci(s["discrepancy_sigma_s"], ".4f") if s else "not run",
+            "median |error| volume / iid / discrepancy": (f"{med['volume']:.4f} / {med['iid']:.4f} / "
+                                                          f"{med['discrepancy']:.4f}") if s else "not run"})
         for geo, rs in [("REAL LV", real)] + list(syn.items()):
             for r in rs:
                 regional.append({"layer": layer, "geometry": geo, "theta": tuple(r["theta"][n] for n in THETA_NAMES),
@@ -255,7 +257,7 @@ def figures(result: dict) -> dict:
     out["fig_real_lv_regional_spread"] = fig
     rows = []
     for layer, L in result["layers"].items():
-        for key, label in (("iid_sigma_s_inflation", "iid σ_S / 0.03"),):
+        for key, label in (("iid_sigma_s_inflation", "iid σ_S / 0.03"),) if L["summary"] else ():
             d = L["summary"][key]
             rows.append({"label": layer.replace("_", " "), "series": label, "median": d["estimate"], "q05": d["lo"],
                          "q95": d["hi"]})
@@ -273,6 +275,9 @@ def source_line(result: dict) -> str:
 
     parts = []
     for layer, L in result["layers"].items():
+        if not L["study"]:
+            parts.append(f"{layer.replace('_', ' ')}: FE sweeps only (mesh {L.get('resolution', 'default')})")
+            continue
         smp, em = L["study"].get("sampler") or {}, L.get("emulator") or {}
         parts.append(f"{layer.replace('_', ' ')}: emulator {em.get('name', '?')} (held-out LVV RMSE "
                      f"{em.get('lvv_rmse_ml', float('nan')):.2f} mL, strain {em.get('strain_rmse', float('nan')):.4f}), "
@@ -304,7 +309,7 @@ def docs_markdown(result: dict) -> str:
                           f"{sp.mean():.4f} [{sp.min():.4f}, {sp.max():.4f}]"]))
     lines += ["", row(["layer", "iid σ_S / 0.03 per angle pair (median over its 4 sets)", "largest R-hat",
                        "emulator held-out LVV / strain RMSE", "sampler"]), "|---|---|---|---|---|"]
-    for layer, L in result["layers"].items():
+    for layer, L in [(k, v) for k, v in result["layers"].items() if v["summary"]]:
         s, em, smp = L["summary"], L.get("emulator") or {}, L["study"].get("sampler") or {}
         pairs = ", ".join(f"{k}: {v:.2f}" for k, v in s["iid_inflation_per_angle_pair"].items())
         lines.append(row([layer.replace("_", " "), pairs, f"{s['rhat_max']:.3f}",
