@@ -6,9 +6,11 @@ what do the derived quantities cost next to the sampling?
 
 For each volunteer ``lvcore calibrate --volunteer NAME --model iid --chains 2 --derived-draws N`` runs in this
 process (the sampler compiled once); the table gives the sampling wall time, the derived quantities' wall time
-(the FE load path of N posterior draws at 0-30 mmHg and the data's EDP, the stress, the ridge), their ratio, the
-measured EDV against the 99 % predictive interval of the FE volume at the EDP, the emulator-to-FE offset and the
-exit code. The linear solver and the machine's load are printed with the table.
+(the EDPVR of N posterior draws at 0-30 mmHg and the data's EDP, the stress, the ridge), their ratio, the path
+that gave the EDPVR (``emulator``: the EDPVR emulator evaluated directly; ``fe``: FE load paths), the measured EDV
+against the 99 % predictive interval of the volume at the EDP, the emulator-to-FE offset and the exit code. The
+linear solver and the machine's load are printed with the table, and the median ratio over the runs after it.
+``--fe`` forces the FE load path (``LVCORE_EDPVR_EMULATOR=none``) for a comparison.
 """
 from __future__ import annotations
 
@@ -44,6 +46,7 @@ def run_one(name: str, draws: int, out: Path, extrapolate: bool = False) -> dict
     c = d["edpvr_check"]
     return {"volunteer": name + (" (--allow-extrapolation)" if extrapolate else ""), "exit": code, "wall_s": wall, "sampling_s": rec["wall_s"],
             "derived_s": d["seconds"]["total"], "fe_s": d["seconds"]["fe"], "n_draws": d["n_draws"],
+            "path": d.get("path", "fe"), "emulator": d.get("emulator"),
             "measured": c["measured_edv_ml"], "band": c["predictive_99"], "inside": c["inside"],
             "offset": c["emulator_to_fe_offset_ml"]["median"], "flags": rec["flags"],
             "v20": [r for r in d["edpvr"] if r["pressure_mmhg"] == 20][0]}
@@ -55,18 +58,22 @@ def main(argv=None) -> int:
     p.add_argument("--draws", type=int, default=100, help="--derived-draws (default 100)")
     p.add_argument("--repeats", type=int, default=1)
     p.add_argument("--json", default=None, help="also write the rows to this file")
+    p.add_argument("--fe", action="store_true", help="force the FE load path (default: the EDPVR emulator where it "
+                                                     "covers the calibration)")
     args = p.parse_args(argv)
 
     from lvcore.mechanics.linear import cholmod_mode, default_backend
     from lvcore.resources import bundled_volunteers
 
     names = args.volunteers or list(bundled_volunteers())
+    if args.fe:
+        os.environ["LVCORE_EDPVR_EMULATOR"] = "none"
     print(f"# {time.strftime('%Y-%m-%d %H:%M')} {platform.node()} {os.cpu_count()} cores, load "
           f"{os.getloadavg()[0]:.2f}, linear solver {default_backend()} ({cholmod_mode() if default_backend() == 'cholmod' else '-'}), iid, 2 chains x (1000 + 1000), "
           f"{args.draws} derived draws", flush=True)
-    print("| volunteer | exit | sampling (s) | derived (s) | derived / sampling | measured EDV (mL) | "
+    print("| volunteer | exit | path | sampling (s) | derived (s) | derived / sampling | measured EDV (mL) | "
           "99 % predictive at EDP (mL) | inside | emulator-to-FE offset (mL) | V20 median [90 %] (mL) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
@@ -74,10 +81,15 @@ def main(argv=None) -> int:
                 r = run_one(name, args.draws, Path(tmp) / f"{name}_{k}")
                 rows.append(r)
                 v = r["v20"]
-                print(f"| {r['volunteer']} | {r['exit']} | {r['sampling_s']:.1f} | {r['derived_s']:.1f} | "
-                      f"{r['derived_s'] / r['sampling_s']:.1f} | {r['measured']:.1f} | {r['band'][0]:.1f}-"
+                print(f"| {r['volunteer']} | {r['exit']} | {r['path']} | {r['sampling_s']:.1f} | {r['derived_s']:.2f} | "
+                      f"{r['derived_s'] / r['sampling_s']:.3f} | {r['measured']:.1f} | {r['band'][0]:.1f}-"
                       f"{r['band'][1]:.1f} | {'yes' if r['inside'] else 'NO'} | {r['offset']:+.2f} | "
                       f"{v['median']:.1f} [{v['q05']:.1f}, {v['q95']:.1f}] |", flush=True)
+    import statistics
+
+    ratios = [r["derived_s"] / r["sampling_s"] for r in rows]
+    print(f"\nderived / sampling: median {statistics.median(ratios):.3f} (range {min(ratios):.3f}-{max(ratios):.3f}) "
+          f"over {len(rows)} runs; paths {sorted({r['path'] for r in rows})}; load now {os.getloadavg()[0]:.2f}")
     inside = sum(r["inside"] for r in rows)
     print(f"\nmeasured point inside the 99 % predictive band: {inside}/{len(rows)}; exit 4: "
           f"{sum(r['exit'] == 4 for r in rows)} ({sorted({f.split(':')[0] for r in rows for f in r['flags']})})")

@@ -18,7 +18,8 @@ The layout under ``assets/``::
     cases/                  example case files (docs/case_schema.md), shown by the app
     cohort/                 SYNTHETIC cohort, operator study, contour stacks
     shape_model/            SYNTHETIC PCA shape model (.npz + .json)
-    emulators/<name>/       emulators loaded by name ("chapter", "angles")
+    emulators/<name>/       emulators loaded by name ("chapter", "angles"); emulators/edpvr/ the derived EDPVR's
+                            emulator (edpvr.json, lvcore.emulator.edpvr), not a calibration emulator
     emulators-below-spec/   demonstration emulators, loaded only by path
     volunteers/             SYNTHETIC volunteers: <name>_measured.csv, <name>_geometry.vtu
     volunteers/truth/       the volunteers' hidden true parameters

@@ -108,6 +108,8 @@ def test_calibrate_reports_derived_quantities_and_exits_0_on_weak_identification
                "--samples", "300", "--derived-draws", "12", "--out", str(out), "--json"])
     (rec,) = json.loads((out / "summary.json").read_text())
     d = rec["derived"]
+    # a given mesh's PC scores and scale with the chapter emulator: the EDPVR emulator, not FE load paths
+    assert (d["path"], d["emulator"], d["seconds"]["fe"]) == ("emulator", "edpvr", 0.0)
     assert [r["pressure_mmhg"] for r in d["edpvr"]] == [0, 5, 10, 15, 20, 25, 30]
     med = [r["median"] for r in d["edpvr"]]
     assert all(np.diff(med) > 0)

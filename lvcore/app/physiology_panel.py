@@ -3,10 +3,11 @@
 EDV/V₀: the posterior of the emulated end-diastolic volume (``eta[..., 0]``) over the reference cavity V₀, with
 the measured LVV's ratio and the typical range (:mod:`lvcore.domain.physiology`).
 EDPVR and the derived quantities: :func:`lvcore.inference.derived.derive`, exactly what ``lvcore calibrate``
-writes to summary.json (``derived``): the FE simulator on the calibration's own geometry (PC scores and scale,
-the posterior's own scores and scale when the geometry was inferred, or a subject emulator's mesh), base
-condition, fibre angles and the emulator's training resolution, for :func:`edpvr_draws` posterior draws, run
-when the user presses the button (the emulators are trained at 6–14 mmHg at most, so they cannot give 0–30 mmHg).
+writes to summary.json (``derived``): on the calibration's own geometry (PC scores and scale, the posterior's own
+scores and scale when the geometry was inferred, or a subject emulator's mesh), base condition, fibre angles and
+the emulator's training resolution, for :func:`edpvr_draws` posterior draws, run when the user presses the
+button: the EDPVR emulator (an EDP input of 0–30 mmHg, :mod:`lvcore.emulator.edpvr`) where it covers the
+calibration, else the FE simulator (the calibration emulators are trained at 6–14 mmHg at most).
 Once computed, V₀ is the derived one (the FE reference cavity) everywhere in the panel.
 """
 from __future__ import annotations
@@ -190,15 +191,28 @@ def summary_lines(record: Mapping) -> list[str]:
              f"(90 % width a factor {best['width90_factor']:.2f}). corr(log a, log b) "
              f"{rg['correlation_log_a_log_b']:+.2f}."]
     lines += [f"{phrase}." for phrase in stress_phrases(st_, lambda heading: f"**{heading}**")]
-    lines.append(f"**Emulator-to-FE offset** at {c['edp_mmhg']:g} mmHg (FE volume − emulated volume, same draws): "
+    what = ("EDPVR emulator's volume − calibration emulator's, same draws" if record.get("path") == "emulator" else
+            "FE volume − emulated volume, same draws")
+    lines.append(f"**Emulator-to-FE offset** at {c['edp_mmhg']:g} mmHg ({what}): "
                  f"{_q(c['emulator_to_fe_offset_ml'], ' mL')}; {c['source']}.")
     return lines
 
 
-def _button_label(n: int) -> str:
+def _button_label(n: int, setup: "Setup | None" = None) -> str:
+    if setup is not None and _emulated(setup):
+        return f"Compute the EDPVR and derived quantities (EDPVR emulator, {n} posterior draws, 0–30 mmHg; under a minute)"
     minutes = max(1, round(n * SECONDS_PER_100_DRAWS / 100 / 60))
     return (f"Compute the EDPVR and derived quantities (FE, {n} posterior draws, 0–30 mmHg; about "
             f"{minutes} minute{'s' if minutes > 1 else ''})")
+
+
+def _emulated(setup: "Setup") -> bool:
+    """Whether the EDPVR emulator covers the calibration's conditions (its posterior draws are checked on the run)."""
+    from lvcore.emulator.edpvr import conditions_covered
+
+    emu, _ = conditions_covered(geometry=setup.geometry, angles=setup.angles, base=setup.base,
+                                resolution=setup.resolution)
+    return emu is not None
 
 
 def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) -> None:
@@ -239,7 +253,7 @@ def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) 
         st.caption(f"EDP assumed: {setup.edp_mmhg:g} mmHg. The geometry is not a fixed set of PC scores: V₀ and "
                    f"EDV/V₀ come with the EDPVR below. {typical.text()}.")
     n = edpvr_draws()
-    if st.button(_button_label(n), key=f"{key}_run"):
+    if st.button(_button_label(n, setup), key=f"{key}_run"):
         bar = st.progress(0.0, text=f"EDPVR: FE solves for {n} posterior draws…")
         try:
             record = run_edpvr(idatas[label], setup, n_draws=n,
@@ -264,7 +278,8 @@ def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) 
     fig = derived_edpvr_figure(record, subtitle=f"{subject}, {shown}; {record['n_draws']} posterior draws, "
                                                 f"{setup.resolution} mesh, {setup.base} base; V₀ = {v0:.1f} mL")
     st.plotly_chart(fig, width="stretch", key=f"{key}_fig")
-    st.caption("Band: equal-tailed 90 % posterior interval of the FE cavity volume (0 mmHg is V₀). The normal "
+    st.caption("Band: equal-tailed 90 % posterior interval of the cavity volume (0 mmHg is V₀; "
+               f"{record['edpvr_check']['source']}). The normal "
                "curve (Klotz et al. 2006: EDP = 27.78 · EDVn^2.76, EDVn = (V − V₀)/(V₃₀ − V₀)) is drawn through "
                "the derived V₀ and the measured (EDV, EDP); the red bar is the 99 % posterior predictive interval "
                "of the volume at the EDP.")

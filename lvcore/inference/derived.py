@@ -7,14 +7,21 @@ below are what the data do determine, each computed per posterior draw so
 that its interval is a posterior interval:
 
 * **EDPVR** (:func:`fe_load_path`): the end-diastolic cavity volume at 0 (the
-  reference cavity V₀), 5, 10, 15, 20, 25 and 30 mmHg. The emulators cover
-  6–14 mmHg at most, so the curve comes from the FE simulator on the
-  calibration's own geometry (PC scores and scale, or the subject emulator's
-  mesh), base condition, fibre angles and mesh resolution (the emulator's
-  training resolution), with one warm-started solve per draw and pressure
-  (draws ordered along a continuation path, :func:`lvcore.execution.chains.continuation_order`).
-  A solve at the data's EDP gives the emulator-to-FE offset, reported with
-  the curve, and the mean end-diastolic fibre stretch.
+  reference cavity V₀), 5, 10, 15, 20, 25 and 30 mmHg, computed consistently
+  with the calibration: the same geometry (PC scores and scale, or the subject
+  emulator's mesh), base condition, fibre angles and mesh resolution (the
+  emulator's training resolution). Where the EDPVR emulator (an EDP input of
+  0-30 mmHg on the ``chapter`` geometry space, :mod:`lvcore.emulator.edpvr`)
+  covers the calibration (PC-score geometry, given or inferred, any scale;
+  angles -60°/60°; its base and mesh; every draw in its box) it is evaluated
+  directly, its held-out volume error added to the predictive band; otherwise
+  (subject emulators, inferred angles, other bases or meshes) the FE simulator
+  solves each draw and pressure, warm-started (draws ordered along a
+  continuation path, :func:`lvcore.execution.chains.continuation_order`).
+  ``derived["path"]`` says which. The volume at the data's EDP gives the
+  emulator-to-FE offset (the calibration emulator against the FE volume, or
+  against the EDPVR emulator), reported with the curve, and the mean
+  end-diastolic fibre stretch.
 * **Stress** (:func:`stress_summary`): the fibre and cross-fibre Cauchy
   stress of the HO law at a fixed fibre stretch of 1.10 and at the subject's
   mean end-diastolic fibre stretch (:func:`lvcore.mechanics.stress.ho_fibre_stress`).
@@ -51,6 +58,8 @@ FIXED_FIBRE_STRETCH = 1.10
 WEAK_CONTRACTION = 0.5
 #: Central interval of every derived quantity.
 LEVELS = (0.05, 0.5, 0.95)
+#: The EDPVR emulator (an EDP input, 0-30 mmHg) evaluated instead of FE load paths where it covers the calibration.
+DEFAULT_EDPVR_EMULATOR = "edpvr"
 
 
 def default_draws() -> int:
@@ -71,6 +80,17 @@ def default_draws() -> int:
     if not 0 <= n <= 2000:
         raise DataError(f"LVCORE_DERIVED_DRAWS must be an integer 0-2000, got {n}")
     return n
+
+
+def default_edpvr_emulator() -> str | None:
+    """The EDPVR emulator unless told: the environment's ``LVCORE_EDPVR_EMULATOR`` (a name, or ``none`` for the FE
+    load path everywhere), else :data:`DEFAULT_EDPVR_EMULATOR`."""
+    import os
+
+    raw = os.environ.get("LVCORE_EDPVR_EMULATOR", "").strip()
+    if not raw:
+        return DEFAULT_EDPVR_EMULATOR
+    return None if raw.lower() == "none" else raw
 
 
 # --------------------------------------------------------------------------- contraction and the ridge
@@ -324,6 +344,31 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
                     time.perf_counter() - t0)
 
 
+def _edpvr_path(draws, *, edp_mmhg, angles, base, resolution, geometry, progress, pressures_mmhg,
+                edpvr_emulator) -> tuple[LoadPath, dict]:
+    """The EDPVR of the draws from the EDPVR emulator where it covers the calibration, else from FE load paths;
+    with how (``path``, ``emulator``, ``reason``, ``source``, ``volume_log_sd_at_edp``)."""
+    from lvcore.emulator import edpvr
+
+    emu, why = edpvr.emulator_for(draws, geometry=geometry, angles=angles, base=base, resolution=resolution,
+                                  edp_mmhg=edp_mmhg, pressures_mmhg=pressures_mmhg, name=edpvr_emulator)
+    if emu is None:
+        path = fe_load_path(draws, edp_mmhg=edp_mmhg, angles=angles, base=base, resolution=resolution,
+                            geometry=geometry, progress=progress, pressures_mmhg=pressures_mmhg)
+        return path, {"path": "fe", "emulator": None, "reason": why, "volume_log_sd_at_edp": 0.0,
+                      "source": f"FE simulator ({path.resolution} mesh, {path.base} base)"}
+    e = edpvr.emulated_load_path(emu, draws, edp_mmhg=edp_mmhg, pressures_mmhg=pressures_mmhg)
+    if progress is not None:
+        progress(len(draws), len(draws))
+    path = LoadPath(e.pressures_mmhg, e.volumes_ml, float(edp_mmhg), e.volume_at_edp_ml, e.fibre_stretch_at_edp, 0,
+                    emu.resolution, emu.base, e.seconds)
+    sd = e.volume_log_sd_at_edp
+    return path, {"path": "emulator", "emulator": emu.name, "reason": "", "volume_log_sd_at_edp": sd,
+                  "source": f"EDPVR emulator '{emu.name}' (FE-trained, {emu.resolution} mesh, {emu.base} base; held-out "
+                            f"volume error {100 * sd:.2f} % at {float(edp_mmhg):g} mmHg, added to the band; the offset "
+                            "is the calibration emulator against it)"}
+
+
 # --------------------------------------------------------------------------- stress
 def stress_summary(thetas: Mapping[str, np.ndarray], fibre_stretch_at_edp: np.ndarray | None) -> dict:
     """Fibre and cross-fibre Cauchy stress (kPa) at :data:`FIXED_FIBRE_STRETCH` and at the mean ED fibre stretch.
@@ -457,7 +502,8 @@ def predictive_interval(volumes_ml: np.ndarray, sd_ml, level: float = 0.99, seed
 def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float, angles: tuple[float, float],
            base: str, resolution: str, measured_edv_ml: float | None, lvv_sd_ml, h=None, scale: float = 1.0,
            geometry: Mapping | None = None, n_draws: int = N_DERIVED_DRAWS, progress=None,
-           pressures_mmhg: Sequence[float] = EDPVR_PRESSURES_MMHG) -> tuple[dict, DerivedDraws]:
+           pressures_mmhg: Sequence[float] = EDPVR_PRESSURES_MMHG,
+           edpvr_emulator: str | None = "auto") -> tuple[dict, DerivedDraws]:
     """Every derived quantity of one calibration (module docstring) and the per-draw values behind them.
 
     Parameters
@@ -478,12 +524,17 @@ def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float,
         Posterior draws behind the EDPVR and the stress (>= 100 for a 90 % band worth reading).
     pressures_mmhg : sequence of float
         The EDPVR's pressures besides 0 mmHg (default :data:`EDPVR_PRESSURES_MMHG`).
+    edpvr_emulator : str or None
+        The EDPVR emulator evaluated directly where it covers the calibration
+        (:func:`lvcore.emulator.edpvr.emulator_for`); None: the FE load path; ``"auto"`` (default):
+        :func:`default_edpvr_emulator`.
 
     Returns
     -------
     record : dict
         ``derived`` of summary.json: ``edpvr``, ``edpvr_check``, ``stress``, ``ridge``, ``contraction``,
-        ``weakly_identified``, ``n_draws``, ``seconds``.
+        ``weakly_identified``, ``n_draws``, ``path`` (``"emulator"`` or ``"fe"``), ``emulator`` (the EDPVR
+        emulator's name or None), ``path_reason`` (why the FE path, else ""), ``seconds``.
     draws : DerivedDraws
     """
     from lvcore.domain import physiology
@@ -492,18 +543,23 @@ def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float,
     post = idata.posterior
     samples = {n: np.asarray(post[n]) for n in THETA_NAMES}
     draws, idx = posterior_draws(idata, n_draws, h=h, scale=scale)
-    path = fe_load_path(draws, edp_mmhg=edp_mmhg, angles=angles, base=base, resolution=resolution,
-                        geometry=geometry, progress=progress, pressures_mmhg=pressures_mmhg)
+    path, via = _edpvr_path(draws, edp_mmhg=edp_mmhg, angles=angles, base=base, resolution=resolution,
+                            geometry=geometry, progress=progress, pressures_mmhg=pressures_mmhg,
+                            edpvr_emulator=default_edpvr_emulator() if edpvr_emulator == "auto" else edpvr_emulator)
     eta0 = np.asarray(post["eta"]).reshape(-1, np.asarray(post["eta"]).shape[-1])[idx, 0] if "eta" in post else \
         np.full(idx.size, np.nan)
     offset = path.volume_at_edp_ml - eta0
     sd = lvv_sd_ml(path.volume_at_edp_ml) if callable(lvv_sd_ml) else float(lvv_sd_ml)
+    # the EDPVR emulator's own held-out error (relative, at the EDP) adds to the data's volume sd
+    sd_emu = via["volume_log_sd_at_edp"] * path.volume_at_edp_ml
+    sd = np.sqrt(np.asarray(sd, float) ** 2 + sd_emu ** 2)
     edpvr = [{"pressure_mmhg": float(p), **quantiles(path.volumes_ml[:, j])}
              for j, p in enumerate(path.pressures_mmhg)]
     check = {"edp_mmhg": float(edp_mmhg), "fe_edv": quantiles(path.volume_at_edp_ml),
-             "emulator_to_fe_offset_ml": quantiles(offset),
-             "source": f"FE simulator ({path.resolution} mesh, {path.base} base), {len(draws)} posterior draws",
+             "emulator_to_fe_offset_ml": quantiles(offset), "source": via["source"] + f", {len(draws)} posterior draws",
              "n_failed_solves": int(path.n_failed)}
+    if via["path"] == "emulator":
+        check["edpvr_emulator_sd_ml"] = quantiles(sd_emu)
     if measured_edv_ml is not None:
         lo, hi = predictive_interval(path.volume_at_edp_ml, sd, level=0.99)
         check.update({"measured_edv_ml": float(measured_edv_ml), "predictive_99": [lo, hi],
@@ -522,9 +578,12 @@ def derive(idata, *, bounds: Mapping[str, tuple[float, float]], edp_mmhg: float,
               "stress": stress_summary(thin, path.fibre_stretch_at_edp),
               "ridge": ridge(samples), "contraction": con, "weakly_identified": list(weak.values()),
               "n_draws": int(len(draws)), "interval": "equal-tailed 90 % (q05-q95)",
-              "seconds": {"fe": path.seconds, "total": time.perf_counter() - t0}}
+              "path": via["path"], "emulator": via["emulator"], "path_reason": via["reason"],
+              "seconds": {"fe": path.seconds if via["path"] == "fe" else 0.0,
+                          "emulator": path.seconds if via["path"] == "emulator" else 0.0,
+                          "total": time.perf_counter() - t0}}
     dd = DerivedDraws(idx, thin, path.pressures_mmhg, path.volumes_ml, eta0, path.volume_at_edp_ml,
-                      path.fibre_stretch_at_edp)
+                      path.fibre_stretch_at_edp, extra={"path": np.array(via["path"])})
     return record, dd
 
 
@@ -535,12 +594,13 @@ def check_flags(record: Mapping) -> list[str]:
     if c.get("inside", True):
         return []
     lo, hi = c["predictive_99"]
+    how = "EDPVR emulator" if record.get("path") == "emulator" else "FE simulator"
     return [f"the EDPVR of the posterior misses the measured point: EDV {c['measured_edv_ml']:.1f} mL at "
-            f"{c['edp_mmhg']:g} mmHg lies outside its 99 % predictive interval [{lo:.1f}, {hi:.1f}] mL (FE "
-            f"simulator; emulator-to-FE offset {c['emulator_to_fe_offset_ml']['median']:+.1f} mL)"]
+            f"{c['edp_mmhg']:g} mmHg lies outside its 99 % predictive interval [{lo:.1f}, {hi:.1f}] mL ({how}; "
+            f"emulator-to-FE offset {c['emulator_to_fe_offset_ml']['median']:+.1f} mL)"]
 
 
-__all__ = ["EDPVR_PRESSURES_MMHG", "N_DERIVED_DRAWS", "default_draws", "FIXED_FIBRE_STRETCH", "WEAK_CONTRACTION", "LoadPath",
+__all__ = ["EDPVR_PRESSURES_MMHG", "N_DERIVED_DRAWS", "DEFAULT_EDPVR_EMULATOR", "default_edpvr_emulator", "default_draws", "FIXED_FIBRE_STRETCH", "WEAK_CONTRACTION", "LoadPath",
            "DerivedDraws", "log_uniform_moments", "contraction", "ridge", "fe_load_path", "stress_summary",
            "quantiles", "posterior_draws", "thinned_indices", "predictive_interval", "derive", "check_flags", "text_table", "summary_rows",
            "format_interval", "stress_phrases"]
