@@ -148,3 +148,17 @@ def test_build_script_refuses_load_path_rows_off_its_blocks(tmp_path):
     with pytest.raises(SystemExit, match="multiples of 64"):
         mod.build_load_path_one("edpvr", args)
     assert not any(tmp_path.iterdir())   # refused before any design or run
+
+
+def test_the_edpvr_quantiles_carry_the_emulators_own_error(emu):
+    """One draw repeated: the emulated EDPVR's spread at each pressure is the held-out error drawn in (V₀ exact)."""
+    n = 4000
+    em = edpvr.emulated_load_path(emu, [_draw()] * n, edp_mmhg=8.0, pressures_mmhg=PRESSURES)
+    vols, lam = edpvr.emulator_error_draws(emu, em, 8.0)
+    assert np.array_equal(vols[:, 0], em.volumes_ml[:, 0])            # V0 from the geometry: no error
+    log_sd = np.log(vols[:, 1:] / em.volumes_ml[:, 1:]).std(axis=0)
+    # the sd of 4,000 normal draws is within 5 % of its value with probability > 0.999 (se of an sd: s/sqrt(2n))
+    np.testing.assert_allclose(log_sd, emu.volume_log_sd(np.asarray(PRESSURES)), rtol=0.05)
+    np.testing.assert_allclose(lam.std(), float(emu.stretch_sd(8.0)), rtol=0.05)
+    again, _ = edpvr.emulator_error_draws(emu, em, 8.0)
+    assert np.array_equal(again, vols)                                   # seeded: a rerun gives the same band

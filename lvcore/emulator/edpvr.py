@@ -493,6 +493,42 @@ def emulated_load_path(emu: EdpvrEmulator, draws: Sequence[Mapping], *, edp_mmhg
                         np.exp(out[:, -1, 1]), float(emu.volume_log_sd(edp_mmhg)), time.perf_counter() - t0)
 
 
+#: Seed of the emulator-error draws of :func:`emulator_error_draws` (fixed: a rerun gives the same band).
+EMULATOR_ERROR_SEED = 20261202
+
+
+def emulator_error_draws(emu: EdpvrEmulator, path: EmulatedPath, edp_mmhg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The emulated EDPVR volumes and ED fibre stretch with the emulator's own held-out error drawn in.
+
+    The emulator predicts the FE mean; the quantity is the FE value. Each draw's volume at pressure p is
+    multiplied by exp(ε), ε ~ N(0, s(p)²) with s(p) the held-out RMSE of log V/V₀ there
+    (:meth:`EdpvrEmulator.volume_log_sd`; 0 at V₀, which is exact), and its fibre stretch
+    gets N(0, s_λ²) at the EDP (:meth:`EdpvrEmulator.stretch_sd`), so the quantiles are
+    those of the FE quantity, not only of the emulator's mean. The volume at the EDP is left as the mean: the
+    check adds its error as a variance.
+
+    Parameters
+    ----------
+    emu : EdpvrEmulator
+    path : EmulatedPath
+        The emulated means (volumes in mL, V₀ first).
+    edp_mmhg : float
+        The data's EDP (mmHg), where the fibre stretch is taken.
+
+    Returns
+    -------
+    volumes_ml : ndarray (N, P)
+    fibre_stretch : ndarray (N,)
+    """
+    rng = np.random.default_rng(EMULATOR_ERROR_SEED)
+    vols = np.asarray(path.volumes_ml, float)
+    log_sd = np.asarray(emu.volume_log_sd(path.pressures_mmhg), float)
+    vols = vols * np.exp(rng.standard_normal(vols.shape) * log_sd[None, :])
+    lam = np.asarray(path.fibre_stretch_at_edp, float)
+    lam = lam + rng.standard_normal(lam.shape) * float(emu.stretch_sd(edp_mmhg))
+    return vols, lam
+
+
 def conditions_covered(*, geometry: Mapping | None, angles: Sequence[float | None], base: str, resolution: str,
                        name: str | None = DEFAULT_NAME) -> tuple[EdpvrEmulator | None, str]:
     """The EDPVR emulator ``name`` when a calibration's conditions are in its space (the draws not yet known:
@@ -540,7 +576,7 @@ def emulator_for(draws: Sequence[Mapping], *, geometry: Mapping | None, angles: 
     return emu, ""
 
 
-__all__ = ["FORMAT", "METADATA_FILE", "DEFAULT_NAME", "INPUT_NAMES", "OUTPUT_NAMES", "EdpvrEmulator",
+__all__ = ["FORMAT", "METADATA_FILE", "DEFAULT_NAME", "INPUT_NAMES", "OUTPUT_NAMES", "EdpvrEmulator", "emulator_error_draws", "EMULATOR_ERROR_SEED",
            "geometry_basis", "reference_volumes_ml", "fe_log_v8_ratio", "training_rows",
            "anchor_log_v8_ratio", "train_edpvr_emulator", "format_heldout", "save_edpvr_emulator",
            "find_edpvr_emulator", "load_edpvr_emulator", "EmulatedPath", "emulated_load_path", "conditions_covered", "emulator_for"]

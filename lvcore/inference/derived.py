@@ -360,12 +360,14 @@ def _edpvr_path(draws, *, edp_mmhg, angles, base, resolution, geometry, progress
     e = edpvr.emulated_load_path(emu, draws, edp_mmhg=edp_mmhg, pressures_mmhg=pressures_mmhg)
     if progress is not None:
         progress(len(draws), len(draws))
-    path = LoadPath(e.pressures_mmhg, e.volumes_ml, float(edp_mmhg), e.volume_at_edp_ml, e.fibre_stretch_at_edp, 0,
+    volumes, stretch = edpvr.emulator_error_draws(emu, e, edp_mmhg)
+    path = LoadPath(e.pressures_mmhg, volumes, float(edp_mmhg), e.volume_at_edp_ml, stretch, 0,
                     emu.resolution, emu.base, e.seconds)
     sd = e.volume_log_sd_at_edp
     return path, {"path": "emulator", "emulator": emu.name, "reason": "", "volume_log_sd_at_edp": sd,
-                  "source": f"EDPVR emulator '{emu.name}' (FE-trained, {emu.resolution} mesh, {emu.base} base; held-out "
-                            f"volume error {100 * sd:.2f} % at {float(edp_mmhg):g} mmHg, added to the band; the offset "
+                  "source": f"EDPVR emulator '{emu.name}' (FE-trained, {emu.resolution} mesh, {emu.base} base; its "
+                            "held-out error at each pressure drawn into the EDPVR and the fibre stretch, and at "
+                            f"{float(edp_mmhg):g} mmHg ({100 * sd:.2f} %) added to the band of the check; the offset "
                             "is the calibration emulator against it)"}
 
 

@@ -505,7 +505,7 @@ class Store:
     IMPORTED_FILE = "subjects_imported.jsonl"
 
     def import_summary(self, result: Mapping, settings: Mapping, source: str) -> int:
-        """Take over the subjects of an earlier summary (``sbc.json``) whose work folder is gone.
+        """Take over the subjects of an earlier summary (the study's result file) whose work folder is gone.
 
         The summary's subjects keep every field the statistics read (truths,
         ranks, widths, exit codes, flag kinds, seconds); each imported record
