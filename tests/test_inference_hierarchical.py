@@ -18,7 +18,7 @@ from lvcore.inference import hierarchical as hi
 from lvcore.inference.sampler_config import SamplerConfig
 from lvcore.testing.analytic import AnalyticForward
 
-SHORT = SamplerConfig(num_warmup=150, num_samples=150, num_chains=2, seed=1)
+SHORT = SamplerConfig(num_warmup=100, num_samples=100, num_chains=2, seed=1)
 
 
 @pytest.fixture(scope="module")
