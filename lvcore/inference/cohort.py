@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from lvcore.core.space import THETA_BOUNDS
-from lvcore.domain.conditions import SIGMA_V_ML
+from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML, THETA_TILDE
 from lvcore.domain.outputs import OUTPUT_COLUMNS, THETA_NAMES
 from lvcore.exceptions import DataError, LVCoreError
 from lvcore.safety import limits
@@ -48,9 +48,9 @@ MIN_SUBJECTS = 2
 #: Most groups of one cohort.
 MAX_GROUPS = 8
 #: Strain noise sd of the SYNTHETIC cohort (the chapter's sigma_S).
-SYNTHETIC_SIGMA_S = 0.03
+SYNTHETIC_SIGMA_S = SIGMA_S
 #: Population of the SYNTHETIC cohort: the mean of log theta (theta~ of the chapter's operator study) ...
-SYNTHETIC_MU = {"a": 0.60, "b": 1.30, "af": 1.00, "bf": 3.60}
+SYNTHETIC_MU = dict(THETA_TILDE)
 #: ... and the sds of log theta and their correlation matrix (order a, b, af, bf).
 SYNTHETIC_SD = (0.30, 0.25, 0.30, 0.25)
 SYNTHETIC_CORR = ((1.0, -0.3, 0.2, 0.0), (-0.3, 1.0, 0.0, 0.1), (0.2, 0.0, 1.0, -0.2), (0.0, 0.1, -0.2, 1.0))

@@ -257,7 +257,7 @@ def figures(result: dict) -> dict:
     out["fig_real_lv_regional_spread"] = fig
     rows = []
     for layer, L in result["layers"].items():
-        for key, label in (("iid_sigma_s_inflation", "iid σ_S / 0.03"),) if L["summary"] else ():
+        for key, label in (("iid_sigma_s_inflation", f"iid σ_S / {SIGMA_S:g}"),) if L["summary"] else ():
             d = L["summary"][key]
             rows.append({"label": layer.replace("_", " "), "series": label, "median": d["estimate"], "q05": d["lo"],
                          "q95": d["hi"]})
@@ -307,7 +307,7 @@ def docs_markdown(result: dict) -> str:
         sp = g["spread"]
         lines.append(row([layer.replace("_", " "), geo, f"{g['ΔLVV (mL)'].mean():.2f}", f"{g['mean Δstrain'].mean():.4f}",
                           f"{sp.mean():.4f} [{sp.min():.4f}, {sp.max():.4f}]"]))
-    lines += ["", row(["layer", "iid σ_S / 0.03 per angle pair (median over its 4 sets)", "largest R-hat",
+    lines += ["", row(["layer", f"iid σ_S / {SIGMA_S:g} per angle pair (median over its 4 sets)", "largest R-hat",
                        "emulator held-out LVV / strain RMSE", "sampler"]), "|---|---|---|---|---|"]
     for layer, L in [(k, v) for k, v in result["layers"].items() if v["summary"]]:
         s, em, smp = L["summary"], L.get("emulator") or {}, L["study"].get("sampler") or {}
