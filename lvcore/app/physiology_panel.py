@@ -254,11 +254,11 @@ def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) 
                    f"EDV/V₀ come with the EDPVR below. {typical.text()}.")
     n = edpvr_draws()
     if st.button(_button_label(n, setup), key=f"{key}_run"):
-        bar = st.progress(0.0, text=f"EDPVR: FE solves for {n} posterior draws…")
+        bar = st.progress(0.0, text=f"EDPVR of {n} posterior draws…")
         try:
             record = run_edpvr(idatas[label], setup, n_draws=n,
                                progress=lambda done, total: bar.progress(
-                                   min(1.0, done / total), text=f"EDPVR: {done}/{total} FE solves"))
+                                   min(1.0, done / total), text=f"EDPVR: {done} of {total} done"))
         except Exception as err:  # noqa: BLE001 - a page shows errors in words, never a traceback
             st.error(f"The EDPVR could not be computed: {type(err).__name__}: {err}")
             record = None

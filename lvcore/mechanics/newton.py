@@ -127,8 +127,8 @@ def tangent_definite(tangent) -> bool | None:
     """Whether a factorised tangent (a :class:`Tangent`, or a factorisation) was positive definite.
 
     True when PARDISO's or CHOLMOD's Cholesky (LLᵀ) succeeded on it; False when the backend asked for
-    one (PARDISO, CHOLMOD supernodal) had to fall back to an indefinite factorisation (CHOLMOD's
-    LDLᵀ, SuperLU), or an LDLᵀ has a pivot ≤ 0 (CHOLMOD's simplicial one; SuperLU's LU where it kept
+    one (PARDISO, CHOLMOD supernodal) had to fall back to an indefinite factorisation (PARDISO's
+    symmetric indefinite LDLᵀ, CHOLMOD's LDLᵀ, SuperLU), or an LDLᵀ has a pivot ≤ 0 (CHOLMOD's simplicial one; SuperLU's LU where it kept
     to diagonal pivots, a symmetric permutation, is one too); None when it cannot tell (SuperLU that
     pivoted off the diagonal, no tangent). At a converged state (its last tangent is taken within a few Newton iterations of
     it) an indefinite tangent means an unstable equilibrium: under the same pressure a nearby state
