@@ -80,10 +80,8 @@ def solve_load_path(case: dict, pressures_mmhg: Sequence[float] = LOAD_PATH_PRES
     """One case's load path: ``(v0_ml, lvv_ml (P,), strains (P, 24), fibre_stretch (P,))``, NaN from the first
     pressure that did not converge on (warm continuation from the pressure below, then a cold solve)."""
     from lvcore.domain import units
-    from lvcore.exceptions import LVCoreError
     from lvcore.mechanics.fibre_stretch import mean_fibre_stretch
-    from lvcore.mechanics.forward import _as_warm, case_values, warm_continuation
-    from lvcore.mechanics.simulate import simulate
+    from lvcore.mechanics.forward import _as_warm, case_values, continue_or_solve
 
     P = len(pressures_mmhg)
     lvv, lam = np.full(P, np.nan), np.full(P, np.nan)
@@ -91,13 +89,8 @@ def solve_load_path(case: dict, pressures_mmhg: Sequence[float] = LOAD_PATH_PRES
     v0, warm = float("nan"), None
     for j, p in enumerate(pressures_mmhg):
         c = {**case, "load": {"pressure": float(p), "units": "mmHg"}}
-        try:
-            res = None if warm is None else warm_continuation(c, warm)
-            if res is None or not res.converged:
-                res = simulate(c)
-        except LVCoreError:
-            res = None
-        if res is None or not res.converged:
+        res = continue_or_solve(c, warm)
+        if res is None:
             break
         out = res.outputs()
         v0 = res.cavity_volume_mm3[0] / units.MM3_PER_ML

@@ -273,10 +273,8 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
     from lvcore.execution import chains
     from lvcore.domain import units
     from lvcore.mechanics.case_inputs import build_case
-    from lvcore.exceptions import LVCoreError
     from lvcore.mechanics.fibre_stretch import mean_fibre_stretch
-    from lvcore.mechanics.forward import _as_warm, case_values, warm_continuation
-    from lvcore.mechanics.simulate import simulate
+    from lvcore.mechanics.forward import _as_warm, case_values, continue_or_solve
 
     p = np.asarray(pressures_mmhg, float)
     if p.ndim != 1 or p.size == 0 or np.any(np.diff(p) <= 0) or p[0] <= 0 or p[-1] > 30.0:
@@ -306,16 +304,11 @@ def fe_load_path(draws: Sequence[Mapping], *, edp_mmhg: float, angles: tuple[flo
 
     def solve(key, initial):
         case = cases[key]
-        try:
-            res = None if initial is None else warm_continuation(case, initial)
-            if res is None or not res.converged:
-                res = simulate(case)
-        except LVCoreError:
-            res = None
+        res = continue_or_solve(case, initial)
         done[0] += 1
         if progress is not None:
             progress(done[0], len(cases))
-        if res is None or not res.converged:
+        if res is None:
             return None, None
         lam = float("nan")
         if fibre_stretch and abs(float(X[key, len(names) - 1]) - edp) < 1e-12:

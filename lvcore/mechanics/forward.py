@@ -130,6 +130,25 @@ def warm_continuation(case: Mapping, initial, *, with_sensitivities: bool = Fals
                              depth=depth - 1)
 
 
+def continue_or_solve(case: Mapping, initial=None):
+    """``case`` solved by :func:`warm_continuation` from ``initial`` (a :class:`WarmState`) where given, else, or
+    when that does not converge, cold; the converged :class:`~lvcore.mechanics.simulate.SimulationResult`, or None
+    when neither converged or the case was refused (:class:`~lvcore.exceptions.LVCoreError`).
+
+    The step of a load path (:mod:`lvcore.campaigns.load_paths`, :func:`lvcore.inference.derived.fe_load_path`),
+    without :func:`solve_warm`'s guard of warm results.
+    """
+    from lvcore.exceptions import LVCoreError
+
+    try:
+        res = None if initial is None else warm_continuation(case, initial)
+        if res is None or not res.converged:
+            res = simulate(case)
+    except LVCoreError:
+        return None
+    return res if res.converged else None
+
+
 def _simulate_point(case: dict, input_names: tuple[str, ...], jacobian: bool, warm: dict | None = None):
     """One simulator run -> ``(outputs (25,), converged, message, jacobian (25, p) or None, seconds)``.
 
@@ -513,4 +532,5 @@ def simulator_factory(space, resolution: str) -> SimulatorForward:
 
 register_forward(DEFAULT_FORWARD_NAME, simulator_factory)
 
-__all__ = ["SimulatorForward", "AdjointSimulatorForward", "simulator_factory", "WarmSolve", "solve_warm", "soft_corner"]
+__all__ = ["SimulatorForward", "AdjointSimulatorForward", "simulator_factory", "WarmSolve", "solve_warm", "soft_corner",
+           "continue_or_solve"]
