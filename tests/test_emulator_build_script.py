@@ -16,7 +16,7 @@ def test_below_spec_build_goes_to_workdir_and_says_so(tmp_path):
     mod = _script()
     out = tmp_path / "assets"
     args = ["--emulators", "material", "--n-train", "8", "--n-valid", "8", "--n-test", "0", "--resolution", "fast",
-            "--workers", "2", "--workdir", str(tmp_path / "work"), "--out", str(out), "--architectures", "20x20",
+            "--workdir", str(tmp_path / "work"), "--out", str(out), "--architectures", "20x20",
             "--max-epochs", "20", "--batch-size", "4", "--lbfgs-iterations", "50", "--no-progress"]
     assert mod.main(args) == 0
     store = read_store(tmp_path / "work" / "material" / "train_fast.h5")

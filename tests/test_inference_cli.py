@@ -165,9 +165,18 @@ def test_measure_sd_columns_are_read_from_csv_json_and_mat(tmp_path):
 
 
 @pytest.mark.slow
-def test_geometry_infer_records_the_measure_sds_and_the_representation_floor(tmp_path):
+def test_geometry_infer_records_the_measure_sds_and_the_representation_floor(tmp_path, monkeypatch):
     """A short infer run (not converged: the sampler is cut short): summary.json names each measure's sd,
-    where it came from, the likelihood sd with the floor and the representation error; 'off' drops the floor."""
+    where it came from, the likelihood sd with the floor and the representation error; 'off' drops the floor.
+
+    The 'off' run stops before sampling (its sampler, without the floor, would be a second trace and compile,
+    about 24 CPU-s): it checks the geometry record the CLI's request carries, which the floor run shows reaching
+    summary.json unchanged."""
+    from lvcore.inference import calibrate as cal
+    from lvcore.inference import cli as inference_cli
+
+    setups, prepare_run = [], inference_cli.prepare_run
+    monkeypatch.setattr(inference_cli, "prepare_run", lambda args: setups.append(prepare_run(args)) or setups[-1])
     p = _csv(tmp_path, ",reference_volume_ml,long_axis_mm", ",70,82")
     short = ["--chains", "1", "--warmup", "15", "--samples", "15", "--model", "iid"]
     code = main(["calibrate", "--data", str(p), "--geometry", "infer", "--reference-volume-sd", "4", *short,
@@ -181,8 +190,14 @@ def test_geometry_infer_records_the_measure_sds_and_the_representation_floor(tmp
     rep = geo["representation_error"]
     assert rep["mode"] == "floor" and rep["n_cases"] >= 30 and 0 < rep["strain_sd_rms"] < 0.1
     assert geo["posterior"]["measure_sd"] == geo["measure_sd"]
+    # the request's geometry record is what summary.json says (the posterior added)
+    (request,) = setups[-1].requests.values()
+    assert request.geometry_record and {k: geo[k] for k in request.geometry_record} == json.loads(
+        json.dumps(request.geometry_record))
+    monkeypatch.setattr(cal, "calibrate_subjects", lambda *a, **k: [])
     code = main(["calibrate", "--data", str(p), "--geometry", "infer", "--representation-error", "off", *short,
                  "--out", str(tmp_path / "o2")])
-    (rec,) = json.loads((tmp_path / "o2" / "summary.json").read_text())
-    assert rec["geometry"]["representation_error"] is None
-    assert rec["geometry"]["likelihood_sd"] == {"reference_volume_ml": 5.0, "long_axis_mm": 3.0}
+    assert code == 0
+    (request,) = setups[-1].requests.values()
+    assert request.geometry_record["representation_error"] is None
+    assert request.geometry_record["likelihood_sd"] == {"reference_volume_ml": 5.0, "long_axis_mm": 3.0}
