@@ -92,7 +92,7 @@ def test_fit_datasets_sees_a_strain_mismatch_on_the_analytic_stand_in():
     bump = 0.06 * (-1.0) ** (np.arange(24) % 6)
     ys = np.concatenate([mm.noisy_copies(z, 3, 1), mm.noisy_copies(z + np.r_[0.0, bump], 3, 2)])
     truths = np.repeat(np.array([[THETA[n] for n in THETA_NAMES]]), 6, axis=0)
-    cfg = samplers.SamplerConfig(num_warmup=150, num_samples=150, num_chains=2)
+    cfg = samplers.SamplerConfig(num_warmup=100, num_samples=100, num_chains=2)
     res = mm.fit_datasets(fwd, ys, None, truths, np.repeat(z[None], 6, axis=0), config=cfg,
                           keys=jax.random.split(jax.random.PRNGKey(0), 6))
     clean_iid, bumped_iid = np.median(res["iid"]["sigma_s"][:3]), np.median(res["iid"]["sigma_s"][3:])
