@@ -26,6 +26,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -317,8 +318,9 @@ def fuzz_my_subject() -> int:
 
 
 # --------------------------------------------------------------------------- the tests
-def _capped(function: str, timeout: float = 900, warmup: bool = False) -> int:
-    """Run ``function`` of this module in a child Python capped at :data:`CAP_BYTES`; returns its example count.
+def _capped(functions: tuple[str, ...], timeout: float = 900, warmup: bool = False) -> dict[str, int]:
+    """Run ``functions`` of this module, one after the other, in one child Python capped at :data:`CAP_BYTES`;
+    returns each one's example count.
 
     With ``warmup`` the app's background warm-up (:mod:`lvcore.app.warmup`, what ``lvcore app`` starts once per
     server: the Calibration page's samplers and best fit compiled) runs in that child while the uploads are fuzzed,
@@ -334,12 +336,12 @@ def _capped(function: str, timeout: float = 900, warmup: bool = False) -> int:
             "import streamlit.testing.v1\n"   # a server has Streamlit (plotly, pandas) imported before it warms up
             "from lvcore.app import warmup\n"
             f"started = warmup.start() if {warmup!r} else False\n"
-            f"n = fuzz.{function}()\n"
+            f"for name in {tuple(functions)!r}:\n"
+            "    print('FUZZED', name, getattr(fuzz, name)(), flush=True)\n"
             "t0 = time.perf_counter()\n"
             "while warmup.STATUS['state'] == 'running' and time.perf_counter() - t0 < 300:\n"
             "    time.sleep(0.5)\n"
-            "print('WARMUP', started, warmup.STATUS['state'], warmup.STATUS['error'], flush=True)\n"
-            "print('FUZZED', n, flush=True)\n")
+            "print('WARMUP', started, warmup.STATUS['state'], warmup.STATUS['error'], flush=True)\n")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
     # what `lvcore app` puts in a capped server's environment (lvcore.app.memory.launch_environment)
     from lvcore.app import memory
@@ -352,25 +354,36 @@ def _capped(function: str, timeout: float = 900, warmup: bool = False) -> int:
         env[app_warmup.ENV] = "1"
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, timeout=timeout, capture_output=True,
                           encoding="utf-8", errors="replace")  # a reader's stderr may echo the file's bytes
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("FUZZED ")]
-    assert proc.returncode == 0 and lines, (f"{function} exited {proc.returncode} under the {CAP_BYTES / 2**30:.1f} GB "
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(("FUZZED ", "WARMUP "))]
+    assert proc.returncode == 0 and lines and lines[-1].startswith("WARMUP "), (f"{functions} exited {proc.returncode} under the {CAP_BYTES / 2**30:.1f} GB "
                                             f"cap:\n{proc.stdout[-3000:]}\n{proc.stderr[-6000:]}")
-    state = [ln for ln in proc.stdout.splitlines() if ln.startswith("WARMUP ")][-1]
+    state = lines[-1]
     print(state)
     if warmup:
         # it compiled at least one stage beside the fuzz (with the app's memory economies it did all of them)
         assert state.split()[1] == "True" and state.split()[2] in ("done", "partial"), state
-    return int(lines[-1].split()[1])
+    counts = {ln.split()[1]: int(ln.split()[2]) for ln in lines if ln.startswith("FUZZED ")}
+    assert set(counts) == set(functions), (functions, lines)
+    return counts
 
 
-def test_calibration_page_uploads_fuzzed_under_a_4gb_cap_with_the_warmup_on():
-    """The page whose samplers the warm-up compiles, fuzzed while it compiles them (the most memory at once)."""
-    assert _capped("fuzz_calibration", warmup=True) >= 2
+@pytest.fixture(scope="module")
+def fuzzed_with_the_warmup():
+    """The Calibration page (whose samplers the warm-up compiles), fuzzed while the warm-up compiles them (the most
+    memory at once), then the My subject page, in one capped child (one warm-up, not one per page: each is
+    minutes of compiling on a cold cache, and the second child's warm-up was mostly tracing again)."""
+    return _capped(("fuzz_calibration", "fuzz_my_subject"), warmup=True)
+
+
+def test_calibration_page_uploads_fuzzed_under_a_4gb_cap_with_the_warmup_on(fuzzed_with_the_warmup):
+    assert fuzzed_with_the_warmup["fuzz_calibration"] >= 2
 
 
 def test_geometry_page_uploads_fuzzed_under_a_4gb_cap():
-    assert _capped("fuzz_geometry_page") >= 2
+    assert _capped(("fuzz_geometry_page",))["fuzz_geometry_page"] >= 2
 
 
-def test_my_subject_uploads_fuzzed_under_a_4gb_cap_with_the_warmup_on():
-    assert _capped("fuzz_my_subject", warmup=True) >= 2
+def test_my_subject_uploads_fuzzed_under_a_4gb_cap_with_the_warmup_on(fuzzed_with_the_warmup):
+    """After the Calibration page's fuzz, in the same capped child: the warm-up's programs are held (or still being
+    compiled) while the My subject page reads its uploads."""
+    assert fuzzed_with_the_warmup["fuzz_my_subject"] >= 2
