@@ -355,8 +355,9 @@ def _capped(functions: tuple[str, ...], timeout: float = 900, warmup: bool = Fal
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, timeout=timeout, capture_output=True,
                           encoding="utf-8", errors="replace")  # a reader's stderr may echo the file's bytes
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith(("FUZZED ", "WARMUP "))]
-    assert proc.returncode == 0 and lines and lines[-1].startswith("WARMUP "), (f"{functions} exited {proc.returncode} under the {CAP_BYTES / 2**30:.1f} GB "
-                                            f"cap:\n{proc.stdout[-3000:]}\n{proc.stderr[-6000:]}")
+    assert proc.returncode == 0 and lines and lines[-1].startswith("WARMUP "), (
+        f"{functions} exited {proc.returncode} under the {CAP_BYTES / 2**30:.1f} GB cap:\n{proc.stdout[-3000:]}\n"
+        f"{proc.stderr[-6000:]}")
     state = lines[-1]
     print(state)
     if warmup:
