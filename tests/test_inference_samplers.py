@@ -1,4 +1,6 @@
 """Samplers on a closed-form stand-in forward model (SYNTHETIC; the product uses emulators)."""
+from dataclasses import replace
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -139,14 +141,32 @@ def test_quick_coverage_iid(iid_batch):
     assert 0.78 <= overall <= 0.99, overall
 
 
-@pytest.mark.slow
-def test_discrepancy_model_recovers_smooth_discrepancy():
-    """Data with a known discrepancy in the kernel's class: (iii) covers it and sigma_S near truth."""
+def _smooth_discrepancy():
+    """A known discrepancy in the kernel's class (strain), for the discrepancy samplers' data."""
     x = kernels.strain_grid()
-    true_disc = 0.05 * np.cos(x[:, 0] - 0.7) + 0.03 * (x[:, 1] - 1.5) / 1.5
-    y = _data(seed=5, disc=true_disc)
-    cfg = samplers.SamplerConfig(num_warmup=500, num_samples=500, num_chains=2)
-    run = samplers.run_hmc_gibbs(y, FWD, cfg)
+    return 0.05 * np.cos(x[:, 0] - 0.7) + 0.03 * (x[:, 1] - 1.5) / 1.5
+
+
+#: The discrepancy samplers' settings on the smooth-discrepancy data set (both block-4 kinds, and iid NUTS).
+SMOOTH_CFG = samplers.SamplerConfig(num_warmup=500, num_samples=1500, num_chains=2)
+
+
+@pytest.fixture(scope="module")
+def smooth_discrepancy_runs():
+    """The two block-4 samplers of the discrepancy model on one data set with a smooth discrepancy, 2 × (500 +
+    1500) each, run once for the recovery and the sampler comparison tests (each sampler is a trace and an XLA
+    compile of its own, the larger part of its cost)."""
+    y = _data(seed=5, disc=_smooth_discrepancy())
+    return y, {block: samplers.run_hmc_gibbs(y, FWD, replace(SMOOTH_CFG, discrepancy_block=block))
+               for block in samplers.DISCREPANCY_BLOCKS}
+
+
+@pytest.mark.slow
+def test_discrepancy_model_recovers_smooth_discrepancy(smooth_discrepancy_runs):
+    """Data with a known discrepancy in the kernel's class: (iii) covers it and sigma_S near truth."""
+    true_disc = _smooth_discrepancy()
+    y, runs = smooth_discrepancy_runs
+    run = runs["marginal"]
     total = run.samples["disc"] + run.samples["v"][..., None]
     eta_dev = run.samples["eta"][..., 1:] - np.asarray(FWD(TRUTH))[1:]
     # what the data identify: eta + disc + v; the band of disc + v + (eta - eta_true) must cover the truth
@@ -160,7 +180,7 @@ def test_discrepancy_model_recovers_smooth_discrepancy():
     s = np.sqrt(run.samples["sigma_s2"])
     assert 0.012 < np.median(s) < 0.045
     # an iid fit of the same data inflates sigma_S
-    iid = samplers.run_nuts("iid", y, FWD, cfg)
+    iid = samplers.run_nuts("iid", y, FWD, replace(SMOOTH_CFG, num_samples=500))
     assert iid.samples["eta"].shape == (2, 500, 25) and iid.sample_stats["diverging"].shape == (2, 500)
     assert np.median(np.sqrt(iid.samples["sigma_s2"])) > np.median(s)
 
@@ -198,20 +218,26 @@ def test_joint_theta_and_fibre_angle_inference(model_name):
 @pytest.mark.slow
 def test_data_passed_to_the_compiled_sampler_give_the_same_draws():
     """The chain methods that pass the data as an argument (not a compiled-in constant) draw what
-    numpyro's own vectorized method draws, and a second data set changes the draws."""
+    numpyro's own vectorized method draws, and a second data set given to the same compiled sampler (no new
+    trace or compile) changes the draws."""
     y1, y2 = _data(seed=5), _data(seed=6)
 
-    def draws(chain_method, y):
+    def run(chain_method, y):
         # 10 warm-up steps: each NUTS step amplifies the chain methods' different rounding (after 60, one chain's
         # first draws differed by 1 % with XLA's back end at -O0, another rounding than this machine's default)
         cfg = samplers.SamplerConfig(num_warmup=10, num_samples=40, num_chains=2, seed=3, chain_method=chain_method)
-        return samplers.run_nuts("iid", y, FWD, cfg).samples["a"]
+        return samplers.run_nuts("iid", y, FWD, cfg)
 
-    ref = draws("vectorized", y1)
+    ref = run("vectorized", y1).samples["a"]
     # the same chains up to floating-point rounding (different fusion), which NUTS amplifies: the first draws
     # and the chains' means (assert_same_chains); another data set moves the first draws far beyond that
-    assert_same_chains(draws(samplers.pmap_vmap(1), y1), ref)
-    assert early_difference(draws(samplers.pmap_vmap(1), y2), ref) > 100 * TIGHT_RTOL
+    new = run(samplers.pmap_vmap(1), y1)
+    assert_same_chains(new.samples["a"], ref)
+    compiled = dict(new.mcmc.__dict__["_lvcore_compiled"])
+    assert len(compiled) == 1
+    samples, _ = samplers._run_and_collect(new.mcmc, jax.random.PRNGKey(3), samplers._run_kwargs(y2, None))
+    assert new.mcmc.__dict__["_lvcore_compiled"] == compiled  # the program compiled for y1 drew for y2
+    assert early_difference(samples["a"], ref) > 100 * TIGHT_RTOL
     call, model_args = samplers._with_dynamic_model_args(lambda m: m)  # not numpyro's layout: passed through
     assert model_args is None and call(7, None) == 7
 
@@ -303,7 +329,15 @@ def test_batched_posteriors_per_data_set_conditions_match_compiled_in(model_name
     in one compiled run) draws what one run per geometry with the scores compiled in draws, key for key, up to
     rounding that the samplers amplify: the first draws tightly, the means within Monte Carlo error
     (assert_same_chains; issue 48: the chapter's block 4 differed by 6.1e-4 at draws 8-9 of 10). Swapping the
-    two geometries' conditions moves the first draws far beyond that tolerance."""
+    two geometries' conditions moves the first draws far beyond that tolerance.
+
+    One compiled-in program (the first geometry's, over both data sets) is the reference of both runs with
+    run-time conditions: data set 0 with its own conditions (``both``) and data set 1 with the first geometry's
+    (``swapped``) must draw what it draws, and the other pairings (each data set with the other geometry's
+    conditions) must not. So a batch that gave every data set the first row's conditions, or the rows in the
+    wrong order, fails; the second geometry's values themselves are checked against its forward model in
+    test_runtime_conditions_compile_one_program_for_every_geometry. (A compiled-in program of the second
+    geometry as well cost one more trace and XLA compile of the batched sampler, and caught no other defect.)"""
     fwds = [f.forward for f in _chapter_forwards()]  # unscaled emulator forwards of two geometries
     params = {"a": 0.8, "b": 4.0, "af": 1.2, "bf": 6.0}
     ys = np.stack([np.asarray(f(params)) + 0.01 for f in fwds])
@@ -313,12 +347,14 @@ def test_batched_posteriors_per_data_set_conditions_match_compiled_in(model_name
     sites = ("a", "bf") + (("sigma_s2",) if model_name != "volume" else ())
     both = coverage.batched_posteriors(fwds[0], model_name, ys, keys, cfg, sites=sites, conditions=conds)
     swapped = coverage.batched_posteriors(fwds[0], model_name, ys, keys, cfg, sites=sites, conditions=conds[::-1])
-    for i, f in enumerate(fwds):  # the same batch shape (rounding of batched products depends on it)
-        one = coverage.batched_posteriors(f, model_name, ys, keys, cfg, sites=sites)
+    # the same batch shape (rounding of batched products depends on it): geometry 0 compiled in, both data sets
+    one = coverage.batched_posteriors(fwds[0], model_name, ys, keys, cfg, sites=sites)
+    for i, (run, other) in enumerate(((both, swapped), (swapped, both))):  # data set i with geometry 0's conditions
         for s in sites:
-            assert_same_chains(both[s][i:i + 1], one[s][i:i + 1], rtol=SIGMA_S2_RTOL if s == "sigma_s2" else TIGHT_RTOL,
+            assert_same_chains(run[s][i:i + 1], one[s][i:i + 1], rtol=SIGMA_S2_RTOL if s == "sigma_s2" else TIGHT_RTOL,
                                atol=1e-12)
-        assert max(early_difference(swapped[s][i:i + 1], one[s][i:i + 1]) for s in sites) > 100 * TIGHT_RTOL, i
+        # data set i with geometry 1's conditions
+        assert max(early_difference(other[s][i:i + 1], one[s][i:i + 1]) for s in sites) > 100 * TIGHT_RTOL, i
     assert not np.allclose(both["a"][0], both["a"][1])  # the two geometries' data sets differ
     with pytest.raises(ValueError, match="conditions must have shape"):
         coverage.batched_posteriors(fwds[0], "iid", ys, keys, cfg, conditions=conds[:, :2])
@@ -383,15 +419,11 @@ def test_marginal_block4_draws_the_discrepancy_from_its_full_conditional():
 
 
 @pytest.mark.slow
-def test_marginal_and_chapter_block4_sample_the_same_posterior():
+def test_marginal_and_chapter_block4_sample_the_same_posterior(smooth_discrepancy_runs):
     """The two block-4 samplers on one data set with a smooth discrepancy: the 5 %, 50 % and 95 % quantiles of
     θ, σ_S², v and λ agree within 4.5 combined Monte Carlo standard errors (ArviZ's quantile MCSE; log scale for
     the positive sites), 2 × (500 + 1500) each; the marginal one diverges less."""
-    x = kernels.strain_grid()
-    y = _data(seed=5, disc=0.04 * np.cos(x[:, 0] - 0.7) + 0.02 * (x[:, 1] - 1.5) / 1.5)
-    runs = {}
-    for block in samplers.DISCREPANCY_BLOCKS:
-        cfg = samplers.SamplerConfig(num_warmup=500, num_samples=1500, num_chains=2, discrepancy_block=block)
-        runs[block] = samplers.run_hmc_gibbs(y, FWD, cfg)
+    _, runs = smooth_discrepancy_runs
+    assert runs["chapter"].samples["a"].shape == runs["marginal"].samples["a"].shape == (2, 1500)
     assert_same_quantiles(runs["marginal"], runs["chapter"], ("a", "b", "af", "bf", "sigma_s2", "v", "lam"))
     assert runs["marginal"].sample_stats["diverging"].sum() <= runs["chapter"].sample_stats["diverging"].sum() + 5
