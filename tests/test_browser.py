@@ -91,34 +91,6 @@ def _new_page(chromium, errors: list):
     return ctx, page
 
 
-def test_every_page_opens_at_its_url_path_on_a_fresh_server(app, chromium):
-    """Every page typed at its URL path (the home page at / and at /simulator too), each in a fresh browser context
-    (a new session): its own title, no "Page not found", no exception and no error box. First in this module, so the
-    first visit of all goes to a fresh server at /simulator: Streamlit used to run that first session inside the page
-    list of the ``pages/`` folder beside app.py, which knew none of the app's URL paths."""
-    from lvcore.app import PAGES
-
-    js_errors: list = []
-    home, *others = PAGES
-    urls = [(home.url_path, home), ("", home)] + [(p.url_path, p) for p in others]
-    for path, expected in urls:
-        ctx, page = _new_page(chromium, js_errors)
-        page.goto(f"{app.url}/{path}")
-        drv.wait_idle(page, timeout_s=600)  # a first visit compiles the page's imports (minutes on a loaded machine)
-        where = f"/{path} ({expected.title})"
-        body = page.locator("body").inner_text()
-        assert "Page not found" not in body, f"{where}: {body[body.index('Page not found'):][:200]!r}"
-        assert page.url.rstrip("/") == f"{app.url}/{path}".rstrip("/"), f"{where}: went to {page.url}"
-        _no_error_box(page, where)
-        current = page.locator("[data-testid=stSidebarNav] a[aria-current=page], [data-testid=stSidebarNavLink]"
-                               "[aria-current=page]")
-        if current.count():  # the sidebar marks the page shown (the hidden /simulator alias marks none)
-            assert expected.title in current.first.inner_text(), f"{where}: sidebar shows {current.first.inner_text()}"
-        assert page.locator("h1").count() >= 1, f"{where}: no title"
-        ctx.close()
-    assert not js_errors, f"JavaScript errors in the page: {js_errors[:3]}"
-
-
 #: The elements screenshotted one by one: plots (Plotly, live charts), tables and dataframes, images.
 FIGURE_SELECTORS = {"plot": '[data-testid="stPlotlyChart"], [data-testid="stCustomComponentV1"]',
                     "dataframe": '[data-testid="stDataFrame"]', "table": '[data-testid="stTable"]',
@@ -193,45 +165,76 @@ def _move_a_slider(page, label: str) -> tuple:
     return name, before, after
 
 
+def _url_path_checks(page, app, path: str, expected, where: str) -> None:
+    """A page typed at its URL path: no "Page not found", no redirect, no exception or error box, the sidebar
+    marks it (the hidden /simulator alias marks none), and it has a title."""
+    body = page.locator("body").inner_text()
+    assert "Page not found" not in body, f"{where}: {body[body.index('Page not found'):][:200]!r}"
+    assert page.url.rstrip("/") == f"{app.url}/{path}".rstrip("/"), f"{where}: went to {page.url}"
+    _no_error_box(page, where)
+    current = page.locator("[data-testid=stSidebarNav] a[aria-current=page], [data-testid=stSidebarNavLink]"
+                           "[aria-current=page]")
+    if current.count():
+        assert expected.title in current.first.inner_text(), f"{where}: sidebar shows {current.first.inner_text()}"
+    assert page.locator("h1").count() >= 1, f"{where}: no title"
+
+
 def test_every_page_its_figures_a_slider_a_calibration_and_its_edpvr(app, chromium):
-    """Every page of the sidebar in one browser session, at a 1400-px-wide viewport:
-    - its title and no exception; every plot, table and image, on every tab, screenshotted alone
-      (build/screenshots/figures/): each has a non-zero box and ends inside the viewport's width;
+    """Every page typed at its URL path (the home page at /simulator and at /), each in a fresh browser context
+    (a new session), at a 1400-px-wide viewport. The first visit of all goes to the fresh server at /simulator:
+    Streamlit used to run that first session inside the page list of the ``pages/`` folder beside app.py, which
+    knew none of the app's URL paths. On each page (:func:`_url_path_checks` on all, the rest from / on):
+    - its own title, no "Page not found", no redirect, no exception and no error box, the sidebar marks it;
+    - every plot, table and image, on every tab, screenshotted alone (build/screenshots/figures/): each has a
+      non-zero box and ends inside the viewport's width;
     - one slider moved by keyboard: the value changes and no exception follows (a full-page screenshot after);
-    - no request of any page leaves localhost;
+    - no request of any page leaves localhost; the sidebar links only to these URL paths;
     then a small calibration on the Calibration page: its result figures (one tab per likelihood) fit too, and the
     EDPVR button (:data:`EDPVR_TEST_DRAWS` posterior draws) draws the derived EDPVR with the measured point inside
-    its band, V₀ and Klotz's curve, the identified combination, and no error or exception box."""
+    its band, V₀ and Klotz's curve, the identified combination, and no error or exception box.
+    (One walk: it used to be two, one typing each URL path and one following the sidebar, each loading every page.)"""
     import shutil
     from urllib.parse import urlparse
+
+    from lvcore.app import PAGES
 
     out = SHOTS / "figures"
     shutil.rmtree(out, ignore_errors=True)  # only this run's pictures
     out.mkdir(parents=True, exist_ok=True)
     js_errors: list = []
-    ctx, page = _new_page(chromium, js_errors)
     hosts: set = set()
-    ctx.on("request", lambda req: hosts.add(urlparse(req.url).hostname or urlparse(req.url).scheme))
-    assert page.viewport_size["width"] == VIEWPORT_WIDTH
-    page.goto(app.url)
-    drv.wait_idle(page)
-    shot, problems, tabs, moved = [], [], 0, []
-    links = drv.page_links(page)
-    assert len(links) >= 5, f"expected the app's pages in the sidebar, found {links}"
-    for label, href in links:
-        page.goto(href)
-        drv.wait_idle(page)
-        assert page.locator("h1").count() >= 1, f"page '{label}' shows no title"
-        assert not drv.exceptions(page), f"page '{label}' shows an exception: {drv.exceptions(page)}"
+    shot, problems, tabs, moved, links = [], [], 0, [], None
+    home, *others = PAGES
+    visits = [(home.url_path, home), ("", home)] + [(p.url_path, p) for p in others]
+    for path, expected in visits:
+        ctx, page = _new_page(chromium, js_errors)
+        ctx.on("request", lambda req: hosts.add(urlparse(req.url).hostname or urlparse(req.url).scheme))
+        assert page.viewport_size["width"] == VIEWPORT_WIDTH
+        page.goto(f"{app.url}/{path}")
+        drv.wait_idle(page, timeout_s=600)  # a first visit compiles the page's imports (minutes on a loaded machine)
+        label = expected.title
+        _url_path_checks(page, app, path, expected, f"/{path} ({label})")
+        if path == home.url_path:  # the alias, the fresh server's first visit: the rest is done at /
+            ctx.close()
+            continue
+        if links is None:
+            links = drv.page_links(page)
+            assert len(links) >= 5, f"expected the app's pages in the sidebar, found {links}"
+            paths = {p for p, _ in visits}
+            assert all(urlparse(h).path.strip("/") in paths for _, h in links), (links, sorted(paths))
         tabs += _check_figures(page, drv.slug(label), out, shot, problems)
         moved.append((label, *_move_a_slider(page, label)))
         page.screenshot(path=str(SHOTS / f"{drv.slug(label)}.png"), full_page=True)
+        ctx.close()
     print("\n".join(f"{lab}: moved '{n}' {b} -> {a}" for lab, n, b, a in moved))
     assert any(b for _, _, b, _ in moved), f"no page had a slider to move: {moved}"
+    ctx, page = _new_page(chromium, js_errors)
+    ctx.on("request", lambda req: hosts.add(urlparse(req.url).hostname or urlparse(req.url).scheme))
     # figures that appear only after a calibration: the Calibration page's results, one tab per likelihood
     page.goto(dict(links)["Calibration"])
     drv.wait_idle(page)
-    for label, value in (("chains", 1), ("warm-up", 100), ("draws kept", 100)):
+    # the page's smallest run (1 chain: no R-hat here), as the My subject test's: the same sampler settings
+    for label, value in (("chains", 1), ("warm-up", 50), ("draws kept", 50)):
         _number_input(page, label, value)
         assert page.get_by_label(label, exact=True).input_value() == str(value), label
     page.get_by_role("button", name="Run calibration").click()  # runs in the background; a 1 s timer polls it
