@@ -165,12 +165,13 @@ def test_discrepancy_adds_its_one_discrepancy_to_every_state():
 def test_two_states_narrow_a_on_the_stand_in():
     """SYNTHETIC stand-in, volume-only model: one volume fixes only a x b (a ridge); a second pressure fixes the
     exponent, hence b and a. a's 90 % interval (ratio q95/q05) narrows more than 3x, and the truths of a and b stay
-    inside (noise-free volumes, sigma_V 5 mL; 2 chains)."""
+    inside (noise-free volumes, sigma_V 5 mL; 2 chains x (150 + 200); measured 2026-12-02 at XLA -O0: ratio 59.9
+    with one state, 9.2 with two)."""
     from lvcore.inference.calibrate import calibrate
     from lvcore.inference.samplers import SamplerConfig
 
     y8, y20 = np.asarray(at(8)(THETA)), np.asarray(at(20)(THETA))   # noise-free: the posterior centres on the truth
-    cfg = SamplerConfig(num_warmup=200, num_samples=300, num_chains=2, chain_method="sequential", seed=2)
+    cfg = SamplerConfig(num_warmup=150, num_samples=200, num_chains=2, chain_method="sequential", seed=2)
     ratio = {}
     for key, fw in (("one", at(8)), ("two", LoadedStatesForward(at(8), (StateTerm(at(20), y20, 20.0),)))):
         res = calibrate(y8, fw, "volume", config=cfg, max_rounds=1)
