@@ -209,24 +209,27 @@ def test_simulate_rows_keeps_the_runs_done_and_resumes(tmp_path):
 def test_simulate_rows_on_two_workers_streams_chunks_and_resumes(tmp_path):
     """With a pool, chain chunks are recorded as they return (no barrier per batch): a stop keeps every chunk
     returned so far (any subset of the walk), the resumed run simulates only the rest, and the results equal
-    those of the in-process walk within solver tolerance."""
+    those of the in-process walk within solver tolerance. Both pooled calls share one pool of two processes, as
+    the stages of a build do (each new worker process imports JAX and compiles the simulator again)."""
     from lvcore.campaigns.designs import make_design
     from lvcore.emulator.subject import simulate_rows
+    from lvcore.execution.parallel import make_executor
 
     space = subject_space(("theta",), bounds=BOUNDS)
     x = make_design(space, "sobol", 10, 4).points
     geometry = resolve_subject_geometry("default").section
     ckpt = tmp_path / "fe_runs.npz"
-    seen = []
-    with pytest.raises(EmulatorError, match="stopped after [0-9]+ of 10 FE runs"):
-        simulate_rows(space, x, geometry, resolution="fast", workers=2, checkpoint=ckpt, chunk=2,
-                      progress=lambda done, total: seen.append(done), stop=lambda: len(seen) >= 1)
-    with np.load(ckpt) as z:
-        n_kept = z["inputs"].shape[0]
-        assert 2 <= n_kept < 10 and z["converged"].all()
-    calls = []
-    res = simulate_rows(space, x, geometry, resolution="fast", workers=2, checkpoint=ckpt, chunk=2,
-                        progress=lambda done, total: calls.append(done))
+    seen, calls = [], []
+    with make_executor(workers=2) as pool:
+        with pytest.raises(EmulatorError, match="stopped after [0-9]+ of 10 FE runs"):
+            simulate_rows(space, x, geometry, resolution="fast", workers=2, checkpoint=ckpt, chunk=2,
+                          progress=lambda done, total: seen.append(done), stop=lambda: len(seen) >= 1,
+                          executor=pool)
+        with np.load(ckpt) as z:
+            n_kept = z["inputs"].shape[0]
+            assert 2 <= n_kept < 10 and z["converged"].all()
+        res = simulate_rows(space, x, geometry, resolution="fast", workers=2, checkpoint=ckpt, chunk=2,
+                            progress=lambda done, total: calls.append(done), executor=pool)
     assert calls[0] == n_kept and calls[-1] == 10 and calls == sorted(calls)
     assert res.converged.all() and res.workers == 2
     ref = simulate_rows(space, x, geometry, resolution="fast", workers=1)
