@@ -100,8 +100,10 @@ def test_my_subject_page_runs_the_flow_and_offers_the_zip():
     # the example's mesh is seen through its projection: the floor, scaled to its own projection error
     assert any(c.value.startswith("Representation-error floor: on") and "projection error" in c.value
                for c in at.caption), [c.value for c in at.caption]
+    # test_flow_end_to_end_gives_a_complete_bundle's sampler settings (its seed aside): the sampler it compiled
+    # for this mesh and emulator is reused, not compiled again for other shapes
     at.number_input(key="my_chains").set_value(1)
-    at.number_input(key="my_warmup").set_value(100)
+    at.number_input(key="my_warmup").set_value(150)
     at.number_input(key="my_draws").set_value(100).run()
     at.button(key="my_run").click().run(timeout=300)
     assert not at.exception and not at.error, [e.value for e in at.error]
@@ -337,14 +339,22 @@ def test_build_dir_names_the_geometry_and_design(tmp_path):
     assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path, units="cm") != a
 
 
-def test_subject_build_runs_stops_keeps_and_resumes(tmp_path):
+@pytest.fixture(scope="module")
+def build_cache(tmp_path_factory):
+    """The module's folder of subject-emulator builds (the page's ``flow.BUILD_CACHE`` in its test)."""
+    return tmp_path_factory.mktemp("subject_builds")
+
+
+def test_subject_build_runs_stops_keeps_and_resumes(build_cache):
     """SubjectBuild: a stopped build says what to do and keeps the FE runs; the next build resumes from them and
     gives the held-out accuracy; a third finds it in the folder."""
     from lvcore.emulator.subject import RUNS_FILE, SubjectDesign
 
     geometry = volunteer_files(SUBJECT).geometry
-    out = tmp_path / "emu"
     design = SubjectDesign(8, 3, 3)
+    # the folder the My subject page names for this example and design (the page's test below, whose build is this
+    # one on the fast mesh, then finds it there instead of running the same 14 FE runs and training again)
+    out = flow.build_dir(geometry.read_bytes(), geometry.name, design=design, root=build_cache)
     job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu")
     job.stop()  # before the first batch: nothing done
     job.start(background=False)
@@ -362,9 +372,11 @@ def test_subject_build_runs_stops_keeps_and_resumes(tmp_path):
     assert again.ok and again.cached and again.metadata["test"] == job.metadata["test"]
 
 
-def test_my_subject_page_builds_and_uses_a_subject_emulator(tmp_path, monkeypatch):
+def test_my_subject_page_builds_and_uses_a_subject_emulator(build_cache, monkeypatch):
     """AppTest: the build panel (CLI defaults; a small design here, on the fast mesh), its held-out RMSE, the
-    emulator offered for calibration, and a calibration with the geometry bound in."""
+    emulator offered for calibration, and a calibration with the geometry bound in. After
+    test_subject_build_runs_stops_keeps_and_resumes the page's build is found in the module's build folder (that
+    test's build, the same design and mesh); run alone, the page builds it."""
     from streamlit.testing.v1 import AppTest
 
     from lvcore.app import PAGES_DIR
@@ -374,7 +386,7 @@ def test_my_subject_page_builds_and_uses_a_subject_emulator(tmp_path, monkeypatc
             super().__init__(*args, **{**kwargs, "resolution": "fast", "workers": 1})
 
     monkeypatch.setattr(flow, "SubjectBuild", SmallBuild)
-    monkeypatch.setattr(flow, "BUILD_CACHE", tmp_path)
+    monkeypatch.setattr(flow, "BUILD_CACHE", build_cache)
     at = AppTest.from_file(str(PAGES_DIR / "8_My_subject.py"), default_timeout=180).run()
     at.selectbox(key="my_example").select(SUBJECT).run()
     assert not at.exception and not at.error, [e.value for e in at.error]
