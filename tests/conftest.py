@@ -109,6 +109,7 @@ def _release_compiled_programs(request):
     7.4 s, warm 0.4 s; the persistent compilation cache, :mod:`lvcore.execution.jax_cache`, spares only XLA's part).
     """
     yield
+    _return_free_memory()
     pressure = _process_pressure()
     release = pressure is None or pressure[0] >= MAP_SHARE * pressure[1] or pressure[2] >= RSS_LIMIT
     if os.environ.get(PRESSURE_LOG_ENV):  # measurement only: how often a module ends with the programs let go
@@ -126,6 +127,28 @@ def _release_compiled_programs(request):
     verdict.clear_best_fit_programs()
     jax.clear_caches()
     gc.collect()
+    _return_free_memory()
+
+
+def _return_free_memory() -> None:
+    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing elsewhere).
+
+    Freed memory stays in the process's resident size until trimmed: without this the workers sat near
+    RSS_LIMIT after their first large modules, and nearly every later module let its compiled programs go
+    and the next one traced and compiled them again. Measured 2026-12-02: a fast-LV solve and two samplers,
+    950 MB resident; after letting the programs go 942 MB; after the trim 400 MB.
+    """
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+        trim = getattr(libc, "malloc_trim", None)
+        if trim is not None:
+            trim(0)
+    except OSError:
+        pass
 
 
 # ----------------------------------------------------------------------------
