@@ -160,5 +160,9 @@ def test_the_edpvr_quantiles_carry_the_emulators_own_error(emu):
     # the sd of 4,000 normal draws is within 5 % of its value with probability > 0.999 (se of an sd: s/sqrt(2n))
     np.testing.assert_allclose(log_sd, emu.volume_log_sd(np.asarray(PRESSURES)), rtol=0.05)
     np.testing.assert_allclose(lam.std(), float(emu.stretch_sd(8.0)), rtol=0.05)
+    # one standard normal per draw at every pressure (the error along a curve is smooth): a draw's standardised
+    # log errors are equal across pressures, where independent ones made single curves fall with pressure
+    z = np.log(vols[:, 1:] / em.volumes_ml[:, 1:]) / emu.volume_log_sd(np.asarray(PRESSURES))[None, :]
+    np.testing.assert_allclose(z, np.repeat(z[:, :1], z.shape[1], axis=1), rtol=1e-9, atol=1e-9)
     again, _ = edpvr.emulator_error_draws(emu, em, 8.0)
     assert np.array_equal(again, vols)                                   # seeded: a rerun gives the same band

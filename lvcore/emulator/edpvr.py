@@ -501,8 +501,11 @@ def emulator_error_draws(emu: EdpvrEmulator, path: EmulatedPath, edp_mmhg: float
     """The emulated EDPVR volumes and ED fibre stretch with the emulator's own held-out error drawn in.
 
     The emulator predicts the FE mean; the quantity is the FE value. Each draw's volume at pressure p is
-    multiplied by exp(ε), ε ~ N(0, s(p)²) with s(p) the held-out RMSE of log V/V₀ there
-    (:meth:`EdpvrEmulator.volume_log_sd`; 0 at V₀, which is exact), and its fibre stretch
+    multiplied by exp(z s(p)), s(p) the held-out RMSE of log V/V₀ there (:meth:`EdpvrEmulator.volume_log_sd`;
+    0 at V₀, which is exact) and z ~ N(0, 1) one number per draw, the same at every pressure: the emulator's
+    error along one curve is smooth, and a new z at every pressure made single draws' curves, and the medians
+    of a few draws, fall with pressure where the error is larger than a step's rise (25 to 30 mmHg). Each
+    pressure's spread is s(p) either way. Its fibre stretch
     gets N(0, s_λ²) at the EDP (:meth:`EdpvrEmulator.stretch_sd`), so the quantiles are
     those of the FE quantity, not only of the emulator's mean. The volume at the EDP is left as the mean: the
     check adds its error as a variance.
@@ -523,7 +526,7 @@ def emulator_error_draws(emu: EdpvrEmulator, path: EmulatedPath, edp_mmhg: float
     rng = np.random.default_rng(EMULATOR_ERROR_SEED)
     vols = np.asarray(path.volumes_ml, float)
     log_sd = np.asarray(emu.volume_log_sd(path.pressures_mmhg), float)
-    vols = vols * np.exp(rng.standard_normal(vols.shape) * log_sd[None, :])
+    vols = vols * np.exp(rng.standard_normal((vols.shape[0], 1)) * log_sd[None, :])
     lam = np.asarray(path.fibre_stretch_at_edp, float)
     lam = lam + rng.standard_normal(lam.shape) * float(emu.stretch_sd(edp_mmhg))
     return vols, lam
