@@ -1,3 +1,4 @@
+import functools
 import os
 from pathlib import Path
 
@@ -138,17 +139,21 @@ def _return_free_memory() -> None:
     and the next one traced and compiled them again. Measured 2026-12-02: a fast-LV solve and two samplers,
     950 MB resident; after letting the programs go 942 MB; after the trim 400 MB.
     """
-    import ctypes
-    import ctypes.util
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
 
-    name = ctypes.util.find_library("c")
+
+@functools.cache
+def _malloc_trim():
+    """glibc's ``malloc_trim`` from the symbols already loaded in this process (no library search, which runs
+    ``ldconfig``), looked up once; None where the C library has none."""
+    import ctypes
+
     try:
-        libc = ctypes.CDLL(name) if name else None
-        trim = getattr(libc, "malloc_trim", None)
-        if trim is not None:
-            trim(0)
+        return getattr(ctypes.CDLL(None), "malloc_trim", None)
     except OSError:
-        pass
+        return None
 
 
 # ----------------------------------------------------------------------------
