@@ -5,7 +5,9 @@ module loaded as a pytest plugin in every worker. Each test's setup, call and te
 ``time.perf_counter`` (wall) and ``resource.getrusage`` of the worker and its reaped children (CPU): CPU seconds
 hold up on a loaded machine where wall seconds do not. They leave out the child processes a test does not reap
 before it ends (the browser tests' Streamlit server and Chromium, reaped at their module's end) and include XLA's
-own threads. Prints one table row per file, the most CPU first, and writes every test's record as JSON lines.
+own threads. JAX's own timers (:mod:`jax.monitoring`) split each test's in-process compile work into tracing,
+lowering to MLIR and XLA's back-end compile, and count the persistent cache's hits and misses (child processes
+not included). Prints one table row per file, the most CPU first, and writes every test's record as JSON lines.
 
 Usage::
 
@@ -37,34 +39,72 @@ def _cpu() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
+#: JAX's duration events (seconds) summed in this process, by the short name used in the records.
+JAX_EVENTS = {"/jax/core/compile/jaxpr_trace_duration": "trace_s",
+              "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower_s",
+              "/jax/core/compile/backend_compile_duration": "compile_s"}
+#: JAX's counted events, by short name.
+JAX_COUNTS = {"/jax/compilation_cache/cache_hits": "cache_hits",
+              "/jax/compilation_cache/cache_misses": "cache_misses"}
+_jax_totals: dict[str, float] = defaultdict(float)
+_listening = False
+
+
+def _listen_to_jax() -> None:
+    """Register the listeners once, after the test session has imported JAX (not before conftest's settings)."""
+    global _listening
+    if _listening or "jax" not in sys.modules:
+        return
+    from jax import monitoring
+
+    def on_duration(event, duration, **_):
+        if event in JAX_EVENTS:
+            _jax_totals[JAX_EVENTS[event]] += duration
+
+    def on_event(event, **_):
+        if event in JAX_COUNTS:
+            _jax_totals[JAX_COUNTS[event]] += 1
+
+    monitoring.register_event_duration_secs_listener(on_duration)
+    monitoring.register_event_listener(on_event)
+    _listening = True
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     """Time one test's setup, call and teardown; append its record to this worker's file."""
+    _listen_to_jax()
+    jax0 = dict(_jax_totals)
     wall0, cpu0 = time.perf_counter(), _cpu()
     yield
+    _listen_to_jax()
     out = os.environ.get(OUT_ENV)
     if not out:
         return
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
     record = {"file": item.path.name, "test": item.nodeid, "worker": worker,
-              "wall_s": round(time.perf_counter() - wall0, 3), "cpu_s": round(_cpu() - cpu0, 3)}
+              "wall_s": round(time.perf_counter() - wall0, 3), "cpu_s": round(_cpu() - cpu0, 3),
+              **{k: round(v - jax0.get(k, 0.0), 3) for k, v in _jax_totals.items()}}
     with open(f"{out}.{worker}", "a") as f:
         f.write(json.dumps(record) + "\n")
 
 
 def table(records: list[dict]) -> str:
     """One row per test file: tests, wall s and CPU s (sums), the most CPU first, and a total row."""
-    per = defaultdict(lambda: [0, 0.0, 0.0])
+    keys = ("wall_s", "cpu_s", "trace_s", "lower_s", "compile_s", "cache_misses")
+    per = defaultdict(lambda: [0] + [0.0] * len(keys))
     for r in records:
         row = per[r["file"]]
         row[0] += 1
-        row[1] += r["wall_s"]
-        row[2] += r["cpu_s"]
-    lines = ["| test file | tests | wall s | CPU s |", "| --- | ---: | ---: | ---: |"]
-    for name, (n, wall, cpu) in sorted(per.items(), key=lambda kv: -kv[1][2]):
-        lines.append(f"| {name} | {n} | {wall:.1f} | {cpu:.1f} |")
-    n = sum(v[0] for v in per.values())
-    lines.append(f"| **all** | {n} | {sum(v[1] for v in per.values()):.1f} | {sum(v[2] for v in per.values()):.1f} |")
+        for i, k in enumerate(keys, 1):
+            row[i] += r.get(k, 0.0)
+    lines = ["| test file | tests | wall s | CPU s | JAX trace s | lower s | XLA compile s | cache misses |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    fmt = "| {} | {} | {:.1f} | {:.1f} | {:.1f} | {:.1f} | {:.1f} | {:.0f} |"
+    for name, row in sorted(per.items(), key=lambda kv: -kv[1][2]):
+        lines.append(fmt.format(name, *row))
+    total = [sum(v[i] for v in per.values()) for i in range(len(keys) + 1)]
+    lines.append(fmt.format("**all**", *total))
     return "\n".join(lines)
 
 

@@ -142,12 +142,21 @@ def _platform():
 
 
 def _xla_level():
-    """"O0" under ``--xla_backend_optimization_level=0`` (tests/conftest.py), "default" without the flag, else None."""
+    """The XLA flag set the draws were compiled under: "default" without flags, "O0" under
+    ``--xla_backend_optimization_level=0`` alone, "O0-elemental" under tests/conftest.py's TEST_XLA_FLAGS (-O0,
+    fusion emitters off, one codegen split); None for any other set."""
     import os
     import re
 
-    m = re.search(r"--xla_backend_optimization_level=(\d+)", os.environ.get("XLA_FLAGS", ""))
-    return "default" if m is None else ("O0" if m.group(1) == "0" else None)
+    flags = dict(re.findall(r"--(xla_[a-z_]+)=(\S+)", os.environ.get("XLA_FLAGS", "")))
+    flags.pop("xla_force_host_platform_device_count", None)   # the host devices do not change the code
+    if not flags:
+        return "default"
+    if flags == {"xla_backend_optimization_level": "0"}:
+        return "O0"
+    from conftest import TEST_XLA_FLAGS
+
+    return "O0-elemental" if flags == TEST_XLA_FLAGS else None
 
 
 @pytest.mark.parametrize("block", ["marginal", pytest.param("chapter", marks=pytest.mark.slow)])

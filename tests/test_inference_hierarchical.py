@@ -216,9 +216,15 @@ def analytic_run():
 def test_joint_posterior_recovers_the_subjects_and_reports_every_level(analytic_run):
     members, run = analytic_run
     rec = hi.summarise(run)
-    for s, a in zip(run.subjects, [0.4, 0.6, 0.9, 1.3, 0.7]):
-        q = rec["subjects"][s]["a"]
-        assert q["q05"] < a < q["q95"], (s, q)
+    # Each subject's 98 % interval of a covers its truth: 5 subjects at 2 % each keep the chance that a calibrated
+    # posterior fails the test under 10 %. (All five 90 % intervals, as before, fail 41 % of the time by design:
+    # S1's truth 0.6 sits at its posterior's 5th percentile on these data, 0.59-0.60 over 2 x 100 and 2 x 200
+    # draws, so the compiler's rounding alone moved it in or out.)
+    a_draws = np.exp(np.asarray(run.samples["log_theta"])[..., 0]).reshape(-1, len(run.subjects))
+    lo, hi_ = np.quantile(a_draws, [0.01, 0.99], axis=0)
+    for s, a, l, h in zip(run.subjects, [0.4, 0.6, 0.9, 1.3, 0.7], lo, hi_):
+        assert l < a < h, (s, l, h)
+        assert rec["subjects"][s]["a"]["q05"] < rec["subjects"][s]["a"]["median"] < rec["subjects"][s]["a"]["q95"]
     assert set(rec["diagnostics"]) == {"population", "subject"}
     for level in rec["diagnostics"].values():
         assert {"max_rhat", "min_ess_bulk", "n_divergent", "failing", "converged"} <= set(level)
