@@ -33,3 +33,42 @@ def test_warm_compiles_the_pages_default_sampler_and_best_fit():
     # the best fit of the same forward model (its template key: emulator, inputs, conditions, scale) is kept;
     # counted by key, not in total: a calibration thread an earlier app test started may add its own
     assert [k for k in verdict._BEST_FIT_PROGRAMS if k[0] == keys[0][2]]
+
+
+CHILD_EXITS_DURING_WARMUP = r'''
+import sys, time
+from lvcore.app import warmup
+
+def fake_warm(subject, emulator, models, room, stages):
+    """Stages of 0.3 s each (a sampler's compile stands in), checking the room before each, as _warm does."""
+    for k in range(100):
+        room(f"stage {k}")
+        time.sleep(0.3)
+        stages[f"stage {k}"] = 0.3
+
+
+warmup._warm = fake_warm
+warmup.check_room = lambda stage, **kw: None   # the machine's memory is not what this test is about
+assert warmup.start()
+time.sleep(0.5)   # inside its second stage
+assert warmup.STATUS["state"] == "running"
+print("main done", flush=True)
+'''
+
+
+def test_a_process_that_exits_mid_warmup_stops_it_between_stages_and_exits_cleanly():
+    """The interpreter's exit waits for the warm-up to finish its current stage and stop (an atexit handler):
+    a daemon thread left inside XLA's compile at teardown aborted the process (exit -6) after its work."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, warmup.ENV: "1"}
+    done = subprocess.run([sys.executable, "-c", CHILD_EXITS_DURING_WARMUP], env=env, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "main done" in done.stdout
+    # the warm-up reported that it stopped, well before its 100 stages (30 s)
+    line = next(ln for ln in done.stderr.splitlines() if "lvcore app warm-up" in ln)
+    assert line.startswith("lvcore app warm-up stopped in "), line
+    assert float(line.split(" in ")[1].split(" s")[0]) < 5.0, line

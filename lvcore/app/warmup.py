@@ -28,6 +28,13 @@ available) and stops, with a note the app shows in the sidebar
 tight limit the warm-up does less, or nothing, and the first calibration
 compiles on the click instead. A failure inside the warm-up (a Python
 exception, ``MemoryError`` included) only ends the warm-up.
+
+Exit: a process that ends while the warm-up is compiling (a server stopped
+during its first minute, a script that started the app's helpers) stops it
+between stages. :func:`start` registers an ``atexit`` handler that asks the
+thread to stop and waits up to :data:`EXIT_WAIT_S` for it; a daemon thread
+still inside XLA when the interpreter tears down aborted the process
+(SIGABRT, "exception not rethrown") after its work was done.
 """
 from __future__ import annotations
 
@@ -48,15 +55,26 @@ STAGE_BYTES = 0.5 * memory.GiB
 #: simulation (its FE kernels compiled) took 0.45 GB of address space, an ``accurate`` one 0.3 GB more.
 RESERVE_BYTES = 1.0 * memory.GiB
 
+#: Longest wait (s) at the process's exit for the warm-up to finish its current stage (one sampler's compile,
+#: 3-20 s on 2 cores with a cold cache).
+EXIT_WAIT_S = 60.0
+
 _started = False
 _lock = threading.Lock()
-#: What the warm-up did: ``state`` (``running``, ``done``, ``partial``, ``skipped``, ``failed``, ``off``),
+_stop = threading.Event()
+_thread: threading.Thread | None = None
+#: What the warm-up did: ``state`` (``running``, ``done``, ``partial``, ``skipped``, ``failed``, ``stopped``,
+#: ``off``),
 #: per-stage wall seconds, error, and ``note`` (for the user, when it did less than asked; else None).
 STATUS: dict = {"state": "not started", "stages": {}, "error": None, "note": None}
 
 
 class ShortOfMemory(RuntimeError):
     """Too little memory is left for the next warm-up stage (the warm-up stops; the app carries on)."""
+
+
+class Stopped(RuntimeError):
+    """The process is exiting: the warm-up stops before its next stage."""
 
 
 def check_room(stage: str, need: float = STAGE_BYTES, reserve: float = RESERVE_BYTES) -> None:
@@ -176,8 +194,11 @@ def _run() -> None:
     STATUS["state"] = "running"
     t0 = time.perf_counter()
     try:
-        STATUS["stages"] = warm(room=check_room)
+        STATUS["stages"] = warm(room=_room_unless_stopping)
         STATUS["state"] = "done"
+    except Stopped as err:
+        STATUS["stages"] = getattr(err, "stages", {})
+        STATUS["state"] = "stopped"
     except ShortOfMemory as err:
         STATUS["stages"] = getattr(err, "stages", {})
         STATUS["state"] = "partial" if any(m in STATUS["stages"] for m in MODELS) else "skipped"
@@ -194,6 +215,20 @@ def _run() -> None:
           file=sys.stderr, flush=True)
 
 
+def _room_unless_stopping(stage: str) -> None:
+    """:func:`check_room`, after :class:`Stopped` once the process has begun to exit."""
+    if _stop.is_set():
+        raise Stopped(f"the process is exiting; the warm-up stopped before its {stage!r} stage")
+    check_room(stage)
+
+
+def _stop_at_exit() -> None:
+    """Ask the warm-up to stop and wait (at most EXIT_WAIT_S) until it is out of XLA (an ``atexit`` handler)."""
+    _stop.set()
+    if _thread is not None:
+        _thread.join(EXIT_WAIT_S)
+
+
 def note() -> str | None:
     """A line for the user when the warm-up did less than asked because memory was short; else None."""
     return STATUS.get("note")
@@ -201,7 +236,7 @@ def note() -> str | None:
 
 def start() -> bool:
     """Start :func:`warm` in a daemon thread, once per process; False if already started or turned off."""
-    global _started
+    global _started, _thread
     with _lock:
         if _started:
             return False
@@ -209,9 +244,13 @@ def start() -> bool:
         if not enabled():
             STATUS["state"] = "off"
             return False
-        threading.Thread(target=_run, name="lvcore-calibration-warmup", daemon=True).start()
+        import atexit
+
+        _thread = threading.Thread(target=_run, name="lvcore-calibration-warmup", daemon=True)
+        atexit.register(_stop_at_exit)
+        _thread.start()
         return True
 
 
-__all__ = ["ENV", "MODELS", "STAGE_BYTES", "RESERVE_BYTES", "CALIBRATION_RUN_BYTES", "STATUS", "ShortOfMemory",
-           "enabled", "check_room", "calibration_room", "warm", "note", "start"]
+__all__ = ["ENV", "MODELS", "STAGE_BYTES", "RESERVE_BYTES", "CALIBRATION_RUN_BYTES", "EXIT_WAIT_S", "STATUS",
+           "ShortOfMemory", "Stopped", "enabled", "check_room", "calibration_room", "warm", "note", "start"]
