@@ -31,8 +31,9 @@ exception, ``MemoryError`` included) only ends the warm-up.
 
 Exit: a process that ends while the warm-up is compiling (a server stopped
 during its first minute, a script that started the app's helpers) stops it
-between stages. :func:`start` registers an ``atexit`` handler that asks the
-thread to stop and waits up to :data:`EXIT_WAIT_S` for it; a daemon thread
+between stages. :func:`start` registers an exit handler (run before the
+``atexit`` handlers, JAX's among them) that asks the thread to stop and waits
+up to :data:`EXIT_WAIT_S` for it; a daemon thread
 still inside XLA when the interpreter tears down aborted the process
 (SIGABRT, "exception not rethrown") after its work was done.
 """
@@ -223,10 +224,28 @@ def _room_unless_stopping(stage: str) -> None:
 
 
 def _stop_at_exit() -> None:
-    """Ask the warm-up to stop and wait (at most EXIT_WAIT_S) until it is out of XLA (an ``atexit`` handler)."""
+    """Ask the warm-up to stop and wait (at most EXIT_WAIT_S) until it is out of XLA (an exit handler)."""
     _stop.set()
     if _thread is not None:
         _thread.join(EXIT_WAIT_S)
+
+
+def _register_before_atexit(fn) -> None:
+    """Call ``fn`` at the interpreter's exit before the ``atexit`` handlers (where Python allows it).
+
+    JAX's own ``atexit`` handler (``jax._src.api.clean_up``) clears its backends and caches. JAX may be imported
+    only by the warm-up thread, after :func:`start`, and ``atexit`` runs the latest handler first, so a plain
+    ``atexit`` handler of ours would stop the warm-up only after JAX had been torn down under it (seen: the
+    stage then failed with a ``KeyError`` from JAX's tracer). ``threading._register_atexit`` (the hook
+    :mod:`concurrent.futures` uses) runs in the interpreter's thread shutdown, before every ``atexit`` handler.
+    """
+    import atexit
+
+    register = getattr(threading, "_register_atexit", None)
+    try:
+        register(fn)
+    except Exception:  # noqa: BLE001 - no such hook on this Python (None) or shutdown already begun
+        atexit.register(fn)
 
 
 def note() -> str | None:
@@ -244,10 +263,8 @@ def start() -> bool:
         if not enabled():
             STATUS["state"] = "off"
             return False
-        import atexit
-
         _thread = threading.Thread(target=_run, name="lvcore-calibration-warmup", daemon=True)
-        atexit.register(_stop_at_exit)
+        _register_before_atexit(_stop_at_exit)
         _thread.start()
         return True
 
