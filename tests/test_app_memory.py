@@ -227,9 +227,9 @@ _APP_UNDER_CAP = """
                peak=float(open("/proc/self/status").read().split("VmPeak:")[1].split()[0]) * 1024,
                hwm=s.peak_resident, limit=s.address_space_limit)
     print("RESULT " + json.dumps(out), flush=True)
-    # end here, without the interpreter's teardown: a warm-up still compiling runs in a daemon thread, which
-    # Python's finalisation stops by unwinding it through XLA's C++ frames ("FATAL: exception not rethrown",
-    # exit -6 after the result was printed, 2026-12-02 under load); the claim is the pages' run above
+    # end here, without the interpreter's teardown: the warm-up's exit handler (lvcore.app.warmup) would wait for
+    # its current stage, up to a minute, and that stage's compile is not what this test measures; the claim is
+    # the pages' run above (before that handler, a warm-up still compiling aborted the teardown, exit -6)
     os._exit(0)
 """
 

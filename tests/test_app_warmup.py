@@ -57,7 +57,7 @@ print("main done", flush=True)
 
 
 def test_a_process_that_exits_mid_warmup_stops_it_between_stages_and_exits_cleanly():
-    """The interpreter's exit waits for the warm-up to finish its current stage and stop (an atexit handler):
+    """The interpreter's exit waits for the warm-up to finish its current stage and stop (an exit handler):
     a daemon thread left inside XLA's compile at teardown aborted the process (exit -6) after its work."""
     import os
     import subprocess

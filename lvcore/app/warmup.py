@@ -33,9 +33,9 @@ Exit: a process that ends while the warm-up is compiling (a server stopped
 during its first minute, a script that started the app's helpers) stops it
 between stages. :func:`start` registers an exit handler (run before the
 ``atexit`` handlers, JAX's among them) that asks the thread to stop and waits
-up to :data:`EXIT_WAIT_S` for it; a daemon thread
-still inside XLA when the interpreter tears down aborted the process
-(SIGABRT, "exception not rethrown") after its work was done.
+up to :data:`EXIT_WAIT_S` for it; a daemon thread still inside XLA when the
+interpreter tears down aborted the process (SIGABRT, "exception not
+rethrown") after its work was done.
 """
 from __future__ import annotations
 
@@ -242,9 +242,12 @@ def _register_before_atexit(fn) -> None:
     import atexit
 
     register = getattr(threading, "_register_atexit", None)
+    if register is None:  # no such hook on this Python
+        atexit.register(fn)
+        return
     try:
         register(fn)
-    except Exception:  # noqa: BLE001 - no such hook on this Python (None) or shutdown already begun
+    except RuntimeError:  # the interpreter's shutdown has begun: "can't register atexit after shutdown"
         atexit.register(fn)
 
 
