@@ -178,6 +178,24 @@ def draw_sbc(study: registry.Study) -> None:
              tables=["table_sbc_summary", "runs"])
 
 
+def draw_information(study: registry.Study) -> None:
+    st.write("What pins the stiffness: with one pressure, 24 strains and one volume, a and b are fixed only as a "
+             "combination. How much do a second and third loaded state, the Klotz EDPVR prior and a hierarchical "
+             "fit of a cohort narrow a's 90 % interval, and is the truth still covered? SYNTHETIC subjects "
+             "(`lvcore study information --help`).")
+    res = load(study)
+    if res is not None:
+        module = study.load_module()
+        st.caption(module.source_line(res))
+        if not res.get("complete", True):
+            st.warning(f"{module.incomplete_text(res).capitalize()}; the numbers are those of the finished runs.")
+        show(module, res, figures=["fig_information_a_ratio", "fig_information_v30_width"],
+             tables=["verdicts", "table_information_variants"])
+        if res.get("notes"):
+            with st.expander("Notes"):
+                st.markdown("\n".join(f"* {n}" for n in res["notes"]))
+
+
 def draw_default(study: registry.Study, tables=()) -> None:
     """Any study without a layout of its own: its source, its figures, and the named tables."""
     res = load(study)
@@ -189,7 +207,7 @@ def draw_default(study: registry.Study, tables=()) -> None:
 
 #: The studies with a layout of their own (by registry name); every other study is drawn by :func:`draw_default`.
 DRAW = {"bo-fibres": draw_bo_fibres, "operators": draw_operators, "geometry-operators": draw_geometry_operators,
-        "mismatch": draw_mismatch, "findings": draw_findings, "sbc": draw_sbc,
+        "mismatch": draw_mismatch, "findings": draw_findings, "sbc": draw_sbc, "information": draw_information,
         "fibre-discrepancy": lambda study: draw_default(study, tables=["sets"]),
         "bo-mismatch": verdict_section("F6 as a real test: data with a known mismatch"),
         "operators-realistic": verdict_section("F4/F5 with realistic operators (whole slices, trabeculae, "

@@ -176,6 +176,14 @@ _STUDIES = (
     Study("sbc", "sbc", "sbc.json", report="Simulation-based calibration of the pipeline",
           report_items=("fig_sbc_rank_histograms", "fig_sbc_coverage", "table_sbc_summary"), tab="SBC",
           parts=("sbc_runner", "sbc_stats")),
+    Study("information", "information", "information.json",
+          description="Information that pins the stiffness: how much a second and third loaded state, the Klotz "
+                      "EDPVR prior and a hierarchical cohort fit narrow a's 90 % interval, with the coverage of the "
+                      "truth, on SYNTHETIC subjects (FE-simulated default LV; cohorts from the chapter emulator; "
+                      "resumable parts, then --summarise).",
+          report="Information that pins the stiffness (SYNTHETIC)",
+          report_items=("fig_information_a_ratio", "table_information_variants", "verdicts"), tab="Information",
+          parts=("information_runner", "information_summary")),
     Study("operators-realistic", "operators_realistic", "operators_realistic.json",
           description="Findings F4/F5 with realistic imitation operators (whole-slice choices, trabeculae, "
                       "breath-hold shifts) on 20 or more SYNTHETIC patients, with bootstrap intervals.",
