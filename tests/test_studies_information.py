@@ -241,6 +241,8 @@ def test_the_studies_page_has_an_information_tab_drawing_a_result_folder(tmp_pat
     at = AppTest.from_file(str(PAGES_DIR / "6_Studies.py"), default_timeout=240).run()
     assert registry.study("information").tab in [t.label for t in at.tabs]
     at.sidebar.text_input[0].input(str(tmp_path)).run()
+    src = next(s for s in at.selectbox if s.key == "information_src")
+    src.set_value(next(o for o in src.options if str(tmp_path) in o)).run()   # the saved set, not the bundled one
     assert not at.exception
     assert any(c.value.startswith(f"{inf.RESULT_FILE} ({tmp_path})") and "SYNTHETIC" in c.value for c in at.caption)
     assert any(w.value.startswith("Incomplete: not every planned run done") for w in at.warning)

@@ -1,6 +1,7 @@
 """Reproductions of the chapter's studies (fibre angles, fibre discrepancy, geometry operators, the volunteer
 calibration, fibre-angle BO, operator SQP refits, the mismatch dose-response, the findings with verdicts, realistic
-operators, BO with a known mismatch) and the simulation-based calibration of the calibration pipeline (``sbc``).
+operators, BO with a known mismatch), the simulation-based calibration of the calibration pipeline (``sbc``) and
+what more loaded states, a population EDPVR prior and a cohort add to the stiffness (``information``).
 
 Each study is a submodule listed in the one registry, :data:`lvcore.studies.registry.STUDIES` (its name, result
 file, ``load``/``tables``/``figures`` and its ``lvcore study`` sub-command); this package exports every study module

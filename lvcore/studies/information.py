@@ -337,12 +337,12 @@ def figures(result: Mapping) -> dict:
     out = {"fig_information_a_ratio": per_variant_figure(
         per_subject_rows(result, a_ratio), panels=list(PARTS), panel_titles=PARTS, log_y=True,
         yaxis_title="a: q95 / q05 (log scale)",
-        title=f"{TITLES['fig_information_a_ratio']}<br><sup>{tag}; marker: a subject, bar: the median</sup>")}
+        title=f"{TITLES['fig_information_a_ratio']}<br><sup>{tag}</sup>")}
     v30 = per_subject_rows(result, width)
     if v30:
         out["fig_information_v30_width"] = per_variant_figure(
             v30, panels=list(PARTS), panel_titles=PARTS, yaxis_title="V30: q95 − q05 (mL)",
-            title=f"{TITLES['fig_information_v30_width']}<br><sup>{tag}; marker: a subject, bar: the median</sup>")
+            title=f"{TITLES['fig_information_v30_width']}<br><sup>{tag}</sup>")
     tabs = tables(result)
     for name in ("table_information_variants", "verdicts", "runs"):
         out[name] = table_figure(tabs[name], title=f"{TITLES[name]}<br><sup>{tag}</sup>")
@@ -352,7 +352,7 @@ def figures(result: Mapping) -> dict:
 # ============================================================================ command line
 def add_study_parser(study_subparsers) -> None:
     """``lvcore study information`` (the runner's parser, :mod:`lvcore.studies.information_runner`)."""
-    from lvcore.studies.information_runner import add_study_parser as _add
+    from lvcore.studies.information_runner import add_parser as _add
 
     _add(study_subparsers)
 

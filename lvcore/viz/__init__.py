@@ -18,6 +18,7 @@ _EXPORTS = {
     # modules, for the remaining builders
     "figures": "figures", "inference_figures": "inference_figures", "mesh3d": "mesh3d",
     "geometry_views": "geometry_views", "report_figures": "report_figures", "study_figures": "study_figures",
+    "information_figures": "information_figures",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -74,7 +74,7 @@ def per_variant_figure(rows: Sequence[dict], *, title: str, yaxis_title: str, pa
                                  text=[f"{v}: median of {n}" for v, n in zip(variants, counts)],
                                  hovertemplate="%{text}: %{y:.3g}<extra></extra>"), row=1, col=c + 1)
         fig.update_xaxes(tickmode="array", tickvals=list(range(len(variants))), ticktext=variants,
-                         range=[-0.6, len(variants) - 0.4], tickangle=-30, row=1, col=c + 1)
+                         range=[-0.6, len(variants) - 0.4], tickangle=-30, title_text="variant", row=1, col=c + 1)
     fig.update_yaxes(title_text=yaxis_title, row=1, col=1)
     if log_y:
         fig.update_yaxes(type="log")
