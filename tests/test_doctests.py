@@ -11,6 +11,7 @@ import pytest
 
 MODULES = (
     "lvcore.execution.bounded_cache",
+    "lvcore.execution.restart",
     "lvcore.mechanics.simulate",
     "lvcore.core.forward",
     "lvcore.emulator.io",
@@ -19,6 +20,7 @@ MODULES = (
     "lvcore.inference.calibrate",
     "lvcore.inference.request",
     "lvcore.studies.sbc",
+    "lvcore.studies.information",
     "lvcore.studies.fibre_discrepancy",
     "lvcore.studies.operators",
     "lvcore.studies.operators_realistic",

@@ -79,6 +79,16 @@ def load(folder) -> dict:
     LVCoreError
         The file is missing, not a regular file, too large, not UTF-8 text or not JSON (naming it), or JSON that is
         not this study's result (no ``variants`` list).
+
+    Examples
+    --------
+    >>> from lvcore.studies import information
+    >>> from lvcore.studies.results import bundled_studies_dir
+    >>> result = information.load(bundled_studies_dir())
+    >>> result["synthetic"], sorted({v["part"] for v in result["variants"]})
+    (True, ['cohort', 'states'])
+    >>> next(v["label"] for v in result["variants"] if v["key"] == "states-8-20")
+    '8 + 20 mmHg'
     """
     from pathlib import Path
 

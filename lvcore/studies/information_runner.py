@@ -279,8 +279,9 @@ def record_state_emulator(workdir, emulator: str) -> dict:
 
 
 def run_states(settings: Mapping, workdir, *, emulator: str | None = None, variants: Sequence[str] | None = None,
-               say=print, calibrate=calibrate_in_process, truth_fn=simulate_states) -> int:
-    """Run the states part's missing (subject, variant) pairs; returns how many ran."""
+               say=print, calibrate=calibrate_in_process, truth_fn=simulate_states, between=None) -> int:
+    """Run the states part's missing (subject, variant) pairs; returns how many ran. ``between()`` is called
+    after each subject (the command line's restart before the memory-mapping limit)."""
     from lvcore.studies.sbc_runner import _release_compiled_programs
 
     workdir = Path(workdir)
@@ -302,6 +303,8 @@ def run_states(settings: Mapping, workdir, *, emulator: str | None = None, varia
             say(f"{name} {variant}: exit {rec['exit']}, a {_interval(rec, 'a')}, {rec['wall_s']:.0f} s")
         if subject is not None:
             _release_compiled_programs()
+            if between is not None:
+                between()
     return n
 
 
@@ -424,8 +427,9 @@ def run_separate(n: int, subject: str, truth: Mapping, settings: Mapping, folder
     return rec
 
 
-def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in_process) -> int:
-    """Run the cohort part's missing runs (each cohort: its subjects alone, then the joint posterior)."""
+def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in_process, between=None) -> int:
+    """Run the cohort part's missing runs (each cohort: its subjects alone, then the joint posterior);
+    ``between()`` is called after each step, as in :func:`run_states`."""
     from lvcore.studies.sbc_runner import _release_compiled_programs
 
     workdir = Path(workdir)
@@ -441,6 +445,8 @@ def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in
                 store.append(workdir / "runs_cohort.jsonl", rec)
                 count += 1
                 say(f"cohort of {n}, {s} alone: exit {rec['exit']}, a {_interval(rec, 'a')}, {rec['wall_s']:.0f} s")
+                if between is not None:
+                    between()
         _release_compiled_programs()
         if (cohort_key(n, "hierarchical"), f"cohort of {n}") not in done:
             rec = run_hierarchical(n, csv, truth, settings, folder, calibrate)
@@ -448,6 +454,8 @@ def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in
             count += 1
             say(f"cohort of {n}, joint posterior: exit {rec['exit']}, {rec['wall_s']:.0f} s")
             _release_compiled_programs()
+            if between is not None:
+                between()
     return count
 
 
@@ -525,10 +533,13 @@ def _cli(args) -> int:
     settings = {"seed": args.seed, "chains": args.chains, "warmup": args.warmup, "samples": args.samples,
                 "derived_draws": args.derived_draws, "n_subjects": args.n_subjects, "cohort_sizes": sizes,
                 "state_pressures_mmhg": list(STATE_PRESSURES_MMHG), "sigma_v_ml": SIGMA_V_ML, "sigma_s": SIGMA_S}
+    from lvcore.execution.restart import restart_when_mappings_high
+
     say = (lambda m: print(m, flush=True))
+    between = (lambda: restart_when_mappings_high(say))
     if args.part in ("states", "all"):
-        run_states(settings, args.workdir, emulator=args.emulator, variants=variants, say=say)
+        run_states(settings, args.workdir, emulator=args.emulator, variants=variants, say=say, between=between)
     if args.part in ("cohort", "all"):
-        run_cohorts(settings, args.workdir, say=say)
+        run_cohorts(settings, args.workdir, say=say, between=between)
     print(f"done; summarise with `lvcore study information --summarise --workdir {args.workdir}`")
     return 0

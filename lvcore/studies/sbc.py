@@ -80,6 +80,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import sys
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -530,6 +531,7 @@ def _cli(args) -> int:
     bad = [r for r in routes if r not in ROUTES]
     if bad or not routes:
         raise LVCoreError(f"--routes {args.routes}: choose from {', '.join(ROUTES)}")
+    from lvcore.execution.restart import restart_when_mappings_high
     from lvcore.inference import samplers
 
     samplers.use_host_devices(args.chains)
@@ -545,7 +547,8 @@ def _cli(args) -> int:
         if not args.json:
             print(f"imported {n} finished subjects from {args.import_summary}", flush=True)
     res = run_piece(start, stop, settings, args.workdir, n_subjects=args.n_subjects,
-                    log=None if args.json else (lambda m: print(m, flush=True)), keep_runs=args.keep_runs)
+                    log=None if args.json else (lambda m: print(m, flush=True)), keep_runs=args.keep_runs,
+                    between=lambda: restart_when_mappings_high(lambda m: print(m, file=sys.stderr, flush=True)))
     if args.json:
         print(json.dumps(res, indent=1))
     else:

@@ -575,10 +575,12 @@ def piece_range(n_subjects: int, piece: str | None = None, start: int | None = N
 
 def run_piece(start: int, stop: int, settings: Mapping, workdir, *, n_subjects: int | None = None,
               subject_fn: Callable[[int], dict] | None = None, log: Callable[[str], None] | None = None,
-              keep_runs: bool = False) -> dict:
+              keep_runs: bool = False, between: Callable[[], None] | None = None) -> dict:
     """Run subjects ``start..stop-1`` not yet recorded in ``workdir``; each finished one is appended at once.
 
-    ``subject_fn(index) -> record`` replaces :func:`run_subject` (tests).
+    ``subject_fn(index) -> record`` replaces :func:`run_subject` (tests). ``between()`` is called after each
+    recorded subject (the command line's restart before the memory-mapping limit,
+    :func:`lvcore.execution.restart.restart_when_mappings_high`).
     """
     store = Store(workdir)
     store.check_settings(settings, n_subjects if n_subjects is not None else stop)
@@ -595,6 +597,8 @@ def run_piece(start: int, stop: int, settings: Mapping, workdir, *, n_subjects: 
         codes = ", ".join(f"{r} exit {v['exit_code']} ({v['seconds']:.0f} s)" for r, v in rec["routes"].items())
         say(f"[{k + 1}/{len(todo)}] {rec['subject']}: {codes}; {rec['seconds']:.0f} s wall, "
             f"{rec.get('cpu_seconds', float('nan')):.0f} CPU-s")
+        if between is not None:
+            between()
     return {"piece": [start, stop], "ran": len(todo), "seconds": time.perf_counter() - t0, "file": str(path)}
 
 
