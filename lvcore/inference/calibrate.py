@@ -119,6 +119,8 @@ def calibrate(y, forward, model: str = "iid", *, config: samplers.SamplerConfig 
                                                    ess_min=ess_min, max_rounds=max_rounds, progress=progress,
                                                    **kwargs)
     label = getattr(forward, "label", type(forward).__name__)
+    if model == "discrepancy":  # the GP's kernel (config.discrepancy_kernel), whichever sampler ran
+        attrs = {"discrepancy_kernel": config.discrepancy_kernel, **(attrs or {})}
     idata = diagnostics.to_inference_data(run, y, convergence=conv, sigma_v=sigma_v, forward_label=label,
                                           extra_attrs=attrs, forward=forward)
     return CalibrationResult(model, run.method, idata, conv, diagnostics.summary_table(run.samples), run.wall_s,
@@ -261,7 +263,8 @@ def write_result(result: CalibrationResult, out_dir, stem: str) -> dict:
 
 
 def result_record(result: CalibrationResult) -> dict:
-    """Plain-data summary (JSON-serialisable) of one result."""
+    """Plain-data summary (JSON-serialisable) of one result; a discrepancy run's holds its GP kernel
+    (``discrepancy_kernel``: ``"additive"``, the chapter's, or ``"product"``)."""
     post = result.idata.posterior
     rec = {
         "model": result.model,
@@ -271,6 +274,8 @@ def result_record(result: CalibrationResult) -> dict:
         "convergence": result.convergence.message(),
         "ess_per_s_min": round(result.ess_per_s["min"], 2),
     }
+    if result.model == "discrepancy":
+        rec["discrepancy_kernel"] = str(result.idata.attrs.get("discrepancy_kernel", "additive"))
     for n in list(result.summary.index):
         vals = np.asarray(post[n]).reshape(-1)
         rec[n] = {"median": float(np.median(vals)), "q05": float(np.quantile(vals, 0.05)),

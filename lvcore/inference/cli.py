@@ -131,20 +131,7 @@ def register(subparsers) -> None:
     p.add_argument("--strain-noise", type=float, default=None,
                    help=f"reference strain noise sd of the plausibility check, in [{STRAIN_NOISE_RANGE[0]:g}, "
                         f"{STRAIN_NOISE_RANGE[1]:g}] (default 0.035)")
-    p.add_argument("--sampler", choices=("auto", "nuts", "hmc_gibbs"), default="auto",
-                   help="auto: NUTS for volume/iid, HMC-within-Gibbs for discrepancy")
-    p.add_argument("--discrepancy-block", choices=("marginal", "chapter"), default="marginal",
-                   help="HMC-within-Gibbs block 4: marginal (the discrepancy integrated out of the NUTS block, then "
-                        "drawn exactly; default, fewer steps and divergences) or chapter (Algorithm 4 as written: NUTS "
-                        "over theta, the whitened discrepancy and v); the same posterior")
-    p.add_argument("--chains", type=int, default=4,
-                   help="MCMC chains, 1 to 64, run in parallel on up to 4 host devices (default 4)")
-    p.add_argument("--warmup", type=int, default=1000,
-                   help="warm-up (adaptation) iterations per chain, 1 to 1,000,000 (default 1000)")
-    p.add_argument("--samples", type=int, default=1000,
-                   help="draws kept per chain after convergence, 1 to 1,000,000 (default 1000)")
-    p.add_argument("--seed", type=cli_args.seed, default=0,
-                   help="random seed of the sampler, an integer from 0 to 2^32 - 1 (default 0)")
+    _add_sampler_options(p)
     p.add_argument("--derived-draws", type=int, default=None, metavar="N",
                    help="posterior draws behind the derived quantities (EDPVR by the FE simulator, stress, the "
                         "identified combination, contraction), 0 to skip them, at most 2,000 (default 100, or the "
@@ -162,6 +149,31 @@ def register(subparsers) -> None:
                    help="output folder, created if missing (default calibration_out)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run_calibrate)
+
+
+def _add_sampler_options(p) -> None:
+    """The sampler's options of ``lvcore calibrate``: the sampler, the discrepancy model's block 4 and GP kernel,
+    chains, warm-up, draws and seed."""
+    p.add_argument("--sampler", choices=("auto", "nuts", "hmc_gibbs"), default="auto",
+                   help="auto: NUTS for volume/iid, HMC-within-Gibbs for discrepancy")
+    p.add_argument("--discrepancy-block", choices=("marginal", "chapter"), default="marginal",
+                   help="HMC-within-Gibbs block 4: marginal (the discrepancy integrated out of the NUTS block, then "
+                        "drawn exactly; default, fewer steps and divergences) or chapter (Algorithm 4 as written: NUTS "
+                        "over theta, the whitened discrepancy and v); the same posterior")
+    p.add_argument("--discrepancy-kernel", choices=("additive", "product"), default="additive",
+                   help="GP kernel of the discrepancy likelihood (--model discrepancy, or a list that includes it; "
+                        "the other likelihoods have none): additive (default, the chapter's: a sector profile plus "
+                        "a level profile, rank 9 on the 6 x 4 strain grid) or product (sector x level, full rank "
+                        "24: can represent a mismatch that differs between sectors from level to level); "
+                        "recorded in summary.json as discrepancy_kernel")
+    p.add_argument("--chains", type=int, default=4,
+                   help="MCMC chains, 1 to 64, run in parallel on up to 4 host devices (default 4)")
+    p.add_argument("--warmup", type=int, default=1000,
+                   help="warm-up (adaptation) iterations per chain, 1 to 1,000,000 (default 1000)")
+    p.add_argument("--samples", type=int, default=1000,
+                   help="draws kept per chain after convergence, 1 to 1,000,000 (default 1000)")
+    p.add_argument("--seed", type=cli_args.seed, default=0,
+                   help="random seed of the sampler, an integer from 0 to 2^32 - 1 (default 0)")
 
 
 def check_options(args) -> None:
@@ -190,6 +202,10 @@ def check_options(args) -> None:
         if not ps or any(not (0 < x <= 30) for x in ps) or any(b <= a for a, b in zip(ps, ps[1:])):
             raise DataError(f"--derived-pressures {raw!r}: pressures must increase within (0, 30] mmHg")
         args.derived_pressures = tuple(ps)
+    kernel = getattr(args, "discrepancy_kernel", "additive")
+    if kernel != "additive" and "discrepancy" not in [m.strip() for m in str(args.model).split(",")]:
+        raise DataError(f"--discrepancy-kernel {kernel}: only the discrepancy likelihood has a GP kernel; "
+                        "add discrepancy to --model (e.g. --model discrepancy) or leave the option out")
     n_derived = getattr(args, "derived_draws", None)
     if n_derived is not None and not 0 <= n_derived <= 2000:
         raise DataError(f"--derived-draws must be 0 (skip) to 2,000 posterior draws, got {n_derived}")
@@ -357,7 +373,8 @@ def prepare_run(args) -> CalibrateSetup:
     requests = {r.subject: _request(args, emulator, name, r, geometry, label, cli_measures, cli_sds,
                                     representation=representation, sigma_ref=sigma_ref) for r in rows}
     config = SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains, seed=args.seed,
-                           discrepancy_block=args.discrepancy_block)
+                           discrepancy_block=args.discrepancy_block,
+                           discrepancy_kernel=getattr(args, "discrepancy_kernel", "additive"))
     n_derived = derived.default_draws() if args.derived_draws is None else int(args.derived_draws)
     source = INFER if inferred else next(iter(requests.values())).geometry.source if requests else str(geometry)
     return CalibrateSetup(emulator, name, tuple(model_names), {r.subject: r for r in rows}, requests, config,

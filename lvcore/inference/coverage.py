@@ -84,11 +84,12 @@ def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.Sampler
     functions take the forward model's conditions ``c`` (``{"conditions": (k,)}``)
     next to the data; otherwise ``c`` is ignored.
     """
+    kw = {"kernel": config.discrepancy_kernel} if model_name == "discrepancy" else {}
     if template is None:
-        model = partial(models.get_model(model_name), forward=forward, sigma_v=sigma_v)
+        model = partial(models.get_model(model_name), forward=forward, sigma_v=sigma_v, **kw)
         args = lambda y, c: (y,)  # noqa: E731
     else:
-        model = samplers._conditioned_model(models.get_model(model_name), template, sigma_v=sigma_v)
+        model = samplers._conditioned_model(models.get_model(model_name), template, sigma_v=sigma_v, **kw)
         args = lambda y, c: (y, c)  # noqa: E731
     info = initialize_model(jax.random.PRNGKey(0), model, model_args=args(jnp.asarray(y0), c0), dynamic_args=True)
     init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
@@ -114,7 +115,8 @@ def _nuts_fns(model_name: str, forward, sigma_v: float, config: samplers.Sampler
 
 def _gibbs_fns(forward, sigma_v: float, config: samplers.SamplerConfig):
     kernel = samplers.PolarGPGibbs(forward, None, sigma_v=sigma_v, target_accept_prob=config.target_accept_prob,
-                                   max_tree_depth=config.max_tree_depth, block4=config.discrepancy_block)
+                                   max_tree_depth=config.max_tree_depth, block4=config.discrepancy_block,
+                                   kernel=config.discrepancy_kernel)
     kw = lambda c: None if c is None else {"conditions": c}  # noqa: E731
     return (lambda key, y, c=None: kernel.init(key, config.num_warmup, None, (y,), kw(c)),
             lambda state, y, c=None: kernel.sample(state, (y,), kw(c)),

@@ -28,7 +28,8 @@ DEFAULT_ESS_MIN = 100.0
 
 
 def monitored_names(samples: dict) -> list[str]:
-    """Scalar parameters whose convergence is checked (theta, angles, sigma_S^2, v, GP hyperparameters)."""
+    """Scalar parameters whose convergence is checked (theta, angles, sigma_S^2, v, GP hyperparameters: those the
+    run sampled, so the product kernel's, without ``sigma2_sq``, too)."""
     order = THETA_NAMES + ANGLE_NAMES + ("sigma_s2", "v") + models.HYPER_NAMES
     # the geometry of --geometry infer: PC scores h1..hk and the scale (lvcore.inference.geometry_prior)
     pcs = sorted((n for n in samples if is_pc_name(n) and np.ndim(samples[n]) == 2), key=lambda n: int(n[1:]))
@@ -257,6 +258,7 @@ def to_inference_data(run: samplers.SamplerRun, y, *, convergence: Convergence |
     block4 = getattr(getattr(run.mcmc, "sampler", None), "block4", None)
     if block4 is not None:  # which HMC-within-Gibbs block 4 drew the discrepancy (samplers.DISCREPANCY_BLOCKS)
         attrs["discrepancy_block"] = block4
+        attrs["discrepancy_kernel"] = str(getattr(run.mcmc.sampler, "kernel", "additive"))  # the GP's kernel
     if convergence is not None:
         attrs.update({f"convergence_{k}": (json.dumps(v) if isinstance(v, tuple) else v)
                       for k, v in asdict(convergence).items()})

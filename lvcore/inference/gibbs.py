@@ -19,6 +19,11 @@ per-mesh factor a run-time value) and the LVV sd is :func:`lvcore.inference.mode
 :func:`lvcore.inference.models.discrepancy_model`; ``sigma_S^2`` stays conjugate. Without one every step is
 the GP's alone, draw for draw as before.
 
+``kernel="product"`` uses the product (sector × level) polar kernel for ``K`` in steps 2-4
+(:func:`lvcore.inference.models.discrepancy_cholesky`); its GP has no ``sigma2^2``, so block 2 samples
+``(lam, sigma1^2, c, tau)`` (:func:`lvcore.inference.models.hyper_priors`). The default, the chapter's additive
+kernel, draws exactly what it drew before the option existed.
+
 Each NUTS block keeps its own step size and diagonal mass-matrix adaptation
 (numpyro's functional :func:`numpyro.infer.hmc.hmc` with ``potential_fn_gen``),
 and the cached potential energy and gradient are refreshed whenever the
@@ -112,19 +117,24 @@ class PolarGPGibbs(MCMCKernel):
         NUTS settings of both blocks.
     block4 : str
         One of :data:`DISCREPANCY_BLOCKS` (above).
+    kernel : {"additive", "product"}
+        The GP's kernel: the chapter's additive one (default) or the product (sector × level) one
+        (:data:`lvcore.inference.models.KERNEL_KINDS`).
 
     Sites in ``state.z``: theta (and angles), ``sigma_s2``, ``lam``, ``sigma1_sq``,
-    ``sigma2_sq``, ``c``, ``tau``, ``disc_tilde`` (24, whitened), ``disc`` (24, the discrepancy b), ``v``.
+    ``sigma2_sq`` (additive kernel only), ``c``, ``tau``, ``disc_tilde`` (24, whitened), ``disc`` (24, the
+    discrepancy b), ``v``.
     """
 
     sample_field = "z"
 
     def __init__(self, forward, y=None, *, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
                  nugget: float = kernels.DEFAULT_NUGGET, target_accept_prob: float = 0.8, max_tree_depth: int = 10,
-                 block4: str = "marginal"):
+                 block4: str = "marginal", kernel: str = models.DEFAULT_KERNEL):
         if block4 not in DISCREPANCY_BLOCKS:
             raise ValueError(f"block4 must be one of {DISCREPANCY_BLOCKS}, got {block4!r}")
         self.block4 = block4
+        self.kernel = models.check_kernel(kernel)
         self.forward = forward
         # the forward model's conditions are run-time values (runtime_conditions), not compiled in
         self._template, self.conditions = runtime_conditions(forward)
@@ -136,7 +146,7 @@ class PolarGPGibbs(MCMCKernel):
         self.target_accept_prob = target_accept_prob
         self.max_tree_depth = max_tree_depth
         self.theta_priors = models.theta_priors(infer_angles, forward)
-        self.hyper_priors = models.hyper_priors()
+        self.hyper_priors = models.hyper_priors(kernel)
         self.v_prior = models.v_prior()
         self._hyper_init, self._hyper_sample = hmc(potential_fn_gen=self._hyper_potential_gen, algo="NUTS")
         self._main_gen = self._marginal_potential_gen if block4 == "marginal" else self._main_potential_gen
@@ -147,7 +157,7 @@ class PolarGPGibbs(MCMCKernel):
         """Potential of block 2: ``-log MVN(b | 0, K(hyper) [+ Sigma_rep]) - log prior`` (unconstrained)."""
         def potential(u):
             hyper, logp = _constrain(self.hyper_priors, u)
-            chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov)
+            chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov, self.kernel)
             alpha = solve_triangular(chol, b, lower=True)
             loglik = -0.5 * alpha @ alpha - jnp.sum(jnp.log(jnp.diag(chol)))
             return -(loglik + logp)
@@ -244,6 +254,7 @@ class PolarGPGibbs(MCMCKernel):
                 "c": jax.random.uniform(kh[3], (), minval=-2.0, maxval=2.0),
                 "tau": jax.random.uniform(kh[4], (), minval=-2.0, maxval=2.0),
             }
+            u_hyper = {n: u_hyper[n] for n in self.hyper_priors}  # the product kernel has no sigma2_sq
             b_tilde = 0.5 * jax.random.normal(k_bt, (24,))
             v = 0.01 * jax.random.normal(k_v, ())
         else:
@@ -253,7 +264,7 @@ class PolarGPGibbs(MCMCKernel):
             v = jnp.asarray(init_params.get("v", 0.0), dtype=jnp.float64)
         hyper, _ = _constrain(self.hyper_priors, u_hyper)
         rep_cov = self._rep_cov(cond)
-        chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov)
+        chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov, self.kernel)
         b = chol @ b_tilde
         params, _ = _constrain(self.theta_priors, u_theta)
         sigma_s2 = self._sigma_s2_draw(k_s, params, b, v, y, cond)
@@ -308,7 +319,7 @@ class PolarGPGibbs(MCMCKernel):
         hyper_state = self._hyper_sample(hyper_state, model_args=hyper_args)
         hyper, _ = _constrain(self.hyper_priors, hyper_state.z)
         # 3. Cholesky of the new K (+ Sigma_rep).
-        chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov)
+        chol = models.discrepancy_cholesky(hyper, self.nugget, rep_cov, self.kernel)
         args = self._block4_args(sigma_s2, chol, y, cond)
         main_state = state.main_state
         if self.block4 == "chapter":  # re-whiten so that b is unchanged

@@ -41,9 +41,15 @@ of full rank 24 whenever :math:`W` (6 × 6, positive definite for
 :math:`\tau \ge 4`, :math:`0 < c \le \pi`) and :math:`K_z` (4 × 4, distinct
 levels) are: it can represent a sector × level interaction, which the
 additive kernel cannot. ``gram(hyper, kind="product")`` builds it (``hyper``:
-``sigma1_sq`` is its variance σ², ``sigma2_sq`` is not used). The
-likelihoods and samplers use the chapter's additive kernel; the product
-kernel is not wired into them.
+``sigma1_sq`` is its variance σ², ``sigma2_sq`` is not used).
+
+The discrepancy model takes either: the chapter's additive kernel is the default everywhere;
+``kind="product"`` reaches :func:`lvcore.inference.models.discrepancy_cholesky`, the numpyro model
+:func:`lvcore.inference.models.discrepancy_model` (``kernel=``), the blocked sampler
+:class:`lvcore.inference.gibbs.PolarGPGibbs` (``kernel=``) and, through
+:class:`lvcore.inference.sampler_config.SamplerConfig` ``discrepancy_kernel``, ``lvcore calibrate
+--discrepancy-kernel product`` and ``lvcore study mismatch --discrepancy-kernel product``. With the product
+kernel the GP has no ``sigma2_sq`` (:func:`lvcore.inference.models.hyper_priors`).
 """
 from __future__ import annotations
 
@@ -184,9 +190,9 @@ def gram(hyper, x=None, nugget: float = DEFAULT_NUGGET, kind: str = "additive"):
     return k + nugget * jnp.eye(k.shape[0])
 
 
-def gram_cholesky(hyper, x=None, nugget: float = DEFAULT_NUGGET):
-    """Lower Cholesky factor L of :func:`gram` (``K = L L^T``)."""
-    return jnp.linalg.cholesky(gram(hyper, x, nugget))
+def gram_cholesky(hyper, x=None, nugget: float = DEFAULT_NUGGET, kind: str = "additive"):
+    """Lower Cholesky factor L of :func:`gram` (``K = L L^T``) of the kernel ``kind``."""
+    return jnp.linalg.cholesky(gram(hyper, x, nugget, kind))
 
 
 __all__ = [

@@ -18,6 +18,9 @@ Models
     with the polar kernel of :mod:`lvcore.inference.kernels`,
     ``v ~ N(0, 0.05^2)``, ``lambda ~ Gamma(2, 2)``,
     ``sigma_1^2, sigma_2^2 ~ IG(0.001, 0.001)``, ``c ~ U(0, pi)``, ``tau ~ U(4, 10)``.
+    ``kernel="product"`` swaps the chapter's additive kernel for the product (sector × level) one,
+    ``sigma_1^2 W_c k_z`` (:func:`lvcore.inference.kernels.polar_product_kernel`), whose GP has no
+    ``sigma_2^2``: :func:`hyper_priors` of that kind leaves it out, so it is not sampled.
 
 A forward model that carries the shape model's representation error (a mesh's floor,
 :class:`lvcore.inference.representation_error.FlooredForward`, or ``--geometry infer``) widens every model:
@@ -54,8 +57,12 @@ from lvcore.domain.outputs import ANGLE_NAMES, N_OUTPUTS, THETA_NAMES
 IG_SHAPE, IG_SCALE = 0.001, 0.001
 #: Standard deviation of the global strain bias v.
 V_SD = 0.05
-#: GP hyperparameter names, in a fixed order.
+#: GP hyperparameter names of the chapter's additive kernel, in a fixed order (:func:`hyper_names` per kernel).
 HYPER_NAMES = ("lam", "sigma1_sq", "sigma2_sq", "c", "tau")
+#: The discrepancy model's kernels (:data:`lvcore.inference.kernels.KERNEL_KINDS`); the first, the chapter's, is
+#: the default everywhere.
+KERNEL_KINDS = kernels.KERNEL_KINDS
+DEFAULT_KERNEL = "additive"
 MODEL_NAMES = ("volume", "iid", "discrepancy")
 #: How the likelihood models are named wherever a user reads them (app, report, study figures).
 MODEL_LABELS = {"volume": "(i) volume only", "iid": "(ii) iid strains", "discrepancy": "(iii) polar-GP discrepancy"}
@@ -102,15 +109,31 @@ def sigma_s2_prior():
     return dist.InverseGamma(IG_SHAPE, IG_SCALE)
 
 
-def hyper_priors() -> dict:
-    """GP hyperparameter priors (Table 9.1): lam, sigma1_sq, sigma2_sq, c (rad), tau."""
-    return {
+def check_kernel(kind: str) -> str:
+    """``kind`` if it is one of :data:`KERNEL_KINDS`, else a ValueError naming them."""
+    if kind not in KERNEL_KINDS:
+        raise ValueError(f"discrepancy kernel must be one of {KERNEL_KINDS}, got {kind!r}")
+    return kind
+
+
+def hyper_names(kind: str = DEFAULT_KERNEL) -> tuple:
+    """The GP hyperparameters the discrepancy model samples with kernel ``kind``: :data:`HYPER_NAMES` for the
+    additive kernel, the same less ``sigma2_sq`` for the product kernel (its one variance is ``sigma1_sq``)."""
+    check_kernel(kind)
+    return HYPER_NAMES if kind == "additive" else tuple(n for n in HYPER_NAMES if n != "sigma2_sq")
+
+
+def hyper_priors(kind: str = DEFAULT_KERNEL) -> dict:
+    """GP hyperparameter priors (Table 9.1): lam, sigma1_sq, sigma2_sq, c (rad), tau; ``kind="product"``: the
+    product kernel's, without ``sigma2_sq`` (:func:`hyper_names`)."""
+    priors = {
         "lam": dist.Gamma(2.0, 2.0),
         "sigma1_sq": dist.InverseGamma(IG_SHAPE, IG_SCALE),
         "sigma2_sq": dist.InverseGamma(IG_SHAPE, IG_SCALE),
         "c": dist.Uniform(0.0, math.pi),
         "tau": dist.Uniform(4.0, 10.0),
     }
+    return {n: priors[n] for n in hyper_names(kind)}
 
 
 def v_prior():
@@ -203,22 +226,25 @@ def strain_noise_covariance(sigma_s2, forward=None, model: str = "iid"):
     return cov if floor is None else cov + floor
 
 
-def discrepancy_cholesky(hyper, nugget: float = kernels.DEFAULT_NUGGET, rep_cov=None):
+def discrepancy_cholesky(hyper, nugget: float = kernels.DEFAULT_NUGGET, rep_cov=None, kind: str = DEFAULT_KERNEL):
     """Lower Cholesky factor of the discrepancy's covariance ``K(hyper) + nugget I (+ Sigma_rep)`` (strain).
 
     Parameters
     ----------
     hyper : mapping
-        GP hyperparameters (:data:`HYPER_NAMES`).
+        GP hyperparameters (:func:`hyper_names` of ``kind``).
     nugget : float
         Diagonal jitter of the Gram matrix (strain²).
     rep_cov : array (24, 24), optional
         The representation error's known covariance (:func:`strain_rep_covariance`, strain²); None: the
         GP's alone, exactly :func:`lvcore.inference.kernels.gram_cholesky`.
+    kind : {"additive", "product"}
+        The GP's kernel (:func:`lvcore.inference.kernels.gram`): the chapter's additive one (default, rank 9 on
+        the grid) or the product (sector × level) one (full rank 24).
     """
     if rep_cov is None:
-        return kernels.gram_cholesky(hyper, nugget=nugget)
-    return jnp.linalg.cholesky(kernels.gram(hyper, nugget=nugget) + rep_cov)
+        return kernels.gram_cholesky(hyper, nugget=nugget, kind=kind)
+    return jnp.linalg.cholesky(kernels.gram(hyper, nugget=nugget, kind=kind) + rep_cov)
 
 
 def _volume_term(eta0, y, sigma_v, forward=None):
@@ -257,7 +283,7 @@ def iid_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: boo
 
 
 def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_angles: bool = False,
-                      nugget: float = kernels.DEFAULT_NUGGET):
+                      nugget: float = kernels.DEFAULT_NUGGET, kernel: str = DEFAULT_KERNEL):
     """Model (iii): strains ``~ N(eta + b + v, sigma_S^2)`` with ``b = L b_tilde`` a polar GP.
 
     ``disc_tilde ~ N(0, I_24)`` is the whitened discrepancy; ``disc`` (= b, named so it cannot clash with the
@@ -265,15 +291,17 @@ def discrepancy_model(y=None, *, forward, sigma_v: float = SIGMA_V_ML, infer_ang
     polar-kernel Gram matrix (plus ``nugget``) on the 6 x 4 strain grid, plus the representation error's
     ``Sigma_rep`` when the forward model carries one (:func:`discrepancy_cholesky`; module docstring): b is
     then the GP discrepancy and the shape model's known one together, and further loaded states share it.
+    ``kernel``: the GP's kernel, the chapter's ``"additive"`` (default) or ``"product"`` (sector × level; no
+    ``sigma2_sq`` site, :func:`hyper_priors`).
     """
     _check_y(y)
     params = _sample_params(infer_angles, forward)
     sigma_s2 = numpyro.sample("sigma_s2", sigma_s2_prior())
-    hyper = {n: numpyro.sample(n, d) for n, d in hyper_priors().items()}
+    hyper = {n: numpyro.sample(n, d) for n, d in hyper_priors(kernel).items()}
     b_tilde = numpyro.sample("disc_tilde", dist.Normal(0.0, 1.0).expand([24]).to_event(1))
     v = numpyro.sample("v", v_prior())
     rep_cov = strain_rep_covariance(forward)
-    chol = discrepancy_cholesky(hyper, nugget, rep_cov)
+    chol = discrepancy_cholesky(hyper, nugget, rep_cov, kernel)
     b = numpyro.deterministic("disc", chol @ b_tilde)
     eta = numpyro.deterministic("eta", forward(params))
     _volume_term(eta[0], y, sigma_v, forward)
@@ -305,8 +333,8 @@ PARAMETER_HELP = {
     "sigma_s2": "σ_S² (strain²): variance of the iid strain measurement noise; prior IG(0.001, 0.001).",
     "v": "v (strain): global strain bias of the discrepancy b(x), the same offset in all 24 segments; prior N(0, 0.05²).",
     "lam": "λ (levels): correlation length of the polar-GP discrepancy across the three short-axis levels; prior Gamma(2, 2).",
-    "sigma1_sq": "σ₁² (strain²): variance of the discrepancy's circumferential component (polar Wendland kernel around each ring); prior IG(0.001, 0.001).",
-    "sigma2_sq": "σ₂² (strain²): variance of the discrepancy's base-to-apex (level) component; prior IG(0.001, 0.001).",
+    "sigma1_sq": "σ₁² (strain²): variance of the discrepancy's circumferential component (polar Wendland kernel around each ring; with the product kernel, the variance of the whole sector × level GP); prior IG(0.001, 0.001).",
+    "sigma2_sq": "σ₂² (strain²): variance of the discrepancy's base-to-apex (level) component (the additive kernel only); prior IG(0.001, 0.001).",
     "c": "c (rad): compact-support radius of the polar kernel: segments further apart than c around the ring are uncorrelated; prior U(0, π).",
     "tau": "τ (-): shape/smoothness exponent of the polar Wendland kernel (positive definite for τ ≥ 4); prior U(4, 10).",
 }
@@ -331,5 +359,5 @@ __all__ = [
     "PARAMETER_HELP", "prior_bounds", "theta_priors", "sigma_s2_prior", "hyper_priors", "v_prior",
     "volume_model", "iid_model", "discrepancy_model", "get_model", "representation_error", "lvv_sd",
     "strain_likelihood", "extra_terms", "strain_rep_covariance", "strain_floor", "strain_noise_covariance",
-    "discrepancy_cholesky",
+    "discrepancy_cholesky", "KERNEL_KINDS", "DEFAULT_KERNEL", "check_kernel", "hyper_names",
 ]

@@ -36,6 +36,12 @@ class SamplerConfig:
     discrepancy_block : str
         Block 4 of the discrepancy model's HMC-within-Gibbs, one of :data:`DISCREPANCY_BLOCKS`: ``"marginal"``
         (b integrated out of the NUTS block, then drawn exactly) or ``"chapter"`` (Algorithm 4 as written).
+    discrepancy_kernel : str
+        The discrepancy model's GP kernel, one of :data:`lvcore.inference.models.KERNEL_KINDS`: ``"additive"``
+        (the chapter's, sector profile + level profile) or ``"product"`` (sector × level,
+        :func:`lvcore.inference.kernels.polar_product_kernel`). Read by the discrepancy model's samplers only
+        (blocked and joint NUTS); being a field, it keys the compiled samplers, so the two kernels never share
+        a compiled program.
     """
 
     num_warmup: int = 1000
@@ -48,6 +54,7 @@ class SamplerConfig:
     dense_mass: bool = False
     progress_bar: bool = False
     discrepancy_block: str = "marginal"
+    discrepancy_kernel: str = "additive"
 
 
 #: The app's default run: 4 chains x (250 warm-up + 500 draws). Chosen by measured ESS per CPU second

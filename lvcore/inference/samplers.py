@@ -52,6 +52,20 @@ def _run_kwargs(y, values) -> dict:
     return run_kwargs
 
 
+def sampler_cache_key(method: str, model_name: str, template, config: SamplerConfig, model_kwargs: dict):
+    """The key of a compiled sampler in this process's cache (:func:`_cached_mcmc`), or None for a forward model
+    whose programs are not kept (``template`` from :func:`runtime_conditions`). It holds everything compiled in:
+    the emulator template, the sampler settings but the seed (so the discrepancy model's block 4 and GP kernel,
+    ``config.discrepancy_block`` / ``discrepancy_kernel``: a product-kernel run never reuses an additive program)
+    and the model's keyword arguments."""
+    key = _template_key(template)
+    if key is None:
+        return None
+    if method == "nuts":
+        return ("nuts", model_name, key, _config_key(config, model_kwargs))
+    return ("hmc_gibbs", key, _config_key(config, model_kwargs))
+
+
 def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(), **model_kwargs) -> SamplerRun:
     """Run NUTS on model ``model_name`` (``volume``, ``iid`` or ``discrepancy`` = joint NUTS).
 
@@ -66,8 +80,11 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
         Forward model (emulator adapter or stand-in).
     config : SamplerConfig
     **model_kwargs
-        ``sigma_v``, ``infer_angles`` (and ``nugget`` for the discrepancy model).
+        ``sigma_v``, ``infer_angles`` (and ``nugget`` for the discrepancy model, whose GP kernel is
+        ``config.discrepancy_kernel``).
     """
+    if model_name == "discrepancy":
+        model_kwargs = {**model_kwargs, "kernel": config.discrepancy_kernel}
     # the forward model and settings are bound into the model; the data y and the forward model's conditions
     # (runtime_conditions: PC scores, EDP, angles, scale) are (dynamic) arguments of the compiled sampler
     template, values = runtime_conditions(forward)
@@ -75,8 +92,7 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
         model = partial(models.get_model(model_name), forward=forward, **model_kwargs)
     else:
         model = _conditioned_model(models.get_model(model_name), template, **model_kwargs)
-    key = _template_key(template)
-    key = None if key is None else ("nuts", model_name, key, _config_key(config, model_kwargs))
+    key = sampler_cache_key("nuts", model_name, template, config, model_kwargs)
     mcmc = _cached_mcmc(key, lambda: _mcmc(NUTS(model, target_accept_prob=config.target_accept_prob,
                                                 max_tree_depth=config.max_tree_depth, dense_mass=config.dense_mass),
                                            config, dynamic_args=True))
@@ -87,14 +103,15 @@ def run_nuts(model_name: str, y, forward, config: SamplerConfig = SamplerConfig(
 
 
 def run_hmc_gibbs(y, forward, config: SamplerConfig = SamplerConfig(), **model_kwargs) -> SamplerRun:
-    """Run :class:`PolarGPGibbs` (model (iii), Algorithm 4); ``model_kwargs`` as for the kernel."""
+    """Run :class:`PolarGPGibbs` (model (iii), Algorithm 4) with block 4 ``config.discrepancy_block`` and the GP
+    kernel ``config.discrepancy_kernel``; ``model_kwargs`` as for the kernel."""
     template, values = runtime_conditions(forward)
-    key = _template_key(template)
-    key = None if key is None else ("hmc_gibbs", key, _config_key(config, model_kwargs))
+    key = sampler_cache_key("hmc_gibbs", "discrepancy", template, config, model_kwargs)
     # y (and the forward model's conditions, runtime_conditions) are arguments of the compiled sampler, as for NUTS
     mcmc = _cached_mcmc(key, lambda: _mcmc(PolarGPGibbs(forward, y, target_accept_prob=config.target_accept_prob,
                                                         max_tree_depth=config.max_tree_depth,
-                                                        block4=config.discrepancy_block, **model_kwargs),
+                                                        block4=config.discrepancy_block,
+                                                        kernel=config.discrepancy_kernel, **model_kwargs),
                                            config, dynamic_args=True))
     t0 = time.perf_counter()
     run_kwargs = _run_kwargs(y, values)
@@ -176,4 +193,4 @@ __all__ = ["SamplerConfig", "SamplerRun", "PolarGPGibbs", "GibbsState", "run_nut
            "run_model", "continue_run", "posterior_eta", "sigma_s2_conditional", "resolve_chain_method", "pmap_vmap", "pmap_chains",
            "use_host_devices", "runtime_conditions", "ConditionedForward", "INTERACTIVE", "TRACE_LOCK", "compile_only",
            "precompile", "clear_sampler_cache", "emulator_fingerprint", "MCMC_CACHE_SIZE",
-           "DISCREPANCY_BLOCKS"]
+           "DISCREPANCY_BLOCKS", "sampler_cache_key"]

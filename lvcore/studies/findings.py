@@ -128,8 +128,11 @@ def source_line(result: dict) -> str:
 
     parts = [f"{SOURCES[k]} ({source_label(result[k].get('folder'))})" for k in SOURCES
              if isinstance(result.get(k), dict)]
+    from lvcore.studies.mismatch import kernel_note
+
     return ("findings from " + ", ".join(parts) + "; SYNTHETIC data; 90 % percentile bootstrap CIs over the "
-            "independent unit; one symmetric verdict rule over cited physiological doses (lvcore.studies.findings)")
+            "independent unit; one symmetric verdict rule over cited physiological doses (lvcore.studies.findings)"
+            + kernel_note(result.get("mismatch") or {}))
 
 
 def tables(result: dict) -> dict:

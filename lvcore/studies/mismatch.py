@@ -47,6 +47,14 @@ skips what is there. Simulations run on the campaign executors (a local
 process pool, or a Dask scheduler with ``--scheduler``), as campaigns do.
 The full chapter-size run (6 sources × 4–5 doses × 8 volunteers × ≥ 20
 seeds) is not done by default; see docs/studies.md for its cost.
+
+**Discrepancy kernel.** The discrepancy likelihood uses the chapter's additive
+polar kernel unless ``--discrepancy-kernel product`` (``SamplerConfig``'s
+``discrepancy_kernel``) asks for the product (sector × level) one. The result
+records it (``discrepancy_kernel``; the source line, the figures and the docs
+text name a product-kernel run as such), and a product-kernel run's fit files
+carry ``_kproduct`` in their name and the kernel in their record: a work folder
+keeps the two kernels' fits apart, and a fit file of the other kernel is refused.
 """
 from __future__ import annotations
 
@@ -91,6 +99,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     whose fits are recorded and lists the others under ``not_fitted``.
     ``fit_cost`` sums the CPU seconds of the MCMC batches behind the fits
     (each fit file records its batch's cost; a padded batch counts in full).
+    ``config.discrepancy_kernel``: the discrepancy likelihood's GP kernel (module docstring).
     """
     from lvcore.emulator.forward import emulator_forward
     from lvcore.emulator.io import load_emulator
@@ -101,6 +110,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     # Algorithm 4 as the chapter writes it, whatever the caller's config: the shipped results were made with it,
     # and a resumed study must not mix samplers (its recorded fits are keyed by budget, not by sampler)
     config = dataclasses.replace(config or samplers.SamplerConfig(), discrepancy_block="chapter")
+    kernel, tag = _fit_tag(seeds, config)
     plan = {s: tuple(float(d) for d in (doses or {}).get(s, DEFAULT_DOSES[s])) for s in sources}
     bad = sorted(set(plan) - set(SOURCES))
     if bad:
@@ -117,7 +127,6 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
         write_json_atomic(out / "doses.json", clean(res))
         return res
     fits, failed, todo = {}, [], []
-    tag = f"s{seeds}_w{config.num_warmup}_n{config.num_samples}_c{config.num_chains}"
     for v in vols:
         nominal = sims[dose_key(v.name, None, 0.0)]
         if not nominal["converged"]:
@@ -132,7 +141,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
                     continue
                 path = out / "fits" / f"{key}__{tag}.json"
                 if path.is_file():
-                    fits.setdefault((source, dose), {})[v.name] = json.loads(path.read_text())
+                    fits.setdefault((source, dose), {})[v.name] = _recorded_fit(path, kernel)
                 else:
                     todo.append((v, source, dose, key, np.asarray(rec["outputs"], dtype=float)))
     not_fitted = [{"volunteer": u[0].name, "source": u[1], "dose": u[2]} for u in todo] if recorded_only else []
@@ -168,7 +177,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
             for i, (v, source, dose, key, _) in enumerate(units):
                 sl = slice(i * seeds, (i + 1) * seeds)
                 fit = clean({**{m: {k: np.asarray(a)[sl] for k, a in r.items()} for m, r in res.items()},
-                             "batch_cost": cost})
+                             "batch_cost": cost, **({} if kernel == "additive" else {"discrepancy_kernel": kernel})})
                 write_json_atomic(out / "fits" / f"{key}__{tag}.json", fit)
                 fits.setdefault((source, dose), {})[v.name] = fit
     t_fit = time.perf_counter() - t0 - t_sim
@@ -184,6 +193,7 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
         "sampler": {"num_warmup": config.num_warmup, "num_samples": config.num_samples,
                     "num_chains": config.num_chains, "batch": batch},
         "noise": {"sigma_v_ml": SIGMA_V_ML, "sigma_s": SIGMA_S},
+        "discrepancy_kernel": kernel,
         "rows": rows, "appearance": appearance(rows), "failed": failed, "not_fitted": not_fitted,
         "complete": not not_fitted and not failed,
         "timings_s": {"simulate": t_sim, "calibrate": t_fit, "total": time.perf_counter() - t0},
@@ -191,6 +201,26 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     }
     write_json_atomic(out / result_file, clean(result))
     return result
+
+
+def _fit_tag(seeds: int, config) -> tuple[str, str]:
+    """``(kernel, tag)``: the discrepancy kernel of ``config`` (checked) and the fit files' name tag (seeds and
+    sampler budget), with ``_k<kernel>`` for a kernel other than the chapter's (whose file names stay as they
+    were), so that one work folder keeps the two kernels' fits apart."""
+    from lvcore.inference.models import check_kernel
+
+    kernel = check_kernel(config.discrepancy_kernel)
+    tag = f"s{seeds}_w{config.num_warmup}_n{config.num_samples}_c{config.num_chains}"
+    return kernel, tag + ("" if kernel == "additive" else f"_k{kernel}")
+
+
+def _recorded_fit(path: Path, kernel: str) -> dict:
+    """A recorded fit file, refused (ValueError) when it was fitted with another discrepancy kernel."""
+    fit = json.loads(path.read_text())
+    if fit.get("discrepancy_kernel", "additive") != kernel:
+        raise ValueError(f"{path}: fitted with the {fit.get('discrepancy_kernel')} discrepancy kernel, this run "
+                         f"uses the {kernel} one; use another --out folder")
+    return fit
 
 
 # ----------------------------------------------------------------------------
@@ -259,7 +289,15 @@ def source_line(result: dict) -> str:
     return (f"{RESULT_FILE} ({source_label(result['folder'])}); SYNTHETIC data from the FE simulator "
             f"({result.get('resolution', '?')} mesh), {len(vols)} volunteer(s) ({', '.join(vols)}) × "
             f"{result.get('seeds_per_dose', '?')} noise seeds per dose; calibrated on the "
-            f"{result.get('emulator', '?')} emulator; sampler {sampler_text(result)}")
+            f"{result.get('emulator', '?')} emulator; sampler {sampler_text(result)}" + kernel_note(result))
+
+
+def kernel_note(result: dict) -> str:
+    """``""`` for the chapter's additive discrepancy kernel (a result that does not record one is the chapter's);
+    for another, a clause naming it, so that its numbers are never read as the chapter's."""
+    kind = result.get("discrepancy_kernel", "additive")
+    return "" if kind == "additive" else (f"; discrepancy likelihood with the {kind} (sector × level) GP kernel, "
+                                          "not the chapter's additive one")
 
 
 def tables(result: dict) -> dict:
@@ -315,7 +353,7 @@ def figures(result: dict) -> dict:
     out["fig_mismatch_discrepancy_sigma_s"] = dose_response_figure(
         tabs["fig_mismatch_discrepancy_sigma_s"].to_dict("records"),
         title=f"SYNTHETIC mismatch dose–response ({n}): discrepancy model's posterior median σ_S, 90 % bootstrap "
-              f"CI band; truth {SIGMA_S:g}, chapter 0.024 (F2)",
+              f"CI band; truth {SIGMA_S:g}, chapter 0.024 (F2){kernel_note(result)}",
         xaxis_title=xt, yaxis_title="discrepancy σ_S (strain)", refs=((SIGMA_S, f"truth {SIGMA_S:g}"),))
     panels = list(dict.fromkeys(tabs["fig_mismatch_output_error"]["panel"]))
     out["fig_mismatch_output_error"] = dose_response_figure(
@@ -354,6 +392,9 @@ def add_study_parser(study_subparsers) -> None:
                    help="only simulate and print the measured strain RMS of each dose (OUT/doses.json); no fits")
     p.add_argument("--recorded-only", action="store_true",
                    help="start no new fits: summarise the recorded ones and list the rest as not fitted")
+    p.add_argument("--discrepancy-kernel", choices=("additive", "product"), default="additive",
+                   help="GP kernel of the discrepancy likelihood: additive (default, the chapter's) or product "
+                        "(sector x level); a product run's fits are kept apart in --out and its result says so")
     p.add_argument("--batch", type=int, default=BATCH,
                    help=f"data sets per compiled MCMC batch (default {BATCH}; the last batch is padded)")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
@@ -399,7 +440,7 @@ def _cli(args) -> int:
         return 2
     samplers.use_host_devices(args.chains)
     cfg = samplers.SamplerConfig(num_warmup=args.warmup, num_samples=args.samples, num_chains=args.chains,
-                                 seed=args.seed)
+                                 seed=args.seed, discrepancy_kernel=args.discrepancy_kernel)
     res = run_study(sources=sources, doses=doses, volunteers=vols, seeds=args.seeds, config=cfg, seed=args.seed,
                     resolution=args.resolution, emulator=args.emulator, workers=args.workers,
                     scheduler=args.scheduler, out=args.out, retry_failed=args.retry_failed,
@@ -425,4 +466,4 @@ __all__ = ["SOURCES", "DEFAULT_DOSES", "MODEL_ANGLES", "MODEL_BASE", "HETEROGENE
            "fit_datasets", "run_study", "summarise", "per_volunteer_values", "appearance", "measured_doses",
            "strain_rms", "fit_cost", "budget_text", "sampler_text", "verdict_rows", "RESULT_FILE", "COMMAND",
            "TITLES", "MISSING", "load", "source_line", "tables", "figures", "docs_markdown", "DOCS_BEGIN",
-           "DOCS_END", "add_study_parser"]
+           "DOCS_END", "add_study_parser", "kernel_note"]

@@ -83,6 +83,10 @@ def docs_markdown(result: dict) -> str:
              + (f" ({_cost_text(result['fit_cost'])})" if result.get("fit_cost") else "")
              + (f" (shipped by `{shipped['command']}`, {shipped.get('date', '')}; the run's cost is in "
                 "BENCHMARKS.md)" if shipped.get("command") else "") + "."]
+    kind = result.get("discrepancy_kernel", "additive")
+    if kind != "additive":   # never read as the chapter's: say which kernel the discrepancy likelihood had
+        lines += ["", f"**Discrepancy kernel: {kind}** (sector × level), not the chapter's additive one: the "
+                  "discrepancy likelihood's σ_S and output error below are of that model."]
     co = result.get("carried_over")
     if co:
         lines += ["", f"**Carried over (†):** {len(co['doses'])} doses (" + ", ".join(
