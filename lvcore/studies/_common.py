@@ -153,6 +153,16 @@ def add_simulator_options(parser) -> None:
     parser.add_argument("--resolution", default="default", help="simulator mesh preset (default 'default')")
 
 
+def add_sampler_options(parser, *, chains: int, warmup: int, samples: int) -> None:
+    """``--chains``, ``--warmup`` and ``--samples`` of a study command that runs ``lvcore calibrate``, with the
+    study's defaults."""
+    parser.add_argument("--chains", type=cli_args.int_in(1, 64), default=chains, help=f"MCMC chains (default {chains})")
+    parser.add_argument("--warmup", type=cli_args.int_in(1, 1_000_000), default=warmup,
+                        help=f"warm-up iterations per chain (default {warmup})")
+    parser.add_argument("--samples", type=cli_args.int_in(1, 1_000_000), default=samples,
+                        help=f"draws kept per chain (default {samples})")
+
+
 def comma_list(text: str | None) -> list[str]:
     """The items of a comma-separated option, stripped, empty ones dropped (``" a,,b "`` -> ``["a", "b"]``)."""
     return [s.strip() for s in (text or "").split(",") if s.strip()]

@@ -38,7 +38,7 @@ import numpy as np
 from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.domain.outputs import THETA_NAMES
 from lvcore.exceptions import LVCoreError
-from lvcore.studies._common import write_json_atomic
+from lvcore.studies._common import add_sampler_options, comma_list, write_json_atomic
 from lvcore.studies.sbc_runner import Store, TruthFailure, calibrate_in_process
 
 #: Version of the run records; a work folder from another version is refused.
@@ -486,12 +486,7 @@ def add_parser(study_subparsers) -> None:
                    help="the state emulator's folder (default: WORKDIR/state_emulator, built there when missing "
                         "by `lvcore emulator build " + " ".join(EMULATOR_BUILD_ARGS) + "`)")
     p.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the subjects, noise and samplers (default 0)")
-    p.add_argument("--chains", type=cli_args.int_in(1, 64), default=DEFAULT_CHAINS,
-                   help=f"MCMC chains (default {DEFAULT_CHAINS})")
-    p.add_argument("--warmup", type=cli_args.int_in(1, 1_000_000), default=DEFAULT_WARMUP,
-                   help=f"warm-up iterations per chain (default {DEFAULT_WARMUP})")
-    p.add_argument("--samples", type=cli_args.int_in(1, 1_000_000), default=DEFAULT_SAMPLES,
-                   help=f"draws kept per chain (default {DEFAULT_SAMPLES})")
+    add_sampler_options(p, chains=DEFAULT_CHAINS, warmup=DEFAULT_WARMUP, samples=DEFAULT_SAMPLES)
     p.add_argument("--derived-draws", type=cli_args.int_in(2, 2000), default=DEFAULT_DERIVED_DRAWS,
                    help=f"posterior draws behind V20 and V30 (default {DEFAULT_DERIVED_DRAWS})")
     p.add_argument("--summarise", action="store_true",
@@ -521,8 +516,8 @@ def _cli(args) -> int:
                 print(f"{'met' if d['met'] else 'NOT met'}: {d['claim']}: {d['value']}")
             print(f"wrote {out}")
         return 0
-    sizes = [int(x) for x in str(args.cohort_sizes).split(",") if x.strip()]
-    variants = [v.strip() for v in str(args.variants).split(",") if v.strip()]
+    sizes = [int(x) for x in comma_list(args.cohort_sizes)]
+    variants = comma_list(args.variants)
     bad = [v for v in variants if v not in STATE_VARIANTS] + [str(n) for n in sizes if n < 2]
     if bad or not variants:
         raise LVCoreError(f"unknown variant or cohort size {', '.join(bad) or '(none)'}: variants are "

@@ -91,7 +91,7 @@ from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.exceptions import LVCoreError
 from lvcore.domain.outputs import DISPLAY_NAMES
 from lvcore.studies import registry
-from lvcore.studies._common import clean, round_floats, write_json_atomic
+from lvcore.studies._common import add_sampler_options, clean, round_floats, write_json_atomic
 # the statistics (pure) and the runs live in their own modules; their names are this module's too
 from lvcore.studies.sbc_runner import (ANGLES, BASE, CLI_DERIVED_PRESSURES_MMHG, DEFAULT_CHAINS,  # noqa: F401
                                        DEFAULT_DERIVED_DRAWS, DEFAULT_N_SUBJECTS, DEFAULT_SAMPLES, DEFAULT_THIN,
@@ -489,12 +489,7 @@ def add_study_parser(study_subparsers) -> None:
                    help="one past the last subject index (default --n-subjects)")
     p.add_argument("--workdir", type=cli_args.output_dir, default=DEFAULT_WORKDIR,
                    help=f"work folder with the per-subject records (default {DEFAULT_WORKDIR}); a rerun resumes")
-    p.add_argument("--warmup", type=cli_args.int_in(1, 1_000_000), default=DEFAULT_WARMUP,
-                   help=f"warm-up iterations per chain (default {DEFAULT_WARMUP})")
-    p.add_argument("--samples", type=cli_args.int_in(1, 1_000_000), default=DEFAULT_SAMPLES,
-                   help=f"draws kept per chain (default {DEFAULT_SAMPLES})")
-    p.add_argument("--chains", type=cli_args.int_in(1, 64), default=DEFAULT_CHAINS,
-                   help=f"MCMC chains (default {DEFAULT_CHAINS})")
+    add_sampler_options(p, chains=DEFAULT_CHAINS, warmup=DEFAULT_WARMUP, samples=DEFAULT_SAMPLES)
     p.add_argument("--derived-draws", type=cli_args.int_in(2, 2000), default=DEFAULT_DERIVED_DRAWS,
                    help=f"posterior draws behind the derived FE volumes (default {DEFAULT_DERIVED_DRAWS})")
     p.add_argument("--thin", type=cli_args.int_in(2, 100_000), default=DEFAULT_THIN,
