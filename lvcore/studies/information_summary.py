@@ -181,7 +181,14 @@ def summarise(workdir, out=None) -> dict:
               "notes": [
                   "Truth: FE simulator on the default LV for the states part; the chapter emulator (data) and the "
                   "EDPVR emulator (V20, V30) for the cohorts.",
-                  "Noise: sigma_V 5 mL and sigma_S 0.03 at every loaded state; 90 % intervals are q05-q95."]}
+                  "Noise: sigma_V 5 mL and sigma_S 0.03 at every loaded state; 90 % intervals are q05-q95.",
+                  "The separate fits' prior is the box of Table 9.1 (a >= 0.05 kPa); the hierarchical model's "
+                  "population log theta ~ N(mu, Sigma) is not truncated to it, so a subject's a may extend below "
+                  "0.05 kPa (the emulator's extrapolation), which widens a's q95/q05 against separate fits.",
+                  "--prior klotz pulls V20 and V30 towards Klotz et al. (2006)'s population curve; the FE truths "
+                  "here are not on that curve, so it may cost coverage while it narrows.",
+                  "The --geometry infer route uses the bundled angles emulator, whose EDP box stops at 14 mmHg: "
+                  "its second state is 14 mmHg, not 20."]}
     result = clean(result)
     if out is not None:
         write_json_atomic(out, result)
