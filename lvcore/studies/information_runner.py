@@ -36,7 +36,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
-from lvcore.domain.outputs import THETA_NAMES
+from lvcore.domain.outputs import EDP_NAME, THETA_NAMES
 from lvcore.exceptions import LVCoreError
 from lvcore.studies._common import add_sampler_options, comma_list, write_json_atomic
 from lvcore.studies.sbc_runner import Store, TruthFailure, calibrate_in_process
@@ -110,7 +110,7 @@ def simulate_states(theta: Mapping[str, float]) -> dict:
 
     outputs, v0 = {}, None
     for p in TRUTH_PRESSURES_MMHG:
-        case = build_case({**theta, "edp": p, "alpha_endo": ANGLES[0], "alpha_epi": ANGLES[1]},
+        case = build_case({**theta, EDP_NAME: p, "alpha_endo": ANGLES[0], "alpha_epi": ANGLES[1]},
                           geometry={"kind": "default", "resolution": "default"}, base=BASE)
         try:
             res = simulate(case)
@@ -267,8 +267,8 @@ def record_state_emulator(workdir, emulator: str) -> dict:
     meta = json.loads((Path(emulator) / "metadata.json").read_text())
     names = list(meta.get("input_names", []))
     bounds = meta.get("bounds") or {}
-    box = ([float(bounds["lower"][names.index("edp")]), float(bounds["upper"][names.index("edp")])]
-           if "edp" in names and "lower" in bounds else None)
+    box = ([float(bounds["lower"][names.index(EDP_NAME)]), float(bounds["upper"][names.index(EDP_NAME)])]
+           if EDP_NAME in names and "lower" in bounds else None)
     test = meta.get("test") or {}
     rec = {"name": meta.get("name", Path(emulator).name), "edp_box_mmhg": box,
            "heldout_lvv_rmse_ml": test.get("lvv_rmse_ml"), "heldout_strain_rmse": test.get("strain_rmse"),
