@@ -26,6 +26,7 @@ from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.inference.diagnostics import banner_status, netcdf_bytes
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.request import build_request
+from lvcore.inference.kernels import KERNEL_KINDS
 from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
 from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
@@ -121,6 +122,12 @@ with right:
     with st.expander("What the parameters mean"):
         st.markdown("\n".join(f"- **{display_name(n)}** — {PARAMETER_HELP[n]}" for n in
                                ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau")))
+    kernel = st.radio("Discrepancy kernel", list(KERNEL_KINDS), horizontal=True,
+                      disabled="discrepancy" not in models,
+                      help="The polar GP of the discrepancy likelihood: additive (the chapter's: a sector profile "
+                           "plus a level profile, rank 9 on the 24 regions) or product (sector × level, full rank: "
+                           "it can represent a regional interaction). Used only by the discrepancy likelihood "
+                           "(`lvcore calibrate --discrepancy-kernel`).")
     angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
                       help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
     c1, c2, c3 = st.columns(3)
@@ -213,7 +220,8 @@ if run_clicked:
     except Exception as err:  # noqa: BLE001 - the calibration still runs; the panel says why it is missing
         st.warning(f"The EDPVR and derived quantities will not be available ({type(err).__name__}: {err}).")
         physiology_setup = None
-    config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains))
+    config = SamplerConfig(num_warmup=int(warmup), num_samples=int(samples), num_chains=int(chains),
+                           discrepancy_kernel=kernel)
     job = {"done": False, "message": "compiling the sampler", "fraction": 0.0, "results": {}, "error": None,
            "t0": time.perf_counter(), "y": data.y, "subject": data.subject, "emulator": emu_label,
            "synthetic": data.subject.startswith("SYNTHETIC"), "bounds": prior_bounds(request.infer_angles, forward),

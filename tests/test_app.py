@@ -296,3 +296,14 @@ def test_conditions_are_the_emulators_own_with_the_reason():
     assert angles == ("EDP 10 mmHg; fibre angles -60° / 90°, the simulator's default (the 'angles' emulator takes "
                       "the angles as inputs)")
     assert "inferred" in conditions_text(8.0, (0, 0), load_emulator("angles"), infer_angles=True)
+
+
+def test_the_discrepancy_kernel_choice_is_offered_for_the_discrepancy_likelihood_only():
+    """The Calibration page offers the discrepancy GP's kernel (additive by default, as the chapter and the CLI);
+    the choice is greyed out when the discrepancy likelihood is not selected."""
+    at = AppTest.from_file(str(PAGES_DIR / "5_Calibration.py"), default_timeout=180).run()
+    assert not at.exception, at.exception
+    kernel = next(r for r in at.radio if r.label == "Discrepancy kernel")
+    assert list(kernel.options) == ["additive", "product"] and kernel.value == "additive" and not kernel.disabled
+    next(m for m in at.multiselect if m.label == "Likelihood(s)").set_value(["iid"]).run()
+    assert next(r for r in at.radio if r.label == "Discrepancy kernel").disabled
