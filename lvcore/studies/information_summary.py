@@ -182,9 +182,10 @@ def summarise(workdir, out=None) -> dict:
                   "Truth: FE simulator on the default LV for the states part; the chapter emulator (data) and the "
                   "EDPVR emulator (V20, V30) for the cohorts.",
                   "Noise: sigma_V 5 mL and sigma_S 0.03 at every loaded state; 90 % intervals are q05-q95.",
-                  "The separate fits' prior is the box of Table 9.1 (a >= 0.05 kPa); the hierarchical model's "
-                  "population log theta ~ N(mu, Sigma) is not truncated to it, so a subject's a may extend below "
-                  "0.05 kPa (the emulator's extrapolation), which widens a's q95/q05 against separate fits.",
+                  "The separate fits' prior is uniform on Table 9.1's box (a in 0.05-10 kPa, a log-scale density "
+                  "proportional to a: little mass near 0.05); the hierarchical population log theta ~ N(mu, Sigma) "
+                  "is symmetric in log a and not cut at the box, so a subject's a reaches lower (the emulator's "
+                  "extrapolation below 0.05 kPa), which widens a's q95/q05 against separate fits.",
                   "--prior klotz pulls V20 and V30 towards Klotz et al. (2006)'s population curve; the FE truths "
                   "here are not on that curve, so it may cost coverage while it narrows.",
                   "The --geometry infer route uses the bundled angles emulator, whose EDP box stops at 14 mmHg: "
