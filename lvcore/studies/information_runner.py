@@ -39,7 +39,7 @@ from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
 from lvcore.domain.outputs import EDP_NAME, THETA_NAMES
 from lvcore.exceptions import LVCoreError
 from lvcore.studies._common import add_sampler_options, comma_list, write_json_atomic
-from lvcore.studies.sbc_runner import Store, TruthFailure, calibrate_in_process
+from lvcore.studies.sbc_runner import Store, TruthFailure, calibrate_in_process, first_solvable_draw
 
 #: Version of the run records; a work folder from another version is refused.
 RECORD_VERSION = 1
@@ -125,24 +125,16 @@ def simulate_states(theta: Mapping[str, float]) -> dict:
 
 def make_state_subject(seed: int, index: int, truth_fn: Callable[[Mapping], dict] = simulate_states) -> dict:
     """Subject ``index`` of the states part: θ, its FE truth, the noisy data at each state and the noisy V0."""
-    reasons = []
-    for attempt in range(MAX_REDRAWS + 1):
-        theta = state_theta(seed, index, attempt)
-        try:
-            fe = truth_fn(theta)
-        except TruthFailure as err:
-            reasons.append(str(err)[:200])
-            continue
-        rng = np.random.default_rng([int(seed), int(index), 12])
-        sd = np.r_[SIGMA_V_ML, np.full(24, SIGMA_S)]
-        data = {f"{p:g}": (np.asarray(fe["outputs"][f"{p:g}"]) + sd * rng.standard_normal(25)).tolist()
-                for p in STATE_PRESSURES_MMHG}
-        truth = {**theta, **{q: float(fe["outputs"][f"{p:g}"][0]) for q, p in DERIVED.items()}}
-        return {"subject": f"SYNTHETIC-INF-{int(index):03d}", "index": int(index), "truth": truth,
-                "v0_ml": fe["v0_ml"], "data": data, "redraws": attempt, "redraw_reasons": reasons,
-                "reference_volume_ml": float(fe["v0_ml"] + REFERENCE_VOLUME_SD_ML * rng.standard_normal())}
-    raise LVCoreError(f"subject {index}: {MAX_REDRAWS + 1} draws in a row failed in the FE simulator "
-                      f"(last: {reasons[-1] if reasons else '?'})")
+    attempt, theta, fe, reasons = first_solvable_draw(lambda k: state_theta(seed, index, k), truth_fn, index,
+                                                      max_redraws=MAX_REDRAWS)
+    rng = np.random.default_rng([int(seed), int(index), 12])
+    sd = np.r_[SIGMA_V_ML, np.full(24, SIGMA_S)]
+    data = {f"{p:g}": (np.asarray(fe["outputs"][f"{p:g}"]) + sd * rng.standard_normal(25)).tolist()
+            for p in STATE_PRESSURES_MMHG}
+    truth = {**theta, **{q: float(fe["outputs"][f"{p:g}"][0]) for q, p in DERIVED.items()}}
+    return {"subject": f"SYNTHETIC-INF-{int(index):03d}", "index": int(index), "truth": truth,
+            "v0_ml": fe["v0_ml"], "data": data, "redraws": attempt, "redraw_reasons": reasons,
+            "reference_volume_ml": float(fe["v0_ml"] + REFERENCE_VOLUME_SD_ML * rng.standard_normal())}
 
 
 def write_state_data(subject: Mapping, states: Sequence[float], path, *, reference_volume: bool) -> Path:

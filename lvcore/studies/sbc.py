@@ -100,8 +100,8 @@ from lvcore.studies.sbc_runner import (ANGLES, BASE, CLI_DERIVED_PRESSURES_MMHG,
                                        QUANTITIES, RECORD_VERSION, REFERENCE_VOLUME_SD_ML, RESOLUTION, ROUTES,
                                        STRESS_STRETCH, V_REF_RANGE_ML, WIDTH_QUANTITIES, Store, TruthFailure,
                                        calibrate_argv, calibrate_in_process, calibration_seed,
-                                       check_emulator_conditions, default_settings, fibre_stress, flag_kind,
-                                       make_subject, noise_draw, piece_range, prior_draw, read_route_outputs,
+                                       check_emulator_conditions, default_settings, fibre_stress, first_solvable_draw,
+                                       flag_kind, make_subject, noise_draw, piece_range, prior_draw, read_route_outputs,
                                        route_ranks, run_piece, run_route, run_subject, settings_key,
                                        simulate_truth, subject_name, write_subject_files)
 from lvcore.studies.sbc_stats import (BAND_LEVEL, CI_LEVEL, LEVELS, MIN_EXPECTED_PER_BIN, N_BINS,  # noqa: F401

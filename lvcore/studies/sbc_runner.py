@@ -175,21 +175,34 @@ def make_subject(seed: int, index: int, *, truth_fn: Callable[[Mapping], dict] =
         ``index``, ``subject``, ``draw`` (the prior draw), the :func:`simulate_truth` fields, ``y`` (the noisy
         25 outputs), ``reference_volume_ml`` (V_ref + noise), ``redraws`` and ``redraw_reasons``.
     """
+    attempt, draw, sim, reasons = first_solvable_draw(lambda k: prior_draw(seed, index, k), truth_fn, index,
+                                                      max_redraws=max_redraws, what="prior draws")
+    noise = noise_draw(seed, index)
+    y = np.asarray(sim["y_clean"], float) + np.asarray(noise["y"], float)
+    return {"index": int(index), "subject": subject_name(index), "draw": draw, **sim,
+            "y": [float(v) for v in y],
+            "reference_volume_ml": float(sim["v_ref_ml"] + noise["reference_volume_ml"]),
+            "redraws": attempt, "redraw_reasons": reasons}
+
+
+def first_solvable_draw(draw_fn: Callable[[int], object], truth_fn: Callable, index: int, *,
+                        max_redraws: int = MAX_REDRAWS, what: str = "draws") -> tuple:
+    """``(attempt, draw, truth, reasons)``: the first ``draw_fn(attempt)`` whose ``truth_fn`` succeeds; each
+    :class:`TruthFailure` before it is kept (``reasons``, 200 characters each) and the next draw is tried.
+
+    Raises
+    ------
+    LVCoreError
+        When ``max_redraws + 1`` draws in a row fail (naming subject ``index`` and the last reason).
+    """
     reasons = []
     for attempt in range(max_redraws + 1):
-        draw = prior_draw(seed, index, attempt)
+        draw = draw_fn(attempt)
         try:
-            sim = truth_fn(draw)
+            return attempt, draw, truth_fn(draw), reasons
         except TruthFailure as err:
             reasons.append(str(err)[:200])
-            continue
-        noise = noise_draw(seed, index)
-        y = np.asarray(sim["y_clean"], float) + np.asarray(noise["y"], float)
-        return {"index": int(index), "subject": subject_name(index), "draw": draw, **sim,
-                "y": [float(v) for v in y],
-                "reference_volume_ml": float(sim["v_ref_ml"] + noise["reference_volume_ml"]),
-                "redraws": attempt, "redraw_reasons": reasons}
-    raise LVCoreError(f"subject {index}: {max_redraws + 1} prior draws in a row failed in the FE simulator "
+    raise LVCoreError(f"subject {index}: {max_redraws + 1} {what} in a row failed in the FE simulator "
                       f"(last: {reasons[-1] if reasons else '?'})")
 
 
@@ -619,6 +632,7 @@ def check_emulator_conditions(name: str = EMULATOR) -> dict:
 
 __all__ = ["RECORD_VERSION", "ROUTES", "DERIVED_QUANTITIES", "QUANTITIES", "WIDTH_QUANTITIES", "flag_kind",
            "prior_draw", "noise_draw", "calibration_seed", "fibre_stress", "TruthFailure", "simulate_truth",
-           "make_subject", "subject_name", "write_subject_files", "calibrate_argv", "calibrate_in_process",
+           "make_subject", "first_solvable_draw", "subject_name", "write_subject_files", "calibrate_argv",
+           "calibrate_in_process",
            "read_route_outputs", "route_ranks", "run_route", "run_subject", "default_settings", "settings_key",
            "Store", "piece_range", "run_piece", "check_emulator_conditions"]
