@@ -132,9 +132,13 @@ def make_state_subject(seed: int, index: int, truth_fn: Callable[[Mapping], dict
     data = {f"{p:g}": (np.asarray(fe["outputs"][f"{p:g}"]) + sd * rng.standard_normal(25)).tolist()
             for p in STATE_PRESSURES_MMHG}
     truth = {**theta, **{q: float(fe["outputs"][f"{p:g}"][0]) for q, p in DERIVED.items()}}
-    return {"subject": f"SYNTHETIC-INF-{int(index):03d}", "index": int(index), "truth": truth,
+    return {"subject": state_subject_name(index), "index": int(index), "truth": truth,
             "v0_ml": fe["v0_ml"], "data": data, "redraws": attempt, "redraw_reasons": reasons,
             "reference_volume_ml": float(fe["v0_ml"] + REFERENCE_VOLUME_SD_ML * rng.standard_normal())}
+
+
+def state_subject_name(index: int) -> str:
+    return f"SYNTHETIC-INF-{int(index):03d}"
 
 
 def write_state_data(subject: Mapping, states: Sequence[float], path, *, reference_volume: bool) -> Path:
@@ -284,8 +288,8 @@ def run_states(settings: Mapping, workdir, *, emulator: str | None = None, varia
     store, n = Store(workdir), 0
     for index in range(int(settings["n_subjects"])):
         subject = None
+        name = state_subject_name(index)
         for variant in variants or STATE_VARIANTS:
-            name = f"SYNTHETIC-INF-{index:03d}"
             if (variant, name) in done:
                 continue
             subject = subject or make_state_subject(settings["seed"], index, truth_fn)
@@ -324,9 +328,9 @@ def edpvr_volumes(theta: np.ndarray, h: Sequence[float], scale: float, *, error:
     return np.asarray(vols, float)[:, 1:]
 
 
-def _quantile_record(theta: np.ndarray, v: np.ndarray) -> dict:
-    cols = np.c_[theta, v]
-    return {c: {q: float(np.quantile(cols[:, j], lvl)) for j, q in enumerate(QUANTITIES)}
+def _quantile_record(draws: Mapping[str, np.ndarray]) -> dict:
+    """q05, median and q95 of each quantity's draws."""
+    return {c: {q: float(np.quantile(v, lvl)) for q, v in draws.items()}
             for c, lvl in (("q05", 0.05), ("median", 0.5), ("q95", 0.95))}
 
 
@@ -364,12 +368,14 @@ def run_hierarchical(n: int, csv, truth: Mapping, settings: Mapping, folder,
         return rec
     import arviz as az
 
+    from lvcore.inference.derived import thinned_indices
+
     summary = json.loads((out / "summary.json").read_text())["hierarchical"]
     idata = az.from_netcdf(str(out / "hierarchical.nc"))
     log_theta = np.asarray(idata.posterior["log_theta"].values, float)
     subjects = [str(s) for s in idata.posterior["subject"].values]
     log_theta = log_theta.reshape(-1, len(subjects), len(THETA_NAMES))
-    keep = np.unique(np.linspace(0, log_theta.shape[0] - 1, settings["derived_draws"]).round().astype(int))
+    keep = thinned_indices(log_theta.shape[0], settings["derived_draws"])
     truth_all = json.loads((Path(csv).parent / "truth.json").read_text())
     mu = summary["population"]["groups"]["all"]["mu_log"]
     rec["mu_covered"] = {k: bool(mu[k]["q05"] <= truth_all["mu_log"]["A"][j] <= mu[k]["q95"])
@@ -380,10 +386,8 @@ def run_hierarchical(n: int, csv, truth: Mapping, settings: Mapping, folder,
     for j, s in enumerate(subjects):
         theta = np.exp(log_theta[:, j, :])
         v = edpvr_volumes(theta[keep], truth[s]["h"], truth[s]["scale"], error=True)
-        q = _quantile_record(theta, np.full((theta.shape[0], 2), np.nan))
-        qv = _quantile_record(theta[keep], v)
-        for c in q:
-            q[c].update({k: qv[c][k] for k in DERIVED})
+        q = _quantile_record({**{k: theta[:, i] for i, k in enumerate(THETA_NAMES)},
+                              **{k: v[:, i] for i, k in enumerate(DERIVED)}})
         rec["subjects"][s] = {**q, "truth": {k: truth[s][k] for k in QUANTITIES}}
     rec["converged"] = bool(summary.get("converged"))
     return rec
