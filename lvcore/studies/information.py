@@ -227,7 +227,8 @@ def _quantile(run: Mapping, level: str, q: str):
     return (run.get(level) or {}).get(q)
 
 
-def _covered(run: Mapping, q: str):
+def covered(run: Mapping, q: str):
+    """Whether ``q``'s truth lies in one run's 90 % interval; None without the interval or the truth."""
     lo, hi, truth = _quantile(run, "q05", q), _quantile(run, "q95", q), (run.get("truth") or {}).get(q)
     return None if None in (lo, hi, truth) else bool(lo <= truth <= hi)
 
@@ -255,10 +256,10 @@ def run_rows(result: Mapping) -> list[dict]:
                "subject": r.get("subject"), "exit": r.get("exit"), "converged": _yes_no(r.get("converged")),
                "wall s": r.get("wall_s"), "a truth": (r.get("truth") or {}).get("a"),
                **{f"a {c}": _quantile(r, c, "a") for c in ("q05", "median", "q95")}, "a q95/q05": a_ratio(r)}
-        row.update({f"{k} covered": _yes_no(_covered(r, k)) for k in THETA})
+        row.update({f"{k} covered": _yes_no(covered(r, k)) for k in THETA})
         for q in ("V20", "V30"):
             row.update({f"{q} truth (mL)": (r.get("truth") or {}).get(q), f"{q} 90 % width (mL)": width(r, q),
-                        f"{q} covered": _yes_no(_covered(r, q))})
+                        f"{q} covered": _yes_no(covered(r, q))})
         rows.append(row)
     return rows
 
@@ -369,4 +370,4 @@ def add_study_parser(study_subparsers) -> None:
 
 __all__ = ["RESULT_FILE", "COMMAND", "SYNTHETIC_LABEL", "TITLES", "MISSING", "PARTS", "load", "source_line",
            "tables", "figures", "captions", "incomplete_text", "variant_labels", "variant_rows", "verdict_rows",
-           "run_rows", "per_subject_rows", "a_ratio", "width", "add_study_parser"]
+           "run_rows", "per_subject_rows", "a_ratio", "covered", "width", "add_study_parser"]

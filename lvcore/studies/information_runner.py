@@ -192,6 +192,15 @@ def record_from_summary(rec: Mapping) -> dict:
     return {**out, "converged": bool(rec.get("converged")), "flags": list(rec.get("flags") or [])}
 
 
+def read_calibration(out, code: int) -> dict:
+    """:func:`record_from_summary` of the iid record in ``out/summary.json`` after a run that wrote one (exit 0,
+    1 or 4); ``{}`` otherwise."""
+    summary = Path(out) / "summary.json"
+    if code not in (0, 1, 4) or not summary.is_file():
+        return {}
+    return record_from_summary(next(r for r in json.loads(summary.read_text()) if r.get("model") == MODEL))
+
+
 def run_state_variant(variant: str, subject: Mapping, settings: Mapping, folder, emulator: str,
                       calibrate=calibrate_in_process) -> dict:
     """One subject in one states-part variant: write its data, calibrate, read the summary; the record."""
@@ -207,11 +216,7 @@ def run_state_variant(variant: str, subject: Mapping, settings: Mapping, folder,
     rec = {"part": "states", "variant": variant, "subject": subject["subject"], "index": subject["index"],
            "exit": int(code), "error": error, "wall_s": time.perf_counter() - t0,
            "cpu_s": time.process_time() - c0, "truth": dict(subject["truth"]), "version": RECORD_VERSION}
-    summary = folder / "out" / "summary.json"
-    if code in (0, 1, 4) and summary.is_file():
-        (first,) = [r for r in json.loads(summary.read_text()) if r.get("model") == MODEL][:1]
-        rec.update(record_from_summary(first))
-    return rec
+    return {**rec, **read_calibration(folder / "out", code)}
 
 
 # ============================================================================ the work folder
@@ -416,11 +421,7 @@ def run_separate(n: int, subject: str, truth: Mapping, settings: Mapping, folder
     rec = {"part": "cohort", "variant": cohort_key(n, "separate"), "subject": subject, "cohort_size": int(n),
            "exit": int(code), "error": error, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
            "truth": {k: truth[subject][k] for k in QUANTITIES}, "version": RECORD_VERSION}
-    summary = work / "out" / "summary.json"
-    if code in (0, 1, 4) and summary.is_file():
-        first = [r for r in json.loads(summary.read_text()) if r.get("model") == MODEL][0]
-        rec.update(record_from_summary(first))
-    return rec
+    return {**rec, **read_calibration(work / "out", code)}
 
 
 def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in_process, between=None) -> int:

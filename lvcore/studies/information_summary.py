@@ -16,7 +16,7 @@ import numpy as np
 from lvcore.domain.outputs import THETA_NAMES
 from lvcore.exceptions import LVCoreError
 from lvcore.studies._common import clean, write_json_atomic
-from lvcore.studies.information import a_ratio
+from lvcore.studies.information import a_ratio, covered, width
 from lvcore.studies.information_runner import (DERIVED, REFERENCE, STATE_VARIANTS, cohort_key, read_records)
 from lvcore.studies.sbc_stats import wilson_interval
 
@@ -51,15 +51,6 @@ def _spread(values) -> dict | None:
     return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
 
 
-def _covered(run: Mapping, q: str) -> bool | None:
-    if not run.get("q05") or q not in run["q05"] or q not in (run.get("truth") or {}):
-        return None
-    lo, hi = run["q05"][q], run["q95"][q]
-    if lo is None or hi is None or not (np.isfinite(lo) and np.isfinite(hi)):
-        return None
-    return bool(lo <= run["truth"][q] <= hi)
-
-
 def _share(flags) -> tuple[float | None, list | None]:
     f = [bool(x) for x in flags if x is not None]
     if not f:
@@ -76,21 +67,20 @@ def variant_summary(key: str, runs: Sequence[Mapping], reference_runs: Sequence[
     narrowing = [ref[r["subject"]] / a_ratio(r) for r in fitted if ref.get(r["subject"]) and a_ratio(r)]
     cov, cov_ci = {}, {}
     for q in (*THETA_NAMES, "all4"):
-        flags = ([None if any(_covered(r, n) is None for n in THETA_NAMES) else
-                  all(_covered(r, n) for n in THETA_NAMES) for r in fitted] if q == "all4"
-                 else [_covered(r, q) for r in fitted])
+        flags = ([None if any(covered(r, n) is None for n in THETA_NAMES) else
+                  all(covered(r, n) for n in THETA_NAMES) for r in fitted] if q == "all4"
+                 else [covered(r, q) for r in fitted])
         cov[q], cov_ci[q] = _share(flags)
     exits: dict[str, int] = {}
     for r in mine:
         exits[str(r["exit"])] = exits.get(str(r["exit"]), 0) + 1
-    width = {q: _spread([r["q95"][q] - r["q05"][q] for r in fitted if q in r["q05"]
-                         and np.isfinite(r["q05"][q])]) for q in DERIVED}
+    widths = {q: _spread([width(r, q) for r in fitted]) for q in DERIVED}
     return {"key": key, **extra, "n_runs": len(mine), "n_calibrated": len(fitted), "exit_codes": exits,
             "converged_share": _share([r.get("converged") for r in fitted])[0],
             "a_ratio": _spread([a_ratio(r) for r in fitted]), "narrowing": _spread(narrowing),
             "coverage_90": cov, "coverage_90_ci": cov_ci,
-            "v30_width_ml": width["V30"], "v30_coverage_90": _share([_covered(r, "V30") for r in fitted])[0],
-            "v20_width_ml": width["V20"], "v20_coverage_90": _share([_covered(r, "V20") for r in fitted])[0]}
+            "v30_width_ml": widths["V30"], "v30_coverage_90": _share([covered(r, "V30") for r in fitted])[0],
+            "v20_width_ml": widths["V20"], "v20_coverage_90": _share([covered(r, "V20") for r in fitted])[0]}
 
 
 def _verdict(claim: str, target: str, value: str, met, note: str = "") -> dict:
