@@ -15,8 +15,8 @@ from lvcore.app.emulators import cached_emulator
 from lvcore.app import warmup as app_warmup
 from lvcore.app.subject_prepare import floor_caption
 from lvcore.app.tables import summary_view
-from lvcore.app.controls import (DEFAULT_SUBJECT, chosen_index, conditions_text, disabled_hint, remember_choice,
-                                   shared_inputs, why_disabled)
+from lvcore.app.controls import (DEFAULT_SUBJECT, chosen_index, conditions_text, disabled_hint,
+                                 discrepancy_kernel_choice, remember_choice, shared_inputs, why_disabled)
 from lvcore.domain.conditions import SIMULATOR_DEFAULT_ANGLES, SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.io import available_emulators, below_spec_emulators
 from lvcore.exceptions import LVCoreError
@@ -26,7 +26,6 @@ from lvcore.inference.data import MeasuredData, read_measured_csv
 from lvcore.inference.diagnostics import banner_status, netcdf_bytes
 from lvcore.inference.models import MODEL_LABELS, PARAMETER_HELP, parameter_meaning, prior_bounds
 from lvcore.inference.request import build_request
-from lvcore.inference.kernels import KERNEL_KINDS
 from lvcore.inference.samplers import INTERACTIVE, SamplerConfig
 from lvcore.viz.inference_figures import display_name
 from lvcore.resources import bundled_volunteers, volunteer_files, volunteer_truth
@@ -122,12 +121,7 @@ with right:
     with st.expander("What the parameters mean"):
         st.markdown("\n".join(f"- **{display_name(n)}** — {PARAMETER_HELP[n]}" for n in
                                ("a", "b", "af", "bf", "sigma_s_sq", "v", "lam", "sigma1_sq", "sigma2_sq", "c", "tau")))
-    kernel = st.radio("Discrepancy kernel", list(KERNEL_KINDS), horizontal=True,
-                      disabled="discrepancy" not in models,
-                      help="The polar GP of the discrepancy likelihood: additive (the chapter's: a sector profile "
-                           "plus a level profile, rank 9 on the 24 regions) or product (sector × level, full rank: "
-                           "it can represent a regional interaction). Used only by the discrepancy likelihood "
-                           "(`lvcore calibrate --discrepancy-kernel`).")
+    kernel = discrepancy_kernel_choice(models)  # greyed out unless the discrepancy likelihood is chosen
     angles = st.radio("Fibre angles", ["fixed", "infer"], horizontal=True,
                       help="infer: α_endo ~ U(-90, 0), α_epi ~ U(0, 90); needs an emulator with angle inputs")
     c1, c2, c3 = st.columns(3)
@@ -139,7 +133,8 @@ with right:
 job = st.session_state.get("calibration_job")
 cal_inputs = {"subject": None if data is None else data.subject, "emulator": emu_label,
               "likelihoods": [MODEL_LABELS[m] for m in models], "fibre angles": angles, "chains": int(chains),
-              "warm-up": int(warmup), "draws": int(samples)}
+              "warm-up": int(warmup), "draws": int(samples),
+              "discrepancy kernel": kernel if "discrepancy" in models else None}
 
 
 def _consistency(job: dict):

@@ -10,7 +10,8 @@ from lvcore.app import freshness, physiology_panel, subject_emulator_panel, subj
 from lvcore.app import warmup as app_warmup
 from lvcore.app.emulators import cached_emulator
 from lvcore.app.tables import number_column, summary_view
-from lvcore.app.controls import chosen_index, conditions_text, disabled_hint, remember_choice, shared_inputs, why_disabled
+from lvcore.app.controls import (chosen_index, conditions_text, disabled_hint, discrepancy_kernel_choice,
+                                 remember_choice, shared_inputs, why_disabled)
 from lvcore.domain.conditions import SIMULATOR_DEFAULT_EDP_MMHG
 from lvcore.emulator.io import available_emulators
 from lvcore.exceptions import LVCoreError
@@ -149,6 +150,7 @@ edp = m2.number_input("EDP (mmHg)", min_value=0.0, max_value=40.0, value=float(S
                       step=0.5, key="my_edp", help="lvcore calibrate --edp; a fixed-EDP emulator takes only its own.")
 models = m3.multiselect("Likelihood(s)", list(MODEL_LABELS), default=["iid"], format_func=MODEL_LABELS.get,
                         key="my_models")
+kernel = discrepancy_kernel_choice(models, key="my_kernel")  # greyed out unless the discrepancy likelihood is chosen
 c1, c2, c3 = st.columns(3)
 chains = c1.number_input("chains", 1, 8, 2, key="my_chains")
 warmup = c2.number_input("warm-up", 50, 5000, 500, step=50, key="my_warmup")
@@ -209,7 +211,8 @@ st.header("4 · Calibrate")
 settings = {"geometry": "infer" if inferred else geometry_name, "units": units,
             "reference_volume_ml": ref_volume or None, "measures": measures,
             "subject": None if data is None else data.subject, "emulator": emu_name, "edp_mmhg": float(edp),
-            "models": list(models), "chains": int(chains), "warmup": int(warmup), "draws": int(draws)}
+            "models": list(models), "discrepancy_kernel": kernel if "discrepancy" in models else None,
+            "chains": int(chains), "warmup": int(warmup), "draws": int(draws)}
 room = app_warmup.calibration_room(models)   # a compile short of memory would abort the server: checked first
 blocked = why_disabled(
     (data is None, "no measurements yet: upload LVV + 24 strains in step 2 (or pick a bundled example in step 1)."),
@@ -222,7 +225,8 @@ clicked = st.button("Run calibration", type="primary", key="my_run", disabled=bl
 disabled_hint(blocked)
 if clicked:
     with st.status("Calibrating…", expanded=True) as status:
-        config = SamplerConfig(num_warmup=int(warmup), num_samples=int(draws), num_chains=int(chains))
+        config = SamplerConfig(num_warmup=int(warmup), num_samples=int(draws), num_chains=int(chains),
+                               discrepancy_kernel=kernel)
         try:
             runs = flow.calibrate(data.subject, data.y, prepared, models, config=config,
                                   progress=lambda msg, frac: status.update(label=f"Calibrating: {msg}"))

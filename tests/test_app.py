@@ -307,3 +307,31 @@ def test_the_discrepancy_kernel_choice_is_offered_for_the_discrepancy_likelihood
     assert list(kernel.options) == ["additive", "product"] and kernel.value == "additive" and not kernel.disabled
     next(m for m in at.multiselect if m.label == "Likelihood(s)").set_value(["iid"]).run()
     assert next(r for r in at.radio if r.label == "Discrepancy kernel").disabled
+
+
+def test_my_subject_offers_the_discrepancy_kernel_and_passes_it_on(monkeypatch):
+    """My subject offers the Calibration page's kernel choice (the same widget, additive by default), greyed out
+    unless the discrepancy likelihood is chosen, and passes the choice to the calibration's sampler config."""
+    from lvcore.app import subject_flow as flow
+
+    seen = {}
+
+    def calibrate(subject, y, prepared, models, *, config=None, **kwargs):  # records what the page passes on
+        seen.update(models=list(models), kernel=config.discrepancy_kernel)
+        return []
+
+    monkeypatch.setattr(flow, "calibrate", calibrate)
+    at = AppTest.from_file(str(PAGES_DIR / "8_My_subject.py"), default_timeout=180).run()
+    assert not at.exception, at.exception
+    kernel = at.radio(key="my_kernel")
+    assert kernel.label == "Discrepancy kernel" and list(kernel.options) == ["additive", "product"]
+    assert kernel.value == "additive" and kernel.disabled  # the page's default likelihood is iid alone
+    at.selectbox(key="my_example").select("SYNTHETIC_HV3")
+    at.selectbox(key="my_emulator").select("chapter")
+    at.multiselect(key="my_models").set_value(["iid", "discrepancy"]).run()
+    assert not at.exception and not at.error, [e.value for e in at.error]
+    assert not at.radio(key="my_kernel").disabled
+    at.radio(key="my_kernel").set_value("product").run()
+    at.button(key="my_run").click().run()
+    assert not at.exception, at.exception
+    assert seen == {"models": ["iid", "discrepancy"], "kernel": "product"}

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lvcore.domain import conditions, units
+from lvcore.domain import conditions
 from lvcore.core.space import THETA_BOUNDS
 from lvcore.inference.cli import DEFAULT_EMULATOR
 from lvcore.domain.outputs import EDP_NAME
@@ -116,6 +116,25 @@ def disabled_hint(reason: str | None, container=None) -> None:
 
     if reason:
         (container if container is not None else st).caption(f"Disabled: {reason}")
+
+
+#: Help of the discrepancy kernel choice (Calibration and My subject pages).
+KERNEL_HELP = ("The polar GP of the discrepancy likelihood: additive (the chapter's: a sector profile plus a level "
+               "profile, rank 9 on the 24 regions) or product (sector × level, full rank: it can represent a regional "
+               "interaction). Used only by the discrepancy likelihood (`lvcore calibrate --discrepancy-kernel`).")
+
+
+def discrepancy_kernel_choice(models, *, key: str | None = None, container=None) -> str:
+    """The discrepancy likelihood's GP kernel (:data:`lvcore.inference.kernels.KERNEL_KINDS`; additive, the chapter's
+    and the CLI's default, first), greyed out unless ``"discrepancy"`` is in ``models``. Pages pass it on as
+    :class:`lvcore.inference.samplers.SamplerConfig` ``discrepancy_kernel``."""
+    import streamlit as st
+
+    from lvcore.inference.kernels import KERNEL_KINDS
+
+    where = container if container is not None else st
+    return where.radio("Discrepancy kernel", list(KERNEL_KINDS), horizontal=True, key=key,
+                       disabled="discrepancy" not in models, help=KERNEL_HELP)
 
 
 # ----------------------------------------------------------------------------- the shared sidebar
@@ -238,4 +257,5 @@ def shared_inputs(theta: bool = True, edp: bool = True) -> dict:
 
 __all__ = ["THETA_RANGES", "THETA_LABELS", "THETA_HELP", "log_options", "theta_slider", "input_label", "SHARED",
            "EDP_KEY", "EDP_RANGE", "DEFAULT_SUBJECT", "chosen_index", "remember_choice", "why_disabled", "disabled_hint", "conditions_text",
+           "KERNEL_HELP", "discrepancy_kernel_choice",
            "shared_sidebar", "render_shared_sidebar", "shared_inputs", "shared_start"]

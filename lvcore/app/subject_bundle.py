@@ -44,6 +44,8 @@ def summary_record(subject: str, y, geometry, prepared: Prepared, runs: Sequence
             "posterior": {str(k): {c: float(table.loc[k, c]) for c in table.columns
                                    if np.issubdtype(type(table.loc[k, c]), np.number)} for k in table.index},
         }
+        if run.model == "discrepancy":  # the GP's kernel, as the run recorded it (lvcore calibrate's summary.json)
+            models[run.model]["discrepancy_kernel"] = str(run.result.idata.attrs.get("discrepancy_kernel", "additive"))
         if prepared.inferred:
             models[run.model]["geometry_posterior"] = geometry_posterior(run, prepared)
     flagged = [m for m, r in models.items() if r["flags"] or not r["converged_cleanly"]]
