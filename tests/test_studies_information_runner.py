@@ -138,3 +138,45 @@ def test_hierarchical_record_expands_to_one_run_per_subject():
     runs = isum.expand_runs([rec])
     assert [r["subject"] for r in runs] == ["S0", "S1", "S2", "S3"]
     assert all(r["variant"] == "cohort4-hierarchical" for r in runs)
+
+
+def test_infer_variants_through_edpvr_need_no_state_emulator_and_pin_no_angles(tmp_path):
+    """The edpvr route's variants: ``--emulator edpvr --geometry infer`` without angle options (its angles are
+    fixed), narrowing against its own one-state variant, and no state emulator built for them."""
+    cal = StandInCalibrate()
+    n = ir.run_states(SETTINGS, tmp_path / "w", variants=["infer-edpvr-8", "infer-edpvr-8-20"], say=lambda m: None,
+                      calibrate=cal, truth_fn=fake_truth)
+    assert n == 4 and not (tmp_path / "w" / ir.STATE_EMULATOR_DIR).exists()
+    for c in cal.calls:
+        assert c[c.index("--emulator") + 1] == "edpvr" and "--alpha-endo" not in c
+    assert ir.variant_reference("infer-edpvr-8-20") == "infer-edpvr-8" and ir.variant_reference("infer-8-14") == "infer-8"
+    res = isum.summarise(tmp_path / "w")
+    v = {x["key"]: x for x in res["variants"]}["infer-edpvr-8-20"]
+    assert v["reference"] == "infer-edpvr-8" and v["emulator"] == "edpvr"
+    assert v["narrowing"]["median"] == pytest.approx(np.exp(4.0 - 2.0))   # the stand-in: e^4 -> e^2
+
+
+def test_a_shipped_result_is_taken_over_and_summarised_again_unchanged(tmp_path):
+    """--import-summary: the shipped result's runs become the work folder's records (a joint posterior one record
+    again), and the summary of them equals the shipped one, cost included; a second import adds nothing; a
+    result made with other settings is refused."""
+    from lvcore.studies.results import bundled_studies_dir
+
+    shipped = json.loads((bundled_studies_dir() / "information.json").read_text())
+    settings = {**{k: shipped["settings"][k] for k in ("seed", "chains", "warmup", "samples", "derived_draws",
+                                                       "n_subjects", "cohort_sizes")},
+                "state_pressures_mmhg": [8.0, 14.0, 20.0], "sigma_v_ml": 5.0, "sigma_s": 0.03}
+    n = ir.import_summary(shipped, settings, tmp_path / "w", "information.json")
+    assert n == shipped["n_records"]
+    assert ir.import_summary(shipped, settings, tmp_path / "w", "information.json") == 0
+    res = isum.summarise(tmp_path / "w")
+    old = {v["key"]: v for v in shipped["variants"]}
+    new = {v["key"]: v for v in res["variants"]}
+    for key, v in old.items():
+        for field in ("a_ratio", "narrowing", "coverage_90", "v20_width_ml", "v30_width_ml", "exit_codes",
+                      "mu_covered", "diagnostics"):
+            assert new[key].get(field) == v.get(field), (key, field)
+    assert res["cost"]["cpu_s_total"] == pytest.approx(shipped["cost"]["cpu_s_total"])
+    assert len(res["runs"]) == len(shipped["runs"])
+    with pytest.raises(LVCoreError, match="other settings"):
+        ir.import_summary(shipped, {**settings, "warmup": 7}, tmp_path / "w2", "information.json")

@@ -209,6 +209,12 @@ def load_emulator(name_or_path: str | Path, *, strict: bool = False) -> Emulator
     lvcore.exceptions.EmulatorError: ...
     """
     directory = resolve_emulator_dir(name_or_path)
+    from lvcore.emulator.edpvr_states import is_edpvr_folder
+
+    if is_edpvr_folder(directory):   # the EDPVR emulator, composed with its anchor for calibration at any EDP
+        from lvcore.emulator.edpvr_states import load_state_emulator
+
+        return load_state_emulator(directory)
     meta_path, net_path = directory / "metadata.json", directory / "network.npz"
     if not meta_path.is_file() or not net_path.is_file():
         raise EmulatorError(f"emulator directory '{directory}' needs metadata.json and network.npz")

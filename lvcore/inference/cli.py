@@ -107,9 +107,10 @@ def register(subparsers) -> None:
                    help="fibre angles fixed at the emulator's values, or inferred (needs the 'angles' emulator)")
     p.add_argument("--emulator", default=None,
                    help=f"emulator name or directory (default: {DEFAULT_EMULATOR}, the app's default too, or angles "
-                        "with --angles infer; 'angles' takes the EDP and fibre angles as inputs and is needed for "
-                        "per-subject edp_mmhg other than 8); a subject-specific emulator directory (`lvcore emulator "
-                        "build`) needs no --geometry")
+                        "with --angles infer; 'angles' takes the EDP (6-14 mmHg) and fibre angles as inputs and is needed for "
+                        "per-subject edp_mmhg other than 8; 'edpvr' takes the EDP over 1-30 mmHg at fibre angles "
+                        "-60/60 deg, e.g. loaded states at 8 and 20 mmHg with --geometry infer); a subject-specific "
+                        "emulator directory (`lvcore emulator build`) needs no --geometry")
     p.add_argument("--alpha-endo", type=float, default=None,
                    help="fixed alpha_endo (deg) for emulators that take angles (default -60); an error with "
                         "emulators trained at fixed angles (e.g. 'chapter', trained at -60/60)")

@@ -292,8 +292,9 @@ def check_edp_input(emulator, name: str, what: str) -> None:
     fixed = dict(getattr(emulator, "fixed", None) or {}).get(EDP_NAME)
     at = f" of {float(fixed):g} mmHg" if fixed is not None else ""
     raise DataError(f"{what} needs an emulator with an EDP input; '{name}' was trained at a fixed EDP{at}. Use "
-                    "--emulator angles (EDP 6-14 mmHg) or a subject emulator built with `lvcore emulator build "
-                    "--inputs theta,edp` (its --bound edp=LO,HI sets the pressures it covers)")
+                    "--emulator angles (EDP 6-14 mmHg), --emulator edpvr (EDP 1-30 mmHg, fibre angles -60/60 deg) or a "
+                    "subject emulator built with `lvcore emulator build --inputs theta,edp` (its --bound edp=LO,HI "
+                    "sets the pressures it covers)")
 
 
 def edp_box(emulator) -> tuple[float, float]:

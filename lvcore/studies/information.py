@@ -278,7 +278,8 @@ def per_subject_rows(result: Mapping, value) -> list[dict]:
             continue
         series = (f"{v.get('method')} fits" if v.get("part") == "cohort" else
                   ("no prior" if v.get("prior") in (None, "none") else f"{str(v['prior']).capitalize()} prior")
-                  + (", --geometry infer" if v.get("route") == "infer" else ""))
+                  + (", --geometry infer" if v.get("route") == "infer" else "")
+                  + (f" ({v['emulator']})" if v.get("emulator") else ""))
         rows.append({"panel": v.get("part", "other"), "variant": labels.get(r["variant"], r["variant"]),
                      "series": series, "subject": r.get("subject"), "value": y})
     return rows

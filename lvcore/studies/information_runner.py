@@ -14,7 +14,8 @@ recorded one JSON line a run in a resumable work folder:
     loaded states with and without ``--prior klotz`` through a subject emulator
     of that geometry with EDP as an input over 6–30 mmHg (built on first use by
     :data:`EMULATOR_BUILD_ARGS`), and with ``--geometry infer`` through the
-    bundled ``angles`` emulator (its EDP box stops at 14 mmHg).
+    bundled ``angles`` emulator (its EDP box stops at 14 mmHg) and through the
+    ``edpvr`` emulator composed with ``chapter`` (EDP 1–30 mmHg; 8 and 8 + 20).
 ``cohort``
     SYNTHETIC cohorts of :data:`COHORT_SIZES` subjects
     (:func:`lvcore.inference.cohort.synthetic_cohort`: data from the ``chapter``
@@ -72,9 +73,23 @@ STATE_VARIANTS = {
     "states-8-14-20-klotz": {"states": (8.0, 14.0, 20.0), "prior": "klotz", "route": "mesh"},
     "infer-8": {"states": (8.0,), "prior": "none", "route": "infer"},
     "infer-8-14": {"states": (8.0, 14.0), "prior": "none", "route": "infer"},
+    # the EDPVR emulator composed with ``chapter`` (lvcore.emulator.edpvr_states) takes an EDP of 1-30 mmHg
+    "infer-edpvr-8": {"states": (8.0,), "prior": "none", "route": "infer", "emulator": "edpvr",
+                      "reference": "infer-edpvr-8"},
+    "infer-edpvr-8-20": {"states": (8.0, 20.0), "prior": "none", "route": "infer", "emulator": "edpvr",
+                         "reference": "infer-edpvr-8"},
 }
-#: Reference of each variant's narrowing (the same route's one state without the prior).
+#: Reference of each variant's narrowing (the same route's one state without the prior), unless the variant names
+#: its own (``reference``: the same emulator's one state).
 REFERENCE = {"mesh": "states-8", "infer": "infer-8"}
+#: The emulator of the infer route unless a variant names its own.
+INFER_EMULATOR = "angles"
+
+
+def variant_reference(variant: str) -> str:
+    """The variant whose a-interval a variant's narrowing is measured against."""
+    v = STATE_VARIANTS[variant]
+    return v.get("reference", REFERENCE[v["route"]])
 DERIVED = {"V20": 20.0, "V30": 30.0}
 QUANTITIES = tuple(THETA_NAMES) + tuple(DERIVED)
 MAX_REDRAWS = 20
@@ -170,8 +185,10 @@ def state_argv(variant: str, data, subject: Mapping, settings: Mapping, out, emu
     if v["route"] == "mesh":
         argv += ["--emulator", emulator]
     else:
-        argv += ["--emulator", "angles", "--geometry", "infer", "--alpha-endo", f"{ANGLES[0]:g}",
-                 "--alpha-epi", f"{ANGLES[1]:g}"]
+        name = v.get("emulator", INFER_EMULATOR)
+        argv += ["--emulator", name, "--geometry", "infer"]
+        if name == INFER_EMULATOR:   # angles are inputs of the angles emulator: pin them; edpvr has them fixed
+            argv += ["--alpha-endo", f"{ANGLES[0]:g}", "--alpha-epi", f"{ANGLES[1]:g}"]
     if v["prior"] == "klotz":
         argv += ["--prior", "klotz"]
     return argv
@@ -287,9 +304,13 @@ def run_states(settings: Mapping, workdir, *, emulator: str | None = None, varia
 
     workdir = Path(workdir)
     check_settings(workdir, settings)
-    emu = ensure_state_emulator(workdir, emulator)
-    record_state_emulator(workdir, emu)
     done = {(r["variant"], r["subject"]) for r in read_records(workdir) if r["part"] == "states"}
+    todo = [v for v in (variants or STATE_VARIANTS)
+            if any((v, state_subject_name(i)) not in done for i in range(int(settings["n_subjects"])))]
+    emu = None
+    if any(STATE_VARIANTS[v]["route"] == "mesh" for v in todo):   # only the mesh route needs the state emulator
+        emu = ensure_state_emulator(workdir, emulator)
+        record_state_emulator(workdir, emu)
     store, n = Store(workdir), 0
     for index in range(int(settings["n_subjects"])):
         subject = None
@@ -424,6 +445,48 @@ def run_separate(n: int, subject: str, truth: Mapping, settings: Mapping, folder
     return {**rec, **read_calibration(work / "out", code)}
 
 
+def import_summary(result: Mapping, settings: Mapping, workdir, source: str) -> int:
+    """Take over the runs of an earlier result file made with the same settings (e.g. the shipped one), so that a
+    lost work folder resumes where that result stopped; returns how many records were written.
+
+    A result keeps each run's intervals, truth, exit code and wall time but not its CPU time: the imported runs'
+    CPU time is kept as one total (``settings.json``'s ``imported``) and added to the cost by the summary. A joint
+    (hierarchical) posterior, shipped as one run per subject, becomes one record again with its population checks.
+    """
+    workdir = Path(workdir)
+    key = ("seed", "chains", "warmup", "samples", "derived_draws")
+    old = result.get("settings") or {}
+    if {k: old.get(k) for k in key} != {k: settings[k] for k in key}:
+        raise LVCoreError(f"{source} was made with other settings ({ {k: old.get(k) for k in key} }); these are "
+                          f"{ {k: settings[k] for k in key} }")
+    check_settings(workdir, settings)
+    if read_records(workdir):
+        return 0
+    path = workdir / "settings.json"
+    extra = {k: old[k] for k in ("state_emulator",) if k in old}
+    write_json_atomic(path, {**json.loads(path.read_text()), **extra, "imported": {
+        "from": str(source), "cpu_s_total": float((result.get("cost") or {}).get("cpu_s_total") or 0.0)}})
+    variants = {v["key"]: v for v in result.get("variants") or []}
+    wall = (result.get("cost") or {}).get("wall_s_median_by_variant") or {}
+    recs, joints = [], {}
+    for r in result.get("runs") or []:
+        v = variants.get(r["variant"], {})
+        base = {**r, "version": RECORD_VERSION, "cpu_s": None, "imported": True}
+        if v.get("method") == "hierarchical":
+            j = joints.setdefault(r["variant"], {
+                "part": "cohort", "variant": r["variant"], "subject": f"cohort of {v['cohort_size']}",
+                "cohort_size": int(v["cohort_size"]), "exit": r["exit"], "converged": r.get("converged"),
+                "wall_s": wall.get(r["variant"]), "cpu_s": None, "version": RECORD_VERSION, "imported": True,
+                "mu_covered": v.get("mu_covered"), "diagnostics": v.get("diagnostics"), "subjects": {}})
+            j["subjects"][r["subject"]] = {c: r[c] for c in ("truth", "q05", "median", "q95")}
+        else:
+            recs.append({**base, **({"cohort_size": int(v["cohort_size"])} if v.get("part") == "cohort" else {})})
+    store = Store(workdir)
+    for rec in recs + list(joints.values()):
+        store.append(workdir / f"runs_{rec['part']}_imported.jsonl", rec)
+    return len(recs) + len(joints)
+
+
 def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in_process, between=None) -> int:
     """Run the cohort part's missing runs (each cohort: its subjects alone, then the joint posterior);
     ``between()`` is called after each step, as in :func:`run_states`."""
@@ -486,6 +549,9 @@ def add_parser(study_subparsers) -> None:
     add_sampler_options(p, chains=DEFAULT_CHAINS, warmup=DEFAULT_WARMUP, samples=DEFAULT_SAMPLES)
     p.add_argument("--derived-draws", type=cli_args.int_in(2, 2000), default=DEFAULT_DERIVED_DRAWS,
                    help=f"posterior draws behind V20 and V30 (default {DEFAULT_DERIVED_DRAWS})")
+    p.add_argument("--import-summary", type=Path, default=None, metavar="INFORMATION_JSON",
+                   help="before running, take over the runs of an earlier result made with the same settings (e.g. "
+                        "the shipped information.json), into an empty --workdir (default: none)")
     p.add_argument("--summarise", action="store_true",
                    help="build the result from the finished runs in --workdir instead of running any")
     p.add_argument("--out", type=cli_args.output_file, default=None,
@@ -529,6 +595,11 @@ def _cli(args) -> int:
 
     say = (lambda m: print(m, flush=True))
     between = (lambda: restart_when_mappings_high(say))
+    if args.import_summary is not None:
+        from lvcore.studies.results import read_json
+
+        n = import_summary(read_json(args.import_summary), settings, args.workdir, str(args.import_summary))
+        say(f"imported {n} runs from {args.import_summary}")
     if args.part in ("states", "all"):
         run_states(settings, args.workdir, emulator=args.emulator, variants=variants, say=say, between=between)
     if args.part in ("cohort", "all"):

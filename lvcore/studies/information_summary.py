@@ -17,7 +17,8 @@ from lvcore.domain.outputs import THETA_NAMES
 from lvcore.exceptions import LVCoreError
 from lvcore.studies._common import clean, write_json_atomic
 from lvcore.studies.information import a_ratio, covered, width
-from lvcore.studies.information_runner import (DERIVED, REFERENCE, STATE_VARIANTS, cohort_key, read_records)
+from lvcore.studies.information_runner import (DERIVED, STATE_VARIANTS, cohort_key, read_records,
+                                               variant_reference)
 from lvcore.studies.sbc_stats import wilson_interval
 
 # ============================================================================ the summary
@@ -25,7 +26,8 @@ VARIANT_LABELS = {
     "states-8": "8 mmHg", "states-8-klotz": "8 mmHg, --prior klotz", "states-8-20": "8 + 20 mmHg",
     "states-8-20-klotz": "8 + 20 mmHg, --prior klotz", "states-8-14-20": "8 + 14 + 20 mmHg",
     "states-8-14-20-klotz": "8 + 14 + 20 mmHg, --prior klotz", "infer-8": "--geometry infer, 8 mmHg",
-    "infer-8-14": "--geometry infer, 8 + 14 mmHg"}
+    "infer-8-14": "--geometry infer, 8 + 14 mmHg", "infer-edpvr-8": "--geometry infer, edpvr emulator, 8 mmHg",
+    "infer-edpvr-8-20": "--geometry infer, edpvr emulator, 8 + 20 mmHg"}
 
 
 def expand_runs(records: Sequence[Mapping]) -> list[dict]:
@@ -103,6 +105,8 @@ def verdicts(variants: Mapping[str, Mapping]) -> list[dict]:
     for key, what in (("states-8-20", "two loaded states (8 + 20 mmHg, mesh)"),
                       ("infer-8-14", "two loaded states with --geometry infer (8 + 14 mmHg: the angles emulator "
                                      "stops at 14)"),
+                      ("infer-edpvr-8-20", "two loaded states with --geometry infer (8 + 20 mmHg, the edpvr emulator "
+                                           "composed with chapter)"),
                       ("states-8-14-20", "three loaded states (8 + 14 + 20 mmHg, mesh)")):
         met, text = narrow(key, 3.0)
         out.append(_verdict(f"{what} narrow a's 90 % interval (q95/q05) at least 3x against 8 mmHg alone",
@@ -140,10 +144,11 @@ def summarise(workdir, out=None) -> dict:
     variants = {}
     for key, v in STATE_VARIANTS.items():
         if any(r["variant"] == key for r in runs):
-            ref = [r for r in runs if r["variant"] == REFERENCE[v["route"]]]
+            ref = [r for r in runs if r["variant"] == variant_reference(key)]
             variants[key] = variant_summary(key, runs, ref, {
                 "part": "states", "label": VARIANT_LABELS[key], "states_mmhg": list(v["states"]), "prior": v["prior"],
-                "method": "separate", "route": v["route"], "cohort_size": None, "reference": REFERENCE[v["route"]]})
+                "method": "separate", "route": v["route"], "cohort_size": None, "reference": variant_reference(key),
+                **({"emulator": v["emulator"]} if "emulator" in v else {})})
     for n in sorted({int(r["cohort_size"]) for r in records if r["part"] == "cohort"}):
         ref = [r for r in runs if r["variant"] == cohort_key(n, "separate")]
         for method in ("separate", "hierarchical"):
@@ -164,9 +169,11 @@ def summarise(workdir, out=None) -> dict:
               "settings": {k: v for k, v in settings.items() if k != "version"},
               "variants": list(variants.values()), "runs": runs, "verdicts": verdicts(variants),
               "cost": {"wall_s_total": float(sum(r.get("wall_s") or 0 for r in records)),
-                       "cpu_s_total": float(sum(r.get("cpu_s") or 0 for r in records)),
+                       "cpu_s_total": float(sum(r.get("cpu_s") or 0 for r in records)
+                                            + float((settings.get("imported") or {}).get("cpu_s_total") or 0.0)),
                        "wall_s_median_by_variant": {k: float(np.median([r["wall_s"] for r in records
-                                                                        if r["variant"] == k]))
+                                                                        if r["variant"] == k and
+                                                                        r.get("wall_s") is not None]))
                                                     for k in variants}},
               "notes": [
                   "Truth: FE simulator on the default LV for the states part; the chapter emulator (data) and the "
@@ -178,8 +185,9 @@ def summarise(workdir, out=None) -> dict:
                   "extrapolation below 0.05 kPa), which widens a's q95/q05 against separate fits.",
                   "--prior klotz pulls V20 and V30 towards Klotz et al. (2006)'s population curve; the FE truths "
                   "here are not on that curve, so it may cost coverage while it narrows.",
-                  "The --geometry infer route uses the bundled angles emulator, whose EDP box stops at 14 mmHg: "
-                  "its second state is 14 mmHg, not 20."]}
+                  "The --geometry infer route uses the bundled angles emulator, whose EDP box stops at 14 mmHg "
+                  "(its second state is 14 mmHg), and the edpvr emulator composed with chapter "
+                  "(lvcore.emulator.edpvr_states; EDP 1-30 mmHg, second state 20 mmHg)."]}
     result = clean(result)
     if out is not None:
         write_json_atomic(out, result)
