@@ -166,6 +166,26 @@ def test_the_shipped_result_holds_the_inner_half():
     assert inner["study"]["sampler"]["num_chains"] >= 2
 
 
+def test_no_shipped_layer_rests_on_an_unconverged_fit():
+    """Every fit of every shipped layer (3 likelihoods x 12 sets) has >= 2 chains and split R-hat <= 1.05, and the
+    layers share one sampler budget (comparable); the script's defaults are that budget."""
+    from lvcore.studies.results import bundled_studies_dir
+
+    res = rl.load(bundled_studies_dir())
+    budgets = set()
+    for name, layer in res["layers"].items():
+        smp = layer["study"]["sampler"]
+        budgets.add((smp["num_chains"], smp["num_warmup"], smp["num_samples"]))
+        assert smp["num_chains"] >= 2, name
+        rhats = [r["rhat_max"] for s in layer["study"]["sets"] for r in s["models"].values()]
+        assert len(rhats) == 36 and max(rhats) <= 1.05 and layer["summary"]["rhat_max"] == max(rhats), name
+    assert len(budgets) == 1
+    text = (Path(__file__).resolve().parent.parent / "scripts" / "ship_fibre_discrepancy_real_lv.py").read_text()
+    chains, warmup, samples = budgets.pop()
+    for opt, value in (("warmup", warmup), ("samples", samples), ("chains", chains)):
+        assert f'"--{opt}", type=int, default={value},' in text, opt
+
+
 def test_docs_quote_the_shipped_result():
     from lvcore.studies.results import bundled_studies_dir
 

@@ -33,7 +33,7 @@ from lvcore.studies import registry
 
 #: Result file of the study, read by :func:`load`.
 RESULT_FILE = registry.result_file("fibre-discrepancy-real-lv")
-#: The command that makes it (about 20-25 min of FE and MCMC per layer on 2 shared cores).
+#: The command that makes it (about 12.5 min of FE and MCMC per layer on 2 shared cores, 2 x (500 + 500) per fit).
 COMMAND = "python scripts/ship_fibre_discrepancy_real_lv.py --layer inner_half"
 #: The strain layers the study is run for, in order (lvcore's default first).
 LAYERS = ("inner_half", "whole_wall")
