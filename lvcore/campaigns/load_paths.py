@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
+
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER
 
 #: Pressures (mmHg) of each training load path: 0 is the reference state (exact: V = V₀, no strain, stretch 1).
 LOAD_PATH_PRESSURES_MMHG = (1.0, 2.0, 3.0, 4.0, 5.0, 6.5, 8.0, 10.0, 12.0, 14.0, 17.0, 20.0, 25.0, 30.0)
@@ -103,18 +105,19 @@ def solve_load_path(case: dict, pressures_mmhg: Sequence[float] = LOAD_PATH_PRES
 def _solve_rows(args) -> list:
     from lvcore.mechanics.case_inputs import space_case
 
-    space, rows, resolution, pressures = args
+    space, rows, resolution, pressures, geometry, strain_layer = args
     out = []
     for row in rows:
         t0 = time.perf_counter()
-        r = solve_load_path(space_case(space, row, resolution), pressures)
+        r = solve_load_path(space_case(space, row, resolution, strain_layer, geometry), pressures)
         out.append(r + (time.perf_counter() - t0,))
     return out
 
 
 def run_load_paths(space, rows: np.ndarray, *, resolution: str = "default", workers: int = 1,
                    pressures_mmhg: Sequence[float] = LOAD_PATH_PRESSURES_MMHG, chunk: int = 10,
-                   progress=None) -> LoadPathData:
+                   progress=None, geometry: Mapping | None = None,
+                   strain_layer: str = DEFAULT_STRAIN_LAYER) -> LoadPathData:
     """Load paths of every row of ``rows`` (values of ``space.names``) on ``workers`` processes.
 
     Parameters
@@ -131,6 +134,11 @@ def run_load_paths(space, rows: np.ndarray, *, resolution: str = "default", work
     chunk : int
         Rows per task.
     progress : callable(done, total), optional
+    geometry : mapping, optional
+        A fixed case ``geometry`` section for every row (a subject emulator's mesh,
+        :mod:`lvcore.emulator.subject_edpvr`); default: the rows' PC scores.
+    strain_layer : str
+        The wall layer of the recorded strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`).
 
     Returns
     -------
@@ -138,7 +146,9 @@ def run_load_paths(space, rows: np.ndarray, *, resolution: str = "default", work
     """
     rows = np.asarray(rows, float)
     p = np.asarray(pressures_mmhg, float)
-    tasks = [(space, rows[i:i + chunk], resolution, tuple(p)) for i in range(0, len(rows), chunk)]
+    geometry = None if geometry is None else dict(geometry)
+    tasks = [(space, rows[i:i + chunk], resolution, tuple(p), geometry, strain_layer)
+             for i in range(0, len(rows), chunk)]
     results: list = [None] * len(tasks)
     if workers <= 1:
         for k, t in enumerate(tasks):

@@ -2,6 +2,7 @@
 ``lvcore emulator info NAME``."""
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -86,6 +87,17 @@ def register(subparsers) -> None:
                         "base and conditions, at the subject's size-normalised shape and size; none if none matches), "
                         "'none' (learn the whole map), or an emulator name or directory (default auto)")
     b.add_argument("--workers", type=int, default=2, help="FE worker processes, one continuation chain each")
+    from lvcore.emulator.subject import DEFAULT_EDPVR
+    from lvcore.emulator.subject_edpvr import EdpvrDesign
+
+    ed = EdpvrDesign()
+    b.add_argument("--edpvr", action=argparse.BooleanOptionalAction, default=DEFAULT_EDPVR,
+                   help="also build the subject's EDPVR emulator into OUT/edpvr: FE load paths of 0-30 mmHg on the "
+                        f"same mesh ({ed.n_train} + {ed.n_valid} + {ed.n_test} paths), so the derived EDPVR of a "
+                        "calibration through this emulator is evaluated directly (0.01 s) instead of by 700 FE "
+                        "solves (2-3 min each calibration); it adds about 2.5 min on 2 cores with the default mesh "
+                        "(158 s on SYNTHETIC_HV3, three times the rest of that build; BENCHMARKS.md row 51) "
+                        f"(default {'on' if DEFAULT_EDPVR else 'off'})")
     b.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the design and training, 0 to 2^32 - 1 (default 0)")
     from lvcore.emulator.subject import default_training_config
 
@@ -232,7 +244,7 @@ def _build(args) -> int:
         alpha_epi=CHAPTER_ANGLES[1] if args.alpha_epi is None else args.alpha_epi,
         bounds=parse_bounds(args.bound), units=args.units, workers=args.workers, seed=args.seed,
         config=training_config(args, seed=args.seed), name=args.name, prior=args.prior, log=print,
-        strain_layer=args.strain_layer)
+        strain_layer=args.strain_layer, edpvr=args.edpvr)
     print(format_info(emu.metadata))
     return 0
 
@@ -261,6 +273,12 @@ def format_info(meta: dict) -> str:
         from lvcore.emulator.subject import describe_prior
 
         lines.append(f"  {describe_prior(sub.get('prior'))}")
+        e = sub.get("edpvr")
+        lines.append("  EDPVR emulator: " + (f"'{e.get('name')}' in {e.get('folder')}/ (held-out log V/V0 RMSE up to "
+                                             f"{e.get('log_volume_ratio_rmse_max', float('nan')):.4f}, "
+                                             f"{e.get('n_test_paths')} paths; {e.get('seconds')} s)"
+                                             if isinstance(e, dict) else "none (the derived EDPVR uses FE load paths; "
+                                             "build with --edpvr)"))
     lines.append(f"  network: {meta.get('input_names') and len(meta['input_names'])} -> {arch.get('hidden')} (tanh) -> 25")
     tr = meta.get("training", {})
     if tr:

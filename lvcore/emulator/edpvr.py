@@ -32,9 +32,14 @@ scalers, held-out errors, provenance) and ``network.npz`` (the MLP's arrays, :fu
 ``geometry.npz`` (the mesh's endocardium, linear in the PC scores, for V₀), ``validation.npz`` (the held-out rows, predictions and FE values). There is no ``metadata.json``, so the folder is not
 listed among the calibration emulators (:func:`lvcore.emulator.io.available_emulators`). Evaluation is NumPy (no
 compilation): 100 draws at 8 pressures cost well under a millisecond.
+
+A calibration through a subject emulator (a fixed mesh, no PC scores) is not in this space; a subject emulator
+built with its own EDPVR emulator (:mod:`lvcore.emulator.subject_edpvr`, the same class with inputs θ and p) is
+found and used by :func:`conditions_covered` and :func:`emulator_for`.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import time
@@ -88,7 +93,11 @@ class EdpvrEmulator:
     geometry : dict
         The mesh's endocardium, linear in the PC scores (:func:`geometry_basis`), for V₀.
     metadata : dict
-        Everything else (held-out errors under ``test``, provenance under ``source``).
+        Everything else (held-out errors under ``test``, provenance under ``source``; a subject EDPVR emulator's
+        V₀ and mesh under ``subject``).
+    log1p_pressure : bool
+        The pressure enters the network as ``log(1 + p)`` (a subject EDPVR emulator,
+        :mod:`lvcore.emulator.subject_edpvr`: inputs a, b, af, bf, edp; outputs ``log V/V₀``, ``log λ_f``), not as p.
     """
 
     name: str
@@ -105,15 +114,24 @@ class EdpvrEmulator:
     resolution: str
     geometry: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)
+    log1p_pressure: bool = False
+
+    @property
+    def is_subject(self) -> bool:
+        """True for a subject EDPVR emulator (one fixed mesh, V₀ in ``metadata["subject"]``; no PC scores)."""
+        return bool(self.metadata.get("subject"))
 
     def outputs(self, x) -> np.ndarray:
-        """``(..., 10)`` inputs (physical units, :data:`INPUT_NAMES`) -> ``(..., 26)`` :data:`OUTPUT_NAMES`.
+        """``(..., 10)`` inputs (physical units, :data:`INPUT_NAMES`) -> ``(..., 26)`` :data:`OUTPUT_NAMES` (a subject
+        EDPVR emulator: ``(..., 5)`` -> ``(..., 2)``, :mod:`lvcore.emulator.subject_edpvr`).
 
         No box check (:meth:`in_box`); at ``edp = 0`` the outputs are forced to their exact value 0.
         """
         x = np.asarray(x, float)
         z = x.copy()
         z[..., :4] = np.log(z[..., :4])
+        if self.log1p_pressure:
+            z[..., -1] = np.log1p(z[..., -1])
         h = (z - self.x_mean) / self.x_sd
         for w, b in zip(self.weights[:-1], self.biases[:-1]):
             h = np.tanh(h @ w.T + b)
@@ -361,7 +379,7 @@ def train_edpvr_emulator(train, valid, test, *, name: str = DEFAULT_NAME, base: 
                          "seconds": round(time.perf_counter() - t0, 1)},
             "test": held, "source": dict(source or {}),
             "anchor": {"emulator": ANCHOR_EMULATOR, "edp_mmhg": ANCHOR_EDP_MMHG}}
-    return EdpvrEmulator(*(getattr(emu, k) for k in list(EdpvrEmulator.__dataclass_fields__)[:-1]), meta), val
+    return dataclasses.replace(emu, metadata=meta), val
 
 
 def _space_bounds(source, k: int, data) -> np.ndarray:
@@ -476,7 +494,12 @@ class EmulatedPath:
 def emulated_load_path(emu: EdpvrEmulator, draws: Sequence[Mapping], *, edp_mmhg: float,
                        pressures_mmhg: Sequence[float]) -> EmulatedPath:
     """The EDPVR (V₀ first, then each pressure) and the volume and mean fibre stretch at the EDP of draws
-    ``{"a", "b", "af", "bf", "h", "scale"}`` (volumes times ``scale³``)."""
+    ``{"a", "b", "af", "bf", "h", "scale"}`` (volumes times ``scale³``); a subject EDPVR emulator's draws need only
+    θ (:func:`lvcore.emulator.subject_edpvr.emulated_load_path`)."""
+    if emu.is_subject:
+        from lvcore.emulator import subject_edpvr
+
+        return subject_edpvr.emulated_load_path(emu, draws, edp_mmhg=edp_mmhg, pressures_mmhg=pressures_mmhg)
     t0 = time.perf_counter()
     theta = np.array([[float(d[k]) for k in THETA_NAMES] for d in draws])
     h = np.array([[float(v) for v in d["h"]] for d in draws])
@@ -538,8 +561,10 @@ def conditions_covered(*, geometry: Mapping | None, angles: Sequence[float | Non
     :func:`emulator_for` checks them), else None and why not."""
     if name is None:
         return None, "the FE load path was asked for"
-    if geometry is not None:
-        return None, "a subject emulator's mesh (not the shape model's PC scores)"
+    if geometry is not None:   # a subject emulator's mesh: its own EDPVR emulator, if it was built with one
+        from lvcore.emulator import subject_edpvr
+
+        return subject_edpvr.conditions_covered(geometry, angles=angles, base=base, resolution=resolution)
     folder = find_edpvr_emulator(name)
     if folder is None:
         return None, f"no EDPVR emulator '{name}' installed"
@@ -561,9 +586,16 @@ def emulator_for(draws: Sequence[Mapping], *, geometry: Mapping | None, angles: 
     """The EDPVR emulator that covers a calibration's derived quantities, or None and why the FE path is needed.
 
     It covers them when the geometry is the shape model's (every draw has PC scores ``h``, given or inferred, with a
-    ``scale``; not a subject emulator's mesh), the fibre angles, base condition and mesh resolution are the
-    emulator's, and every draw's θ, h and every pressure lie in its box. ``name`` None asks for the FE path.
+    ``scale``), the fibre angles, base condition and mesh resolution are the emulator's, and every draw's θ, h and
+    every pressure lie in its box. With a subject emulator's mesh (``geometry``) it is that subject emulator's own
+    EDPVR emulator where one was built (:func:`lvcore.emulator.subject_edpvr.emulator_for`). ``name`` None asks for
+    the FE path.
     """
+    if geometry is not None and name is not None:
+        from lvcore.emulator import subject_edpvr
+
+        return subject_edpvr.emulator_for(draws, geometry=geometry, angles=angles, base=base, resolution=resolution,
+                                          edp_mmhg=edp_mmhg, pressures_mmhg=pressures_mmhg)
     emu, why = conditions_covered(geometry=geometry, angles=angles, base=base, resolution=resolution, name=name)
     if emu is None:
         return None, why

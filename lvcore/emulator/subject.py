@@ -29,6 +29,10 @@ geometry as it is, with no projection:
    suffice); the test rows, which the training never sees, give the held-out
    LVV and strain RMSE of the full outputs recorded in the metadata
    (``metadata["test"]``).
+5. Asked (``edpvr=True``, ``lvcore emulator build --edpvr``), its own EDPVR
+   emulator is built into ``DIR/edpvr`` (:mod:`lvcore.emulator.subject_edpvr`:
+   FE load paths of 0-30 mmHg on the same mesh), which the derived quantities
+   of a calibration through this emulator evaluate instead of FE load paths.
 
 The emulator directory is an ordinary one (:mod:`lvcore.emulator.io`) with a
 ``subject`` section in ``metadata.json``: the geometry section (path relative
@@ -61,6 +65,8 @@ from lvcore.domain.outputs import strain_layer as canonical_strain_layer
 INPUT_GROUPS = {"theta": THETA_NAMES, EDP_NAME: (EDP_NAME,), "angles": ANGLE_NAMES}
 #: Most FE runs one build may ask for.
 MAX_RUNS = 20_000
+#: Whether a build also trains the subject EDPVR emulator unless told (``--edpvr``; see :func:`build_subject_emulator`).
+DEFAULT_EDPVR = False
 
 
 # --------------------------------------------------------------------------- the design space
@@ -202,7 +208,8 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                            workers: int = 2, seed: int = 0, config=None, name: str | None = None,
                            prior: str = "auto", log: Callable[[str], None] | None = None,
                            progress: Callable[[int, int], None] | None = None,
-                           stop: Callable[[], bool] | None = None, strain_layer: str = DEFAULT_STRAIN_LAYER):
+                           stop: Callable[[], bool] | None = None, strain_layer: str = DEFAULT_STRAIN_LAYER,
+                           edpvr: bool = DEFAULT_EDPVR, edpvr_design=None):
     """Build, validate and save a subject-specific emulator (see the module docstring).
 
     Parameters
@@ -246,6 +253,10 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     strain_layer : str
         The wall layer of the FE runs' strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`; default the inner
         half), recorded in the emulator's metadata; a prior mean must have the same layer.
+    edpvr, edpvr_design : bool, EdpvrDesign
+        Also build the subject EDPVR emulator into ``out/edpvr`` (:mod:`lvcore.emulator.subject_edpvr`; default
+        :data:`DEFAULT_EDPVR`, off: 304 load paths, 158 s on 2 cores for SYNTHETIC_HV3's default mesh, BENCHMARKS.md
+        row 51), with this design (default 256 + 16 + 32 paths): the derived EDPVR then needs no FE solve.
 
     The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) as every chunk returns, so a build that
     fails, is stopped or killed keeps them, and a new build of the same design into ``out`` resumes from them.
@@ -275,10 +286,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     for w in geo.warnings:
         say(f"  warning: {w}")
 
-    try:
-        strain_layer = canonical_strain_layer(strain_layer, "--strain-layer")
-    except ValueError as err:
-        raise EmulatorError(str(err)) from None
+    strain_layer = _checked_strain_layer(strain_layer)
     prior_mean, prior_record = choose_prior(space, section, prior, strain_layer=strain_layer)
     say(_prior_line(prior_mean, prior_record))
     points, parts = design_rows(space, design, seed)
@@ -307,7 +315,35 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
         "seconds": {"geometry": round(t_geometry, 2), "simulations": round(runs.wall_s, 2),
                     "training": round(t_train, 2)},
     }
+    if edpvr:
+        _build_edpvr(emu.metadata["subject"], space, section, out, design=edpvr_design, say=say, workers=workers,
+                     resolution=resolution, strain_layer=strain_layer, alpha_endo=alpha_endo, alpha_epi=alpha_epi,
+                     seed=seed, name=f"{name}-edpvr")
     return _save_build(emu, out, sets, geo, t_start, t_train, say)
+
+
+def _build_edpvr(record: dict, space: ParameterSpace, section: Mapping, out: Path, *, design, say, **kw) -> None:
+    """Build the subject EDPVR emulator into ``out/edpvr``; its summary and seconds go into ``record`` (the
+    subject emulator's ``metadata["subject"]``)."""
+    from lvcore.emulator import subject_edpvr
+
+    say(f"EDPVR emulator: FE load paths of 0-30 mmHg on the same mesh ({out / subject_edpvr.FOLDER})")
+    e = subject_edpvr.build_subject_edpvr(section, space, out / subject_edpvr.FOLDER,
+                                          design=design or subject_edpvr.EdpvrDesign(), log=say, **kw)
+    t = e.metadata["test"]
+    record["edpvr"] = {"folder": subject_edpvr.FOLDER, "name": e.name, "n_test_paths": t["n_paths"],
+                       "log_volume_ratio_rmse_max": max(t["log_volume_ratio_rmse"]),
+                       "fibre_stretch_rmse_max": max(t["fibre_stretch_rmse"]),
+                       "seconds": e.metadata["subject"]["seconds"]["total"]}
+    record["seconds"]["edpvr"] = record["edpvr"]["seconds"]
+
+
+def _checked_strain_layer(layer: str) -> str:
+    """The canonical name of the strain layer ``layer`` (EmulatorError naming ``--strain-layer``)."""
+    try:
+        return canonical_strain_layer(layer, "--strain-layer")
+    except ValueError as err:
+        raise EmulatorError(str(err)) from None
 
 
 def _write_geometry(geo: SubjectGeometry, out: Path) -> dict:
@@ -380,4 +416,4 @@ __all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", 
            "GEOMETRY_FILE", "MESH_SUFFIXES", "VOLUME_MESH_SUFFIXES", "MAX_RUNS",
            "build_subject_emulator", "design_rows", "choose_prior", "describe_prior", "subject_template_nodes",
            "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
-           "default_training_config"]
+           "default_training_config", "DEFAULT_EDPVR"]

@@ -14,8 +14,11 @@ that its interval is a posterior interval:
   0-30 mmHg on the ``chapter`` geometry space, :mod:`lvcore.emulator.edpvr`)
   covers the calibration (PC-score geometry, given or inferred, any scale;
   angles -60°/60°; its base and mesh; every draw in its box) it is evaluated
-  directly, its held-out volume error added to the predictive band; otherwise
-  (subject emulators, inferred angles, other bases or meshes) the FE simulator
+  directly, its held-out volume error added to the predictive band; so is a
+  subject emulator's own EDPVR emulator (:mod:`lvcore.emulator.subject_edpvr`,
+  trained on its mesh when it was built with one) for a calibration through it;
+  otherwise (subject emulators without one, inferred angles, other bases or
+  meshes, draws outside the box) the FE simulator
   solves each draw and pressure, warm-started (draws ordered along a
   continuation path, :func:`lvcore.execution.chains.continuation_order`).
   ``derived["path"]`` says which. The volume at the data's EDP gives the
@@ -357,8 +360,10 @@ def _edpvr_path(draws, *, edp_mmhg, angles, base, resolution, geometry, progress
     path = LoadPath(e.pressures_mmhg, volumes, float(edp_mmhg), e.volume_at_edp_ml, stretch, 0,
                     emu.resolution, emu.base, e.seconds)
     sd = e.volume_log_sd_at_edp
+    what = "subject EDPVR emulator" if emu.is_subject else "EDPVR emulator"
+    mesh = "the subject emulator's mesh, " if emu.is_subject else ""
     return path, {"path": "emulator", "emulator": emu.name, "reason": "", "volume_log_sd_at_edp": sd,
-                  "source": f"EDPVR emulator '{emu.name}' (FE-trained, {emu.resolution} mesh, {emu.base} base; its "
+                  "source": f"{what} '{emu.name}' (FE-trained, {mesh}{emu.resolution} mesh, {emu.base} base; its "
                             "held-out error at each pressure drawn into the EDPVR and the fibre stretch, and at "
                             f"{float(edp_mmhg):g} mmHg ({100 * sd:.2f} %) added to the band of the check; the offset "
                             "is the calibration emulator against it)"}

@@ -105,7 +105,7 @@ def build_case(inputs: Mapping[str, float], *, geometry: Mapping | None = None, 
 
 
 def space_case(space: ParameterSpace, row: Sequence[float], resolution: str = "default",
-               strain_layer: str = DEFAULT_STRAIN_LAYER) -> dict:
+               strain_layer: str = DEFAULT_STRAIN_LAYER, geometry: Mapping | None = None) -> dict:
     """The simulator case dictionary for one design row of ``space`` (see :func:`build_case`).
 
     Parameters
@@ -118,6 +118,9 @@ def space_case(space: ParameterSpace, row: Sequence[float], resolution: str = "d
         Mesh resolution passed to the simulator's geometry section.
     strain_layer : str
         The wall layer of the strains (:func:`build_case`).
+    geometry : mapping, optional
+        A fixed case ``geometry`` section (e.g. a subject emulator's mesh); default: PC scores of the row, else the
+        default LV (:func:`build_case`).
 
     Raises
     ------
@@ -128,7 +131,7 @@ def space_case(space: ParameterSpace, row: Sequence[float], resolution: str = "d
     missing = [n for n in THETA_NAMES if n not in v]
     if missing:
         raise CampaignError(f"space '{space.name}' does not define material parameter(s) {missing}")
-    return build_case(v, resolution=resolution, base=space.base, strain_layer=strain_layer)
+    return build_case(v, geometry=geometry, resolution=resolution, base=space.base, strain_layer=strain_layer)
 
 
 __all__ = ["CASE_LAW", "build_case", "space_case"]
