@@ -314,8 +314,9 @@ def check_klotz_pressures(emulator, name: str, pressures: Sequence[float] = KLOT
     if out:
         raise DataError(f"--prior klotz puts its term on the model's volumes at {', '.join(f'{p:g}' for p in pressures)} "
                         f"mmHg, but the '{name}' emulator covers EDP {lo:g}-{hi:g} mmHg ({', '.join(f'{p:g}' for p in out)} "
-                        "outside; an emulator is never extrapolated for the prior). Build a subject emulator that "
-                        "covers them: `lvcore emulator build --geometry FILE --inputs theta,edp --bound edp=6,30`")
+                        "outside; an emulator is never extrapolated for the prior). Use --emulator edpvr (EDP 1-30 mmHg, "
+                        "PC scores or --geometry infer) or build a subject emulator that covers them: `lvcore "
+                        "emulator build --geometry FILE --inputs theta,edp --bound edp=6,30`")
 
 
 def reference_volume_ml(geometry_section: dict) -> float:
