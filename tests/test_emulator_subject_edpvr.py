@@ -165,3 +165,26 @@ def test_design_parts_are_seeded_and_refused_when_too_small(built):
     sp = ParameterSpace.from_dict(e.metadata["subject"]["space"])
     with np.load(out / "edpvr" / "load_paths_train.npz") as z:
         np.testing.assert_array_equal(z["inputs"], make_design(sp, "sobol", 12, 3).points)
+
+
+def test_build_cli_states_its_default_and_info_names_it(built, capsys):
+    from lvcore.cli import main
+    from lvcore.emulator.cli import format_info
+
+    with pytest.raises(SystemExit):
+        main(["emulator", "build", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--edpvr, --no-edpvr" in text and "(default off)" in text
+    _, emu, e = built
+    assert f"EDPVR emulator: '{e.name}' in edpvr/" in format_info(emu.metadata)
+    assert "EDPVR emulator: none" in format_info({k: v for k, v in emu.metadata.items() if k != "subject"} |
+                                                 {"subject": {k: v for k, v in emu.metadata["subject"].items()
+                                                              if k != "edpvr"}})
+
+
+def test_build_refuses_edpvr_for_a_geometry_without_a_mesh_file(tmp_path):
+    """With no mesh file in the emulator folder, nothing would find the EDPVR emulator: refused before any run."""
+    with pytest.raises(EmulatorError, match="--edpvr needs a mesh geometry"):
+        build_subject_emulator("default", tmp_path / "emu", design=SubjectDesign(8, 3, 3), resolution="fast",
+                               bounds=BOUNDS, workers=1, config=CONFIG, edpvr=True)
+    assert not (tmp_path / "emu" / "fe_runs.npz").exists()

@@ -280,7 +280,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                           bounds=bounds)
     geo = geometry if isinstance(geometry, SubjectGeometry) else resolve_subject_geometry(geometry, units=units)
     out.mkdir(parents=True, exist_ok=True)
-    section = _write_geometry(geo, out)
+    section = _write_geometry(geo, out, edpvr=edpvr)
     t_geometry = time.perf_counter() - t_start
     say(f"geometry: {geo.kind} from {geo.source} ({t_geometry:.1f} s)")
     for w in geo.warnings:
@@ -346,14 +346,20 @@ def _checked_strain_layer(layer: str) -> str:
         raise EmulatorError(str(err)) from None
 
 
-def _write_geometry(geo: SubjectGeometry, out: Path) -> dict:
-    """The case geometry section of the build; template nodes are written to ``out/geometry.vtu`` first."""
+def _write_geometry(geo: SubjectGeometry, out: Path, edpvr: bool = False) -> dict:
+    """The case geometry section of the build; template nodes are written to ``out/geometry.vtu`` first. With
+    ``edpvr`` a geometry that is no mesh file (``default``, PC scores, an analytic case) is refused: the derived
+    quantities find a subject EDPVR emulator next to the mesh file."""
     section = dict(geo.section)
     if geo.nodes is not None:
         from lvcore.geometry.io import write_template_mesh
 
         write_template_mesh(out / GEOMETRY_FILE, geo.nodes, metadata={"label": f"subject geometry from {geo.source}"})
         section = {"kind": "mesh", "path": str((out / GEOMETRY_FILE).resolve())}
+    if edpvr and section.get("kind") != "mesh":
+        raise EmulatorError(f"--edpvr needs a mesh geometry (a template or volume mesh, contours or a case with a "
+                            f"mesh), got {geo.kind} ({section.get('kind')}): the derived quantities of such a subject "
+                            "emulator use FE load paths; build without --edpvr")
     return section
 
 
