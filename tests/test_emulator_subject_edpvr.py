@@ -52,7 +52,7 @@ def test_build_saves_it_in_the_subject_emulators_folder_with_its_held_out_errors
         np.testing.assert_allclose(pred, e.outputs(z["inputs"]), rtol=1e-12)
     np.testing.assert_allclose(t["log_volume_ratio_rmse"],
                                np.sqrt(np.mean((pred[..., 0] - np.log(lvv / v0)) ** 2, axis=0)), rtol=1e-9)
-    assert t["n_paths"] == 6 and max(t["pressures_mmhg"]) == 30.0 and 0 < max(t["log_volume_ratio_rmse"]) < 0.03
+    assert t["n_paths"] == 6 and max(t["pressures_mmhg"]) == 30.0 and 0 < max(t["log_volume_ratio_rmse"]) < 0.05
     # the pressures of the held-out paths lie between the training ones
     with np.load(out / "edpvr" / "load_paths_train.npz") as z:
         assert not set(z["pressures_mmhg"].tolist()) >= set(t["pressures_mmhg"])
