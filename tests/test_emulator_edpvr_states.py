@@ -76,6 +76,9 @@ def test_a_broken_edpvr_folder_is_refused(tmp_path):
     (folder / edpvr.METADATA_FILE).write_text(json.dumps({**meta, "format": "something-else"}))
     with pytest.raises(EmulatorError, match="not an lvcore-edpvr-emulator"):
         load_emulator(folder)
+    (folder / edpvr.METADATA_FILE).write_text("{not json")
+    with pytest.raises(EmulatorError, match="cannot read an EDPVR emulator"):
+        load_emulator(folder)
     (folder / edpvr.METADATA_FILE).write_text(json.dumps({**meta, "anchor": {"emulator": "no-such-emulator"}}))
     with pytest.raises(EmulatorError, match="no-such-emulator"):
         load_emulator(folder)

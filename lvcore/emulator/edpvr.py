@@ -445,18 +445,27 @@ def find_edpvr_emulator(name: str = DEFAULT_NAME) -> Path | None:
     return None
 
 
+def read_layers(npz_path) -> tuple[tuple, tuple]:
+    """The tanh MLP's weights and biases (``layer{i}_weight``, ``layer{i}_bias``) saved in ``npz_path``."""
+    with np.load(npz_path) as z:
+        n = sum(1 for k in z.files if k.endswith("_weight"))
+        return (tuple(np.asarray(z[f"layer{i}_weight"], float) for i in range(n)),
+                tuple(np.asarray(z[f"layer{i}_bias"], float) for i in range(n)))
+
+
 @functools.lru_cache(maxsize=4)
 def _load(folder: str, stamp: int) -> EdpvrEmulator:
     path = Path(folder)
-    meta = json.loads((path / METADATA_FILE).read_text())
-    if meta.get("format") != FORMAT or int(meta.get("format_version", 0)) > FORMAT_VERSION:
+    try:
+        meta = json.loads((path / METADATA_FILE).read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise EmulatorError(f"{path / METADATA_FILE}: cannot read an EDPVR emulator ({type(err).__name__}: "
+                            f"{str(err)[:200]})") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT or int(meta.get("format_version", 0)) > FORMAT_VERSION:
         raise EmulatorError(f"{path / METADATA_FILE}: not an {FORMAT} file of version <= {FORMAT_VERSION}")
     if tuple(meta["input_names"]) != INPUT_NAMES or tuple(meta["output_names"]) != OUTPUT_NAMES:
         raise EmulatorError(f"{path / METADATA_FILE}: inputs/outputs differ from {INPUT_NAMES} -> {OUTPUT_NAMES}")
-    with np.load(path / "network.npz") as z:
-        n = sum(1 for k in z.files if k.endswith("_weight"))
-        ws = tuple(np.asarray(z[f"layer{i}_weight"], float) for i in range(n))
-        bs = tuple(np.asarray(z[f"layer{i}_bias"], float) for i in range(n))
+    ws, bs = read_layers(path / "network.npz")
     with np.load(path / "geometry.npz") as z:
         geometry = {k: np.asarray(z[k]) for k in z.files}
     extra = {k: v for k, v in meta.items() if k in ("architecture", "training", "test", "source", "created_at",

@@ -51,7 +51,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME, THETA_NAMES
-from lvcore.emulator.edpvr import METADATA_FILE, STRETCH_WEIGHT, EdpvrEmulator, EmulatedPath
+from lvcore.emulator.edpvr import METADATA_FILE, STRETCH_WEIGHT, EdpvrEmulator, EmulatedPath, read_layers
 from lvcore.exceptions import EmulatorError
 
 FORMAT = "lvcore-subject-edpvr-emulator"
@@ -418,17 +418,14 @@ def load_subject_edpvr(folder) -> EdpvrEmulator:
     try:
         if tuple(meta["input_names"]) != INPUT_NAMES or tuple(meta["output_names"]) != OUTPUT_NAMES:
             raise EmulatorError(f"{meta_path}: inputs/outputs differ from {INPUT_NAMES} -> {OUTPUT_NAMES}")
-        with np.load(folder / "network.npz") as z:
-            n = sum(1 for k in z.files if k.endswith("_weight"))
-            ws = tuple(np.asarray(z[f"layer{i}_weight"], float) for i in range(n))
-            bs = tuple(np.asarray(z[f"layer{i}_bias"], float) for i in range(n))
+        ws, bs = read_layers(folder / "network.npz")
         vec = {k: np.asarray(v, float) for k, v in (("lower", meta["lower"]), ("upper", meta["upper"]),
                                                     ("x_mean", meta["input_scaler"]["mean"]),
                                                     ("x_sd", meta["input_scaler"]["sd"]),
                                                     ("y_mean", meta["output_scaler"]["mean"]),
                                                     ("y_sd", meta["output_scaler"]["sd"]))}
         shapes_ok = all(vec[k].shape == (len(INPUT_NAMES),) for k in ("lower", "upper", "x_mean", "x_sd")) and \
-            all(vec[k].shape == (len(OUTPUT_NAMES),) for k in ("y_mean", "y_sd")) and n >= 1 and \
+            all(vec[k].shape == (len(OUTPUT_NAMES),) for k in ("y_mean", "y_sd")) and len(ws) >= 1 and \
             ws[0].shape[1] == len(INPUT_NAMES) and ws[-1].shape[0] == len(OUTPUT_NAMES)
         v0 = float(meta["subject"]["v0_ml"])
         test = meta["test"]
