@@ -82,6 +82,10 @@ def test_a_broken_edpvr_folder_is_refused(tmp_path):
     (folder / edpvr.METADATA_FILE).write_text(json.dumps({**meta, "anchor": {"emulator": "no-such-emulator"}}))
     with pytest.raises(EmulatorError, match="no-such-emulator"):
         load_emulator(folder)
+    for anchor in ("edpvr", str(folder), 3):   # an EDPVR emulator cannot anchor itself (no endless loading)
+        (folder / edpvr.METADATA_FILE).write_text(json.dumps({**meta, "anchor": {"emulator": anchor}}))
+        with pytest.raises(EmulatorError, match="must name a calibration emulator"):
+            load_emulator(folder)
 
 
 def test_a_20_mmhg_state_is_accepted_through_it_and_refused_by_angles(tmp_path):

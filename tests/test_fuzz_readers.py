@@ -516,3 +516,30 @@ def test_fuzz_emulator_prior_record(prior_emulator_dir, data):
             assert emu.prior is not None and emu.prior.scale > 0 and np.all(np.isfinite(list(emu.prior.inputs.values())))
             # strains do not depend on the scale (LVV x scale^3 may overflow for an absurd recorded scale)
             assert np.all(np.isfinite(np.asarray(emu.apply(np.array([0.7, 1.4, 1.1, 3.0])))[1:]))
+
+
+# --------------------------------------------------------------------------- an EDPVR emulator's folder (edpvr.json)
+@FEW
+@given(data=st.data())
+def test_fuzz_edpvr_emulator_metadata(data):
+    """``edpvr.json`` with one field replaced (or random JSON, or bytes): ``load_emulator`` of the folder (the EDPVR
+    emulator composed with chapter, lvcore.emulator.edpvr_states) loads it or raises the package's error; a loaded
+    one evaluates to finite outputs inside its box."""
+    import shutil
+
+    from lvcore.emulator.edpvr import METADATA_FILE, find_edpvr_emulator
+    from lvcore.emulator.io import load_emulator
+
+    src = find_edpvr_emulator()
+    meta = json.loads((src / METADATA_FILE).read_text())
+    content = data.draw(mutated(meta).map(_text) | json_values.map(_text) | st.binary(max_size=200))
+    with tempfile.TemporaryDirectory() as d:
+        folder = Path(d) / "edpvr"
+        shutil.copytree(src, folder)
+        (folder / METADATA_FILE).write_bytes(content if isinstance(content, bytes) else content.encode("utf-8"))
+        try:
+            emu = load_emulator(folder)
+        except LVCoreError:
+            return
+        x = (emu.lower + emu.upper) / 2.0
+        assert np.all(np.isfinite(np.asarray(emu.apply(x))))

@@ -461,8 +461,19 @@ def _load(folder: str, stamp: int) -> EdpvrEmulator:
     except (OSError, UnicodeDecodeError, ValueError) as err:
         raise EmulatorError(f"{path / METADATA_FILE}: cannot read an EDPVR emulator ({type(err).__name__}: "
                             f"{str(err)[:200]})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT or int(meta.get("format_version", 0)) > FORMAT_VERSION:
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT or not isinstance(meta.get("format_version"), int) \
+            or meta["format_version"] > FORMAT_VERSION:
         raise EmulatorError(f"{path / METADATA_FILE}: not an {FORMAT} file of version <= {FORMAT_VERSION}")
+    try:
+        return _parse(path, meta)
+    except EmulatorError:
+        raise
+    except (OSError, KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+        raise EmulatorError(f"EDPVR emulator '{path}' is malformed ({type(err).__name__}: {str(err)[:200]})") from None
+
+
+def _parse(path: Path, meta: dict) -> EdpvrEmulator:
+    """The emulator from its checked metadata and arrays (any malformed part raises; :func:`_load` says which)."""
     if tuple(meta["input_names"]) != INPUT_NAMES or tuple(meta["output_names"]) != OUTPUT_NAMES:
         raise EmulatorError(f"{path / METADATA_FILE}: inputs/outputs differ from {INPUT_NAMES} -> {OUTPUT_NAMES}")
     ws, bs = read_layers(path / "network.npz")
@@ -470,11 +481,27 @@ def _load(folder: str, stamp: int) -> EdpvrEmulator:
         geometry = {k: np.asarray(z[k]) for k in z.files}
     extra = {k: v for k, v in meta.items() if k in ("architecture", "training", "test", "source", "created_at",
                                                    "anchor")}
-    arr = {k: np.asarray(v, float) for k, v in (("lower", meta["lower"]), ("upper", meta["upper"]))}
-    return EdpvrEmulator(meta["name"], arr["lower"], arr["upper"], np.asarray(meta["input_scaler"]["mean"], float),
-                         np.asarray(meta["input_scaler"]["sd"], float), np.asarray(meta["output_scaler"]["mean"], float),
-                         np.asarray(meta["output_scaler"]["sd"], float), ws, bs, dict(meta["fixed_inputs"]),
-                         str(meta["base"]), str(meta["resolution"]), geometry, extra)
+    vec = {k: np.asarray(v, float) for k, v in (("lower", meta["lower"]), ("upper", meta["upper"]),
+                                                ("x_mean", meta["input_scaler"]["mean"]),
+                                                ("x_sd", meta["input_scaler"]["sd"]),
+                                                ("y_mean", meta["output_scaler"]["mean"]),
+                                                ("y_sd", meta["output_scaler"]["sd"]))}
+    test = meta["test"]
+    per_p = [np.asarray(test[k], float) for k in ("pressures_mmhg", "log_volume_ratio_rmse", "fibre_stretch_rmse")]
+    ok = (all(vec[k].shape == (len(INPUT_NAMES),) for k in ("lower", "upper", "x_mean", "x_sd"))
+          and all(vec[k].shape == (len(OUTPUT_NAMES),) for k in ("y_mean", "y_sd"))
+          and all(np.all(np.isfinite(v)) for v in vec.values()) and np.all(vec["x_sd"] > 0)
+          and np.all(vec["lower"][:len(THETA_NAMES)] > 0) and np.all(vec["lower"] < vec["upper"])
+          and len(ws) >= 1 and len(ws) == len(bs) and ws[0].shape[1] == len(INPUT_NAMES)
+          and ws[-1].shape[0] == len(OUTPUT_NAMES)
+          and per_p[0].ndim == 1 and per_p[0].size >= 1 and len({a.shape for a in per_p}) == 1
+          and all(np.all(np.isfinite(a)) for a in per_p)
+          and {"faces", "nodes", "basis", "base_z"} <= set(geometry))
+    if not ok:
+        raise ValueError("array shapes, bounds, scalers, held-out errors or the geometry are invalid")
+    fixed = {str(k): float(v) for k, v in dict(meta["fixed_inputs"]).items()}
+    return EdpvrEmulator(str(meta["name"]), vec["lower"], vec["upper"], vec["x_mean"], vec["x_sd"], vec["y_mean"],
+                         vec["y_sd"], ws, bs, fixed, str(meta["base"]), str(meta["resolution"]), geometry, extra)
 
 
 def load_edpvr_emulator(name_or_folder: str | Path = DEFAULT_NAME) -> EdpvrEmulator:

@@ -152,22 +152,33 @@ def load_state_emulator(folder) -> EdpvrStateEmulator:
     EmulatorError
         The folder's EDPVR emulator or its anchor cannot be read, or their inputs differ.
     """
+    from lvcore.core.space import ParameterSpace
     from lvcore.emulator import edpvr as ev
-    from lvcore.emulator.io import load_emulator
+    from lvcore.emulator.io import load_emulator, resolve_emulator_dir
     from lvcore.emulator.network import from_arrays
 
     emu = ev.load_edpvr_emulator(Path(folder))
     anchor_name = (emu.metadata.get("anchor") or {}).get("emulator", ev.ANCHOR_EMULATOR)
+    if not isinstance(anchor_name, str) or not anchor_name or is_edpvr_folder(resolve_emulator_dir(anchor_name)):
+        raise EmulatorError(f"EDPVR emulator '{folder}': its anchor {anchor_name!r} must name a calibration emulator "
+                            f"such as '{ev.ANCHOR_EMULATOR}'")
     anchor = load_emulator(anchor_name)
     if anchor.prior is not None:
         raise EmulatorError(f"the anchor emulator '{anchor_name}' has a prior mean; an EDPVR emulator needs a plain one")
     lower, upper = np.array(emu.lower, float), np.array(emu.upper, float)
     lower[-1] = max(lower[-1], MIN_EDP_MMHG)
-    space = _space_with_pressure(emu, lower[-1], upper[-1])
-    arrays = {}
-    for i, (w, b) in enumerate(zip(emu.weights, emu.biases)):
-        arrays[f"layer{i}_weight"], arrays[f"layer{i}_bias"] = w, b
-    network = from_arrays(arrays)
+    try:
+        space = _space_with_pressure(emu, lower[-1], upper[-1])
+        ParameterSpace.from_dict(space)   # checked now: the emulator's base and resolution are read from it
+        arrays = {}
+        for i, (w, b) in enumerate(zip(emu.weights, emu.biases)):
+            arrays[f"layer{i}_weight"], arrays[f"layer{i}_bias"] = w, b
+        network = from_arrays(arrays)
+    except EmulatorError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+        raise EmulatorError(f"EDPVR emulator '{folder}': its recorded training space or network is malformed "
+                            f"({type(err).__name__}: {str(err)[:200]})") from None
     n_out = 1 + (len(ev.OUTPUT_NAMES) - 2)
     meta = {"source": {**dict(emu.metadata.get("source") or {}), "space": space, "resolution": [emu.resolution]},
             "strain_layer": anchor.strain_layer, "test": emu.metadata.get("test"),
@@ -184,7 +195,7 @@ def load_state_emulator(folder) -> EdpvrStateEmulator:
 def _space_with_pressure(emu, lo: float, hi: float) -> dict:
     """The EDPVR emulator's training space (the anchor's, recorded in its source) with the EDP varied."""
     space = json.loads(json.dumps((emu.metadata.get("source") or {}).get("space") or {}))
-    if not space:
+    if not isinstance(space, dict) or not space:
         raise EmulatorError(f"EDPVR emulator '{emu.name}': its metadata does not record its training space")
     params = [p for p in space.get("parameters", []) if p.get("name") != EDP_NAME]
     space["parameters"] = params + [{"name": EDP_NAME, "lower": float(lo), "upper": float(hi), "scale": "linear"}]
