@@ -106,3 +106,18 @@ def test_a_20_mmhg_state_is_accepted_through_it_and_refused_by_angles(tmp_path):
     assert req.record()["conditions"]["edp_mmhg"] == 8.0 and "2 loaded states" in req.record()["forward"]
     with pytest.raises(EmulatorError, match="edp = 20"):
         build_request(load_emulator("angles"), "angles", INFER, row=row)
+
+
+def test_its_fingerprint_covers_both_parts(emu):
+    """Compiled samplers are cached by the emulator's fingerprint: another anchor or EDPVR network is another key."""
+    import dataclasses
+
+    from lvcore.inference.compiled_samplers import emulator_fingerprint
+
+    fp = emulator_fingerprint(emu)
+    again = load_emulator("edpvr")
+    assert emulator_fingerprint(again) == fp
+    e2 = dataclasses.replace(emu.edpvr, y_sd=emu.edpvr.y_sd * 1.01)
+    assert emulator_fingerprint(dataclasses.replace(emu, edpvr=e2)) != fp
+    a2 = dataclasses.replace(emu.anchor, y_mean=emu.anchor.y_mean + 1.0)
+    assert emulator_fingerprint(dataclasses.replace(emu, anchor=a2)) != fp

@@ -210,20 +210,31 @@ def reference_volumes_ml(h, geometry: Mapping) -> np.ndarray:
     quadrature of :func:`lvcore.mechanics.loads.cavity_volume` (4 × 4 Gauss points per quad), vectorised: no mesh
     is built.
     """
+    return cavity_volume_function(geometry, np)(np.atleast_2d(np.asarray(h, float)))
+
+
+def cavity_volume_function(geometry: Mapping, xp=np):
+    """``h (..., k) -> V₀ (...)`` in mL, the quadrature of :func:`reference_volumes_ml` written once for NumPy
+    (``xp=np``) and for JAX (``xp=jax.numpy``: traceable, differentiable in h)."""
     from lvcore.domain import units
     from lvcore.mechanics.quadrature import gauss_quad, quad9_shape
 
-    h = np.atleast_2d(np.asarray(h, float))
     faces = np.asarray(geometry["faces"])
-    nodes = np.asarray(geometry["nodes"])[None] + np.einsum("nk,kmc->nmc", h, np.asarray(geometry["basis"]))
-    X = nodes[:, faces]   # (N, f, 9, 3)
+    nodes = xp.asarray(np.asarray(geometry["nodes"], float)[faces])             # (f, 9, 3)
+    basis = xp.asarray(np.asarray(geometry["basis"], float)[:, faces])          # (k, f, 9, 3)
     xi, w = gauss_quad(4)
-    N, dA, dB = (np.asarray(a) for a in quad9_shape(xi))
-    z = np.einsum("qa,nfa->nfq", N, X[..., 2]) - float(geometry["base_z"])
-    ta = np.einsum("qa,nfac->nfqc", dA, X[..., :2])
-    tb = np.einsum("qa,nfac->nfqc", dB, X[..., :2])
-    nz = ta[..., 0] * tb[..., 1] - ta[..., 1] * tb[..., 0]
-    return -np.einsum("nfq,q->n", z * nz, np.asarray(w)) / units.MM3_PER_ML
+    N, dA, dB, w = (xp.asarray(np.asarray(a, float)) for a in (*quad9_shape(xi), w))
+    base_z = float(geometry["base_z"])
+
+    def volume(h):
+        X = nodes + xp.einsum("...k,kfac->...fac", h, basis)
+        z = xp.einsum("qa,...fa->...fq", N, X[..., 2]) - base_z
+        ta = xp.einsum("qa,...fac->...fqc", dA, X[..., :2])
+        tb = xp.einsum("qa,...fac->...fqc", dB, X[..., :2])
+        nz = ta[..., 0] * tb[..., 1] - ta[..., 1] * tb[..., 0]
+        return -xp.einsum("...fq,q->...", z * nz, w) / units.MM3_PER_ML
+
+    return volume
 
 
 # --------------------------------------------------------------------------- training
@@ -648,6 +659,6 @@ def emulator_for(draws: Sequence[Mapping], *, geometry: Mapping | None, angles: 
 
 
 __all__ = ["FORMAT", "METADATA_FILE", "DEFAULT_NAME", "INPUT_NAMES", "OUTPUT_NAMES", "EdpvrEmulator", "emulator_error_draws", "EMULATOR_ERROR_SEED",
-           "geometry_basis", "reference_volumes_ml", "fe_log_v8_ratio", "training_rows",
+           "geometry_basis", "reference_volumes_ml", "cavity_volume_function", "fe_log_v8_ratio", "training_rows",
            "anchor_log_v8_ratio", "train_edpvr_emulator", "format_heldout", "save_edpvr_emulator",
            "find_edpvr_emulator", "load_edpvr_emulator", "EmulatedPath", "emulated_load_path", "conditions_covered", "emulator_for"]

@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from lvcore.domain.outputs import EDP_NAME, THETA_NAMES
+from lvcore.emulator.edpvr import cavity_volume_function
 from lvcore.emulator.model import Emulator
 from lvcore.exceptions import EmulatorError
 
@@ -70,11 +71,27 @@ class EdpvrStateEmulator(Emulator):
             raise EmulatorError(f"the anchor emulator '{self.anchor.name}' takes {list(self.anchor.input_names)}; "
                                 f"the EDPVR emulator {list(self.input_names[:-1])} (plus {EDP_NAME})")
         object.__setattr__(self, "_apply", jax.jit(_composed_apply(self.edpvr, self.anchor)))
+        # the compiled-sampler cache's key (lvcore.inference.compiled_samplers.emulator_fingerprint): both parts' arrays
+        object.__setattr__(self, "_lvcore_fingerprint", _fingerprint(self.edpvr, self.anchor, self.lower, self.upper))
 
     @property
     def volume_log_sd(self):
         """The EDPVR emulator's held-out ``log V/V₀`` RMSE as a function of the pressure (mmHg)."""
         return self.edpvr.volume_log_sd
+
+
+def _fingerprint(edpvr, anchor, lower, upper) -> str:
+    import hashlib
+
+    h = hashlib.sha1(b"EdpvrStateEmulator")
+    arrays = [*edpvr.weights, *edpvr.biases, edpvr.x_mean, edpvr.x_sd, edpvr.y_mean, edpvr.y_sd, lower, upper,
+              *(edpvr.geometry[k] for k in sorted(edpvr.geometry)), *jax.tree.leaves(anchor.network),
+              anchor.x_mean, anchor.x_sd, anchor.y_mean, anchor.y_sd, anchor.lower, anchor.upper]
+    for a in arrays:
+        if hasattr(a, "shape") and hasattr(a, "dtype"):
+            a = np.ascontiguousarray(np.asarray(a))
+            h.update(f"{a.shape}{a.dtype}".encode() + a.tobytes())
+    return h.hexdigest()
 
 
 def _mlp(weights, biases):
@@ -89,36 +106,11 @@ def _mlp(weights, biases):
     return net
 
 
-def _reference_volume(geometry):
-    """JAX twin of :func:`lvcore.emulator.edpvr.reference_volumes_ml`: ``h (..., k) -> V₀ (...)`` in mL."""
-    from lvcore.domain import units
-    from lvcore.mechanics.quadrature import gauss_quad, quad9_shape
-
-    faces = np.asarray(geometry["faces"])
-    nodes = np.asarray(geometry["nodes"])[faces]                    # (f, 9, 3)
-    basis = np.asarray(geometry["basis"])[:, faces]                # (k, f, 9, 3)
-    xi, w = gauss_quad(4)
-    N, dA, dB = (np.asarray(a) for a in quad9_shape(xi))
-    base_z = float(geometry["base_z"])
-    c = dict(nodes=jnp.asarray(nodes), basis=jnp.asarray(basis), N=jnp.asarray(N), dA=jnp.asarray(dA),
-             dB=jnp.asarray(dB), w=jnp.asarray(np.asarray(w)))
-
-    def volume(h):
-        X = c["nodes"] + jnp.einsum("...k,kfac->...fac", h, c["basis"])
-        z = jnp.einsum("qa,...fa->...fq", c["N"], X[..., 2]) - base_z
-        ta = jnp.einsum("qa,...fac->...fqc", c["dA"], X[..., :2])
-        tb = jnp.einsum("qa,...fac->...fqc", c["dB"], X[..., :2])
-        nz = ta[..., 0] * tb[..., 1] - ta[..., 1] * tb[..., 0]
-        return -jnp.einsum("...fq,q->...", z * nz, c["w"]) / units.MM3_PER_ML
-
-    return volume
-
-
 def _composed_apply(edpvr, anchor):
     net = _mlp(edpvr.weights, edpvr.biases)
     x_mean, x_sd = jnp.asarray(edpvr.x_mean), jnp.asarray(edpvr.x_sd)
     y_mean, y_sd = jnp.asarray(edpvr.y_mean), jnp.asarray(edpvr.y_sd)
-    v0_of = _reference_volume(edpvr.geometry)
+    v0_of = cavity_volume_function(edpvr.geometry, jnp)
     n_theta = len(THETA_NAMES)
     anchor_apply = anchor.apply
 
