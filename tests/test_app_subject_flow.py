@@ -324,8 +324,8 @@ def test_subject_build_design_defaults_are_the_clis():
     build = flow.SubjectBuild("g.vtu", "out")
     assert (build.design.n_train, build.design.n_valid, build.design.n_test, build.design.method) == \
         (args.n_train, args.n_valid, args.n_test, args.design)
-    assert (build.workers, build.seed, build.resolution, build.units) == \
-        (args.workers, args.seed, args.resolution, args.units)
+    assert (build.workers, build.seed, build.resolution, build.units, build.edpvr) == \
+        (args.workers, args.seed, args.resolution, args.units, args.edpvr)
 
 
 def test_build_dir_names_the_geometry_and_design(tmp_path):
@@ -337,6 +337,23 @@ def test_build_dir_names_the_geometry_and_design(tmp_path):
     assert flow.build_dir(b"mesh2", "my lv.vtu", root=tmp_path) != a
     assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path, design=SubjectDesign(10, 5, 5)) != a
     assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path, units="cm") != a
+    assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path, edpvr=False) == a   # the folders built before
+    assert flow.build_dir(b"mesh", "my lv.vtu", root=tmp_path, edpvr=True) != a    # with its EDPVR emulator
+
+
+def test_held_out_summary_and_the_derived_path_say_whether_a_subject_edpvr_emulator_was_built():
+    """A build with --edpvr: its EDPVR emulator's summary in the build's summary (None without); a derived record
+    from FE load paths says why, and where the subject emulator lacks one, how to build it from the app."""
+    from lvcore.app.physiology_panel import path_reason_text
+
+    edpvr = {"folder": "edpvr", "name": "subject-x-edpvr", "n_test_paths": 32, "log_volume_ratio_rmse_max": 0.004,
+             "fibre_stretch_rmse_max": 0.002, "seconds": 150.0}
+    assert flow.held_out_summary({"subject": {"edpvr": edpvr}})["edpvr"] == edpvr
+    assert flow.held_out_summary({"subject": {}})["edpvr"] is None
+    text = path_reason_text({"path": "fe", "path_reason": "a subject emulator's mesh without a subject EDPVR "
+                                                          "emulator (x missing; build the subject emulator with --edpvr)"})
+    assert text.startswith("The EDPVR and stress here are from FE load paths") and "Also build the EDPVR" in text
+    assert "Also build" not in path_reason_text({"path": "fe", "path_reason": "inferred fibre angles"})
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,9 @@ EDPVR and the derived quantities: :func:`lvcore.inference.derived.derive`, exact
 writes to summary.json (``derived``): on the calibration's own geometry (PC scores and scale, the posterior's own
 scores and scale when the geometry was inferred, or a subject emulator's mesh), base condition, fibre angles and
 the emulator's training resolution, for :func:`edpvr_draws` posterior draws, run when the user presses the
-button: the EDPVR emulator (an EDP input of 0–30 mmHg, :mod:`lvcore.emulator.edpvr`) where it covers the
-calibration, else the FE simulator (the calibration emulators are trained at 6–14 mmHg at most).
+button: the EDPVR emulator (an EDP input of 0–30 mmHg, :mod:`lvcore.emulator.edpvr`; through a subject emulator
+its own, where it was built with one, :mod:`lvcore.emulator.subject_edpvr`) where it covers the calibration, else
+the FE simulator (the calibration emulators are trained at 6–14 mmHg at most); the panel says which, and why FE.
 Once computed, V₀ is the derived one (the FE reference cavity) everywhere in the panel.
 """
 from __future__ import annotations
@@ -198,6 +199,14 @@ def summary_lines(record: Mapping) -> list[str]:
     return lines
 
 
+def path_reason_text(record: Mapping) -> str:
+    """Why a derived record's EDPVR came from FE load paths rather than an EDPVR emulator (``path_reason``)."""
+    why = str(record.get("path_reason", ""))
+    hint = (" A subject emulator built with “Also build the EDPVR emulator” ticked needs no FE solve here."
+            if "--edpvr" in why else "")
+    return f"The EDPVR and stress here are from FE load paths, not an EDPVR emulator: {why}.{hint}"
+
+
 def _button_label(n: int, setup: "Setup | None" = None) -> str:
     if setup is not None and _emulated(setup):
         return f"Compute the EDPVR and derived quantities (EDPVR emulator, {n} posterior draws, 0–30 mmHg; under a minute)"
@@ -283,6 +292,8 @@ def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) 
                "curve (Klotz et al. 2006: EDP = 27.78 · EDVn^2.76, EDVn = (V − V₀)/(V₃₀ − V₀)) is drawn through "
                "the derived V₀ and the measured (EDV, EDP); the red bar is the 99 % posterior predictive interval "
                "of the volume at the EDP.")
+    if record.get("path") == "fe" and record.get("path_reason"):
+        st.caption(path_reason_text(record))
     level, text = check_text(record)
     getattr(st, level)(text)
     st.dataframe(edpvr_rows(record), width="stretch", hide_index=True)
@@ -298,4 +309,5 @@ def show(idatas: Mapping[str, object], setup: Setup, *, subject: str, key: str) 
 
 
 __all__ = ["N_EDPVR_DRAWS", "DRAWS_ENV", "edpvr_draws", "Setup", "reference_volume_ml", "derived_v0_ml",
-           "ratio_table", "run_edpvr", "edpvr_rows", "contraction_rows", "check_text", "summary_lines", "show"]
+           "ratio_table", "run_edpvr", "edpvr_rows", "contraction_rows", "check_text", "summary_lines",
+           "path_reason_text", "show"]

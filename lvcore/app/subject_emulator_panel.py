@@ -6,7 +6,9 @@ It runs ``lvcore emulator build --geometry FILE`` (:class:`lvcore.app.subject_fl
 button, shows the held-out LVV and strain RMSE of its metadata, and keeps the emulator in the session (and on
 disk in :data:`lvcore.app.subject_flow.BUILD_CACHE`), where the My subject page offers it for calibration
 instead of a shared emulator. The design size is the CLI's by default (:class:`lvcore.emulator.subject.SubjectDesign`);
-a smaller one is for trying the flow, a larger one for a tighter emulator.
+a smaller one is for trying the flow, a larger one for a tighter emulator. A checkbox (off by default, as the CLI)
+also builds the subject's own EDPVR emulator (``--edpvr``, :mod:`lvcore.emulator.subject_edpvr`), after which the
+derived EDPVR and stress of a calibration through it need no FE load paths.
 """
 from __future__ import annotations
 
@@ -16,6 +18,9 @@ from pathlib import Path
 SESSION_KEY = "subject_emulators"
 #: Label prefix of a built subject emulator in the My subject page's emulator choice.
 LABEL_PREFIX = "subject: "
+#: The build option's checkbox: its own EDPVR emulator too (``lvcore emulator build --edpvr``).
+EDPVR_LABEL = ("Also build the EDPVR emulator (about +2.5 min on 2 cores; the derived EDPVR and stress then take a "
+               "fraction of a second instead of minutes of FE solves)")
 
 
 def built_emulators() -> dict:
@@ -28,7 +33,13 @@ def built_emulators() -> dict:
     for value in list(st.session_state.values()):  # a panel's build that finished since the page last ran
         if isinstance(value, SubjectBuild) and value.ok:
             builds.setdefault(str(value.out), value)
-    return {f"{LABEL_PREFIX}{b.label} ({Path(folder).name[-16:]})": folder for folder, b in builds.items() if b.ok}
+    return {f"{LABEL_PREFIX}{b.label}{' + EDPVR' if _has_edpvr(b.metadata) else ''} ({Path(folder).name[-16:]})":
+            folder for folder, b in builds.items() if b.ok}
+
+
+def _has_edpvr(metadata) -> bool:
+    """Whether a subject emulator's metadata records its own EDPVR emulator."""
+    return bool(dict(dict(metadata or {}).get("subject") or {}).get("edpvr"))
 
 
 def _design_controls(key: str):
@@ -45,6 +56,17 @@ def _design_controls(key: str):
     n_test = c3.number_input("held-out test FE runs", 2, 5_000, default.n_test, step=10, key=f"{key}_test",
                              help=f"never used in training; their RMSE is recorded; --n-test (default {default.n_test})")
     return SubjectDesign(int(n_train), int(n_valid), int(n_test), default.method)
+
+
+def _edpvr_control(key: str) -> bool:
+    import streamlit as st
+
+    from lvcore.emulator.subject import DEFAULT_EDPVR
+
+    return bool(st.checkbox(EDPVR_LABEL, value=DEFAULT_EDPVR, key=f"{key}_edpvr",
+                            help="lvcore emulator build --edpvr (off by default): FE load paths of 0-30 mmHg on the "
+                                 "same mesh train the subject's own EDPVR emulator; needs a mesh (not PC scores). "
+                                 "Without it the derived EDPVR and stress of a calibration run FE load paths."))
 
 
 def _progress(key: str) -> None:
@@ -78,6 +100,17 @@ def show_summary(job) -> None:
         st.warning(f"The held-out accuracy misses the targets (LVV RMSE ≤ {t['lvv_rmse_ml']:g} mL, strain RMSE ≤ "
                    f"{t['strain_rmse']:g}): calibrations with it carry that emulator error; build with more "
                    f"training runs (the default is {SubjectDesign().n_train}).")
+    e = info["edpvr"]
+    if e:
+        st.success(f"Its own EDPVR emulator: held-out test ({e['n_test_paths']} FE load paths) log-volume-ratio "
+                   f"RMSE ≤ {e['log_volume_ratio_rmse_max']:.4f}, fibre-stretch RMSE ≤ "
+                   f"{e['fibre_stretch_rmse_max']:.4f}; "
+                   f"built in {e['seconds']:.0f} s. The derived EDPVR and stress of a calibration through this "
+                   "emulator use it, with no FE solve, where the posterior draws lie in its box (else FE load "
+                   "paths; the results say which).")
+    else:
+        st.caption("Built without its own EDPVR emulator: the derived EDPVR and stress of a calibration through it "
+                   "run FE load paths (minutes).")
 
 
 def show(geometry_file, geometry_bytes: bytes, label: str, *, units: str = "mm", key: str = "build"):
@@ -110,17 +143,19 @@ def show(geometry_file, geometry_bytes: bytes, label: str, *, units: str = "mm",
     except LVCoreError as err:
         st.error(f"Design: {err}")
         return None
-    out = flow.build_dir(geometry_bytes, label, units=units, design=design, root=flow.BUILD_CACHE)
+    edpvr = _edpvr_control(key)
+    out = flow.build_dir(geometry_bytes, label, units=units, design=design, root=flow.BUILD_CACHE, edpvr=edpvr)
     job = st.session_state.get(f"{key}_job")
     busy = job is not None and job.running
     from lvcore.app.controls import disabled_hint, why_disabled
 
     blocked = why_disabled((busy, "a build is running: wait for it, or stop it below."))
-    clicked = st.button(f"Build a subject emulator ({design.total:,} FE runs)", disabled=blocked is not None,
+    what = f"{design.total:,} FE runs" + (" + its EDPVR emulator" if edpvr else "")
+    clicked = st.button(f"Build a subject emulator ({what})", disabled=blocked is not None,
                         key=f"{key}_start", help=blocked)
     disabled_hint(blocked)
     if clicked:
-        job = flow.SubjectBuild(geometry_file, out, design=design, units=units, label=label).start()
+        job = flow.SubjectBuild(geometry_file, out, design=design, units=units, label=label, edpvr=edpvr).start()
         st.session_state[f"{key}_job"] = job
         busy = job.running
     if busy:
@@ -140,4 +175,4 @@ def show(geometry_file, geometry_bytes: bytes, label: str, *, units: str = "mm",
     return None
 
 
-__all__ = ["SESSION_KEY", "LABEL_PREFIX", "built_emulators", "show", "show_summary"]
+__all__ = ["SESSION_KEY", "LABEL_PREFIX", "EDPVR_LABEL", "built_emulators", "show", "show_summary"]
