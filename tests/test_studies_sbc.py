@@ -346,3 +346,31 @@ def test_one_subject_end_to_end_through_lvcore_calibrate(tmp_path, monkeypatch):
     assert main(["study", "sbc", "--summarise", "--workdir", str(work), "--out", str(tmp_path / "sbc.json")]) == 0
     res = json.loads((tmp_path / "sbc.json").read_text())
     assert res["n_subjects"] == 1 and res["synthetic"] is True and set(res["routes"]) == set(sbc.ROUTES)
+
+
+def test_the_docs_sbc_table_is_the_shipped_results():
+    """docs/real_data.md's SBC table is :func:`sbc.docs_markdown` of the shipped result (regenerate it with
+    ``lvcore study sbc --summarise ... --docs docs/real_data.md``), without the mesh route's unranked V0."""
+    from pathlib import Path
+
+    from lvcore.studies.results import bundled_studies_dir
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "real_data.md").read_text(encoding="utf-8")
+    block = text.split(sbc.DOCS_BEGIN)[1].split(sbc.DOCS_END)[0].strip()
+    res = sbc.load(bundled_studies_dir())
+    assert block == sbc.docs_markdown(res).strip(), "regenerate: lvcore study sbc --summarise --docs docs/real_data.md"
+    assert "| mesh | V0 |" not in block and "| infer | V0 |" in block and f"{res['n_subjects']} SYNTHETIC" in block
+
+
+def test_rewrite_docs_needs_its_markers(tmp_path):
+    from lvcore.studies.results import bundled_studies_dir
+
+    res = sbc.load(bundled_studies_dir())
+    p = tmp_path / "doc.md"
+    p.write_text("before\n" + sbc.DOCS_BEGIN + "\nold\n" + sbc.DOCS_END + "\nafter\n")
+    assert sbc.rewrite_docs(res, p)
+    text = p.read_text()
+    assert text.startswith("before\n") and text.endswith("after\n") and "old" not in text and "| infer | a |" in text
+    q = tmp_path / "plain.md"
+    q.write_text("no markers\n")
+    assert not sbc.rewrite_docs(res, q) and q.read_text() == "no markers\n"
