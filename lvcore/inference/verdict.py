@@ -526,7 +526,8 @@ class Verdict:
 
     @property
     def flags(self) -> list[str]:
-        return ([f"CONSISTENCY: {f}" for f in self.consistency.flags]
+        checked = self.consistency.flags if self.consistency is not None else []   # None: no check was made
+        return ([f"CONSISTENCY: {f}" for f in checked]
                 + [f"MISFIT: {f}" for f in self.misfit]
                 + [f"BOUND: {f}" for f in self.identifiability] + [f"SAMPLER: {f}" for f in self.sampler]
                 + [f"{kind}: {f}" for kind, f in self.extra])

@@ -18,6 +18,8 @@ from lvcore import cli_args
 
 #: Seconds a study waits for one PNG export (kaleido starts Chromium) before it goes on with the HTML only.
 PNG_TIMEOUT_S = 120.0
+#: Tries of one PNG export before it is given up (the HTML is written either way).
+PNG_ATTEMPTS = 2
 
 
 def write_json_atomic(path, data: Any) -> Path:
@@ -83,11 +85,13 @@ def save_figure(fig, stem: Path) -> list[str]:
     done = threading.Event()
 
     def export():
-        try:
-            fig.write_image(png, width=1000, height=600)
-            done.set()
-        except Exception:  # noqa: BLE001 - kaleido/Chrome missing or broken: HTML is the figure, PNG is optional
-            pass
+        for _ in range(PNG_ATTEMPTS):   # a Chromium that fails to start once (a busy machine) gets a second try
+            try:
+                fig.write_image(png, width=1000, height=600)
+                done.set()
+                return
+            except Exception:  # noqa: BLE001 - kaleido/Chrome missing or broken: HTML is the figure, PNG is optional
+                continue
 
     # a hung Chrome (seen on a starved machine: kaleido blocked for 30+ min) must not hang the study:
     # the export runs in a daemon thread and is abandoned after PNG_TIMEOUT_S

@@ -551,7 +551,7 @@ def add_parser(study_subparsers) -> None:
                    help=f"posterior draws behind V20 and V30 (default {DEFAULT_DERIVED_DRAWS})")
     p.add_argument("--import-summary", type=Path, default=None, metavar="INFORMATION_JSON",
                    help="before running, take over the runs of an earlier result made with the same settings (e.g. "
-                        "the shipped information.json), into an empty --workdir (default: none)")
+                        f"the shipped {result_file('information')}), into an empty --workdir (default: none)")
     p.add_argument("--summarise", action="store_true",
                    help="build the result from the finished runs in --workdir instead of running any")
     p.add_argument("--out", type=cli_args.output_file, default=None,
