@@ -374,3 +374,22 @@ def test_rewrite_docs_needs_its_markers(tmp_path):
     q = tmp_path / "plain.md"
     q.write_text("no markers\n")
     assert not sbc.rewrite_docs(res, q) and q.read_text() == "no markers\n"
+
+
+def test_a_routes_error_names_workdir_not_the_machines_path(tmp_path):
+    """A refused run's error line is shipped in sbc.json: the subject folder is written WORKDIR/runs/<index>."""
+    from lvcore.studies import sbc_runner
+
+    folder = tmp_path / "w" / "runs" / "00007"
+    folder.mkdir(parents=True)
+
+    def refused(argv, log_path=None):
+        return 2, f"lvcore: error: --geometry {folder.resolve()}/geometry.vtu: outside the box"
+
+    subject = {"subject": "SYNTHETIC-SBC-00007", "index": 7, "truth": {}, "reference_volume_ml": 100.0}
+    settings = sbc.default_settings(seed=0, warmup=10, samples=10, chains=2, derived_draws=2, thin=10,
+                                    routes=["mesh"], allow_extrapolation=False)
+    files = {"data": str(folder / "data.csv"), "mesh": str(folder / "geometry.vtu")}
+    rec = sbc_runner.run_route("mesh", subject, files, settings, folder, calibrate=refused)
+    assert rec["exit_code"] == 2 and str(tmp_path) not in rec["error"]
+    assert "WORKDIR/runs/00007/geometry.vtu" in rec["error"]

@@ -295,7 +295,13 @@ def summarise(workdir, out=None) -> dict:
         raise LVCoreError(f"--workdir {workdir}: no such folder; run `lvcore study sbc --workdir {workdir} ...` "
                           "first")
     meta = store.settings() or {}
-    result = summarise_records(store.records(), meta.get("key"), meta.get("n_subjects"))
+    records = store.records()
+    for rec in records:   # errors recorded before they named WORKDIR: the work folder's path is the machine's
+        for rr in (rec.get("routes") or {}).values():
+            for path in sorted({str(store.root.resolve()), str(store.root)}, key=len, reverse=True):
+                if rr.get("error") and path in rr["error"]:
+                    rr["error"] = rr["error"].replace(path, "WORKDIR")
+    result = summarise_records(records, meta.get("key"), meta.get("n_subjects"))
     out = Path(out) if out is not None else store.root / RESULT_FILE
     write_json_atomic(out, result)
     subjects_table(result).to_csv(out.parent / SUBJECTS_FILE, index=False, float_format="%.6g")

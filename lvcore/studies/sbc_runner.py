@@ -390,6 +390,9 @@ def run_route(route: str, subject: Mapping, files: Mapping, settings: Mapping, f
                                                      rng=[int(settings["seed"]), int(subject["index"]), 4,
                                                           ROUTES.index(route)])
     geometry = rec.get("geometry") or {}
+    # the record names the subject's folder as WORKDIR/runs/<index>, never the machine's path (records are shipped)
+    for path in {str(folder.resolve()), str(folder)}:
+        error = (error or "").replace(path, f"WORKDIR/runs/{folder.name}")
     return {"exit_code": int(code), "error": error or None, "converged": rec.get("converged"),
             "flag_kinds": sorted({flag_kind(f) for f in flags}), "flags": [f[:240] for f in flags],
             "ranks": ranks, "width_rel": widths, "median_rel_error": rel_error, "derived_failed": n_failed,
