@@ -489,15 +489,13 @@ def docs_markdown(result: Mapping) -> str:
 
 def rewrite_docs(result: Mapping, path) -> bool:
     """Replace the generated block of the Markdown file ``path`` by :func:`docs_markdown`; False without markers."""
-    import re
+    from lvcore.studies.findings_docs import rewrite_docs as replace_block
 
     path = Path(path)
     text = path.read_text(encoding="utf-8")
     if DOCS_BEGIN not in text or DOCS_END not in text:
         return False
-    pattern = re.compile(re.escape(DOCS_BEGIN) + ".*?" + re.escape(DOCS_END), re.S)
-    path.write_text(pattern.sub(lambda m: f"{DOCS_BEGIN}\n{docs_markdown(result)}\n{DOCS_END}", text),
-                    encoding="utf-8")
+    path.write_text(replace_block(text, docs_markdown(result), DOCS_BEGIN, DOCS_END), encoding="utf-8")
     return True
 
 
