@@ -40,6 +40,15 @@ and per source the smallest dose at which F1 (iid inflation ≥ 1.5 with the
 CI above 1.2) and the F3 ordering (discrepancy and volume errors below iid's)
 appear, or "does not appear up to RMS x".
 
+**The real LV.** ``volunteers=[..., "REAL-LV"]`` (``--volunteers ...,REAL-LV``) adds the shipped REAL,
+patient-derived LV (:func:`lvcore.resources.real_lv_files`) as a volunteer at a fixed hidden θ
+(:data:`REAL_LV_THETA`, the SYNTHETIC volunteers' median): its nominal and mismatched data are FE-simulated on its
+template mesh with the same sources (each applies to a mesh), and its fits go through a subject emulator of that
+mesh at the model's conditions (``subject_emulators={"REAL-LV": DIR}``, ``--subject-emulator REAL-LV=DIR``;
+:func:`subject_forward` refuses another geometry, base, strain layer or fixed angles and EDP, and says how to build
+the right one). Its fit files have the volunteers' format and name tag, so that one work folder holds both and a
+``recorded_only`` run summarises them together (``per_volunteer`` names ``REAL-LV``).
+
 **Resumable.** Each simulation result is written atomically to
 ``OUT/sims/<volunteer>__<source>__<dose>.json`` and each fit to
 ``OUT/fits/...json`` as soon as it finishes; a rerun with the same ``OUT``
@@ -66,16 +75,17 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
-from lvcore.domain.outputs import THETA_NAMES
+from lvcore.domain.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, THETA_NAMES
 from lvcore.studies._common import clean, write_json_atomic
 from lvcore.studies.mismatch_docs import DOCS_BEGIN, DOCS_END, docs_markdown
 from lvcore.studies.mismatch_fit import (BATCH, F1_CI_FLOOR, F1_INFLATION, MODELS, PER_VOLUNTEER_DIGITS,  # noqa: F401
                                          appearance, budget_text, fit_cost, fit_datasets, noisy_copies,
                                          per_volunteer_values, sampler_text, summarise, unit_seed, verdict_rows)
 from lvcore.studies.mismatch_sim import (DEFAULT_DOSES, HETEROGENEITY_SEED, MODEL_ANGLES, MODEL_BASE,  # noqa: F401
-                                         SOURCE_LABELS, SOURCES, Volunteer, bundled_volunteers, dose_key, dose_label,
-                                         measured_doses, mismatch_case, simulate_all, strain_rms)
+                                         REAL_LV, REAL_LV_THETA, SOURCE_LABELS, SOURCES, Volunteer, bundled_volunteers,
+                                         dose_key, dose_label, measured_doses, mismatch_case, real_lv_volunteer,
+                                         simulate_all, strain_rms, study_volunteers)
 from lvcore.studies import registry
 
 #: Result file of :func:`run_study` (the shipped one is under ``assets/studies/``), read by :func:`load`.
@@ -86,7 +96,8 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
               seeds: int = 20, config=None, seed: int = 0, resolution: str = "default", emulator: str = "chapter",
               workers: int = 1, scheduler: str | None = None, out: str | Path = "study_mismatch",
               progress: Callable | None = None, retry_failed: bool = False, simulate_only: bool = False,
-              batch: int = BATCH, recorded_only: bool = False, result_file: str = RESULT_FILE) -> dict:
+              batch: int = BATCH, recorded_only: bool = False, result_file: str = RESULT_FILE,
+              subject_emulators: dict | None = None) -> dict:
     """Run (or resume) the study under ``out``; returns the result (also written to ``out/<result_file>``).
 
     Every data set of every volunteer and dose goes through one compiled
@@ -100,9 +111,10 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     ``fit_cost`` sums the CPU seconds of the MCMC batches behind the fits
     (each fit file records its batch's cost; a padded batch counts in full).
     ``config.discrepancy_kernel``: the discrepancy likelihood's GP kernel (module docstring).
+    ``volunteers`` may hold :data:`REAL_LV` (the real LV's mesh, at :data:`REAL_LV_THETA`); its fits go through
+    the subject emulator ``subject_emulators[REAL_LV]`` (a name or directory, checked by :func:`subject_forward`),
+    in batches of their own, and are written in the same fit-file format as the volunteers'.
     """
-    from lvcore.emulator.forward import emulator_forward
-    from lvcore.emulator.io import load_emulator
     from lvcore.inference import samplers
 
     t0 = time.perf_counter()
@@ -115,7 +127,13 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     bad = sorted(set(plan) - set(SOURCES))
     if bad:
         raise ValueError(f"unknown mismatch source(s) {bad}; choose from {SOURCES}")
-    vols = bundled_volunteers(volunteers)
+    vols = study_volunteers(volunteers)
+    subject_emulators = dict(subject_emulators or {})
+    stray = sorted(set(subject_emulators) - {v.name for v in vols if v.geometry is not None})
+    if stray:
+        raise ValueError(f"subject emulator(s) given for {stray}, which are not mesh volunteers of this run")
+    subjects = {} if simulate_only or recorded_only else \
+        {v.name: subject_forward(_needs_subject(v, subject_emulators), v) for v in vols if v.geometry is not None}
     sims = simulate_all(vols, plan, out, resolution=resolution, workers=workers, scheduler=scheduler,
                         progress=progress, retry_failed=retry_failed)
     t_sim = time.perf_counter() - t0
@@ -146,40 +164,8 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
                     todo.append((v, source, dose, key, np.asarray(rec["outputs"], dtype=float)))
     not_fitted = [{"volunteer": u[0].name, "source": u[1], "dose": u[2]} for u in todo] if recorded_only else []
     if todo and not recorded_only:
-        import jax
-
-        emu = load_emulator(emulator)
-        fwd = {v.name: emulator_forward(emu, v.h, name=emulator) for v in vols}
-        cond = {n: np.asarray(samplers.runtime_conditions(f)[1]["conditions"]) for n, f in fwd.items()}
-        per = max(1, batch // seeds)  # (volunteer, source, dose) units per batch
-        for b in range(0, len(todo), per):
-            units = todo[b:b + per]
-            padded = units + [units[0]] * (per - len(units))  # same shape every batch: no recompilation
-            ys, cs, th, et, ks = [], [], [], [], []
-            for v, source, dose, key, z in padded:
-                us = unit_seed(key, seed)
-                ys.append(noisy_copies(z, seeds, us))
-                cs.append(np.repeat(cond[v.name][None, :], seeds, axis=0))
-                th.append(np.repeat(np.array([[v.theta[n] for n in THETA_NAMES]]), seeds, axis=0))
-                et.append(np.repeat(np.asarray(fwd[v.name](v.theta), dtype=float)[None, :], seeds, axis=0))
-                ks.append(jax.random.split(jax.random.PRNGKey(us), seeds))
-            if progress:
-                progress(f"calibrating {', '.join(u[3] for u in units)}: {len(units) * seeds} data sets x "
-                         f"{len(MODELS)} likelihoods ({b + len(units)}/{len(todo)})")
-            cpu0, wall0 = time.process_time(), time.perf_counter()
-            res = fit_datasets(fwd[vols[0].name], np.concatenate(ys), np.concatenate(cs), np.concatenate(th),
-                               np.concatenate(et), config=config, keys=np.concatenate(ks))
-            cost = {"cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - wall0,
-                    "datasets": len(padded) * seeds, "units": len(units)}
-            if progress:
-                progress(f"  batch done: {cost['cpu_s']:.0f} CPU-s, {cost['wall_s']:.0f} s wall for "
-                         f"{cost['datasets']} data sets x {len(MODELS)} likelihoods")
-            for i, (v, source, dose, key, _) in enumerate(units):
-                sl = slice(i * seeds, (i + 1) * seeds)
-                fit = clean({**{m: {k: np.asarray(a)[sl] for k, a in r.items()} for m, r in res.items()},
-                             "batch_cost": cost, **({} if kernel == "additive" else {"discrepancy_kernel": kernel})})
-                write_json_atomic(out / "fits" / f"{key}__{tag}.json", fit)
-                fits.setdefault((source, dose), {})[v.name] = fit
+        _fit_all(todo, vols, emulator, subjects, fits, out=out, tag=tag, kernel=kernel, seeds=seeds, seed=seed,
+                 batch=batch, config=config, progress=progress)
     t_fit = time.perf_counter() - t0 - t_sim
     rows = summarise({k: fits[k] for k in rms if k in fits}, rms)
     costs = [f["batch_cost"] for per in fits.values() for f in per.values() if "batch_cost" in f]
@@ -188,6 +174,9 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
         "emulator": emulator, "resolution": resolution,
         "model_conditions": {"angles": list(MODEL_ANGLES), "base": MODEL_BASE},
         "volunteers": [v.name for v in vols], "seeds_per_dose": seeds,
+        **({"subject_emulators": {n: f.label for n, f in subjects.items()},
+            "mesh_volunteers": {v.name: {"theta": v.theta, "geometry": _geometry_label(v)}
+                                for v in vols if v.geometry is not None}} if any(v.geometry for v in vols) else {}),
         "doses": {s: list(d) for s, d in plan.items()},
         "doses_measured": measured,
         "sampler": {"num_warmup": config.num_warmup, "num_samples": config.num_samples,
@@ -201,6 +190,125 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     }
     write_json_atomic(out / result_file, clean(result))
     return result
+
+
+def _needs_subject(volunteer, subject_emulators: dict):
+    """The subject emulator given for a mesh volunteer, or a ValueError saying how to give and build one."""
+    if volunteer.name not in subject_emulators:
+        raise ValueError(f"volunteer {volunteer.name} is a mesh (not PC scores): its fits need a subject emulator of "
+                         f"that mesh, given as subject_emulators={{'{volunteer.name}': DIR}} (CLI --subject-emulator "
+                         f"{volunteer.name}=DIR); {_build_hint(volunteer)}")
+    return subject_emulators[volunteer.name]
+
+
+def _build_hint(volunteer) -> str:
+    return (f"build one with lvcore emulator build --geometry {volunteer.geometry.get('path')} --base {MODEL_BASE} "
+            f"--strain-layer {DEFAULT_STRAIN_LAYER} --alpha-endo {MODEL_ANGLES[0]:g} --alpha-epi {MODEL_ANGLES[1]:g} "
+            f"--edp {CHAPTER_EDP:g} --out DIR")
+
+
+def _geometry_label(volunteer) -> str:
+    """A mesh volunteer's geometry without a machine path: the real LV's label, else the mesh file's name."""
+    from lvcore.resources import REAL_LV_LABEL
+
+    return REAL_LV_LABEL if volunteer.name == REAL_LV else Path(str(volunteer.geometry.get("path"))).name
+
+
+def subject_forward(emulator, volunteer):
+    """The subject emulator ``emulator`` (name or directory) as the forward model of a mesh ``volunteer``'s fits.
+
+    Raises
+    ------
+    EmulatorError
+        If it is not a subject emulator, was trained on another geometry than the volunteer's mesh (template nodes
+        more than 1e-6 mm apart), or at other conditions than the calibration model's: θ inputs, angles
+        :data:`MODEL_ANGLES`, 8 mmHg, base :data:`MODEL_BASE`, strains of the inner half (the ``chapter``
+        emulator's). The message says how to build the right one.
+    """
+    from lvcore.domain.outputs import ANGLE_NAMES, EDP_NAME
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.emulator.io import load_emulator
+    from lvcore.emulator.subject import subject_template_nodes
+    from lvcore.exceptions import EmulatorError
+
+    emu = load_emulator(emulator)
+    how = _build_hint(volunteer)
+    if not emu.is_subject:
+        raise EmulatorError(f"emulator '{emulator}' takes PC scores; volunteer {volunteer.name} (a mesh) needs a "
+                            f"subject emulator: {how}")
+    gap = np.abs(subject_template_nodes(emu.subject_geometry) - subject_template_nodes(volunteer.geometry)).max()
+    if not gap <= 1e-6:
+        raise EmulatorError(f"emulator '{emulator}' was trained on another geometry than volunteer {volunteer.name}'s "
+                            f"mesh (nodes up to {gap:.3g} mm apart): {how}")
+    fixed, want = dict(emu.fixed), {ANGLE_NAMES[0]: MODEL_ANGLES[0], ANGLE_NAMES[1]: MODEL_ANGLES[1],
+                                    EDP_NAME: CHAPTER_EDP}
+    bad = {k: fixed.get(k) for k, v in want.items() if fixed.get(k) is None or abs(float(fixed[k]) - v) > 1e-9}
+    if emu.base != MODEL_BASE:
+        bad["base"] = emu.base
+    if emu.strain_layer != DEFAULT_STRAIN_LAYER:
+        bad["strain_layer"] = emu.strain_layer
+    if bad or tuple(emu.input_names) != THETA_NAMES:
+        raise EmulatorError(f"emulator '{emulator}' has inputs {list(emu.input_names)} and {bad}; the mismatch "
+                            f"study's model needs θ inputs at {want}, base {MODEL_BASE}, strain layer "
+                            f"{DEFAULT_STRAIN_LAYER}: {how}")
+    return emulator_forward(emu, (), alpha_endo=MODEL_ANGLES[0], alpha_epi=MODEL_ANGLES[1], edp_mmhg=CHAPTER_EDP,
+                            name=emu.name)
+
+
+def _fit_all(todo, vols, emulator, subjects, fits, *, out, tag, kernel, seeds, seed, batch, config, progress):
+    """Fit the ``todo`` units ((volunteer, source, dose, key, outputs)) in batches and write each one's fit file.
+
+    The volunteers over PC scores share one compiled sampler on ``emulator`` (their scores are run-time
+    conditions); each mesh volunteer is fitted on its subject forward model (``subjects``) in batches of its own.
+    """
+    import jax
+
+    from lvcore.emulator.forward import emulator_forward
+    from lvcore.emulator.io import load_emulator
+    from lvcore.inference import samplers
+
+    pca = [v for v in vols if v.geometry is None and any(u[0].name == v.name for u in todo)]
+    fwd, cond = dict(subjects), {}
+    if pca:
+        emu = load_emulator(emulator)
+        fwd.update({v.name: emulator_forward(emu, v.h, name=emulator) for v in pca})
+        cond = {v.name: np.asarray(samplers.runtime_conditions(fwd[v.name])[1]["conditions"]) for v in pca}
+    groups: dict = {}
+    for u in todo:  # one compiled sampler per group: the PCA volunteers together, each mesh volunteer alone
+        groups.setdefault(None if u[0].geometry is None else u[0].name, []).append(u)
+    per = max(1, batch // seeds)  # (volunteer, source, dose) units per batch
+    done = 0
+    for group, items in groups.items():
+        for b in range(0, len(items), per):
+            units = items[b:b + per]
+            padded = units + [units[0]] * (per - len(units))  # same shape every batch: no recompilation
+            ys, cs, th, et, ks = [], [], [], [], []
+            for v, source, dose, key, z in padded:
+                us = unit_seed(key, seed)
+                ys.append(noisy_copies(z, seeds, us))
+                if group is None:
+                    cs.append(np.repeat(cond[v.name][None, :], seeds, axis=0))
+                th.append(np.repeat(np.array([[v.theta[n] for n in THETA_NAMES]]), seeds, axis=0))
+                et.append(np.repeat(np.asarray(fwd[v.name](v.theta), dtype=float)[None, :], seeds, axis=0))
+                ks.append(jax.random.split(jax.random.PRNGKey(us), seeds))
+            done += len(units)
+            if progress:
+                progress(f"calibrating {', '.join(u[3] for u in units)}: {len(units) * seeds} data sets x "
+                         f"{len(MODELS)} likelihoods ({done}/{len(todo)})")
+            cpu0, wall0 = time.process_time(), time.perf_counter()
+            res = fit_datasets(fwd[units[0][0].name], np.concatenate(ys), np.concatenate(cs) if cs else None,
+                               np.concatenate(th), np.concatenate(et), config=config, keys=np.concatenate(ks))
+            cost = {"cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - wall0,
+                    "datasets": len(padded) * seeds, "units": len(units)}
+            if progress:
+                progress(f"  batch done: {cost['cpu_s']:.0f} CPU-s, {cost['wall_s']:.0f} s wall for "
+                         f"{cost['datasets']} data sets x {len(MODELS)} likelihoods")
+            for i, (v, source, dose, key, _) in enumerate(units):
+                sl = slice(i * seeds, (i + 1) * seeds)
+                fit = clean({**{m: {k: np.asarray(a)[sl] for k, a in r.items()} for m, r in res.items()},
+                             "batch_cost": cost, **({} if kernel == "additive" else {"discrepancy_kernel": kernel})})
+                write_json_atomic(out / "fits" / f"{key}__{tag}.json", fit)
+                fits.setdefault((source, dose), {})[v.name] = fit
 
 
 def _fit_tag(seeds: int, config) -> tuple[str, str]:
@@ -289,7 +397,10 @@ def source_line(result: dict) -> str:
     return (f"{RESULT_FILE} ({source_label(result['folder'])}); SYNTHETIC data from the FE simulator "
             f"({result.get('resolution', '?')} mesh), {len(vols)} volunteer(s) ({', '.join(vols)}) × "
             f"{result.get('seeds_per_dose', '?')} noise seeds per dose; calibrated on the "
-            f"{result.get('emulator', '?')} emulator; sampler {sampler_text(result)}" + kernel_note(result))
+            f"{result.get('emulator', '?')} emulator" + "".join(
+                f" ({n}: its own mesh, through the subject emulator {e})"
+                for n, e in (result.get("subject_emulators") or {}).items())
+            + f"; sampler {sampler_text(result)}" + kernel_note(result))
 
 
 def kernel_note(result: dict) -> str:
@@ -376,7 +487,13 @@ def add_study_parser(study_subparsers) -> None:
     p.add_argument("--sources", default=",".join(SOURCES), help=f"comma-separated, from {','.join(SOURCES)}")
     p.add_argument("--doses", action="append", default=[], metavar="SOURCE=D1,D2",
                    help="doses of one source (repeatable); default DEFAULT_DOSES")
-    p.add_argument("--volunteers", default=None, help="e.g. HV1,HV2 (default all bundled)")
+    p.add_argument("--volunteers", default=None,
+                   help=f"e.g. HV1,HV2 (default all bundled); {REAL_LV} adds the real LV (its shipped mesh, data "
+                        f"FE-simulated on it; needs --subject-emulator {REAL_LV}=DIR)")
+    p.add_argument("--subject-emulator", action="append", default=[], metavar="VOLUNTEER=DIR",
+                   help=f"the subject emulator of a mesh volunteer's fits (repeatable), e.g. {REAL_LV}=DIR: one "
+                        "built on its mesh at the model's conditions (lvcore emulator build --geometry MESH --base "
+                        "sliding --strain-layer inner_half --alpha-endo -60 --alpha-epi 60 --edp 8 --out DIR)")
     p.add_argument("--seeds", type=int, default=20, help="noise seeds per dose and volunteer")
     p.add_argument("--warmup", type=int, default=500, help="warm-up iterations per chain (default 500)")
     p.add_argument("--samples", type=int, default=500, help="draws kept per chain (default 500)")
@@ -415,6 +532,17 @@ def _parse_doses(items, sources) -> dict:
     return doses
 
 
+def _parse_subject_emulators(items) -> dict:
+    """``["REAL-LV=DIR", ...]`` -> ``{"REAL-LV": "DIR"}`` (ValueError naming the bad item)."""
+    out = {}
+    for item in items:
+        name, _, path = item.partition("=")
+        if not name or not path:
+            raise ValueError(f"--subject-emulator {item!r}: expected VOLUNTEER=DIR, e.g. {REAL_LV}=DIR")
+        out[name] = path
+    return out
+
+
 def _cli(args) -> int:
     import sys
 
@@ -433,8 +561,10 @@ def _cli(args) -> int:
     try:
         doses = _parse_doses(args.doses, sources)
         vols = args.volunteers.split(",") if args.volunteers else None
-        if vols:
-            bundled_volunteers(vols)
+        subject_emulators = _parse_subject_emulators(args.subject_emulator)
+        for v in study_volunteers(vols) if vols else []:
+            if v.geometry is not None and not (args.simulate_only or args.recorded_only):
+                _needs_subject(v, subject_emulators)
     except ValueError as err:  # bad options: a clear message, exit 2
         print(f"lvcore study mismatch: {err}", file=sys.stderr)
         return 2
@@ -445,6 +575,7 @@ def _cli(args) -> int:
                     resolution=args.resolution, emulator=args.emulator, workers=args.workers,
                     scheduler=args.scheduler, out=args.out, retry_failed=args.retry_failed,
                     simulate_only=args.simulate_only, batch=args.batch, recorded_only=args.recorded_only,
+                    subject_emulators=subject_emulators,
                     progress=None if args.json else (lambda msg: print(msg, flush=True)))
     if args.simulate_only:
         for r in res["doses_measured"]:
@@ -460,7 +591,8 @@ def _cli(args) -> int:
     return 0
 
 
-__all__ = ["SOURCES", "DEFAULT_DOSES", "MODEL_ANGLES", "MODEL_BASE", "HETEROGENEITY_SEED", "SOURCE_LABELS", "MODELS",
+__all__ = ["SOURCES", "DEFAULT_DOSES", "MODEL_ANGLES", "MODEL_BASE", "REAL_LV", "REAL_LV_THETA", "real_lv_volunteer",
+           "study_volunteers", "subject_forward", "HETEROGENEITY_SEED", "SOURCE_LABELS", "MODELS",
            "F1_INFLATION", "F1_CI_FLOOR", "BATCH", "PER_VOLUNTEER_DIGITS", "Volunteer", "mismatch_case",
            "bundled_volunteers", "dose_key", "dose_label", "simulate_all", "unit_seed", "noisy_copies",
            "fit_datasets", "run_study", "summarise", "per_volunteer_values", "appearance", "measured_doses",

@@ -52,12 +52,19 @@ def dose_label(source: str, dose: float) -> str:
 # the mismatched case (pure)
 # ----------------------------------------------------------------------------
 def mismatch_case(theta: dict, h: Sequence[float], source: str | None, dose: float, *,
-                  resolution: str = "default") -> dict:
+                  resolution: str = "default", geometry: dict | None = None) -> dict:
     """The simulator case of a volunteer (θ, PC scores h) with one mismatch ``source`` at ``dose``.
 
     ``source=None`` (or dose 0) is the calibration model's own condition: angles
-    :data:`MODEL_ANGLES`, base :data:`MODEL_BASE`, population sheet terms.
+    :data:`MODEL_ANGLES`, base :data:`MODEL_BASE`, population sheet terms. ``geometry`` (a case geometry section,
+    e.g. the real LV's template mesh ``{"kind": "mesh", "path": ...}``) replaces the PC scores ``h`` (give ``h=()``).
+    Every source applies to a mesh too: the fibre angles, sheet terms and dispersion are material and fibre
+    settings, the clamped base and the pericardial spring act on the mesh's base and epicardium, and the
+    heterogeneity field on its 24 AHA regions; a source the simulator cannot apply is refused when the case is
+    validated (:func:`lvcore.mechanics.case.Case.from_dict`), never skipped.
     """
+    if geometry is not None and len(h):
+        raise ValueError("give either PC scores h or a geometry section, not both")
     inputs = {**{n: float(theta[n]) for n in THETA_NAMES}, "alpha_endo": MODEL_ANGLES[0],
               "alpha_epi": MODEL_ANGLES[1], EDP_NAME: CHAPTER_EDP,
               **{f"h{i + 1}": float(v) for i, v in enumerate(h)}}
@@ -67,7 +74,7 @@ def mismatch_case(theta: dict, h: Sequence[float], source: str | None, dose: flo
         inputs["alpha_epi"] += dose
     if source == "base" and dose:
         base = "clamped"
-    case = build_case(inputs, resolution=resolution, base=base)
+    case = build_case(inputs, resolution=resolution, base=base, geometry=geometry)
     mat, bnd = case["material"], case["boundary"]
     if source == "sheet":
         mat["as"], mat["afs"] = HO_FIXED["as"] * dose, HO_FIXED["afs"] * dose
@@ -104,11 +111,39 @@ def _simulate_job(key: str, case: dict) -> dict:
 # ----------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Volunteer:
-    """A SYNTHETIC volunteer: name, PC scores h (the emulator's geometry inputs) and hidden θ."""
+    """A volunteer of the study: name, PC scores h (the ``chapter`` emulator's geometry inputs) and hidden θ; or,
+    for a mesh volunteer (the real LV), ``h=()`` and ``geometry`` (its case geometry section), calibrated through a
+    subject emulator of that mesh."""
 
     name: str
     h: tuple[float, ...]
     theta: dict
+    geometry: dict | None = None
+
+
+#: The real LV's volunteer name (``volunteers=[..., REAL_LV]``, ``--volunteers ...,REAL-LV``).
+REAL_LV = "REAL-LV"
+#: The real LV's hidden θ (a, b, af, bf): the SYNTHETIC volunteers' (HV1-HV8) componentwise median θ, rounded to
+#: 3 significant digits. A typical volunteer's material, inside the emulators' box and away from its edges (the
+#: fibre-discrepancy study's first θ, a = 0.1, is near the lower edge), so that the real LV's mismatch sizes and
+#: fits compare with the volunteers' at a material in their middle: the geometry is the one difference.
+REAL_LV_THETA = {"a": 0.994, "b": 2.14, "af": 1.05, "bf": 3.90}
+
+
+def real_lv_volunteer() -> Volunteer:
+    """The real LV (the shipped patient-derived mesh, :func:`lvcore.resources.real_lv_files`) as a volunteer at
+    :data:`REAL_LV_THETA`; its data are FE-simulated on its template mesh."""
+    from lvcore.resources import real_lv_files
+
+    return Volunteer(REAL_LV, (), dict(REAL_LV_THETA), {"kind": "mesh", "path": str(real_lv_files().template)})
+
+
+def study_volunteers(names: Sequence[str] | None = None) -> list[Volunteer]:
+    """The study's volunteers: the bundled SYNTHETIC ones named in ``names`` (all when None), then the real LV
+    when ``names`` holds :data:`REAL_LV`."""
+    bundled = None if names is None else [n for n in names if n != REAL_LV]
+    out = bundled_volunteers(bundled) if bundled is None or bundled else []
+    return out + ([real_lv_volunteer()] if names is not None and REAL_LV in names else [])
 
 
 def bundled_volunteers(names: Sequence[str] | None = None) -> list[Volunteer]:
@@ -126,7 +161,7 @@ def bundled_volunteers(names: Sequence[str] | None = None) -> list[Volunteer]:
                              {n: truth[n] for n in THETA_NAMES}))
     if names and len(out) != len(set(names)):
         known = [v["subject"].split("-")[-1] for v in meta["volunteers"]]
-        raise ValueError(f"unknown volunteer(s) in {list(names)}; bundled: {known}")
+        raise ValueError(f"unknown volunteer(s) in {list(names)}; bundled: {known}, and {REAL_LV} (the real LV)")
     return out
 
 
@@ -153,7 +188,7 @@ def simulate_all(volunteers, plan, out: Path, *, resolution="default", workers=1
             key = dose_key(v.name, source, dose)
             path = sims / f"{key}.json"
             if not path.is_file() or (retry_failed and not json.loads(path.read_text())["converged"]):
-                jobs[key] = mismatch_case(v.theta, v.h, source, dose, resolution=resolution)
+                jobs[key] = mismatch_case(v.theta, v.h, source, dose, resolution=resolution, geometry=v.geometry)
     if jobs:
         if workers == 1 and not scheduler:
             for i, (k, c) in enumerate(jobs.items()):
@@ -202,5 +237,6 @@ def measured_doses(sims: dict, volunteers, plan: dict) -> dict:
 
 
 __all__ = ["MODEL_ANGLES", "MODEL_BASE", "DEFAULT_DOSES", "SOURCES", "HETEROGENEITY_SEED", "SOURCE_LABELS",
-           "dose_key", "dose_label", "mismatch_case", "Volunteer", "bundled_volunteers", "simulate_all", "strain_rms",
+           "dose_key", "dose_label", "mismatch_case", "Volunteer", "bundled_volunteers", "REAL_LV", "REAL_LV_THETA",
+           "real_lv_volunteer", "study_volunteers", "simulate_all", "strain_rms",
            "measured_doses"]
