@@ -70,30 +70,36 @@ def update_docs(path: Path, dest: Path) -> None:
     path.write_text(text)
 
 
-def carry_over(res: dict, path: Path) -> None:
+def carry_over(res: dict, path: Path, part: str = "main") -> None:
     """Fill ``res``'s not-fitted doses with the rows of an earlier shipped result at ``path`` (in place).
 
     Only an earlier run of the same design qualifies (volunteers, seeds per dose, sampler budget): its rows
     are what this run would compute for those doses (the data sets and chains of a dose depend only on its key,
     :func:`lvcore.studies.mismatch.unit_seed`). Each carried row gets ``carried_over`` (the earlier run's
-    date); ``res["carried_over"]`` says from which command.
+    date); ``res["carried_over"]`` says from which command. ``part="check"``: ``res`` is the convergence check,
+    filled from the earlier result's ``check`` (same check budget), so a check that refits some doses anew keeps
+    the earlier check's rows of the others.
     """
     from lvcore.studies import mismatch
 
-    old = json.loads(path.read_text())
+    top = json.loads(path.read_text())
+    old = top if part == "main" else (top.get("check") or {})
     keys = ("num_warmup", "num_samples", "num_chains")
-    if (old.get("volunteers") != res["volunteers"] or old.get("seeds_per_dose") != res["seeds_per_dose"]
+    volunteers = top.get("volunteers")
+    if (volunteers != res.get("volunteers", volunteers) or top.get("seeds_per_dose") != res.get("seeds_per_dose",
+                                                                                                  top.get("seeds_per_dose"))
             or any(old.get("sampler", {}).get(k) != res["sampler"][k] for k in keys)):
         raise SystemExit(f"--carry-from {path}: another design (volunteers, seeds or sampler budget differ)")
     missing = {(u["source"], u["dose"]) for u in res["not_fitted"]}
-    carried = [{**r, "carried_over": old.get("shipped", {}).get("date", "?")} for r in old["rows"]
+    carried = [{**r, "carried_over": top.get("shipped", {}).get("date", "?")} for r in old.get("rows", [])
                if (r["source"], r["dose"]) in missing]
     got = {(r["source"], r["dose"]) for r in carried}
     res["rows"] = sorted(res["rows"] + carried, key=lambda r: (mismatch.SOURCES.index(r["source"]), r["dose"]))
     res["not_fitted"] = [u for u in res["not_fitted"] if (u["source"], u["dose"]) not in got]
     res["appearance"] = mismatch.appearance(res["rows"])
-    res["complete"] = not res["not_fitted"] and not res["failed"]
-    res["carried_over"] = {"command": old.get("shipped", {}).get("command"), "date": old.get("shipped", {}).get("date"),
+    if part == "main":
+        res["complete"] = not res["not_fitted"] and not res["failed"]
+    res["carried_over"] = {"command": top.get("shipped", {}).get("command"), "date": top.get("shipped", {}).get("date"),
                            "doses": [{"source": s, "dose": d} for s, d in sorted(got)]}
 
 
@@ -109,8 +115,8 @@ def main(argv=None) -> int:
                    help="start no new fits: ship what --work holds (the JSON lists the doses not fitted)")
     p.add_argument("--carry-from", default="",
                    help="with --recorded-only: a previously shipped mismatch.json whose rows fill the main run's "
-                        "doses not fitted in --work (same volunteers, seeds and sampler budget; marked "
-                        "carried_over in the JSON and the docs)")
+                        "and the convergence check's doses not fitted in --work (same volunteers, seeds and sampler "
+                        "budget; marked carried_over in the JSON and the docs)")
     args = p.parse_args(argv)
     from lvcore.studies.results import bundled_studies_dir
 
@@ -146,6 +152,8 @@ def main(argv=None) -> int:
                                  progress=lambda m: print(time.strftime("%H:%M:%S"), "check:", m, flush=True))
         res["check"] = {k: chk[k] for k in ("sampler", "doses", "rows", "appearance", "failed", "not_fitted",
                                             "fit_cost")}
+        if args.carry_from:
+            carry_over(res["check"], Path(args.carry_from), part="check")
     cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k.replace('_', '-')} {shlex.quote(str(getattr(args, k)))}"
                                                         for k in SHIP) + (" --recorded-only" if args.recorded_only else "") \
         + (f" --carry-from {shlex.quote(Path(args.carry_from).name)}" if args.carry_from else "")  # no build-machine folder

@@ -262,6 +262,28 @@ def test_carry_over_fills_only_not_fitted_doses_of_the_same_design(mismatch_resu
         ship.carry_over({**full, "not_fitted": []}, tmp_path / "other.json")
 
 
+def test_carry_over_keeps_the_earlier_checks_rows_of_doses_the_new_check_did_not_refit(mismatch_result, tmp_path):
+    """A check that refits some doses anew (e.g. the realistic ones) keeps the earlier check's rows of the others,
+    marked carried over; a check at another budget is refused."""
+    import json
+
+    ship = _ship_script()
+    full = mismatch_result()
+    smp = {"num_chains": 2, "num_warmup": 300, "num_samples": 300}
+    old = {**full, "shipped": {"date": "2026-11-27", "command": "python scripts/ship_mismatch.py"},
+           "check": {"sampler": smp, "rows": full["rows"][1:], "not_fitted": [], "failed": []}}
+    old.pop("folder")
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    check = {"sampler": smp, "rows": full["rows"][:1], "failed": [],
+             "not_fitted": [{"volunteer": "HV1", "source": "dispersion", "dose": d} for d in (2.0, 3.0)]}
+    ship.carry_over(check, tmp_path / "old.json", part="check")
+    assert [r["dose"] for r in check["rows"]] == [1.0, 2.0, 3.0] and not check["not_fitted"]
+    assert [r.get("carried_over") for r in check["rows"]] == [None, "2026-11-27", "2026-11-27"]
+    assert "complete" not in check
+    with pytest.raises(SystemExit, match="another design"):
+        ship.carry_over({**check, "sampler": {**smp, "num_chains": 4}}, tmp_path / "old.json", part="check")
+
+
 def test_an_unfitted_convergence_check_is_said_in_the_docs_block(mismatch_result):
     res = {**mismatch_result(), "check": {"sampler": {"num_chains": 2, "num_warmup": 300, "num_samples": 300},
                                           "rows": [], "not_fitted": [{"volunteer": "HV1", "source": "dispersion",
