@@ -171,6 +171,39 @@ def test_batched_and_per_subject_models_have_the_same_density(cohort4, emulator)
     assert abs(density(y2, batch) - vec) > 1.0
 
 
+@pytest.mark.parametrize("likelihood", ["volume", "iid"])
+def test_a_subjects_terms_in_the_joint_model_are_its_separate_likelihood(likelihood):
+    """At one theta, a subject's observed terms in the joint model (LVV, strains and every further loaded state)
+    equal the separate model's: the joint posterior differs from the separate fits only through the population
+    prior, never through the data's wiring (a subject at 8 + 20 mmHg and one at 8 mmHg, SYNTHETIC stand-in)."""
+    from loaded_states_double import at
+    from numpyro import handlers
+
+    from lvcore.inference.loaded_states import LoadedStatesForward, StateTerm
+    from lvcore.inference.models import get_model
+
+    theta = {"a": 0.8, "b": 3.0, "af": 1.2, "bf": 4.0}
+    rng = np.random.default_rng(4)
+    ys = {p: np.asarray(at(p)(theta)) + np.r_[5 * rng.standard_normal(), 0.03 * rng.standard_normal(24)]
+          for p in (8.0, 20.0)}
+    s2 = None if likelihood == "volume" else 0.03 ** 2
+
+    def observed(tr):
+        return sum(float(np.sum(s["fn"].log_prob(s["value"]))) for s in tr.values()
+                   if s["type"] == "sample" and s.get("is_observed", False))
+
+    for fw in (LoadedStatesForward(at(8), (StateTerm(at(20), ys[20.0], 20.0),)), at(8)):
+        th = jax.numpy.asarray([theta[k] for k in THETA_NAMES])
+        joint = handlers.trace(lambda: hi._subject_terms(fw, th, ys[8.0], s2, 5.0)).get_trace()
+        params = {**theta, **({} if s2 is None else {"sigma_s2": s2})}
+        sep = handlers.trace(handlers.substitute(lambda: get_model(likelihood)(ys[8.0], forward=fw, sigma_v=5.0),
+                                                 data=params)).get_trace()
+        names = {k for k, s in joint.items() if s.get("is_observed")}
+        assert names == {k for k, s in sep.items() if s.get("is_observed")}
+        assert ("lvv_obs_state2" in names) == isinstance(fw, LoadedStatesForward)
+        assert observed(joint) == pytest.approx(observed(sep), rel=1e-12)
+
+
 def test_each_subject_keeps_its_own_geometry_route(tmp_path, emulator):
     """Subjects with an inferred geometry (PC scores and scale sampled per subject, observed through their own
     reference volume) and with given scores share one model: each subject's latent sites and data are its own."""
