@@ -117,6 +117,33 @@ def test_docs_blocks_are_the_shipped_json(shipped):
         "run python scripts/ship_mismatch.py --docs-only"
 
 
+def test_prose_quotes_the_volunteer_ci_where_per_volunteer_values_are_shipped(shipped):
+    """A dose whose row ships per-volunteer values is read with its cluster-bootstrap CI (marked ᵛ) and named in
+    the CI bullet; the others keep the pooled CI over data sets."""
+    import copy
+
+    rng = np.random.default_rng(1)
+    per_vol = {}
+    for i, level in enumerate((0.036, 0.04, 0.045, 0.05, 0.055)):
+        rec = {m: {"coverage": [1.0] * 20, "output_error": list(0.01 + 0.001 * rng.random(20)),
+                   "min_ess": [300.0] * 20, "max_rhat": [1.0] * 20} for m in mm.MODELS}
+        rec["iid"]["sigma_s"] = list(level + 0.0005 * rng.standard_normal(20))
+        rec["discrepancy"]["sigma_s"] = list(0.03 + 0.0005 * rng.standard_normal(20))
+        per_vol[f"HV{i + 1}"] = rec
+    base = mm.summarise({("base", 1.0): per_vol}, {("base", 1.0): {"mean": 0.03, "min": 0.02, "max": 0.04,
+                                                                     "by_volunteer": {}}})[0]
+    res = copy.deepcopy(shipped)
+    res["mismatch"]["rows"] = [base if (r["source"], r["dose"]) == ("base", 1.0) else r
+                               for r in res["mismatch"]["rows"]]
+    text = fd.prose_markdown(res)
+    t = next(t for t in fd.mismatch_dose_tests(res["mismatch"]) if t["source"] == "base")
+    assert t["unit"] == "volunteers" and t["f1"]["ci"] != base["iid_sigma_s_inflation"]["ci"]
+    line = next(x for x in text.splitlines() if x.startswith("* The clamped base"))
+    assert f"[{t['f1']['ci'][0]:.2f}, {t['f1']['ci'][1]:.2f}]ᵛ" in line
+    assert "per-volunteer values shipped for 1 of" in text and ": base 1)" in text
+    assert "ᵛ" not in next(x for x in text.splitlines() if x.startswith("* Heterogeneity"))
+
+
 CI = re.compile(r"-?\d+\.\d+\s*×?\s*\[-?\d+\.\d+,\s*-?\d+\.\d+\]")
 
 

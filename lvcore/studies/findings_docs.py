@@ -9,7 +9,7 @@ from __future__ import annotations
 from lvcore.domain.conditions import SIGMA_S
 from lvcore.studies.findings_rule import (F1_COLUMN, MIN_CHAINS, N_MIN, PHYSIOLOGICAL_RANGES, RHAT_SHARE_MAX, TESTABLE_RMS,
                                           dose_range, fmt_ci)
-from lvcore.studies.findings_tests import SOURCES, dose_rows, replication_tests, verdicts
+from lvcore.studies.findings_tests import SOURCES, dose_rows, mismatch_dose_tests, replication_tests, verdicts
 
 #: Markers of the findings block of docs/studies.md (``python scripts/ship_mismatch.py --docs-only`` rewrites it; a test
 #: compares).
@@ -64,6 +64,14 @@ def prose_markdown(result: dict) -> str:
 
     mm = result["mismatch"]
     rows = verdict_rows(mm)
+    tests = {(t["source"], t["dose"]): t for t in mismatch_dose_tests(mm)}
+
+    def ci(r, key, fmt, unit=""):
+        """The dose's CI as the findings take it: a cluster bootstrap over volunteers where the row ships
+        per-volunteer values (marked ᵛ), else the pooled CI over its data sets."""
+        t = tests[(r["source"], r["dose"])]
+        return fmt_ci(t[key], fmt, unit) + ("ᵛ" if t["unit"] == "volunteers" else "")
+
     vols = mm.get("volunteers") or []
     out = [f"**Reading the shipped numbers** (generated from the shipped JSON by "
            f"`lvcore.studies.findings.prose_markdown`). The dose–response pools {len(vols)} SYNTHETIC volunteer"
@@ -73,8 +81,8 @@ def prose_markdown(result: dict) -> str:
               f"{len(mm['check'].get('rows', []))} doses" if mm.get("check") else "") + "."]
     small = [r for r in rows if (r["strain_rms_mismatch"].get("mean") or 0) < 0.02]
     if small:
-        infl = [r["iid_sigma_s_inflation"]["value"] for r in small]
-        iid_best = sum(r["output_error_gap"]["iid_minus_discrepancy"]["ci"][1] < 0 for r in small)
+        infl = [tests[(r["source"], r["dose"])]["f1"]["value"] for r in small]
+        iid_best = sum((tests[(r["source"], r["dose"])]["f3_disc"].get("ci") or [0, 0])[1] < 0 for r in small)
         out.append(f"* Up to a strain RMS mismatch of 0.02 ({len(small)} doses) the calibration absorbs the "
                    f"mismatch into θ: the iid σ_S stays within {min(infl):.2f}–{max(infl):.2f}× of {SIGMA_S:g}, "
                    f"and the iid likelihood has a lower output error than the discrepancy one at {iid_best} of them "
@@ -83,23 +91,23 @@ def prose_markdown(result: dict) -> str:
     if b:
         rms = b["strain_rms_mismatch"]
         out.append(f"* The clamped base (strain RMS {rms['mean']:.4f}, {rms['min']:.4f}–{rms['max']:.4f} over the "
-                   f"volunteers) inflates the iid σ_S to {fmt_ci(b['iid_sigma_s_inflation'], '.2f', '×')}, short of "
-                   f"F1's 1.5×, while the discrepancy σ_S stays at {fmt_ci(b['discrepancy_sigma_s'], '.4f')}.")
+                   f"volunteers; {b['budget']}) inflates the iid σ_S to {ci(b, 'f1', '.2f', '×')}, short of "
+                   f"F1's 1.5×, while the discrepancy σ_S stays at {ci(b, 'f2', '.4f')}.")
     for src in ("heterogeneity", "pericardium"):
         r = _row(rows, src)
         if r:
             label, _ = dose_range(src, r["dose"])
             out.append(f"* {src.capitalize()} {r['dose']:g} (strain RMS {r['strain_rms_mismatch']['mean']:.4f}; "
-                       f"{label}; {r['budget']}): iid σ_S {fmt_ci(r['iid_sigma_s_inflation'], '.2f', '×')}, "
-                       f"discrepancy σ_S {fmt_ci(r['discrepancy_sigma_s'], '.4f')}, iid − discrepancy output error "
-                       f"{fmt_ci(r['output_error_gap']['iid_minus_discrepancy'], '.4f')}.")
+                       f"{label}; {r['budget']}): iid σ_S {ci(r, 'f1', '.2f', '×')}, "
+                       f"discrepancy σ_S {ci(r, 'f2', '.4f')}, iid − discrepancy output error "
+                       f"{ci(r, 'f3_disc', '.4f')}.")
     disp = [r for r in rows if r["source"] == "dispersion" and r.get("f3")]
     if disp:
         out.append("* Fibre dispersion is the source where the F3 ordering appears: iid − discrepancy output error "
-                   + "; ".join(f"{fmt_ci(r['output_error_gap']['iid_minus_discrepancy'], '.4f')} at κ = {r['dose']:g} "
+                   + "; ".join(f"{ci(r, 'f3_disc', '.4f')} at κ = {r['dose']:g} "
                                f"(strain RMS {r['strain_rms_mismatch']['mean']:.4f}, {r['budget']})" for r in disp)
                    + ", with the iid σ_S at only "
-                   + ", ".join(f"{r['iid_sigma_s_inflation']['value']:.2f}×" for r in disp)
+                   + ", ".join(f"{tests[(r['source'], r['dose'])]['f1']['value']:.2f}×" for r in disp)
                    + " (a smooth mismatch that iid absorbs into a biased θ rather than into σ_S).")
     shares = {k: [r["diagnostics"][m]["share_rhat_over_1_05"] for r in rows if r.get("checked") is k
                   for m in r.get("diagnostics", {}) if r["diagnostics"][m].get("share_rhat_over_1_05") is not None]
@@ -110,12 +118,17 @@ def prose_markdown(result: dict) -> str:
                    "two halves, which cannot see a second mode)"
                    + (f"; at the check budget {100 * min(shares[True]):.0f}–{100 * max(shares[True]):.0f} %."
                       if shares[True] else "."))
-    has_pv = any(r.get("per_volunteer") for r in rows)
-    out.append("* The CIs above " + ("resample volunteers (per-volunteer values shipped)." if has_pv else
-                                     "resample the data sets of a dose (volunteers × seeds pooled): the shipped "
-                                     f"{SOURCES['mismatch']} has no per-volunteer values, so they cover the measurement "
-                                     "noise around a few fixed mismatch patterns only, and no F1–F3 verdict rests "
-                                     "on them."))
+    pv = [f"{s} {d:g}" for (s, d), t in tests.items() if t["unit"] == "volunteers"]
+    pooled = "the data sets of a dose (volunteers × seeds pooled): they cover the measurement noise around a few " \
+             "fixed mismatch patterns only, and no F1–F3 verdict rests on them"
+    if not pv:
+        out.append(f"* The CIs above resample {pooled} (the shipped {SOURCES['mismatch']} has no per-volunteer "
+                   "values).")
+    elif len(pv) == len(tests):
+        out.append("* The CIs above resample volunteers (a cluster bootstrap over the per-volunteer values shipped).")
+    else:
+        out.append(f"* The CIs marked ᵛ resample volunteers (a cluster bootstrap over the per-volunteer values "
+                   f"shipped for {len(pv)} of {len(tests)} doses: {', '.join(pv)}); the others resample {pooled}.")
     fd = result.get("fibre_discrepancy")
     if fd:
         t = replication_tests(fd)
