@@ -122,8 +122,10 @@ def test_the_real_lv_is_simulated_fitted_and_summarised_beside_a_volunteer(tmp_p
     assert res["mesh_volunteers"][mm.REAL_LV]["theta"] == mm.REAL_LV_THETA
     assert "REAL" in res["mesh_volunteers"][mm.REAL_LV]["geometry"]
     assert str(real_lv_files().template.parent) not in json.dumps(res)  # no machine path
-    assert "REAL-LV: its own mesh, through the subject emulator stand-in-subject" in mm.source_line(
-        {**res, "folder": str(tmp_path / "work")})
+    line = mm.source_line({**res, "folder": str(tmp_path / "work")})
+    assert "1 SYNTHETIC volunteer(s) (HV1) and REAL-LV (the REAL LV's mesh" in line
+    assert "chapter emulator (REAL-LV: through its subject emulator stand-in-subject)" in line
+    assert mm.docs_markdown(res).startswith("Shipped run: 1 SYNTHETIC volunteer(s) (HV1) and REAL-LV")
     (row,) = res["rows"]
     assert set(row["per_volunteer"]) == {"HV1", mm.REAL_LV} and row["n_datasets"] == 6
     assert row["per_volunteer"][mm.REAL_LV]["strain_rms"] == pytest.approx(
@@ -134,6 +136,7 @@ def test_the_real_lv_is_simulated_fitted_and_summarised_beside_a_volunteer(tmp_p
     again = mm.run_study(**kw, recorded_only=True, result_file="recorded.json")  # no subject emulator needed
     assert not calls and again["complete"] and set(again["rows"][0]["per_volunteer"]) == {"HV1", mm.REAL_LV}
     assert again["rows"][0]["per_volunteer"] == row["per_volunteer"]
+    assert again["mesh_volunteers"] == res["mesh_volunteers"] and again["subject_emulators"] == {}
 
 
 def test_cli_takes_the_real_lv_and_its_subject_emulator(capsys):

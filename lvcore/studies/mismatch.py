@@ -78,7 +78,7 @@ import numpy as np
 from lvcore.domain.conditions import CHAPTER_EDP, SIGMA_S, SIGMA_V_ML
 from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, THETA_NAMES
 from lvcore.studies._common import clean, write_json_atomic
-from lvcore.studies.mismatch_docs import DOCS_BEGIN, DOCS_END, docs_markdown
+from lvcore.studies.mismatch_docs import DOCS_BEGIN, DOCS_END, docs_markdown, mesh_note, volunteers_text
 from lvcore.studies.mismatch_fit import (BATCH, F1_CI_FLOOR, F1_INFLATION, MODELS, PER_VOLUNTEER_DIGITS,  # noqa: F401
                                          appearance, budget_text, fit_cost, fit_datasets, noisy_copies,
                                          per_volunteer_values, sampler_text, summarise, unit_seed, verdict_rows)
@@ -132,8 +132,9 @@ def run_study(*, sources: Sequence[str] = SOURCES, doses: dict | None = None, vo
     stray = sorted(set(subject_emulators) - {v.name for v in vols if v.geometry is not None})
     if stray:
         raise ValueError(f"subject emulator(s) given for {stray}, which are not mesh volunteers of this run")
-    subjects = {} if simulate_only or recorded_only else \
-        {v.name: subject_forward(_needs_subject(v, subject_emulators), v) for v in vols if v.geometry is not None}
+    subjects = {} if simulate_only else {  # a recorded-only run checks (and names) only the emulators it is given
+        v.name: subject_forward(_needs_subject(v, subject_emulators), v) for v in vols
+        if v.geometry is not None and (v.name in subject_emulators or not recorded_only)}
     sims = simulate_all(vols, plan, out, resolution=resolution, workers=workers, scheduler=scheduler,
                         progress=progress, retry_failed=retry_failed)
     t_sim = time.perf_counter() - t0
@@ -393,14 +394,11 @@ def source_line(result: dict) -> str:
     """Where the numbers come from, as one readable line."""
     from lvcore.studies.results import source_label
 
-    vols = result.get("volunteers", [])
     return (f"{RESULT_FILE} ({source_label(result['folder'])}); SYNTHETIC data from the FE simulator "
-            f"({result.get('resolution', '?')} mesh), {len(vols)} volunteer(s) ({', '.join(vols)}) × "
+            f"({result.get('resolution', '?')} mesh), {volunteers_text(result)} × "
             f"{result.get('seeds_per_dose', '?')} noise seeds per dose; calibrated on the "
-            f"{result.get('emulator', '?')} emulator" + "".join(
-                f" ({n}: its own mesh, through the subject emulator {e})"
-                for n, e in (result.get("subject_emulators") or {}).items())
-            + f"; sampler {sampler_text(result)}" + kernel_note(result))
+            f"{result.get('emulator', '?')} emulator{mesh_note(result)}; sampler {sampler_text(result)}"
+            + kernel_note(result))
 
 
 def kernel_note(result: dict) -> str:

@@ -67,6 +67,21 @@ def _check_markdown(result: dict) -> list[str]:
     return lines
 
 
+def volunteers_text(result: dict) -> str:
+    """``5 SYNTHETIC volunteer(s) (HV1, ...)``, plus the mesh volunteers (the real LV) by name when the run has any:
+    their geometry is not a SYNTHETIC shape, though their data are still FE-simulated."""
+    mesh = list(result.get("mesh_volunteers") or {})
+    synth = [v for v in result.get("volunteers", []) if v not in mesh]
+    return (f"{len(synth)} SYNTHETIC volunteer(s) ({', '.join(synth)})"
+            + (f" and {', '.join(mesh)} (the REAL LV's mesh, data FE-simulated on it)" if mesh else ""))
+
+
+def mesh_note(result: dict) -> str:
+    """``""``, or for a run with mesh volunteers: which emulator their fits went through."""
+    mesh, emus = list(result.get("mesh_volunteers") or {}), result.get("subject_emulators") or {}
+    return "".join(f" ({n}: through its subject emulator{' ' + emus[n] if n in emus else ''})" for n in mesh)
+
+
 def docs_markdown(result: dict) -> str:
     """The docs' text of a shipped result: the run, the dose table, and the per-dose metrics with CIs.
 
@@ -76,9 +91,9 @@ def docs_markdown(result: dict) -> str:
     is :func:`lvcore.studies.findings.docs_markdown`.
     """
     shipped = result.get("shipped", {})
-    lines = [f"Shipped run: {len(result['volunteers'])} SYNTHETIC volunteer(s) ({', '.join(result['volunteers'])}) × "
+    lines = [f"Shipped run: {volunteers_text(result)} × "
              f"{result['seeds_per_dose']} noise seeds per dose, {result.get('resolution')} mesh, "
-             f"{result.get('emulator')} emulator, sampler {sampler_text(result)} per data set; "
+             f"{result.get('emulator')} emulator{mesh_note(result)}, sampler {sampler_text(result)} per data set; "
              f"{sum(r.get('n_datasets', 0) for r in result['rows'])} data sets × 3 likelihoods fitted"
              + (f" ({_cost_text(result['fit_cost'])})" if result.get("fit_cost") else "")
              + (f" (shipped by `{shipped['command']}`, {shipped.get('date', '')}; the run's cost is in "
@@ -133,4 +148,4 @@ def docs_markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["DOCS_BEGIN", "DOCS_END", "docs_markdown"]
+__all__ = ["volunteers_text", "mesh_note", "DOCS_BEGIN", "DOCS_END", "docs_markdown"]
