@@ -77,6 +77,20 @@ def test_two_rows_of_one_subject_are_still_a_cohort_of_one(tmp_path, capsys):
         co.read_cohort(p)
 
 
+def test_a_cohort_mixing_one_and_several_states_is_warned(tmp_path):
+    """Six of 24 at two pressures made the joint posterior confident and wrong on a SYNTHETIC cohort: the mix is
+    said (stderr and summary.json's warnings); a cohort of one kind is not."""
+    from lvcore.inference.hierarchical_cli import cohort_warnings
+
+    header = ["subject", "edp_mmhg", "geometry", *OUTPUT_COLUMNS]
+    rows = [["S1", 8, "mean", *_data()], ["S1", 20, "mean", *_data(190)], ["S2", 8, "mean", *_data()],
+            ["S3", 8, "mean", *_data(150)]]
+    (w,) = cohort_warnings(co.read_cohort(_write(tmp_path, header, rows)))
+    assert "1 of 3 subjects have several loaded states" in w and "separate" in w
+    same = [["S1", 8, "mean", *_data()], ["S2", 8, "mean", *_data(150)]]
+    assert cohort_warnings(co.read_cohort(_write(tmp_path, header, same))) == []
+
+
 def test_a_state_without_its_pressure_is_refused(tmp_path, capsys):
     header = ["subject", "edp_mmhg", "geometry", *OUTPUT_COLUMNS]
     rows = [["S1", 8, "mean", *_data()], ["S1", "", "mean", *_data(160)], ["S2", 8, "mean", *_data()]]
