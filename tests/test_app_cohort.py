@@ -41,7 +41,7 @@ def test_the_calibration_page_has_a_cohort_section_that_runs_the_demo(monkeypatc
         from lvcore.inference.cohort import read_cohort
 
         calls.append(read_cohort(csv).subjects)
-        return _record()
+        return {**_record(), "warnings": ["3 of 6 subjects have several loaded states (stand-in warning)"]}
 
     monkeypatch.setattr(cohort_panel, "run_cohort", fake_run)
     at = AppTest.from_file(str(PAGES_DIR / "5_Calibration.py"), default_timeout=180).run()
@@ -56,3 +56,4 @@ def test_the_calibration_page_has_a_cohort_section_that_runs_the_demo(monkeypatc
     subjects = next(t for t in tables if "shrinkage" in t.columns)
     assert list(subjects["subject"].unique()) == ["S1", "S2", "S3"]
     assert any("interval excludes 1" in t.columns for t in tables)
+    assert any("several loaded states" in w.value for w in at.warning)   # the run's warnings are shown

@@ -113,6 +113,8 @@ def show(st) -> None:
                                 f"{d['max_rhat']:.3f}, min ESS {d['min_ess_bulk']:.0f});" for lv, d in
                                 rec["diagnostics"].items())
                        + f" {rec['diagnostics']['population']['n_divergent']} divergent")
+    for w in rec.get("warnings") or ():
+        st.warning(w)
     st.subheader("Population")
     st.dataframe(population_table(rec), width="stretch", hide_index=True)
     if rec["population"]["differences"]:
