@@ -43,8 +43,8 @@ from lvcore.studies._common import round_floats  # noqa: E402
 #: sampler budget (``lvcore.studies.mismatch.verdict_rows`` puts them in place of the main run's rows).
 SHIP = {"volunteers": "HV1,HV2,HV3,HV4,HV5", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40,
         "seed": 0, "resolution": "default", "workers": 1,
-        "check_doses": "dispersion=0.2,0.333;heterogeneity=1.2;pericardium=0.3,0.2", "check_chains": 2, "check_warmup": 300,
-        "check_samples": 300, "check_batch": 20}
+        "check_doses": "angles=5,15,30;base=1;dispersion=0.2,0.333;heterogeneity=0.4,1.2;pericardium=0.3,0.2",
+        "check_chains": 2, "check_warmup": 300, "check_samples": 300, "check_batch": 20}
 
 
 def replace_block(text: str, begin: str, end: str, body: str, path) -> str:
@@ -94,13 +94,37 @@ def carry_over(res: dict, path: Path, part: str = "main") -> None:
     carried = [{**r, "carried_over": top.get("shipped", {}).get("date", "?")} for r in old.get("rows", [])
                if (r["source"], r["dose"]) in missing]
     got = {(r["source"], r["dose"]) for r in carried}
-    res["rows"] = sorted(res["rows"] + carried, key=lambda r: (mismatch.SOURCES.index(r["source"]), r["dose"]))
+    # a dose fitted for some volunteers only is replaced by the earlier complete row, not shipped twice
+    kept = [r for r in res["rows"] if (r["source"], r["dose"]) not in got]
+    res["rows"] = sorted(kept + carried, key=lambda r: (mismatch.SOURCES.index(r["source"]), r["dose"]))
     res["not_fitted"] = [u for u in res["not_fitted"] if (u["source"], u["dose"]) not in got]
     res["appearance"] = mismatch.appearance(res["rows"])
     if part == "main":
         res["complete"] = not res["not_fitted"] and not res["failed"]
     res["carried_over"] = {"command": top.get("shipped", {}).get("command"), "date": top.get("shipped", {}).get("date"),
                            "doses": [{"source": s, "dose": d} for s, d in sorted(got)]}
+
+
+def real_lv_section(args, samplers) -> dict:
+    """The real LV beside the volunteers: ``--real-lv-doses`` FE-simulated on the shipped real LV mesh and fitted
+    through its subject emulator at the convergence check's budget (recorded fits only without
+    ``--real-lv-emulator``); the JSON's ``real_lv`` (rows, sampler, θ, the emulator's conditions)."""
+    from lvcore.studies import mismatch
+
+    plan = mismatch._parse_doses(args.real_lv_doses.split(";"), mismatch.SOURCES)
+    cfg = samplers.SamplerConfig(num_warmup=args.check_warmup, num_samples=args.check_samples,
+                                 num_chains=args.check_chains, seed=args.seed)
+    emus = {mismatch.REAL_LV: args.real_lv_emulator} if args.real_lv_emulator else {}
+    rl = mismatch.run_study(sources=tuple(plan), doses=plan, volunteers=[mismatch.REAL_LV], seeds=args.seeds,
+                            config=cfg, seed=args.seed, resolution=args.resolution, workers=args.workers,
+                            out=args.work, batch=args.check_batch, recorded_only=not emus, subject_emulators=emus,
+                            result_file="mismatch_real_lv.json",
+                            progress=lambda m: print(time.strftime("%H:%M:%S"), "real LV:", m, flush=True))
+    out = {k: rl[k] for k in ("sampler", "doses", "rows", "failed", "not_fitted", "fit_cost", "seeds_per_dose")
+           if k in rl}
+    out["theta"] = dict(mismatch.REAL_LV_THETA)
+    out["emulator_note"] = "sliding base, inner half, angles (−60°, 60°), 8 mmHg"
+    return out
 
 
 def main(argv=None) -> int:
@@ -117,6 +141,13 @@ def main(argv=None) -> int:
                    help="with --recorded-only: a previously shipped mismatch.json whose rows fill the main run's "
                         "and the convergence check's doses not fitted in --work (same volunteers, seeds and sampler "
                         "budget; marked carried_over in the JSON and the docs)")
+    p.add_argument("--real-lv-doses", default="angles=5,15,30;base=1;heterogeneity=0.4",
+                   help="the doses run on the real LV beside the volunteers, at the check's budget, shipped as the "
+                        "JSON's real_lv ('' none; default %(default)r)")
+    p.add_argument("--real-lv-emulator", default="",
+                   help="the real LV's subject emulator (sliding base, inner half, (-60, 60) deg, 8 mmHg; "
+                        "lvcore emulator build --geometry <real LV template> ...); without it only the real LV's fits "
+                        "recorded in --work are shipped (default none)")
     args = p.parse_args(argv)
     from lvcore.studies.results import bundled_studies_dir
 
@@ -154,9 +185,12 @@ def main(argv=None) -> int:
                                             "fit_cost")}
         if args.carry_from:
             carry_over(res["check"], Path(args.carry_from), part="check")
+    if args.real_lv_doses:
+        res["real_lv"] = real_lv_section(args, samplers)
     cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k.replace('_', '-')} {shlex.quote(str(getattr(args, k)))}"
                                                         for k in SHIP) + (" --recorded-only" if args.recorded_only else "") \
-        + (f" --carry-from {shlex.quote(Path(args.carry_from).name)}" if args.carry_from else "")  # no build-machine folder
+        + (f" --carry-from {shlex.quote(Path(args.carry_from).name)}" if args.carry_from else "") \
+        + f" --real-lv-doses {shlex.quote(args.real_lv_doses)}"  # no build-machine folder
     res.pop("folder", None)
     res["shipped"] = {"script": "scripts/ship_mismatch.py", "command": cmd, "date": time.strftime("%Y-%m-%d"),
                       "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared)",

@@ -291,3 +291,37 @@ def test_an_unfitted_convergence_check_is_said_in_the_docs_block(mismatch_result
     text = mm.docs_markdown(res)
     assert "**Convergence check** (2 × (300 + 300) on dispersion 3): not fitted" in text
     assert all(not r["checked"] for r in mm.verdict_rows(res))
+
+
+def test_the_real_lv_is_shown_beside_the_volunteers_and_kept_out_of_the_verdicts(mismatch_result):
+    """The shipped JSON's real_lv rows get a table of their own in the docs block, each dose beside the
+    volunteers' row of the same dose (their per-volunteer medians); the findings' dose tests read the volunteers'
+    rows only."""
+    from lvcore.studies import findings as fd
+
+    res = mismatch_result()
+    real = mismatch_result(doses=((0.02, 0.045, 0.01),))["rows"]     # dose 1.0, another mismatch size
+    res["real_lv"] = {"rows": real, "sampler": res["sampler"], "seeds_per_dose": 20,
+                      "theta": {"a": 0.994, "b": 2.14, "af": 1.05, "bf": 3.9}}
+    text = mm.docs_markdown(res)
+    assert "**The real LV beside the volunteers.**" in text and "a 0.994, b 2.14" in text
+    line = next(x for x in text.splitlines() if x.startswith("| dispersion | 1 | 0.0200 / 0.0100"))
+    vol = res["rows"][0]["per_volunteer"]["HV1"]["iid_sigma_s"]
+    assert f"{np.median(vol) / 0.03:.2f} [" in line           # the volunteers' per-volunteer median
+    assert "real LV" not in mm.docs_markdown(mismatch_result())  # no real_lv, no table
+    assert len(fd.mismatch_dose_tests(res)) == len(res["rows"])
+
+
+def test_carry_over_replaces_a_dose_fitted_for_some_volunteers_only(mismatch_result, tmp_path):
+    import json
+
+    ship = _ship_script()
+    full = mismatch_result()
+    old = {**full, "shipped": {"date": "2026-11-25"}}
+    old.pop("folder")
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    partial = {**full["rows"][1], "n_datasets": 20}
+    res = {**full, "rows": [full["rows"][0], partial], "failed": [],
+           "not_fitted": [{"volunteer": "HV2", "source": "dispersion", "dose": 2.0}]}
+    ship.carry_over(res, tmp_path / "old.json")
+    assert [(r["dose"], r.get("carried_over")) for r in res["rows"]] == [(1.0, None), (2.0, "2026-11-25")]
