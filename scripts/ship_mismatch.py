@@ -39,11 +39,13 @@ pin_threads()  # before numpy is imported (lvcore.studies imports it)
 from lvcore.studies._common import round_floats  # noqa: E402
 
 #: The shipped run's settings (see docs/studies.md for why these). ``check_*``: the convergence check, the doses
-#: that decide the verdicts (``SOURCE=D1,D2;SOURCE=D``; '' for none) refitted on the same data sets at a larger
-#: sampler budget (``lvcore.studies.mismatch.verdict_rows`` puts them in place of the main run's rows).
+#: (``SOURCE=D1,D2;SOURCE=D``; '' for none; the shipped run: every dose) refitted on the same data sets at
+#: >= 2 chains with per-volunteer values (``lvcore.studies.mismatch.verdict_rows`` puts them in place of the main
+#: run's rows, so every CI the findings read resamples volunteers).
 SHIP = {"volunteers": "HV1,HV2,HV3,HV4,HV5", "seeds": 20, "warmup": 150, "samples": 150, "chains": 1, "batch": 40,
         "seed": 0, "resolution": "default", "workers": 1,
-        "check_doses": "angles=5,15,30;base=1;dispersion=0.2,0.333;heterogeneity=0.4,1.2;pericardium=0.3,0.2",
+        "check_doses": "angles=5,15,30,45;base=1;sheet=4,32;dispersion=0.025,0.05,0.1,0.2,0.333;"
+                       "heterogeneity=0.2,0.4,0.8,1.2;pericardium=0.03,0.1,0.2,0.3",
         "check_chains": 2, "check_warmup": 300, "check_samples": 300, "check_batch": 20}
 
 
@@ -94,6 +96,8 @@ def carry_over(res: dict, path: Path, part: str = "main") -> None:
     carried = [{**r, "carried_over": top.get("shipped", {}).get("date", "?")} for r in old.get("rows", [])
                if (r["source"], r["dose"]) in missing]
     got = {(r["source"], r["dose"]) for r in carried}
+    if part == "check" and not got:
+        return
     # a dose fitted for some volunteers only is replaced by the earlier complete row, not shipped twice
     kept = [r for r in res["rows"] if (r["source"], r["dose"]) not in got]
     res["rows"] = sorted(kept + carried, key=lambda r: (mismatch.SOURCES.index(r["source"]), r["dose"]))

@@ -132,7 +132,7 @@ def test_measured_doses_are_the_strain_rms_over_volunteers():
 def test_figures_have_axis_titles_ci_bands_and_no_negative_values(mismatch_result):
     res = mismatch_result()
     figs = mm.figures(res)
-    assert set(figs) == set(mm.TITLES)
+    assert set(figs) == set(mm.TITLES) - {"table_mismatch_real_lv"}      # no real-LV rows in this result
     for name in ("fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s", "fig_mismatch_output_error"):
         fig = figs[name]
         assert "SYNTHETIC" in fig.layout.title.text
@@ -309,6 +309,8 @@ def test_the_real_lv_is_shown_beside_the_volunteers_and_kept_out_of_the_verdicts
     vol = res["rows"][0]["per_volunteer"]["HV1"]["iid_sigma_s"]
     assert f"{np.median(vol) / 0.03:.2f} [" in line           # the volunteers' per-volunteer median
     assert "real LV" not in mm.docs_markdown(mismatch_result())  # no real_lv, no table
+    tab = mm.tables(res)["table_mismatch_real_lv"]
+    assert tab.loc[0, "strain RMS real LV"] == pytest.approx(0.02) and "table_mismatch_real_lv" in mm.figures(res)
     assert len(fd.mismatch_dose_tests(res)) == len(res["rows"])
 
 

@@ -341,9 +341,11 @@ COMMAND = "python scripts/ship_mismatch.py (or lvcore study mismatch --out RESUL
 TITLES = {"fig_mismatch_sigma_s_inflation": "Mismatch dose–response: iid σ_S inflation vs strain RMS mismatch",
           "fig_mismatch_discrepancy_sigma_s": "Mismatch dose–response: the discrepancy model's σ_S vs mismatch",
           "fig_mismatch_output_error": "Mismatch dose–response: output error per likelihood vs dose",
-          "table_mismatch_doses": "Mismatch dose–response: per source and dose, with 90 % bootstrap CIs"}
+          "table_mismatch_doses": "Mismatch dose–response: per source and dose, with 90 % bootstrap CIs",
+          "table_mismatch_real_lv": "The real LV beside the volunteers: per source and dose"}
 #: Why a figure can be missing.
 MISSING = {n: "the results hold no fitted doses (a --simulate-only run)" for n in TITLES}
+MISSING["table_mismatch_real_lv"] = "the results hold no real-LV rows (scripts/ship_mismatch.py --real-lv-doses)"
 
 
 def load(folder) -> dict:
@@ -437,10 +439,28 @@ def tables(result: dict) -> dict:
                      **{f"error {m}": r["output_error"][m]["value"] for m in MODELS},
                      **{f"coverage {m}": c[m]["value"] for m in MODELS},
                      "F1": r["f1"], "F3": r["f3"]})
-    return {"fig_mismatch_sigma_s_inflation": pd.DataFrame(infl),
-            "fig_mismatch_discrepancy_sigma_s": pd.DataFrame(disc),
-            "fig_mismatch_output_error": pd.DataFrame(err),
-            "table_mismatch_doses": pd.DataFrame(flat)}
+    out = {"fig_mismatch_sigma_s_inflation": pd.DataFrame(infl),
+           "fig_mismatch_discrepancy_sigma_s": pd.DataFrame(disc),
+           "fig_mismatch_output_error": pd.DataFrame(err),
+           "table_mismatch_doses": pd.DataFrame(flat)}
+    real = (result.get("real_lv") or {}).get("rows") or []
+    if real:
+        vol = {(r["source"], r["dose"]): r for r in verdict_rows(result)}
+        def volunteers(r, key):
+            return ((vol.get((r["source"], r["dose"])) or {}).get(key) or {}).get(
+                "mean" if key == "strain_rms_mismatch" else "value")
+
+        out["table_mismatch_real_lv"] = pd.DataFrame([
+            {"source": r["source"], "dose": r["dose"], "strain RMS real LV": r["strain_rms_mismatch"]["mean"],
+             "strain RMS volunteers": volunteers(r, "strain_rms_mismatch"),
+             f"iid σ_S/{SIGMA_S:g} real LV": r["iid_sigma_s_inflation"]["value"],
+             "real LV CI (its data sets)": f"[{r['iid_sigma_s_inflation']['ci'][0]:.2f}, "
+                                           f"{r['iid_sigma_s_inflation']['ci'][1]:.2f}]",
+             f"iid σ_S/{SIGMA_S:g} volunteers": volunteers(r, "iid_sigma_s_inflation"),
+             "discrepancy σ_S real LV": r["discrepancy_sigma_s"]["value"],
+             "discrepancy σ_S volunteers": volunteers(r, "discrepancy_sigma_s"),
+             **{f"error {m} real LV": r["output_error"][m]["value"] for m in MODELS}} for r in real])
+    return out
 
 
 def figures(result: dict) -> dict:
@@ -472,6 +492,10 @@ def figures(result: dict) -> dict:
         xaxis_title="strain RMS mismatch", yaxis_title="output error (strain)")
     out["table_mismatch_doses"] = table_figure(tabs["table_mismatch_doses"],
                                                title=f"SYNTHETIC mismatch study ({n}): per source and dose")
+    if "table_mismatch_real_lv" in tabs:
+        out["table_mismatch_real_lv"] = table_figure(
+            tabs["table_mismatch_real_lv"], title="The REAL LV's mesh (data FE-simulated on it) beside the SYNTHETIC "
+                                                  "volunteers: per source and dose (one geometry: no verdict)")
     return out
 
 # ----------------------------------------------------------------------------

@@ -47,8 +47,9 @@ def _check_markdown(result: dict) -> list[str]:
                 + ", ".join(dose_label(u["source"], u["dose"]) for u in check.get("not_fitted", []))
                 + "): not fitted in this shipped run; the findings use the main run's budget."]
     main = {(r["source"], r["dose"]): r for r in result["rows"]}
-    lines = ["", f"**Convergence check.** The doses the verdicts read (the realistic ones, and the others large "
-             "enough to show F1), refitted on the same data sets (same "
+    n_check, n_all = len(check["rows"]), len(result["rows"])
+    lines = ["", f"**Convergence check.** {'Every dose' if n_check >= n_all else f'{n_check} of the {n_all} doses'}"
+             ", refitted on the same data sets (same "
              f"noise seeds) with {budget_text(check.get('sampler'))} instead of "
              f"{budget_text(result.get('sampler'))}; the findings below use these rows "
              f"(`lvcore.studies.mismatch.verdict_rows`). MCMC: {_cost_text(check.get('fit_cost'))}."

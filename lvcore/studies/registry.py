@@ -167,7 +167,7 @@ _STUDIES = (
                       "of each likelihood as one source of mismatch grows (SYNTHETIC; resumable).",
           report="Model-data mismatch dose-response",
           report_items=("fig_mismatch_sigma_s_inflation", "fig_mismatch_discrepancy_sigma_s",
-                        "fig_mismatch_output_error", "table_mismatch_doses"),
+                        "fig_mismatch_output_error", "table_mismatch_doses", "table_mismatch_real_lv"),
           tab="Mismatch dose–response and findings", parts=("mismatch_sim", "mismatch_fit", "mismatch_docs")),
     Study("findings", "findings", cli=False, report="Findings F1-F6 with verdicts",
           report_items=("table_findings", "table_findings_doses"), tab="Mismatch dose–response and findings",
