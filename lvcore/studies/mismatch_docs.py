@@ -113,8 +113,8 @@ def real_lv_markdown(result: dict) -> list[str]:
              f"{rl.get('seeds_per_dose')} noise seeds per dose, {budget_text(rl.get('sampler'))}. The real LV's CIs "
              "resample its own data sets (one geometry: noise only); the volunteers' column is the median and the "
              "range of their per-volunteer medians. One geometry decides no verdict.", "",
-             "| source | dose | strain RMS: real LV / volunteers (mean [min, max]) | iid σ_S / 0.03: real LV [90 % CI] "
-             "/ volunteers | discrepancy σ_S: real LV [90 % CI] / volunteers | output error volume / iid / "
+             f"| source | dose | strain RMS: real LV / volunteers (mean [min, max]) | iid σ_S / {SIGMA_S:g}: real LV "
+             "[90 % CI] / volunteers | discrepancy σ_S: real LV [90 % CI] / volunteers | output error volume / iid / "
              "discrepancy (real LV) | share R-hat > 1.05 (real LV) |", "|---|---|---|---|---|---|---|"]
     for r in rl["rows"]:
         v = vol.get((r["source"], r["dose"]))
