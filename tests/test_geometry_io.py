@@ -77,3 +77,29 @@ def test_rejects_wrong_topology_units_and_garbage(tmp_path):
         write_template_mesh(tmp_path / "f.vtu", flipped)
     with pytest.raises(GeometryError, match="does not exist"):
         read_template_mesh(tmp_path / "nope.vtu")
+
+
+def test_a_template_mesh_is_read_once_until_the_file_changes(tmp_path, monkeypatch):
+    """The in-process cache: a second read of the same unchanged file parses nothing and returns a copy the
+    caller may change; a rewritten file (new size or time) is parsed and checked again."""
+    import os
+
+    from lvcore.geometry import io as gio
+
+    path = tmp_path / "m.vtu"
+    nodes = DEFAULT_LV.nodes(DEFAULT_TEMPLATE)
+    gio.write_template_mesh(path, nodes)
+    calls = []
+    real = gio._read_template_mesh
+    monkeypatch.setattr(gio, "_read_template_mesh", lambda p, t: calls.append(p) or real(p, t))
+    first = gio.read_template_mesh(path)
+    first[0] += 1000.0                                   # the caller's copy: the cache is not changed
+    second = gio.read_template_mesh(path)
+    assert len(calls) == 1 and np.array_equal(second, nodes) and not np.shares_memory(first, second)
+    gio.write_template_mesh(path, nodes * 1.01)
+    os.utime(path, ns=(1, 1))                            # a different time even on a coarse-clock file system
+    np.testing.assert_allclose(gio.read_template_mesh(path), nodes * 1.01)
+    assert len(calls) == 2
+    with pytest.raises(gio.GeometryError):               # another template: read and checked again, refused
+        gio.read_template_mesh(path, LVTemplate(n_circ=6, n_long=4, n_trans=1))
+    assert len(calls) == 3

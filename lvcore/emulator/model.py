@@ -44,6 +44,10 @@ class ExtrapolationWarning(UserWarning):
     """An emulator was asked for a prediction outside its training box."""
 
 
+#: The prior mean's size factor: an LV between a tenth and ten times the shape model's size (subjects lie near 1).
+PRIOR_SCALE_RANGE = (0.1, 10.0)
+
+
 @dataclass(frozen=True, eq=False)
 class PriorMean:
     """A bundled emulator at one subject's shape: the baseline a subject emulator's network corrects.
@@ -77,8 +81,10 @@ class PriorMean:
     def __post_init__(self):
         object.__setattr__(self, "inputs", {str(k): float(v) for k, v in self.inputs.items()})
         object.__setattr__(self, "scale", float(self.scale))
-        if not (np.isfinite(self.scale) and self.scale > 0):
-            raise EmulatorError(f"prior mean: scale must be a positive number, got {self.scale}")
+        lo, hi = PRIOR_SCALE_RANGE
+        if not (np.isfinite(self.scale) and lo <= self.scale <= hi):
+            raise EmulatorError(f"prior mean: scale must be the subject's size factor relative to the shape model, "
+                                f"between {lo:g} and {hi:g}, got {self.scale:g}; build the subject emulator again")
 
     def columns(self, input_names) -> tuple:
         """Per prior input: the column of ``input_names`` it is read from, or its fixed value (float)."""

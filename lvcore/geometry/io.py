@@ -224,8 +224,27 @@ def _meshio_read(path: Path, what: str, hint: str):
         raise GeometryError(f"cannot read {what} '{path}': it is not a valid .{fmt} file ({detail}); {hint}") from None
 
 
+#: Template meshes already read and checked, by file identity (path, inode, size, modification time) and template:
+#: a campaign or a BO parses the same mesh for every case (440 times for one subject EDPVR emulator, each in an
+#: isolated child process: 40 % of its build). A changed file has another identity and is read again.
+_MESH_CACHE: dict = {}
+_MESH_CACHE_SIZE = 16
+
+
+def _mesh_identity(path, template: LVTemplate):
+    try:
+        p = Path(path).resolve()
+        st = p.stat()
+        return (str(p), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, hash(template), template)
+    except (OSError, TypeError, ValueError):
+        return None  # the reader below reports what is wrong
+
+
 def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndarray:
     """Read a template mesh written by :func:`write_template_mesh` (or an equivalent VTU).
+
+    A mesh read before (same file, unchanged, same template) is returned from a small in-process cache, as a
+    fresh copy; every check below ran when it was first read.
 
     Parameters
     ----------
@@ -246,6 +265,20 @@ def read_template_mesh(path, template: LVTemplate = DEFAULT_TEMPLATE) -> np.ndar
         the template, has non-finite coordinates, looks like it is in metres or
         centimetres, or has inverted elements.
     """
+    key = _mesh_identity(path, template)
+    if key is not None and key in _MESH_CACHE:
+        _MESH_CACHE[key] = _MESH_CACHE.pop(key)  # most recently used last
+        return _MESH_CACHE[key].copy()
+    nodes = _read_template_mesh(path, template)
+    if key is not None:
+        _MESH_CACHE[key] = nodes.copy()
+        while len(_MESH_CACHE) > _MESH_CACHE_SIZE:
+            _MESH_CACHE.pop(next(iter(_MESH_CACHE)))
+    return nodes
+
+
+def _read_template_mesh(path, template: LVTemplate) -> np.ndarray:
+    """:func:`read_template_mesh` without the cache."""
     from lvcore.safety import limits
 
     mesh = read_meshio_file(path, "template mesh", limits.MAX_MESH_BYTES,
