@@ -127,7 +127,7 @@ def real_lv_section(args, samplers) -> dict:
     out = {k: rl[k] for k in ("sampler", "doses", "rows", "failed", "not_fitted", "fit_cost", "seeds_per_dose")
            if k in rl}
     out["theta"] = dict(mismatch.REAL_LV_THETA)
-    out["emulator_note"] = "sliding base, inner half, angles (−60°, 60°), 8 mmHg"
+    out["emulator_note"] = mismatch.model_conditions_text()
     return out
 
 

@@ -97,3 +97,55 @@ def test_sqp_on_the_simulator_uses_its_adjoint_jacobian():
     assert res.success and res.loss < 1e-4 * start_loss
     # theta is weakly identified from noise-free outputs (a flat valley): every parameter moves toward the truth
     assert np.all(np.abs(res.theta / truth - 1) < 0.25 * np.abs(start / truth - 1))
+
+
+def ridge_forward(theta):
+    """Outputs that depend on a and b through a·b only (the a–b ridge of one loaded state), and on af, bf."""
+    t = np.log(np.atleast_2d(theta))
+    ridge = np.column_stack([t[:, 0] + t[:, 1], t[:, 2], t[:, 3]])
+    y = np.tanh(ridge @ W[:, :3].T * 0.5)
+    y[:, 0] = 120.0 - 20.0 * ridge[:, 0] - 5.0 * ridge[:, 1]
+    y[:, 1:] = -0.15 + 0.03 * y[:, 1:]
+    return y
+
+
+class RidgeForward(SmoothForward):
+    def _batch(self, inputs, jacobian):
+        cols, n = as_columns(inputs, self.input_names)
+        theta = np.column_stack([cols[k] for k in self.input_names])
+        return ForwardBatch(ridge_forward(theta), np.ones(n, bool), ("",) * n, None)
+
+
+def test_posterior_objective_is_chi2_plus_the_prior_terms():
+    from lvcore.optimise.bayesopt import PosteriorObjective
+
+    measured = np.r_[120.0, np.full(24, -0.15)]
+    obj = PosteriorObjective(measured, 5.0, 0.03, {"a": (1.0, 0.5)}, {"alpha_endo": (-60.0, 20.0)})
+    y = measured + np.r_[10.0, np.full(24, 0.03)]
+    x = np.array([[np.e, 5.0, -20.0]])
+    # chi2: (10/5)² + 24·1² = 28; prior: (ln e / 0.5)² = 4 on a, ((−20 + 60)/20)² = 4 on alpha_endo; b has none
+    assert obj.misfit(y)[0] == pytest.approx(28.0)
+    assert obj.penalty(("a", "b", "alpha_endo"), x)[0] == pytest.approx(8.0)
+    assert obj(y, ("a", "b", "alpha_endo"), x)[0] == pytest.approx(36.0)
+
+
+def test_the_posterior_objective_keeps_a_ridge_fit_off_the_box_edge():
+    """Data that fix a·b only, from a truth near two box edges (a = 0.12, b = 8; the box is [0.1, 10]): the
+    regularised BO's best point lies on the ridge (a·b as the truth's), clearly better than the truth on its
+    objective (the prior pulls it along the ridge), and away from every edge; its recorded best value is the
+    objective at the recorded best point."""
+    from lvcore.optimise.bayesopt import PosteriorObjective
+
+    space = get_space("bo4")
+    truth = np.array([0.12, 8.0, 1.0, 3.0])
+    measured = ridge_forward(truth)[0]
+    obj = PosteriorObjective(measured, 5.0, 0.03, {n: (1.0, float(np.log(10) / 2)) for n in THETA_NAMES}, {})
+    res = bayesian_optimise(RidgeForward(), measured, space, n_initial=30, n_iterations=40, seed=2, objective=obj)
+    a, b = res.x_best[:2]
+    assert a * b == pytest.approx(truth[0] * truth[1], rel=0.15)
+    f_truth = obj(ridge_forward(truth), space.names, truth[None, :])[0]   # its prior term alone is 6.6
+    assert res.f_best < f_truth - 2.0
+    assert np.min(np.abs(np.log(res.x_best / np.array([[0.1], [10.0]])))) > 0.3   # no parameter near an edge
+    assert res.f_best == pytest.approx(obj(res.y_best, space.names, res.x_best)[0])
+    with pytest.raises(ValueError, match="measured data differ"):
+        bayesian_optimise(RidgeForward(), measured + 1.0, space, n_initial=5, n_iterations=1, objective=obj)

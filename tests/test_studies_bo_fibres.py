@@ -96,3 +96,22 @@ def test_cli_names_a_bad_subject(tmp_path, capsys):
 
     assert main(["study", "bo-fibres", "--subjects", "SYNTHETIC-HV99", "--out", str(tmp_path)]) == 2
     assert "SYNTHETIC-HV1" in capsys.readouterr().err
+
+
+def test_the_regularised_objective_is_recorded_and_a_chapter_state_is_not_resumed_with_it(subject, tmp_path):
+    names = bf.bo_space("free").names
+    kw = dict(n_initial=6, n_iterations=2, seed=1, state_dir=tmp_path)
+    chapter = bf.run_one(subject, "free", forward=CountingForward(names), **kw)
+    assert chapter["objective"] == "chapter" and "chi2_best" not in chapter
+    with pytest.raises(bf.StudyStateError, match="other settings"):
+        bf.run_one(subject, "free", forward=CountingForward(names), objective="posterior", **kw)
+    post = bf.run_one(subject, "free", forward=CountingForward(names), objective="posterior",
+                      **{**kw, "state_dir": tmp_path / "post"})
+    obj = bf.posterior_objective(subject.measured, "free")
+    assert set(obj.normal_prior) == {"alpha_endo", "alpha_epi"} and set(obj.log_prior) == {"a", "b", "af", "bf"}
+    assert not bf.posterior_objective(subject.measured, "fixed").normal_prior   # fixed angles carry no prior
+    x = np.array([[post["theta"][n] for n in names[:4]] + [post["alpha_endo"], post["alpha_epi"]]])
+    assert post["prior_penalty_best"] == pytest.approx(obj.penalty(names, x)[0])
+    assert post["objective_best"] == pytest.approx(post["chi2_best"] + post["prior_penalty_best"])
+    with pytest.raises(bf.LVCoreError, match="objective must be one of"):
+        bf.run_one(subject, "free", forward=CountingForward(names), objective="map", **kw)

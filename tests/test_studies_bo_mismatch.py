@@ -134,3 +134,32 @@ def test_docs_quote_the_shipped_verdicts():
     assert bm.markdown_table(result) in DOCS.read_text()
     assert json.loads(path.read_text())["meta"]["budget"]["n_initial"] >= 30
     assert all(s["n_volunteers"] >= 3 for s in result["summary"].values())
+
+
+def test_the_real_lv_is_a_volunteer_of_its_own_mesh_with_simulated_data():
+    from lvcore.studies.mismatch import REAL_LV, study_volunteers
+
+    real = study_volunteers([REAL_LV])[0]
+    case = bm.data_case(real, "angles")
+    assert {k: case["geometry"][k] for k in real.geometry} == real.geometry and case["fibres"] == {"alpha_endo": -30.0, "alpha_epi": 80.0}
+    fwd = bm.model_forward(real, "free", kind="angles")
+    assert fwd.geometry == real.geometry and not any(k.startswith("h") for k in fwd.conditions)
+    assert "REAL-LV mesh" in fwd.label
+    assert bm.subject_name(real, "angles") == "REAL-LV-angles"  # a patient's geometry: not labelled SYNTHETIC
+    assert bm.subject_name(bundled_volunteers(["HV2"])[0], "base") == "SYNTHETIC-HV2-base"
+
+
+def test_the_regularised_objective_is_named_in_the_result(tmp_path):
+    fac = lambda v, mode, kind: AnalyticForward(input_names=bo_fibres.bo_space(mode).names)  # noqa: E731
+    truth = AnalyticForward(input_names=bo_fibres.bo_space("free").names)
+    sim = lambda case: np.array(truth({**{n: case["material"][n] for n in ("a", "b", "af", "bf")},  # noqa: E731
+                                       **case["fibres"]}), float)
+    res = bm.run_study(["HV1"], ["angles"], out=tmp_path, n_initial=5, n_iterations=1, forward_factory=fac,
+                       simulate=sim, n_boot=50, objective="posterior")
+    meta = res["meta"]
+    assert meta["objective"]["name"] == "posterior" and "not the chapter's" in meta["objective"]["what"]
+    assert "--objective posterior" in meta["command"]
+    run = res["runs"][0]
+    assert run["free"]["chi2_at_best"] >= 0 and run["fixed"]["chi2_at_best"] >= 0
+    with pytest.raises(bm.LVCoreError, match="--objective"):
+        bm.run_study(["HV1"], ["angles"], out=tmp_path, forward_factory=fac, simulate=sim, objective="map")

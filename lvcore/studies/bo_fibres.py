@@ -66,6 +66,15 @@ CHAPTER_FINDING = {"free_lvv_error_lower": "8/8",
                    "median_lvv_abs_error_ml": {"fixed": 18.89, "free": 5.92},
                    "median_median_abs_strain_error": {"fixed": 0.0409, "free": 0.0381}}
 STATE_VERSION = 1
+#: The BO objectives: the chapter's standardised RSS, or the regularised one (:func:`posterior_objective`).
+OBJECTIVES = ("chapter", "posterior")
+#: The regularised objective's prior on each stiffness (kPa): log-normal with median 1, the geometric centre of
+#: the BO box [0.1, 10], and log-SD ln(10)/2, so the box's edges sit 2 SD out. Weakly informative and set by the
+#: box alone, never by the volunteers' hidden θ.
+THETA_PRIOR = (1.0, float(np.log(10.0) / 2.0))
+#: Its prior on each free fibre angle (deg): normal about the fixed-angle mode's pair (the rule-based angles the
+#: fixed mode assumes) with SD 20°, the order of the spread of measured helix angles between hearts.
+ANGLE_PRIOR_SD = 20.0
 
 
 class StudyStateError(LVCoreError):
@@ -110,6 +119,20 @@ def hidden_truth() -> dict:
     """The volunteers' hidden generating parameters (for the findings only, never the fit)."""
     path = asset_path("volunteers", "truth", "SYNTHETIC_volunteers_truth.json")
     return {v["subject"]: v for v in json.loads(path.read_text())["volunteers"]}
+
+
+def posterior_objective(measured, mode: str):
+    """The regularised BO objective of one run (:class:`lvcore.optimise.bayesopt.PosteriorObjective`): the
+    calibration's noise model (σ_V, σ_S) plus :data:`THETA_PRIOR` on a, b, af, bf and, in ``free`` mode,
+    :data:`ANGLE_PRIOR_SD` about :data:`FIXED_ANGLES` on the angles."""
+    from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
+    from lvcore.optimise.bayesopt import PosteriorObjective
+
+    if mode not in MODES:
+        raise LVCoreError(f"mode must be one of {MODES}, got {mode!r}")
+    angles = ({n: (float(c), ANGLE_PRIOR_SD) for n, c in zip(ANGLE_NAMES, FIXED_ANGLES)} if mode == "free" else {})
+    return PosteriorObjective(np.asarray(measured, dtype=float), SIGMA_V_ML, SIGMA_S,
+                              {n: THETA_PRIOR for n in THETA_NAMES}, angles)
 
 
 # ----------------------------------------------------------------------------- spaces and forwards
@@ -258,7 +281,8 @@ class RecordingForward:
 # ----------------------------------------------------------------------------- one run
 def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_iterations: int = CHAPTER_ITERATIONS,
             seed: int = 0, resolution: str = "default", state_dir=None, executor=None, workers: int = 1,
-            forward=None, progress: bool = False, on_evaluation=None, refit_every: int = REFIT_EVERY) -> dict:
+            forward=None, progress: bool = False, on_evaluation=None, refit_every: int = REFIT_EVERY,
+            objective: str = "chapter") -> dict:
     """BO of one subject in one mode; returns its entry of the result file (:data:`RESULT_FILE`).
 
     Parameters
@@ -286,16 +310,25 @@ def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_
         GP hyperparameters re-estimated every this many iterations (see
         :func:`lvcore.optimise.bayesopt.bayesian_optimise`); recorded in the
         state, since the points chosen depend on it.
+    objective : {"chapter", "posterior"}
+        The chapter's standardised RSS, or the regularised :func:`posterior_objective`; recorded in the state
+        (a state of the other objective is refused on resume) and in the entry.
     """
     from sklearn.exceptions import ConvergenceWarning
 
     from lvcore.optimise.bayesopt import bayesian_optimise
 
+    if objective not in OBJECTIVES:
+        raise LVCoreError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
     space = bo_space(mode)
     inner = forward if forward is not None else simulator_forward(subject, mode, resolution)
     settings = {"subject": subject.name, "mode": mode, "n_initial": int(n_initial), "seed": int(seed),
                 "resolution": resolution if forward is None else inner.label, "refit_every": int(refit_every),
                 "measured": [float(v) for v in subject.measured]}
+    posterior = None
+    if objective != "chapter":  # older states have no key: they are the chapter's
+        settings["objective"] = objective
+        posterior = posterior_objective(subject.measured, mode)
     path = None if state_dir is None else Path(state_dir) / f"{subject.stem}_{mode}.json"
     log = EvaluationLog(path, settings)
     total = n_initial + n_iterations
@@ -310,7 +343,7 @@ def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_
         with warnings.catch_warnings():  # sklearn's GP hyperparameter bound warnings, hundreds per run
             warnings.simplefilter("ignore", ConvergenceWarning)
             res = bayesian_optimise(rec, subject.measured, space, n_initial=n_initial, n_iterations=n_iterations,
-                                    seed=seed, refit_every=refit_every, callback=callback)
+                                    seed=seed, refit_every=refit_every, callback=callback, objective=posterior)
     log.save()
     x = dict(zip(space.names, res.x_best.tolist()))
     angles = {n: x.get(n, space.fixed_dict().get(n)) for n in ANGLE_NAMES}
@@ -327,6 +360,7 @@ def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_
         "failed_evaluations": log.failures(),
         "seconds": round(log.seconds, 2),
         # beyond the format of issue 13 (kept for figures and the report)
+        "objective": objective,
         "objective_best": float(res.f_best),
         "lvv_model_ml": float(res.y_best[0]),
         "lvv_measured_ml": float(subject.measured[0]),
@@ -338,6 +372,8 @@ def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_
         "refit_every": int(refit_every),
         "resolution": settings["resolution"],
         "fresh_evaluations": rec.fresh,
+        **({"chi2_best": float(posterior.misfit(res.y_best)[0]),
+            "prior_penalty_best": float(posterior.penalty(space.names, res.x_best)[0])} if posterior else {}),
     }
 
 

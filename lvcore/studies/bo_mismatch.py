@@ -84,7 +84,8 @@ def data_case(volunteer, kind: str, resolution: str = "default") -> dict:
     if kind is not None and kind not in KINDS:
         raise LVCoreError(f"--kinds: unknown mismatch kind {kind!r}; choose from {', '.join(KINDS)}")
     k = KINDS[kind] if kind else {"source": None, "dose": 0.0, "angles": tuple(bo_fibres.FIXED_ANGLES)}
-    case = mismatch_case(volunteer.theta, volunteer.h, k["source"], k["dose"], resolution=resolution)
+    case = mismatch_case(volunteer.theta, volunteer.h, k["source"], k["dose"], resolution=resolution,
+                         geometry=volunteer.geometry)
     case["fibres"] = {"alpha_endo": float(k["angles"][0]), "alpha_epi": float(k["angles"][1])}
     return case
 
@@ -120,16 +121,26 @@ def make_data(volunteer, kind: str, out: Path, *, resolution: str = "default", s
     return d
 
 
+def subject_name(volunteer, kind: str) -> str:
+    """The BO subject of one volunteer and kind: ``SYNTHETIC-HV1-angles``; the real LV's geometry is a patient's,
+    its data are simulated: ``REAL-LV-angles``."""
+    return f"{volunteer.name if volunteer.geometry else 'SYNTHETIC-' + volunteer.name}-{kind}"
+
+
 def model_forward(volunteer, mode: str, resolution: str = "default", kind: str = ""):
-    """The BO's forward model: the FE simulator on the volunteer's PCA geometry, sliding base, reading the mode's inputs."""
+    """The BO's forward model: the FE simulator on the volunteer's PCA geometry (the real LV: its mesh), sliding
+    base, reading the mode's inputs."""
     from lvcore.mechanics.forward import SimulatorForward
     from lvcore.studies.mismatch import MODEL_BASE
 
     space = bo_fibres.bo_space(mode)
     cond = {**space.fixed_dict(), EDP_NAME: CHAPTER_EDP, **{f"h{i + 1}": float(v) for i, v in enumerate(volunteer.h)}}
+    where = (f"the {volunteer.name} mesh" if volunteer.geometry
+             else f"SYNTHETIC-{volunteer.name} PCA geometry")
     return SimulatorForward(input_names=space.names, conditions=cond, base=MODEL_BASE, resolution=resolution,
-                            label=f"FE simulator on SYNTHETIC-{volunteer.name} PCA geometry ({resolution}, "
-                                  f"{MODEL_BASE} base; data: {kind})", warm_start=True)
+                            geometry=volunteer.geometry,
+                            label=f"FE simulator on {where} ({resolution}, {MODEL_BASE} base; data: {kind})",
+                            warm_start=True)
 
 
 # ----------------------------------------------------------------------------- common scale
@@ -149,7 +160,11 @@ def common_objective(Y, measured, scale, lvv_weight: float = LVV_WEIGHT) -> np.n
 
 
 def compare(entries: dict, states: dict, data: dict, n_initial: int) -> dict:
-    """Fixed vs free for one volunteer and kind on the common scale; ``entries``/``states`` by mode."""
+    """Fixed vs free for one volunteer and kind on the common scale, and by the noise model's χ² (σ_V, σ_S: one
+    scale for both modes and both objectives); ``entries``/``states`` by mode."""
+    from lvcore.optimise.bayesopt import PosteriorObjective
+
+    chi2 = PosteriorObjective(np.asarray(data["measured"], float), SIGMA_V_ML, SIGMA_S, {}, {}).misfit
     scale = common_scale([states[m] for m in bo_fibres.MODES], n_initial)
     measured, clean_y = np.asarray(data["measured"]), np.asarray(data["clean"])
     out = {"scale": scale.tolist()}
@@ -163,6 +178,7 @@ def compare(entries: dict, states: dict, data: dict, n_initial: int) -> dict:
         out[m] = {"objective_common_at_best": float(common_objective(y_best, measured, scale)[0]),
                   "objective_common_min": float(np.nanmin(f_all)),
                   "objective_own_scale": float(e["objective_best"]),
+                  "chi2_at_best": float(chi2(y_best)[0]),
                   "lvv_abs_error_ml": float(abs(y_best[0] - measured[0])),
                   "strain_rmse": float(np.sqrt(np.mean((y_best[1:] - measured[1:]) ** 2))),
                   "lvv_abs_error_vs_noise_free_ml": float(abs(y_best[0] - clean_y[0])),
@@ -177,18 +193,23 @@ def compare(entries: dict, states: dict, data: dict, n_initial: int) -> dict:
 def run_study(volunteers: Sequence[str] = DEFAULT_VOLUNTEERS, kinds: Sequence[str] = tuple(KINDS), *, out,
               n_initial: int = DEFAULT_INITIAL, n_iterations: int = DEFAULT_ITERATIONS, workers: int = 1,
               scheduler: str | None = None, seed: int = 0, resolution: str = "default", progress: bool = False,
-              forward_factory=None, simulate=None, log=None, n_boot: int = N_BOOT) -> dict:
+              forward_factory=None, simulate=None, log=None, n_boot: int = N_BOOT, objective: str = "chapter") -> dict:
     """Data with each mismatch kind, BO fixed and free per volunteer, the common-scale comparison; resumable.
 
+    ``volunteers``: bundled SYNTHETIC volunteers (``HV1``) and :data:`lvcore.studies.mismatch.REAL_LV`, the real
+    LV's mesh at the volunteers' median θ (its data simulated on it). ``objective``: the chapter's
+    standardised RSS or the regularised ``posterior`` (:func:`lvcore.studies.bo_fibres.posterior_objective`).
     ``forward_factory(volunteer, mode, kind)`` and ``simulate(case) -> outputs`` replace the simulator (tests).
     State files (every evaluation) go to ``out/state``, data to ``out/data``.
     """
-    from lvcore.studies.mismatch import bundled_volunteers
+    from lvcore.studies.mismatch import study_volunteers
 
     for k in kinds:
         if k not in KINDS:
             raise LVCoreError(f"--kinds: unknown mismatch kind {k!r}; choose from {', '.join(KINDS)}")
-    vols = bundled_volunteers(list(volunteers))
+    if objective not in bo_fibres.OBJECTIVES:
+        raise LVCoreError(f"--objective: choose from {', '.join(bo_fibres.OBJECTIVES)}, not {objective!r}")
+    vols = study_volunteers(list(volunteers))
     out = Path(out)
     t0 = time.perf_counter()
     runs = []
@@ -196,7 +217,7 @@ def run_study(volunteers: Sequence[str] = DEFAULT_VOLUNTEERS, kinds: Sequence[st
         for kind in kinds:
             for v in vols:
                 d = make_data(v, kind, out, resolution=resolution, simulate=simulate, seed=seed)
-                subject = bo_fibres.Subject(f"SYNTHETIC-{v.name}-{kind}", np.asarray(d["measured"]), Path("pca"))
+                subject = bo_fibres.Subject(subject_name(v, kind), np.asarray(d["measured"]), Path("pca"))
                 entries, states = {}, {}
                 for mode in bo_fibres.MODES:
                     fwd = (forward_factory(v, mode, kind) if forward_factory is not None
@@ -204,7 +225,7 @@ def run_study(volunteers: Sequence[str] = DEFAULT_VOLUNTEERS, kinds: Sequence[st
                     entries[mode] = bo_fibres.run_one(subject, mode, n_initial=n_initial, n_iterations=n_iterations,
                                                       seed=seed, resolution=resolution, state_dir=out / "state",
                                                       executor=executor, workers=workers, forward=fwd,
-                                                      progress=progress)
+                                                      progress=progress, objective=objective)
                     states[mode] = json.loads((out / "state" / f"{subject.stem}_{mode}.json").read_text())
                 c = compare(entries, states, d, n_initial)
                 run = {"volunteer": v.name, "kind": kind, "strain_rms_mismatch": d["strain_rms_mismatch"],
@@ -215,8 +236,12 @@ def run_study(volunteers: Sequence[str] = DEFAULT_VOLUNTEERS, kinds: Sequence[st
                         f"{run['free']['lvv_abs_error_ml']:.2f} mL; common objective fixed "
                         f"{run['fixed']['objective_common_at_best']:.3g} / free {run['free']['objective_common_at_best']:.3g}; "
                         f"free angles ({run['free']['alpha_endo']:.0f}, {run['free']['alpha_epi']:.0f})")
-    meta = {"study": "bo-mismatch", "label": "SYNTHETIC volunteers with a known model-data mismatch (F6 test)",
+    real = [v.name for v in vols if v.geometry]
+    meta = {"study": "bo-mismatch", "label": "SYNTHETIC volunteers with a known model-data mismatch (F6 test)"
+                                             + (f"; {', '.join(real)}: a real LV's mesh, its data simulated"
+                                                if real else ""),
             "volunteers": [v.name for v in vols], "kinds": {k: KINDS[k] for k in kinds},
+            "objective": objective_meta(objective),
             "fixed_angles": list(bo_fibres.FIXED_ANGLES),
             "budget": {"n_initial": n_initial, "n_iterations": n_iterations,
                        "label": bo_fibres.budget_label(n_initial, n_iterations)},
@@ -227,10 +252,26 @@ def run_study(volunteers: Sequence[str] = DEFAULT_VOLUNTEERS, kinds: Sequence[st
             "common_scale": "SD of each output over the union of both modes' initial designs (one standardisation "
                             "for fixed and free); LVV weight 2",
             "command": (f"lvcore study bo-mismatch --volunteers {','.join(v.name for v in vols)} --kinds "
-                        f"{','.join(kinds)} --initial {n_initial} --iterations {n_iterations} --out RESULTS")}
+                        f"{','.join(kinds)} --initial {n_initial} --iterations {n_iterations}"
+                        + (f" --objective {objective}" if objective != "chapter" else "") + " --out RESULTS")}
     result = summarise(runs, meta, n_boot=n_boot)
     write_outputs(result, out)
     return result
+
+
+def objective_meta(objective: str) -> dict:
+    """What the BO minimised, for the result's meta: the name and, for the regularised objective, its terms."""
+    if objective == "chapter":
+        return {"name": "chapter", "what": "the chapter's standardised RSS (each output scaled by its SD over the "
+                                           f"initial design; LVV weight {LVV_WEIGHT:g})"}
+    med, sd = bo_fibres.THETA_PRIOR
+    return {"name": objective,
+            "what": (f"regularised (not the chapter's): chi2 with sigma_V {SIGMA_V_ML:g} mL and sigma_S {SIGMA_S:g}, "
+                     f"plus a log-normal prior on a, b, af, bf (median {med:g} kPa, log-SD {sd:.3f}: the box's "
+                     f"edges at 2 SD) and, with free angles, a normal prior about the fixed pair "
+                     f"({bo_fibres.FIXED_ANGLES[0]:g}, {bo_fibres.FIXED_ANGLES[1]:g}) deg with SD "
+                     f"{bo_fibres.ANGLE_PRIOR_SD:g} deg"),
+            "theta_prior": {"median": med, "log_sd": sd}, "angle_prior_sd_deg": bo_fibres.ANGLE_PRIOR_SD}
 
 
 # ----------------------------------------------------------------------------- findings
@@ -457,7 +498,12 @@ def add_study_parser(study_subparsers) -> None:
     p = study_subparsers.add_parser("bo-mismatch", help="finding F6 as a real test: BO with fixed vs free fibre "
                                                         "angles on data with a known mismatch (SYNTHETIC)")
     p.add_argument("--volunteers", default=",".join(DEFAULT_VOLUNTEERS),
-                   help=f"comma-separated bundled volunteers (default {','.join(DEFAULT_VOLUNTEERS)})")
+                   help=f"comma-separated bundled volunteers, and REAL-LV for the real LV's mesh (default "
+                        f"{','.join(DEFAULT_VOLUNTEERS)})")
+    p.add_argument("--objective", choices=bo_fibres.OBJECTIVES, default="chapter",
+                   help="what the BO minimises: the chapter's standardised RSS, or 'posterior', the noise model's "
+                        "chi2 plus a weakly informative prior that keeps fits off the box's edges where the data do "
+                        "not decide (default 'chapter')")
     p.add_argument("--kinds", default=",".join(KINDS), help=f"mismatch kinds (default {','.join(KINDS)})")
     bo_fibres.add_budget_options(p, DEFAULT_INITIAL, DEFAULT_ITERATIONS, per_run=True)
     add_simulator_options(p)
@@ -471,14 +517,14 @@ def add_study_parser(study_subparsers) -> None:
 def _cli(args) -> int:
     vols, kinds = comma_list(args.volunteers), comma_list(args.kinds)
     try:
-        from lvcore.studies.mismatch import bundled_volunteers
+        from lvcore.studies.mismatch import study_volunteers
 
-        bundled_volunteers(vols)
+        study_volunteers(vols)
     except ValueError as err:
         raise LVCoreError(f"--volunteers: {err}") from None
     res = run_study(vols, kinds, out=args.out, n_initial=args.initial, n_iterations=args.iterations,
                     workers=args.workers, scheduler=args.scheduler, seed=args.seed, resolution=args.resolution,
-                    progress=not args.json, log=None if args.json else print)
+                    progress=not args.json, log=None if args.json else print, objective=args.objective)
     return print_result(args.json, clean({"verdicts": res["verdicts"], "meta": res["meta"]}),
                         lambda: f"{format_findings(res)}\nbudget: {res['meta']['budget']['label']}; wrote "
                                 f"{args.out}/{RESULT_FILE}, {RUNS_FILE} and figures")

@@ -247,6 +247,11 @@ def verdict_rows(result: dict) -> list[dict]:
             for r in result.get("rows", [])]
 
 
+def verdict_rows_by_dose(result: dict) -> dict:
+    """:func:`verdict_rows` keyed by ``(source, dose)``."""
+    return {(r["source"], r["dose"]): r for r in verdict_rows(result)}
+
+
 #: Data sets per compiled MCMC batch: every batch has this size (the last is padded), so one program serves all.
 BATCH = 40
 
@@ -270,4 +275,4 @@ def fit_cost(costs: Sequence[dict]) -> dict | None:
 
 __all__ = ["MODELS", "F1_INFLATION", "F1_CI_FLOOR", "unit_seed", "noisy_copies", "fit_datasets", "summarise",
            "PER_VOLUNTEER_DIGITS", "per_volunteer_values", "appearance", "sampler_text", "budget_text",
-           "verdict_rows", "BATCH", "fit_cost"]
+           "verdict_rows", "verdict_rows_by_dose", "BATCH", "fit_cost"]

@@ -15,12 +15,22 @@ import numpy as np
 
 from lvcore.domain.conditions import CHAPTER_ANGLES, CHAPTER_EDP, HO_FIXED
 from lvcore.mechanics.case_inputs import build_case
-from lvcore.domain.outputs import EDP_NAME, THETA_NAMES
+from lvcore.domain.outputs import DEFAULT_STRAIN_LAYER, EDP_NAME, THETA_NAMES
 from lvcore.studies._common import write_json_atomic
 
 #: The calibration model's fixed conditions (the ``chapter`` emulator).
 MODEL_ANGLES = CHAPTER_ANGLES
 MODEL_BASE = "sliding"
+
+
+def model_conditions_text() -> str:
+    """The calibration model's fixed conditions in words, e.g. ``sliding base, inner half, angles (−60°, 60°),
+    8 mmHg`` (from :data:`MODEL_BASE`, the default strain layer, :data:`MODEL_ANGLES` and the chapter's EDP)."""
+    angles = ", ".join(f"{a:g}°".replace("-", "−") for a in MODEL_ANGLES)
+    return (f"{MODEL_BASE} base, {DEFAULT_STRAIN_LAYER.replace('_', ' ')}, angles ({angles}), "
+            f"{CHAPTER_EDP:g} mmHg")
+
+
 #: Doses per source, chosen from a simulation-only pass (``--simulate-only``, HV1 and HV5, docs/studies.md) to
 #: span a strain RMS mismatch of about 0.005-0.06 where the physics reaches it: the angle rotation peaks near
 #: 0.017 (30°) and falls beyond; the sheet terms stay below 0.002 even at 32x (a null control, two doses);
