@@ -163,3 +163,23 @@ def test_the_regularised_objective_is_named_in_the_result(tmp_path):
     assert run["free"]["chi2_at_best"] >= 0 and run["fixed"]["chi2_at_best"] >= 0
     with pytest.raises(bm.LVCoreError, match="--objective"):
         bm.run_study(["HV1"], ["angles"], out=tmp_path, forward_factory=fac, simulate=sim, objective="map")
+
+
+def test_the_regularised_run_is_shipped_on_eight_volunteers_and_the_real_lv_and_quoted_in_the_docs():
+    """``bo_mismatch.json``'s ``posterior`` part: F6 with the regularised objective on HV1-HV8 and the real LV;
+    docs/studies.md's block is its generated text; the findings table has its own F6 row, which decides only on
+    volunteers whose fits are interior."""
+    from lvcore.studies import findings as fd
+    from lvcore.studies.mismatch import REAL_LV
+
+    shipped = json.loads((bundled_studies_dir() / bm.RESULT_FILE).read_text())
+    post = shipped[bm.POSTERIOR_KEY]
+    assert post["meta"]["objective"]["name"] == "posterior" and len(post["meta"]["volunteers"]) >= 9
+    assert REAL_LV in post["meta"]["volunteers"] and {r["volunteer"] for r in post["runs"]} >= {REAL_LV, "HV8"}
+    assert all(r[m]["chi2_at_best"] >= 0 for r in post["runs"] for m in ("fixed", "free"))
+    assert bm.posterior_markdown(shipped) in DOCS.read_text()
+    assert bm.DOCS_BEGIN + "\n" + bm.posterior_markdown(shipped) + "\n" + bm.DOCS_END in DOCS.read_text()
+    rows = [r for r in fd.verdicts(fd.load()) if "regularised BO" in r["finding"]]
+    assert len(rows) == 1 and "not the chapter's objective" in rows[0]["doses"]
+    verdict_kinds = {(r["objective"], r["kind"]) for r in bm.verdict_rows(bm.load(bundled_studies_dir()))}
+    assert ("regularised", "angles") in verdict_kinds and ("chapter", "angles") in verdict_kinds

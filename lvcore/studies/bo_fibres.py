@@ -72,9 +72,10 @@ OBJECTIVES = ("chapter", "posterior")
 #: the BO box [0.1, 10], and log-SD ln(10)/2, so the box's edges sit 2 SD out. Weakly informative and set by the
 #: box alone, never by the volunteers' hidden θ.
 THETA_PRIOR = (1.0, float(np.log(10.0) / 2.0))
-#: Its prior on each free fibre angle (deg): normal about the fixed-angle mode's pair (the rule-based angles the
-#: fixed mode assumes) with SD 20°, the order of the spread of measured helix angles between hearts.
-ANGLE_PRIOR_SD = 20.0
+#: Its prior on each free fibre angle (deg): normal about the middle of the angle's box, SD a quarter of the box's
+#: width (the edges 2 SD out), by the same rule as the stiffnesses'. Not about the fixed pair: its α_epi (90°) is
+#: the box's edge, where a prior would park every fit the data do not move.
+ANGLE_PRIOR = {n: ((lo + hi) / 2.0, (hi - lo) / 4.0) for n, (lo, hi) in ANGLE_BOUNDS.items()}
 
 
 class StudyStateError(LVCoreError):
@@ -124,13 +125,13 @@ def hidden_truth() -> dict:
 def posterior_objective(measured, mode: str):
     """The regularised BO objective of one run (:class:`lvcore.optimise.bayesopt.PosteriorObjective`): the
     calibration's noise model (σ_V, σ_S) plus :data:`THETA_PRIOR` on a, b, af, bf and, in ``free`` mode,
-    :data:`ANGLE_PRIOR_SD` about :data:`FIXED_ANGLES` on the angles."""
+    :data:`ANGLE_PRIOR` on the angles."""
     from lvcore.domain.conditions import SIGMA_S, SIGMA_V_ML
     from lvcore.optimise.bayesopt import PosteriorObjective
 
     if mode not in MODES:
         raise LVCoreError(f"mode must be one of {MODES}, got {mode!r}")
-    angles = ({n: (float(c), ANGLE_PRIOR_SD) for n, c in zip(ANGLE_NAMES, FIXED_ANGLES)} if mode == "free" else {})
+    angles = {n: ANGLE_PRIOR[n] for n in ANGLE_NAMES} if mode == "free" else {}
     return PosteriorObjective(np.asarray(measured, dtype=float), SIGMA_V_ML, SIGMA_S,
                               {n: THETA_PRIOR for n in THETA_NAMES}, angles)
 
@@ -329,6 +330,7 @@ def run_one(subject: Subject, mode: str, *, n_initial: int = CHAPTER_INITIAL, n_
     if objective != "chapter":  # older states have no key: they are the chapter's
         settings["objective"] = objective
         posterior = posterior_objective(subject.measured, mode)
+        settings["prior"] = {n: list(v) for n, v in {**posterior.log_prior, **posterior.normal_prior}.items()}
     path = None if state_dir is None else Path(state_dir) / f"{subject.stem}_{mode}.json"
     log = EvaluationLog(path, settings)
     total = n_initial + n_iterations

@@ -320,12 +320,16 @@ def _f6_text(t: dict) -> str:
 
 
 def _f6_rows(bo_mismatch: dict | None, bo_fibres: dict | None) -> list[dict]:
-    rows = []
-    if bo_mismatch and bo_mismatch.get("runs"):
-        from lvcore.studies.bo_mismatch import KINDS
+    from lvcore.studies.bo_mismatch import KINDS, POSTERIOR_KEY
 
-        for kind in dict.fromkeys(r["kind"] for r in bo_mismatch["runs"]):
-            pairs = {r["volunteer"]: (r["fixed"], r["free"]) for r in bo_mismatch["runs"]
+    rows = []
+    parts = [(bo_mismatch, "")] + ([(bo_mismatch[POSTERIOR_KEY], "; regularised BO")]
+                                   if bo_mismatch and bo_mismatch.get(POSTERIOR_KEY) else [])
+    for part, label in parts:
+        if not part or not part.get("runs"):
+            continue
+        for kind in dict.fromkeys(r["kind"] for r in part["runs"]):
+            pairs = {r["volunteer"]: (r["fixed"], r["free"]) for r in part["runs"]
                      if r["kind"] == kind and r.get("fixed") and r.get("free")}
             t = f6_tests(pairs)
             absorb = KINDS.get(kind, {}).get("absorbable")
@@ -333,9 +337,12 @@ def _f6_rows(bo_mismatch: dict | None, bo_fibres: dict | None) -> list[dict]:
             if t["call"] is None:
                 why.append(f"fewer than {N_MIN} volunteers with interior fits")
             rows.append({"finding": f"F6 (known mismatch: {kind}" + ("" if absorb else ", angles cannot absorb")
-                         + ")", "verdict": combine([t["call"]]),
+                         + label + ")", "verdict": combine([t["call"]]),
                          "ci": _f6_text(t) + (f": {t['call']}" if t["call"] else ""),
-                         "unit": f"{t['n_interior']} volunteers", "doses": KINDS.get(kind, {}).get("what", kind),
+                         "unit": f"{t['n_interior']} volunteers",
+                         "doses": KINDS.get(kind, {}).get("what", kind) + (
+                             f"; {part['meta']['budget']['label']}; a weakly informative prior (not the chapter's "
+                             "objective)" if label else ""),
                          "source": SOURCES["bo_mismatch"], "why": "; ".join(why) or "deciding"})
     if bo_fibres:
         entries = bo_fibres["entries"] if isinstance(bo_fibres, dict) else bo_fibres
