@@ -23,23 +23,19 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from ship_mismatch import replace_block  # noqa: E402
+from ship_mismatch import findings_blocks, replace_block  # noqa: E402
 
 VOLUNTEERS = "HV1,HV2,HV3,HV4,HV5,HV6,HV7,HV8,REAL-LV"
 
 
 def update_docs(docs: Path, dest: Path) -> None:
     """docs/studies.md's regularised-F6 block and the findings prose and table, from the JSON in ``dest``."""
-    from lvcore.studies import bo_mismatch, findings
+    from lvcore.studies import bo_mismatch
 
     shipped = json.loads(dest.read_text())
-    text = docs.read_text()
-    text = replace_block(text, bo_mismatch.DOCS_BEGIN, bo_mismatch.DOCS_END,
+    text = replace_block(docs.read_text(), bo_mismatch.DOCS_BEGIN, bo_mismatch.DOCS_END,
                          bo_mismatch.posterior_markdown(shipped), docs)
-    found = findings.load(dest.parent)
-    text = replace_block(text, findings.PROSE_BEGIN, findings.PROSE_END, findings.prose_markdown(found), docs)
-    text = replace_block(text, findings.DOCS_BEGIN, findings.DOCS_END, findings.docs_markdown(found), docs)
-    docs.write_text(text)
+    docs.write_text(findings_blocks(text, dest.parent, docs))
 
 
 def main(argv=None) -> int:

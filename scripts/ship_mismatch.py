@@ -58,18 +58,25 @@ def replace_block(text: str, begin: str, end: str, body: str, path) -> str:
     return f"{head}{begin}\n{body}\n{end}{tail}"
 
 
+def findings_blocks(text: str, folder: Path, path) -> str:
+    """``text`` (docs/studies.md at ``path``) with the findings prose and table blocks regenerated from the
+    result files in ``folder`` (the bundled ones where it lacks some)."""
+    from lvcore.studies import findings
+
+    found = findings.load(folder)
+    text = replace_block(text, findings.PROSE_BEGIN, findings.PROSE_END, findings.prose_markdown(found), path)
+    return replace_block(text, findings.DOCS_BEGIN, findings.DOCS_END, findings.docs_markdown(found), path)
+
+
 def update_docs(path: Path, dest: Path) -> None:
     """Rewrite docs/studies.md's mismatch block and the findings prose and table blocks from the shipped JSON in
     ``dest``'s folder."""
-    from lvcore.studies import findings, mismatch
+    from lvcore.studies import mismatch
 
     shipped = mismatch.load(dest.parent)
     text = path.read_text()
     text = replace_block(text, mismatch.DOCS_BEGIN, mismatch.DOCS_END, mismatch.docs_markdown(shipped), path)
-    found = findings.load(dest.parent)
-    text = replace_block(text, findings.PROSE_BEGIN, findings.PROSE_END, findings.prose_markdown(found), path)
-    text = replace_block(text, findings.DOCS_BEGIN, findings.DOCS_END, findings.docs_markdown(found), path)
-    path.write_text(text)
+    path.write_text(findings_blocks(text, dest.parent, path))
 
 
 def carry_over(res: dict, path: Path, part: str = "main") -> None:
