@@ -47,8 +47,8 @@ def main(argv=None) -> int:
                                                                   "(default build/f6_regularised)")
     p.add_argument("--volunteers", default=VOLUNTEERS, help=f"default {VOLUNTEERS}")
     p.add_argument("--kinds", default="angles", help="mismatch kinds (default angles: the one free angles can absorb)")
-    p.add_argument("--initial", type=int, default=100, help="BO initial design per run (default 100)")
-    p.add_argument("--iterations", type=int, default=100, help="BO iterations per run (default 100)")
+    p.add_argument("--initial", type=int, default=200, help="BO initial design per run (default 200)")
+    p.add_argument("--iterations", type=int, default=200, help="BO iterations per run (default 200)")
     p.add_argument("--resolution", default="fast", help="simulator mesh preset (default fast, as the chapter "
                                                        "objective's shipped run)")
     p.add_argument("--workers", type=int, default=2, help="local simulator workers (default 2)")

@@ -179,6 +179,9 @@ def test_the_regularised_run_is_shipped_on_eight_volunteers_and_the_real_lv_and_
     assert all(r[m]["chi2_at_best"] >= 0 for r in post["runs"] for m in ("fixed", "free"))
     assert bm.posterior_markdown(shipped) in DOCS.read_text()
     assert bm.DOCS_BEGIN + "\n" + bm.posterior_markdown(shipped) + "\n" + bm.DOCS_END in DOCS.read_text()
+    on_box = [(r["volunteer"], m) for r in post["runs"] for m in ("fixed", "free")
+              if fd.bo_on_bound(r[m]["theta"], r[m]["alpha_endo"], r[m]["alpha_epi"], m == "free")]
+    assert not on_box, f"the shipped regularised run has fits on the BO box: {on_box}"
     rows = [r for r in fd.verdicts(fd.load()) if "regularised BO" in r["finding"]]
     assert len(rows) == 1 and "not the chapter's objective" in rows[0]["doses"]
     verdict_kinds = {(r["objective"], r["kind"]) for r in bm.verdict_rows(bm.load(bundled_studies_dir()))}
