@@ -189,3 +189,19 @@ def test_vectorised_cluster_bootstrap_equals_the_loop_over_resamples(stat):
             assert fast["ci"] == slow["ci"]
         else:
             assert fast["ci"] == pytest.approx(slow["ci"], rel=1e-12, abs=1e-14)
+
+
+def test_the_real_lv_is_a_sixth_unit_in_a_sensitivity_ci_only(shipped):
+    """Where the real LV was fitted at a volunteers' dose and budget, F1's CI is also given with it as one more
+    unit (its values come from its own subject emulator); the calls and verdicts use the volunteers only."""
+    mm_result = shipped["mismatch"]
+    real = {(r["source"], r["dose"]) for r in mm_result["real_lv"]["rows"]}
+    tests = fd.mismatch_dose_tests(mm_result)
+    with_real = [t for t in tests if t["f1_with_real_lv"]]
+    assert {(t["source"], t["dose"]) for t in with_real} == real
+    for t in with_real:
+        assert t["f1_with_real_lv"]["n"] == t["n_units"] + 1 and "REAL-LV" in t["f1_with_real_lv"]["unit_values"]
+        assert "REAL-LV" not in t["f1"]["unit_values"]
+    without = {**mm_result, "real_lv": None}
+    assert [t["calls"] for t in fd.mismatch_dose_tests(without)] == [t["calls"] for t in tests]
+    assert "With the real LV as one more unit (6 units;" in fd.prose_markdown(shipped)

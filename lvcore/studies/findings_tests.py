@@ -23,6 +23,17 @@ def _chains(row: dict, result: dict) -> int:
     return int((smp or {}).get("num_chains", 0))
 
 
+def _real_lv_units(result: dict) -> dict:
+    """The real LV's per-data-set values (``result["real_lv"]``) by (source, dose, sampler budget text): a sixth
+    unit beside the volunteers for a sensitivity CI (``f1_with_real_lv``); never in a verdict (one geometry, its
+    own subject emulator)."""
+    from lvcore.studies.mismatch import budget_text
+
+    rl = result.get("real_lv") or {}
+    budget = budget_text(rl.get("sampler"))
+    return {(r["source"], r["dose"], budget): r["per_volunteer"] for r in rl.get("rows", []) if r.get("per_volunteer")}
+
+
 def mismatch_dose_tests(result: dict) -> list[dict]:
     """One record per mismatch dose (the check's row where it refitted the dose): whether it decides, and why.
 
@@ -35,6 +46,7 @@ def mismatch_dose_tests(result: dict) -> list[dict]:
     """
     from lvcore.studies.mismatch import verdict_rows
 
+    real = _real_lv_units(result)
     out = []
     for row in verdict_rows(result):
         m = (row.get("strain_rms_mismatch") or {}).get("mean") or 0.0
@@ -54,11 +66,15 @@ def mismatch_dose_tests(result: dict) -> list[dict]:
                         for v, d in pv.items()}
             f3d, f3v = cluster_boot(gap("iid", "discrepancy")), cluster_boot(gap("iid", "volume"))
             unit, n_units = "volunteers", len(pv)
+            extra = real.get((row["source"], row["dose"], row.get("budget")))
+            f1_real = (cluster_boot({v: np.asarray([x for x in d["iid_sigma_s"] if x is not None]) / SIGMA_S
+                                     for v, d in {**pv, **extra}.items()}) if extra else None)
         else:
             f1, f2 = row["iid_sigma_s_inflation"], row["discrepancy_sigma_s"]
             g = row["output_error_gap"]
             f3d, f3v = g["iid_minus_discrepancy"], g["iid_minus_volume"]
             unit, n_units = "data sets", int(row.get("n_datasets") or 0)
+            f1_real = None
         why, keys = [], []
         if label != "realistic":
             why.append(label), keys.append(label)
@@ -88,7 +104,8 @@ def mismatch_dose_tests(result: dict) -> list[dict]:
         out.append({"source": row["source"], "dose": row["dose"], "budget": row.get("budget"), "chains": chains,
                     "strain_rms": m, "range": label, "range_reason": reason, "testable": testable,
                     "rhat_share": rhat, "ess_median": ess, "unit": unit, "n_units": n_units,
-                    "f1": f1, "f2": f2, "f3_disc": f3d, "f3_vol": f3v, "calls": {"F1": c1, "F2": c2, "F3": c3},
+                    "f1": f1, "f2": f2, "f3_disc": f3d, "f3_vol": f3v, "f1_with_real_lv": f1_real,
+                    "calls": {"F1": c1, "F2": c2, "F3": c3},
                     "deciding": not why, "why_not": why, "why_keys": keys})
     return out
 
@@ -396,6 +413,8 @@ def dose_rows(result: dict) -> list[dict]:
                                              for m in ("volume", "iid", "discrepancy")),
                     "CI over": f"{t['n_units']} {t['unit']}",
                     F1_COLUMN: fmt_ci(t["f1"], ".2f"),
+                    "F1 with the real LV as a unit (sensitivity)": (fmt_ci(t["f1_with_real_lv"], ".2f")
+                                                                    if t["f1_with_real_lv"] else "–"),
                     "calls F1 / F2 / F3": " / ".join(t["calls"][f] or "–" for f in ("F1", "F2", "F3")),
                     "deciding": "yes" if t["deciding"] else "no: " + "; ".join(t["why_not"])})
     return out
