@@ -87,12 +87,18 @@ def carry_over(res: dict, path: Path, part: str = "main") -> None:
     :func:`lvcore.studies.mismatch.unit_seed`). Each carried row gets ``carried_over`` (the earlier run's
     date); ``res["carried_over"]`` says from which command. ``part="check"``: ``res`` is the convergence check,
     filled from the earlier result's ``check`` (same check budget), so a check that refits some doses anew keeps
-    the earlier check's rows of the others.
+    the earlier check's rows of the others. An earlier ship whose check was promoted to its run
+    (:func:`lvcore.studies.mismatch.promote_check`) fills the check from its rows and the main run not at all.
     """
     from lvcore.studies import mismatch
 
     top = json.loads(path.read_text())
-    old = top if part == "main" else (top.get("check") or {})
+    if top.get("superseded"):  # a promoted ship: its rows are a check of every dose, its main run was not shipped
+        if part == "main":
+            return
+        old = top
+    else:
+        old = top if part == "main" else (top.get("check") or {})
     keys = ("num_warmup", "num_samples", "num_chains")
     volunteers = top.get("volunteers")
     if (volunteers != res.get("volunteers", volunteers) or top.get("seeds_per_dose") != res.get("seeds_per_dose",
@@ -155,6 +161,9 @@ def main(argv=None) -> int:
     p.add_argument("--real-lv-doses", default="angles=5,15,30;base=1;heterogeneity=0.4",
                    help="the doses run on the real LV beside the volunteers, at the check's budget, shipped as the "
                         "JSON's real_lv ('' none; default %(default)r)")
+    p.add_argument("--keep-main-run", action="store_true",
+                   help="ship the main run beside a convergence check that refitted every dose (default: the check "
+                        "becomes the shipped run and the main run is recorded as superseded)")
     p.add_argument("--real-lv-emulator", default="",
                    help="the real LV's subject emulator (sliding base, inner half, (-60, 60) deg, 8 mmHg; "
                         "lvcore emulator build --geometry <real LV template> ...); without it only the real LV's fits "
@@ -198,6 +207,8 @@ def main(argv=None) -> int:
             carry_over(res["check"], Path(args.carry_from), part="check")
     if args.real_lv_doses:
         res["real_lv"] = real_lv_section(args, samplers)
+    if not args.keep_main_run:
+        res = mismatch.promote_check(res)  # a check of every dose becomes the run; the main run is superseded
     cmd = "python scripts/ship_mismatch.py " + " ".join(f"--{k.replace('_', '-')} {shlex.quote(str(getattr(args, k)))}"
                                                         for k in SHIP) + (" --recorded-only" if args.recorded_only else "") \
         + (f" --carry-from {shlex.quote(Path(args.carry_from).name)}" if args.carry_from else "") \

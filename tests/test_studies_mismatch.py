@@ -1,4 +1,6 @@
 """Mismatch study: the mismatched cases, the per-dose summaries and CIs, the appearance rule, CLI errors."""
+import json
+
 import numpy as np
 import pytest
 
@@ -327,3 +329,41 @@ def test_carry_over_replaces_a_dose_fitted_for_some_volunteers_only(mismatch_res
            "not_fitted": [{"volunteer": "HV2", "source": "dispersion", "dose": 2.0}]}
     ship.carry_over(res, tmp_path / "old.json")
     assert [(r["dose"], r.get("carried_over")) for r in res["rows"]] == [(1.0, None), (2.0, "2026-11-25")]
+
+
+def test_a_check_of_every_dose_becomes_the_shipped_run_and_the_main_run_is_superseded(mismatch_result):
+    """promote_check: with a convergence check that refitted every dose, the check's rows and sampler are the
+    run (every shipped fit has its chains) and the main run is only recorded (budget, worst R-hat share); a check
+    of some doses leaves the result as it is. The shipped mismatch.json is promoted: no fit with one chain."""
+    res = {**mismatch_result(), "sampler": {"num_chains": 1, "num_warmup": 150, "num_samples": 150}}
+    smp = {"num_chains": 2, "num_warmup": 300, "num_samples": 300}
+    full = {"sampler": smp, "rows": [dict(r, n_datasets=99) for r in res["rows"]], "failed": [], "not_fitted": []}
+    out = mm.promote_check({**res, "check": full})
+    assert "check" not in out and out["sampler"] == smp and [r["n_datasets"] for r in out["rows"]] == [99] * len(
+        res["rows"])
+    assert out["superseded"]["sampler"] == res["sampler"] and out["complete"]
+    assert all(r["budget"] == "2 × (300 + 300)" for r in mm.verdict_rows(out))
+    some = {**full, "rows": full["rows"][1:]}
+    assert mm.promote_check({**res, "check": some}) == {**res, "check": some}
+    assert mm.promote_check(res) == res
+    from lvcore.studies import results
+
+    shipped = mm.load(dict(results.result_sources()["mismatch"])["bundled"])
+    assert "check" not in shipped and shipped["sampler"]["num_chains"] >= 2 and shipped["superseded"]
+    assert (shipped["real_lv"]["sampler"]["num_chains"]) >= 2
+
+
+def test_carry_over_from_a_promoted_ship_fills_the_check_and_not_the_main_run(tmp_path, mismatch_result):
+    ship = load_script("scripts/ship_mismatch.py")
+    smp = {"num_chains": 2, "num_warmup": 300, "num_samples": 300}
+    full = mismatch_result()
+    promoted = {**full, "sampler": smp, "superseded": {"sampler": {"num_chains": 1}}, "shipped": {"date": "d"}}
+    (tmp_path / "old.json").write_text(json.dumps({**promoted, "folder": None}))
+    missing = [{"source": r["source"], "dose": r["dose"]} for r in full["rows"][:1]]
+    check = {"sampler": smp, "rows": full["rows"][1:], "not_fitted": missing, "failed": []}
+    ship.carry_over(check, tmp_path / "old.json", part="check")
+    assert [(r["source"], r["dose"]) for r in check["rows"]] == [(r["source"], r["dose"]) for r in full["rows"]]
+    main = {**full, "sampler": {"num_chains": 1, "num_warmup": 150, "num_samples": 150}, "not_fitted": missing,
+            "rows": full["rows"][1:]}
+    ship.carry_over(main, tmp_path / "old.json")          # no main run in a promoted ship: nothing carried
+    assert len(main["rows"]) == len(full["rows"]) - 1 and "carried_over" not in main

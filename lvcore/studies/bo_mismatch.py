@@ -270,7 +270,8 @@ def objective_meta(objective: str) -> dict:
                      f"plus a log-normal prior on a, b, af, bf (median {med:g} kPa, log-SD {sd:.3f}: the box's "
                      f"edges at 2 SD) and, with free angles, a normal prior on each about its box's middle, SD a "
                      f"quarter of its width ("
-                     + ", ".join(f"{n} {m:g} +- {sd:g} deg" for n, (m, sd) in bo_fibres.ANGLE_PRIOR.items()) + ")"),
+                     + ", ".join(f"{n} {mean:g} +- {width:g} deg" for n, (mean, width) in bo_fibres.ANGLE_PRIOR.items())
+                     + ")"),
             "theta_prior": {"median": med, "log_sd": sd},
             "angle_prior": {n: {"mean": m, "sd": s} for n, (m, s) in bo_fibres.ANGLE_PRIOR.items()}}
 

@@ -123,9 +123,11 @@ def prose_markdown(result: dict) -> str:
                   for m in r.get("diagnostics", {}) if r["diagnostics"][m].get("share_rhat_over_1_05") is not None]
               for k in (False, True)}
     if shares[False]:
-        out.append(f"* Sampler: at the main run's budget {100 * min(shares[False]):.0f}–{100 * max(shares[False]):.0f} % "
-                   "of the data sets per dose and likelihood have split R-hat > 1.05 (one chain: the R-hat of its "
-                   "two halves, which cannot see a second mode)"
+        one = (mm.get("sampler") or {}).get("num_chains") == 1
+        out.append(f"* Sampler: at the main run's budget ({budget_text(mm.get('sampler'))}) "
+                   f"{100 * min(shares[False]):.0f}–{100 * max(shares[False]):.0f} % "
+                   "of the data sets per dose and likelihood have split R-hat > 1.05"
+                   + (" (one chain: the R-hat of its two halves, which cannot see a second mode)" if one else "")
                    + (f"; at the check budget {100 * min(shares[True]):.0f}–{100 * max(shares[True]):.0f} %."
                       if shares[True] else "."))
     pv = [f"{s} {d:g}" for (s, d), t in tests.items() if t["unit"] == "volunteers"]

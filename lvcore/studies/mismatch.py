@@ -81,8 +81,8 @@ from lvcore.studies._common import clean, write_json_atomic
 from lvcore.studies.mismatch_docs import DOCS_BEGIN, DOCS_END, docs_markdown, mesh_note, volunteers_text
 from lvcore.studies.mismatch_fit import (BATCH, F1_CI_FLOOR, F1_INFLATION, MODELS, PER_VOLUNTEER_DIGITS,  # noqa: F401
                                          appearance, budget_text, fit_cost, fit_datasets, noisy_copies,
-                                         per_volunteer_values, sampler_text, summarise, unit_seed, verdict_rows,
-                                         verdict_rows_by_dose)
+                                         per_volunteer_values, promote_check, sampler_text, summarise, unit_seed,
+                                         verdict_rows, verdict_rows_by_dose)
 from lvcore.studies.mismatch_sim import (DEFAULT_DOSES, HETEROGENEITY_SEED, MODEL_ANGLES, MODEL_BASE,  # noqa: F401
                                          REAL_LV, REAL_LV_THETA, SOURCE_LABELS, SOURCES, Volunteer, bundled_volunteers,
                                          dose_key, dose_label, measured_doses, mismatch_case, model_conditions_text,
@@ -620,6 +620,7 @@ __all__ = ["SOURCES", "DEFAULT_DOSES", "MODEL_ANGLES", "MODEL_BASE", "REAL_LV", 
            "F1_INFLATION", "F1_CI_FLOOR", "BATCH", "PER_VOLUNTEER_DIGITS", "Volunteer", "mismatch_case",
            "bundled_volunteers", "dose_key", "dose_label", "simulate_all", "unit_seed", "noisy_copies",
            "fit_datasets", "run_study", "summarise", "per_volunteer_values", "appearance", "measured_doses",
-           "strain_rms", "fit_cost", "budget_text", "sampler_text", "verdict_rows", "verdict_rows_by_dose", "model_conditions_text", "RESULT_FILE", "COMMAND",
+           "strain_rms", "fit_cost", "budget_text", "sampler_text", "verdict_rows", "verdict_rows_by_dose",
+           "promote_check", "model_conditions_text", "RESULT_FILE", "COMMAND",
            "TITLES", "MISSING", "load", "source_line", "tables", "figures", "docs_markdown", "DOCS_BEGIN",
            "DOCS_END", "add_study_parser", "kernel_note"]

@@ -150,6 +150,13 @@ def docs_markdown(result: dict) -> str:
     if kind != "additive":   # never read as the chapter's: say which kernel the discrepancy likelihood had
         lines += ["", f"**Discrepancy kernel: {kind}** (sector × level), not the chapter's additive one: the "
                   "discrepancy likelihood's σ_S and output error below are of that model."]
+    sup = result.get("superseded")
+    if sup:
+        worst = sup.get("max_share_rhat_over_1_05")
+        lines += ["", f"**One budget.** Every dose was refitted on the same data sets (same noise seeds) at "
+                      f"{sampler_text(result)}; the earlier main run at {budget_text(sup.get('sampler'))}"
+                      + (f" (split R-hat > 1.05 in up to {100 * worst:.0f} % of a dose's data sets)" if worst is not None
+                         else "") + " is superseded and not shipped (`lvcore.studies.mismatch.promote_check`)."]
     co = result.get("carried_over")
     if co:
         lines += ["", f"**Carried over (†):** {len(co['doses'])} doses (" + ", ".join(

@@ -247,6 +247,29 @@ def verdict_rows(result: dict) -> list[dict]:
             for r in result.get("rows", [])]
 
 
+def promote_check(result: dict) -> dict:
+    """``result`` with its convergence check as the study's run, when the check refitted every dose of the main
+    run on the same data sets: the check's rows, sampler, appearance, cost and gaps replace the main run's, and the
+    main run is dropped, its budget and worst split R-hat share kept under ``superseded``. So every shipped fit has
+    the check's chains. A result without a complete check is returned unchanged.
+    """
+    check = result.get("check") or {}
+    main = {(r["source"], r["dose"]) for r in result.get("rows", [])}
+    if not check.get("rows") or main - {(r["source"], r["dose"]) for r in check["rows"]}:
+        return result
+    shares = [d.get("share_rhat_over_1_05") for r in result["rows"] for d in (r.get("diagnostics") or {}).values()]
+    shares = [x for x in shares if x is not None]
+    out = {k: v for k, v in result.items() if k not in ("check", "carried_over")}
+    out.update(rows=check["rows"], sampler=check["sampler"], doses=check.get("doses", result.get("doses")),
+               appearance=check.get("appearance", result.get("appearance")), fit_cost=check.get("fit_cost"),
+               failed=check.get("failed", []), not_fitted=check.get("not_fitted", []),
+               complete=not check.get("failed") and not check.get("not_fitted"),
+               superseded={"sampler": result.get("sampler"), "rows": len(result.get("rows", [])),
+                           "max_share_rhat_over_1_05": max(shares) if shares else None,
+                           "why": "every dose was refitted on the same data sets at the check's budget"})
+    return out
+
+
 def verdict_rows_by_dose(result: dict) -> dict:
     """:func:`verdict_rows` keyed by ``(source, dose)``."""
     return {(r["source"], r["dose"]): r for r in verdict_rows(result)}
@@ -275,4 +298,4 @@ def fit_cost(costs: Sequence[dict]) -> dict | None:
 
 __all__ = ["MODELS", "F1_INFLATION", "F1_CI_FLOOR", "unit_seed", "noisy_copies", "fit_datasets", "summarise",
            "PER_VOLUNTEER_DIGITS", "per_volunteer_values", "appearance", "sampler_text", "budget_text",
-           "verdict_rows", "verdict_rows_by_dose", "BATCH", "fit_cost"]
+           "verdict_rows", "verdict_rows_by_dose", "promote_check", "BATCH", "fit_cost"]
