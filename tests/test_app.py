@@ -358,7 +358,7 @@ def test_my_subject_offers_the_edpvr_emulator_build_and_passes_it_on(monkeypatch
     at.selectbox(key="my_example").select("SYNTHETIC_HV3").run()
     assert not at.exception and not at.error, [e.value for e in at.error]
     box = at.checkbox(key="my_build_edpvr")
-    assert box.label == panel.EDPVR_LABEL and "+2.5 min" in box.label
+    assert box.label == panel.EDPVR_LABEL and "+1.5 min" in box.label
     assert box.value is subject.DEFAULT_EDPVR is False   # off by default, as the CLI
     for ticked in (False, True):
         at.checkbox(key="my_build_edpvr").set_value(ticked).run()

@@ -19,7 +19,7 @@ SESSION_KEY = "subject_emulators"
 #: Label prefix of a built subject emulator in the My subject page's emulator choice.
 LABEL_PREFIX = "subject: "
 #: The build option's checkbox: its own EDPVR emulator too (``lvcore emulator build --edpvr``).
-EDPVR_LABEL = ("Also build the EDPVR emulator (about +2.5 min on 2 cores; the derived EDPVR and stress then take a "
+EDPVR_LABEL = ("Also build the EDPVR emulator (about +1.5 min on 2 cores; the derived EDPVR and stress then take a "
                "fraction of a second instead of minutes of FE solves)")
 
 

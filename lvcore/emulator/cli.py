@@ -95,8 +95,9 @@ def register(subparsers) -> None:
                    help="also build the subject's EDPVR emulator into OUT/edpvr: FE load paths of 0-30 mmHg on the "
                         f"same mesh ({ed.n_train} + {ed.n_valid} + {ed.n_test} paths), so the derived EDPVR of a "
                         "calibration through this emulator is evaluated directly (0.01 s) instead of by 700 FE "
-                        "solves (2-3 min each calibration); it adds about 2.5 min on 2 cores with the default mesh "
-                        "(158 s on SYNTHETIC_HV3, three times the rest of that build; BENCHMARKS.md row 51) "
+                        "solves (2-3 min each calibration); it adds about 1.5 min on 2 cores with the default mesh "
+                        "(82 s on SYNTHETIC_HV3, whose build took 39 s without it and 122 s with it; BENCHMARKS.md "
+                        "row 51) "
                         f"(default {'on' if DEFAULT_EDPVR else 'off'})")
     b.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the design and training, 0 to 2^32 - 1 (default 0)")
     from lvcore.emulator.subject import default_training_config

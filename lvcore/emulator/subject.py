@@ -255,7 +255,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
         half), recorded in the emulator's metadata; a prior mean must have the same layer.
     edpvr, edpvr_design : bool, EdpvrDesign
         Also build the subject EDPVR emulator into ``out/edpvr`` (:mod:`lvcore.emulator.subject_edpvr`; default
-        :data:`DEFAULT_EDPVR`, off: 304 load paths, 158 s on 2 cores for SYNTHETIC_HV3's default mesh, BENCHMARKS.md
+        :data:`DEFAULT_EDPVR`, off: 304 load paths, 82 s on 2 cores for SYNTHETIC_HV3's default mesh, BENCHMARKS.md
         row 51), with this design (default 256 + 16 + 32 paths): the derived EDPVR then needs no FE solve.
 
     The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) as every chunk returns, so a build that
