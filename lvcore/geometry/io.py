@@ -235,7 +235,7 @@ def _mesh_identity(path, template: LVTemplate):
     try:
         p = Path(path).resolve()
         st = p.stat()
-        return (str(p), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, hash(template), template)
+        return (str(p), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, template)
     except (OSError, TypeError, ValueError):
         return None  # the reader below reports what is wrong
 

@@ -511,6 +511,7 @@ def posterior_markdown(result: dict) -> str:
     """The regularised run (``result[POSTERIOR_KEY]``) as docs/studies.md quotes it: the run, one row per
     volunteer (mismatch size, LVV error and χ² fixed / free, the free angles, parameters on the BO box), and the
     mean LVV-error cut over volunteers. Empty without that run."""
+    from lvcore.studies.findings_rule import fmt_ci
     from lvcore.studies.findings_tests import bo_on_bound
 
     post = result.get(POSTERIOR_KEY)
@@ -531,10 +532,8 @@ def posterior_markdown(result: dict) -> str:
                      f"{fx['chi2_at_best']:.1f} / {fr['chi2_at_best']:.1f} | "
                      f"({fr['alpha_endo']:.0f}°, {fr['alpha_epi']:.0f}°) | {edge} |")
     for kind, s in post["summary"].items():
-        b = s["lvv_error_reduction_ml"]
-        ci = f" [{b['ci'][0]:.2f}, {b['ci'][1]:.2f}]" if b["ci"] else ""
-        lines += ["", f"{kind}: LVV error fixed − free {b['value']:.2f} mL{ci} (mean over {s['n_volunteers']} "
-                      f"volunteers, 90 % CI resampling volunteers); free angles lower the LVV error for "
+        lines += ["", f"{kind}: LVV error fixed − free {fmt_ci(s['lvv_error_reduction_ml'], '.2f', ' mL')} (mean over "
+                      f"{s['n_volunteers']} volunteers, 90 % CI resampling volunteers); free angles lower the LVV error for "
                       f"{s['free_lvv_error_lower']}/{s['n_volunteers']}; median LVV error fixed "
                       f"{s['median_lvv_abs_error_ml']['fixed']:.2f} / free {s['median_lvv_abs_error_ml']['free']:.2f} mL."]
     return "\n".join(lines)

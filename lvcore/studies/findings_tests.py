@@ -23,6 +23,11 @@ def _chains(row: dict, result: dict) -> int:
     return int((smp or {}).get("num_chains", 0))
 
 
+def _iid_inflation(per_unit: dict) -> dict:
+    """Unit -> its data sets' iid σ_S / :data:`SIGMA_S` (fits without one left out): F1's values."""
+    return {u: np.asarray([x for x in d["iid_sigma_s"] if x is not None]) / SIGMA_S for u, d in per_unit.items()}
+
+
 def _real_lv_units(result: dict) -> dict:
     """The real LV's per-data-set values (``result["real_lv"]``) by (source, dose, sampler budget text): a sixth
     unit beside the volunteers for a sensitivity CI (``f1_with_real_lv``); never in a verdict (one geometry, its
@@ -57,8 +62,7 @@ def mismatch_dose_tests(result: dict) -> list[dict]:
         chains = _chains(row, result)
         pv = row.get("per_volunteer")
         if pv:
-            f1 = cluster_boot({v: np.asarray([x for x in d["iid_sigma_s"] if x is not None]) / SIGMA_S
-                               for v, d in pv.items()})
+            f1 = cluster_boot(_iid_inflation(pv))
             f2 = cluster_boot({v: d["discrepancy_sigma_s"] for v, d in pv.items()})
 
             def gap(a, b):
@@ -67,8 +71,7 @@ def mismatch_dose_tests(result: dict) -> list[dict]:
             f3d, f3v = cluster_boot(gap("iid", "discrepancy")), cluster_boot(gap("iid", "volume"))
             unit, n_units = "volunteers", len(pv)
             extra = real.get((row["source"], row["dose"], row.get("budget")))
-            f1_real = (cluster_boot({v: np.asarray([x for x in d["iid_sigma_s"] if x is not None]) / SIGMA_S
-                                     for v, d in {**pv, **extra}.items()}) if extra else None)
+            f1_real = cluster_boot(_iid_inflation({**pv, **extra})) if extra else None
         else:
             f1, f2 = row["iid_sigma_s_inflation"], row["discrepancy_sigma_s"]
             g = row["output_error_gap"]
