@@ -9,7 +9,7 @@ FE-simulated on it (SYNTHETIC data on a real shape). One run of this script does
    layer) that is exactly::
 
        nice -n 5 lvcore emulator build --geometry assets/real_lv/real_lv_dalton2022_template.vtu \\
-           --out build/real_lv/emulator_inner_half --name real-lv-inner-half
+           --out build/real_lv/emulator_inner_half --name real-lv-inner-half --no-edpvr
 
    and for the whole wall the same with ``--strain-layer whole_wall --prior none``, 640 + 50 + 60 runs, on the
    default mesh with two elements through the wall (a mesh the command's ``--resolution`` does not name);
@@ -60,14 +60,15 @@ LAYER_SETUP = {"inner_half": {"resolution": "default", "design": (512, 50, 100),
 
 def build_emulator(layer: str, out: Path, workers: int = 2) -> None:
     """The subject emulator of ``layer`` on the shipped real LV (:data:`LAYER_SETUP`), as ``lvcore emulator build``
-    builds it (the inner half's is exactly that command's default)."""
+    builds it with ``--no-edpvr`` (the inner half's is exactly that command's default otherwise): the study reads
+    no derived EDPVR."""
     from lvcore.emulator.subject import SubjectDesign, build_subject_emulator
     from lvcore.resources import real_lv_files
 
     setup = LAYER_SETUP[layer]
     build_subject_emulator(real_lv_files().template, out, design=SubjectDesign(*setup["design"]),
                            resolution=mesh(setup["resolution"]), strain_layer=layer, prior=setup["prior"],
-                           name=f"real-lv-{layer.replace('_', '-')}", workers=workers, log=_say)
+                           name=f"real-lv-{layer.replace('_', '-')}", workers=workers, log=_say, edpvr=False)
 
 
 def run_layer_study(layer: str, emulator: Path, work: Path, warmup: int, samples: int, chains: int, seed: int,

@@ -338,8 +338,8 @@ def test_my_subject_offers_the_discrepancy_kernel_and_passes_it_on(monkeypatch):
 
 
 def test_my_subject_offers_the_edpvr_emulator_build_and_passes_it_on(monkeypatch, tmp_path):
-    """My subject's build step offers the subject's own EDPVR emulator (``lvcore emulator build --edpvr``), off by
-    default as the CLI; ticked, the build is asked for it (``build_subject_emulator(edpvr=True)``, replaced here by
+    """My subject's build step offers the subject's own EDPVR emulator (``lvcore emulator build --edpvr``), on by
+    default as the CLI's for a mesh; ticked, the build is asked for it (``build_subject_emulator(edpvr=True)``, replaced here by
     a stand-in that records what it is given: no FE run), into a folder of its own."""
     from lvcore.app import subject_emulator_panel as panel
     from lvcore.app import subject_flow as flow
@@ -359,7 +359,7 @@ def test_my_subject_offers_the_edpvr_emulator_build_and_passes_it_on(monkeypatch
     assert not at.exception and not at.error, [e.value for e in at.error]
     box = at.checkbox(key="my_build_edpvr")
     assert box.label == panel.EDPVR_LABEL and "+1.5 min" in box.label
-    assert box.value is subject.DEFAULT_EDPVR is False   # off by default, as the CLI
+    assert box.value is subject.DEFAULT_EDPVR is True   # on by default, as the CLI's for a mesh
     for ticked in (False, True):
         at.checkbox(key="my_build_edpvr").set_value(ticked).run()
         assert ("EDPVR emulator" in at.button(key="my_build_start").label) is ticked
@@ -368,6 +368,7 @@ def test_my_subject_offers_the_edpvr_emulator_build_and_passes_it_on(monkeypatch
         job = at.session_state["my_build_job"]
         job.join(60)
         assert job.finished and "stand-in build" in job.error   # the CLI line it offers has --edpvr when ticked
-        assert (f"--n-test {subject.SubjectDesign().n_test} --edpvr --out" in job.error) is ticked
+        flag = "--edpvr" if ticked else "--no-edpvr"
+        assert f"--n-test {subject.SubjectDesign().n_test} {flag} --out" in job.error
         assert seen[-1]["edpvr"] is ticked
     assert len(seen) == 2 and seen[0]["out"] != seen[1]["out"]   # a build with it is not found as one without

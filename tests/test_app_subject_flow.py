@@ -319,13 +319,15 @@ def test_my_subject_page_no_mesh_route():
 def test_subject_build_design_defaults_are_the_clis():
     """The app's build (and its design controls) default to `lvcore emulator build`'s options."""
     from lvcore.cli import build_parser
+    from lvcore.emulator.subject import resolve_edpvr
 
     args = build_parser().parse_args(["emulator", "build", "--geometry", "g.vtu", "--out", "o"])
     build = flow.SubjectBuild("g.vtu", "out")
     assert (build.design.n_train, build.design.n_valid, build.design.n_test, build.design.method) == \
         (args.n_train, args.n_valid, args.n_test, args.design)
-    assert (build.workers, build.seed, build.resolution, build.units, build.edpvr) == \
-        (args.workers, args.seed, args.resolution, args.units, args.edpvr)
+    assert (build.workers, build.seed, build.resolution, build.units) == \
+        (args.workers, args.seed, args.resolution, args.units)
+    assert args.edpvr is None and build.edpvr is resolve_edpvr(args.edpvr, {"kind": "mesh"}) is True  # a mesh: on
 
 
 def test_build_dir_names_the_geometry_and_design(tmp_path):
@@ -372,12 +374,13 @@ def test_subject_build_runs_stops_keeps_and_resumes(build_cache):
     # the folder the My subject page names for this example and design (the page's test below, whose build is this
     # one on the fast mesh, then finds it there instead of running the same 14 FE runs and training again)
     out = flow.build_dir(geometry.read_bytes(), geometry.name, design=design, root=build_cache)
-    job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu")
+    job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu", edpvr=False)
     job.stop()  # before the first batch: nothing done
     job.start(background=False)
     assert job.finished and not job.ok and "No FE run was finished" in job.error
     assert "lvcore emulator build --geometry hv3.vtu" in job.error and "--n-train 8" in job.error
-    job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu").start()
+    job = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, label="hv3.vtu",
+                            edpvr=False).start()
     job.join(1500)  # about a minute on a quiet machine
     assert job.finished, f"the build is still running after 1500 s: {job.status()}"
     assert job.ok, job.error
@@ -385,7 +388,7 @@ def test_subject_build_runs_stops_keeps_and_resumes(build_cache):
     assert info["n_test"] == 3 and info["runs_total"] == 14 and info["lvv_rmse_ml"] > 0
     assert info["geometry_source"] == str(geometry)
     assert not (out / RUNS_FILE).exists()  # the converged rows are in training_data.npz
-    again = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1).start()
+    again = flow.SubjectBuild(geometry, out, design=design, resolution="fast", workers=1, edpvr=False).start()
     assert again.ok and again.cached and again.metadata["test"] == job.metadata["test"]
 
 
@@ -414,7 +417,9 @@ def test_my_subject_page_builds_and_uses_a_subject_emulator(build_cache, monkeyp
                                                                                                  d.n_test]
     at.number_input(key="my_build_train").set_value(8)
     at.number_input(key="my_build_valid").set_value(3)
-    at.number_input(key="my_build_test").set_value(3).run()
+    at.number_input(key="my_build_test").set_value(3)
+    assert at.checkbox(key="my_build_edpvr").value is True   # on by default; off here: the CI-sized build above
+    at.checkbox(key="my_build_edpvr").set_value(False).run()
     at.button(key="my_build_start").click().run()
     assert not at.exception, at.exception
     job = at.session_state["my_build_job"]

@@ -27,7 +27,7 @@ def built(tmp_path_factory):
     out = tmp_path_factory.mktemp("subject") / "emu"
     geometry = volunteer_files("SYNTHETIC_HV3").geometry
     emu = build_subject_emulator(geometry, out, design=SubjectDesign(24, 6, 6), resolution="fast", bounds=BOUNDS,
-                                 workers=1, seed=3, config=CONFIG)
+                                 workers=1, seed=3, config=CONFIG, edpvr=False)
     return out, emu, geometry
 
 

@@ -174,7 +174,7 @@ def test_build_cli_states_its_default_and_info_names_it(built, capsys):
     with pytest.raises(SystemExit):
         main(["emulator", "build", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "--edpvr, --no-edpvr" in text and "(default off)" in text
+    assert "--edpvr, --no-edpvr" in text and "(default on for a mesh geometry, off for default or PC scores" in text
     _, emu, e = built
     assert f"EDPVR emulator: '{e.name}' in edpvr/" in format_info(emu.metadata)
     assert "EDPVR emulator: none" in format_info({k: v for k, v in emu.metadata.items() if k != "subject"} |
@@ -188,3 +188,14 @@ def test_build_refuses_edpvr_for_a_geometry_without_a_mesh_file(tmp_path):
         build_subject_emulator("default", tmp_path / "emu", design=SubjectDesign(8, 3, 3), resolution="fast",
                                bounds=BOUNDS, workers=1, config=CONFIG, edpvr=True)
     assert not (tmp_path / "emu" / "fe_runs.npz").exists()
+
+
+def test_the_default_builds_the_edpvr_emulator_for_a_mesh_only():
+    """``edpvr=None`` (the CLI's and the app's default): on for a mesh geometry, off for one without a mesh file
+    (``default``, PC scores), which cannot have one; an explicit choice wins."""
+    from lvcore.emulator.subject import DEFAULT_EDPVR, resolve_edpvr
+
+    assert DEFAULT_EDPVR is True
+    assert resolve_edpvr(None, {"kind": "mesh", "path": "x/geometry.vtu"}) is True
+    assert resolve_edpvr(None, {"kind": "default"}) is False and resolve_edpvr(None, {"kind": "scores"}) is False
+    assert resolve_edpvr(False, {"kind": "mesh"}) is False and resolve_edpvr(True, {"kind": "mesh"}) is True

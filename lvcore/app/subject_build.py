@@ -79,8 +79,8 @@ class SubjectBuild:
         The user's name of the geometry (messages).
     edpvr : bool
         Also build the subject's own EDPVR emulator (``--edpvr``; default
-        :data:`lvcore.emulator.subject.DEFAULT_EDPVR`, off): the derived EDPVR and stress of a calibration through
-        it then take a fraction of a second instead of minutes of FE load paths.
+        :data:`lvcore.emulator.subject.DEFAULT_EDPVR`, on: the geometry is a mesh file): the derived EDPVR and
+        stress of a calibration through it then take a fraction of a second instead of FE load paths.
     """
 
     def __init__(self, geometry_file, out, *, design=None, units: str = "mm", workers: int = 2, seed: int = 0,
@@ -200,5 +200,5 @@ class SubjectBuild:
         return (f"The subject emulator for {self.label} was not built: {reason}. {kept}. If it fails again, run it "
                 f"in a terminal, where it reports every stage: lvcore emulator build --geometry {self.label} "
                 f"--units {self.units} --n-train {d.n_train} --n-valid {d.n_valid} --n-test {d.n_test}"
-                f"{' --edpvr' if self.edpvr else ''} --out {self.out}")
+                f" {'--edpvr' if self.edpvr else '--no-edpvr'} --out {self.out}")
 

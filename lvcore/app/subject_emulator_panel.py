@@ -18,9 +18,9 @@ from pathlib import Path
 SESSION_KEY = "subject_emulators"
 #: Label prefix of a built subject emulator in the My subject page's emulator choice.
 LABEL_PREFIX = "subject: "
-#: The build option's checkbox: its own EDPVR emulator too (``lvcore emulator build --edpvr``).
+#: The build option's checkbox: its own EDPVR emulator too (``lvcore emulator build --edpvr``, on by default).
 EDPVR_LABEL = ("Also build the EDPVR emulator (about +1.5 min on 2 cores; the derived EDPVR and stress then take a "
-               "fraction of a second instead of minutes of FE solves)")
+               "fraction of a second instead of half a minute or more of FE solves)")
 
 
 def built_emulators() -> dict:
@@ -64,8 +64,8 @@ def _edpvr_control(key: str) -> bool:
     from lvcore.emulator.subject import DEFAULT_EDPVR
 
     return bool(st.checkbox(EDPVR_LABEL, value=DEFAULT_EDPVR, key=f"{key}_edpvr",
-                            help="lvcore emulator build --edpvr (off by default): FE load paths of 0-30 mmHg on the "
-                                 "same mesh train the subject's own EDPVR emulator; needs a mesh (not PC scores). "
+                            help="lvcore emulator build --edpvr (on by default for a mesh; --no-edpvr skips it): FE "
+                                 "load paths of 0-30 mmHg on the same mesh train the subject's own EDPVR emulator. "
                                  "Without it the derived EDPVR and stress of a calibration run FE load paths."))
 
 

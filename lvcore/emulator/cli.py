@@ -91,14 +91,15 @@ def register(subparsers) -> None:
     from lvcore.emulator.subject_edpvr import EdpvrDesign
 
     ed = EdpvrDesign()
-    b.add_argument("--edpvr", action=argparse.BooleanOptionalAction, default=DEFAULT_EDPVR,
+    b.add_argument("--edpvr", action=argparse.BooleanOptionalAction, default=None,
                    help="also build the subject's EDPVR emulator into OUT/edpvr: FE load paths of 0-30 mmHg on the "
                         f"same mesh ({ed.n_train} + {ed.n_valid} + {ed.n_test} paths), so the derived EDPVR of a "
                         "calibration through this emulator is evaluated directly (0.01 s) instead of by 700 FE "
                         "solves (2-3 min each calibration); it adds about 1.5 min on 2 cores with the default mesh "
                         "(82 s on SYNTHETIC_HV3, whose build took 39 s without it and 122 s with it; BENCHMARKS.md "
                         "row 51) "
-                        f"(default {'on' if DEFAULT_EDPVR else 'off'})")
+                        f"(default {'on for a mesh geometry, off for default or PC scores' if DEFAULT_EDPVR else 'off'}"
+                        "; --no-edpvr skips it)")
     b.add_argument("--seed", type=cli_args.seed, default=0, help="seed of the design and training, 0 to 2^32 - 1 (default 0)")
     from lvcore.emulator.subject import default_training_config
 

@@ -29,10 +29,11 @@ geometry as it is, with no projection:
    suffice); the test rows, which the training never sees, give the held-out
    LVV and strain RMSE of the full outputs recorded in the metadata
    (``metadata["test"]``).
-5. Asked (``edpvr=True``, ``lvcore emulator build --edpvr``), its own EDPVR
-   emulator is built into ``DIR/edpvr`` (:mod:`lvcore.emulator.subject_edpvr`:
-   FE load paths of 0-30 mmHg on the same mesh), which the derived quantities
-   of a calibration through this emulator evaluate instead of FE load paths.
+5. For a mesh geometry (unless ``edpvr=False``, ``lvcore emulator build
+   --no-edpvr``), its own EDPVR emulator is built into ``DIR/edpvr``
+   (:mod:`lvcore.emulator.subject_edpvr`: FE load paths of 0-30 mmHg on the
+   same mesh), which the derived quantities of a calibration through this
+   emulator evaluate instead of FE load paths.
 
 The emulator directory is an ordinary one (:mod:`lvcore.emulator.io`) with a
 ``subject`` section in ``metadata.json``: the geometry section (path relative
@@ -65,8 +66,9 @@ from lvcore.domain.outputs import strain_layer as canonical_strain_layer
 INPUT_GROUPS = {"theta": THETA_NAMES, EDP_NAME: (EDP_NAME,), "angles": ANGLE_NAMES}
 #: Most FE runs one build may ask for.
 MAX_RUNS = 20_000
-#: Whether a build also trains the subject EDPVR emulator unless told (``--edpvr``; see :func:`build_subject_emulator`).
-DEFAULT_EDPVR = False
+#: Whether a build of a mesh geometry also trains the subject EDPVR emulator unless told (``--edpvr``/``--no-edpvr``;
+#: see :func:`build_subject_emulator`); a geometry that is no mesh (``default``, PC scores) never gets one unasked.
+DEFAULT_EDPVR = True
 
 
 # --------------------------------------------------------------------------- the design space
@@ -209,7 +211,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                            prior: str = "auto", log: Callable[[str], None] | None = None,
                            progress: Callable[[int, int], None] | None = None,
                            stop: Callable[[], bool] | None = None, strain_layer: str = DEFAULT_STRAIN_LAYER,
-                           edpvr: bool = DEFAULT_EDPVR, edpvr_design=None):
+                           edpvr: bool | None = None, edpvr_design=None):
     """Build, validate and save a subject-specific emulator (see the module docstring).
 
     Parameters
@@ -253,10 +255,12 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     strain_layer : str
         The wall layer of the FE runs' strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`; default the inner
         half), recorded in the emulator's metadata; a prior mean must have the same layer.
-    edpvr, edpvr_design : bool, EdpvrDesign
-        Also build the subject EDPVR emulator into ``out/edpvr`` (:mod:`lvcore.emulator.subject_edpvr`; default
-        :data:`DEFAULT_EDPVR`, off: 304 load paths, 82 s on 2 cores for SYNTHETIC_HV3's default mesh, BENCHMARKS.md
-        row 51), with this design (default 256 + 16 + 32 paths): the derived EDPVR then needs no FE solve.
+    edpvr, edpvr_design : bool or None, EdpvrDesign
+        Also build the subject EDPVR emulator into ``out/edpvr`` (:mod:`lvcore.emulator.subject_edpvr`: 304 load
+        paths, 82 s on 2 cores for SYNTHETIC_HV3's default mesh, BENCHMARKS.md row 51), with this design (default
+        256 + 16 + 32 paths): the derived EDPVR then needs no FE solve. None (default): :data:`DEFAULT_EDPVR` (on)
+        where the geometry is a mesh, off for one that is not (it cannot have one); True for a geometry that is no
+        mesh is refused.
 
     The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) as every chunk returns, so a build that
     fails, is stopped or killed keeps them, and a new build of the same design into ``out`` resumes from them.
@@ -280,9 +284,14 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                           bounds=bounds)
     geo = geometry if isinstance(geometry, SubjectGeometry) else resolve_subject_geometry(geometry, units=units)
     out.mkdir(parents=True, exist_ok=True)
-    section = _write_geometry(geo, out, edpvr=edpvr)
+    section = _write_geometry(geo, out, edpvr=bool(edpvr))
     t_geometry = time.perf_counter() - t_start
     say(f"geometry: {geo.kind} from {geo.source} ({t_geometry:.1f} s)")
+    edpvr = resolve_edpvr(edpvr, section)
+    if not edpvr:
+        say("EDPVR emulator: not built (" + ("--no-edpvr" if section.get("kind") == "mesh" else
+                                             "the geometry is no mesh") + "): the derived EDPVR and stress of a "
+            "calibration through this emulator take FE load paths")
     for w in geo.warnings:
         say(f"  warning: {w}")
 
@@ -320,6 +329,14 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
                      resolution=resolution, strain_layer=strain_layer, alpha_endo=alpha_endo, alpha_epi=alpha_epi,
                      seed=seed, name=f"{name}-edpvr")
     return _save_build(emu, out, sets, geo, t_start, t_train, say)
+
+
+def resolve_edpvr(edpvr: bool | None, section: Mapping) -> bool:
+    """Whether a build makes its subject EDPVR emulator: ``edpvr`` as given, or None: :data:`DEFAULT_EDPVR` for a
+    mesh geometry (``section["kind"] == "mesh"``) and False for any other."""
+    if edpvr is not None:
+        return bool(edpvr)
+    return bool(DEFAULT_EDPVR) and section.get("kind") == "mesh"
 
 
 def _build_edpvr(record: dict, space: ParameterSpace, section: Mapping, out: Path, *, design, say, **kw) -> None:
@@ -422,4 +439,4 @@ __all__ = ["SubjectGeometry", "SubjectDesign", "SimulatedRows", "INPUT_GROUPS", 
            "GEOMETRY_FILE", "MESH_SUFFIXES", "VOLUME_MESH_SUFFIXES", "MAX_RUNS",
            "build_subject_emulator", "design_rows", "choose_prior", "describe_prior", "subject_template_nodes",
            "resolve_subject_geometry", "subject_space", "parse_inputs", "simulate_rows",
-           "default_training_config", "DEFAULT_EDPVR"]
+           "default_training_config", "DEFAULT_EDPVR", "resolve_edpvr"]
