@@ -12,10 +12,10 @@ against the 99 % predictive interval of the volume at the EDP, the emulator-to-F
 linear solver and the machine's load are printed with the table, and the median ratio over the runs after it.
 ``--fe`` forces the FE load path (``LVCORE_EDPVR_EMULATOR=none``) for a comparison.
 
-A calibration through a subject emulator (its own mesh; its EDPVR emulator where it was built with ``--edpvr``,
+A calibration through a subject emulator (its own mesh; its EDPVR emulator where it was built with one, the default,
 lvcore.emulator.subject_edpvr):
 
-    lvcore emulator build --geometry assets/volunteers/SYNTHETIC_HV3_geometry.vtu --out EMU --edpvr
+    lvcore emulator build --geometry assets/volunteers/SYNTHETIC_HV3_geometry.vtu --out EMU   # --edpvr by default
     python benchmarks/bench_derived.py --subject-emulator EMU --data assets/volunteers/SYNTHETIC_HV3_measured.csv \
         --repeats 3            # and again with --fe
 
