@@ -2,6 +2,7 @@
 
     nice python benchmarks/bench_hierarchical.py                       # 24 subjects, then a two-group cohort
     nice python benchmarks/bench_hierarchical.py --n 8 --warmup 300    # a smaller run
+    nice python benchmarks/bench_hierarchical.py --states 8,20         # two loaded states per subject (edpvr)
 
 1. One group: a SYNTHETIC cohort of ``--n`` subjects (``lvcore.inference.cohort.synthetic_cohort``: log theta ~
    N(mu, Sigma) inside Table 9.1's box, PC scores and scale per subject, data from the ``chapter`` emulator with
@@ -11,6 +12,9 @@
    coverage of the subjects' 90 % intervals in [0.8, 1.0] (per parameter)?
 2. Two groups (``--n`` subjects, half each, group B's population a twice group A's): does the 90 % interval of
    the difference in mu_a exclude 0?
+
+``--states 8,20`` measures every subject at each of these pressures (its data, and the calibration, through an
+emulator with an EDP input: ``--emulator``, default ``edpvr`` then, the EDPVR emulator composed with ``chapter``).
 
 Prints one JSON record (``--out FILE`` also writes it). Pin threads (the script does) and run niced on a shared
 machine; the timings then depend on the load, which is recorded.
@@ -36,7 +40,7 @@ def _calibrate(csv: Path, out: Path, args) -> tuple[int, dict, dict]:
     t0, c0, load0 = time.perf_counter(), time.process_time(), os.getloadavg()[0]
     code = main(["calibrate", "--data", str(csv), "--hierarchical", "--model", "iid", "--chains", str(args.chains),
                  "--warmup", str(args.warmup), "--samples", str(args.samples), "--seed", str(args.seed),
-                 "--out", str(out)])
+                 "--emulator", args.emulator, "--out", str(out)])
     timing = {"wall_s": round(time.perf_counter() - t0, 1), "cpu_s": round(time.process_time() - c0, 1),
               "load_start": round(load0, 1), "load_end": round(os.getloadavg()[0], 1)}
     rec = json.loads((out / "summary.json").read_text())["hierarchical"]
@@ -105,12 +109,18 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, default=500, help="draws per chain (default 500)")
     p.add_argument("--seed", type=int, default=0, help="cohort and sampler seed (default 0)")
     p.add_argument("--skip-groups", action="store_true", help="only the one-group cohort")
+    p.add_argument("--states", default="", help="loaded states per subject, mmHg, e.g. 8,20 (default: one state at "
+                                                 "the emulator's fixed EDP)")
+    p.add_argument("--emulator", default=None, help="the emulator of the data and the calibration (default chapter; "
+                                                     "edpvr with --states)")
     p.add_argument("--workdir", default=None, help="folder for the cohorts and outputs (default: a temporary one)")
     p.add_argument("--out", default=None, help="also write the JSON record here")
     p.add_argument("--ship", default=None, metavar="FOLDER",
                    help="write the report's result file (cohort.json, lvcore.studies.cohort) into FOLDER, e.g. "
                         "assets/studies (default: none)")
     args = p.parse_args(argv)
+    states = tuple(float(v) for v in args.states.split(",") if v.strip())
+    args.emulator = args.emulator or ("edpvr" if states else "chapter")
 
     from lvcore.inference.samplers import use_host_devices
 
@@ -119,16 +129,18 @@ def main(argv=None) -> int:
     from lvcore.inference import cohort as co
 
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_hier_"))
-    emulator = load_emulator("chapter")
+    emulator = load_emulator(args.emulator)
     result = {"label": "SYNTHETIC", "n": args.n, "chains": args.chains, "warmup": args.warmup,
-              "samples": args.samples, "seed": args.seed, "cpus": os.cpu_count()}
-    csv = co.write_cohort(co.synthetic_cohort(args.n, emulator, seed=args.seed), work / "one_group")
+              "samples": args.samples, "seed": args.seed, "cpus": os.cpu_count(), "emulator": args.emulator,
+              "states_mmhg": list(states)}
+    csv = co.write_cohort(co.synthetic_cohort(args.n, emulator, seed=args.seed, edp_mmhg=states), work / "one_group")
     code, rec, timing = _calibrate(csv, work / "one_group" / "out", args)
     truth = json.loads((csv.parent / "truth.json").read_text())
     result["one_group"] = {"exit": code, **timing, "joint_wall_s": round(rec["wall_s"], 1), **_checks(rec, truth)}
     print(json.dumps(result["one_group"]), file=sys.stderr)
     if not args.skip_groups:
-        csv2 = co.write_cohort(co.synthetic_cohort(args.n, emulator, seed=args.seed + 1, n_groups=2), work / "two_groups")
+        csv2 = co.write_cohort(co.synthetic_cohort(args.n, emulator, seed=args.seed + 1, n_groups=2, edp_mmhg=states),
+                               work / "two_groups")
         code2, rec2, timing2 = _calibrate(csv2, work / "two_groups" / "out", args)
         d = rec2["population"]["differences"]["B - A"]["a"]
         result["two_groups"] = {"exit": code2, **timing2, "true_ratio_a": 2.0,

@@ -153,6 +153,28 @@ def test_cohort_reader_keeps_groups_geometry_and_data(cohort4):
     assert np.exp(truth["mu_log"]["B"][0] - truth["mu_log"]["A"][0]) == pytest.approx(2.0)
 
 
+def test_a_synthetic_cohort_with_loaded_states_has_a_row_per_state(tmp_path):
+    """``synthetic_cohort(edp_mmhg=...)``: every subject measured at each pressure through an emulator with an EDP
+    input (its data there), written one row per state (``edp_mmhg``) that the cohort reader takes as the subject's
+    loaded states; a fixed-EDP emulator is refused."""
+    from lvcore.emulator.io import load_emulator
+
+    emu = load_emulator("edpvr")
+    c = co.synthetic_cohort(3, emu, seed=5, edp_mmhg=(8.0, 20.0), sigma_v=0.0, sigma_s=0.0)
+    assert c.y.shape == (3, 2, 25) and c.edp_mmhg == (8.0, 20.0)
+    assert np.all(c.y[:, 1, 0] > c.y[:, 0, 0])   # more volume at 20 mmHg
+    x = np.r_[c.theta[0], c.h[0], 20.0]
+    np.testing.assert_allclose(c.y[0, 1, 0], np.asarray(emu.apply(x))[0] * c.scale[0] ** 3, rtol=1e-6)
+    read = co.read_cohort(co.write_cohort(c, tmp_path))
+    assert read.subjects == list(c.subjects) and all(r.n_states == 2 for r in read.rows)
+    st = read.rows[1].all_states()
+    assert [s.edp_mmhg for s in st] == [8.0, 20.0]
+    np.testing.assert_allclose(np.stack([s.y for s in st]), c.y[1], rtol=1e-7)
+    assert json.loads((tmp_path / "truth.json").read_text())["edp_mmhg"] == [8.0, 20.0]
+    with pytest.raises(ValueError, match="EDP input"):
+        co.synthetic_cohort(3, load_emulator("chapter"), edp_mmhg=(8.0, 20.0))
+
+
 # --------------------------------------------------------------------------- the model
 def test_batched_and_per_subject_models_have_the_same_density(cohort4, emulator):
     """The batched emulator call (one vmap over the subjects) and the loop over the subjects are one model."""

@@ -218,13 +218,15 @@ class SyntheticCohort:
     h : ndarray, shape (n, n_pc)
         PC scores per subject.
     scale : ndarray, shape (n,)
-    y : ndarray, shape (n, 25)
-        Noisy data [LVV (mL), 24 strains].
+    y : ndarray, shape (n, 25), or (n, S, 25) with loaded states
+        Noisy data [LVV (mL), 24 strains] (per state).
     group : tuple of str
     mu : dict
         Group -> the true mean of log theta (4,).
     cov : ndarray, shape (4, 4)
         The true covariance of log theta.
+    edp_mmhg : tuple of float
+        The loaded states' pressures (mmHg), one per state of ``y``; empty: one state at the emulator's fixed EDP.
     """
 
     subjects: tuple
@@ -235,6 +237,7 @@ class SyntheticCohort:
     group: tuple
     mu: dict
     cov: np.ndarray
+    edp_mmhg: tuple = ()
 
 
 def population_covariance(sd=SYNTHETIC_SD, corr=SYNTHETIC_CORR) -> np.ndarray:
@@ -245,7 +248,7 @@ def population_covariance(sd=SYNTHETIC_SD, corr=SYNTHETIC_CORR) -> np.ndarray:
 
 def synthetic_cohort(n: int, emulator, *, seed: int = 0, mu: dict | None = None, cov=None, n_groups: int = 1,
                      group_ratio_a: float = 2.0, h_sd: float = 0.5, sigma_v: float = SIGMA_V_ML,
-                     sigma_s: float = SYNTHETIC_SIGMA_S) -> SyntheticCohort:
+                     sigma_s: float = SYNTHETIC_SIGMA_S, edp_mmhg=()) -> SyntheticCohort:
     """Draw a SYNTHETIC cohort of ``n`` subjects (module docstring).
 
     Parameters
@@ -265,9 +268,12 @@ def synthetic_cohort(n: int, emulator, *, seed: int = 0, mu: dict | None = None,
     h_sd : float
         Sd of the PC scores (clipped to +-1.5).
     sigma_v, sigma_s : float
-        Noise sds of the LVV (mL) and the strains.
+        Noise sds of the LVV (mL) and the strains (independent at every state).
+    edp_mmhg : sequence of float, optional
+        Loaded states (mmHg): every subject is measured at each of these pressures, through an emulator with an
+        EDP input (e.g. ``edpvr``); empty (default): one state at the emulator's fixed EDP.
     """
-    from lvcore.domain.outputs import is_pc_name
+    from lvcore.domain.outputs import EDP_NAME, is_pc_name
     from lvcore.geometry.scaling import scale_outputs
 
     if n < MIN_SUBJECTS or n_groups not in (1, 2):
@@ -292,13 +298,21 @@ def synthetic_cohort(n: int, emulator, *, seed: int = 0, mu: dict | None = None,
     h = np.clip(h_sd * rng.standard_normal((n, n_pc)), -1.5, 1.5)
     scale = np.exp(0.05 * rng.standard_normal(n))
     theta = np.exp(log_theta)
-    x = np.concatenate([theta, h], axis=1)
-    names = list(THETA_NAMES) + [f"h{k + 1}" for k in range(n_pc)]
+    states = tuple(float(p) for p in edp_mmhg)
+    if states and EDP_NAME not in emulator.input_names:
+        raise ValueError(f"loaded states {list(states)} mmHg need an emulator with an EDP input ('{EDP_NAME}')")
+    names = list(THETA_NAMES) + [f"h{k + 1}" for k in range(n_pc)] + ([EDP_NAME] if states else [])
     order = [names.index(nm) for nm in emulator.input_names]
-    clean = np.asarray([np.asarray(scale_outputs(emulator.apply(x[i, order]), scale[i])) for i in range(n)])
-    y = clean + np.concatenate([sigma_v * rng.standard_normal((n, 1)), sigma_s * rng.standard_normal((n, 24))], 1)
+
+    def data(pressure):
+        x = np.concatenate([theta, h] + ([np.full((n, 1), pressure)] if states else []), axis=1)
+        clean = np.asarray([np.asarray(scale_outputs(emulator.apply(x[i, order]), scale[i])) for i in range(n)])
+        return clean + np.concatenate([sigma_v * rng.standard_normal((n, 1)),
+                                       sigma_s * rng.standard_normal((n, 24))], 1)
+
+    y = np.stack([data(p) for p in states], axis=1) if states else data(None)
     subjects = tuple(f"SYNTHETIC-C{i + 1:02d}" for i in range(n))
-    return SyntheticCohort(subjects, theta, h, scale, y, group, {g: means[g] for g in labels}, cov)
+    return SyntheticCohort(subjects, theta, h, scale, y, group, {g: means[g] for g in labels}, cov, states)
 
 
 def write_cohort(cohort: SyntheticCohort, folder) -> Path:
@@ -307,21 +321,25 @@ def write_cohort(cohort: SyntheticCohort, folder) -> Path:
     folder = Path(folder)
     (folder / "geometry").mkdir(parents=True, exist_ok=True)
     two = len(set(cohort.group)) > 1
-    head = ["subject"] + (["group"] if two else []) + ["geometry"] + list(OUTPUT_COLUMNS)
+    states = tuple(cohort.edp_mmhg)
+    head = ["subject"] + (["group"] if two else []) + ["geometry"] + (["edp_mmhg"] if states else []) \
+        + list(OUTPUT_COLUMNS)
     lines = [",".join(head)]
     for i, s in enumerate(cohort.subjects):
         geo = f"geometry/{s}.json"
         (folder / geo).write_text(json.dumps({"h": [float(v) for v in cohort.h[i]], "scale": float(cohort.scale[i]),
                                               "label": "SYNTHETIC"}))
-        cells = [s] + ([cohort.group[i]] if two else []) + [geo] + [f"{v:.8g}" for v in cohort.y[i]]
-        lines.append(",".join(cells))
+        lead = [s] + ([cohort.group[i]] if two else []) + [geo]
+        for j, y in enumerate(cohort.y[i] if states else [cohort.y[i]]):
+            lines.append(",".join(lead + ([f"{states[j]:g}"] if states else []) + [f"{v:.8g}" for v in y]))
     path = folder / "cohort.csv"
     path.write_text("\n".join(lines) + "\n")
     truth = {"label": "SYNTHETIC", "theta_names": list(THETA_NAMES),
              "mu_log": {g: [float(v) for v in m] for g, m in cohort.mu.items()},
              "cov_log": np.asarray(cohort.cov).tolist(),
              "theta": {s: [float(v) for v in cohort.theta[i]] for i, s in enumerate(cohort.subjects)},
-             "group": dict(zip(cohort.subjects, cohort.group))}
+             "group": dict(zip(cohort.subjects, cohort.group)),
+             "edp_mmhg": [float(p) for p in cohort.edp_mmhg]}
     (folder / "truth.json").write_text(json.dumps(truth, indent=1))
     return path
 
