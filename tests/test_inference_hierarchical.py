@@ -338,6 +338,44 @@ def test_shrinkage_and_group_difference_are_computed_from_the_draws():
     assert not d["b"]["excludes_zero"]
 
 
+def _separate(values):
+    """Separate fits whose posterior medians are ``values[s][k]`` (a plain interval around each)."""
+    return {s: {k: {"q05": v / 2, "median": v, "q95": 2 * v} for k, v in th.items()} for s, th in values.items()}
+
+
+def test_separate_fits_group_difference_resamples_the_subjects():
+    """The separate fits' difference: the ratio of the groups' mean log medians, its 90 % interval from resampling
+    subjects within each group; a 2x difference in a over 8 + 8 subjects excludes 1, none in b does not."""
+    rng = np.random.default_rng(0)
+    subjects = [f"S{i}" for i in range(16)]
+    gi = np.r_[np.zeros(8, int), np.ones(8, int)]
+    vals = {s: {"a": float(np.exp(0.2 * rng.standard_normal() + np.log(2.0) * g)),
+                "b": float(np.exp(0.2 * rng.standard_normal())), "af": 1.0, "bf": 1.0} for s, g in zip(subjects, gi)}
+    d = hi.separate_differences(_separate(vals), subjects, ("A", "B"), gi)["B - A"]
+    la = np.log([vals[s]["a"] for s in subjects])
+    assert d["a"]["ratio"]["median"] == pytest.approx(np.exp(la[8:].mean() - la[:8].mean()))
+    assert d["a"]["excludes_zero"] and 1.5 < d["a"]["ratio"]["q05"] < 2.0 < d["a"]["ratio"]["q95"] < 3.0
+    assert not d["b"]["excludes_zero"] and d["b"]["ratio"]["q05"] < 1.0 < d["b"]["ratio"]["q95"]
+    again = hi.separate_differences(_separate(vals), subjects, ("A", "B"), gi)["B - A"]
+    assert again == d   # seeded: a rerun gives the same interval
+
+
+def test_group_flags_are_symmetric():
+    """A difference the joint posterior adds, one it removes and one of the opposite sign are all flagged;
+    agreement is not."""
+    def diff(lo, med, hi_):
+        return {"ratio": {"q05": lo, "median": med, "q95": hi_}, "excludes_zero": lo > 1 or hi_ < 1}
+
+    joint = {"B - A": {"a": diff(1.6, 3.2, 8.9), "b": diff(0.5, 0.9, 1.5), "af": diff(0.2, 0.47, 0.95),
+                       "bf": diff(1.2, 1.5, 2.0)}}
+    sep = {"B - A": {"a": diff(2.0, 2.6, 3.4), "b": diff(1.1, 1.3, 1.6), "af": diff(0.56, 0.75, 1.01),
+                     "bf": diff(0.6, 0.7, 0.9)}}
+    flags = hi.group_flags(joint, sep)
+    assert [f.split(" in ")[1].split(":")[0] for f in flags] == ["b", "af", "bf"]
+    assert all(f.startswith("CONSISTENCY: group difference B - A") for f in flags)
+    assert hi.group_flags(joint, joint) == [] and hi.group_flags(sep, sep) == []
+
+
 # --------------------------------------------------------------------------- end to end
 def test_cli_writes_the_hierarchical_summary(cohort4, tmp_path):
     _, path = cohort4
@@ -349,3 +387,7 @@ def test_cli_writes_the_hierarchical_summary(cohort4, tmp_path):
     assert set(rec["shrinkage"]["per_subject"]) == set(rec["subjects"])
     assert (tmp_path / "out" / "hierarchical.nc").is_file()
     assert (code == 1) == (not rec["converged"])
+    assert set(rec["population"]["differences_separate"]) == {"B - A"} and isinstance(rec["flags"], list)
+    if rec["converged"]:
+        flagged = rec["diagnostics"]["population"]["n_divergent"] > 0 or bool(rec["flags"])
+        assert (code == 4) == flagged

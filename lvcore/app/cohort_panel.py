@@ -45,10 +45,19 @@ def subject_table(rec: dict) -> pd.DataFrame:
 
 
 def difference_table(rec: dict) -> pd.DataFrame:
-    """One row per pair of groups and parameter: the ratio of the population medians with its 90 % interval."""
-    rows = [{"groups": pair, "parameter": k, "ratio median": v["ratio"]["median"], "ratio q05": v["ratio"]["q05"],
-             "ratio q95": v["ratio"]["q95"], "interval excludes 1": v["excludes_zero"]}
-            for pair, d in rec["population"]["differences"].items() for k, v in d.items()]
+    """One row per pair of groups and parameter: the ratio of the population medians with its 90 % interval, and
+    the same ratio from the separate fits (subjects resampled) where they were made."""
+    sep = rec["population"].get("differences_separate", {})
+    rows = []
+    for pair, d in rec["population"]["differences"].items():
+        for k, v in d.items():
+            row = {"groups": pair, "parameter": k, "ratio median": v["ratio"]["median"], "ratio q05": v["ratio"]["q05"],
+                   "ratio q95": v["ratio"]["q95"], "interval excludes 1": v["excludes_zero"]}
+            w = sep.get(pair, {}).get(k)
+            if w is not None:
+                row.update({"separate fits: ratio q05": w["ratio"]["q05"], "separate fits: ratio q95": w["ratio"]["q95"],
+                            "separate fits: excludes 1": w["excludes_zero"]})
+            rows.append(row)
     return pd.DataFrame(rows)
 
 
@@ -115,6 +124,8 @@ def show(st) -> None:
                        + f" {rec['diagnostics']['population']['n_divergent']} divergent")
     for w in rec.get("warnings") or ():
         st.warning(w)
+    for f in rec.get("flags") or ():
+        st.error(f)
     st.subheader("Population")
     st.dataframe(population_table(rec), width="stretch", hide_index=True)
     if rec["population"]["differences"]:

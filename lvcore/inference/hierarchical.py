@@ -18,7 +18,9 @@ Model (non-centred)
 Outputs (:func:`summarise`)
     The population mean and covariance (sds and correlations) of log theta, per group; each subject's 90 %
     interval with its shrinkage against a separate fit (``1 - width_hier / width_separate``); the differences of
-    the group means with their 90 % intervals; R-hat, ESS and divergences at the population and subject levels.
+    the group means with their 90 % intervals, checked against the same differences of the separate fits
+    (:func:`separate_differences`, :func:`group_flags`); R-hat, ESS and divergences at the population and subject
+    levels.
 """
 from __future__ import annotations
 
@@ -47,6 +49,8 @@ LIKELIHOODS = ("volume", "iid")
 #: NUTS settings of the joint run: a higher target than a single subject's against the funnel of tau and z.
 TARGET_ACCEPT = 0.9
 MAX_TREE_DEPTH = 8
+#: Resamples of the separate fits' group differences (subjects resampled within each group).
+SEPARATE_BOOTSTRAP = 4000
 #: Population-level parameters of the joint posterior, and subject-level ones.
 POPULATION_SITES = ("mu", "tau", "corr")
 SUBJECT_SITES = ("log_theta", "sigma_s2")
@@ -347,6 +351,57 @@ def shrinkage(hier: dict, separate: dict) -> dict:
             "median_narrowing": {k: float(np.median(v)) if v else None for k, v in ratios.items()}}
 
 
+def separate_differences(separate: dict, subjects, groups, group_index, seed: int = 0) -> dict:
+    """The group differences as the separate fits give them: per pair (each group against the first) and theta,
+    the ratio ``exp(mean_B log m - mean_A log m)`` of the subjects' separate posterior medians ``m``, with its 90 %
+    percentile interval from resampling the subjects within each group (the independent unit;
+    ``scipy.stats.bootstrap``, :data:`SEPARATE_BOOTSTRAP` resamples) and whether it excludes 1; a pair with a group
+    of one subject is left out."""
+    from scipy.stats import bootstrap
+
+    gi = np.asarray(group_index)
+    logm = {k: np.log([float(separate[s][k]["median"]) for s in subjects]) for k in THETA_NAMES}
+    out = {}
+    for g in range(1, len(groups)):
+        if min(np.sum(gi == 0), np.sum(gi == g)) < 2:   # nothing to resample (the cohort reader refuses such groups)
+            continue
+        rec = {}
+        for j, k in enumerate(THETA_NAMES):
+            a, b = logm[k][gi == 0], logm[k][gi == g]
+            ci = bootstrap((a, b), lambda x, y, axis: np.mean(y, axis=axis) - np.mean(x, axis=axis),
+                           n_resamples=SEPARATE_BOOTSTRAP, confidence_level=0.9, method="percentile",
+                           vectorized=True, rng=np.random.default_rng(seed + 1000 * g + j)).confidence_interval
+            lo, hi = float(ci.low), float(ci.high)
+            d = float(np.mean(b) - np.mean(a))
+            rec[k] = {"ratio": {"q05": float(np.exp(lo)), "median": float(np.exp(d)), "q95": float(np.exp(hi))},
+                      "excludes_zero": bool(lo > 0 or hi < 0)}
+        out[f"{groups[g]} - {groups[0]}"] = rec
+    return out
+
+
+def group_flags(joint: dict, separate: dict) -> list[str]:
+    """CONSISTENCY flags where the joint posterior and the separate fits disagree on a group difference: one
+    interval excludes no difference and the other does not, or both exclude it with opposite signs (a symmetric
+    rule: a difference the joint model adds and one it removes are both flagged). On a SYNTHETIC two-group cohort
+    the joint model called a difference in a_f that was not there while the separate fits did not
+    (BENCHMARKS.md row 64)."""
+    flags = []
+    for pair, d in joint.items():
+        for k, v in d.items():
+            w = separate.get(pair, {}).get(k)
+            if w is None:
+                continue
+            jr, sr = v["ratio"], w["ratio"]
+            same = v["excludes_zero"] == w["excludes_zero"] and (
+                not v["excludes_zero"] or (jr["median"] > 1) == (sr["median"] > 1))
+            if not same:
+                flags.append(f"CONSISTENCY: group difference {pair} in {k}: the joint posterior's ratio "
+                             f"{jr['median']:.2f} [{jr['q05']:.2f}, {jr['q95']:.2f}] and the separate fits' "
+                             f"{sr['median']:.2f} [{sr['q05']:.2f}, {sr['q95']:.2f}] (subjects resampled) disagree on "
+                             "whether there is one; trust neither without more data")
+    return flags
+
+
 def summarise(run: HierarchicalRun, separate: dict | None = None) -> dict:
     """summary.json's ``hierarchical`` section: population, subjects (with shrinkage against ``separate``, subject
     -> theta's q05/median/q95 of separate fits, when given), group differences and diagnostics per level."""
@@ -356,12 +411,18 @@ def summarise(run: HierarchicalRun, separate: dict | None = None) -> dict:
            "population": population(run), "subjects": subj, "diagnostics": diagnostics(run),
            "priors": {"mu": "Uniform over Table 9.1's box (log scale)", "tau": f"HalfNormal({TAU_SD:g})",
                       "corr": f"LKJCholesky(4, {LKJ_CONCENTRATION:g})"}}
+    rec["flags"] = []
     if separate:
         rec["separate"] = separate
         rec["shrinkage"] = shrinkage(subj, separate)
+        if len(run.groups) > 1 and all(s in separate for s in run.subjects):
+            sep = separate_differences(separate, run.subjects, run.groups, run.group_index)
+            rec["population"]["differences_separate"] = sep
+            rec["flags"] = group_flags(rec["population"]["differences"], sep)
     rec["converged"] = all(v["converged"] for v in rec["diagnostics"].values())
     return rec
 
 
 __all__ = ["CohortMember", "HierarchicalRun", "hierarchical_model", "run_hierarchical", "log_bounds", "diagnostics",
-           "population", "subject_intervals", "shrinkage", "summarise", "LIKELIHOODS", "TAU_SD", "LKJ_CONCENTRATION"]
+           "population", "subject_intervals", "shrinkage", "summarise", "LIKELIHOODS", "TAU_SD", "LKJ_CONCENTRATION",
+           "separate_differences", "group_flags", "SEPARATE_BOOTSTRAP"]

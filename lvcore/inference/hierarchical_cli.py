@@ -6,7 +6,8 @@ column; exit 2), sets up every subject as ``lvcore calibrate`` does (:func:`lvco
 through :func:`lvcore.inference.cli._request`), samples the hierarchical model
 (:mod:`lvcore.inference.hierarchical`) with a progress bar, fits every subject separately with the same
 likelihood for the shrinkage, and writes ``summary.json`` (section ``hierarchical``) and ``hierarchical.nc``.
-Exit 0, 1 when a level misses its R-hat/ESS thresholds, 4 (flagged) when the joint sampler diverged.
+Exit 0, 1 when a level misses its R-hat/ESS thresholds, 4 (flagged) when the joint sampler diverged or the joint
+posterior and the separate fits disagree on a group difference (CONSISTENCY).
 """
 from __future__ import annotations
 
@@ -184,7 +185,8 @@ def run_hierarchical_calibrate(args) -> int:
         print(f"\nwrote {args.out}/summary.json and {args.out}/hierarchical.nc")
     if not rec["converged"]:
         return 1
-    return EXIT_FLAGGED if rec["diagnostics"]["population"]["n_divergent"] > 0 else 0
+    flagged = rec["diagnostics"]["population"]["n_divergent"] > 0 or bool(rec.get("flags"))
+    return EXIT_FLAGGED if flagged else 0
 
 
 def _plain(v):
@@ -226,6 +228,12 @@ def text_report(rec: dict) -> list[str]:
         lines.append(f"difference of group means {pair} (ratio, median [90 %]): " + ", ".join(
             f"{k} {v['ratio']['median']:.2f} [{v['ratio']['q05']:.2f}, {v['ratio']['q95']:.2f}]"
             + (" *" if v["excludes_zero"] else "") for k, v in d.items()) + "  (* interval excludes no difference)")
+    for pair, d in pop.get("differences_separate", {}).items():
+        lines.append(f"the same from the separate fits, subjects resampled {pair} (ratio of mean log medians "
+                     "[90 %]): " + ", ".join(f"{k} {v['ratio']['median']:.2f} [{v['ratio']['q05']:.2f}, "
+                                              f"{v['ratio']['q95']:.2f}]" + (" *" if v["excludes_zero"] else "")
+                                              for k, v in d.items()))
+    lines.extend(rec.get("flags") or [])
     shr = rec.get("shrinkage", {}).get("per_subject", {})
     lines.append("\nsubject: a median [90 %] joint | separate, shrinkage of the a interval")
     for s, q in rec["subjects"].items():
