@@ -145,7 +145,9 @@ def main(argv=None) -> int:
         d = rec2["population"]["differences"]["B - A"]["a"]
         result["two_groups"] = {"exit": code2, **timing2, "true_ratio_a": 2.0,
                                 "ratio_a": [round(d["ratio"][k], 3) for k in ("q05", "median", "q95")],
-                                "detected": d["excludes_zero"],
+                                "detected": d["excludes_zero"], "flags": rec2.get("flags", []),
+                                "ratio_a_separate": [round(rec2["population"]["differences_separate"]["B - A"]["a"]
+                                                           ["ratio"][k], 3) for k in ("q05", "median", "q95")],
                                 "others_exclude_zero": {k: v["excludes_zero"] for k, v in
                                                         rec2["population"]["differences"]["B - A"].items() if k != "a"}}
     text = json.dumps(result, indent=1)

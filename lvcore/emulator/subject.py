@@ -256,11 +256,8 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
         The wall layer of the FE runs' strains (:data:`lvcore.domain.outputs.STRAIN_LAYERS`; default the inner
         half), recorded in the emulator's metadata; a prior mean must have the same layer.
     edpvr, edpvr_design : bool or None, EdpvrDesign
-        Also build the subject EDPVR emulator into ``out/edpvr`` (:mod:`lvcore.emulator.subject_edpvr`: 304 load
-        paths, 82 s on 2 cores for SYNTHETIC_HV3's default mesh, BENCHMARKS.md row 51), with this design (default
-        256 + 16 + 32 paths): the derived EDPVR then needs no FE solve. None (default): :data:`DEFAULT_EDPVR` (on)
-        where the geometry is a mesh, off for one that is not (it cannot have one); True for a geometry that is no
-        mesh is refused.
+        Also build the subject EDPVR emulator (:mod:`lvcore.emulator.subject_edpvr`; ``out/edpvr``, design default
+        256 + 16 + 32 paths, 82 s for SYNTHETIC_HV3, BENCHMARKS.md row 51); None: :func:`resolve_edpvr`.
 
     The FE runs done are saved in ``out/fe_runs.npz`` (:data:`RUNS_FILE`) as every chunk returns, so a build that
     fails, is stopped or killed keeps them, and a new build of the same design into ``out`` resumes from them.
@@ -287,11 +284,7 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     section = _write_geometry(geo, out, edpvr=bool(edpvr))
     t_geometry = time.perf_counter() - t_start
     say(f"geometry: {geo.kind} from {geo.source} ({t_geometry:.1f} s)")
-    edpvr = resolve_edpvr(edpvr, section)
-    if not edpvr:
-        say("EDPVR emulator: not built (" + ("--no-edpvr" if section.get("kind") == "mesh" else
-                                             "the geometry is no mesh") + "): the derived EDPVR and stress of a "
-            "calibration through this emulator take FE load paths")
+    edpvr = resolve_edpvr(edpvr, section, say)
     for w in geo.warnings:
         say(f"  warning: {w}")
 
@@ -331,12 +324,16 @@ def build_subject_emulator(geometry, out, *, inputs: Sequence[str] | str = ("the
     return _save_build(emu, out, sets, geo, t_start, t_train, say)
 
 
-def resolve_edpvr(edpvr: bool | None, section: Mapping) -> bool:
+def resolve_edpvr(edpvr: bool | None, section: Mapping, say: Callable[[str], None] | None = None) -> bool:
     """Whether a build makes its subject EDPVR emulator: ``edpvr`` as given, or None: :data:`DEFAULT_EDPVR` for a
-    mesh geometry (``section["kind"] == "mesh"``) and False for any other."""
-    if edpvr is not None:
-        return bool(edpvr)
-    return bool(DEFAULT_EDPVR) and section.get("kind") == "mesh"
+    mesh geometry (``section["kind"] == "mesh"``) and False for any other (it cannot have one; ``edpvr=True`` for
+    it is refused by the build). ``say`` gets a line when none is built."""
+    mesh = section.get("kind") == "mesh"
+    built = bool(edpvr) if edpvr is not None else bool(DEFAULT_EDPVR) and mesh
+    if not built and say is not None:
+        say(f"EDPVR emulator: not built ({'--no-edpvr' if mesh else 'the geometry is no mesh'}): the derived EDPVR "
+            "and stress of a calibration through this emulator take FE load paths")
+    return built
 
 
 def _build_edpvr(record: dict, space: ParameterSpace, section: Mapping, out: Path, *, design, say, **kw) -> None:
