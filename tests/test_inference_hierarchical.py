@@ -391,3 +391,20 @@ def test_cli_writes_the_hierarchical_summary(cohort4, tmp_path):
     if rec["converged"]:
         flagged = rec["diagnostics"]["population"]["n_divergent"] > 0 or bool(rec["flags"])
         assert (code == 4) == flagged
+
+
+def test_the_joint_posterior_is_kept_when_the_separate_fits_fail(cohort4, tmp_path, monkeypatch):
+    """The joint posterior is written before the separate fits start: a failure there (here a stand-in error)
+    leaves summary.json (marked ``separate_fits: running``) and hierarchical.nc behind."""
+    from lvcore.inference import hierarchical_cli
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("stand-in failure of a separate fit")
+
+    monkeypatch.setattr(hierarchical_cli, "separate_fits", boom)
+    _, path = cohort4
+    code = _cli(["--data", str(path), "--chains", "2", "--warmup", "20", "--samples", "20", "--json"], tmp_path)
+    assert code == 3   # the CLI's internal-error exit, with one line on stderr
+    rec = json.loads((tmp_path / "out" / "summary.json").read_text())["hierarchical"]
+    assert rec["separate_fits"] == "running" and rec["n_subjects"] == 4 and "separate" not in rec
+    assert (tmp_path / "out" / "hierarchical.nc").is_file()

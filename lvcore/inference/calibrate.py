@@ -283,6 +283,22 @@ def result_record(result: CalibrationResult) -> dict:
     return rec
 
 
+def release_compiled_programs() -> None:
+    """Let go of the programs the last calibration compiled (each subject's geometry is bound into its forward
+    model, so every subject compiles its own): a process keeps a few memory mappings per program and the kernel caps
+    them (``vm.max_map_count``; :mod:`lvcore.execution.restart`). Call it between subjects of a long run."""
+    import gc
+
+    import jax
+
+    from lvcore.inference import verdict
+
+    samplers.clear_sampler_cache()
+    verdict.clear_best_fit_programs()
+    jax.clear_caches()
+    gc.collect()
+
+
 __all__ = ["CalibrationResult", "SubjectResult", "calibrate", "calibrate_subjects", "read_pc_scores", "read_scale",
            "write_result",
-           "result_record", "file_stem", "output_stems"]
+           "result_record", "file_stem", "output_stems", "release_compiled_programs"]

@@ -96,8 +96,11 @@ def prepare_cohort(args):
 
 def separate_fits(members, likelihood: str, config, sigma_v: float, progress=None) -> dict:
     """Subject -> theta's q05/median/q95 from its own calibration (same likelihood and sampler settings, the
-    single-subject prior of Table 9.1), the reference of the shrinkage."""
-    from lvcore.inference.calibrate import calibrate
+    single-subject prior of Table 9.1), the reference of the shrinkage. Each subject's compiled programs are let go
+    before the next (:func:`lvcore.inference.calibrate.release_compiled_programs`): a process that kept them all
+    ran out of memory mappings (LLVM "Cannot allocate memory", then a segfault) on its second cohort of 24
+    two-state subjects."""
+    from lvcore.inference.calibrate import calibrate, release_compiled_programs
 
     out = {}
     for k, m in enumerate(members):
@@ -106,6 +109,7 @@ def separate_fits(members, likelihood: str, config, sigma_v: float, progress=Non
         res = calibrate(m.y, m.forward, likelihood, config=config, sigma_v=sigma_v, max_rounds=1)
         out[m.subject] = {n: {c: float(res.summary.loc[n, c]) for c in ("q05", "median", "q95")} for n in THETA_NAMES}
         out[m.subject]["converged"] = bool(res.convergence.converged)
+        release_compiled_programs()
     return out
 
 
@@ -159,15 +163,17 @@ def calibrate_cohort(args, say=print, progress_bar: bool = True) -> dict:
         f"{args.chains} x ({args.warmup} + {args.samples})); progress on stderr")
     run = hi.run_hierarchical(members, groups=tuple(groups), likelihood=likelihood, config=config,
                               sigma_v=args.sigma_v, progress_bar=progress_bar)
-    say(f"joint posterior in {run.wall_s:.1f} s; separate fits for the shrinkage")
-    separate = separate_fits(members, likelihood, config, args.sigma_v, progress=say)
-    rec = hi.summarise(run, separate)
-    rec.update({"data_file": str(args.data), "emulator": name,
-                "synthetic": all("SYNTHETIC" in s.upper() for s in cohort.subjects),
-                "geometry": {s: dict(q.geometry_record) for s, q in requests.items()}, "warnings": warnings})
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    _write_netcdf(run, out / "hierarchical.nc", rec)
+    extra = {"data_file": str(args.data), "emulator": name,
+             "synthetic": all("SYNTHETIC" in s.upper() for s in cohort.subjects),
+             "geometry": {s: dict(q.geometry_record) for s, q in requests.items()}, "warnings": warnings}
+    rec = {**hi.summarise(run), **extra, "separate_fits": "running"}
+    _write_netcdf(run, out / "hierarchical.nc", rec)   # kept if the separate fits fail or are stopped
+    (out / "summary.json").write_text(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
+    say(f"joint posterior in {run.wall_s:.1f} s (written to {out}); separate fits for the shrinkage")
+    separate = separate_fits(members, likelihood, config, args.sigma_v, progress=say)
+    rec = {**hi.summarise(run, separate), **extra}
     (out / "summary.json").write_text(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
     return rec
 

@@ -300,7 +300,7 @@ def run_states(settings: Mapping, workdir, *, emulator: str | None = None, varia
                say=print, calibrate=calibrate_in_process, truth_fn=simulate_states, between=None) -> int:
     """Run the states part's missing (subject, variant) pairs; returns how many ran. ``between()`` is called
     after each subject (the command line's restart before the memory-mapping limit)."""
-    from lvcore.studies.sbc_runner import _release_compiled_programs
+    from lvcore.inference.calibrate import release_compiled_programs
 
     workdir = Path(workdir)
     check_settings(workdir, settings)
@@ -324,7 +324,7 @@ def run_states(settings: Mapping, workdir, *, emulator: str | None = None, varia
             n += 1
             say(f"{name} {variant}: exit {rec['exit']}, a {_interval(rec, 'a')}, {rec['wall_s']:.0f} s")
         if subject is not None:
-            _release_compiled_programs()
+            release_compiled_programs()
             if between is not None:
                 between()
     return n
@@ -490,7 +490,7 @@ def import_summary(result: Mapping, settings: Mapping, workdir, source: str) -> 
 def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in_process, between=None) -> int:
     """Run the cohort part's missing runs (each cohort: its subjects alone, then the joint posterior);
     ``between()`` is called after each step, as in :func:`run_states`."""
-    from lvcore.studies.sbc_runner import _release_compiled_programs
+    from lvcore.inference.calibrate import release_compiled_programs
 
     workdir = Path(workdir)
     check_settings(workdir, settings)
@@ -507,13 +507,13 @@ def run_cohorts(settings: Mapping, workdir, *, say=print, calibrate=calibrate_in
                 say(f"cohort of {n}, {s} alone: exit {rec['exit']}, a {_interval(rec, 'a')}, {rec['wall_s']:.0f} s")
                 if between is not None:
                     between()
-        _release_compiled_programs()
+        release_compiled_programs()
         if (cohort_key(n, "hierarchical"), f"cohort of {n}") not in done:
             rec = run_hierarchical(n, csv, truth, settings, folder, calibrate)
             store.append(workdir / "runs_cohort.jsonl", rec)
             count += 1
             say(f"cohort of {n}, joint posterior: exit {rec['exit']}, {rec['wall_s']:.0f} s")
-            _release_compiled_programs()
+            release_compiled_programs()
             if between is not None:
                 between()
     return count

@@ -413,7 +413,9 @@ def run_subject(index: int, settings: Mapping, workdir, *, calibrate=calibrate_i
     routes = {r: run_route(r, subject, files, settings, folder, calibrate=calibrate) for r in settings["routes"]}
     if not keep_runs:
         shutil.rmtree(folder, ignore_errors=True)
-    _release_compiled_programs()
+    from lvcore.inference.calibrate import release_compiled_programs
+
+    release_compiled_programs()
     return {"version": RECORD_VERSION, "index": int(index), "subject": subject["subject"],
             "settings_key": settings_key(settings), "h": subject["h"], "scale": subject["scale"],
             "v_ref_ml": subject["v_ref_ml"], "reference_volume_ml": subject["reference_volume_ml"],
@@ -430,21 +432,6 @@ def _load_average() -> float | None:
         return float(os.getloadavg()[0])
     except (AttributeError, OSError):
         return None
-
-
-def _release_compiled_programs() -> None:
-    """Let go of the programs one subject compiled (each subject's geometry is bound into its forward model):
-    a process keeps a few memory mappings per program and the kernel caps them (tests/conftest.py)."""
-    import gc
-
-    import jax
-
-    from lvcore.inference import samplers, verdict
-
-    samplers.clear_sampler_cache()
-    verdict.clear_best_fit_programs()
-    jax.clear_caches()
-    gc.collect()
 
 
 # ============================================================================ the resumable store
