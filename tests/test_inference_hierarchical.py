@@ -408,3 +408,18 @@ def test_the_joint_posterior_is_kept_when_the_separate_fits_fail(cohort4, tmp_pa
     rec = json.loads((tmp_path / "out" / "summary.json").read_text())["hierarchical"]
     assert rec["separate_fits"] == "running" and rec["n_subjects"] == 4 and "separate" not in rec
     assert (tmp_path / "out" / "hierarchical.nc").is_file()
+
+
+def test_separate_fits_stop_with_a_warning_near_the_mapping_limit(monkeypatch, capsys):
+    """Near the kernel's memory-mapping limit the separate fits stop before compiling more (a process that went on
+    died in LLVM): what was fitted is returned and the user is told why and what to do."""
+    from lvcore.execution import restart
+    from lvcore.inference import hierarchical_cli
+
+    shares = iter([0.1, 0.95])
+    monkeypatch.setattr(restart, "mapping_share", lambda: next(shares))
+    members = _analytic_members([0.5, 0.7, 0.9])
+    out = hierarchical_cli.separate_fits(members, "iid", SHORT, 5.0)
+    assert list(out) == ["S0"] and out["S0"]["a"]["q05"] < out["S0"]["a"]["q95"]
+    err = capsys.readouterr().err
+    assert "separate fits stopped after 1 of 3 subjects" in err and "fewer subjects per run" in err

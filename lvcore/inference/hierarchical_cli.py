@@ -19,6 +19,8 @@ import numpy as np
 
 from lvcore.domain.outputs import THETA_NAMES
 
+#: Share of the kernel's memory-mapping limit past which the separate fits stop (:func:`separate_fits`).
+MAPPING_SHARE_LIMIT = 0.8
 #: Options of ``lvcore calibrate`` a hierarchical run does not take, with what to do instead.
 REFUSED = (("volunteer", "--volunteer is one bundled subject; give a cohort CSV with --data"),
            ("subject", "--subject picks one row; a hierarchical calibration uses every subject of the cohort"))
@@ -96,14 +98,26 @@ def prepare_cohort(args):
 
 def separate_fits(members, likelihood: str, config, sigma_v: float, progress=None) -> dict:
     """Subject -> theta's q05/median/q95 from its own calibration (same likelihood and sampler settings, the
-    single-subject prior of Table 9.1), the reference of the shrinkage. Each subject's compiled programs are let go
-    before the next (:func:`lvcore.inference.calibrate.release_compiled_programs`): a process that kept them all
-    ran out of memory mappings (LLVM "Cannot allocate memory", then a segfault) on its second cohort of 24
-    two-state subjects."""
+    single-subject prior of Table 9.1), the reference of the shrinkage.
+
+    Every fit compiles its own programs, and XLA keeps memory mappings of each even after JAX's caches are cleared
+    (:mod:`lvcore.execution.restart`): a process ran out of them (LLVM "Cannot allocate memory", then a segfault)
+    in its second cohort of 24 two-state subjects, at about 1,100 mappings a fit (BENCHMARKS.md row 64). So the
+    programs are let go after each fit, and the fits stop, with a warning, before the process passes
+    :data:`MAPPING_SHARE_LIMIT` of the kernel's limit; the subjects fitted so far are returned (the shrinkage is
+    then over them, and the group check is left out)."""
+    from lvcore.execution.restart import mapping_share
     from lvcore.inference.calibrate import calibrate, release_compiled_programs
 
     out = {}
     for k, m in enumerate(members):
+        share = mapping_share()
+        if share is not None and share > MAPPING_SHARE_LIMIT:
+            print(f"lvcore: warning: separate fits stopped after {k} of {len(members)} subjects: this process "
+                  f"holds {share:.0%} of the kernel's memory-mapping limit (compiled programs); the shrinkage is "
+                  "over the subjects fitted, the group check left out; calibrate fewer subjects per run for all "
+                  "of them", file=sys.stderr)
+            break
         if progress is not None:
             progress(f"separate fit {k + 1}/{len(members)}: {m.subject}")
         res = calibrate(m.y, m.forward, likelihood, config=config, sigma_v=sigma_v, max_rounds=1)
@@ -173,7 +187,7 @@ def calibrate_cohort(args, say=print, progress_bar: bool = True) -> dict:
     (out / "summary.json").write_text(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
     say(f"joint posterior in {run.wall_s:.1f} s (written to {out}); separate fits for the shrinkage")
     separate = separate_fits(members, likelihood, config, args.sigma_v, progress=say)
-    rec = {**hi.summarise(run, separate), **extra}
+    rec = {**hi.summarise(run, separate), **extra, "separate_fits": f"{len(separate)} of {len(members)}"}
     (out / "summary.json").write_text(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
     return rec
 
