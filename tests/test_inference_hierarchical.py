@@ -416,10 +416,13 @@ def test_separate_fits_stop_with_a_warning_near_the_mapping_limit(monkeypatch, c
     from lvcore.execution import restart
     from lvcore.inference import hierarchical_cli
 
-    shares = iter([0.1, 0.95])
+    shares = iter([0.1, 0.95, 0.9])   # the second subject: programs let go (0.95 -> 0.9), still over: stop
+    released = []
     monkeypatch.setattr(restart, "mapping_share", lambda: next(shares))
+    monkeypatch.setattr("lvcore.inference.calibrate.release_compiled_programs", lambda: released.append(1))
     members = _analytic_members([0.5, 0.7, 0.9])
     out = hierarchical_cli.separate_fits(members, "iid", SHORT, 5.0)
     assert list(out) == ["S0"] and out["S0"]["a"]["q05"] < out["S0"]["a"]["q95"]
     err = capsys.readouterr().err
     assert "separate fits stopped after 1 of 3 subjects" in err and "fewer subjects per run" in err
+    assert released == [1]

@@ -19,7 +19,9 @@ import numpy as np
 
 from lvcore.domain.outputs import THETA_NAMES
 
-#: Share of the kernel's memory-mapping limit past which the separate fits stop (:func:`separate_fits`).
+#: Shares of the kernel's memory-mapping limit past which the separate fits let go of their compiled programs, and
+#: past which they stop (:func:`separate_fits`).
+MAPPING_SHARE_RELEASE = 0.5
 MAPPING_SHARE_LIMIT = 0.8
 #: Options of ``lvcore calibrate`` a hierarchical run does not take, with what to do instead.
 REFUSED = (("volunteer", "--volunteer is one bundled subject; give a cohort CSV with --data"),
@@ -103,15 +105,19 @@ def separate_fits(members, likelihood: str, config, sigma_v: float, progress=Non
     Every fit compiles its own programs, and XLA keeps memory mappings of each even after JAX's caches are cleared
     (:mod:`lvcore.execution.restart`): a process ran out of them (LLVM "Cannot allocate memory", then a segfault)
     in its second cohort of 24 two-state subjects, at about 1,100 mappings a fit (BENCHMARKS.md row 64). So the
-    programs are let go after each fit, and the fits stop, with a warning, before the process passes
-    :data:`MAPPING_SHARE_LIMIT` of the kernel's limit; the subjects fitted so far are returned (the shrinkage is
-    then over them, and the group check is left out)."""
+    programs are let go once the process passes :data:`MAPPING_SHARE_RELEASE` of the kernel's limit (not before:
+    subjects that share one compiled sampler would each compile it again), and the fits stop, with a warning,
+    past :data:`MAPPING_SHARE_LIMIT`; the subjects fitted so far are returned (the shrinkage is then over them,
+    and the group check is left out)."""
     from lvcore.execution.restart import mapping_share
     from lvcore.inference.calibrate import calibrate, release_compiled_programs
 
     out = {}
     for k, m in enumerate(members):
         share = mapping_share()
+        if share is not None and share > MAPPING_SHARE_RELEASE:
+            release_compiled_programs()
+            share = mapping_share()
         if share is not None and share > MAPPING_SHARE_LIMIT:
             print(f"lvcore: warning: separate fits stopped after {k} of {len(members)} subjects: this process "
                   f"holds {share:.0%} of the kernel's memory-mapping limit (compiled programs); the shrinkage is "
@@ -123,7 +129,6 @@ def separate_fits(members, likelihood: str, config, sigma_v: float, progress=Non
         res = calibrate(m.y, m.forward, likelihood, config=config, sigma_v=sigma_v, max_rounds=1)
         out[m.subject] = {n: {c: float(res.summary.loc[n, c]) for c in ("q05", "median", "q95")} for n in THETA_NAMES}
         out[m.subject]["converged"] = bool(res.convergence.converged)
-        release_compiled_programs()
     return out
 
 
