@@ -128,9 +128,6 @@ def main(argv=None) -> int:
     states = tuple(float(v) for v in args.states.split(",") if v.strip())
     args.emulator = args.emulator or ("edpvr" if states else "chapter")
 
-    from lvcore.inference.samplers import use_host_devices
-
-    use_host_devices(args.chains)
     from lvcore.emulator.io import load_emulator
     from lvcore.inference import cohort as co
 

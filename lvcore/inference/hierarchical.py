@@ -412,17 +412,23 @@ def summarise(run: HierarchicalRun, separate: dict | None = None) -> dict:
            "priors": {"mu": "Uniform over Table 9.1's box (log scale)", "tau": f"HalfNormal({TAU_SD:g})",
                       "corr": f"LKJCholesky(4, {LKJ_CONCENTRATION:g})"}}
     rec["flags"] = []
-    if separate:
-        rec["separate"] = separate
-        rec["shrinkage"] = shrinkage(subj, separate)
-        if len(run.groups) > 1 and all(s in separate for s in run.subjects):
-            sep = separate_differences(separate, run.subjects, run.groups, run.group_index)
-            rec["population"]["differences_separate"] = sep
-            rec["flags"] = group_flags(rec["population"]["differences"], sep)
     rec["converged"] = all(v["converged"] for v in rec["diagnostics"].values())
+    return with_separate(rec, run, separate) if separate else rec
+
+
+def with_separate(rec: dict, run: HierarchicalRun, separate: dict) -> dict:
+    """:func:`summarise`'s record ``rec`` with the separate fits added (in place, and returned): ``separate``, the
+    ``shrinkage`` against them and, with groups and every subject fitted, ``population.differences_separate`` and
+    the CONSISTENCY ``flags`` of :func:`group_flags`."""
+    rec["separate"] = separate
+    rec["shrinkage"] = shrinkage(rec["subjects"], separate)
+    if len(run.groups) > 1 and all(s in separate for s in run.subjects):
+        sep = separate_differences(separate, run.subjects, run.groups, run.group_index)
+        rec["population"]["differences_separate"] = sep
+        rec["flags"] = group_flags(rec["population"]["differences"], sep)
     return rec
 
 
 __all__ = ["CohortMember", "HierarchicalRun", "hierarchical_model", "run_hierarchical", "log_bounds", "diagnostics",
            "population", "subject_intervals", "shrinkage", "summarise", "LIKELIHOODS", "TAU_SD", "LKJ_CONCENTRATION",
-           "separate_differences", "group_flags", "SEPARATE_BOOTSTRAP"]
+           "separate_differences", "group_flags", "SEPARATE_BOOTSTRAP", "with_separate"]

@@ -192,7 +192,9 @@ def calibrate_cohort(args, say=print, progress_bar: bool = True) -> dict:
     (out / "summary.json").write_text(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
     say(f"joint posterior in {run.wall_s:.1f} s (written to {out}); separate fits for the shrinkage")
     separate = separate_fits(members, likelihood, config, args.sigma_v, progress=say)
-    rec = {**hi.summarise(run, separate), **extra, "separate_fits": f"{len(separate)} of {len(members)}"}
+    rec["separate_fits"] = f"{len(separate)} of {len(members)}"
+    if separate:
+        hi.with_separate(rec, run, separate)
     (out / "summary.json").write_text(json.dumps({"hierarchical": rec}, indent=2, default=_plain))
     return rec
 
@@ -241,6 +243,12 @@ def _write_netcdf(run, path: Path, rec: dict) -> None:
     save_netcdf(idata, path)
 
 
+def _ratios(diffs: dict) -> str:
+    """``a 3.27 [1.62, 9.46] *, b ...``: each parameter's ratio, its 90 % interval, * where it excludes 1."""
+    return ", ".join(f"{k} {v['ratio']['median']:.2f} [{v['ratio']['q05']:.2f}, {v['ratio']['q95']:.2f}]"
+                     + (" *" if v["excludes_zero"] else "") for k, v in diffs.items())
+
+
 def text_report(rec: dict) -> list[str]:
     """The printed summary: population per group, differences, sds, subjects with shrinkage, diagnostics."""
     pop, lines = rec["population"], []
@@ -250,14 +258,11 @@ def text_report(rec: dict) -> list[str]:
     lines.append("population sd of log theta: " + ", ".join(
         f"{k} {q['median']:.2f} [{q['q05']:.2f}, {q['q95']:.2f}]" for k, q in pop["sd"].items()))
     for pair, d in pop["differences"].items():
-        lines.append(f"difference of group means {pair} (ratio, median [90 %]): " + ", ".join(
-            f"{k} {v['ratio']['median']:.2f} [{v['ratio']['q05']:.2f}, {v['ratio']['q95']:.2f}]"
-            + (" *" if v["excludes_zero"] else "") for k, v in d.items()) + "  (* interval excludes no difference)")
+        lines.append(f"difference of group means {pair} (ratio, median [90 %]): " + _ratios(d)
+                     + "  (* interval excludes no difference)")
     for pair, d in pop.get("differences_separate", {}).items():
         lines.append(f"the same from the separate fits, subjects resampled {pair} (ratio of mean log medians "
-                     "[90 %]): " + ", ".join(f"{k} {v['ratio']['median']:.2f} [{v['ratio']['q05']:.2f}, "
-                                              f"{v['ratio']['q95']:.2f}]" + (" *" if v["excludes_zero"] else "")
-                                              for k, v in d.items()))
+                     "[90 %]): " + _ratios(d))
     lines.extend(rec.get("flags") or [])
     shr = rec.get("shrinkage", {}).get("per_subject", {})
     lines.append("\nsubject: a median [90 %] joint | separate, shrinkage of the a interval")
